@@ -1,0 +1,399 @@
+"""Crash-safe HDF5 session recording: one file per (object, sensor) session, one group per press.
+
+Durability rule: killing the process at any moment loses at most the press in progress, the session file stays
+readable, and the same command resumes without duplicating a finished press. How:
+
+1. A finished press is first written to its own small HDF5 file in the session's *journal*
+   (``DATA/.journal/<object>__<sensor>/<press_id>.h5``): written under a temporary name, fsynced, then atomically
+   renamed. A press is durable from that rename on.
+2. The press is then copied into the session file (opened, appended, flushed, closed; the group's ``write_complete``
+   attribute is set last).
+3. On every open, the session file is checked against the journal: a file that no longer opens is moved aside
+   (``*.broken-<time>.h5``) and rebuilt from the journal; a press group without ``write_complete`` is replaced from the
+   journal; a journalled press missing from the file (a kill between steps 1 and 2) is copied in.
+
+Schema (see docs/dataset.md): root attributes describe the session; ``/presses/<press_id>`` holds the raw streams
+(``robot/*``, ``tactile/*``, ``events``), the tare, and ``extraction/*`` (force-matched frames).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import time
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from unitac_rig.errors import DataError
+from unitac_rig.extraction import Extraction, ExtractionSettings
+
+log = logging.getLogger(__name__)
+
+SCHEMA_VERSION = 1
+FINISHED_STATUSES = ("complete", "failed")  # never redone on resume; "aborted" presses are redone
+
+
+def session_stem(object_id: str, sensor: str) -> str:
+    return f"{object_id}__{sensor}"
+
+
+def session_path(data_dir: Path, object_id: str, sensor: str) -> Path:
+    return Path(data_dir) / f"{session_stem(object_id, sensor)}.h5"
+
+
+def journal_dir(data_dir: Path, object_id: str, sensor: str) -> Path:
+    return Path(data_dir) / ".journal" / session_stem(object_id, sensor)
+
+
+def press_id(rotation_deg: float, angle_deg: float) -> str:
+    """Stable, sortable name of a press: ``rot090_ang-12``."""
+    return f"rot{round(rotation_deg) % 360:03d}_ang{round(angle_deg):+03d}"
+
+
+@dataclass
+class PressRecord:
+    """Everything recorded for one press. Times are host-clock seconds (monotonic on hardware, virtual in sim)."""
+
+    press_id: str
+    rotation_deg: float
+    angle_deg: float
+    status: str  # complete | failed | aborted
+    reason: str  # force | travel | hard_limit | protective_stop | stall | interrupted | ...
+    robot_t_s: np.ndarray  # (K,)
+    robot_force: np.ndarray  # (K, 6) N, N*m, base axes (after the F/T zero)
+    robot_pose: np.ndarray  # (K, 6) m, rad
+    press_force_n: np.ndarray  # (K,) force along the press direction, N
+    tactile_t_s: np.ndarray  # (M,) host time
+    tactile_values: np.ndarray  # (M, n_taxels, 3) raw, layout units
+    tactile_seq: np.ndarray  # (M,) int64, -1 where the device has no counter
+    tactile_device_t_us: np.ndarray  # (M,) int64, -1 where the device has no clock
+    tactile_valid: np.ndarray  # (M,) bool
+    tare_baseline: np.ndarray  # (n_taxels, 3) subtracted from raw values for extraction and learning
+    tactile_displacement_mm: np.ndarray | None = None  # (M, n_taxels, 3), PapillArray only
+    events: list[tuple[float, str, str]] = field(default_factory=list)
+    attrs: dict[str, Any] = field(default_factory=dict)  # strategy, speed, threshold, tare info, F/T zero, ...
+    extraction: Extraction | None = None
+
+    @property
+    def finished(self) -> bool:
+        return self.status in FINISHED_STATUSES
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# low-level HDF5 helpers
+
+
+def _attr_value(value: Any) -> Any:
+    if isinstance(value, dict | list | tuple) and not (
+        isinstance(value, list | tuple) and value and all(isinstance(v, int | float) for v in value)
+    ):
+        return json.dumps(value, default=_json_default)
+    if value is None:
+        return "null"
+    return value
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"cannot serialise {type(obj).__name__}")
+
+
+def write_extraction(group: h5py.Group, extraction: Extraction, tared_values: np.ndarray) -> None:
+    """(Re)write ``group/extraction`` from an Extraction and the press's tare-subtracted frames."""
+    if "extraction" in group:
+        del group["extraction"]
+    ex = group.create_group("extraction")
+    ex.attrs["settings"] = json.dumps(extraction.settings.to_dict())
+    ex["targets_n"] = extraction.targets_n
+    ex["crossing_t_s"] = extraction.crossing_t_s
+    ex["frame_index"] = extraction.frame_index
+    ex["frame_t_s"] = extraction.frame_t_s
+    ex["force_at_frame_n"] = extraction.force_at_frame_n
+    ex["error_n"] = extraction.error_n
+    ex["miss"] = extraction.miss
+    n_taxels = tared_values.shape[1] if tared_values.ndim == 3 else 0
+    frames = np.full((extraction.targets_n.size, n_taxels, 3), np.nan, dtype=np.float32)
+    chosen = extraction.frame_index >= 0
+    if chosen.any() and tared_values.size:
+        frames[chosen] = tared_values[extraction.frame_index[chosen]]
+    ex["values"] = frames
+
+
+def read_extraction(group: h5py.Group) -> tuple[Extraction, np.ndarray] | None:
+    if "extraction" not in group:
+        return None
+    ex = group["extraction"]
+    extraction = Extraction(
+        targets_n=ex["targets_n"][()],
+        crossing_t_s=ex["crossing_t_s"][()],
+        frame_index=ex["frame_index"][()],
+        frame_t_s=ex["frame_t_s"][()],
+        force_at_frame_n=ex["force_at_frame_n"][()],
+        error_n=ex["error_n"][()],
+        miss=ex["miss"][()].astype(bool),
+        settings=ExtractionSettings.from_dict(json.loads(ex.attrs["settings"])),
+    )
+    return extraction, ex["values"][()]
+
+
+def write_press_group(parent: h5py.Group, rec: PressRecord, name: str | None = None) -> h5py.Group:
+    """Write one press under ``parent/<name or press_id>``; the ``write_complete`` attribute is set last."""
+    name = name or rec.press_id
+    if name in parent:
+        del parent[name]
+    g = parent.create_group(name)
+    g.attrs["press_id"] = rec.press_id
+    g.attrs["rotation_deg"] = float(rec.rotation_deg)
+    g.attrs["angle_deg"] = float(rec.angle_deg)
+    g.attrs["status"] = rec.status
+    g.attrs["reason"] = rec.reason
+    for key, value in rec.attrs.items():
+        g.attrs[key] = _attr_value(value)
+    robot = g.create_group("robot")
+    robot.create_dataset("t_s", data=np.asarray(rec.robot_t_s, np.float64))
+    robot.create_dataset("force", data=np.asarray(rec.robot_force, np.float32).reshape(-1, 6))
+    robot.create_dataset("tcp_pose", data=np.asarray(rec.robot_pose, np.float64).reshape(-1, 6))
+    robot.create_dataset("press_force_n", data=np.asarray(rec.press_force_n, np.float32))
+    tac = g.create_group("tactile")
+    tac.create_dataset("t_s", data=np.asarray(rec.tactile_t_s, np.float64))
+    values = np.asarray(rec.tactile_values, np.float32)
+    tac.create_dataset("values", data=values, compression="gzip", compression_opts=1, shuffle=True,
+                       chunks=True if values.size else None)
+    tac.create_dataset("seq", data=np.asarray(rec.tactile_seq, np.int64))
+    tac.create_dataset("device_t_us", data=np.asarray(rec.tactile_device_t_us, np.int64))
+    tac.create_dataset("valid", data=np.asarray(rec.tactile_valid, bool))
+    if rec.tactile_displacement_mm is not None:
+        disp = np.asarray(rec.tactile_displacement_mm, np.float32)
+        tac.create_dataset("displacement_mm", data=disp, compression="gzip", compression_opts=1, shuffle=True,
+                           chunks=True if disp.size else None)
+    g.create_dataset("tare_baseline", data=np.asarray(rec.tare_baseline, np.float64))
+    ev_dtype = np.dtype([("t_s", np.float64), ("kind", h5py.string_dtype()), ("detail", h5py.string_dtype())])
+    g.create_dataset("events", data=np.array([(t, k, d) for t, k, d in rec.events], dtype=ev_dtype))
+    if rec.extraction is not None:
+        write_extraction(g, rec.extraction, values - np.asarray(rec.tare_baseline, np.float32)[None])
+    g.attrs["write_complete"] = True
+    return g
+
+
+def read_press_group(g: h5py.Group) -> PressRecord:
+    attrs = {k: _decode_attr(v) for k, v in g.attrs.items()}
+    for key in ("press_id", "rotation_deg", "angle_deg", "status", "reason", "write_complete"):
+        attrs.pop(key, None)
+    tac = g["tactile"]
+    ex = read_extraction(g)
+    events = [(float(e["t_s"]), _as_str(e["kind"]), _as_str(e["detail"])) for e in g["events"][()]]
+    return PressRecord(
+        press_id=_as_str(g.attrs.get("press_id", g.name.rsplit("/", 1)[-1])),
+        rotation_deg=float(g.attrs["rotation_deg"]),
+        angle_deg=float(g.attrs["angle_deg"]),
+        status=_as_str(g.attrs["status"]),
+        reason=_as_str(g.attrs["reason"]),
+        robot_t_s=g["robot/t_s"][()],
+        robot_force=g["robot/force"][()],
+        robot_pose=g["robot/tcp_pose"][()],
+        press_force_n=g["robot/press_force_n"][()],
+        tactile_t_s=tac["t_s"][()],
+        tactile_values=tac["values"][()],
+        tactile_seq=tac["seq"][()],
+        tactile_device_t_us=tac["device_t_us"][()],
+        tactile_valid=tac["valid"][()].astype(bool),
+        tactile_displacement_mm=tac["displacement_mm"][()] if "displacement_mm" in tac else None,
+        tare_baseline=g["tare_baseline"][()],
+        events=events,
+        attrs=attrs,
+        extraction=ex[0] if ex else None,
+    )
+
+
+def _as_str(value: Any) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def _decode_attr(value: Any) -> Any:
+    if isinstance(value, bytes | str):
+        value = _as_str(value)
+        if value[:1] in ("[", "{") or value == "null":
+            try:
+                return json.loads(value)
+            except json.JSONDecodeError:
+                return value
+        return value
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _fsync_dir(path: Path) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# the writer
+
+
+class SessionWriter:
+    """Appends presses to one session file, durably (see the module docstring)."""
+
+    def __init__(self, data_dir: Path, object_id: str, sensor: str, root_attrs: Mapping[str, Any]) -> None:
+        self.data_dir = Path(data_dir)
+        self.object_id = object_id
+        self.sensor = sensor
+        self.path = session_path(self.data_dir, object_id, sensor)
+        self.journal = journal_dir(self.data_dir, object_id, sensor)
+        self.root_attrs = dict(root_attrs)
+        self.recovery_notes: list[str] = []
+        try:
+            self.journal.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise DataError(f"cannot create the dataset directory {self.data_dir}: {exc.strerror}") from exc
+        self._write_journal_header()
+        self._open_or_recover()
+
+    # -- set-up / recovery ------------------------------------------------------------------------------------------
+    def _write_journal_header(self) -> None:
+        header = self.journal / "_session.json"
+        if header.exists():
+            existing = json.loads(header.read_text())
+            for key in ("object", "sensor"):
+                if existing.get(key) != self.root_attrs.get(key):
+                    raise DataError(
+                        f"{self.path.name}: the journal belongs to {key}={existing.get(key)!r}, "
+                        f"not {self.root_attrs.get(key)!r}"
+                    )
+            return
+        tmp = header.with_suffix(".tmp")
+        tmp.write_text(json.dumps(self.root_attrs, default=_json_default, indent=1))
+        os.replace(tmp, header)
+
+    def _journal_header(self) -> dict[str, Any]:
+        data: dict[str, Any] = json.loads((self.journal / "_session.json").read_text())
+        return data
+
+    def _journal_press_files(self) -> dict[str, Path]:
+        return {p.stem: p for p in sorted(self.journal.glob("*.h5"))}
+
+    def _create_file(self, path: Path) -> None:
+        with h5py.File(path, "w") as f:
+            attrs = self._journal_header()
+            attrs["schema_version"] = SCHEMA_VERSION
+            for key, value in attrs.items():
+                f.attrs[key] = _attr_value(value)
+            f.create_group("presses")
+
+    def _open_or_recover(self) -> None:
+        if self.path.exists():
+            try:
+                with h5py.File(self.path, "r") as f:
+                    version = int(f.attrs.get("schema_version", -1))
+                    if version != SCHEMA_VERSION:
+                        raise DataError(
+                            f"{self.path} has schema version {version}; this unitac-rig writes {SCHEMA_VERSION}",
+                            hint="collect into a new --data directory",
+                        )
+                    if _as_str(f.attrs.get("object", "")) != self.object_id:
+                        raise DataError(f"{self.path} is not a session of {self.object_id}")
+                    "presses" in f  # noqa: B018 - touching the index proves it is readable
+            except OSError as exc:
+                broken = self.path.with_name(f"{self.path.stem}.broken-{time.strftime('%Y%m%d-%H%M%S')}.h5")
+                os.replace(self.path, broken)
+                self.recovery_notes.append(
+                    f"{self.path.name} could not be opened ({exc}); moved aside to {broken.name} and rebuilt "
+                    "from the journal"
+                )
+                log.warning(self.recovery_notes[-1])
+        if not self.path.exists():
+            self._create_file(self.path)
+        self._reconcile_with_journal()
+
+    def _reconcile_with_journal(self) -> None:
+        journal = self._journal_press_files()
+        with h5py.File(self.path, "a") as f:
+            presses = f.require_group("presses")
+            for pid in list(presses):
+                if not presses[pid].attrs.get("write_complete", False):
+                    del presses[pid]
+                    self.recovery_notes.append(f"press {pid} was half written; dropped")
+            for pid, path in journal.items():
+                if pid in presses and _as_str(presses[pid].attrs.get("status", "")) in FINISHED_STATUSES:
+                    continue
+                try:
+                    with h5py.File(path, "r") as jf:
+                        rec = read_press_group(jf["press"])
+                except (OSError, KeyError) as exc:
+                    self.recovery_notes.append(f"journal entry {path.name} unreadable ({exc}); ignored")
+                    continue
+                write_press_group(presses, rec)
+                self.recovery_notes.append(f"press {pid} ({rec.status}) restored from the journal")
+            f.flush()
+
+    # -- public API -------------------------------------------------------------------------------------------------
+    def press_statuses(self) -> dict[str, str]:
+        with h5py.File(self.path, "r") as f:
+            return {pid: _as_str(g.attrs.get("status", "")) for pid, g in f["presses"].items()}
+
+    def finished_press_ids(self) -> set[str]:
+        return {pid for pid, status in self.press_statuses().items() if status in FINISHED_STATUSES}
+
+    def update_root_attrs(self, attrs: Mapping[str, Any]) -> None:
+        """Merge attributes into the session (e.g. sensor identity once connected)."""
+        header = self._journal_header()
+        header.update(attrs)
+        tmp = self.journal / "_session.tmp"
+        tmp.write_text(json.dumps(header, default=_json_default, indent=1))
+        os.replace(tmp, self.journal / "_session.json")
+        with h5py.File(self.path, "a") as f:
+            for key, value in attrs.items():
+                f.attrs[key] = _attr_value(value)
+
+    def write_press(self, rec: PressRecord) -> None:
+        """Make ``rec`` durable (journal), then add it to the session file."""
+        final = self.journal / f"{rec.press_id}.h5"
+        tmp = self.journal / f"{rec.press_id}.h5.tmp"
+        try:
+            with h5py.File(tmp, "w") as jf:
+                write_press_group(jf, rec, name="press")
+            with open(tmp, "rb+") as fh:
+                os.fsync(fh.fileno())
+            os.replace(tmp, final)
+            _fsync_dir(self.journal)
+            with h5py.File(self.path, "a") as f:
+                write_press_group(f["presses"], rec)
+                f.flush()
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            raise DataError(
+                f"could not record press {rec.press_id} in {self.path}: {exc}",
+                hint="check free disk space; rerun the same command to resume",
+            ) from exc
+
+
+def iter_press_groups(f: h5py.File) -> Iterator[tuple[str, h5py.Group]]:
+    presses = f.get("presses")
+    if presses is None:
+        return
+    for pid in sorted(presses):
+        g = presses[pid]
+        if g.attrs.get("write_complete", False):
+            yield pid, g

@@ -1,0 +1,167 @@
+"""Reading session files: listing sessions, reading presses, and the force-matched frames learning trains on."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from unitac_rig.errors import DataError
+from unitac_rig.recording import (
+    SCHEMA_VERSION,
+    PressRecord,
+    _as_str,
+    _decode_attr,
+    iter_press_groups,
+    read_extraction,
+    read_press_group,
+)
+
+
+@dataclass(frozen=True)
+class SessionInfo:
+    path: Path
+    object_id: str
+    sensor: str
+    simulated: bool
+    attrs: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class MatchedSet:
+    """Every force-matched frame of one (object, sensor) session that hit its target (misses and failed presses out).
+
+    ``values`` are tare-subtracted, in the sensor's units (uSkin counts, PapillArray N), shape (M, n_taxels, 3).
+    """
+
+    object_id: str
+    sensor: str
+    simulated: bool
+    rotation_deg: np.ndarray
+    angle_deg: np.ndarray
+    target_n: np.ndarray
+    values: np.ndarray
+    force_n: np.ndarray
+    error_n: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.target_n.size)
+
+
+def _open(path: Path) -> h5py.File:
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise DataError(
+            f"{path} is not a readable session file ({exc})",
+            hint="rerun the collect command on that directory to rebuild it from the journal",
+        ) from exc
+    version = f.attrs.get("schema_version")
+    if version is None or int(version) != SCHEMA_VERSION:
+        f.close()
+        raise DataError(
+            f"{path} has session schema version {version!r}, this unitac-rig reads version {SCHEMA_VERSION}",
+            hint="re-collect or re-import the data with this version",
+        )
+    return f
+
+
+def read_session_info(path: Path) -> SessionInfo:
+    with _open(path) as f:
+        attrs = {k: _decode_attr(v) for k, v in f.attrs.items()}
+    return SessionInfo(
+        path=Path(path),
+        object_id=str(attrs.get("object", "")),
+        sensor=str(attrs.get("sensor", "")),
+        simulated=bool(attrs.get("simulated", False)),
+        attrs=attrs,
+    )
+
+
+def list_sessions(data_dir: Path) -> list[SessionInfo]:
+    """Every session file directly in ``data_dir`` (broken copies set aside by recovery are skipped)."""
+    data_dir = Path(data_dir)
+    if not data_dir.is_dir():
+        raise DataError(f"{data_dir} is not a directory", hint="pass the --data directory you collected into")
+    paths = sorted(p for p in data_dir.glob("*__*.h5") if ".broken-" not in p.name)
+    return [read_session_info(p) for p in paths]
+
+
+def read_presses(path: Path, *, with_streams: bool = True) -> list[PressRecord]:
+    with _open(path) as f:
+        return [read_press_group(g) for _, g in iter_press_groups(f)] if with_streams else []
+
+
+def press_summaries(path: Path) -> list[dict[str, Any]]:
+    """Per-press attributes and extraction arrays without loading the raw streams."""
+    out = []
+    with _open(path) as f:
+        for pid, g in iter_press_groups(f):
+            item = {k: _decode_attr(v) for k, v in g.attrs.items()}
+            item["press_id"] = pid
+            item["status"] = _as_str(g.attrs["status"])
+            ex = read_extraction(g)
+            item["extraction"] = ex[0] if ex else None
+            item["tactile_frames"] = int(g["tactile/t_s"].shape[0])
+            item["robot_samples"] = int(g["robot/t_s"].shape[0])
+            out.append(item)
+    return out
+
+
+def load_matched_set(path: Path) -> MatchedSet:
+    info = read_session_info(path)
+    rot, ang, tgt, vals, force, err = [], [], [], [], [], []
+    with _open(path) as f:
+        for _, g in iter_press_groups(f):
+            if _as_str(g.attrs["status"]) != "complete":
+                continue
+            ex = read_extraction(g)
+            if ex is None:
+                continue
+            extraction, frames = ex
+            keep = ~extraction.miss
+            k = int(keep.sum())
+            rot.append(np.full(k, float(g.attrs["rotation_deg"])))
+            ang.append(np.full(k, float(g.attrs["angle_deg"])))
+            tgt.append(extraction.targets_n[keep])
+            vals.append(frames[keep])
+            force.append(extraction.force_at_frame_n[keep])
+            err.append(extraction.error_n[keep])
+    from drivers.layouts import LAYOUTS
+
+    layout = LAYOUTS.get(info.sensor)
+    n_taxels = layout.n_taxels if layout else (vals[0].shape[1] if vals else 0)
+
+    def cat(parts: list[np.ndarray], shape: tuple[int, ...] = ()) -> np.ndarray:
+        return np.concatenate(parts) if parts else np.zeros((0, *shape))
+
+    return MatchedSet(
+        object_id=info.object_id,
+        sensor=info.sensor,
+        simulated=info.simulated,
+        rotation_deg=cat(rot),
+        angle_deg=cat(ang),
+        target_n=cat(tgt),
+        values=cat(vals, (n_taxels, 3)).astype(np.float32),
+        force_n=cat(force),
+        error_n=cat(err),
+    )
+
+
+def load_matched_sets(data_dir: Path) -> list[MatchedSet]:
+    """One MatchedSet per session in ``data_dir``; raises DataError when there is none."""
+    sessions = list_sessions(data_dir)
+    if not sessions:
+        raise DataError(f"no session files (*__*.h5) in {data_dir}", hint="run `unitac-rig collect` first")
+    return [load_matched_set(s.path) for s in sessions]
+
+
+def root_config(path: Path) -> dict[str, Any]:
+    with _open(path) as f:
+        raw = f.attrs.get("config", "{}")
+    value = json.loads(_as_str(raw)) if isinstance(raw, bytes | str) else {}
+    return value if isinstance(value, dict) else {}

@@ -168,15 +168,27 @@ def write_press_group(parent: h5py.Group, rec: PressRecord, name: str | None = N
     tac = g.create_group("tactile")
     tac.create_dataset("t_s", data=np.asarray(rec.tactile_t_s, np.float64))
     values = np.asarray(rec.tactile_values, np.float32)
-    tac.create_dataset("values", data=values, compression="gzip", compression_opts=1, shuffle=True,
-                       chunks=True if values.size else None)
+    tac.create_dataset(
+        "values",
+        data=values,
+        compression="gzip",
+        compression_opts=1,
+        shuffle=True,
+        chunks=True if values.size else None,
+    )
     tac.create_dataset("seq", data=np.asarray(rec.tactile_seq, np.int64))
     tac.create_dataset("device_t_us", data=np.asarray(rec.tactile_device_t_us, np.int64))
     tac.create_dataset("valid", data=np.asarray(rec.tactile_valid, bool))
     if rec.tactile_displacement_mm is not None:
         disp = np.asarray(rec.tactile_displacement_mm, np.float32)
-        tac.create_dataset("displacement_mm", data=disp, compression="gzip", compression_opts=1, shuffle=True,
-                           chunks=True if disp.size else None)
+        tac.create_dataset(
+            "displacement_mm",
+            data=disp,
+            compression="gzip",
+            compression_opts=1,
+            shuffle=True,
+            chunks=True if disp.size else None,
+        )
     g.create_dataset("tare_baseline", data=np.asarray(rec.tare_baseline, np.float64))
     ev_dtype = np.dtype([("t_s", np.float64), ("kind", h5py.string_dtype()), ("detail", h5py.string_dtype())])
     g.create_dataset("events", data=np.array([(t, k, d) for t, k, d in rec.events], dtype=ev_dtype))
@@ -314,7 +326,7 @@ class SessionWriter:
                         )
                     if _as_str(f.attrs.get("object", "")) != self.object_id:
                         raise DataError(f"{self.path} is not a session of {self.object_id}")
-                    "presses" in f  # noqa: B018 - touching the index proves it is readable
+                    _ = f.get("presses")  # touching the index proves the file is readable
             except OSError as exc:
                 broken = self.path.with_name(f"{self.path.stem}.broken-{time.strftime('%Y%m%d-%H%M%S')}.h5")
                 os.replace(self.path, broken)

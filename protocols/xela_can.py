@@ -1,0 +1,318 @@
+"""XELA uSkin raw CAN wire format (old/2019 "version 1" firmware): stream commands, taxel messages, frame assembly.
+
+Wire format (1 Mbit/s CAN, standard 11-bit arbitration ids, classic frames of up to 8 data bytes):
+
+* Host -> controller stream command on arbitration id ``0x200 | controller_id`` (controller id 0..15, so the first
+  board is 0x201): payload ``07 00`` starts streaming, ``07 01`` stops it. One vendor demo sends a single ``07`` to
+  start; the decoder accepts that too.
+* Controller -> host: **one CAN message per taxel**. Payload byte 0 is not used by any known host (meaning unknown);
+  bytes 1-2 = X, 3-4 = Y, 5-6 = Z, each an unsigned 16-bit count, most significant byte first (big-endian).
+  Byte 7, when present, is unused.
+* Validity: a message whose X most significant byte (payload byte 1) is >= 0xFA is a "no data" sentinel (the vendor
+  manual shows ``FA00,FA00,FA00`` placeholders); a message whose three axes are all 0 means "data unavailable".
+  Either way the taxel is flagged, never used as a reading.
+* Taxel ids: ``0x1RC`` with R = row 0..3 and C = column (chip) 0..3 on the 4x4 uSPa44 and 0..5 on the 4x6 uSPa46.
+  XELA's own map file numbers the 4x6 taxels in *reverse*: s1 = 0x135, s2 = 0x134 ... s6 = 0x130, s7 = 0x125 ...
+  s24 = 0x100. Other firmware uses other ids (one used 0x710 + taxel index), so id maps are plain data
+  (:class:`TaxelIdMap`). This project's taxel index is row-major, ``index = row * cols + col`` (drivers/layouts.py).
+* There is **no frame counter** on the wire: a frame is the latest message of every taxel id. The
+  :class:`FrameAssembler` closes a frame as soon as every taxel has reported once since the previous frame; when a
+  taxel reports a second time first (a cycle lost a message), the frame is closed early with the missing taxels
+  flagged in ``stale_mask``.
+
+Sources: XELA-Robotics/CAN-USB README and sensor-server/server.py, ROS/4x6.ini (reverse numbering), the XELA ROS
+manual v0.0.9b and manual v1.4.0 (sentinel example), the AIST o2as_xela_sensor driver and demo (0xFA rule, 1-byte
+start), aturganbayev/tactile_UR5 (``cansend can0 203#07.00``), as summarised in the project's hardware facts
+(section 1.2). Pure codec: no I/O, threads or clocks; callers pass timestamps in.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from protocols.errors import ProtocolError
+
+START_STREAM_PAYLOAD = b"\x07\x00"
+STOP_STREAM_PAYLOAD = b"\x07\x01"
+START_STREAM_PAYLOAD_SHORT = b"\x07"  # the 1-byte start variant one vendor demo sends
+COMMAND_BASE_ID = 0x200
+MAX_CONTROLLER_ID = 15
+MAX_STANDARD_ID = 0x7FF
+MAX_COUNT = 0xFFFF  # counts are unsigned 16-bit
+INVALID_X_MSB = 0xFA  # payload byte 1 (X MSB) at or above this marks a "no data" sentinel
+TAXEL_PAYLOAD_LEN = 8
+MIN_TAXEL_PAYLOAD_LEN = 7  # byte 0 + three big-endian uint16 axes
+
+_AXES = struct.Struct(">HHH")  # X, Y, Z counts at payload offset 1
+
+
+def command_arbitration_id(controller_id: int) -> int:
+    """CAN id of the host -> controller stream command: ``0x200 | controller_id`` (id 0..15)."""
+    if isinstance(controller_id, bool) or not isinstance(controller_id, int):
+        raise ProtocolError(f"controller id must be an int, got {controller_id!r}", hint="use 0..15")
+    if not 0 <= controller_id <= MAX_CONTROLLER_ID:
+        raise ProtocolError(
+            f"controller id {controller_id} out of range 0..{MAX_CONTROLLER_ID}",
+            hint="use the 'id' from xServ.ini or the low nibble candump shows",
+        )
+    return COMMAND_BASE_ID | controller_id
+
+
+def encode_stream_command(controller_id: int, start: bool) -> tuple[int, bytes]:
+    """(arbitration id, payload) that starts (``07 00``) or stops (``07 01``) streaming on one controller."""
+    return command_arbitration_id(controller_id), (START_STREAM_PAYLOAD if start else STOP_STREAM_PAYLOAD)
+
+
+def decode_stream_command(arbitration_id: int, data: bytes) -> tuple[int, bool] | None:
+    """(controller id, start?) if this CAN message is a stream command, else None.
+
+    Accepts ``07 00`` (start), ``07 01`` (stop) and the 1-byte ``07`` start variant; zero padding after the two
+    command bytes is tolerated (some adapters pad to 8 bytes).
+    """
+    if arbitration_id & ~MAX_CONTROLLER_ID != COMMAND_BASE_ID:
+        return None
+    controller_id = arbitration_id & MAX_CONTROLLER_ID
+    payload = bytes(data)
+    if payload == START_STREAM_PAYLOAD_SHORT:
+        return controller_id, True
+    if len(payload) < 2 or payload[0] != 0x07 or any(payload[2:]):
+        return None
+    if payload[1] == 0x00:
+        return controller_id, True
+    if payload[1] == 0x01:
+        return controller_id, False
+    return None
+
+
+@dataclass(frozen=True)
+class TaxelIdMap:
+    """Which CAN arbitration id carries which taxel, in layout order (``index = row * cols + col``).
+
+    ``ids[i]`` is the arbitration id of taxel ``i``. Firmware differs in its ids, so maps are data: build one with
+    :meth:`from_ids` (ids in layout order) or :meth:`from_xela_ini_order` (ids as listed s1, s2, ... in XELA's
+    map file, which numbers taxels in reverse).
+    """
+
+    ids: tuple[int, ...]
+    name: str = field(default="", compare=False)
+    _index: dict[int, int] = field(init=False, repr=False, compare=False, hash=False)
+
+    def __post_init__(self) -> None:
+        ids = tuple(self.ids)
+        if not ids:
+            raise ProtocolError("a taxel id map needs at least one id", hint="list one CAN id per taxel")
+        for arbitration_id in ids:
+            if isinstance(arbitration_id, bool) or not isinstance(arbitration_id, int):
+                raise ProtocolError(f"taxel id {arbitration_id!r} is not an int", hint="use 11-bit CAN ids")
+            if not 0 <= arbitration_id <= MAX_STANDARD_ID:
+                raise ProtocolError(
+                    f"taxel id 0x{arbitration_id:X} is not a standard 11-bit CAN id", hint="use 0x000..0x7FF"
+                )
+        duplicates = sorted({i for i in ids if ids.count(i) > 1})
+        if duplicates:
+            listed = ", ".join(f"0x{i:03X}" for i in duplicates)
+            raise ProtocolError(f"taxel id map repeats ids {listed}", hint="each taxel needs its own CAN id")
+        object.__setattr__(self, "ids", ids)
+        object.__setattr__(self, "_index", {arbitration_id: i for i, arbitration_id in enumerate(ids)})
+
+    @property
+    def n_taxels(self) -> int:
+        return len(self.ids)
+
+    def index_of(self, arbitration_id: int) -> int | None:
+        """Taxel index (layout order) carried by this CAN id, or None if the id is not a taxel of this map."""
+        return self._index.get(arbitration_id)
+
+    @classmethod
+    def from_ids(cls, ids: Iterable[int], name: str = "") -> TaxelIdMap:
+        """Map from CAN ids listed in layout order (taxel 0 first)."""
+        return cls(tuple(ids), name=name)
+
+    @classmethod
+    def from_xela_ini_order(cls, ini_ids: Sequence[int], name: str = "") -> TaxelIdMap:
+        """Map from ids listed as in XELA's map file (s1 first), which numbers taxels in reverse layout order.
+
+        XELA's 4x6 map gives s1 = 0x135 ... s24 = 0x100, i.e. s1 is the last taxel of this project's row-major
+        layout (row 3, col 5) and s24 the first; so the layout order is the ini order reversed.
+        """
+        return cls(tuple(reversed(tuple(ini_ids))), name=name)
+
+    @classmethod
+    def from_row_col_ids(cls, rows: int, cols: int, base: int = 0x100, name: str = "") -> TaxelIdMap:
+        """The ``base + 0x10 * row + col`` scheme (0x1RC) of the uSPa44/uSPa46 boards."""
+        if not (1 <= rows <= 16 and 1 <= cols <= 16):
+            raise ProtocolError(f"grid {rows}x{cols} does not fit the 0x1RC id scheme", hint="rows, cols 1..16")
+        return cls(tuple(base + 0x10 * row + col for row in range(rows) for col in range(cols)), name=name)
+
+
+USPA46_ID_MAP = TaxelIdMap.from_row_col_ids(4, 6, name="uSPa46 0x1RC (4x6)")
+USPA44_ID_MAP = TaxelIdMap.from_row_col_ids(4, 4, name="uSPa44 0x1RC (4x4)")
+
+
+@dataclass(frozen=True, slots=True)
+class TaxelMessage:
+    """One taxel's three raw counts from one CAN message; ``valid`` is False for the 0xFA sentinel or all-zero axes."""
+
+    arbitration_id: int
+    x: int
+    y: int
+    z: int
+    valid: bool
+
+
+def decode_taxel_message(arbitration_id: int, data: bytes) -> TaxelMessage:
+    """Decode one taxel message (X, Y, Z big-endian uint16 at payload bytes 1-2, 3-4, 5-6).
+
+    Raises ProtocolError when the payload is shorter than 7 bytes.
+    """
+    if len(data) < MIN_TAXEL_PAYLOAD_LEN:
+        raise ProtocolError(
+            f"taxel message 0x{arbitration_id:03X} has {len(data)} data bytes, needs at least {MIN_TAXEL_PAYLOAD_LEN}",
+            hint="check the CAN bit rate (1 Mbit/s) and the sensor firmware version",
+        )
+    x, y, z = _AXES.unpack_from(data, 1)
+    valid = data[1] < INVALID_X_MSB and not x == y == z == 0
+    return TaxelMessage(arbitration_id, x, y, z, valid)
+
+
+def _clip_count(value: int, axis: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer):
+        raise ProtocolError(f"{axis} count must be an int, got {value!r}", hint="round counts before encoding")
+    return min(max(int(value), 0), MAX_COUNT)
+
+
+def encode_taxel_message(arbitration_id: int, x: int, y: int, z: int, byte0: int = 0) -> bytes:
+    """8-byte taxel payload; counts are clipped to 0..65535 like a saturating ADC.
+
+    Note the wire's own rule: an X count >= 0xFA00 reads back as the invalid sentinel.
+    ``arbitration_id`` is validated (11-bit) but not part of the payload; it travels in the CAN header.
+    """
+    if not 0 <= arbitration_id <= MAX_STANDARD_ID:
+        raise ProtocolError(f"CAN id 0x{arbitration_id:X} is not 11-bit", hint="use 0x000..0x7FF")
+    if not 0 <= byte0 <= 0xFF:
+        raise ProtocolError(f"byte0 {byte0} does not fit in one byte", hint="use 0..255")
+    return bytes((byte0,)) + _AXES.pack(_clip_count(x, "X"), _clip_count(y, "Y"), _clip_count(z, "Z")) + b"\x00"
+
+
+def encode_invalid_taxel_message(byte0: int = 0) -> bytes:
+    """8-byte "no data" payload ``FA00`` on every axis (the sentinel the vendor manual shows)."""
+    sentinel = INVALID_X_MSB << 8
+    return encode_taxel_message(0, sentinel, sentinel, sentinel, byte0=byte0)
+
+
+@dataclass(frozen=True, slots=True)
+class AssembledFrame:
+    """One uSkin frame in layout order.
+
+    ``values``: (n_taxels, 3) int64 raw counts; a flagged taxel holds its last good value (0 if never seen).
+    ``t_ns``: caller's timestamp of the last message that went into the frame.
+    ``stale_mask``: (n_taxels,) bool, True where the taxel was missing this cycle, sent the invalid sentinel, or its
+    value is older than ``stale_after_ns``. ``valid`` is True only when no taxel is flagged.
+    """
+
+    values: np.ndarray
+    t_ns: int
+    stale_mask: np.ndarray
+    valid: bool
+
+
+class FrameAssembler:
+    """Turns the per-taxel CAN message stream into frames (there is no frame counter on the wire).
+
+    A frame closes when every taxel has reported once since the previous frame. If a taxel reports a second time
+    before that (its cycle lost a message), the frame closes early, flagging the taxels that did not report, and
+    the repeating message opens the next frame. Unknown ids are counted and ignored; payloads too short to decode or
+    carrying the sentinel count as invalid reports and flag their taxel.
+    """
+
+    def __init__(self, id_map: TaxelIdMap = USPA46_ID_MAP, stale_after_ns: int = 50_000_000) -> None:
+        if stale_after_ns <= 0:
+            raise ProtocolError(f"stale_after_ns must be > 0, got {stale_after_ns}", hint="e.g. 50_000_000 (50 ms)")
+        self.id_map = id_map
+        self.stale_after_ns = stale_after_ns
+        n = id_map.n_taxels
+        self._index = id_map._index
+        self._values: list[list[int]] = [[0, 0, 0] for _ in range(n)]  # last good counts per taxel
+        self._good_t_ns: list[int | None] = [None] * n  # time of each taxel's last good value
+        self._bad_this_cycle: list[bool] = [False] * n  # reported, but invalid
+        self._seen: list[bool] = [False] * n  # reported since the last emitted frame
+        self._n_seen = 0
+        self._last_t_ns = 0
+        # counters (monotonic)
+        self.messages = 0
+        self.unknown_ids = 0
+        self.invalid_messages = 0
+        self.frames = 0
+        self.incomplete_frames = 0
+
+    @property
+    def n_taxels(self) -> int:
+        return self.id_map.n_taxels
+
+    def add(self, arbitration_id: int, data: bytes, t_ns: int) -> AssembledFrame | None:
+        """Feed one CAN message received at ``t_ns`` (caller's clock, ns); returns a frame when one closes."""
+        self.messages += 1
+        index = self._index.get(arbitration_id)
+        if index is None:
+            self.unknown_ids += 1
+            return None
+        emitted: AssembledFrame | None = None
+        if self._seen[index]:
+            emitted = self._emit(incomplete=True)
+        self._seen[index] = True
+        self._n_seen += 1
+        self._last_t_ns = t_ns
+        if len(data) >= MIN_TAXEL_PAYLOAD_LEN and data[1] < INVALID_X_MSB:
+            x, y, z = _AXES.unpack_from(data, 1)
+            if x or y or z:
+                self._values[index] = [x, y, z]
+                self._good_t_ns[index] = t_ns
+                self._bad_this_cycle[index] = False
+            else:
+                self._bad_this_cycle[index] = True
+                self.invalid_messages += 1
+        else:
+            self._bad_this_cycle[index] = True
+            self.invalid_messages += 1
+        if self._n_seen == len(self._seen):
+            # Cannot coincide with an early close: that leaves exactly one taxel seen, and a 1-taxel map never
+            # closes early.
+            return self._emit(incomplete=False)
+        return emitted
+
+    def _emit(self, *, incomplete: bool) -> AssembledFrame:
+        t_ns = self._last_t_ns
+        oldest_ok = t_ns - self.stale_after_ns
+        stale = [
+            (not seen) or bad or good_t is None or good_t < oldest_ok
+            for seen, bad, good_t in zip(self._seen, self._bad_this_cycle, self._good_t_ns, strict=True)
+        ]
+        stale_mask = np.array(stale, dtype=bool)
+        frame = AssembledFrame(
+            values=np.array(self._values, dtype=np.int64),
+            t_ns=t_ns,
+            stale_mask=stale_mask,
+            valid=not any(stale),
+        )
+        self.frames += 1
+        if incomplete:
+            self.incomplete_frames += 1
+        n = len(self._seen)
+        self._seen = [False] * n
+        self._bad_this_cycle = [False] * n
+        self._n_seen = 0
+        return frame
+
+    def counters(self) -> dict[str, int]:
+        """All counters as a dict (for health reports)."""
+        return {
+            "messages": self.messages,
+            "unknown_ids": self.unknown_ids,
+            "invalid_messages": self.invalid_messages,
+            "frames": self.frames,
+            "incomplete_frames": self.incomplete_frames,
+        }

@@ -1,7 +1,330 @@
-"""Placeholder: commands for this area are added by its own work item."""
+"""CLI: ``collect``, ``campaign``, ``inspect`` and ``extract``."""
 
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
 import typer
+from rich.console import Console, Group
+from rich.live import Live
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.table import Table
+from rich.text import Text
+
+from drivers.layouts import LAYOUTS, get_layout
+from unitac_rig.collect import PressDone, SessionOutcome, collect_session
+from unitac_rig.config import STRATEGIES, RigConfig, load_rig_config, parse_rig_config
+from unitac_rig.errors import UsageError
+from unitac_rig.extraction import ExtractionSettings
+from unitac_rig.objects import ObjectSpec, get_object, list_objects
+from unitac_rig.press import TickInfo
+from unitac_rig.recording import FINISHED_STATUSES, reextract_session, session_path
+from unitac_rig.rig import Rig, open_rig
+from unitac_rig.session import list_sessions, press_summaries
+
+console = Console(stderr=False)
+SENSOR_ORDER = ("uskin", "papillarray")
+
+DATA_OPTION = typer.Option(Path("data"), "--data", help="Dataset directory (one HDF5 file per object and sensor).")
+RIG_OPTION = typer.Option(None, "--rig", help="Rig file (TOML). Without one, the simulated rig is used.")
+
+
+def _configure(
+    rig_file: Path | None, strategy: str | None, speed: float | None, angles: int | None, standoff: float | None
+) -> RigConfig:
+    config = load_rig_config(rig_file)
+    if strategy is None and speed is None and angles is None and standoff is None:
+        return config
+    data = config.model_dump(mode="json")
+    if strategy is not None:
+        if strategy not in STRATEGIES:
+            raise UsageError(f"unknown strategy {strategy!r}", hint=f"use one of: {', '.join(STRATEGIES)}")
+        data["press"]["strategy"] = strategy
+    if speed is not None:
+        data["press"]["speed_mm_s"] = speed
+    if angles is not None:
+        data["press"]["angle_count"] = angles
+    if standoff is not None:
+        data["object"]["standoff_mm"] = standoff
+    return parse_rig_config(data, source="command-line options")
+
+
+def _session_complete(data_dir: Path, object_id: str, sensor: str) -> bool:
+    path = session_path(data_dir, object_id, sensor)
+    if not path.exists():
+        return False
+    try:
+        presses = press_summaries(path)
+        planned = {s.path: s for s in list_sessions(data_dir)}[path].attrs.get("planned_presses", [])
+    except Exception:  # an unreadable file is not complete; collect will recover it from the journal
+        return False
+    done = {p["press_id"] for p in presses if p["status"] in FINISHED_STATUSES}
+    return bool(planned) and set(planned) <= done
+
+
+def _choose_sensor(rig: Rig, obj: ObjectSpec, sensor: str | None, data_dir: Path) -> str:
+    if sensor is not None:
+        if sensor not in LAYOUTS:
+            raise UsageError(f"unknown sensor {sensor!r}", hint=f"use one of: {', '.join(SENSOR_ORDER)}")
+        if sensor not in rig.sensor_names():
+            raise UsageError(
+                f"sensor {sensor!r} is not configured on this rig",
+                hint=f"configured: {', '.join(rig.sensor_names())}",
+            )
+        return sensor
+    if not rig.simulated:
+        found = rig.detect_sensor()
+        console.print(f"detected mounted sensor: [bold]{found}[/]")
+        return found
+    for name in SENSOR_ORDER:
+        if name in rig.sensor_names() and not _session_complete(data_dir, obj.id, name):
+            console.print(f"simulated rig: mounting [bold]{name}[/] (no complete data yet for {obj.id})")
+            return name
+    raise UsageError(
+        f"every simulated sensor already has a complete session for {obj.id} in {data_dir}",
+        hint="use --sensor to redo one into another --data directory, or run `unitac-rig inspect`",
+    )
+
+
+class LivePanel:
+    """Progress over presses with time left, the current force, and a small taxel map (normal channel)."""
+
+    def __init__(self, title: str, planned: int, done: int, sensor: str, threshold_n: float) -> None:
+        self.layout = get_layout(sensor)
+        self.threshold_n = threshold_n
+        self.progress = Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("presses"),
+            TimeRemainingColumn(),
+        )
+        self.task = self.progress.add_task(title, total=planned, completed=done)
+        self.force = 0.0
+        self.phase = ""
+        self.press_id = ""
+        self.first_frame: np.ndarray | None = None
+        self.last_frame: np.ndarray | None = None
+        self.last_result = ""
+        self._last_draw = 0.0
+        self.live = Live(self._render(), console=console, refresh_per_second=8, transient=False)
+
+    def _render(self) -> Group:
+        status = Text(f"press {self.press_id} {self.phase:8s} force {self.force:6.2f} N / {self.threshold_n:g} N")
+        grid = Text()
+        if self.last_frame is not None and self.first_frame is not None:
+            z = (self.last_frame - self.first_frame)[:, 2].reshape(self.layout.rows, self.layout.cols)
+            scale = max(float(np.abs(z).max()), 1e-9)
+            shades = " .:-=+*#%@"
+            for row in z:
+                grid.append(" ".join(shades[min(9, int(9 * max(0.0, v) / scale))] * 2 for v in row) + "\n")
+        return Group(self.progress, status, grid, Text(self.last_result, style="dim"))
+
+    def on_tick(self, tick: TickInfo) -> None:
+        self.force, self.phase = tick.press_force_n, tick.phase
+        if tick.press_id != self.press_id:
+            self.press_id, self.first_frame = tick.press_id, None
+        if tick.latest_frame is not None:
+            if self.first_frame is None:
+                self.first_frame = tick.latest_frame.values
+            self.last_frame = tick.latest_frame.values
+        now = time.monotonic()
+        if now - self._last_draw > 0.1:
+            self._last_draw = now
+            self.live.update(self._render())
+
+    def on_press(self, done: PressDone) -> None:
+        r = done.record
+        self.last_result = (
+            f"last: {r.press_id} {r.status} ({r.reason}), peak {r.attrs.get('peak_force_n', 0):.2f} N, "
+            f"{done.matched}/25 targets matched"
+        )
+        self.progress.update(self.task, completed=done.index)
+        self.live.update(self._render())
+
+
+def _run_session(
+    rig: Rig,
+    obj: ObjectSpec,
+    sensor: str,
+    data_dir: Path,
+    rotations: list[float] | None,
+    live: bool,
+    max_presses: int | None,
+) -> SessionOutcome:
+    rot = rotations if rotations is not None else list(obj.rotations_deg)
+    planned = len(rot) * rig.config.press.angle_count
+    panel = LivePanel(f"{obj.id} / {sensor}", planned, 0, sensor, rig.config.press.threshold_n) if live else None
+
+    def ask(message: str) -> None:
+        if panel is not None:
+            panel.live.stop()
+        typer.prompt(message, default="", show_default=False)
+        if panel is not None:
+            panel.live.start()
+
+    try:
+        if panel is not None:
+            panel.live.start()
+        outcome = collect_session(
+            rig, obj, sensor, data_dir, rotations=rot,
+            on_press=panel.on_press if panel else None,
+            on_tick=panel.on_tick if panel else None,
+            ask_operator=ask, max_presses=max_presses,
+        )  # fmt: skip
+    finally:
+        if panel is not None:
+            panel.live.stop()
+    for note in outcome.recovery_notes:
+        console.print(f"[yellow]recovered:[/] {note}")
+    done_now = outcome.complete + outcome.failed + outcome.aborted
+    console.print(
+        f"{obj.id} / {sensor}: {outcome.already_done + outcome.complete + outcome.failed}/{outcome.planned} presses "
+        f"finished ({done_now} this run: {outcome.complete} complete, {outcome.failed} failed, "
+        f"{outcome.aborted} aborted) -> {outcome.path}"
+    )
+    return outcome
+
+
+def collect(
+    object_id: str = typer.Option(..., "--object", help="Object id, e.g. hex_tpu (see `unitac-rig objects`)."),
+    sensor: str | None = typer.Option(None, "--sensor", help="uskin or papillarray; detected when omitted."),
+    rig_file: Path | None = RIG_OPTION,
+    data: Path = DATA_OPTION,
+    strategy: str | None = typer.Option(None, "--strategy", help="guarded, two-phase or force-ramp."),
+    speed: float | None = typer.Option(None, "--speed", help="Press speed in mm/s."),
+    rotation: float | None = typer.Option(None, "--rotation", help="Run the sweep at this object rotation only (deg)."),
+    seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed (runs are deterministic per seed)."),
+    angles: int | None = typer.Option(None, "--angles", help="Number of approach angles (default 91)."),
+    max_presses: int | None = typer.Option(None, "--max-presses", help="Stop after this many presses (resume later)."),
+    live: bool = typer.Option(True, "--live/--no-live", help="Show the live panel."),
+) -> None:
+    """Press one object over the arc with the mounted sensor and record the session (resumes if interrupted)."""
+    config = _configure(rig_file, strategy, speed, angles, None)
+    obj = get_object(object_id, extra_files=config.object.objects_files)
+    if rotation is not None and rotation not in obj.rotations_deg:
+        raise UsageError(
+            f"{obj.id} is swept at rotations {list(obj.rotations_deg)}, not {rotation:g}",
+            hint="omit --rotation to run every rotation",
+        )
+    if config.simulated:
+        console.print("[bold yellow]SIMULATED RIG[/] (no rig file given): every device is simulated, no hardware moves.")
+    with open_rig(config, seed=seed) as rig:
+        chosen = _choose_sensor(rig, obj, sensor, data)
+        outcome = _run_session(rig, obj, chosen, data, [rotation] if rotation is not None else None, live, max_presses)
+    if outcome.stopped:
+        raise UsageError(f"session stopped early: {outcome.stopped}", hint="rerun the same command to resume")
+
+
+def campaign(
+    rig_file: Path | None = RIG_OPTION,
+    data: Path = DATA_OPTION,
+    seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed."),
+    angles: int | None = typer.Option(None, "--angles", help="Number of approach angles (default 91)."),
+    objects: str | None = typer.Option(None, "--objects", help="Comma-separated object ids (default: all)."),
+    live: bool = typer.Option(True, "--live/--no-live", help="Show the live panel."),
+) -> None:
+    """Every object with every sensor: unattended on the simulated rig, operator-guided on hardware."""
+    config = _configure(rig_file, None, None, angles, None)
+    catalogue = list_objects(extra_files=config.object.objects_files)
+    if objects:
+        wanted = [o.strip() for o in objects.split(",") if o.strip()]
+        catalogue = [get_object(o, extra_files=config.object.objects_files) for o in wanted]
+    if config.simulated:
+        console.print("[bold yellow]SIMULATED RIG[/]: running the whole campaign unattended.")
+    started = time.monotonic()
+    with open_rig(config, seed=seed) as rig:
+        for sensor in [s for s in SENSOR_ORDER if s in rig.sensor_names()]:
+            if not rig.simulated:
+                typer.prompt(f"Mount the {sensor} on the arm, then press Enter", default="", show_default=False)
+            for obj in catalogue:
+                if _session_complete(data, obj.id, sensor):
+                    console.print(f"{obj.id} / {sensor}: already complete")
+                    continue
+                if not rig.simulated:
+                    typer.prompt(f"Mount {obj.id} at rotation 0, then press Enter", default="", show_default=False)
+                outcome = _run_session(rig, obj, sensor, data, None, live, None)
+                if outcome.stopped:
+                    raise UsageError(f"campaign stopped: {outcome.stopped}", hint="rerun the same command to resume")
+    console.print(f"campaign done in {time.monotonic() - started:.1f} s wall time -> {data}")
+
+
+def inspect(
+    data: Path = typer.Argument(..., help="Dataset directory."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+) -> None:
+    """Per session: presses, matched targets, matching error, peak force; per object: pairs joined across sensors."""
+    from unitac_rig.inspect import inspect_dataset
+
+    report = inspect_dataset(data)
+    if as_json:
+        typer.echo(json.dumps(report, indent=1))
+        return
+    table = Table(title=f"sessions in {data}")
+    for col in ("object", "sensor", "sim", "presses ok/fail/plan", "targets hit/miss", "|err| med/p95/max N",
+                "peak med/max N", "time s"):  # fmt: skip
+        table.add_column(col)
+    for s in report["sessions"]:
+        e, p = s["match_error_n"], s["peak_force_n"]
+
+        def f(v: float | None) -> str:
+            return "-" if v is None else f"{v:.3f}"
+
+        table.add_row(
+            s["object"], s["sensor"], "yes" if s["simulated"] else "no",
+            f"{s['presses_complete']}/{s['presses_failed']}/{s['presses_planned']}",
+            f"{s['targets_matched']}/{s['targets_missed']}",
+            f"{f(e['median'])}/{f(e['p95'])}/{f(e['max'])}", f"{f(p['median'])}/{f(p['max'])}",
+            f"{s['duration_s']:.1f}",
+        )  # fmt: skip
+    console.print(table)
+    pairs = Table(title="pairs joined across sensors (rotation, angle, target)")
+    pairs.add_column("object")
+    pairs.add_column("pairs")
+    for obj_id, count in report["pairs"].items():
+        pairs.add_row(obj_id, str(count))
+    console.print(pairs)
+
+
+def extract(
+    data: Path = typer.Argument(..., help="Dataset directory."),
+    tolerance: float = typer.Option(0.5, "--tolerance", help="Largest matching error that still counts, N."),
+    smoothing: int = typer.Option(5, "--smoothing", help="Moving-average window on the wrist force, samples."),
+    latency: float = typer.Option(0.0, "--latency", help="Tactile latency to subtract from frame times, s."),
+) -> None:
+    """Recompute the force-matched frames of every session from the raw streams with other settings."""
+    settings = ExtractionSettings(tolerance_n=tolerance, smoothing_samples=smoothing, tactile_latency_s=latency)
+    sessions = list_sessions(data)
+    if not sessions:
+        raise UsageError(f"no session files in {data}")
+    for info in sessions:
+        presses, matched = reextract_session(info.path, settings)
+        console.print(f"{info.path.name}: {presses} presses re-extracted, {matched} targets matched")
+
+
+def objects_cmd(
+    rig_file: Path | None = RIG_OPTION,
+) -> None:
+    """List the object catalogue (ids, shape, material, rotations)."""
+    config = load_rig_config(rig_file)
+    table = Table(title="objects")
+    for col in ("id", "shape", "material", "rotations (deg)", "autoencoder training"):
+        table.add_column(col)
+    for o in list_objects(extra_files=config.object.objects_files):
+        table.add_row(
+            o.id, o.shape, o.material, ", ".join(f"{r:g}" for r in o.rotations_deg),
+            "yes" if o.in_autoencoder_training else "no (test only)",
+        )  # fmt: skip
+    console.print(table)
 
 
 def register(app: typer.Typer) -> None:
-    """Add this area's commands to the root app."""
+    """Add collection commands to the root app."""
+    app.command("collect")(collect)
+    app.command("campaign")(campaign)
+    app.command("inspect")(inspect)
+    app.command("extract")(extract)
+    app.command("objects")(objects_cmd)

@@ -409,3 +409,59 @@ def iter_press_groups(f: h5py.File) -> Iterator[tuple[str, h5py.Group]]:
         g = presses[pid]
         if g.attrs.get("write_complete", False):
             yield pid, g
+
+
+def _reextract_group(g: h5py.Group, settings: ExtractionSettings) -> Extraction:
+    from unitac_rig.extraction import extract_press
+
+    values = g["tactile/values"][()]
+    extraction = extract_press(
+        g["robot/t_s"][()], g["robot/press_force_n"][()], g["tactile/t_s"][()], g["tactile/valid"][()], settings
+    )
+    write_extraction(g, extraction, values - g["tare_baseline"][()].astype(np.float32)[None])
+    return extraction
+
+
+def _rewrite_atomically(path: Path, settings: ExtractionSettings, root_group: str | None) -> tuple[int, int]:
+    """Copy ``path``, recompute every extraction in the copy, fsync, and swap it in; returns (presses, matched)."""
+    import shutil
+
+    tmp = path.with_name(path.name + ".tmp")
+    shutil.copy2(path, tmp)
+    presses = matched = 0
+    try:
+        with h5py.File(tmp, "a") as f:
+            groups = [("press", f["press"])] if root_group == "press" else list(iter_press_groups(f))
+            for _, g in groups:
+                presses += 1
+                matched += _reextract_group(g, settings).n_matched
+            if root_group is None:
+                f.attrs["extraction_settings"] = json.dumps(settings.to_dict())
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return presses, matched
+
+
+def reextract_session(path: Path, settings: ExtractionSettings) -> tuple[int, int]:
+    """Recompute the force-matched extraction of every press from the raw streams with ``settings``.
+
+    The session file and its journal are rewritten atomically (copy, modify, rename), so a crash leaves either the
+    old or the new extraction, never a mix within a file. Returns (presses, targets matched).
+    """
+    path = Path(path)
+    result = _rewrite_atomically(path, settings, None)
+    stem = path.stem
+    journal = path.parent / ".journal" / stem
+    for entry in sorted(journal.glob("*.h5")) if journal.is_dir() else []:
+        _rewrite_atomically(entry, settings, "press")
+    header = journal / "_session.json"
+    if header.exists():
+        data = json.loads(header.read_text())
+        data["extraction_settings"] = settings.to_dict()
+        tmp = journal / "_session.tmp"
+        tmp.write_text(json.dumps(data, default=_json_default, indent=1))
+        os.replace(tmp, header)
+    return result

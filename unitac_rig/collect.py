@@ -1,0 +1,212 @@
+"""A collection session: every planned press of one object with one sensor, resumable, into one session file.
+
+The plan is 91 approach angles (-45..45 deg) per object rotation (four rotations for the irregular prism). Presses
+already finished in the session file (complete or failed) are skipped, so the same command resumes after a crash,
+a Ctrl-C or a protective stop. Library code: no printing; progress goes through callbacks the CLI renders.
+"""
+
+from __future__ import annotations
+
+import logging
+import subprocess
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import unitac_rig
+from drivers.errors import DeviceTimeout, ProtectiveStop
+from drivers.sensor import TactileSensor
+from unitac_rig.config import RigConfig
+from unitac_rig.errors import SafetyLimit
+from unitac_rig.extraction import ExtractionSettings, extract_press
+from unitac_rig.objects import ObjectSpec, pad_side_direction
+from unitac_rig.press import PressPlan, TickInfo, make_plan, run_press
+from unitac_rig.recording import PressRecord, SessionWriter
+from unitac_rig.rig import Rig
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class SessionOutcome:
+    object_id: str
+    sensor: str
+    path: Path
+    planned: int
+    already_done: int = 0
+    complete: int = 0
+    failed: int = 0
+    aborted: int = 0
+    stopped: str | None = None  # why the session ended early, if it did
+    recovery_notes: list[str] = field(default_factory=list)
+
+    @property
+    def finished(self) -> bool:
+        return self.stopped is None
+
+
+@dataclass
+class PressDone:
+    """Handed to ``on_press`` after each press is recorded."""
+
+    index: int
+    planned: int
+    record: PressRecord
+    matched: int
+
+
+def git_commit() -> str:
+    """The project's git commit, or "unknown" outside a checkout."""
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=Path(unitac_rig.__file__).resolve().parent.parent,
+            capture_output=True,
+            text=True,
+            timeout=5,
+            check=False,
+        )
+        return out.stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def support_distance_mm(obj: ObjectSpec, rotation_deg: float, angle_deg: float) -> float:
+    """How far the object's outline reaches from its axis toward the pad (mm): the first-contact distance."""
+    u = pad_side_direction(angle_deg, rotation_deg)
+    return float(np.max(np.asarray(obj.outer_mm) @ u))
+
+
+def plan_presses(obj: ObjectSpec, config: RigConfig, rotations: Sequence[float]) -> list[PressPlan]:
+    placement = config.object
+    return [
+        make_plan(
+            rotation,
+            angle,
+            placement.center_m,
+            placement.press_height_m,
+            support_distance_mm(obj, rotation, angle),
+            placement.standoff_mm,
+        )
+        for rotation in rotations
+        for angle in config.angles_deg()
+    ]
+
+
+def collect_session(
+    rig: Rig,
+    obj: ObjectSpec,
+    sensor_name: str,
+    data_dir: Path,
+    *,
+    rotations: Sequence[float] | None = None,
+    extraction: ExtractionSettings | None = None,
+    on_press: Callable[[PressDone], None] | None = None,
+    on_tick: Callable[[TickInfo], None] | None = None,
+    ask_operator: Callable[[str], None] | None = None,
+    max_presses: int | None = None,
+) -> SessionOutcome:
+    """Run (or resume) the session of ``obj`` with ``sensor_name`` on ``rig``; returns what happened."""
+    config = rig.config
+    extraction = extraction or ExtractionSettings()
+    rotations = list(obj.rotations_deg if rotations is None else rotations)
+    plans = plan_presses(obj, config, rotations)
+    root_attrs: dict[str, Any] = {
+        "object": obj.id,
+        "sensor": sensor_name,
+        "simulated": rig.simulated,
+        "rig": config.name,
+        "config": config.model_dump(mode="json"),
+        "object_spec": {"id": obj.id, "shape": obj.shape, "material": obj.material, "outer_mm": obj.outer_mm},
+        "rotations_deg": [float(r) for r in rotations],
+        "planned_presses": [p.press_id for p in plans],
+        "extraction_settings": extraction.to_dict(),
+        "package_version": unitac_rig.__version__,
+        "git_commit": git_commit(),
+        "created_unix": time.time(),
+    }
+    writer = SessionWriter(data_dir, obj.id, sensor_name, root_attrs)
+    done = writer.finished_press_ids()
+    outcome = SessionOutcome(obj.id, sensor_name, writer.path, planned=len(plans), recovery_notes=writer.recovery_notes)
+    outcome.already_done = sum(p.press_id in done for p in plans)
+    todo = [p for p in plans if p.press_id not in done]
+    if max_presses is not None:
+        todo = todo[:max_presses]
+    if not todo:
+        return outcome
+
+    sensor = rig.open_sensor(sensor_name)
+    try:
+        writer.update_root_attrs({"sensor_identity": sensor.identity(), "layout": sensor.layout.name})
+        current_rotation: float | None = None
+        for index, plan in enumerate(todo):
+            if plan.rotation_deg != current_rotation:
+                rig.mount(obj, plan.rotation_deg, sensor_name)
+                if ask_operator is not None and not rig.simulated and len(rotations) > 1:
+                    ask_operator(f"Turn {obj.id} to {plan.rotation_deg:g} deg on its mount, then press Enter.")
+                current_rotation = plan.rotation_deg
+            record, stop = _one_press(rig, sensor, plan, writer, extraction, outcome, on_tick)
+            if on_press is not None and record is not None:
+                matched = 0 if record.extraction is None else record.extraction.n_matched
+                on_press(PressDone(outcome.already_done + index + 1, outcome.planned, record, matched))
+            if stop:
+                break
+    finally:
+        sensor.disconnect()
+    return outcome
+
+
+def _one_press(
+    rig: Rig,
+    sensor: TactileSensor,
+    plan: PressPlan,
+    writer: SessionWriter,
+    extraction: ExtractionSettings,
+    outcome: SessionOutcome,
+    on_tick: Callable[[TickInfo], None] | None,
+) -> tuple[PressRecord | None, bool]:
+    """Run one press (retrying once after a sensor stall) and record it; also says whether the session must stop."""
+    config = rig.config
+    for attempt in (1, 2):
+        try:
+            record = run_press(rig.arm, sensor, plan, config.press, config.limits, on_tick=on_tick)
+        except DeviceTimeout as exc:
+            partial = getattr(exc, "press_record", None)
+            if partial is not None:
+                _save(writer, partial, extraction, outcome)
+            if attempt == 1:
+                log.warning("%s; reconnecting the sensor and retrying the press once", exc)
+                sensor.disconnect()
+                sensor.connect()
+                continue
+            outcome.stopped = f"sensor stalled twice at press {plan.press_id}: {exc}"
+            return partial, True
+        except (SafetyLimit, ProtectiveStop, KeyboardInterrupt) as exc:
+            partial = getattr(exc, "press_record", None)
+            if partial is not None:
+                _save(writer, partial, extraction, outcome)
+            if isinstance(exc, KeyboardInterrupt):
+                outcome.stopped = f"interrupted at press {plan.press_id}"
+                raise
+            outcome.stopped = f"{type(exc).__name__} at press {plan.press_id}: {exc}"
+            raise
+        _save(writer, record, extraction, outcome)
+        return record, False
+    return None, True
+
+
+def _save(writer: SessionWriter, record: PressRecord, settings: ExtractionSettings, outcome: SessionOutcome) -> None:
+    record.extraction = extract_press(
+        record.robot_t_s, record.press_force_n, record.tactile_t_s, record.tactile_valid, settings
+    )
+    writer.write_press(record)
+    if record.status == "complete":
+        outcome.complete += 1
+    elif record.status == "failed":
+        outcome.failed += 1
+    else:
+        outcome.aborted += 1

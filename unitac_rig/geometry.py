@@ -1,0 +1,72 @@
+"""Rig geometry: approach directions, press frames and pose conversions (base frame, metres, radians).
+
+Convention (shared with the simulator and the object catalogue): the object stands at ``center_m`` in the robot
+base's horizontal plane; for approach angle theta the pad comes from base direction u = (sin theta, -cos theta, 0) and
+presses along d = -u, toward the centre. The TCP is the centre of the sensing surface with tool +z = d,
+tool y = base +z (up) and tool x = y cross z = (-dy, dx, 0), i.e. horizontal and across the press.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def approach_direction(angle_deg: float) -> np.ndarray:
+    """Unit vector (3,) in the base frame from the object centre toward where the pad comes from."""
+    a = math.radians(angle_deg)
+    return np.array([math.sin(a), -math.cos(a), 0.0])
+
+
+def press_rotation(press_dir: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3x3, columns = tool x, y, z in base axes) for a horizontal press along ``press_dir``."""
+    d = np.asarray(press_dir, dtype=np.float64).copy()
+    d[2] = 0.0
+    d /= np.linalg.norm(d)
+    x = np.array([-d[1], d[0], 0.0])
+    y = np.array([0.0, 0.0, 1.0])
+    return np.column_stack([x, y, d])
+
+
+def rotvec_to_matrix(rotvec: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula: rotation vector (rad) to a 3x3 rotation matrix."""
+    r = np.asarray(rotvec, dtype=np.float64)
+    theta = float(np.linalg.norm(r))
+    if theta < 1e-12:
+        return np.eye(3)
+    k = r / theta
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + math.sin(theta) * kx + (1 - math.cos(theta)) * (kx @ kx)
+
+
+def matrix_to_rotvec(rot: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`rotvec_to_matrix` (robust near 0 and pi)."""
+    m = np.asarray(rot, dtype=np.float64)
+    cos_theta = max(-1.0, min(1.0, (np.trace(m) - 1.0) / 2.0))
+    theta = math.acos(cos_theta)
+    if theta < 1e-9:
+        return np.zeros(3)
+    if math.pi - theta < 1e-6:
+        # axis from the largest diagonal term of (R + I) / 2
+        b = (m + np.eye(3)) / 2.0
+        i = int(np.argmax(np.diag(b)))
+        axis = b[:, i] / math.sqrt(b[i, i])
+        return axis * theta
+    axis = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]]) / (2 * math.sin(theta))
+    return axis * theta
+
+
+def pose_from(position_m: np.ndarray, rot: np.ndarray) -> np.ndarray:
+    """[x, y, z, rx, ry, rz] from a position and a rotation matrix."""
+    return np.concatenate([np.asarray(position_m, dtype=np.float64), matrix_to_rotvec(rot)])
+
+
+def tool_z(pose: np.ndarray) -> np.ndarray:
+    """The tool's +z axis (the press direction) in base coordinates."""
+    return rotvec_to_matrix(np.asarray(pose)[3:6])[:, 2]
+
+
+def press_force_n(tcp_force: np.ndarray, press_dir: np.ndarray) -> float:
+    """Force along the press (N, positive while pressing): minus the environment's force on the tool along d."""
+    return -float(np.dot(np.asarray(tcp_force)[:3], press_dir))

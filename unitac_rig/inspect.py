@@ -1,0 +1,66 @@
+"""Summaries of a dataset directory: per session progress and matching quality, and per object the cross-sensor join."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from unitac_rig.session import list_sessions, press_summaries
+
+
+def _stats(values: list[float], keys: tuple[str, ...]) -> dict[str, float | None]:
+    if not values:
+        return dict.fromkeys(keys)
+    arr = np.asarray(values, dtype=np.float64)
+    funcs = {"median": np.median, "p95": lambda a: np.percentile(a, 95), "max": np.max}
+    return {k: round(float(funcs[k](arr)), 4) for k in keys}
+
+
+def inspect_dataset(data_dir: Path) -> dict[str, Any]:
+    """The ``inspect --json`` document (see docs/dataset.md for every key)."""
+    sessions = []
+    keys_by_object: dict[str, dict[str, set[tuple[float, float, float]]]] = defaultdict(dict)
+    for info in list_sessions(data_dir):
+        presses = press_summaries(info.path)
+        planned = info.attrs.get("planned_presses") or []
+        complete = [p for p in presses if p["status"] == "complete"]
+        errors: list[float] = []
+        matched = missed = 0
+        keys: set[tuple[float, float, float]] = set()
+        for p in complete:
+            ex = p["extraction"]
+            if ex is None:
+                continue
+            hit = ~ex.miss
+            matched += int(hit.sum())
+            missed += int(ex.miss.sum())
+            errors.extend(np.abs(ex.error_n[hit]).tolist())
+            for target in ex.targets_n[hit]:
+                keys.add((float(p["rotation_deg"]), float(p["angle_deg"]), round(float(target), 2)))
+        keys_by_object[info.object_id][info.sensor] = keys
+        peaks = [float(p.get("peak_force_n", np.nan)) for p in complete if "peak_force_n" in p]
+        sessions.append(
+            {
+                "object": info.object_id,
+                "sensor": info.sensor,
+                "simulated": info.simulated,
+                "file": info.path.name,
+                "presses_planned": len(planned) if planned else len(presses),
+                "presses_complete": len(complete),
+                "presses_failed": sum(p["status"] == "failed" for p in presses),
+                "presses_aborted": sum(p["status"] == "aborted" for p in presses),
+                "targets_matched": matched,
+                "targets_missed": missed,
+                "match_error_n": _stats(errors, ("median", "p95", "max")),
+                "peak_force_n": _stats(peaks, ("median", "max")),
+                "duration_s": round(float(sum(float(p.get("duration_s", 0.0)) for p in presses)), 3),
+            }
+        )
+    pairs = {}
+    for object_id, by_sensor in sorted(keys_by_object.items()):
+        sets = list(by_sensor.values())
+        pairs[object_id] = len(set.intersection(*sets)) if len(sets) > 1 else 0
+    return {"sessions": sessions, "pairs": pairs}

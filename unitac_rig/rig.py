@@ -1,0 +1,150 @@
+"""A rig: the arm, the clock and the configured sensors, real or simulated, behind one small interface.
+
+``open_rig(config)`` returns a :class:`HardwareRig` when the rig file names an arm and a
+``unitac_rig.sim.rig.SimRig`` otherwise. Collection code only sees :class:`Rig`.
+"""
+
+from __future__ import annotations
+
+import logging
+from abc import ABC, abstractmethod
+from typing import TYPE_CHECKING
+
+from drivers.arm import Arm
+from drivers.clock import Clock, MonotonicClock
+from drivers.errors import DeviceError, DeviceNotFound
+from drivers.sensor import TactileSensor
+from unitac_rig.config import PapillArrayConfig, RigConfig, UskinCanConfig, UskinXelaServerConfig
+from unitac_rig.errors import UsageError
+
+if TYPE_CHECKING:
+    from unitac_rig.objects import ObjectSpec
+
+log = logging.getLogger(__name__)
+
+
+class Rig(ABC):
+    config: RigConfig
+    clock: Clock
+    simulated: bool
+
+    @property
+    @abstractmethod
+    def arm(self) -> Arm: ...
+
+    @abstractmethod
+    def sensor_names(self) -> list[str]:
+        """Sensors this rig can mount (configured ones on hardware; every simulated model on the simulated rig)."""
+
+    @abstractmethod
+    def open_sensor(self, name: str) -> TactileSensor:
+        """Connect the named sensor and return its driver, streaming."""
+
+    def mount(self, obj: ObjectSpec, rotation_deg: float, sensor_name: str) -> None:  # noqa: B027 - optional hook
+        """Tell the rig which object (and rotation) and sensor are mounted. Hardware: nothing to do."""
+
+    @abstractmethod
+    def close(self) -> None: ...
+
+    def __enter__(self) -> Rig:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def detect_sensor(self, probe_s: float = 1.0) -> str:
+        """The one configured sensor that answers; an error if none or more than one does."""
+        answering = []
+        for name in self.sensor_names():
+            try:
+                sensor = self.open_sensor(name)
+            except DeviceError as exc:
+                log.info("sensor %s does not answer: %s", name, exc)
+                continue
+            try:
+                frames = []
+                deadline = self.clock.now_ns() + int(probe_s * 1e9)
+                while not frames and self.clock.now_ns() < deadline:
+                    self.clock.sleep(0.02)
+                    frames = sensor.poll()
+                if frames:
+                    answering.append(name)
+            finally:
+                sensor.disconnect()
+        if not answering:
+            raise DeviceNotFound(
+                "no configured sensor answers",
+                hint="check cables and power, or name the mounted sensor with --sensor",
+            )
+        if len(answering) > 1:
+            raise UsageError(
+                f"more than one sensor answers ({', '.join(answering)}); cannot tell which is mounted",
+                hint="unplug the one that is not on the arm, or name the mounted sensor with --sensor",
+            )
+        return answering[0]
+
+
+class HardwareRig(Rig):
+    """A real UR5e and real sensors, addressed only through the rig file."""
+
+    simulated = False
+
+    def __init__(self, config: RigConfig) -> None:
+        if config.arm is None:
+            raise UsageError("this rig file has no [arm] section; without one the simulated rig is used")
+        self.config = config
+        self.clock = MonotonicClock()
+        self._arm: Arm | None = None
+
+    @property
+    def arm(self) -> Arm:
+        if self._arm is None:
+            from drivers.ur5e import UR5eArm
+
+            assert self.config.arm is not None
+            self._arm = UR5eArm(self.config.arm.host, frequency_hz=self.config.arm.frequency_hz, clock=self.clock)
+        return self._arm
+
+    def sensor_names(self) -> list[str]:
+        return list(self.config.sensors)
+
+    def open_sensor(self, name: str) -> TactileSensor:
+        cfg = self.config.sensors.get(name)
+        if cfg is None:
+            raise UsageError(
+                f"sensor {name!r} is not in the rig file",
+                hint=f"configured: {', '.join(self.config.sensors) or 'none'}",
+            )
+        sensor: TactileSensor
+        if isinstance(cfg, UskinCanConfig):
+            from drivers.uskin import UskinCanDriver, open_can_bus
+
+            bus = open_can_bus(cfg.can_interface, cfg.can_channel, cfg.bitrate)
+            sensor = UskinCanDriver(bus, controller_id=cfg.controller_id, clock=self.clock, owns_bus=True)
+        elif isinstance(cfg, UskinXelaServerConfig):
+            from drivers.uskin import UskinXelaServerDriver
+
+            sensor = UskinXelaServerDriver(cfg.url, sensor_number=cfg.sensor_number, clock=self.clock)
+        elif isinstance(cfg, PapillArrayConfig):
+            from drivers.papillarray import PapillArrayDriver
+
+            sensor = PapillArrayDriver(cfg.port, slot=cfg.slot, rate_hz=cfg.rate_hz, clock=self.clock)
+        else:  # pragma: no cover - pydantic's discriminator makes this unreachable
+            raise UsageError(f"unsupported sensor configuration {cfg!r}")
+        sensor.connect()
+        sensor.start_reader()
+        return sensor
+
+    def close(self) -> None:
+        if self._arm is not None:
+            self._arm.close()
+            self._arm = None
+
+
+def open_rig(config: RigConfig, *, seed: int = 0) -> Rig:
+    """The hardware rig the config describes, or the simulated rig when it names no arm."""
+    if config.simulated:
+        from unitac_rig.sim.rig import SimRig
+
+        return SimRig(config, seed=seed)
+    return HardwareRig(config)

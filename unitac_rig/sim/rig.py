@@ -1,0 +1,158 @@
+"""The simulated rig: a virtual clock, the simulated arm, the press scene, and simulated sensors on real transports.
+
+The collection code cannot tell it from hardware: the arm implements :class:`drivers.arm.Arm`, and each sensor is the
+*real* driver (:class:`drivers.uskin.UskinCanDriver` on a python-can ``virtual`` bus, or
+:class:`drivers.papillarray.PapillArrayDriver` on a ``simpapill://`` pyserial URL) reading the bytes a simulated
+device encodes from what the scene says the pad feels. Everything runs on one thread in lockstep with the virtual
+clock: the arm's ``wait_period`` advances the clock by 2 ms, due sensor samples are emitted into the transport, and
+the press loop polls the driver. A run is therefore deterministic for a given seed and far faster than real time.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from typing import Any
+
+import numpy as np
+
+from drivers.arm import Arm
+from drivers.clock import VirtualClock
+from drivers.layouts import get_layout
+from drivers.sensor import TactileSensor
+from unitac_rig.config import RigConfig
+from unitac_rig.errors import UsageError
+from unitac_rig.geometry import approach_direction, pose_from, press_rotation
+from unitac_rig.objects import ObjectSpec
+from unitac_rig.rig import Rig
+from unitac_rig.sim.signals import SensorSample
+
+log = logging.getLogger(__name__)
+
+SIM_SENSORS = ("uskin", "papillarray")
+_instance_ids = itertools.count()
+
+
+class _SceneSwitch:
+    """The world the simulated arm presses into; swapped when the object, rotation or sensor changes."""
+
+    def __init__(self) -> None:
+        self.scene: Any = None
+
+    def wrench_on_tool(self, tcp_pose: np.ndarray) -> np.ndarray:
+        if self.scene is None:
+            return np.zeros(6)
+        result: np.ndarray = self.scene.wrench_on_tool(tcp_pose)
+        return result
+
+
+class _SensorFeed:
+    """SignalSource for one simulated sensor: the scene's loads through that sensor's (persistent) output model."""
+
+    def __init__(self, rig: SimRig, sensor: str, model: Any) -> None:
+        self.rig = rig
+        self.sensor = sensor
+        self.model = model
+
+    def sample(self, t_ns: int) -> SensorSample:
+        scene = self.rig.world.scene
+        if scene is None or self.rig.mounted_sensor != self.sensor:
+            loads = None
+        else:
+            loads = scene.taxel_loads(self.rig.sim_arm.true_tcp_pose())
+        result: SensorSample = self.model.sample(loads, t_ns)
+        return result
+
+
+class SimRig(Rig):
+    """Both sensor models are available; one is mounted at a time, as on the real arm."""
+
+    simulated = True
+
+    def __init__(self, config: RigConfig, *, seed: int = 0, papillarray_rate_hz: int = 100) -> None:
+        from unitac_rig.sim.arm import SimArm
+        from unitac_rig.sim.sensor_models import PapillArrayModel, UskinModel
+
+        self.config = config
+        self.seed = seed
+        self.clock = VirtualClock()
+        self._rng = np.random.default_rng(seed)
+        self.world = _SceneSwitch()
+        self.mounted_sensor: str | None = None
+        self._instance = next(_instance_ids)
+        home = self._home_pose()
+        self.sim_arm = SimArm(self.world, clock=self.clock, rng=np.random.default_rng([seed, 1]), start_pose=home)
+        self._models: dict[str, Any] = {
+            "uskin": UskinModel(rng=np.random.default_rng([seed, 2])),
+            "papillarray": PapillArrayModel(rng=np.random.default_rng([seed, 3])),
+        }
+        self.papillarray_rate_hz = papillarray_rate_hz
+        self._devices: list[Any] = []
+        self._object: ObjectSpec | None = None
+        self._rotation = 0.0
+
+    def _home_pose(self) -> np.ndarray:
+        placement = self.config.object
+        u = approach_direction(0.0)
+        position = np.array([*placement.center_m, placement.press_height_m]) + u * 0.08
+        return pose_from(position, press_rotation(-u))
+
+    @property
+    def arm(self) -> Arm:
+        return self.sim_arm
+
+    def sensor_names(self) -> list[str]:
+        return list(SIM_SENSORS)
+
+    def mount(self, obj: ObjectSpec, rotation_deg: float, sensor_name: str) -> None:
+        from unitac_rig.sim.scene import PressScene
+
+        self._object, self._rotation = obj, rotation_deg
+        self.mounted_sensor = sensor_name
+        self.world.scene = PressScene(
+            obj,
+            rotation_deg,
+            get_layout(sensor_name),
+            object_center_m=self.config.object.center_m,
+            rng=np.random.default_rng([self.seed, 4, self._instance]),
+        )
+
+    def open_sensor(self, name: str) -> TactileSensor:
+        if name not in SIM_SENSORS:
+            raise UsageError(f"the simulated rig has no sensor {name!r}", hint=f"use one of: {', '.join(SIM_SENSORS)}")
+        self._close_devices()
+        self.mounted_sensor = name
+        if self._object is not None:
+            self.mount(self._object, self._rotation, name)
+        feed = _SensorFeed(self, name, self._models[name])
+        sensor: TactileSensor
+        if name == "uskin":
+            import can
+
+            from drivers.uskin import UskinCanDriver
+            from unitac_rig.sim.devices import SimXelaController
+
+            channel = f"unitac-sim-{self._instance}-{len(self._devices)}"
+            self._devices.append(SimXelaController(channel, source=feed, clock=self.clock, rate_hz=100.0))
+            bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+            sensor = UskinCanDriver(bus, clock=self.clock, owns_bus=True)
+        else:
+            from drivers.papillarray import PapillArrayDriver
+            from unitac_rig.sim.devices.papillarray import SimPapillArrayHub
+
+            hub = SimPapillArrayHub(source=feed, clock=self.clock)
+            self._devices.append(hub)
+            sensor = PapillArrayDriver(hub.url, rate_hz=self.papillarray_rate_hz, clock=self.clock)
+        sensor.connect()
+        return sensor
+
+    def _close_devices(self) -> None:
+        for device in self._devices:
+            device.close()
+        self._devices.clear()
+
+    def close(self) -> None:
+        try:
+            self.sim_arm.close()
+        finally:
+            self._close_devices()

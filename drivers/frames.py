@@ -15,6 +15,8 @@ class TactileFrame:
     ``host_t_ns`` is the host clock when the frame was completed (never synthesised from an index).
     ``seq`` and ``device_t_us`` are the device's own counter and timestamp where the protocol has them.
     ``valid`` is False when any taxel was missing or stale; ``stale_mask`` then says which.
+    ``calibrated_n`` is a device-side force estimate (n_taxels, 3) in N where the device sends one (xela_server
+    with its calibration module on), else None.
     """
 
     sensor: str
@@ -25,3 +27,4 @@ class TactileFrame:
     displacement_mm: np.ndarray | None = None
     valid: bool = True
     stale_mask: np.ndarray | None = field(default=None, repr=False)
+    calibrated_n: np.ndarray | None = field(default=None, repr=False)

@@ -1,0 +1,239 @@
+"""Contactile PapillArray (3x3 pillars) driver over the Controller v2.0's USB serial stream.
+
+The hub streams as soon as the port is open (no start command); the driver sets the rate (``f<rate>\\n``), decodes
+packets with :class:`protocols.papillarray.PacketParser` and hands out frames of pillar forces (9, 3) in N with the
+tip displacements (9, 3) in mm, ``seq`` = the hub's packet counter and ``device_t_us`` = its timestamp. A tare is
+the device's own bias (``z\\n``, up to 2 s), refused when the frames show load.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+import numpy as np
+import serial
+
+from drivers._reader import PumpedSensor
+from drivers.clock import Clock
+from drivers.errors import DeviceError, DeviceNotFound
+from drivers.frames import TactileFrame
+from drivers.layouts import PAPILLARRAY
+from drivers.sensor import TareRecord
+from protocols.papillarray import (
+    N_SENSOR_SLOTS,
+    VALID_RATES_HZ,
+    Command,
+    PacketParser,
+    encode_command,
+)
+
+logger = logging.getLogger(__name__)
+
+CONTACT_THRESHOLD_N = 0.5  # the SDK's per-pillar contact threshold (CONTACT_THRESH)
+MAX_TARE_STD_N = 0.1  # per-channel std over the tare window; resolution is <0.05 N (1 sigma)
+BIAS_SETTLE_S = 2.0  # the hub takes up to 2 s to bias
+MIN_TARE_FRAMES = 5
+RATED_SHEAR_N = 4.0  # per-pillar Fx, Fy range
+RATED_NORMAL_N = 15.0  # per-pillar Fz range
+READ_CHUNK_BYTES = 65_536
+MAX_READS_PER_PUMP = 64
+IDLE_SLEEP_S = 0.002  # reader thread nap when the port had nothing (the port is read with timeout 0)
+
+_PORT_HINT = (
+    "check the hub is plugged in (ls /dev/ttyACM*) and that you may open it: sudo usermod -aG dialout $USER, "
+    "then log in again"
+)
+
+
+def papillarray_saturated(values: np.ndarray) -> np.ndarray:
+    """Per-pillar flag (9,): force outside the rated range (|Fx|, |Fy| >= 4 N or Fz >= 15 N)."""
+    values = np.asarray(values)
+    return (
+        (np.abs(values[:, 0]) >= RATED_SHEAR_N)
+        | (np.abs(values[:, 1]) >= RATED_SHEAR_N)
+        | (values[:, 2] >= RATED_NORMAL_N)
+    )
+
+
+class PapillArrayDriver(PumpedSensor):
+    """One PapillArray on a Controller v2.0 hub; ``url`` is any pyserial URL (``/dev/ttyACM0``, ``simpapill://hub``).
+
+    ``slot`` picks the sensor port on the hub (0 or 1); ``rate_hz`` one of 100, 250, 500, 1000.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        *,
+        slot: int = 0,
+        rate_hz: int = 100,
+        clock: Clock | None = None,
+        stall_timeout_s: float = 0.5,
+        baudrate: int = 115_200,
+        max_tare_std_n: float = MAX_TARE_STD_N,
+    ) -> None:
+        if not 0 <= slot < N_SENSOR_SLOTS:
+            raise DeviceError(f"PapillArray slot {slot} does not exist", hint=f"use 0..{N_SENSOR_SLOTS - 1}")
+        if rate_hz not in VALID_RATES_HZ:
+            raise DeviceError(f"PapillArray rate {rate_hz} Hz is not supported", hint=f"use one of {VALID_RATES_HZ}")
+        super().__init__(
+            PAPILLARRAY,
+            clock=clock,
+            stall_timeout_s=stall_timeout_s,
+            thread_name=f"papillarray-{slot}",
+            is_saturated=papillarray_saturated,
+        )
+        self.url = url
+        self.slot = slot
+        self.rate_hz = rate_hz
+        self.baudrate = baudrate
+        self.max_tare_std_n = max_tare_std_n
+        self._port: Any = None
+        self._parser = PacketParser()
+        self._parser_seen = {"checksum_errors": 0, "framing_errors": 0, "bytes_dropped": 0}
+        self._last_counter: int | None = None
+
+    # ---- transport --------------------------------------------------------------------------------------------
+    def _open(self) -> None:
+        try:
+            port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0)
+        except ValueError as exc:  # pyserial: unknown URL scheme or bad settings
+            raise DeviceNotFound(
+                f"cannot open PapillArray port {self.url!r}: {exc}",
+                hint="give a device path like /dev/ttyACM0 (simulated hubs register simpapill:// when "
+                "unitac_rig.sim is imported)",
+            ) from exc
+        except (serial.SerialException, OSError) as exc:
+            raise DeviceNotFound(f"cannot open PapillArray port {self.url!r}: {exc}", hint=_PORT_HINT) from exc
+        self._port = port
+        self._parser.reset()
+        self._last_counter = None
+        self._write(encode_command(Command.SET_RATE, self.rate_hz))
+        logger.info("papillarray: %s open, rate set to %d Hz", self.url, self.rate_hz)
+
+    def _close(self) -> None:
+        port, self._port = self._port, None
+        if port is not None:
+            try:
+                port.close()
+            except (serial.SerialException, OSError) as exc:
+                logger.warning("papillarray: error closing %s: %s", self.url, exc)
+
+    def _write(self, data: bytes) -> None:
+        if self._port is None:
+            raise DeviceError("PapillArray port is not open", hint="call connect() first")
+        try:
+            self._port.write(data)
+        except (serial.SerialException, OSError) as exc:
+            raise DeviceError(
+                f"cannot write to PapillArray port {self.url}: {exc}",
+                hint="the hub went away; replug it, then reconnect()",
+            ) from exc
+
+    def _read_available(self) -> bytes:
+        chunks = []
+        for _ in range(MAX_READS_PER_PUMP):
+            try:
+                data = self._port.read(READ_CHUNK_BYTES)
+            except (serial.SerialException, OSError) as exc:
+                raise DeviceError(
+                    f"PapillArray port {self.url} failed: {exc}",
+                    hint="the hub went away (unplugged or powered off); replug it, then reconnect()",
+                ) from exc
+            if not data:
+                break
+            chunks.append(data)
+        return b"".join(chunks)
+
+    def _pump(self, wait_s: float) -> list[TactileFrame]:
+        if self._port is None:
+            raise DeviceError("PapillArray port is not open", hint="call connect() first")
+        data = self._read_available()
+        if not data and wait_s > 0:
+            time.sleep(min(wait_s, IDLE_SLEEP_S))
+            data = self._read_available()
+        if not data:
+            return []
+        packets = self._parser.feed(data)
+        self._account_parser()
+        frames: list[TactileFrame] = []
+        now_ns = self.clock.now_ns()
+        for packet in packets:
+            if self._last_counter is not None:
+                gap = (packet.counter - self._last_counter - 1) & 0xFFFF_FFFF
+                if 0 < gap < 0x8000_0000:
+                    self._count(sequence_gaps=gap)
+            self._last_counter = packet.counter
+            if self.slot >= len(packet.sensors):
+                logger.warning("papillarray: packet %d has no slot %d", packet.counter, self.slot)
+                continue
+            sensor = packet.sensors[self.slot]
+            frames.append(
+                TactileFrame(
+                    sensor=PAPILLARRAY.name,
+                    host_t_ns=now_ns,
+                    values=np.asarray(sensor.forces_n, dtype=np.float64),
+                    seq=packet.counter,
+                    device_t_us=packet.timestamp_us,
+                    displacement_mm=np.asarray(sensor.displacements_mm, dtype=np.float64),
+                )
+            )
+        return frames
+
+    def _account_parser(self) -> None:
+        counters = self._parser.counters()
+        errors = counters["checksum_errors"] + counters["framing_errors"]
+        seen_errors = self._parser_seen["checksum_errors"] + self._parser_seen["framing_errors"]
+        self._count(
+            checksum_errors=errors - seen_errors,
+            bytes_dropped=counters["bytes_dropped"] - self._parser_seen["bytes_dropped"],
+        )
+        self._parser_seen = {k: counters[k] for k in self._parser_seen}
+
+    # ---- the rest of TactileSensor ----------------------------------------------------------------------------
+    def tare(self, frames: list[TactileFrame]) -> TareRecord:
+        """Bias the hub (``z``) if ``frames`` show an unloaded, still sensor; blocks ~2 s while the hub biases.
+
+        Refuses (DeviceError) when any pillar's |Fz| exceeds the SDK contact threshold (0.5 N) or a channel's std
+        exceeds ``max_tare_std_n``. Frames that arrive while the hub biases are discarded. The returned baseline is
+        zero: the device removes the offset itself.
+        """
+        self._require_connected()
+        if len(frames) < MIN_TARE_FRAMES:
+            raise DeviceError(
+                f"papillarray tare needs at least {MIN_TARE_FRAMES} frames, got {len(frames)}",
+                hint="record about a second of unloaded frames before taring",
+            )
+        stack = np.stack([f.values for f in frames]).astype(np.float64)
+        peak_fz = float(np.abs(stack[:, :, 2]).max())
+        spread = float(stack.std(axis=0).max())
+        if peak_fz > CONTACT_THRESHOLD_N:
+            raise DeviceError(
+                f"papillarray tare refused: a pillar reads |Fz| = {peak_fz:.2f} N (> {CONTACT_THRESHOLD_N} N contact)",
+                hint="move the sensor clear of the object and keep it unloaded for at least 1 s, then tare",
+            )
+        if spread > self.max_tare_std_n:
+            raise DeviceError(
+                f"papillarray tare refused: force std {spread:.3f} N exceeds {self.max_tare_std_n:.3f} N",
+                hint="keep the sensor still and untouched for at least 1 s, then tare",
+            )
+        self._write(encode_command(Command.BIAS))
+        self.clock.sleep(BIAS_SETTLE_S)
+        discarded = self.poll()
+        logger.info("papillarray: bias sent; %d frames during the bias discarded", len(discarded))
+        return TareRecord(
+            baseline=np.zeros(PAPILLARRAY.frame_shape),
+            n_frames=len(frames),
+            host_t_ns=self.clock.now_ns(),
+            method="device-bias",
+            spread=spread,
+        )
+
+    def link_counters(self) -> dict[str, int]:
+        """The packet parser's counters (packets, bytes_dropped, checksum_errors, framing_errors)."""
+        return self._parser.counters()
+
+    def identity(self) -> dict[str, Any]:
+        return {**super().identity(), "transport": f"serial:{self.url}", "slot": self.slot, "rate_hz": self.rate_hz}

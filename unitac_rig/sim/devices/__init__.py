@@ -1,0 +1,6 @@
+"""Simulated sensor devices that speak the real wire formats into real transports (see each module)."""
+
+from unitac_rig.sim.devices.papillarray import SimPapillArrayHub
+from unitac_rig.sim.devices.xela_can import SimSlcanAdapter, SimXelaController, counts_from_sample
+
+__all__ = ["SimPapillArrayHub", "SimSlcanAdapter", "SimXelaController", "counts_from_sample"]

@@ -1,0 +1,97 @@
+"""When a simulated device samples: lockstep with a virtual clock, or a real-time thread.
+
+With a clock that has ``on_advance`` (:class:`drivers.clock.VirtualClock`) the device emits, inside the advance call,
+every sample that fell due (deterministic and as fast as the caller advances). With any other clock (or none) a
+thread emits at the rate in real time, stamping samples with that clock; it never bursts to catch up after a hiccup.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+
+from drivers.clock import Clock, MonotonicClock
+
+logger = logging.getLogger(__name__)
+
+MAX_CATCH_UP_PERIODS = 5  # a real-time thread that fell further behind skips ahead instead of bursting
+
+
+def is_virtual(clock: Clock | None) -> bool:
+    return clock is not None and hasattr(clock, "on_advance") and hasattr(clock, "remove_listener")
+
+
+class SampleTimer:
+    """Calls ``tick(t_ns)`` once per sample period (ns on ``clock``) until :meth:`close`."""
+
+    def __init__(self, rate_hz: float, clock: Clock | None, tick: Callable[[int], None], thread_name: str) -> None:
+        if rate_hz <= 0:
+            raise ValueError(f"sample rate must be positive, got {rate_hz} Hz")
+        self.clock: Clock = clock if clock is not None else MonotonicClock()
+        self._virtual = is_virtual(clock)
+        self._tick = tick
+        self._period_ns = round(1e9 / rate_hz)
+        self._next_ns = self.clock.now_ns() + self._period_ns
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+        if self._virtual:
+            self.clock.on_advance(self._on_advance)  # type: ignore[attr-defined]
+        else:
+            self._thread = threading.Thread(target=self._run, name=thread_name, daemon=True)
+            self._thread.start()
+
+    @property
+    def virtual(self) -> bool:
+        return self._virtual
+
+    @property
+    def period_ns(self) -> int:
+        return self._period_ns
+
+    def set_rate(self, rate_hz: float) -> None:
+        """Change the sample rate from the next sample on."""
+        with self._lock:
+            last_ns = self._next_ns - self._period_ns
+            self._period_ns = round(1e9 / rate_hz)
+            self._next_ns = last_ns + self._period_ns
+
+    def _due(self, now_ns: int) -> int | None:
+        with self._lock:
+            if self._next_ns > now_ns:
+                return None
+            t_ns = self._next_ns
+            self._next_ns += self._period_ns
+            return t_ns
+
+    def _on_advance(self, now_ns: int) -> None:
+        while not self._stop.is_set():
+            t_ns = self._due(now_ns)
+            if t_ns is None:
+                return
+            self._tick(t_ns)
+
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set():
+                now_ns = self.clock.now_ns()
+                with self._lock:
+                    if now_ns - self._next_ns > MAX_CATCH_UP_PERIODS * self._period_ns:
+                        self._next_ns = now_ns
+                    wait_s = (self._next_ns - now_ns) / 1e9
+                if wait_s > 0 and self._stop.wait(wait_s):
+                    return
+                t_ns = self._due(self.clock.now_ns())
+                if t_ns is not None:
+                    self._tick(self.clock.now_ns())
+        except Exception:  # a simulator bug must not die silently
+            logger.exception("simulated device thread %s crashed", threading.current_thread().name)
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._virtual:
+            self.clock.remove_listener(self._on_advance)  # type: ignore[attr-defined]
+        elif self._thread is not None:
+            self._thread.join(timeout=5.0)
+            self._thread = None

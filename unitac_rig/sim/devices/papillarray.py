@@ -1,0 +1,163 @@
+"""A simulated Contactile PapillArray Controller v2.0 (hub) behind the pyserial URL ``simpapill://NAME``.
+
+Like the real hub it waits for the serial port to be opened, then streams binary packets (PTS v2.0 format, encoded
+with :mod:`protocols.papillarray`) at 1000 Hz after power-up, with a u32 packet counter and a microsecond timestamp
+from its own clock. It reports two sensor slots: ``slot`` carries the source's reading, the other an idle sensor.
+It answers the ASCII commands: ``f100``..``f1000`` change the rate, ``z`` biases (after ``bias_delay_s`` the
+current reading becomes the zero; the real hub takes up to 2 s), ``S``/``s`` start/stop slip detection.
+A disconnect fault is an unplug: USB powers the hub, so afterwards it is back at 1000 Hz with no bias.
+"""
+
+from __future__ import annotations
+
+import logging
+from types import TracebackType
+
+import numpy as np
+
+from drivers.clock import Clock, MonotonicClock
+from drivers.layouts import PAPILLARRAY
+from protocols.papillarray import (
+    N_SENSOR_SLOTS,
+    CommandParser,
+    PapillArrayPacket,
+    PillarSensorData,
+    encode_packet,
+)
+from protocols.papillarray import Command as HubCommandKind
+from unitac_rig.sim.devices._timing import SampleTimer
+from unitac_rig.sim.faults import FaultInjector, FaultPlan
+from unitac_rig.sim.serial_urls import SimSerialEndpoint, unique_name
+from unitac_rig.sim.signals import SignalSource
+
+logger = logging.getLogger(__name__)
+
+POWER_UP_RATE_HZ = 1000
+DEFAULT_BIAS_DELAY_S = 1.0
+
+
+def pillar_positions_mm() -> np.ndarray:
+    """Pillar tip positions (9, 3) in mm relative to the centre pillar (x right, y up, z out of the pad)."""
+    xy = PAPILLARRAY.taxel_xy_mm()
+    return np.concatenate([xy, np.zeros((PAPILLARRAY.n_taxels, 1))], axis=1)
+
+
+class SimPapillArrayHub(SimSerialEndpoint):
+    """The hub; ``hub.url`` (``simpapill://NAME``) is the port :class:`drivers.papillarray.PapillArrayDriver` opens."""
+
+    SCHEME = "simpapill"
+
+    def __init__(
+        self,
+        name: str | None = None,
+        *,
+        source: SignalSource,
+        slot: int = 0,
+        clock: Clock | None = None,
+        rate_hz: int = POWER_UP_RATE_HZ,
+        faults: FaultPlan | None = None,
+        bias_delay_s: float = DEFAULT_BIAS_DELAY_S,
+    ) -> None:
+        if not 0 <= slot < N_SENSOR_SLOTS:
+            raise ValueError(f"slot must be 0..{N_SENSOR_SLOTS - 1}, got {slot}")
+        self.source = source
+        self.slot = slot
+        self.bias_delay_s = bias_delay_s
+        self.rate_hz = rate_hz
+        self.counter = 0
+        self.slip_active = False
+        self.packets_sent = 0
+        self._bias_due_ns: int | None = None
+        self._force_offset = np.zeros(PAPILLARRAY.frame_shape)
+        self._displacement_offset = np.zeros(PAPILLARRAY.frame_shape)
+        self._commands = CommandParser()
+        self._powered = True
+        the_clock = clock or MonotonicClock()
+        self._power_on_ns = the_clock.now_ns()
+        super().__init__(self.SCHEME, name or unique_name("hub"), clock=the_clock, faults=FaultInjector(faults))
+        self._timer = SampleTimer(rate_hz, clock, self._tick, thread_name=f"sim-papillarray-{self.name}")
+
+    @property
+    def biased(self) -> bool:
+        return bool(np.any(self._force_offset))
+
+    # ---- commands ---------------------------------------------------------------------------------------------
+    def on_host_bytes(self, data: bytes) -> None:
+        for command in self._commands.feed(data):
+            now_ns = self.clock.now_ns()
+            if command.command is HubCommandKind.SET_RATE and command.rate_hz is not None:
+                self.rate_hz = command.rate_hz
+                self._timer.set_rate(command.rate_hz)
+            elif command.command is HubCommandKind.BIAS:
+                self._bias_due_ns = now_ns + round(self.bias_delay_s * 1e9)
+            elif command.command is HubCommandKind.START_SLIP:
+                self.slip_active = True
+            elif command.command is HubCommandKind.STOP_SLIP:
+                self.slip_active = False
+            logger.debug("sim hub %s: %s", self.name, command)
+
+    def _power_cycle(self, now_ns: int) -> None:
+        self.rate_hz = POWER_UP_RATE_HZ
+        self._timer.set_rate(POWER_UP_RATE_HZ)
+        self._force_offset[:] = 0.0
+        self._displacement_offset[:] = 0.0
+        self._bias_due_ns = None
+        self.slip_active = False
+        self.counter = 0
+        self._power_on_ns = now_ns
+        self._commands = CommandParser()
+
+    # ---- sampling ---------------------------------------------------------------------------------------------
+    def _tick(self, t_ns: int) -> None:
+        if self.check_disconnect():
+            self.faults.note_disconnected()
+            if self._powered:
+                self._powered = False
+            return
+        if not self._powered:
+            self._powered = True
+            self._power_cycle(t_ns)
+        sample = self.source.sample(t_ns)
+        raw_forces = np.asarray(sample.values, dtype=np.float64)
+        raw_displacement = (
+            np.asarray(sample.displacement_mm, dtype=np.float64)
+            if sample.displacement_mm is not None
+            else np.zeros(PAPILLARRAY.frame_shape)
+        )
+        if self._bias_due_ns is not None and t_ns >= self._bias_due_ns:
+            self._force_offset = raw_forces.copy()
+            self._displacement_offset = raw_displacement.copy()
+            self._bias_due_ns = None
+        if not self.attached:
+            return  # "waiting for serial connection": the hub does not stream to a closed port
+        self.faults.start(t_ns)
+        counter = self.counter
+        self.counter = (self.counter + 1) & 0xFFFF_FFFF
+        if self.faults.is_stalled(t_ns):
+            self.faults.note_stalled()
+            return
+        forces = raw_forces - self._force_offset
+        sensors = [PillarSensorData.unloaded() for _ in range(N_SENSOR_SLOTS)]
+        sensors[self.slot] = PillarSensorData(
+            forces_n=forces,
+            displacements_mm=raw_displacement - self._displacement_offset,
+            global_force_n=forces.sum(axis=0),
+            global_torque_nmm=np.cross(pillar_positions_mm(), forces).sum(axis=0),
+            slip_active=1 if self.slip_active else 0,
+        )
+        packet = PapillArrayPacket(counter=counter, timestamp_us=(t_ns - self._power_on_ns) // 1000, sensors=sensors)
+        self.send_to_host(encode_packet(packet), t_ns)
+        self.packets_sent += 1
+
+    def close(self) -> None:
+        """Stop sampling and unplug the hub for good."""
+        self._timer.close()
+        self.close_endpoint()
+
+    def __enter__(self) -> SimPapillArrayHub:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()

@@ -1,0 +1,244 @@
+"""A simulated XELA uSkin CAN controller, and a simulated SLCAN USB-CAN adapter to reach it over a serial port.
+
+:class:`SimXelaController` sits on a python-can bus (``virtual`` by default) like the real controller board: it
+waits for the start command (``0x200|id``, ``07 00``), then sends one message per taxel per sample (ids from the
+map, counts rounded and clipped to 0..65535) until the stop command. A disconnect fault models a power loss: the
+board stops, ignores the bus and, like the old firmware, needs a new start command afterwards.
+
+:class:`SimSlcanAdapter` is the far end of ``simslcan://NAME``: it speaks the Lawicel ASCII protocol (``O``, ``C``,
+``S0``..``S8``, ``V``, ``N``, ``F``, ``tIIILDD..``) on the serial side and bridges to a python-can ``virtual``
+channel on the CAN side, so python-can's own ``slcan`` interface talks to a :class:`SimXelaController`.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+from types import TracebackType
+from typing import ClassVar
+
+import can
+import numpy as np
+
+from drivers.clock import Clock, MonotonicClock
+from protocols.xela_can import (
+    USPA46_ID_MAP,
+    TaxelIdMap,
+    decode_stream_command,
+    encode_taxel_message,
+)
+from unitac_rig.sim.devices._timing import SampleTimer
+from unitac_rig.sim.faults import FaultInjector, FaultPlan
+from unitac_rig.sim.serial_urls import SimSerialEndpoint, unique_name
+from unitac_rig.sim.signals import SignalSource
+
+logger = logging.getLogger(__name__)
+
+
+def counts_from_sample(values: np.ndarray) -> np.ndarray:
+    """Raw counts as the controller's ADC gives them: rounded, clipped to 0..65535, int64."""
+    return np.clip(np.rint(np.asarray(values, dtype=np.float64)), 0, 0xFFFF).astype(np.int64)
+
+
+class SimXelaController:
+    """A uSkin controller board on a python-can bus, streaming ``source`` at ``rate_hz`` once started."""
+
+    def __init__(
+        self,
+        bus_channel: str,
+        *,
+        controller_id: int = 1,
+        rate_hz: float = 100.0,
+        source: SignalSource,
+        clock: Clock | None = None,
+        interface: str = "virtual",
+        id_map: TaxelIdMap = USPA46_ID_MAP,
+        faults: FaultPlan | None = None,
+        missing_taxels: tuple[int, ...] = (),
+        byte0: int = 0,
+    ) -> None:
+        self.controller_id = controller_id
+        self.source = source
+        self.id_map = id_map
+        self.faults = FaultInjector(faults)
+        self.missing_taxels = frozenset(missing_taxels)
+        self.byte0 = byte0
+        self.streaming = False
+        self.samples_sent = 0
+        self._powered_off = False
+        self._delayed: collections.deque[tuple[int, can.Message]] = collections.deque()
+        self._bus = can.Bus(interface=interface, channel=bus_channel, receive_own_messages=False)
+        self._timer = SampleTimer(rate_hz, clock, self._tick, thread_name=f"sim-xela-can-{controller_id}")
+
+    @property
+    def clock(self) -> Clock:
+        return self._timer.clock
+
+    def _handle_commands(self) -> None:
+        while True:
+            message = self._bus.recv(timeout=0.0)
+            if message is None:
+                return
+            if self._powered_off:
+                continue
+            command = decode_stream_command(message.arbitration_id, bytes(message.data))
+            if command is not None and command[0] == self.controller_id:
+                self.streaming = command[1]
+                logger.debug("sim xela controller %d: streaming=%s", self.controller_id, self.streaming)
+
+    def _tick(self, t_ns: int) -> None:
+        if self.faults.is_disconnected(t_ns):
+            self._powered_off = True
+            self.streaming = False
+            self._delayed.clear()
+            self.faults.note_disconnected()
+        else:
+            self._powered_off = False
+        self._handle_commands()
+        self._send_due(t_ns)
+        if not self.streaming:
+            return
+        self.faults.start(t_ns)
+        if self.faults.is_stalled(t_ns):
+            self.faults.note_stalled()
+            return
+        counts = counts_from_sample(self.source.sample(t_ns).values)
+        release_ns = self.faults.release_t_ns(t_ns)
+        for index, arbitration_id in enumerate(self.id_map.ids):
+            if index in self.missing_taxels:
+                continue
+            x, y, z = (int(v) for v in counts[index])
+            payload = self.faults.mangle(encode_taxel_message(arbitration_id, x, y, z, byte0=self.byte0))
+            if payload is None:
+                continue
+            message = can.Message(arbitration_id=arbitration_id, data=payload[:8], is_extended_id=False)
+            self._delayed.append((release_ns, message))
+        self.samples_sent += 1
+        self._send_due(t_ns)
+
+    def _send_due(self, now_ns: int) -> None:
+        while self._delayed and self._delayed[0][0] <= now_ns:
+            self._bus.send(self._delayed.popleft()[1])
+
+    def close(self) -> None:
+        """Stop the sample timer and leave the bus."""
+        self._timer.close()
+        self._bus.shutdown()
+
+    def __enter__(self) -> SimXelaController:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+class SimSlcanAdapter(SimSerialEndpoint):
+    """A Lawicel/SLCAN USB-CAN adapter: ``simslcan://NAME`` on the host side, a virtual CAN channel on the other.
+
+    Received CAN frames are forwarded to the host as ``tIIILDD..\\r`` lines while the channel is open (``O``);
+    ``faults`` damages those lines on the serial side (split, drop, corrupt, garbage, delay, disconnect).
+    """
+
+    SCHEME = "simslcan"
+    BITRATE_COMMANDS: ClassVar[frozenset[str]] = frozenset(f"S{i}" for i in range(10))
+
+    def __init__(
+        self,
+        can_channel: str,
+        *,
+        name: str | None = None,
+        clock: Clock | None = None,
+        faults: FaultPlan | None = None,
+    ) -> None:
+        self._bus = can.Bus(interface="virtual", channel=can_channel, receive_own_messages=False)
+        self.channel_open = False
+        self.bitrate_command: str | None = None
+        self._line = bytearray()
+        self.lines_forwarded = 0
+        super().__init__(
+            self.SCHEME,
+            name or unique_name("slcan"),
+            clock=clock or MonotonicClock(),
+            faults=FaultInjector(faults),
+        )
+
+    # ---- CAN side -> host ----------------------------------------------------------------------------------------
+    def refill(self) -> None:
+        while True:
+            message = self._bus.recv(timeout=0.0)
+            if message is None:
+                return
+            if not self.channel_open or message.is_extended_id or message.is_error_frame:
+                continue
+            line = f"t{message.arbitration_id:03X}{message.dlc:d}{bytes(message.data).hex().upper()}\r"
+            self.faults.start(self.clock.now_ns())
+            self._push(line.encode("ascii"), self.clock.now_ns(), faulted=True)
+            self.lines_forwarded += 1
+
+    # ---- host -> adapter ------------------------------------------------------------------------------------------
+    def on_attach(self) -> None:
+        self.channel_open = False
+        self._line.clear()
+        while self._bus.recv(timeout=0.0) is not None:
+            pass  # frames from before the port was opened are gone
+
+    def on_detach(self) -> None:
+        self.channel_open = False
+
+    def on_host_bytes(self, data: bytes) -> None:
+        for byte in data:
+            if byte == 0x0D:
+                reply = self._command(self._line.decode("ascii", errors="replace"))
+                self._line.clear()
+                self._push(reply.encode("ascii"), self.clock.now_ns(), faulted=False)
+            else:
+                self._line.append(byte)
+
+    def _command(self, line: str) -> str:
+        ok, error = "\r", "\a"
+        if line == "":
+            return ok  # python-can sends an empty data-bitrate command for classic CAN
+        if line == "O" or line == "L":
+            self.channel_open = True
+            return ok
+        if line == "C":
+            self.channel_open = False
+            return ok
+        if line in self.BITRATE_COMMANDS:
+            if self.channel_open:
+                return error
+            self.bitrate_command = line
+            return ok
+        if line == "V":
+            return "V1013\r"
+        if line == "N":
+            return "NSIM1\r"
+        if line == "F":
+            return "F00\r"
+        if line[0] == "t" and self.channel_open:
+            try:
+                arbitration_id = int(line[1:4], 16)
+                dlc = int(line[4])
+                payload = bytes.fromhex(line[5 : 5 + 2 * dlc])
+            except (ValueError, IndexError):
+                return error
+            if len(payload) != dlc:
+                return error
+            self._bus.send(can.Message(arbitration_id=arbitration_id, data=payload, is_extended_id=False))
+            return "z\r"
+        return error
+
+    def close(self) -> None:
+        """Unplug the adapter for good and leave the CAN channel."""
+        self.close_endpoint()
+        self._bus.shutdown()
+
+    def __enter__(self) -> SimSlcanAdapter:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()

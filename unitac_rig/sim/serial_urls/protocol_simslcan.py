@@ -1,0 +1,7 @@
+"""pyserial URL ``simslcan://NAME``: the port of a simulated SLCAN (Lawicel ASCII) USB-CAN adapter."""
+
+from unitac_rig.sim.serial_urls import SimSerialPort
+
+
+class Serial(SimSerialPort):
+    SCHEME = "simslcan"

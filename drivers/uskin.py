@@ -132,6 +132,7 @@ class UskinCanDriver(PumpedSensor):
         self.controller_id = controller_id
         self.id_map = id_map
         self.owns_bus = owns_bus
+        self._bus_shut_down = False
         self.max_tare_spread_counts = max_tare_spread_counts
         self._start_command = encode_stream_command(controller_id, True)
         self._stop_command = encode_stream_command(controller_id, False)
@@ -163,7 +164,8 @@ class UskinCanDriver(PumpedSensor):
     def disconnect(self) -> None:
         """Stop streaming, stop the reader, and shut the bus down when the driver owns it."""
         super().disconnect()
-        if self.owns_bus:
+        if self.owns_bus and not self._bus_shut_down:
+            self._bus_shut_down = True
             try:
                 self.bus.shutdown()
             except (can.CanError, OSError) as exc:

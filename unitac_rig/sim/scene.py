@@ -1,0 +1,679 @@
+"""The simulated press scene: a sensor pad pushed horizontally into a vertical hollow prism (2-D cross-section).
+
+What it models (no more than the scene needs; parameters and sources in :class:`SceneParams` and docs/simulator.md):
+
+* the exact outline of the object (``unitac_rig.objects``), as mounted and rotated, cut by the pad's horizontal
+  section: ``f(s)`` = how far the outline reaches toward the pad at each point ``s`` across the pad;
+* the pad: **uSkin** = a bed of springs (Winkler skin, N/mm^3) over the whole pad, its pressure read by 4x6 magnets
+  through the skin's spreading (a Gaussian of width ``skin_spread_sigma_mm`` followed by cell integration, which
+  conserves load); **PapillArray** = nine separate pillar springs with hemispherical tips, the centre pillar proud;
+* the object in series: a global spring (mount + prism translating away; non-linear and corner-dependent for hollow
+  TPU) and, for soft walls, a local wall foundation that lets the wall flatten under the pad;
+* shear from the local surface tilt (the contact normal), scaled by ``shear_projection`` and capped by friction;
+* uniform along the prism axis: rows differ only by their share of the pad (uSkin) or their recess (PapillArray).
+
+Speed: the arm asks for the wrench 500 times per simulated second and the sensors for taxel loads 100-1000 times.
+Along one press ray (fixed pad orientation and lateral offset) everything depends only on the travel past first
+touch, so the scene builds one vectorised table per ray (loads and wrench against travel) and interpolates; it
+rebuilds only when the pose leaves the ray.
+
+Frames: see ``unitac_rig.objects`` (rig geometry). ``wrench_on_tool`` is in base axes about the TCP and is the force
+the object exerts on the tool; taxel loads are in the sensor frame (x, y shear; z normal, pushing = +), newtons.
+"""
+
+from __future__ import annotations
+
+import bisect
+import logging
+import math
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivers.layouts import SensorLayout
+from unitac_rig.errors import ConfigError
+from unitac_rig.objects import DEFAULT_OBJECT_CENTER_M, MaterialSpec, ObjectSpec
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SceneParams:
+    """Every number of the scene model, with its source: [S] stated, [D] derived, [I] inferred or fitted."""
+
+    # ---- uSkin uSPa46 pad ----------------------------------------------------------------------------------
+    skin_foundation_n_per_mm3: float = 1.2  # [I] Winkler K = E_eff/h: E 0.3-1 MPa x2-10 (bonded, incompressible),
+    # h ~2.5 mm; gives ~0.5 mm skin indentation under a corner at 10 N
+    skin_spread_sigma_mm: float = 3.0  # [I] Gaussian load spreading of the continuous skin, 2-4 mm (0.3-0.55 pitch)
+    skin_margin_x_mm: float = 4.55  # [S] first taxel 4.55 mm from the pad edge across the press (LeapXELA layout)
+    skin_margin_y_mm: float = 4.43  # [S] same along the prism axis
+    # ---- PapillArray pad -----------------------------------------------------------------------------------
+    pillar_axial_n_per_mm: float = 6.0  # [D] 15 N / 2.5 mm range ratio; data: 4.9 N at 0.86 mm
+    pillar_lateral_n_per_mm: float = 1.2  # [I] fitted: data pillar shear ~1.9 N with displacement ~1.5 mm
+    # (the spec's 4 N / 1 mm range ratio would give 4 N/mm; the recorded displacements say the tips are softer)
+    pillar_tip_radius_mm: float = 3.0  # [S] pillars 6 mm diameter, hemispherical tips
+    pillar_edge_recess_mm: float = 0.4  # [I] edge pillars below the centre one (spec: centre tallest), 0.3-0.5
+    pillar_corner_recess_mm: float = 0.8  # [I] corner pillars, 0.6-1.0
+    # ---- contact and object --------------------------------------------------------------------------------
+    shear_projection: float = 1.0  # [I] c in q = c * p * tan(tilt); 1 = frictionless projection, capped at mu*p
+    mount_stiffness_n_per_mm: float = 20.0  # [I] printed object adapter + sensor adapter + arm, fitted so that
+    # k * v * t_latency gives the recorded 0.6-1.8 N overshoot at 2-10 mm/s with 10-20 ms stop latency
+    corner_decay_mm: float = 4.0  # [I] how far (along the outline) a corner stiffens a soft wall, ~1.5 walls
+    corner_contact_depth_mm: float = 0.3  # [I] outline within this depth of first touch counts as the contact
+    # when deciding whether the object's global spring is loaded at a corner
+    centring_error_mm: float = 0.0  # [I] std of the object's placement error (seeded); authors: precise breadboard
+    # ---- fidelity (speed against accuracy: benchmarks/bench_simulator.py) -----------------------------------
+    section_step_mm: float = 0.1  # sampling step of the pad section (uSkin)
+    table_points: int = 200  # samples of the per-ray load table (quadratic spacing in depth)
+    table_max_force_n: float = 80.0  # table range; deeper presses extrapolate the last segment linearly
+    ray_tolerance_mm: float = 0.005  # a pose within this of the cached ray reuses its table
+    ray_tolerance_rad: float = 1e-4
+
+    def __post_init__(self) -> None:
+        if self.section_step_mm <= 0 or self.table_points < 8 or self.table_max_force_n <= 0:
+            raise ConfigError(
+                "scene fidelity settings out of range",
+                hint="section_step_mm > 0, table_points >= 8, table_max_force_n > 0",
+            )
+
+
+@dataclass(frozen=True, slots=True)
+class TaxelLoads:
+    """What each taxel feels, in the sensor frame: ``forces_n`` (n, 3) x/y shear and z normal (pushing = +), N.
+
+    ``displacement_mm`` (n, 3): pillar tip displacements (PapillArray, along the force), else None.
+    """
+
+    forces_n: np.ndarray
+    displacement_mm: np.ndarray | None = None
+
+
+def pad_kind(layout: SensorLayout) -> str:
+    """``"skin"`` for a continuous-skin pad (uSkin), ``"pillars"`` for separate pillars (PapillArray)."""
+    if layout.name == "uskin":
+        return "skin"
+    if layout.name == "papillarray":
+        return "pillars"
+    return "pillars" if layout.has_displacement else "skin"
+
+
+def press_pose(
+    angle_deg: float,
+    distance_mm: float,
+    *,
+    object_center_m: tuple[float, float] = DEFAULT_OBJECT_CENTER_M,
+    height_m: float = 0.30,
+) -> np.ndarray:
+    """TCP pose (6,) for approach angle ``angle_deg`` with the pad centre ``distance_mm`` from the object's axis."""
+    a = math.radians(angle_deg)
+    u = (math.sin(a), -math.cos(a))
+    x = object_center_m[0] + u[0] * distance_mm * 1e-3
+    y = object_center_m[1] + u[1] * distance_mm * 1e-3
+    d = (-u[0], -u[1], 0.0)
+    rot = np.array([[-d[1], 0.0, d[0]], [d[0], 0.0, d[1]], [0.0, 1.0, 0.0]])
+    return np.concatenate([[x, y, height_m], _matrix_to_rotvec(rot)])
+
+
+class PressScene:
+    """One object (at one rotation) in front of one sensor pad; a ``ContactWorld`` for the simulated arm."""
+
+    def __init__(
+        self,
+        obj: ObjectSpec,
+        rotation_deg: float,
+        layout: SensorLayout,
+        *,
+        object_center_m: tuple[float, float] = DEFAULT_OBJECT_CENTER_M,
+        params: SceneParams | None = None,
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        self.obj = obj
+        self.rotation_deg = float(rotation_deg)
+        self.layout = layout
+        self.params = params or SceneParams()
+        self.kind = pad_kind(layout)
+        rng = rng if rng is not None else np.random.default_rng(0)
+        offset_mm = rng.normal(0.0, self.params.centring_error_mm, 2) if self.params.centring_error_mm > 0 else 0.0
+        self.center_mm = np.asarray(object_center_m, dtype=np.float64) * 1e3 + offset_mm
+        self._outline = _Outline(obj, self.rotation_deg)
+        self._pad = _SkinPad(layout, self.params) if self.kind == "skin" else _PillarPad(layout, self.params)
+        self._ray: _RayTable | None = None
+        self._last_rotvec: tuple[float, float, float] | None = None
+        self._frame: tuple[np.ndarray, float, float, float, float, float] | None = None
+        self.rays_built = 0
+        self._warned_tilt = False
+        self._lock = threading.Lock()  # the arm and a device thread may ask at the same time
+
+    # ---- ContactWorld ------------------------------------------------------------------------------------
+    def wrench_on_tool(self, tcp_pose: np.ndarray) -> np.ndarray:
+        """Force (N) and torque (N*m) the object exerts on the tool, base axes, about the TCP; (6,)."""
+        ray, travel = self._locate(tcp_pose)
+        if travel <= 0.0:
+            return np.zeros(6)
+        return ray.interp(ray.wrench_base, travel)
+
+    def taxel_loads(self, tcp_pose: np.ndarray) -> TaxelLoads:
+        """Per-taxel loads at ``tcp_pose`` in the sensor frame (N, and pillar displacements in mm)."""
+        ray, travel = self._locate(tcp_pose)
+        return ray.loads_at(travel)
+
+    # ---- helpers for presses, figures and tests ------------------------------------------------------------
+    def press_force_n(self, tcp_pose: np.ndarray) -> float:
+        """Force along the press direction (N, positive while pressing)."""
+        ray, travel = self._locate(tcp_pose)
+        return float(ray.interp(ray.force, travel)) if travel > 0 else 0.0
+
+    def touch_distance_mm(self, angle_deg: float) -> float:
+        """Distance (mm) from the object's axis to the TCP at first touch, pressing at ``angle_deg`` on centre."""
+        ray = self._ray_for_angle(angle_deg)
+        return ray.touch_cn
+
+    def pose_at_travel(self, angle_deg: float, travel_mm: float) -> np.ndarray:
+        """TCP pose after travelling ``travel_mm`` past first touch at ``angle_deg`` (negative: before touch)."""
+        return press_pose(angle_deg, self.touch_distance_mm(angle_deg) - travel_mm, object_center_m=self._center_m)
+
+    def travel_at_force_mm(self, angle_deg: float, force_n: float) -> float:
+        """Travel past first touch (mm) at which the press force reaches ``force_n``."""
+        ray = self._ray_for_angle(angle_deg)
+        return float(np.interp(force_n, ray.force, ray.travel))
+
+    def force_curve(self, angle_deg: float, travel_mm: np.ndarray) -> np.ndarray:
+        """Press force (N) against travel past first touch (mm) at ``angle_deg``."""
+        ray = self._ray_for_angle(angle_deg)
+        return np.array([ray.interp(ray.force, float(t)) if t > 0 else 0.0 for t in np.atleast_1d(travel_mm)])
+
+    def loads_at_force(self, angle_deg: float, force_n: float) -> TaxelLoads:
+        """Taxel loads when the press force along ``angle_deg`` reaches ``force_n`` (N)."""
+        ray = self._ray_for_angle(angle_deg)
+        return ray.loads_at(float(np.interp(force_n, ray.force, ray.travel)))
+
+    @property
+    def _center_m(self) -> tuple[float, float]:
+        return (float(self.center_mm[0]) * 1e-3, float(self.center_mm[1]) * 1e-3)
+
+    def _ray_for_angle(self, angle_deg: float) -> _RayTable:
+        ray, _ = self._locate(press_pose(angle_deg, 200.0, object_center_m=self._center_m))
+        return ray
+
+    # ---- internals ---------------------------------------------------------------------------------------
+    def _locate(self, tcp_pose: np.ndarray) -> tuple[_RayTable, float]:
+        """The table of the press ray through ``tcp_pose`` (cached) and the travel past first touch (mm)."""
+        with self._lock:
+            return self._locate_unlocked(np.asarray(tcp_pose, dtype=np.float64))
+
+    def _locate_unlocked(self, pose: np.ndarray) -> tuple[_RayTable, float]:
+        rotvec = (float(pose[3]), float(pose[4]), float(pose[5]))
+        if rotvec != self._last_rotvec or self._frame is None:
+            rot = _rotvec_to_matrix(rotvec)
+            if abs(rot[2, 1]) < 0.99 and not self._warned_tilt:
+                log.warning(
+                    "tool y is %.1f deg off vertical; the 2-D scene ignores the tilt",
+                    math.degrees(math.acos(min(1.0, abs(rot[2, 1])))),
+                )
+                self._warned_tilt = True
+            xh = np.array([rot[0, 0], rot[1, 0]])
+            zh = np.array([rot[0, 2], rot[1, 2]])
+            xh /= np.linalg.norm(xh)
+            zh /= np.linalg.norm(zh)
+            self._frame = (rot, float(xh[0]), float(xh[1]), float(zh[0]), float(zh[1]), math.atan2(zh[1], zh[0]))
+            self._last_rotvec = rotvec
+        rot, xx, xy, zx, zy, psi = self._frame
+        rel_x = self.center_mm[0] - pose[0] * 1e3
+        rel_y = self.center_mm[1] - pose[1] * 1e3
+        c_s = rel_x * xx + rel_y * xy
+        c_n = rel_x * zx + rel_y * zy
+        ray = self._ray
+        p = self.params
+        if (
+            ray is None
+            or abs(ray.c_s - c_s) > p.ray_tolerance_mm
+            or abs(math.remainder(ray.psi - psi, 2 * math.pi)) > p.ray_tolerance_rad
+        ):
+            ray = self._build_ray(rot, (xx, xy), (zx, zy), psi, c_s)
+        return ray, ray.touch_cn - c_n
+
+    def _build_ray(
+        self, rot: np.ndarray, x_axis: tuple[float, float], z_axis: tuple[float, float], psi: float, c_s: float
+    ) -> _RayTable:
+        section = self._outline.section(np.array(x_axis), np.array(z_axis), c_s)
+        table = self._pad.table(section, self.obj.material_params)
+        ray = _RayTable(table, self.obj.material_params, self.params, rot, psi, c_s)
+        self._ray = ray
+        self.rays_built += 1
+        return ray
+
+
+# =================================================================================================================
+# Geometry of the cut: the outline seen from the pad
+# =================================================================================================================
+
+
+class _Section:
+    """The outline in pad coordinates for one ray: ``s`` across the pad (mm, TCP at 0), ``n`` toward the object.
+
+    ``front(s)`` is how far the outline reaches toward the pad, relative to the object centre: the surface is at
+    ``n = c_n + front(s)`` when the centre is at ``n = c_n``. ``slope`` = d front / ds, ``xi`` = distance along the
+    outline to the nearest corner (inf without corners).
+    """
+
+    def __init__(self, outline: _Outline, x_axis: np.ndarray, z_axis: np.ndarray, c_s: float) -> None:
+        self.c_s = c_s
+        self.radius = outline.radius
+        rel = outline.points
+        self.s = rel @ x_axis + c_s
+        self.n = rel @ z_axis
+        self.corner_to_start = outline.corner_to_start
+        self.corner_from_end = outline.corner_from_end
+        self.edge_len = outline.edge_len
+
+    def front(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(front, slope, xi) at pad positions ``s`` (mm); front = +inf where the outline is not in front."""
+        s = np.asarray(s, dtype=np.float64)
+        if self.radius is not None:
+            ds = s - self.c_s
+            inside = np.abs(ds) < self.radius
+            root = np.sqrt(np.where(inside, self.radius**2 - ds**2, 1.0))
+            front = np.where(inside, -root, np.inf)
+            slope = np.where(inside, ds / root, 0.0)
+            return front, slope, np.full(s.shape, np.inf)
+        a_s, a_n = self.s, self.n
+        b_s, b_n = np.roll(a_s, -1), np.roll(a_n, -1)
+        ds_edge = b_s - a_s
+        valid = np.abs(ds_edge) > 1e-12
+        ds_edge = np.where(valid, ds_edge, 1.0)
+        t = (s[None, :] - a_s[:, None]) / ds_edge[:, None]
+        on = valid[:, None] & (t >= 0.0) & (t <= 1.0)
+        n_at = a_n[:, None] + t * (b_n - a_n)[:, None]
+        n_at = np.where(on, n_at, np.inf)
+        k = np.argmin(n_at, axis=0)
+        cols = np.arange(s.size)
+        front = n_at[k, cols]
+        slope = ((b_n - a_n) / ds_edge)[k]
+        tk = np.clip(t[k, cols], 0.0, 1.0)
+        length = self.edge_len[k]
+        xi = np.minimum(self.corner_to_start[k] + tk * length, self.corner_from_end[k] + (1.0 - tk) * length)
+        slope = np.where(np.isfinite(front), slope, 0.0)
+        return front, slope, xi
+
+    def pillar_contact(self, s_axis: float, tip_radius: float) -> tuple[float, float, float]:
+        """First contact of a hemispherical tip on axis ``s_axis`` (tip apex at n = 0 when the centre is at c_n).
+
+        Returns (c_n at touch, contact slope dn/ds of the tip at the contact point, xi at the contact);
+        c_n = -inf when the tip never meets the outline.
+        """
+        rho = tip_radius
+        if self.radius is not None:
+            ds = self.c_s - s_axis
+            reach = self.radius + rho
+            if abs(ds) >= reach:
+                return -math.inf, 0.0, math.inf
+            c_n = math.sqrt(reach**2 - ds**2) - rho
+            return c_n, -ds / (c_n + rho), math.inf
+        # candidates: outline vertices over the tip, and tangency points on each edge
+        best = (-math.inf, 0.0, math.inf)
+        a_s, a_n = self.s, self.n
+        b_s, b_n = np.roll(a_s, -1), np.roll(a_n, -1)
+        cand_s = [float(v) for v in a_s if abs(v - s_axis) < rho]
+        for i in range(a_s.size):
+            d = b_s[i] - a_s[i]
+            if abs(d) < 1e-12:
+                continue
+            m = (b_n[i] - a_n[i]) / d
+            r = -m * rho / math.sqrt(1.0 + m * m)  # tip slope -r/sqrt(rho^2-r^2) equals the edge slope
+            sc = s_axis + r
+            if min(a_s[i], b_s[i]) <= sc <= max(a_s[i], b_s[i]):
+                cand_s.append(sc)
+        if not cand_s:
+            return best
+        cs = np.array(cand_s)
+        front, _, xi = self.front(cs)
+        r = cs - s_axis
+        tip = -(rho - np.sqrt(np.maximum(rho**2 - r**2, 0.0)))
+        value = tip - front  # c_n at which this point touches
+        j = int(np.argmax(value))
+        if not np.isfinite(value[j]):
+            return best
+        rj = float(r[j])
+        slope = -rj / math.sqrt(max(rho**2 - rj**2, 1e-12))
+        return float(value[j]), slope, float(xi[j])
+
+
+class _Outline:
+    """The mounted outline (base axes, mm, relative to the object centre) and where its corners are."""
+
+    def __init__(self, obj: ObjectSpec, rotation_deg: float) -> None:
+        self.radius = obj.radius_mm
+        pts = obj.outer_rotated_mm(rotation_deg)
+        self.points = pts
+        edge = np.roll(pts, -1, axis=0) - pts
+        self.edge_len = np.linalg.norm(edge, axis=1)
+        n = len(pts)
+        corners = set(obj.corner_vertices().tolist())
+        inf = math.inf
+        to_start = np.full(n, inf)  # distance along the outline from edge i's start vertex back to a corner
+        from_end = np.full(n, inf)  # from edge i's end vertex forward to a corner
+        if corners:
+            for i in range(n):
+                dist, j = 0.0, i
+                for _ in range(n):
+                    if j in corners:
+                        break
+                    j = (j - 1) % n
+                    dist += self.edge_len[j]
+                to_start[i] = dist
+                dist, j = 0.0, (i + 1) % n
+                for _ in range(n):
+                    if j in corners:
+                        break
+                    dist += self.edge_len[j]
+                    j = (j + 1) % n
+                from_end[i] = dist
+        self.corner_to_start = to_start
+        self.corner_from_end = from_end
+
+    def section(self, x_axis: np.ndarray, z_axis: np.ndarray, c_s: float) -> _Section:
+        return _Section(self, x_axis, z_axis, c_s)
+
+
+# =================================================================================================================
+# Pads: from the section to a table of loads against contact depth
+# =================================================================================================================
+
+
+@dataclass
+class _PadTable:
+    """Loads against the pad-side contact depth ``e`` (mm past first touch, before the object's global spring)."""
+
+    depth: np.ndarray  # (m,) mm, increasing from 0
+    loads: np.ndarray  # (m, n_taxels, 3) N, sensor frame
+    displacement: np.ndarray | None  # (m, n_taxels, 3) mm
+    wrench_tool: np.ndarray  # (m, 6) N and N*m, tool axes, about the TCP
+    touch_cn: float  # object centre distance along the press at first touch (mm); -inf: never touches
+    corner_proximity: float  # 0..1, how close to a corner the contact is (stiffens the global spring)
+
+
+def _near_corner(material: MaterialSpec, xi: np.ndarray, params: SceneParams) -> np.ndarray:
+    """Local wall stiffening factor along the contact: the material's corner factor at a corner, 1 mid-wall."""
+    bump = np.exp(-np.asarray(xi) / params.corner_decay_mm)
+    return 1.0 + (material.corner_stiffness_factor - 1.0) * bump
+
+
+def _erf(x: np.ndarray) -> np.ndarray:
+    return np.frompyfunc(math.erf, 1, 1)(x).astype(np.float64)
+
+
+class _SkinPad:
+    """uSkin: Winkler skin over the whole pad, read by taxels through Gaussian spreading + cell integration."""
+
+    def __init__(self, layout: SensorLayout, params: SceneParams) -> None:
+        self.layout = layout
+        self.params = params
+        pitch = layout.pitch_mm
+        half_w = (layout.cols - 1) / 2 * pitch + params.skin_margin_x_mm
+        half_h = (layout.rows - 1) / 2 * pitch + params.skin_margin_y_mm
+        n_half = max(1, math.ceil(half_w / params.section_step_mm))
+        self.step = half_w / n_half
+        self.s = (np.arange(-n_half, n_half) + 0.5) * self.step  # symmetric, no sample on the centre line
+        self.height = 2 * half_h
+        self.col_weights = _cell_weights(self.s, layout.cols, pitch, params.skin_spread_sigma_mm)  # (cols, n_s)
+        y = np.linspace(-half_h, half_h, 401)
+        row_w = _cell_weights(-y, layout.rows, pitch, params.skin_spread_sigma_mm)  # row 0 on top (+y)
+        self.row_share = np.trapezoid(row_w, y, axis=1) / (2 * half_h)
+        self.row_share /= self.row_share.sum()
+
+    def table(self, section: _Section, material: MaterialSpec) -> _PadTable:
+        p = self.params
+        layout = self.layout
+        front, slope, xi = section.front(self.s)
+        finite = np.isfinite(front)
+        if not np.any(finite):
+            return _no_contact(layout)
+        fmin = float(np.min(front[finite]))
+        gap = np.where(finite, front - fmin, np.inf)
+        k_skin = p.skin_foundation_n_per_mm3
+        if material.wall_foundation_n_per_mm3 is None:
+            k_eff = np.full(self.s.shape, k_skin)
+        else:
+            k_wall = material.wall_foundation_n_per_mm3 * _near_corner(material, xi, p)
+            k_eff = 1.0 / (1.0 / k_skin + 1.0 / k_wall)
+        # interface tilt: a soft wall takes part of the overlap, flattening the interface
+        tilt = slope * (k_eff / k_skin)
+        ratio = np.clip(p.shear_projection * tilt, -material.friction, material.friction)
+        area = self.step * self.height  # mm^2 per section sample
+
+        def force(e: float) -> float:
+            return float(np.sum(k_eff * np.maximum(0.0, e - gap)) * area)
+
+        e_max = _depth_for_force(force, p.table_max_force_n)
+        u = np.linspace(0.0, 1.0, p.table_points)
+        depth = e_max * u**2
+        pressure = k_eff[None, :] * np.maximum(0.0, depth[:, None] - gap[None, :])  # (m, n_s) N/mm^2
+        normal_cells = pressure * area  # N per section sample
+        shear_cells = normal_cells * ratio[None, :]
+        col_n = normal_cells @ self.col_weights.T  # (m, cols)
+        col_x = shear_cells @ self.col_weights.T
+        m = depth.size
+        loads = np.zeros((m, layout.rows, layout.cols, 3))
+        loads[..., 2] = col_n[:, None, :] * self.row_share[None, :, None]
+        loads[..., 0] = col_x[:, None, :] * self.row_share[None, :, None]
+        total_n = normal_cells.sum(axis=1)
+        total_x = shear_cells.sum(axis=1)
+        wrench = np.zeros((m, 6))
+        wrench[:, 0] = total_x
+        wrench[:, 2] = -total_n
+        wrench[:, 4] = normal_cells @ self.s * 1e-3  # tau_y = sum s * p (contacts in the pad plane, y-symmetric)
+        contact = gap < p.corner_contact_depth_mm
+        proximity = float(np.max(np.exp(-xi[contact] / p.corner_decay_mm))) if np.any(contact) else 0.0
+        return _PadTable(
+            depth=depth,
+            loads=loads.reshape(m, layout.n_taxels, 3),
+            displacement=None,
+            wrench_tool=wrench,
+            touch_cn=-fmin,
+            corner_proximity=proximity,
+        )
+
+
+class _PillarPad:
+    """PapillArray: nine pillar springs with hemispherical tips, the centre one proud; each pillar its own spring."""
+
+    def __init__(self, layout: SensorLayout, params: SceneParams) -> None:
+        self.layout = layout
+        self.params = params
+        xy = layout.taxel_xy_mm()
+        self.col_s = xy[: layout.cols, 0]
+        rows, cols = np.divmod(np.arange(layout.n_taxels), layout.cols)
+        mid_r, mid_c = (layout.rows - 1) / 2, (layout.cols - 1) / 2
+        ring = np.maximum(np.abs(rows - mid_r), np.abs(cols - mid_c))
+        off_axis = (rows != mid_r).astype(int) + (cols != mid_c).astype(int)
+        recess = np.where(
+            off_axis == 0, 0.0, np.where(off_axis == 1, params.pillar_edge_recess_mm, params.pillar_corner_recess_mm)
+        )
+        self.recess = recess * np.maximum(ring, 1)  # larger arrays: recess grows ring by ring
+        self.rows, self.cols = rows, cols
+        self.xy = xy
+
+    def table(self, section: _Section, material: MaterialSpec) -> _PadTable:
+        p = self.params
+        layout = self.layout
+        contacts = [section.pillar_contact(float(s), p.pillar_tip_radius_mm) for s in self.col_s]
+        col_cn = np.array([c[0] for c in contacts])
+        if not np.any(np.isfinite(col_cn)):
+            return _no_contact(layout)
+        col_slope = np.array([c[1] for c in contacts])
+        col_xi = np.array([c[2] for c in contacts])
+        pillar_cn = col_cn[self.cols] - self.recess  # c_n at which each pillar touches
+        touch = float(np.max(pillar_cn))
+        gap = touch - pillar_cn  # pad-side depth at which each pillar starts to load (inf: never)
+        k_n = p.pillar_axial_n_per_mm
+        if material.wall_point_stiffness_n_per_mm is None:
+            k = np.full(layout.n_taxels, k_n)
+        else:
+            k_wall = material.wall_point_stiffness_n_per_mm * _near_corner(material, col_xi[self.cols], p)
+            k = 1.0 / (1.0 / k_n + 1.0 / k_wall)
+        ratio = np.clip(p.shear_projection * col_slope[self.cols], -material.friction, material.friction)
+        k_sum = float(np.sum(k[np.isfinite(gap)]))
+        finite_gap = gap[np.isfinite(gap)]
+        e_max = float(np.max(finite_gap)) + p.table_max_force_n / k_sum
+        depth = np.unique(np.concatenate([np.linspace(0.0, e_max, p.table_points), finite_gap]))
+        normal = k[None, :] * np.maximum(0.0, depth[:, None] - gap[None, :])  # (m, 9) N; inf gap -> 0
+        shear = normal * ratio[None, :]
+        m = depth.size
+        loads = np.zeros((m, layout.n_taxels, 3))
+        loads[..., 0] = shear
+        loads[..., 2] = normal
+        disp = np.zeros_like(loads)
+        disp[..., 0] = shear / p.pillar_lateral_n_per_mm
+        disp[..., 2] = normal / p.pillar_axial_n_per_mm
+        s_pos, y_pos = self.xy[:, 0], self.xy[:, 1]
+        fz = -normal  # force on the pad along tool z
+        wrench = np.zeros((m, 6))
+        wrench[:, 0] = shear.sum(axis=1)
+        wrench[:, 2] = fz.sum(axis=1)
+        wrench[:, 3] = fz @ y_pos * 1e-3  # tau = r x f, r = (s, y, 0) mm -> m
+        wrench[:, 4] = -(fz @ s_pos) * 1e-3
+        wrench[:, 5] = -(shear @ y_pos) * 1e-3
+        contact = gap < p.corner_contact_depth_mm
+        proximity = float(np.max(np.exp(-col_xi[self.cols][contact] / p.corner_decay_mm))) if np.any(contact) else 0.0
+        return _PadTable(depth, loads, disp, wrench, touch, proximity)
+
+
+def _cell_weights(pos: np.ndarray, n_cells: int, pitch: float, sigma: float) -> np.ndarray:
+    """Share of a load at ``pos`` each cell reads: Gaussian spreading then cell integration (sums to 1).
+
+    Cell ``c`` is centred at ``(c - (n-1)/2) * pitch``; the outer cells reach to infinity so no load is lost.
+    """
+    centres = (np.arange(n_cells) - (n_cells - 1) / 2) * pitch
+    lo = centres - pitch / 2
+    hi = centres + pitch / 2
+    lo[0], hi[-1] = -np.inf, np.inf
+    if sigma <= 0:
+        return ((pos[None, :] >= lo[:, None]) & (pos[None, :] < hi[:, None])).astype(np.float64)
+    scale = sigma * math.sqrt(2.0)
+
+    def cdf(edge: np.ndarray) -> np.ndarray:
+        z = (edge[:, None] - pos[None, :]) / scale
+        return 0.5 * (1.0 + _erf(np.clip(z, -40.0, 40.0)))
+
+    return cdf(hi) - cdf(lo)
+
+
+def _depth_for_force(force: Callable[[float], float], target_n: float) -> float:
+    """Smallest depth (mm) at which the monotone ``force(depth)`` reaches ``target_n``, by doubling + bisection."""
+    hi = 0.05
+    while force(hi) < target_n and hi < 200.0:
+        hi *= 2.0
+    lo = 0.0
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if force(mid) < target_n:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def _no_contact(layout: SensorLayout) -> _PadTable:
+    zeros = np.zeros((2, layout.n_taxels, 3))
+    return _PadTable(
+        depth=np.array([0.0, 1.0]),
+        loads=zeros,
+        displacement=zeros.copy() if layout.has_displacement else None,
+        wrench_tool=np.zeros((2, 6)),
+        touch_cn=-math.inf,
+        corner_proximity=0.0,
+    )
+
+
+# =================================================================================================================
+# One press ray: the pad table plus the object's global spring, indexed by travel
+# =================================================================================================================
+
+
+class _RayTable:
+    """Loads and wrench against travel past first touch along one press ray (pad orientation + lateral offset)."""
+
+    def __init__(
+        self, table: _PadTable, material: MaterialSpec, params: SceneParams, rot: np.ndarray, psi: float, c_s: float
+    ) -> None:
+        self.psi = psi
+        self.c_s = c_s
+        self.touch_cn = table.touch_cn
+        self.has_displacement = table.displacement is not None
+        force = -table.wrench_tool[:, 2]
+        corner_factor = 1.0 + (material.corner_stiffness_factor - 1.0) * table.corner_proximity
+        k0 = material.global_stiffness_n_per_mm * corner_factor
+        w_object = _cubic_spring_deflection(force, k0, material.global_cubic_n_per_mm3)
+        travel = table.depth + force / params.mount_stiffness_n_per_mm + w_object
+        self.travel = travel
+        self.force = force
+        self.loads = table.loads
+        self.displacement = table.displacement
+        wrench = table.wrench_tool
+        self.wrench_base = np.concatenate([wrench[:, :3] @ rot.T, wrench[:, 3:] @ rot.T], axis=1)
+        self._travel_list = travel.tolist()
+        self.n_taxels = table.loads.shape[1]
+
+    def _segment(self, travel: float) -> tuple[int, float]:
+        t = self._travel_list
+        i = bisect.bisect_right(t, travel)
+        i = min(max(i, 1), len(t) - 1)  # beyond the ends: extrapolate the first/last segment
+        span = t[i] - t[i - 1]
+        frac = (travel - t[i - 1]) / span if span > 0 else 0.0
+        return i, frac
+
+    def interp(self, values: np.ndarray, travel: float) -> np.ndarray:
+        i, frac = self._segment(travel)
+        return values[i - 1] + frac * (values[i] - values[i - 1])
+
+    def loads_at(self, travel: float) -> TaxelLoads:
+        if travel <= 0.0 or not math.isfinite(self.touch_cn):
+            zeros = np.zeros((self.n_taxels, 3))
+            return TaxelLoads(zeros, zeros.copy() if self.has_displacement else None)
+        forces = self.interp(self.loads, travel)
+        disp = self.interp(self.displacement, travel) if self.displacement is not None else None
+        return TaxelLoads(forces, disp)
+
+
+def _cubic_spring_deflection(force: np.ndarray, k0: float, k3: float) -> np.ndarray:
+    """Deflection w (mm) of the spring ``F = k0 w + k3 w^3`` under ``force`` (N); Cardano's real root."""
+    f = np.maximum(np.asarray(force, dtype=np.float64), 0.0)
+    if k3 <= 0.0:
+        return f / k0
+    q = f / (2.0 * k3)
+    p3 = (k0 / (3.0 * k3)) ** 3
+    root = np.sqrt(q * q + p3)
+    return np.cbrt(q + root) + np.cbrt(q - root)
+
+
+def _rotvec_to_matrix(rotvec: tuple[float, float, float]) -> np.ndarray:
+    rx, ry, rz = rotvec
+    theta = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if theta < 1e-12:
+        return np.eye(3)
+    kx, ky, kz = rx / theta, ry / theta, rz / theta
+    c, s = math.cos(theta), math.sin(theta)
+    v = 1.0 - c
+    return np.array(
+        [
+            [c + kx * kx * v, kx * ky * v - kz * s, kx * kz * v + ky * s],
+            [ky * kx * v + kz * s, c + ky * ky * v, ky * kz * v - kx * s],
+            [kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v],
+        ]
+    )
+
+
+def _matrix_to_rotvec(rot: np.ndarray) -> np.ndarray:
+    cos_theta = max(-1.0, min(1.0, (float(np.trace(rot)) - 1.0) / 2.0))
+    theta = math.acos(cos_theta)
+    if theta < 1e-9:
+        return np.zeros(3)
+    if math.pi - theta < 1e-6:
+        b = (rot + np.eye(3)) / 2.0
+        i = int(np.argmax(np.diag(b)))
+        axis = b[:, i] / math.sqrt(b[i, i])
+        return axis * theta
+    axis = np.array([rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0], rot[1, 0] - rot[0, 1]]) / (2.0 * math.sin(theta))
+    return axis * theta

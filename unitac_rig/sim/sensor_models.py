@@ -1,0 +1,118 @@
+"""Sensor output models: from what each taxel feels (:class:`~unitac_rig.sim.scene.TaxelLoads`, N) to wire units.
+
+* uSkin uSPa46: raw 16-bit counts per taxel and axis = per-taxel baseline (~33 k +- a few k, seeded) + per-taxel
+  gain x (skin-spread load) + axis cross-talk + white noise, clipped to 0..65535. The sensor ships uncalibrated, so
+  gains are fitted to the recorded excursions (1-5 k counts per taxel-axis at 10 N), not taken from a datasheet.
+* PapillArray: per-pillar force (N) and tip displacement (mm) + an unbiased offset (removed by the hub's bias) +
+  white noise, quantised to 1 mN and 1 um.
+
+The skin's load spreading itself lives in the scene (it needs the continuous pressure profile); these models only
+turn each taxel's load into what its transducer reports. Static parts (baselines, gains, cross-talk, offsets) are
+drawn once from ``rng``; noise is drawn from the same generator per sample, so a lockstep run is reproducible.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
+from unitac_rig.sim.scene import TaxelLoads
+from unitac_rig.sim.signals import SensorSample
+
+COUNTS_MAX = 65535  # 16-bit unsigned per axis [S: XELA controller version 3]
+
+
+@dataclass(frozen=True)
+class UskinParams:
+    """uSkin transducer parameters: [S] stated by a source, [I] inferred or fitted."""
+
+    baseline_mean_counts: float = 33_000.0  # [S] resting values ~32 000-36 000 (xela-server README examples)
+    baseline_sd_counts: float = 2_000.0  # [S/I] differs per taxel/axis by thousands
+    gain_normal_counts_per_n: float = 2_500.0  # [I] fitted: sharpest contacts put ~2 N on a taxel at 10 N and the
+    # recorded per-file peaks reach 1.6-5.3 k counts
+    gain_shear_counts_per_n: float = 3_000.0  # [I] Hall lateral sensitivity ~1/2 of normal per mm of magnet motion,
+    # but the skin is 2-3x softer in shear than in (bonded, incompressible) compression
+    gain_sd_fraction: float = 0.10  # [I] uncalibrated taxels differ in gain
+    crosstalk_sd: float = 0.05  # [I] 3-axis cross-talk ~5-10 % (Tomo et al. 2016/2018, qualitative)
+    noise_counts: float = 8.0  # [I] idle noise peaks ~25 counts on one taxel (tactile_UR5) -> ~8 RMS
+
+
+@dataclass(frozen=True)
+class PapillArrayParams:
+    """PapillArray pillar read-out parameters: [S] stated by a source, [I] inferred."""
+
+    noise_n: float = 0.02  # [S/I] stability test 0.02 N std; per-pillar 0.01-0.03 N RMS
+    noise_mm: float = 0.005  # [S] displacement resolution < +-0.01 mm (1 sigma)
+    force_quantum_n: float = 0.001  # [I] 1 mN steps (the wire carries float32)
+    displacement_quantum_mm: float = 0.001  # [I] 1 um steps
+    offset_sd_n: float = 0.1  # [I] an unbiased hub reads small offsets until the 'z' bias command
+    offset_sd_mm: float = 0.01  # [I]
+
+
+class UskinModel:
+    """Taxel loads (N) -> uSkin raw counts (float; the device encoder rounds)."""
+
+    def __init__(
+        self, params: UskinParams | None = None, rng: np.random.Generator | None = None, *, layout: SensorLayout = USKIN
+    ) -> None:
+        self.params = p = params or UskinParams()
+        self.layout = layout
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        n = layout.n_taxels
+        self.baseline_counts = np.clip(
+            self.rng.normal(p.baseline_mean_counts, p.baseline_sd_counts, (n, 3)), 0.0, COUNTS_MAX
+        )
+        nominal = np.array([p.gain_shear_counts_per_n, p.gain_shear_counts_per_n, p.gain_normal_counts_per_n])
+        self.gain_counts_per_n = nominal * (1.0 + p.gain_sd_fraction * self.rng.standard_normal((n, 1)))
+        mix = p.crosstalk_sd * self.rng.standard_normal((n, 3, 3))
+        mix[:, np.arange(3), np.arange(3)] = 1.0
+        self.crosstalk = mix  # (n, out axis, in axis)
+
+    def expected_counts(self, loads: TaxelLoads) -> np.ndarray:
+        """Noise-free counts (n, 3) for these loads, before clipping."""
+        signal = self.gain_counts_per_n * np.asarray(loads.forces_n)
+        return self.baseline_counts + np.einsum("nij,nj->ni", self.crosstalk, signal)
+
+    def sample(self, loads: TaxelLoads) -> SensorSample:
+        counts = self.expected_counts(loads) + self.rng.normal(0.0, self.params.noise_counts, self.layout.frame_shape)
+        return SensorSample(values=np.clip(counts, 0.0, COUNTS_MAX))
+
+
+class PapillArrayModel:
+    """Pillar loads (N) and tip displacements (mm) -> PapillArray readings in N and mm."""
+
+    def __init__(
+        self,
+        params: PapillArrayParams | None = None,
+        rng: np.random.Generator | None = None,
+        *,
+        layout: SensorLayout = PAPILLARRAY,
+    ) -> None:
+        self.params = p = params or PapillArrayParams()
+        self.layout = layout
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.offset_n = self.rng.normal(0.0, p.offset_sd_n, layout.frame_shape)
+        self.offset_mm = self.rng.normal(0.0, p.offset_sd_mm, layout.frame_shape)
+
+    def sample(self, loads: TaxelLoads) -> SensorSample:
+        p = self.params
+        shape = self.layout.frame_shape
+        forces = np.asarray(loads.forces_n) + self.offset_n + self.rng.normal(0.0, p.noise_n, shape)
+        disp = np.zeros(shape) if loads.displacement_mm is None else np.asarray(loads.displacement_mm)
+        disp = disp + self.offset_mm + self.rng.normal(0.0, p.noise_mm, shape)
+        return SensorSample(
+            values=_quantise(forces, p.force_quantum_n), displacement_mm=_quantise(disp, p.displacement_quantum_mm)
+        )
+
+
+def _quantise(values: np.ndarray, step: float) -> np.ndarray:
+    return np.round(values / step) * step if step > 0 else values
+
+
+def model_for(layout: SensorLayout, rng: np.random.Generator | None = None) -> UskinModel | PapillArrayModel:
+    """The default output model for a sensor layout (uSkin counts or PapillArray N/mm)."""
+    if layout.units == "counts":
+        return UskinModel(rng=rng, layout=layout)
+    return PapillArrayModel(rng=rng, layout=layout)

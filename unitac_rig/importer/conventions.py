@@ -1,0 +1,272 @@
+"""The UniTac-NV authors' conventions, made explicit: every constant their offline scripts hard-code is a field here.
+
+Defaults reproduce what their preprocessing does to a raw session (facts from their public repository, see
+docs/import.md): drop the first 10 rows, rotate the wrist F/T x/y (forces and torques) by 45 degrees about z, negate
+PapillArray x/y so both sensors share the uSkin's axes, take the baseline as the mean of the first 100 samples,
+call a press a contiguous run with -20 N < Fz < -5 N of at least 30 (uSkin) / 5 (PapillArray) samples, and label
+each press with round(atan2(y - 0.625, x + 0.15) * 180/pi + 90) degrees from the end-effector x, y in metres.
+
+The rest is what this project adds on top (and says so): how their names map to our object and sensor ids, how the
+press window is widened back to the start of the loading ramp, when a press counts as complete, how their matrices
+map onto our (row, col) grid and axes, and which rotation each arbitrary-object file was recorded at (a guess).
+
+A TOML file can override any field (``--conventions FILE``); the effective conventions are stored in every imported
+session's root attributes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from unitac_rig.errors import ConfigError
+from unitac_rig.extraction import ExtractionSettings, default_targets_n
+
+# What the authors' script (0_data_preprocessing.py) already applied to every processed .npz file.
+AUTHORS_PROCESSED_STEPS: dict[str, Any] = {
+    "drop_first_rows": 10,
+    "baseline_samples": 100,
+    "ft_rotation_deg": 45.0,
+    "papillarray_flip_xy": True,
+    "time_zeroed_at_first_kept_row": True,
+}
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class TactileMapping(_Strict):
+    """How one of their matrices (rows x cols x 3, after their own sign harmonisation) lands in our frame.
+
+    Identity by default: their matrix row r, column c becomes our taxel ``r * cols + c`` and their x, y, z our x, y, z.
+    That is an assumption (the authors publish no drawing of either sensor's axes); flip here if a figure shows
+    otherwise.
+    """
+
+    flip_rows: bool = Field(default=False, description="reverse their row order (our row 0 is the top row)")
+    flip_cols: bool = Field(default=False, description="reverse their column order (our columns grow along +x)")
+    axis_signs: tuple[int, int, int] = Field(default=(1, 1, 1), description="sign applied to their x, y, z")
+
+    @field_validator("axis_signs")
+    @classmethod
+    def _unit_signs(cls, value: tuple[int, int, int]) -> tuple[int, int, int]:
+        if any(s not in (-1, 1) for s in value):
+            raise ValueError("axis_signs entries must be +1 or -1")
+        return value
+
+
+class ExtractionConventions(_Strict):
+    """Settings of the force-matched extraction for 100 Hz imported data (the project defaults assume 500 Hz)."""
+
+    targets_n: tuple[float, ...] = tuple(float(x) for x in default_targets_n())
+    tolerance_n: float = Field(default=0.5, gt=0, description="largest |force at frame - target| that still counts, N")
+    smoothing_samples: int = Field(
+        default=3, ge=1, description="centred moving average of the press force, samples (30 ms)"
+    )
+    max_frame_gap_s: float = Field(default=0.05, gt=0, description="largest gap between crossing and nearest frame, s")
+    tactile_latency_s: float = Field(default=0.0, description="tactile delay relative to the F/T, s (same CSV row: 0)")
+
+    def to_settings(self) -> ExtractionSettings:
+        return ExtractionSettings(
+            targets_n=tuple(self.targets_n),
+            tolerance_n=self.tolerance_n,
+            smoothing_samples=self.smoothing_samples,
+            max_frame_gap_s=self.max_frame_gap_s,
+            tactile_latency_s=self.tactile_latency_s,
+        )
+
+
+def _default_object_shapes() -> dict[str, str]:
+    # Their folder names (circular/square/hexagonal) and their processed names (cylinder/oblong/hexagon) -> our
+    # shape prefix; our object id is "<prefix>_<material>" (e.g. hexagonal_TPU -> hex_tpu).
+    return {
+        "circular": "circle",
+        "cylinder": "circle",
+        "square": "square",
+        "oblong": "square",
+        "hexagonal": "hex",
+        "hexagon": "hex",
+        "arbitrary": "irregular",
+    }
+
+
+class ImportConventions(_Strict):
+    """Every assumption the import makes about the UniTac-NV files (see the module docstring)."""
+
+    # --- names -------------------------------------------------------------------------------------------------
+    object_shapes: dict[str, str] = Field(
+        default_factory=_default_object_shapes,
+        description="their shape name (lower case) -> our object-id prefix; the id is '<prefix>_<material>'",
+    )
+    sensor_names: dict[str, str] = Field(
+        default_factory=lambda: {"xela": "uskin", "papil": "papillarray", "papillarray": "papillarray"},
+        description="their sensor folder/file name (lower case) -> our sensor id",
+    )
+    arbitrary_material: str = Field(
+        default="pla", description="material of the arbitrary object (their raw names omit it)"
+    )
+    arbitrary_rotation_deg: dict[int, float] = Field(
+        default_factory=lambda: {1: 0.0, 2: 90.0, 3: 180.0, 4: 270.0},
+        description="GUESS: object rotation of arbitrary file n; files whose n is missing here are not imported",
+    )
+
+    # --- their preprocessing -----------------------------------------------------------------------------------
+    drop_first_rows: int = Field(default=10, ge=0, description="data rows dropped at the start of every raw file")
+    baseline_samples: int = Field(default=100, ge=1, description="tare = mean of this many first kept samples")
+    ft_rotation_deg: float = Field(default=45.0, description="F/T x, y (and Mx, My) rotated by this about z, degrees")
+    papillarray_flip_xy: bool = Field(default=True, description="negate PapillArray x and y (force and displacement)")
+    press_fz_band_n: tuple[float, float] = Field(
+        default=(-20.0, -5.0), description="a sample is 'pressing' when low < Fz < high (strict), N, after rotation"
+    )
+    min_press_samples: dict[str, int] = Field(
+        default_factory=lambda: {"uskin": 30, "papillarray": 5},
+        description="shortest run that counts as a press, samples, per our sensor id",
+    )
+    object_centre_m: tuple[float, float] = Field(
+        default=(-0.15, 0.625), description="object axis in the robot base frame (x, y), m"
+    )
+    angle_offset_deg: float = Field(default=90.0, description="angle = atan2(y - cy, x - cx) in degrees + this")
+
+    # --- what this project adds --------------------------------------------------------------------------------
+    tactile_mapping: dict[str, TactileMapping] = Field(
+        default_factory=lambda: {"uskin": TactileMapping(), "papillarray": TactileMapping()},
+        description="their harmonised matrix -> our (n_taxels, 3) frame, per our sensor id",
+    )
+    ramp_start_n: float = Field(
+        default=0.5,
+        ge=0,
+        description="press window starts at the last sample before the run with press force <= this, N",
+    )
+    max_pre_margin_s: float = Field(
+        default=5.0, gt=0, description="furthest the window may reach back before the run, s"
+    )
+    post_margin_s: float = Field(default=0.5, ge=0, description="samples kept after the run (unloading), s")
+    complete_peak_n: float = Field(
+        default=10.0, gt=0, description="a press whose peak press force reaches this is complete"
+    )
+    extraction: ExtractionConventions = ExtractionConventions()
+
+    @model_validator(mode="after")
+    def _consistent(self) -> ImportConventions:
+        low, high = self.press_fz_band_n
+        if not low < high:
+            raise ValueError("press_fz_band_n must be (low, high) with low < high")
+        for sensor in ("uskin", "papillarray"):
+            if sensor not in self.tactile_mapping:
+                raise ValueError(f"tactile_mapping.{sensor} is missing")
+            if sensor not in self.min_press_samples:
+                raise ValueError(f"min_press_samples.{sensor} is missing")
+        if any(n < 1 for n in self.min_press_samples.values()):
+            raise ValueError("min_press_samples must be at least 1")
+        for name, sensor in self.sensor_names.items():
+            if sensor not in ("uskin", "papillarray"):
+                raise ValueError(f"sensor_names.{name}: {sensor!r} is not a sensor id (use uskin or papillarray)")
+        if self.drop_first_rows < 0:
+            raise ValueError("drop_first_rows must be >= 0")
+        return self
+
+    # -- helpers ------------------------------------------------------------------------------------------------
+    def object_id(self, shape: str, material: str) -> str:
+        """Our object id for their shape name and material (``hexagonal``, ``TPU`` -> ``hex_tpu``)."""
+        prefix = self.object_shapes.get(shape.lower())
+        if prefix is None:
+            known = ", ".join(sorted(self.object_shapes))
+            raise ConfigError(
+                f"unknown UniTac-NV shape name {shape!r}",
+                hint=f"known: {known}; add it under [object_shapes] in a --conventions file",
+            )
+        return f"{prefix}_{material.lower()}"
+
+    def as_json_dict(self) -> dict[str, Any]:
+        """Plain JSON-able dict (what is stored in the session's root attributes)."""
+        data: dict[str, Any] = json.loads(self.model_dump_json())
+        return data
+
+    def to_toml(self) -> str:
+        """The effective conventions as a TOML document that ``load_conventions`` reads back unchanged."""
+        return _to_toml(self.as_json_dict())
+
+
+def _merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    """Deep-merge ``override`` into ``base``: tables are merged key by key, everything else replaced."""
+    out = dict(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def _describe(err: ValidationError, source: str) -> str:
+    first = err.errors()[0]
+    where = ".".join(str(p) for p in first["loc"]) or "(top level)"
+    message = "unknown key (typo?)" if first["type"] == "extra_forbidden" else first["msg"]
+    return f"{source}: {where}: {message}"
+
+
+def conventions_from_dict(data: dict[str, Any], source: str = "conventions") -> ImportConventions:
+    """Defaults overridden by ``data`` (tables merge with the defaults, so a file only lists what it changes)."""
+    merged = _merge(ImportConventions().as_json_dict(), data)
+    try:
+        return ImportConventions.model_validate(merged)
+    except ValidationError as exc:
+        raise ConfigError(_describe(exc, source), hint="see docs/import.md for every field") from exc
+
+
+def load_conventions(path: Path | None) -> ImportConventions:
+    """The default conventions, or the defaults overridden by a TOML file."""
+    if path is None:
+        return ImportConventions()
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"conventions file {path} does not exist") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML ({exc})") from exc
+    return conventions_from_dict(data, source=str(path))
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# a small TOML writer for the types the conventions use (str, bool, int, float, lists of numbers, nested tables)
+
+
+def _toml_key(key: str) -> str:
+    return key if key.replace("_", "").replace("-", "").isalnum() else json.dumps(key)
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value) or math.isinf(value):
+            raise ConfigError(f"cannot write {value} to TOML")
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise ConfigError(f"cannot write a {type(value).__name__} to TOML")
+
+
+def _to_toml(data: dict[str, Any], prefix: str = "") -> str:
+    scalars = [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in data.items() if not isinstance(v, dict)]
+    lines = []
+    if prefix:
+        lines.append(f"[{prefix}]")
+    lines.extend(scalars)
+    text = "\n".join(lines)
+    for key, value in data.items():
+        if isinstance(value, dict):
+            sub = _to_toml(value, f"{prefix}.{_toml_key(key)}" if prefix else _toml_key(key))
+            text = f"{text}\n\n{sub}" if text else sub
+    return text + ("\n" if not prefix else "")

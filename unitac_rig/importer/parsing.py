@@ -1,0 +1,330 @@
+"""Reading the UniTac-NV files: raw session CSVs and the authors' processed ``.npz`` files.
+
+Raw CSV (one header row, then one row per tactile sample, about 100 Hz), columns by position:
+
+0. host time, ``%Y-%m-%d %H:%M:%S.%f``
+1. sensor sequence number
+2. force matrix as a stringified nested list: uSkin ``4 x 6 x 3`` raw counts, PapillArray ``3 x 3 x 3`` N
+3. displacement matrix, same shape (uSkin: zeros; PapillArray: mm)
+4. wrist F/T ``[Fx, Fy, Fz, Mx, My, Mz]`` (N, N*m), Fz negative while pressing
+5. end-effector pose ``[x, y, z, rx, ry, rz]`` (m, rad)
+
+Parsing is vectorised: a whole column is joined into one string and read by numpy in one call. Rows whose field
+counts, bracket structure or numbers are wrong are dropped and reported by data-row number (0 = first row after the
+header), never guessed.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from unitac_rig.errors import DataError
+
+RAW_COLUMNS = 6
+_TO_SPACES = str.maketrans("[](),", "     ")
+
+
+@dataclass
+class RawColumns:
+    """A raw CSV read into numbers, before any convention is applied."""
+
+    rows: np.ndarray  # (N,) data-row numbers (0 = first row after the header)
+    time_s: np.ndarray  # (N,) seconds since the first good row
+    seq: np.ndarray  # (N,) int64
+    force: np.ndarray  # (N, rows, cols, 3) their units
+    displacement: np.ndarray | None  # (N, rows, cols, 3) or None when not read
+    ft: np.ndarray  # (N, 6)
+    pose: np.ndarray  # (N, 6)
+    bad_rows: list[tuple[int, str]] = field(default_factory=list)  # (data row, reason)
+    total_rows: int = 0
+
+
+def file_sha256(path: Path) -> str:
+    """Hex SHA-256 of a file's bytes (what makes a re-import recognise a file it already has)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def _bracket_count(grid: tuple[int, ...]) -> int:
+    """Opening brackets in a Python repr of a nested list of this shape (``(4, 6, 3)`` -> 1 + 4 + 24)."""
+    total, level = 0, 1
+    for size in grid:
+        total += level
+        level *= size
+    return total
+
+
+def _parse_row_numbers(text: str, count: int) -> np.ndarray | None:
+    """One field's numbers, or None when it does not hold exactly ``count`` of them."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            values = np.fromstring(text.translate(_TO_SPACES), sep=" ")
+    except (ValueError, DeprecationWarning):
+        return None
+    return values if values.size == count else None
+
+
+def parse_number_column(
+    cells: list[str], shape: tuple[int, ...], check_brackets: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """Parse stringified (nested) lists of one shape, vectorised.
+
+    Returns ``(values, ok)``: values has shape ``(len(cells), *shape)`` (NaN rows where ``ok`` is False). A row is
+    bad when its number of values differs, when (``check_brackets``) its bracket nesting does not fit ``shape``, or
+    when a token is not a number. Rows that pass the cheap comma/bracket checks are parsed in one numpy call; only
+    when that call fails are rows parsed one by one to find the culprit.
+    """
+    per_row = int(np.prod(shape))
+    n = len(cells)
+    out = np.full((n, per_row), np.nan)
+    ok = np.zeros(n, bool)
+    if n == 0:
+        return out.reshape(n, *shape), ok
+    brackets = _bracket_count(shape)
+    commas = np.fromiter((c.count(",") for c in cells), dtype=np.int64, count=n)
+    opens = np.fromiter((c.count("[") for c in cells), dtype=np.int64, count=n)
+    fast = commas == per_row - 1
+    if check_brackets:
+        fast &= opens == brackets
+    fast_idx = np.nonzero(fast)[0]
+    if fast_idx.size:
+        joined = " ".join(cells[i] for i in fast_idx).translate(_TO_SPACES)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")
+                values = np.fromstring(joined, sep=" ")
+        except (ValueError, DeprecationWarning):
+            values = np.zeros(0)
+        if values.size == fast_idx.size * per_row:
+            out[fast_idx] = values.reshape(-1, per_row)
+            ok[fast_idx] = True
+        else:  # some token is not a number: find the rows one by one
+            for i in fast_idx:
+                parsed = _parse_row_numbers(cells[i], per_row)
+                if parsed is not None:
+                    out[i] = parsed
+                    ok[i] = True
+    # rows that failed the cheap checks may still be fine when written without commas; parse them alone
+    for i in np.nonzero(~fast)[0]:
+        if check_brackets and opens[i] != brackets:
+            continue
+        parsed = _parse_row_numbers(cells[i], per_row)
+        if parsed is not None:
+            out[i] = parsed
+            ok[i] = True
+    return out.reshape(n, *shape), ok
+
+
+def parse_times(cells: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Time strings (``%Y-%m-%d %H:%M:%S.%f``) -> (microseconds since the epoch as int64, ok mask)."""
+    n = len(cells)
+    micros = np.zeros(n, np.int64)
+    ok = np.ones(n, bool)
+    try:
+        micros[:] = np.array(cells, dtype="datetime64[us]").astype(np.int64)
+    except ValueError:
+        for i, cell in enumerate(cells):
+            try:
+                micros[i] = np.datetime64(cell.strip(), "us").astype(np.int64)
+            except ValueError:
+                ok[i] = False
+    return micros, ok
+
+
+def parse_ints(cells: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    n = len(cells)
+    out = np.zeros(n, np.int64)
+    ok = np.ones(n, bool)
+    try:
+        out[:] = np.array(cells).astype(np.int64) if n else out
+    except ValueError:
+        for i, cell in enumerate(cells):
+            try:
+                out[i] = int(cell.strip())
+            except ValueError:
+                ok[i] = False
+    return out, ok
+
+
+def _nested_shape(text: str) -> tuple[int, ...] | None:
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError:
+        return None
+    try:
+        return tuple(np.shape(np.asarray(value, dtype=np.float64)))
+    except ValueError:
+        return None
+
+
+def read_raw_csv(path: Path, grid: tuple[int, int], read_displacement: bool) -> RawColumns:
+    """Read one raw UniTac-NV session CSV (see the module docstring).
+
+    ``grid`` is the sensor's ``(rows, cols)``; a file whose matrices have another shape is refused with a DataError.
+    """
+    path = Path(path)
+    time_cells: list[str] = []
+    seq_cells: list[str] = []
+    force_cells: list[str] = []
+    disp_cells: list[str] = []
+    ft_cells: list[str] = []
+    pose_cells: list[str] = []
+    bad_rows: list[tuple[int, str]] = []
+    row_numbers: list[int] = []
+    total_rows = 0
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            reader = csv.reader(fh)
+            header = next(reader, None)
+            if header is None:
+                raise DataError(f"{path} is empty", hint="is this a UniTac-NV session CSV?")
+            for number, row in enumerate(reader):
+                total_rows += 1 if row else 0
+                if len(row) < RAW_COLUMNS:
+                    if row:  # blank lines (e.g. a trailing newline) are not data
+                        bad_rows.append((number, f"{len(row)} columns, expected {RAW_COLUMNS}"))
+                    continue
+                row_numbers.append(number)
+                time_cells.append(row[0])
+                seq_cells.append(row[1])
+                force_cells.append(row[2])
+                disp_cells.append(row[3])
+                ft_cells.append(row[4])
+                pose_cells.append(row[5])
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise DataError(f"cannot read {path}: {exc}", hint="check the file is a complete UniTac-NV CSV") from exc
+
+    matrix_shape = (grid[0], grid[1], 3)
+    if force_cells:
+        first_shape = _nested_shape(force_cells[0])
+        if first_shape is not None and first_shape != matrix_shape:
+            raise DataError(
+                f"{path.name}: force matrices have shape {first_shape}, this sensor's are {matrix_shape}",
+                hint="check the file sits under the right sensor folder (xela / papillarray)",
+            )
+    micros, ok_t = parse_times(time_cells)
+    seq, ok_s = parse_ints(seq_cells)
+    force, ok_f = parse_number_column(force_cells, matrix_shape)
+    ft, ok_ft = parse_number_column(ft_cells, (6,), check_brackets=False)
+    pose, ok_p = parse_number_column(pose_cells, (6,), check_brackets=False)
+    ok = ok_t & ok_s & ok_f & ok_ft & ok_p
+    displacement = None
+    if read_displacement:
+        displacement, ok_d = parse_number_column(disp_cells, matrix_shape)
+        ok &= ok_d
+    numbers = np.asarray(row_numbers, np.int64)
+    for i in np.nonzero(~ok)[0]:
+        fields = [
+            name
+            for name, good in (
+                ("time", ok_t[i]),
+                ("sequence", ok_s[i]),
+                ("force matrix", ok_f[i]),
+                ("F/T", ok_ft[i]),
+                ("pose", ok_p[i]),
+            )
+            if not good
+        ]
+        if read_displacement and not ok_d[i]:
+            fields.append("displacement matrix")
+        bad_rows.append((int(numbers[i]), "unparsable " + ", ".join(fields)))
+    bad_rows.sort()
+    kept_micros = micros[ok]
+    time_s = (kept_micros - kept_micros[0]) / 1e6 if kept_micros.size else np.zeros(0)
+    return RawColumns(
+        rows=numbers[ok],
+        time_s=time_s.astype(np.float64),
+        seq=seq[ok],
+        force=force[ok],
+        displacement=displacement[ok] if displacement is not None else None,
+        ft=ft[ok],
+        pose=pose[ok],
+        bad_rows=bad_rows,
+        total_rows=total_rows,
+    )
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# processed .npz files
+
+PROCESSED_KEYS = (
+    "times",
+    "sensor_matrices_force",
+    "sensor_matrices_displacement",
+    "ft_values",
+    "end_effector_poses",
+    "selected",
+    "angle",
+)
+
+
+@dataclass
+class ProcessedArrays:
+    """One processed ``.npz`` as the authors wrote it (baseline subtracted, F/T rotated, PapillArray flipped)."""
+
+    time_s: np.ndarray  # (N,) seconds since their first kept row
+    force: np.ndarray  # (N, rows, cols, 3)
+    displacement: np.ndarray  # (N, rows, cols, 3)
+    ft: np.ndarray  # (N, 6)
+    pose: np.ndarray  # (N, 6)
+    selected: np.ndarray  # (P,) int64 indices of each press's peak
+    angle: np.ndarray  # (P,) int64 degrees
+
+
+def read_processed_npz(path: Path, grid: tuple[int, int]) -> ProcessedArrays:
+    """Read and check one processed file; refuse files that cannot carry force-matched extraction."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            missing = [k for k in PROCESSED_KEYS if k not in npz.files]
+            if missing:
+                raise DataError(
+                    f"{path.name} lacks {', '.join(missing)}",
+                    hint="is this a file from 'UniTac-NV Dataset Processed'?",
+                )
+            arrays = {k: np.asarray(npz[k]) for k in PROCESSED_KEYS}
+    except (OSError, ValueError) as exc:
+        raise DataError(f"cannot read {path}: {exc}", hint="check the .npz file is complete") from exc
+    n = arrays["times"].shape[0]
+    shape = (n, grid[0], grid[1], 3)
+    checks = {
+        "sensor_matrices_force": shape,
+        "sensor_matrices_displacement": shape,
+        "ft_values": (n, 6),
+        "end_effector_poses": (n, 6),
+    }
+    for key, expected in checks.items():
+        if arrays[key].shape != expected:
+            raise DataError(
+                f"{path.name}: {key} has shape {arrays[key].shape}, expected {expected}",
+                hint="check the file sits in the folder of its sensor (Xela / PapillArray)",
+            )
+    selected = arrays["selected"].astype(np.int64).ravel()
+    if n and n == selected.size:
+        raise DataError(
+            f"{path.name} holds only the {n} peak samples (one per press), not the presses' loading ramps; "
+            "force-matched extraction at 4..10 N cannot be done from a single frame per press",
+            hint="import the raw session CSVs from 'UniTac-NV Dataset' instead",
+        )
+    if selected.size and (selected.min() < 0 or selected.max() >= n):
+        raise DataError(f"{path.name}: 'selected' indexes outside its {n} samples")
+    return ProcessedArrays(
+        time_s=arrays["times"].astype(np.float64),
+        force=arrays["sensor_matrices_force"].astype(np.float64),
+        displacement=arrays["sensor_matrices_displacement"].astype(np.float64),
+        ft=arrays["ft_values"].astype(np.float64),
+        pose=arrays["end_effector_poses"].astype(np.float64),
+        selected=selected,
+        angle=arrays["angle"].astype(np.int64).ravel(),
+    )

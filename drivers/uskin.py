@@ -171,6 +171,35 @@ class UskinCanDriver(PumpedSensor):
             except (can.CanError, OSError) as exc:
                 logger.warning("uskin: error shutting the bus down: %s", exc)
 
+    def _skip_damaged_line(self, exc: BaseException) -> bool:
+        """True (and counted) when ``exc`` is python-can's slcan parser choking on one damaged ASCII line.
+
+        python-can raises ValueError/IndexError for a line with bad hex, and wraps a line that is not UTF-8 in
+        CanOperationError while keeping its bytes in the line buffer; ``flush()`` clears that buffer (and the unread
+        input), otherwise every later line would fail too. A port that went away is a different cause: not skipped.
+        """
+        cause = exc if isinstance(exc, ValueError | IndexError) else exc.__cause__
+        if not isinstance(cause, ValueError | IndexError):
+            return False
+        logger.debug("uskin: unreadable CAN line skipped: %s", cause)
+        self._count(checksum_errors=1)
+        flush = getattr(self.bus, "flush", None)
+        if isinstance(cause, UnicodeDecodeError) and callable(flush):
+            flush()
+        return True
+
+    def _serial_bytes_waiting(self) -> bool:
+        """True when the bus is python-can's slcan and its serial port still holds unread bytes."""
+        port = getattr(self.bus, "serialPortOrig", None)
+        if port is None:
+            return False
+        try:
+            return bool(port.in_waiting)
+        except (OSError, ValueError) as exc:  # pyserial's SerialException is an OSError
+            raise DeviceError(
+                f"uSkin SLCAN adapter failed: {exc}", hint="the adapter went away; replug it, then reconnect"
+            ) from exc
+
     def _frame(self, assembled: AssembledFrame) -> TactileFrame:
         return TactileFrame(
             sensor=USKIN.name,
@@ -188,17 +217,16 @@ class UskinCanDriver(PumpedSensor):
         for _ in range(MAX_MESSAGES_PER_PUMP):
             try:
                 message = self.bus.recv(timeout=timeout)
-            except (ValueError, IndexError) as exc:
-                # python-can's ASCII (slcan) parser raises on damaged lines; the line is consumed, go on.
-                logger.debug("uskin: unreadable CAN line skipped: %s", exc)
-                self._count(checksum_errors=1)
+            except (can.CanError, OSError, ValueError, IndexError) as exc:
+                if not self._skip_damaged_line(exc):
+                    raise DeviceError(
+                        f"uSkin CAN bus failed: {exc}",
+                        hint="the adapter or bus went away; check the cable/adapter, then reconnect",
+                    ) from exc
                 continue
-            except (can.CanError, OSError) as exc:
-                raise DeviceError(
-                    f"uSkin CAN bus failed: {exc}",
-                    hint="the adapter or bus went away; check the cable/adapter, then reconnect",
-                ) from exc
             if message is None:
+                if self._serial_bytes_waiting():
+                    continue  # an slcan reply line ("z", OK) made recv() return None with frames still queued
                 break
             timeout = 0.0
             if message.is_error_frame or message.is_remote_frame or message.is_extended_id:

@@ -7,7 +7,6 @@ those files; a run killed mid-file resumes it (presses already written from the 
 
 from __future__ import annotations
 
-import importlib
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -17,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from drivers.layouts import SensorLayout, get_layout
-from unitac_rig.errors import ConfigError, DataError
+from unitac_rig.errors import ConfigError, DataError, UnitacError
 from unitac_rig.importer.conventions import AUTHORS_PROCESSED_STEPS, ImportConventions
 from unitac_rig.importer.discovery import SourceFile, discover
 from unitac_rig.importer.parsing import file_sha256, read_processed_npz, read_raw_csv
@@ -29,14 +28,13 @@ from unitac_rig.importer.presses import (
     streams_from_processed,
     streams_from_raw,
 )
+from unitac_rig.objects import get_object
 from unitac_rig.recording import SessionWriter, session_path
 from unitac_rig.session import press_summaries, read_session_info
 
 log = logging.getLogger(__name__)
 
 SOURCE_TAG = "unitac-nv-import"
-# Object ids of the catalogue, used when unitac_rig.objects is not importable.
-KNOWN_OBJECT_IDS = ("circle_pla", "circle_tpu", "square_pla", "square_tpu", "hex_pla", "hex_tpu", "irregular_pla")
 MAX_LISTED_BAD_ROWS = 5
 
 
@@ -88,27 +86,15 @@ class ImportReport:
         return [f for s in self.sessions for f in s.files]
 
 
-def validate_object_id(object_id: str) -> None:
-    """Check an id against the object catalogue (``unitac_rig.objects`` when present)."""
+def canonical_object_id(object_id: str) -> str:
+    """Our catalogue's id for ``object_id`` (an id or alias); ConfigError when the catalogue does not know it."""
     try:
-        objects = importlib.import_module("unitac_rig.objects")
-    except ImportError:
-        objects = None
-    get_object = getattr(objects, "get_object", None) if objects is not None else None
-    if get_object is not None:
-        try:
-            get_object(object_id)
-        except Exception as exc:  # the catalogue's own error type; any refusal means "not ours"
-            raise ConfigError(
-                f"object id {object_id!r} is not in the object catalogue ({exc})",
-                hint="fix [object_shapes] / arbitrary_material in the --conventions file",
-            ) from exc
-        return
-    if object_id not in KNOWN_OBJECT_IDS:
+        return get_object(object_id).id
+    except UnitacError as exc:
         raise ConfigError(
-            f"object id {object_id!r} is not one of {', '.join(KNOWN_OBJECT_IDS)}",
+            f"object {object_id!r} (from the import conventions) is not in the object catalogue: {exc.one_line()}",
             hint="fix [object_shapes] / arbitrary_material in the --conventions file",
-        )
+        ) from exc
 
 
 def _root_attrs(object_id: str, sensor: str, conv: ImportConventions, source: Path) -> dict[str, Any]:
@@ -266,11 +252,10 @@ def import_unitac_nv(
     if not source.exists():
         raise DataError(f"{source} does not exist", hint="pass the folder you unzipped the UniTac-NV download into")
     found = discover(source, conv, mode)
+    canonical = {object_id: canonical_object_id(object_id) for object_id in {f.object_id for f in found.files}}
     groups: dict[tuple[str, str], list[SourceFile]] = {}
     for src in found.files:
-        groups.setdefault((src.object_id, src.sensor), []).append(src)
-    for object_id, _sensor in groups:
-        validate_object_id(object_id)
+        groups.setdefault((canonical[src.object_id], src.sensor), []).append(src)
     n_targets = len(conv.extraction.targets_n)
     sessions = []
     for (object_id, sensor), files in sorted(groups.items()):

@@ -226,7 +226,9 @@ class FrameAssembler:
     A frame closes when every taxel has reported once since the previous frame. If a taxel reports a second time
     before that (its cycle lost a message), the frame closes early, flagging the taxels that did not report, and
     the repeating message opens the next frame. Unknown ids are counted and ignored; payloads too short to decode or
-    carrying the sentinel count as invalid reports and flag their taxel.
+    carrying the sentinel count as invalid reports and flag their taxel. Known limit (no counter on the wire): when a
+    cycle loses the taxels it starts with, the next cycle's reports of them complete it, so that frame mixes two
+    cycles one period apart; ``stale_after_ns`` bounds how far apart values in one frame can be.
     """
 
     def __init__(self, id_map: TaxelIdMap = USPA46_ID_MAP, stale_after_ns: int = 50_000_000) -> None:

@@ -176,6 +176,8 @@ def decode_message(text: str | bytes) -> XelaWelcome | XelaDataMessage:
     sensors: dict[int, XelaSensorData] = {}
     for key, value in obj.items():
         if key.isdigit() and key.isascii():
+            if len(key) > 6:
+                raise _fail(f"sensor key {key[:12]!r}... is not a plausible sensor number")
             sensor = _decode_sensor(key, value)
             if sensor.sensor_number in sensors:
                 raise _fail(f"sensor number {sensor.sensor_number} appears under two keys")

@@ -1,0 +1,299 @@
+"""XELA uSkin CAN codec: golden payloads worked by hand, id maps, and frame assembly with lost/sentinel taxels."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from protocols.errors import ProtocolError
+from protocols.xela_can import (
+    START_STREAM_PAYLOAD,
+    STOP_STREAM_PAYLOAD,
+    USPA44_ID_MAP,
+    USPA46_ID_MAP,
+    FrameAssembler,
+    TaxelIdMap,
+    command_arbitration_id,
+    decode_stream_command,
+    decode_taxel_message,
+    encode_invalid_taxel_message,
+    encode_stream_command,
+    encode_taxel_message,
+)
+
+MS = 1_000_000  # ns
+
+
+# --------------------------------------------------------------------------------------------- stream commands
+
+
+def test_start_command_for_controller_3_is_cansend_203_07_00() -> None:
+    # tactile_UR5 starts an old board with `cansend can0 203#07.00` and stops it with `203#07.01`.
+    assert encode_stream_command(3, start=True) == (0x203, b"\x07\x00")
+    assert encode_stream_command(3, start=False) == (0x203, b"\x07\x01")
+    assert (START_STREAM_PAYLOAD, STOP_STREAM_PAYLOAD) == (b"\x07\x00", b"\x07\x01")
+    assert command_arbitration_id(1) == 0x201
+
+
+@pytest.mark.parametrize(
+    ("arbitration_id", "data", "expected"),
+    [
+        (0x203, b"\x07\x00", (3, True)),
+        (0x20F, b"\x07\x01", (15, False)),
+        (0x201, b"\x07", (1, True)),  # the AIST demo's 1-byte start
+        (0x200, b"\x07\x00\x00\x00\x00\x00\x00\x00", (0, True)),  # zero-padded by an adapter
+        (0x203, b"\x07\x02", None),
+        (0x203, b"\x08\x00", None),
+        (0x203, b"", None),
+        (0x203, b"\x07\x00\x01", None),
+        (0x135, b"\x07\x00", None),  # a taxel id, not a command
+        (0x210, b"\x07\x00", None),  # outside 0x200..0x20F
+    ],
+)
+def test_decode_stream_command(arbitration_id: int, data: bytes, expected: tuple[int, bool] | None) -> None:
+    assert decode_stream_command(arbitration_id, data) == expected
+
+
+@pytest.mark.parametrize("controller_id", [-1, 16, 0x200])
+def test_controller_id_out_of_range_is_refused_with_a_hint(controller_id: int) -> None:
+    with pytest.raises(ProtocolError) as info:
+        command_arbitration_id(controller_id)
+    assert info.value.hint
+
+
+# ------------------------------------------------------------------------------------------------ taxel messages
+
+
+def test_taxel_payload_is_big_endian_xyz_after_an_unused_byte() -> None:
+    # X = 0x4010 = 16400, Y = 0x8020 = 32800, Z = 0x9030 = 36912 (resting uSkin counts look like this).
+    payload = bytes([0x5A, 0x40, 0x10, 0x80, 0x20, 0x90, 0x30, 0x00])
+    message = decode_taxel_message(0x123, payload)
+    assert (message.x, message.y, message.z) == (16400, 32800, 36912)
+    assert message.valid
+    assert message.arbitration_id == 0x123
+    assert encode_taxel_message(0x123, 16400, 32800, 36912, byte0=0x5A) == payload
+
+
+def test_encoder_clips_counts_to_16_bits() -> None:
+    assert encode_taxel_message(0x100, -5, 70_000, 1) == bytes([0, 0x00, 0x00, 0xFF, 0xFF, 0x00, 0x01, 0])
+
+
+def test_sentinel_and_all_zero_messages_are_invalid() -> None:
+    sentinel = encode_invalid_taxel_message()
+    assert sentinel == bytes([0, 0xFA, 0x00, 0xFA, 0x00, 0xFA, 0x00, 0])
+    assert not decode_taxel_message(0x100, sentinel).valid
+    assert not decode_taxel_message(0x100, bytes(8)).valid
+    # The sentinel rule looks at the X most significant byte only: 0xF9FF is a (very large) reading.
+    assert decode_taxel_message(0x100, encode_taxel_message(0x100, 0xF9FF, 0, 0)).valid
+    assert not decode_taxel_message(0x100, encode_taxel_message(0x100, 0xFA00, 1, 1)).valid
+    # One non-zero axis is enough to be a reading.
+    assert decode_taxel_message(0x100, encode_taxel_message(0x100, 0, 0, 1)).valid
+
+
+def test_seven_byte_payload_decodes_and_six_byte_payload_raises() -> None:
+    assert decode_taxel_message(0x100, bytes([0, 0, 1, 0, 2, 0, 3])).z == 3
+    with pytest.raises(ProtocolError, match="6 data bytes"):
+        decode_taxel_message(0x100, bytes(6))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 0x7FF), st.binary(max_size=8))
+def test_any_payload_decodes_or_raises_protocol_error(arbitration_id: int, data: bytes) -> None:
+    try:
+        message = decode_taxel_message(arbitration_id, data)
+    except ProtocolError:
+        assert len(data) < 7
+    else:
+        assert 0 <= message.x <= 0xFFFF and 0 <= message.y <= 0xFFFF and 0 <= message.z <= 0xFFFF
+
+
+# ------------------------------------------------------------------------------------------------------ id maps
+
+
+def test_uspa46_ids_follow_row_and_column() -> None:
+    assert USPA46_ID_MAP.n_taxels == 24
+    assert USPA46_ID_MAP.index_of(0x100) == 0  # row 0, col 0
+    assert USPA46_ID_MAP.index_of(0x105) == 5  # row 0, col 5
+    assert USPA46_ID_MAP.index_of(0x110) == 6  # row 1, col 0
+    assert USPA46_ID_MAP.index_of(0x135) == 23  # row 3, col 5
+    assert USPA46_ID_MAP.index_of(0x106) is None
+    assert USPA46_ID_MAP.index_of(0x201) is None
+
+
+def test_xela_ini_order_is_the_layout_order_reversed() -> None:
+    # XELA's 4x6 map file lists s1 = 0x135, s2 = 0x134 ... s6 = 0x130, s7 = 0x125 ... s24 = 0x100.
+    ini = [0x135, 0x134, 0x133, 0x132, 0x131, 0x130, 0x125, 0x124, 0x123, 0x122, 0x121, 0x120]
+    ini += [0x115, 0x114, 0x113, 0x112, 0x111, 0x110, 0x105, 0x104, 0x103, 0x102, 0x101, 0x100]
+    assert TaxelIdMap.from_xela_ini_order(ini) == USPA46_ID_MAP
+
+
+def test_uspa44_map_and_other_firmware_maps_are_data() -> None:
+    assert USPA44_ID_MAP.n_taxels == 16
+    assert USPA44_ID_MAP.index_of(0x133) == 15
+    assert USPA44_ID_MAP.index_of(0x134) is None
+    aist = TaxelIdMap.from_ids(range(0x710, 0x720))  # one firmware used 0x710 + taxel index
+    assert aist.index_of(0x71F) == 15
+
+
+@pytest.mark.parametrize("ids", [[0x100, 0x100], [0x800], [], [-1]])
+def test_bad_id_maps_are_refused(ids: list[int]) -> None:
+    with pytest.raises(ProtocolError):
+        TaxelIdMap.from_ids(ids)
+
+
+# ----------------------------------------------------------------------------------------------- frame assembly
+
+
+def _counts(cycle: int, index: int) -> tuple[int, int, int]:
+    """Distinct, recognisable counts per (cycle, taxel)."""
+    return 10_000 + 100 * cycle + index, 20_000 + index, 30_000 + cycle
+
+
+def _send_cycle(
+    assembler: FrameAssembler,
+    cycle: int,
+    t0_ns: int,
+    order: list[int] | None = None,
+    skip: frozenset[int] = frozenset(),
+    sentinel: frozenset[int] = frozenset(),
+) -> list:
+    """Feed one cycle (taxels in ``order``, 0.1 ms apart); return the frames that came out."""
+    frames = []
+    for step, index in enumerate(order if order is not None else range(assembler.n_taxels)):
+        if index in skip:
+            continue
+        arbitration_id = assembler.id_map.ids[index]
+        payload = (
+            encode_invalid_taxel_message()
+            if index in sentinel
+            else encode_taxel_message(arbitration_id, *_counts(cycle, index))
+        )
+        frame = assembler.add(arbitration_id, payload, t0_ns + step * 100_000)
+        if frame is not None:
+            frames.append(frame)
+    return frames
+
+
+def test_frame_closes_when_every_taxel_has_reported_in_any_order() -> None:
+    assembler = FrameAssembler()
+    order = [23, 0, 5, 12, *[i for i in range(24) if i not in (23, 0, 5, 12)]]
+    frames = _send_cycle(assembler, cycle=0, t0_ns=0, order=order)
+    assert len(frames) == 1
+    frame = frames[0]
+    assert frame.valid and not frame.stale_mask.any()
+    assert frame.t_ns == 23 * 100_000  # time of the 24th (last) message
+    assert frame.values.shape == (24, 3)
+    assert tuple(frame.values[0]) == (10_000, 20_000, 30_000)
+    assert tuple(frame.values[23]) == (10_023, 20_023, 30_000)
+    assert assembler.frames == 1 and assembler.incomplete_frames == 0
+
+
+def test_lost_message_closes_the_frame_early_and_flags_only_that_taxel() -> None:
+    assembler = FrameAssembler()
+    first = _send_cycle(assembler, cycle=0, t0_ns=0)
+    assert len(first) == 1
+    assert _send_cycle(assembler, cycle=1, t0_ns=10 * MS, skip=frozenset({7})) == []  # cannot know yet
+    frames = _send_cycle(assembler, cycle=2, t0_ns=20 * MS)
+    assert len(frames) == 2  # cycle 1 closed by cycle 2's first message, then cycle 2 itself
+    lossy, complete = frames
+    assert list(np.flatnonzero(lossy.stale_mask)) == [7]
+    assert not lossy.valid
+    assert tuple(lossy.values[7]) == _counts(0, 7)  # last known value, not a fabricated one
+    assert tuple(lossy.values[8]) == _counts(1, 8)
+    assert lossy.t_ns == 10 * MS + 23 * 100_000  # last message of cycle 1
+    assert complete.valid and tuple(complete.values[7]) == _counts(2, 7)
+    assert assembler.frames == 3 and assembler.incomplete_frames == 1
+
+
+def test_taxel_never_seen_reads_zero_and_is_flagged() -> None:
+    assembler = FrameAssembler()
+    _send_cycle(assembler, cycle=0, t0_ns=0, skip=frozenset({22, 23}))
+    frames = _send_cycle(assembler, cycle=1, t0_ns=10 * MS)
+    first = frames[0]
+    assert list(np.flatnonzero(first.stale_mask)) == [22, 23]
+    assert tuple(first.values[23]) == (0, 0, 0)
+
+
+def test_lost_leading_taxel_is_filled_by_the_next_cycle_known_limit() -> None:
+    """No frame counter on the wire: a cycle that loses the taxels it starts with is completed by the next cycle's
+    reports of them (one cycle apart, within stale_after), exactly as the vendor hosts do."""
+    assembler = FrameAssembler()
+    _send_cycle(assembler, cycle=0, t0_ns=0, skip=frozenset({0}))
+    frames = _send_cycle(assembler, cycle=1, t0_ns=10 * MS)
+    assert len(frames) == 1  # cycle 0 + cycle 1's taxel 0; the rest of cycle 1 is still open
+    assert frames[0].valid
+    assert tuple(frames[0].values[0]) == _counts(1, 0)
+    assert tuple(frames[0].values[1]) == _counts(0, 1)
+
+
+def test_sentinel_flags_the_taxel_and_keeps_its_last_good_value() -> None:
+    assembler = FrameAssembler()
+    _send_cycle(assembler, cycle=0, t0_ns=0)
+    (frame,) = _send_cycle(assembler, cycle=1, t0_ns=10 * MS, sentinel=frozenset({4}))
+    assert list(np.flatnonzero(frame.stale_mask)) == [4]
+    assert tuple(frame.values[4]) == _counts(0, 4)
+    assert assembler.invalid_messages == 1
+    (recovered,) = _send_cycle(assembler, cycle=2, t0_ns=20 * MS)
+    assert recovered.valid
+
+
+def test_value_older_than_stale_after_is_flagged_even_in_a_complete_frame() -> None:
+    assembler = FrameAssembler(stale_after_ns=50 * MS)
+    ids = assembler.id_map.ids
+    assembler.add(ids[0], encode_taxel_message(ids[0], 1, 2, 3), 0)
+    frame = None
+    for index in range(1, 24):  # the bus stalls 60 ms after taxel 0
+        frame = assembler.add(ids[index], encode_taxel_message(ids[index], 1, 2, 3), 60 * MS + index)
+    assert frame is not None
+    assert list(np.flatnonzero(frame.stale_mask)) == [0]
+    assert not frame.valid
+
+
+def test_unknown_ids_and_short_payloads_are_counted_not_raised() -> None:
+    assembler = FrameAssembler()
+    assert assembler.add(0x700, bytes(8), 0) is None
+    assert assembler.add(0x100, b"\x00\x01", 1) is None  # known id, too short: an invalid report
+    assert (assembler.messages, assembler.unknown_ids, assembler.invalid_messages) == (2, 1, 1)
+    frames = _send_cycle(assembler, cycle=0, t0_ns=10, order=list(range(1, 24)))
+    assert len(frames) == 1 and list(np.flatnonzero(frames[0].stale_mask)) == [0]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(st.frozensets(st.integers(1, 23), max_size=6), min_size=1, max_size=8),
+    st.booleans(),
+)
+def test_each_frame_flags_exactly_the_taxels_its_cycle_lost(drops: list[frozenset[int]], uspa44: bool) -> None:
+    """Model check on a bus that sends taxels in id order (taxel 0 never lost): frame k == cycle k."""
+    id_map = USPA44_ID_MAP if uspa44 else USPA46_ID_MAP
+    assembler = FrameAssembler(id_map)
+    n = id_map.n_taxels
+    frames = []
+    for cycle, lost in enumerate(drops):
+        frames += _send_cycle(assembler, cycle, t0_ns=cycle * 10 * MS, skip=frozenset(i for i in lost if i < n))
+    frames += _send_cycle(assembler, len(drops), t0_ns=len(drops) * 10 * MS)  # closes the last lossy cycle
+    assert len(frames) == len(drops) + 1
+    last_good = {index: (0, 0, 0) for index in range(n)}
+    for cycle, frame in enumerate(frames):
+        dropped: set[int] = {i for i in drops[cycle] if i < n} if cycle < len(drops) else set()
+        assert set(np.flatnonzero(frame.stale_mask)) == dropped
+        for index in range(n):
+            if index not in dropped:
+                last_good[index] = _counts(cycle, index)
+            assert tuple(frame.values[index]) == last_good[index]
+    assert assembler.incomplete_frames == sum(1 for d in drops if any(i < n for i in d))
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.tuples(st.integers(0x0FF, 0x136), st.binary(max_size=8)), max_size=80))
+def test_arbitrary_messages_never_crash_the_assembler(messages: list[tuple[int, bytes]]) -> None:
+    assembler = FrameAssembler()
+    for t_ns, (arbitration_id, data) in enumerate(messages):
+        frame = assembler.add(arbitration_id, data, t_ns)
+        if frame is not None:
+            assert frame.values.shape == (24, 3) and frame.stale_mask.shape == (24,)
+            assert frame.valid == (not frame.stale_mask.any())
+    assert assembler.messages == len(messages)
+    assert assembler.frames <= assembler.messages

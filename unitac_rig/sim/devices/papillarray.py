@@ -3,8 +3,8 @@
 Like the real hub it waits for the serial port to be opened, then streams binary packets (PTS v2.0 format, encoded
 with :mod:`protocols.papillarray`) at 1000 Hz after power-up, with a u32 packet counter and a microsecond timestamp
 from its own clock. It reports two sensor slots: ``slot`` carries the source's reading, the other an idle sensor.
-It answers the ASCII commands: ``f100``..``f1000`` change the rate, ``z`` biases (after ``bias_delay_s`` the
-current reading becomes the zero; the real hub takes up to 2 s), ``S``/``s`` start/stop slip detection.
+It answers the ASCII commands: ``f100``..``f1000`` change the rate, ``z`` biases (the mean reading over the next
+``bias_delay_s`` becomes the zero; the real hub takes up to 2 s), ``S``/``s`` start/stop slip detection.
 A disconnect fault is an unplug: USB powers the hub, so afterwards it is back at 1000 Hz with no bias.
 """
 
@@ -68,6 +68,7 @@ class SimPapillArrayHub(SimSerialEndpoint):
         self.slip_active = False
         self.packets_sent = 0
         self._bias_due_ns: int | None = None
+        self._bias_window: list[tuple[np.ndarray, np.ndarray]] = []  # raw readings averaged into the bias
         self._force_offset = np.zeros(PAPILLARRAY.frame_shape)
         self._displacement_offset = np.zeros(PAPILLARRAY.frame_shape)
         self._commands = CommandParser()
@@ -90,6 +91,7 @@ class SimPapillArrayHub(SimSerialEndpoint):
                 self._timer.set_rate(command.rate_hz)
             elif command.command is HubCommandKind.BIAS:
                 self._bias_due_ns = now_ns + round(self.bias_delay_s * 1e9)
+                self._bias_window = []
             elif command.command is HubCommandKind.START_SLIP:
                 self.slip_active = True
             elif command.command is HubCommandKind.STOP_SLIP:
@@ -102,6 +104,7 @@ class SimPapillArrayHub(SimSerialEndpoint):
         self._force_offset[:] = 0.0
         self._displacement_offset[:] = 0.0
         self._bias_due_ns = None
+        self._bias_window = []
         self.slip_active = False
         self.counter = 0
         self._power_on_ns = now_ns
@@ -124,10 +127,13 @@ class SimPapillArrayHub(SimSerialEndpoint):
             if sample.displacement_mm is not None
             else np.zeros(PAPILLARRAY.frame_shape)
         )
-        if self._bias_due_ns is not None and t_ns >= self._bias_due_ns:
-            self._force_offset = raw_forces.copy()
-            self._displacement_offset = raw_displacement.copy()
-            self._bias_due_ns = None
+        if self._bias_due_ns is not None:
+            self._bias_window.append((raw_forces, raw_displacement))
+            if t_ns >= self._bias_due_ns:
+                self._force_offset = np.mean([f for f, _ in self._bias_window], axis=0)
+                self._displacement_offset = np.mean([d for _, d in self._bias_window], axis=0)
+                self._bias_due_ns = None
+                self._bias_window = []
         if not self.attached:
             return  # "waiting for serial connection": the hub does not stream to a closed port
         self.faults.start(t_ns)

@@ -1,0 +1,192 @@
+"""PapillArrayDriver over the simulated hub behind the simpapill:// pyserial URL."""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+from conftest import PERIOD_NS, run_mode, step
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from drivers.clock import VirtualClock
+from drivers.errors import DeviceError, DeviceNotFound
+from drivers.frames import TactileFrame
+from drivers.papillarray import PapillArrayDriver
+from unitac_rig.sim.devices import SimPapillArrayHub
+from unitac_rig.sim.faults import FaultPlan
+from unitac_rig.sim.signals import SensorSample, SignalSource
+from unitac_rig.sim.synthetic import PapillArrayPressSource, RecordingSource
+
+
+@contextlib.contextmanager
+def hub_rig(
+    clock: VirtualClock, source: SignalSource, *, faults: FaultPlan | None = None, slot: int = 0
+) -> Iterator[tuple[PapillArrayDriver, SimPapillArrayHub]]:
+    hub = SimPapillArrayHub(source=source, clock=clock, faults=faults, slot=slot)
+    driver = PapillArrayDriver(hub.url, clock=clock, slot=slot)
+    try:
+        driver.connect()
+        yield driver, hub
+    finally:
+        driver.disconnect()
+        hub.close()
+
+
+def by_time(source: RecordingSource) -> dict[int, SensorSample]:
+    """What the source produced, keyed by its time in us (= the hub timestamp: the hub powered up at t = 0)."""
+    return {t_ns // 1000: sample for t_ns, sample in source.samples}
+
+
+def assert_frames_match_source(frames: list[TactileFrame], source: RecordingSource) -> None:
+    sent = by_time(source)
+    for frame in frames:
+        assert frame.device_t_us is not None
+        sample = sent[frame.device_t_us]
+        np.testing.assert_allclose(frame.values, sample.values, rtol=1e-6, atol=1e-6)  # float32 on the wire
+        assert frame.displacement_mm is not None and sample.displacement_mm is not None
+        np.testing.assert_allclose(frame.displacement_mm, sample.displacement_mm, rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("mode", ["poll", "reader"])
+@pytest.mark.parametrize("slot", [0, 1])
+def test_frames_carry_the_source_forces_and_displacements_with_hub_counter_and_time(mode: str, slot: int) -> None:
+    clock = VirtualClock()
+    source = RecordingSource(PapillArrayPressSource(seed=2))
+    with hub_rig(clock, source, slot=slot) as (driver, hub):
+        assert hub.rate_hz == 100  # the driver set it on connect
+        frames = run_mode(mode, clock, driver, 30)
+    assert len(frames) == 30
+    assert [f.seq for f in frames] == list(range(30))
+    assert np.diff([f.device_t_us for f in frames]).tolist() == [10_000] * 29
+    assert all(f.valid and f.sensor == "papillarray" for f in frames)
+    assert_frames_match_source(frames, source)
+    assert driver.health().sequence_gaps == 0
+
+
+def test_corrupted_packets_and_garbage_lose_only_the_damaged_packets() -> None:
+    clock = VirtualClock()
+    source = RecordingSource(PapillArrayPressSource())
+    plan = FaultPlan(seed=9, corrupt_prob=0.1, garbage_prob=0.1, split_max_bytes=300)
+    with hub_rig(clock, source, faults=plan) as (driver, hub):
+        frames = step(clock, driver, 100)
+        frames += step(clock, driver, 5, period_ns=0)  # drain what the split reads left behind
+        counts = hub.faults.counts
+    assert counts.messages_corrupted > 3 and counts.garbage_bytes > 0
+    assert_frames_match_source(frames, source)
+    corrupted = set(counts.corrupted_indices)
+    expected_seqs = [i for i in range(counts.messages_seen) if i not in corrupted]
+    assert [f.seq for f in frames] == expected_seqs
+    health = driver.health()
+    assert health.bytes_dropped >= counts.garbage_bytes
+    assert health.checksum_errors >= 1
+    assert health.sequence_gaps == len([i for i in corrupted if i < expected_seqs[-1]])
+
+
+def test_dropped_packets_show_up_as_counter_gaps() -> None:
+    clock = VirtualClock()
+    with hub_rig(clock, PapillArrayPressSource(), faults=FaultPlan(seed=1, drop_message_prob=0.1)) as (driver, hub):
+        frames = step(clock, driver, 100)
+        dropped = hub.faults.counts.dropped_indices
+    assert dropped
+    assert len(frames) == 100 - len(dropped)
+    last_seq = frames[-1].seq
+    assert last_seq is not None
+    assert driver.health().sequence_gaps == len([i for i in dropped if i < last_seq])
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**16), split_max_bytes=st.integers(1, 900))
+def test_any_chunking_of_the_stream_yields_every_packet_in_order(seed: int, split_max_bytes: int) -> None:
+    clock = VirtualClock()
+    plan = FaultPlan(seed=seed, split_max_bytes=split_max_bytes)
+    with hub_rig(clock, PapillArrayPressSource(seed=seed), faults=plan) as (driver, _):
+        frames = step(clock, driver, 8)
+        for _ in range(200):
+            if len(frames) == 8:
+                break
+            frames += driver.poll()
+    assert [f.seq for f in frames] == list(range(8))
+    health = driver.health()
+    assert (health.checksum_errors, health.bytes_dropped, health.sequence_gaps) == (0, 0, 0)
+
+
+def test_stall_detected_then_cleared() -> None:
+    clock = VirtualClock()
+    with hub_rig(clock, PapillArrayPressSource()) as (driver, hub):
+        step(clock, driver, 5)
+        hub.faults.force_stall()
+        assert step(clock, driver, 60) == []
+        assert driver.stalled and driver.health().stalls == 1
+        hub.faults.force_stall(False)
+        frames = step(clock, driver, 3)
+        assert len(frames) == 3 and not driver.stalled
+        # the hub kept counting while nothing reached the host
+        assert driver.health().sequence_gaps == 60
+
+
+@pytest.mark.parametrize("mode", ["poll", "reader"])
+def test_unplugged_hub_raises_and_reconnect_after_replug_restores_rate_and_stream(mode: str) -> None:
+    clock = VirtualClock()
+    with hub_rig(clock, PapillArrayPressSource()) as (driver, hub):
+        step(clock, driver, 3)
+        if mode == "reader":
+            driver.start_reader()
+        hub.faults.force_disconnect()
+        clock.advance_ns(PERIOD_NS)
+        with pytest.raises(DeviceError, match="went away"):
+            for _ in range(1000):
+                driver.poll()
+                time.sleep(0.001)
+        with pytest.raises(DeviceNotFound):
+            driver.reconnect()  # still unplugged
+        hub.faults.force_disconnect(False)
+        clock.advance_ns(PERIOD_NS)  # powers up again at 1000 Hz
+        assert hub.rate_hz == 1000
+        driver.reconnect()
+        assert hub.rate_hz == 100
+        frames = step(clock, driver, 5)
+        assert [f.seq for f in frames] == [0, 1, 2, 3, 4]  # the hub's counter restarted at power-up
+        assert driver.health().reconnects == 1
+
+
+def test_tare_biases_the_hub_when_unloaded_and_refuses_under_load_or_motion() -> None:
+    clock = VirtualClock()
+    source = PapillArrayPressSource(period_s=8.0, rest_fraction=0.5, offset_n=0.2)  # press from 4 s on
+    with hub_rig(clock, source) as (driver, hub):
+        idle = step(clock, driver, 50)
+        assert np.mean([f.values[4, 2] for f in idle]) == pytest.approx(0.2, abs=0.02)
+        record = driver.tare(idle)
+        assert hub.biased and record.method == "device-bias" and record.spread < 0.1
+        np.testing.assert_array_equal(record.baseline, np.zeros((9, 3)))
+        after = step(clock, driver, 20)
+        assert np.abs(np.mean([f.values[:, 2] for f in after], axis=0)).max() < 0.02
+        step(clock, driver, 300)  # the tare took 2 s: now at 5.7 s, into the press
+        loaded = step(clock, driver, 20)
+        with pytest.raises(DeviceError, match="contact"):
+            driver.tare(loaded)
+    with hub_rig(VirtualClock(), PapillArrayPressSource(peak_load_n=0.0, noise_n=0.12, offset_n=0.0)) as (
+        driver,
+        hub,
+    ):
+        shaky = step(hub.clock, driver, 50)  # type: ignore[arg-type]
+        with pytest.raises(DeviceError, match="std"):
+            driver.tare(shaky)
+        assert not hub.biased
+
+
+def test_missing_port_unknown_scheme_and_bad_settings_are_reported() -> None:
+    with pytest.raises(DeviceNotFound) as info:
+        PapillArrayDriver("/dev/ttyACM-not-here").connect()
+    assert info.value.hint is not None and "dialout" in info.value.hint
+    with pytest.raises(DeviceNotFound):
+        PapillArrayDriver("nosuchscheme://x").connect()
+    with pytest.raises(DeviceNotFound):
+        PapillArrayDriver("simpapill://no-hub-by-this-name").connect()
+    with pytest.raises(DeviceError, match="rate"):
+        PapillArrayDriver("simpapill://x", rate_hz=300)
+    with pytest.raises(DeviceError, match="slot"):
+        PapillArrayDriver("simpapill://x", slot=2)

@@ -32,6 +32,7 @@ class ArmState:
     safety_mode: int
     protective_stop: bool
     emergency_stop: bool = False
+    tcp_speed: np.ndarray | None = None  # (6,) [vx, vy, vz (m/s), wx, wy, wz (rad/s)], base frame, if known
 
 
 @runtime_checkable

@@ -1,0 +1,542 @@
+"""A simulated UR controller's RTDE server on a loopback address, so the REAL ur_rtde receive client can read it.
+
+:class:`SimURController` listens on ``host:30004`` and speaks RTDE v2 (:mod:`protocols.rtde`): it answers the
+protocol version (``V``), the controller version (``v``, 5.11.0 by default), output and input recipes (``O``/``I``),
+start and pause (``S``/``P``), and once started streams data packages (``U``) in real time at the rate the client
+asked for (at most ``frequency_hz``), filled from a ``state_provider`` (:class:`drivers.arm.ArmState`): TCP pose,
+TCP force, TCP speed, robot mode, safety mode, ``safety_status_bits`` (bit 2 protective stop, bit 7 emergency
+stop) and the controller timestamp. Variables the sim has no model for (joint values, currents, registers...) are
+sent as zeros so a client may still subscribe to them; names it does not know get ``NOT_FOUND``.
+
+Gotchas found by running ``rtde_receive.RTDEReceiveInterface`` (ur-rtde 1.6.5) against this server:
+
+* The client has no port argument: it always connects to 30004. Run several servers side by side on different
+  loopback addresses (Linux routes all of 127.0.0.0/8 to ``lo``; macOS only has 127.0.0.1 unless aliased).
+* Pass an explicit ``variables`` list. With an empty list the client subscribes to its large default list, whose
+  content depends on the controller version it was told (e.g. ``ft_raw_wrench`` from 5.9, payload fields), and
+  every name must be answered; an explicit list keeps the contract small and version independent.
+* The client parses ``U`` packages with its own type table, not with the types named in the ``O`` reply; it only
+  looks for ``NOT_FOUND``/``IN_USE`` there and fails the constructor if it finds one. So the server's type table
+  must agree with ur_rtde's for every variable it serves.
+* A getter for a variable that was not in the subscribed list raises ``RuntimeError`` in the client;
+  ``isProtectiveStopped``/``isEmergencyStopped`` need ``safety_status_bits`` in the list.
+* The constructor blocks until the first data package arrives, so the server must start streaming on ``S``.
+* On connection failure the C++ library prints ``connect: Connection refused`` to stderr itself, then raises
+  ``RuntimeError``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import multiprocessing
+import selectors
+import socket
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from drivers.arm import ArmState
+from drivers.errors import DeviceError
+from protocols import rtde
+from protocols.rtde import ControllerVersion, PackageType, RecipeReply
+
+logger = logging.getLogger(__name__)
+
+ROBOT_MODE_RUNNING = 7  # RTDE robot_mode: 7 = RUNNING (powered, brakes released)
+SAFETY_MODE_NORMAL = 1
+SAFETY_MODE_PROTECTIVE_STOP = 3
+SAFETY_MODE_ROBOT_EMERGENCY_STOP = 7
+ROBOT_STATUS_POWER_ON = 1 << 0  # robot_status_bits bit 0
+RUNTIME_STATE_STOPPED = 1  # no program running (a receive-only client never starts one)
+
+# A still arm in front of the prism (m, rad): used when no state provider is given.
+DEFAULT_STILL_POSE = np.array([-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214])
+
+_SEND_TIMEOUT_S = 1.0  # a client that stops reading for this long is dropped
+_MAX_IDLE_WAIT_S = 0.05  # selector timeout when nothing is due
+_START_TIMEOUT_S = 10.0  # the server process imports numpy; allow for a slow CI box
+
+
+def safety_status_bits(state: ArmState) -> int:
+    """The ``safety_status_bits`` word for a state: bit 0 normal, bit 2 protective stop, bit 7 emergency stop."""
+    bits = 0
+    if state.protective_stop:
+        bits |= rtde.SAFETY_BIT_PROTECTIVE_STOP
+    if state.emergency_stop:
+        bits |= rtde.SAFETY_BIT_EMERGENCY_STOP
+    if not bits:
+        bits |= rtde.SAFETY_BIT_NORMAL_MODE
+    return bits
+
+
+def _zero_value(field_type: str) -> rtde.FieldValue:
+    if field_type == "VECTOR3D":
+        return (0.0, 0.0, 0.0)
+    if field_type == "VECTOR6D":
+        return (0.0,) * 6
+    if field_type in ("VECTOR6INT32", "VECTOR6UINT32"):
+        return (0,) * 6
+    if field_type == "DOUBLE":
+        return 0.0
+    if field_type == "BOOL":
+        return False
+    return 0
+
+
+def _vector6(values: np.ndarray | None) -> tuple[float, ...]:
+    if values is None:
+        return (0.0,) * 6
+    return tuple(float(v) for v in np.asarray(values, dtype=float).reshape(6))
+
+
+def state_values(state: ArmState, names: tuple[str, ...], types: tuple[str, ...]) -> list[rtde.FieldValue]:
+    """Values of an output recipe for one state (zeros for variables the simulation does not model)."""
+    values: list[rtde.FieldValue] = []
+    for name, field_type in zip(names, types, strict=True):
+        if name == "timestamp":
+            values.append(float(state.controller_t_s))
+        elif name in ("actual_TCP_pose", "target_TCP_pose"):
+            values.append(_vector6(state.tcp_pose))
+        elif name in ("actual_TCP_force", "ft_raw_wrench"):
+            values.append(_vector6(state.tcp_force))
+        elif name in ("actual_TCP_speed", "target_TCP_speed"):
+            values.append(_vector6(state.tcp_speed))
+        elif name == "robot_mode":
+            values.append(int(state.robot_mode))
+        elif name in ("safety_mode", "safety_status"):
+            values.append(int(state.safety_mode))
+        elif name == "safety_status_bits":
+            values.append(safety_status_bits(state))
+        elif name == "robot_status_bits":
+            values.append(ROBOT_STATUS_POWER_ON)
+        elif name == "runtime_state":
+            values.append(RUNTIME_STATE_STOPPED)
+        elif name in ("speed_scaling", "target_speed_fraction"):
+            values.append(1.0)
+        else:
+            values.append(_zero_value(field_type))
+    return values
+
+
+# ---- state handed from the simulation (parent process) to the server process ----------------------------------
+
+_SLOT_SEQ, _SLOT_T = 0, 1
+_SLOT_POSE, _SLOT_FORCE, _SLOT_SPEED = slice(2, 8), slice(8, 14), slice(14, 20)
+_SLOT_ROBOT_MODE, _SLOT_SAFETY_MODE, _SLOT_PROTECTIVE, _SLOT_EMERGENCY = 20, 21, 22, 23
+_STATE_SLOTS = 24
+_STAT_CLIENTS, _STAT_SENT = 0, 1
+
+
+def _write_state(shared: Any, state: ArmState) -> None:
+    """Seqlock write: the sequence slot is odd while the snapshot is being written."""
+    shared[_SLOT_SEQ] += 1
+    shared[_SLOT_T] = float(state.controller_t_s)
+    shared[_SLOT_POSE] = _vector6(state.tcp_pose)
+    shared[_SLOT_FORCE] = _vector6(state.tcp_force)
+    shared[_SLOT_SPEED] = _vector6(state.tcp_speed)
+    shared[_SLOT_ROBOT_MODE] = float(state.robot_mode)
+    shared[_SLOT_SAFETY_MODE] = float(state.safety_mode)
+    shared[_SLOT_PROTECTIVE] = 1.0 if state.protective_stop else 0.0
+    shared[_SLOT_EMERGENCY] = 1.0 if state.emergency_stop else 0.0
+    shared[_SLOT_SEQ] += 1
+
+
+def _read_state(shared: Any) -> ArmState | None:
+    """Seqlock read; None while a write is in progress (the caller keeps its last snapshot)."""
+    before = shared[_SLOT_SEQ]
+    values = shared[:_STATE_SLOTS]
+    if before % 2 or shared[_SLOT_SEQ] != before:
+        return None
+    return ArmState(
+        host_t_ns=time.monotonic_ns(),
+        controller_t_s=values[_SLOT_T],
+        tcp_pose=np.array(values[_SLOT_POSE]),
+        tcp_force=np.array(values[_SLOT_FORCE]),
+        robot_mode=int(values[_SLOT_ROBOT_MODE]),
+        safety_mode=int(values[_SLOT_SAFETY_MODE]),
+        protective_stop=values[_SLOT_PROTECTIVE] != 0.0,
+        emergency_stop=values[_SLOT_EMERGENCY] != 0.0,
+        tcp_speed=np.array(values[_SLOT_SPEED]),
+    )
+
+
+# ---- the server process ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Client:
+    sock: socket.socket
+    peer: str
+    parser: rtde.RtdePackageParser = field(default_factory=rtde.RtdePackageParser)
+    output_names: tuple[str, ...] = ()
+    output_types: tuple[str, ...] = ()
+    output_recipe_id: int = 0
+    input_recipe_ids: set[int] = field(default_factory=set)
+    next_recipe_id: int = 1
+    period_s: float = 0.002
+    streaming: bool = False
+    next_due_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class _ServerSettings:
+    host: str
+    port: int
+    max_frequency_hz: float
+    controller_version: ControllerVersion
+    registers_in_use: frozenset[str]
+
+
+class _RtdeServerLoop:
+    """The RTDE protocol server; runs in its own process (see :class:`SimURController` for why)."""
+
+    def __init__(self, settings: _ServerSettings, listener: socket.socket, shared: Any, stats: Any) -> None:
+        self.settings = settings
+        self._listener = listener
+        self._shared = shared
+        self._stats = stats
+        self._clients: list[_Client] = []
+        self._selector = selectors.DefaultSelector()
+        self._selector.register(listener, selectors.EVENT_READ, None)
+        self._last_state = _read_state(shared)
+
+    def run(self, control: Connection) -> None:
+        """Serve until the parent says stop or goes away (its end of ``control`` closes)."""
+        self._selector.register(control, selectors.EVENT_READ, None)
+        try:
+            while True:
+                self._send_due_packages()
+                for key, _ in self._selector.select(self._wait_time_s()):
+                    if key.fileobj is self._listener:
+                        self._accept()
+                    elif key.fileobj is control:
+                        return  # "stop" or EOF: either way we are done
+                    else:
+                        self._read(key.data)
+        finally:
+            for client in list(self._clients):
+                self._drop(client, "server closing")
+            self._selector.close()
+
+    def _wait_time_s(self) -> float:
+        due = [c.next_due_s for c in self._clients if c.streaming and c.output_types]
+        if not due:
+            return _MAX_IDLE_WAIT_S
+        return min(max(0.0, min(due) - time.monotonic()), _MAX_IDLE_WAIT_S)
+
+    def _accept(self) -> None:
+        try:
+            sock, peer = self._listener.accept()
+        except BlockingIOError:
+            return
+        sock.settimeout(_SEND_TIMEOUT_S)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        client = _Client(sock=sock, peer=f"{peer[0]}:{peer[1]}")
+        self._clients.append(client)
+        self._stats[_STAT_CLIENTS] = len(self._clients)
+        self._selector.register(sock, selectors.EVENT_READ, client)
+        logger.debug("RTDE client %s connected", client.peer)
+
+    def _drop(self, client: _Client, why: str) -> None:
+        logger.debug("RTDE client %s dropped: %s", client.peer, why)
+        if client in self._clients:
+            self._clients.remove(client)
+        self._stats[_STAT_CLIENTS] = len(self._clients)
+        with contextlib.suppress(KeyError, ValueError):
+            self._selector.unregister(client.sock)
+        client.sock.close()
+
+    def _read(self, client: _Client) -> None:
+        try:
+            data = client.sock.recv(65536)
+        except (BlockingIOError, TimeoutError):
+            return
+        except OSError as exc:
+            self._drop(client, f"recv failed: {exc}")
+            return
+        if not data:
+            self._drop(client, "closed by peer")
+            return
+        try:
+            for package in client.parser.feed(data):
+                reply = self._handle(client, package)
+                if reply:
+                    client.sock.sendall(reply)
+        except OSError as exc:
+            self._drop(client, f"send failed: {exc}")
+        except rtde.ProtocolError as exc:
+            self._drop(client, f"bad package: {exc}")
+
+    def _handle(self, client: _Client, package: rtde.RtdePackage) -> bytes | None:
+        kind = package.type
+        if kind == PackageType.REQUEST_PROTOCOL_VERSION:
+            version = rtde.decode_request_protocol_version(package.payload)
+            return rtde.encode_protocol_version_reply(version == rtde.PROTOCOL_VERSION)
+        if kind == PackageType.GET_URCONTROL_VERSION:
+            return rtde.encode_controller_version_reply(self.settings.controller_version)
+        if kind == PackageType.CONTROL_PACKAGE_SETUP_OUTPUTS:
+            return self._setup_outputs(client, package.payload)
+        if kind == PackageType.CONTROL_PACKAGE_SETUP_INPUTS:
+            return self._setup_inputs(client, package.payload)
+        if kind == PackageType.CONTROL_PACKAGE_START:
+            client.streaming = True
+            client.next_due_s = time.monotonic()
+            return rtde.encode_accepted_reply(kind, True)
+        if kind == PackageType.CONTROL_PACKAGE_PAUSE:
+            client.streaming = False
+            return rtde.encode_accepted_reply(kind, True)
+        if kind == PackageType.DATA_PACKAGE:
+            recipe_id = package.payload[0] if package.payload else -1
+            if recipe_id not in client.input_recipe_ids:
+                logger.debug("RTDE client %s sent data for unknown input recipe %d", client.peer, recipe_id)
+            return None  # inputs are accepted and ignored: the simulated arm is not driven over RTDE
+        if kind == PackageType.TEXT_MESSAGE:
+            message = rtde.decode_text_message(package.payload)
+            logger.info("RTDE client %s says [%s] %s", client.peer, message.source, message.message)
+        return None
+
+    def _setup_outputs(self, client: _Client, payload: bytes) -> bytes:
+        frequency_hz, names = rtde.decode_setup_outputs(payload)
+        types = tuple(rtde.variable_type(name) or rtde.NOT_FOUND for name in names)
+        recipe_id = 0
+        if names and rtde.NOT_FOUND not in types:
+            limit_hz = self.settings.max_frequency_hz
+            if frequency_hz <= 0 or frequency_hz > limit_hz:
+                logger.info(
+                    "RTDE client %s asked for %.1f Hz; streaming at %.1f Hz", client.peer, frequency_hz, limit_hz
+                )
+                frequency_hz = limit_hz
+            recipe_id = client.next_recipe_id
+            client.next_recipe_id += 1
+            client.output_names, client.output_types = names, types
+            client.output_recipe_id = recipe_id
+            client.period_s = 1.0 / frequency_hz
+        return rtde.encode_recipe_reply(PackageType.CONTROL_PACKAGE_SETUP_OUTPUTS, RecipeReply(recipe_id, types))
+
+    def _setup_inputs(self, client: _Client, payload: bytes) -> bytes:
+        names = rtde.decode_setup_inputs(payload)
+        types = tuple(self._input_type(name) for name in names)
+        recipe_id = 0
+        if names and all(t not in (rtde.NOT_FOUND, rtde.IN_USE) for t in types):
+            recipe_id = client.next_recipe_id
+            client.next_recipe_id += 1
+            client.input_recipe_ids.add(recipe_id)
+        return rtde.encode_recipe_reply(PackageType.CONTROL_PACKAGE_SETUP_INPUTS, RecipeReply(recipe_id, types))
+
+    def _input_type(self, name: str) -> str:
+        if name in self.settings.registers_in_use:
+            return rtde.IN_USE
+        known = rtde.variable_type(name) if name.startswith("input_") else None
+        return known or rtde.NOT_FOUND
+
+    def _send_due_packages(self) -> None:
+        now_s = time.monotonic()
+        due = [c for c in self._clients if c.streaming and c.output_types and c.next_due_s <= now_s]
+        if not due:
+            return
+        state = _read_state(self._shared) or self._last_state
+        self._last_state = state
+        assert state is not None  # the parent writes a first snapshot before starting this process
+        for client in due:
+            values = state_values(state, client.output_names, client.output_types)
+            package = rtde.encode_data_package(client.output_recipe_id, client.output_types, values)
+            try:
+                client.sock.sendall(package)
+            except OSError as exc:
+                self._drop(client, f"send failed: {exc}")
+                continue
+            self._stats[_STAT_SENT] += 1
+            client.next_due_s += client.period_s
+            if client.next_due_s < now_s - client.period_s:  # fell behind: skip, do not burst
+                client.next_due_s = now_s + client.period_s
+
+
+def _serve_process(settings: _ServerSettings, shared: Any, stats: Any, control: Connection) -> None:
+    """Entry point of the server process: bind, report ("ready", port) or ("error", text), then serve."""
+    listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    try:
+        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        listener.bind((settings.host, settings.port))
+        listener.listen(4)
+    except OSError as exc:
+        listener.close()
+        control.send(("error", exc.strerror or str(exc)))
+        control.close()
+        return
+    listener.setblocking(False)
+    control.send(("ready", listener.getsockname()[1]))
+    try:
+        _RtdeServerLoop(settings, listener, shared, stats).run(control)
+    finally:
+        listener.close()
+        control.close()
+
+
+# ---- the object users hold ------------------------------------------------------------------------------------
+
+
+class SimURController:
+    """RTDE server of a simulated UR controller on ``host``:``port`` (30004 by default, what ur_rtde dials).
+
+    ``state_provider`` is polled ``frequency_hz`` times a second by a thread named ``sim-rtde`` and must be
+    thread safe (return an immutable snapshot, e.g. ``SimArm.latest_state``); without one the arm stands still at
+    :data:`DEFAULT_STILL_POSE` with zero force and the timestamp counts seconds since the server started.
+    ``frequency_hz`` is also the highest stream rate (500 Hz on e-Series); a client asking for more gets this rate.
+    Names in ``registers_in_use`` are answered ``IN_USE`` in input recipes (like a running fieldbus adapter).
+
+    The protocol itself is served by a child process, because ur_rtde's Python constructor holds the GIL while it
+    waits for the handshake replies: a server thread in the same interpreter could never answer (deadlock). The
+    state crosses to the child through shared memory with a sequence lock, so a stalled writer never blocks it.
+    """
+
+    def __init__(
+        self,
+        host: str = "127.0.0.1",
+        *,
+        state_provider: Callable[[], ArmState] | None = None,
+        frequency_hz: float = 500.0,
+        port: int = rtde.RTDE_PORT,
+        controller_version: ControllerVersion = ControllerVersion(5, 11, 0, 0),
+        registers_in_use: frozenset[str] = frozenset(),
+    ) -> None:
+        if frequency_hz <= 0:
+            raise ValueError("frequency_hz must be > 0")
+        self.host = host
+        self.frequency_hz = frequency_hz
+        self._state_provider = state_provider or self._still_state
+        self._started_at_s = time.monotonic()
+        self._closed = False
+        self._stop = threading.Event()
+        context = multiprocessing.get_context("spawn")
+        self._shared = context.RawArray("d", _STATE_SLOTS)
+        self._stats = context.RawArray("d", 2)
+        _write_state(self._shared, self._state_provider())
+        self._control, child_end = context.Pipe()
+        settings = _ServerSettings(host, port, frequency_hz, controller_version, frozenset(registers_in_use))
+        self._process = context.Process(
+            target=_serve_process,
+            args=(settings, self._shared, self._stats, child_end),
+            name=f"sim-rtde-{host}",
+            daemon=True,
+        )
+        self._process.start()
+        child_end.close()
+        self.port = self._await_ready(port)
+        _write_state(self._shared, self._state_provider())  # fresh: start-up took a while
+        self._pump = threading.Thread(target=self._pump_states, name="sim-rtde", daemon=True)
+        self._pump.start()
+        logger.debug("simulated UR controller listening on %s:%d", host, self.port)
+
+    def _await_ready(self, port: int) -> int:
+        reply: tuple[str, Any] = ("error", "the server process did not start within 10 s")
+        try:
+            if self._control.poll(_START_TIMEOUT_S):
+                reply = self._control.recv()
+        except EOFError:
+            reply = ("error", "the server process exited during start-up")
+        if reply[0] == "ready":
+            return int(reply[1])
+        self._shut_down_process()
+        raise DeviceError(
+            f"simulated UR controller cannot listen on {self.host}:{port}: {reply[1]}",
+            hint="another controller (or URSim) already uses this address; pick another 127.0.0.x",
+        )
+
+    # ---- public ---------------------------------------------------------------------------------------------
+
+    @property
+    def address(self) -> tuple[str, int]:
+        return (self.host, self.port)
+
+    @property
+    def client_count(self) -> int:
+        """RTDE clients connected right now."""
+        return int(self._stats[_STAT_CLIENTS])
+
+    @property
+    def sent_packages(self) -> int:
+        """Data packages streamed so far (all clients)."""
+        return int(self._stats[_STAT_SENT])
+
+    def close(self) -> None:
+        """Stop serving, drop clients, stop the server process and the ``sim-rtde`` thread. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stop.set()
+        self._pump.join(timeout=5.0)
+        self._shut_down_process()
+
+    def __enter__(self) -> SimURController:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    # ---- internals ------------------------------------------------------------------------------------------
+
+    def _shut_down_process(self) -> None:
+        with contextlib.suppress(OSError, ValueError):
+            self._control.send("stop")
+        self._control.close()
+        self._process.join(timeout=5.0)
+        if self._process.is_alive():  # pragma: no cover - the loop polls the pipe at least every 50 ms
+            logger.warning("simulated UR controller process did not stop; terminating it")
+            self._process.terminate()
+            self._process.join(timeout=5.0)
+        self._process.close()
+
+    def _still_state(self) -> ArmState:
+        return ArmState(
+            host_t_ns=time.monotonic_ns(),
+            controller_t_s=time.monotonic() - self._started_at_s,
+            tcp_pose=DEFAULT_STILL_POSE.copy(),
+            tcp_force=np.zeros(6),
+            robot_mode=ROBOT_MODE_RUNNING,
+            safety_mode=SAFETY_MODE_NORMAL,
+            protective_stop=False,
+            tcp_speed=np.zeros(6),
+        )
+
+    def _pump_states(self) -> None:
+        period_s = 1.0 / self.frequency_hz
+        while not self._stop.wait(period_s):
+            try:
+                state = self._state_provider()
+            except Exception:
+                logger.exception("simulated UR controller: the state provider failed; streaming the last state")
+                continue
+            _write_state(self._shared, state)
+
+
+def start_on_free_loopback(
+    state_provider: Callable[[], ArmState] | None = None, *, frequency_hz: float = 500.0, first: int = 2
+) -> SimURController:
+    """A :class:`SimURController` on the first 127.0.0.x (x >= ``first``) whose port 30004 is free (Linux loopback)."""
+    for last_octet in range(first, 255):
+        host = f"127.0.0.{last_octet}"
+        probe = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the server does: TIME_WAIT is no obstacle
+        try:
+            probe.bind((host, rtde.RTDE_PORT))
+        except OSError:
+            continue
+        finally:
+            probe.close()
+        try:
+            return SimURController(host, state_provider=state_provider, frequency_hz=frequency_hz)
+        except DeviceError:
+            continue  # taken between the check and the start
+    raise DeviceError(
+        "no free loopback address for a simulated UR controller (127.0.0.2-254 all have port 30004 in use)",
+        hint="close other simulated controllers or URSim instances",
+    )

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from unitac_rig.errors import UsageError
+from unitac_rig.errors import DataError, UsageError
 
 
 def register(app: typer.Typer) -> None:
@@ -34,7 +34,7 @@ def import_unitac_nv_command(
 
     from unitac_rig.importer import FileReport, import_unitac_nv, load_conventions
 
-    console = Console(highlight=False, soft_wrap=True)
+    console = Console(highlight=False, soft_wrap=True, markup=False)
     conv = load_conventions(conventions)
     if show_conventions:
         typer.echo(conv.to_toml(), nl=False)
@@ -82,6 +82,8 @@ def import_unitac_nv_command(
     console.print("")
     total_presses = total_complete = total_matched = total_targets = 0
     for s in result.sessions:
+        if not s.path.exists():
+            continue
         console.print(
             f"{s.object_id}__{s.sensor}: {s.presses} presses, {s.complete} complete, "
             f"{s.targets_matched}/{s.targets_total} targets matched ({s.path})"
@@ -90,15 +92,20 @@ def import_unitac_nv_command(
         total_complete += s.complete
         total_matched += s.targets_matched
         total_targets += s.targets_total
+    n_sessions = sum(1 for s in result.sessions if s.path.exists())
     outcomes = [f.outcome for f in result.files]
     counts = ", ".join(f"{outcomes.count(o)} {o}" for o in dict.fromkeys(outcomes))
     console.print(
-        f"total: {len(result.sessions)} sessions, {total_presses} presses, {total_complete} complete, "
+        f"total: {n_sessions} sessions, {total_presses} presses, {total_complete} complete, "
         f"{total_matched}/{total_targets} targets matched; files: {counts}"
     )
     if result.superseded:
         console.print(f"{len(result.superseded)} processed files not used: their sessions have raw files")
     if result.ignored:
         console.print(f"{len(result.ignored)} files ignored (not UniTac-NV sessions), e.g. {result.ignored[0]}")
-    if any(o == "failed" for o in outcomes):
-        raise typer.Exit(1)
+    failed = outcomes.count("failed")
+    if failed:
+        raise DataError(
+            f"{failed} of {len(outcomes)} files could not be imported (see above)",
+            hint="the rest was imported; fix or remove those files and rerun to add them",
+        )

@@ -158,14 +158,10 @@ def test_processed_file_gives_the_same_frames_as_its_raw_file(tmp_path: Path) ->
     np.testing.assert_array_equal(press.tare_baseline, 0.0)
 
 
-def test_auto_mode_prefers_raw_and_peak_only_files_are_refused(tmp_path: Path) -> None:
-    src = tmp_path / "src"
-    write_raw_csv(src / RAW_XELA, "uskin", [Press(0.0)])
-    write_processed_npz(src / PROCESSED_XELA, "uskin", [Press(0.0)])
-    peaks_only = src / "UniTac-NV Dataset Processed" / "PapillArray" / "oblong_PLA_papillarray.npz"
-    peaks_only.parent.mkdir(parents=True)
+def _write_peaks_only_npz(path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(
-        peaks_only,
+        path,
         times=np.array([0.0, 9.0]),
         sensor_matrices_force=np.zeros((2, 3, 3, 3)),
         sensor_matrices_displacement=np.zeros((2, 3, 3, 3)),
@@ -174,6 +170,13 @@ def test_auto_mode_prefers_raw_and_peak_only_files_are_refused(tmp_path: Path) -
         selected=np.array([0, 1]),
         angle=np.array([-45, -44]),
     )
+
+
+def test_auto_mode_prefers_raw_and_peak_only_files_are_refused(tmp_path: Path) -> None:
+    src = tmp_path / "src"
+    write_raw_csv(src / RAW_XELA, "uskin", [Press(0.0)])
+    write_processed_npz(src / PROCESSED_XELA, "uskin", [Press(0.0)])
+    _write_peaks_only_npz(src / "UniTac-NV Dataset Processed" / "PapillArray" / "oblong_PLA_papillarray.npz")
     report = import_unitac_nv(src, tmp_path / "data")
     assert report.superseded == [PROCESSED_XELA]
     outcomes = {(f.object_id, f.sensor, f.kind): f for f in report.files}
@@ -205,6 +208,18 @@ def test_cli_prints_a_summary_per_session_and_a_total(tmp_path: Path, capsys: py
     assert "total: 1 sessions, 2 presses, 2 complete, 50/50 targets matched; files: 1 imported" in out
     main(["import-unitac-nv", str(tmp_path / "src"), "--data", str(tmp_path / "data")])
     assert "already-imported" in capsys.readouterr().out
+
+
+def test_cli_exits_1_when_a_file_could_not_be_used(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    _write_peaks_only_npz(tmp_path / "src" / "oblong_PLA_papillarray.npz")
+    with pytest.raises(SystemExit) as exit_info:
+        main(["import-unitac-nv", str(tmp_path / "src"), "--data", str(tmp_path / "data")])
+    assert exit_info.value.code == 1
+    captured = capsys.readouterr()
+    assert "oblong_PLA_papillarray.npz -> square_pla__papillarray: failed:" in captured.out
+    assert "import the raw session CSVs" in captured.out
+    assert "error: 1 of 1 files could not be imported" in captured.err
+    assert not list(tmp_path.glob("data/*.h5"))  # no empty session left behind
 
 
 def test_cli_missing_source_is_one_usage_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -29,7 +29,7 @@ from unitac_rig.importer.presses import (
     streams_from_raw,
 )
 from unitac_rig.objects import get_object
-from unitac_rig.recording import SessionWriter, session_path
+from unitac_rig.recording import SessionWriter, journal_dir, session_path
 from unitac_rig.session import press_summaries, read_session_info
 
 log = logging.getLogger(__name__)
@@ -154,7 +154,7 @@ def _check_against_selected(streams: Streams, cands: list[PressCandidate], repor
 
 def _import_file(
     src: SourceFile,
-    writer: SessionWriter,
+    writer: _LazyWriter,
     conv: ImportConventions,
     layout: SensorLayout,
     existing: dict[str, dict[str, Any]],
@@ -192,7 +192,7 @@ def _import_file(
                 f"{cand.describe(streams.rows)}: already in the session from {previous.get('source_file', '?')}"
             )
             continue
-        writer.write_press(cand.record)
+        writer.get().write_press(cand.record)
         existing[pid] = dict(cand.record.attrs)
         report.written += 1
         _count(cand, report)
@@ -259,26 +259,25 @@ def import_unitac_nv(
     n_targets = len(conv.extraction.targets_n)
     sessions = []
     for (object_id, sensor), files in sorted(groups.items()):
-        layout = get_layout(sensor)
         session = SessionReport(object_id, sensor, session_path(Path(data_dir), object_id, sensor))
         sessions.append(session)
-        writer = SessionWriter(Path(data_dir), object_id, sensor, _root_attrs(object_id, sensor, conv, source))
-        info = read_session_info(writer.path)
-        _check_session(info.attrs, conv, writer.path)
-        imported: dict[str, Any] = dict(info.attrs.get("source_files") or {})
-        existing = {s["press_id"]: s for s in press_summaries(writer.path)}
+        placed = []
         for src in files:
-            report = FileReport(src.relative, src.kind, object_id, sensor)
-            session.files.append(report)
-            try:
-                _one_file(src, writer, conv, layout, existing, imported, report)
-            except DataError as exc:
-                report.outcome = "failed"
-                report.message = exc.one_line()
-                log.warning("%s: %s", src.relative, report.message)
-            if on_file is not None:
-                on_file(report)
-        _session_counts(session, n_targets)
+            if src.rotation_deg is None:  # not even opened: no session file for files we cannot place
+                report = FileReport(src.relative, src.kind, object_id, sensor, outcome="skipped")
+                report.message = (
+                    f"arbitrary file {src.arbitrary_index} has no rotation in the conventions "
+                    f"(add it under [arbitrary_rotation_deg] in a --conventions file)"
+                )
+                session.files.append(report)
+                if on_file is not None:
+                    on_file(report)
+            else:
+                placed.append(src)
+        if placed:
+            _import_session(session, placed, Path(data_dir), conv, source, on_file)
+        if session.path.exists():
+            _session_counts(session, n_targets)
     return ImportReport(
         sessions=sessions,
         ignored=found.ignored,
@@ -287,22 +286,64 @@ def import_unitac_nv(
     )
 
 
+class _LazyWriter:
+    """Opens the session only when something is written, so a file that fails leaves no empty session behind."""
+
+    def __init__(self, data_dir: Path, object_id: str, sensor: str, root_attrs: dict[str, Any]) -> None:
+        self._args = (data_dir, object_id, sensor, root_attrs)
+        self._writer: SessionWriter | None = None
+
+    def journal_exists(self) -> bool:
+        data_dir, object_id, sensor, _ = self._args
+        return (journal_dir(data_dir, object_id, sensor) / "_session.json").exists()
+
+    def get(self) -> SessionWriter:
+        if self._writer is None:
+            self._writer = SessionWriter(*self._args)
+        return self._writer
+
+
+def _import_session(
+    session: SessionReport,
+    files: list[SourceFile],
+    data_dir: Path,
+    conv: ImportConventions,
+    source: Path,
+    on_file: Callable[[FileReport], None] | None,
+) -> None:
+    object_id, sensor = session.object_id, session.sensor
+    layout = get_layout(sensor)
+    writer = _LazyWriter(data_dir, object_id, sensor, _root_attrs(object_id, sensor, conv, source))
+    imported: dict[str, Any] = {}
+    existing: dict[str, dict[str, Any]] = {}
+    if session.path.exists() or writer.journal_exists():
+        opened = writer.get()  # recovers a half-written session from its journal first
+        info = read_session_info(opened.path)
+        _check_session(info.attrs, conv, opened.path)
+        imported = dict(info.attrs.get("source_files") or {})
+        existing = {s["press_id"]: s for s in press_summaries(opened.path)}
+    for src in files:
+        report = FileReport(src.relative, src.kind, object_id, sensor)
+        session.files.append(report)
+        try:
+            _one_file(src, writer, conv, layout, existing, imported, report)
+        except DataError as exc:
+            report.outcome = "failed"
+            report.message = exc.one_line()
+            log.warning("%s", report.message)
+        if on_file is not None:
+            on_file(report)
+
+
 def _one_file(
     src: SourceFile,
-    writer: SessionWriter,
+    writer: _LazyWriter,
     conv: ImportConventions,
     layout: SensorLayout,
     existing: dict[str, dict[str, Any]],
     imported: dict[str, Any],
     report: FileReport,
 ) -> None:
-    if src.rotation_deg is None:
-        report.outcome = "skipped"
-        report.message = (
-            f"arbitrary file {src.arbitrary_index} has no rotation in the conventions "
-            f"(add it under [arbitrary_rotation_deg] in a --conventions file)"
-        )
-        return
     report.sha256 = file_sha256(src.path)
     if report.sha256 in imported:
         previous = imported[report.sha256]
@@ -317,7 +358,7 @@ def _one_file(
         return
     entry = _import_file(src, writer, conv, layout, existing, report)
     imported[report.sha256] = entry
-    writer.update_root_attrs({"source_files": imported})
+    writer.get().update_root_attrs({"source_files": imported})
     report.outcome = "imported"
 
 

@@ -275,6 +275,9 @@ def build_presses(
                 "band_samples": run.length,
                 "raw_angle_deg": raw_angle,
                 "peak_force_n": peak_force,
+                "threshold_n": conv.complete_peak_n,
+                "overshoot_n": peak_force - conv.complete_peak_n,
+                "duration_s": float(t[-1] - t[0]),
                 "ramp_start_found": ramp_found,
                 "tare_method": streams.tare_method,
             }

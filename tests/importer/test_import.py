@@ -257,3 +257,16 @@ def test_names_mapped_outside_the_object_catalogue_are_refused(tmp_path: Path) -
     with pytest.raises(ConfigError, match=r"hexagonish_tpu.*not in the object catalogue"):
         import_unitac_nv(tmp_path / "src", tmp_path / "data", conv)
     assert not (tmp_path / "data").exists()
+
+
+def test_disagreement_with_their_selected_peaks_is_reported(tmp_path: Path) -> None:
+    path = tmp_path / "src" / PROCESSED_XELA
+    write_processed_npz(path, "uskin", [Press(-1.0), Press(0.0)])
+    with np.load(path) as npz:
+        arrays = dict(npz)
+    arrays["selected"] = arrays["selected"] + np.array([0, 3])  # their second peak 3 samples off ours
+    arrays["angle"] = np.array([-2, 0])  # and their first angle another degree
+    np.savez(path, **arrays)
+    (file_report,) = import_unitac_nv(tmp_path / "src", tmp_path / "data").files
+    assert file_report.outcome == "imported" and file_report.written == 2
+    assert "1 of their peaks not found, 1 extra, 1 with another angle" in " ".join(file_report.notes)

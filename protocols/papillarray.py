@@ -564,6 +564,7 @@ class PacketParser:
         self.max_packet_len = max_packet_len
         self._buf = bytearray()
         self._layout: _Layout | None = None
+        self._waiting = False  # the buffer opens with a start marker whose packet is not complete yet
         self.packets = 0
         self.bytes_dropped = 0
         self.checksum_errors = 0
@@ -577,6 +578,7 @@ class PacketParser:
     def reset(self) -> None:
         """Forget buffered bytes (e.g. after reopening the port); counters are kept."""
         self._buf.clear()
+        self._waiting = False
 
     def counters(self) -> dict[str, int]:
         return {
@@ -622,10 +624,15 @@ class PacketParser:
     def feed(self, data: bytes | bytearray | memoryview) -> list[PapillArrayPacket]:
         """Append received bytes; return the packets completed by them (possibly none)."""
         buf = self._buf
+        old_len = len(buf)
         buf += data
+        max_len = self.max_packet_len
+        if self._waiting and len(buf) < max_len and buf.find(END_MARKER, max(0, old_len - 3)) < 0:
+            # Still inside the packet that opens the buffer: nothing can close without a new end marker.
+            return []
+        self._waiting = False
         out: list[PapillArrayPacket] = []
         pos = 0  # everything before pos is consumed
-        max_len = self.max_packet_len
         while True:
             start = buf.find(START_MARKER, pos)
             if start < 0:
@@ -651,6 +658,7 @@ class PacketParser:
             while later >= 0 and not isinstance(self._try_start(buf, later, later + max_len), tuple):
                 later = buf.find(START_MARKER, later + 1)
             if later < 0:
+                self._waiting = True  # the buffer now opens with this start marker
                 break
             failure = self._try_start(buf, start, later)
             self._give_up(failure if not isinstance(failure, tuple) else None)

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import itertools
 import random
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from protocols.errors import ProtocolError
 from protocols.papillarray import (
@@ -327,3 +330,30 @@ def test_command_parser_drops_an_endless_line() -> None:
     assert parser.feed(b"x" * 100) == []
     assert parser.feed(b"y" * 100 + b"\nz\n") == [HubCommand(Command.BIAS)]
     assert parser.unknown_lines == 1
+
+
+_commands = st.sampled_from(
+    [HubCommand(Command.BIAS), HubCommand(Command.START_SLIP), HubCommand(Command.STOP_SLIP)]
+    + [HubCommand(Command.SET_RATE, rate) for rate in VALID_RATES_HZ]
+)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(_commands, max_size=12), st.lists(st.integers(0, 200), max_size=8))
+def test_commands_survive_any_chunking(commands: list[HubCommand], cuts: list[int]) -> None:
+    stream = b"".join(encode_command(command) for command in commands)
+    points = sorted({c % (len(stream) + 1) for c in cuts} | {0, len(stream)})
+    parser = CommandParser()
+    parsed: list[HubCommand] = []
+    for a, b in itertools.pairwise(points):
+        parsed += parser.feed(stream[a:b])
+    assert parsed == commands
+    assert parser.unknown_lines == 0
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.binary(max_size=200))
+def test_command_parser_never_raises_on_garbage(data: bytes) -> None:
+    parser = CommandParser()
+    parser.feed(data)
+    assert parser.commands + parser.unknown_lines <= data.count(b"\n") + 1

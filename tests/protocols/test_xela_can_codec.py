@@ -297,3 +297,11 @@ def test_arbitrary_messages_never_crash_the_assembler(messages: list[tuple[int, 
             assert frame.valid == (not frame.stale_mask.any())
     assert assembler.messages == len(messages)
     assert assembler.frames <= assembler.messages
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 0xFFFF), st.integers(0, 0xFFFF), st.integers(0, 0xFFFF), st.integers(0, 255))
+def test_taxel_message_round_trip(x: int, y: int, z: int, byte0: int) -> None:
+    message = decode_taxel_message(0x100, encode_taxel_message(0x100, x, y, z, byte0=byte0))
+    assert (message.x, message.y, message.z) == (x, y, z)
+    assert message.valid == (x < 0xFA00 and (x, y, z) != (0, 0, 0))

@@ -7,6 +7,7 @@ taxel-axis, so a tare is a host-side mean over unloaded frames (the sensor has n
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from typing import Any
@@ -296,6 +297,7 @@ class UskinXelaServerDriver(PumpedSensor):
         self.welcome: dict[str, Any] | None = None
         self.model: str | None = None
         self._ws: ClientConnection | None = None
+        self._ws_stack: contextlib.ExitStack | None = None
         self._last_seq: int | None = None
         self._missing_sensor_logged = False
 
@@ -306,13 +308,18 @@ class UskinXelaServerDriver(PumpedSensor):
             attempts += 1
             remaining = deadline - time.monotonic()
             try:
-                self._ws = ws_connect(
-                    self.url,
-                    open_timeout=max(remaining, 0.1),
-                    compression=None,
-                    max_queue=CLIENT_MAX_QUEUE,
-                    ping_interval=None,
+                stack = contextlib.ExitStack()
+                # Entered as a context manager: the form every websockets version >= 12 supports without warning.
+                self._ws = stack.enter_context(
+                    ws_connect(
+                        self.url,
+                        open_timeout=max(remaining, 0.1),
+                        compression=None,
+                        max_queue=CLIENT_MAX_QUEUE,
+                        ping_interval=None,
+                    )
                 )
+                self._ws_stack = stack
                 break
             except InvalidURI as exc:
                 raise DeviceNotFound(f"bad xela_server URL {self.url!r}: {exc}", hint="use ws://HOST:PORT") from exc
@@ -328,9 +335,9 @@ class UskinXelaServerDriver(PumpedSensor):
         logger.info("uskin: connected to xela_server %s after %d tries", self.url, attempts)
 
     def _close(self) -> None:
-        ws, self._ws = self._ws, None
-        if ws is not None:
-            ws.close()
+        stack, self._ws_stack, self._ws = self._ws_stack, None, None
+        if stack is not None:
+            stack.close()
 
     def _pump(self, wait_s: float) -> list[TactileFrame]:
         if self._ws is None:

@@ -20,7 +20,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 from websockets.sync.server import Server, ServerConnection, serve
 
-from drivers.clock import Clock
+from drivers.clock import Clock, MonotonicClock
 from protocols.xela_ws import XelaSensorData, encode_data_message, encode_welcome
 from unitac_rig.sim.devices._timing import SampleTimer
 from unitac_rig.sim.devices.xela_can import counts_from_sample
@@ -75,8 +75,9 @@ class SimXelaServer:
             target=self._server.serve_forever, name=f"sim-xela-server-{self.port}", daemon=True
         )
         self._serve_thread.start()
-        self._timer = SampleTimer(rate_hz, clock, self._tick, thread_name=f"sim-xela-server-tick-{self.port}")
-        self._epoch_offset_s = time.time() - self._timer.clock.now_ns() / 1e9
+        the_clock = clock or MonotonicClock()
+        self._epoch_offset_s = time.time() - the_clock.now_ns() / 1e9  # server "Unix time" = clock + offset
+        self._timer = SampleTimer(rate_hz, the_clock, self._tick, thread_name=f"sim-xela-server-tick-{self.port}")
 
     @property
     def url(self) -> str:

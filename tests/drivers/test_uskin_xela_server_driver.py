@@ -1,0 +1,117 @@
+"""UskinXelaServerDriver against the simulated xela_server (a real WebSocket server on 127.0.0.1, real time)."""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+import threading
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+from conftest import collect
+
+from drivers.errors import DeviceError, DeviceNotFound
+from drivers.uskin import UskinXelaServerDriver
+from unitac_rig.sim.devices import counts_from_sample
+from unitac_rig.sim.devices.xela_server import SimXelaServer
+from unitac_rig.sim.faults import FaultPlan
+from unitac_rig.sim.synthetic import RecordingSource, UskinPressSource
+
+RATE_HZ = 500  # fast, to keep the real-time tests short
+
+
+@contextlib.contextmanager
+def server_rig(
+    source: RecordingSource, *, faults: FaultPlan | None = None, **server_options: object
+) -> Iterator[tuple[UskinXelaServerDriver, SimXelaServer]]:
+    server = SimXelaServer(source=source, rate_hz=RATE_HZ, faults=faults, **server_options)  # type: ignore[arg-type]
+    driver = UskinXelaServerDriver(server.url, connect_timeout_s=5.0, stall_timeout_s=0.1)
+    try:
+        driver.connect()
+        yield driver, server
+    finally:
+        driver.disconnect()
+        server.close()
+
+
+def test_frames_carry_the_server_counts_and_message_numbers_in_poll_and_reader_mode() -> None:
+    source = RecordingSource(UskinPressSource(seed=8))
+    with server_rig(source, calibrated_n_per_count=0.001) as (driver, _):
+        polled = driver.wait_frames(20, timeout_s=5.0)
+        driver.start_reader()
+        threaded = collect(driver, 20)
+        driver.stop_reader()
+        assert driver.welcome is not None and driver.welcome["message"] == "Welcome"
+    frames = polled + threaded
+    assert len(frames) >= 40
+    seqs = [f.seq for f in frames]
+    assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))  # no gaps, no repeats
+    sent = [counts_from_sample(sample.values) for _, sample in source.samples]
+    for frame in frames:
+        assert frame.seq is not None and frame.device_t_us is not None
+        np.testing.assert_array_equal(frame.values, sent[frame.seq - 1])  # message n carries the n-th sample
+        assert frame.calibrated_n is not None
+        np.testing.assert_allclose(frame.calibrated_n, (sent[frame.seq - 1] - sent[0]) * 0.001)
+    assert driver.health().sequence_gaps == 0
+
+
+def test_dropped_messages_are_counted_as_sequence_gaps_and_bad_json_as_errors() -> None:
+    source = RecordingSource(UskinPressSource())
+    plan = FaultPlan(seed=5, drop_message_prob=0.2, corrupt_prob=0.3)
+    with server_rig(source, faults=plan) as (driver, _):
+        frames = driver.wait_frames(60, timeout_s=10.0)
+    seqs = [f.seq for f in frames if f.seq is not None]
+    health = driver.health()
+    # every message number missing between the first and the last frame is a counted gap, or an unreadable one
+    missing = (seqs[-1] - seqs[0] + 1) - len(seqs)
+    assert missing > 0 and health.checksum_errors > 0
+    assert health.sequence_gaps + health.checksum_errors >= missing
+    assert health.sequence_gaps <= missing
+
+
+def test_server_going_away_raises_and_reconnect_works_once_it_is_back() -> None:
+    source = RecordingSource(UskinPressSource())
+    with server_rig(source) as (driver, server):
+        driver.wait_frames(5, timeout_s=5.0)
+        server.faults.force_disconnect()
+        with pytest.raises(DeviceError, match="closed the connection"):
+            collect(driver, 10_000, timeout_s=5.0)
+        # while the server answers 503 the driver keeps retrying; it succeeds once the server is back
+        release = threading.Timer(0.3, server.faults.force_disconnect, args=(False,))
+        release.start()
+        try:
+            driver.reconnect()
+        finally:
+            release.join()
+        assert len(driver.wait_frames(5, timeout_s=5.0)) == 5
+        assert driver.health().reconnects == 1
+
+
+def test_a_silent_server_is_reported_as_a_stall() -> None:
+    with server_rig(RecordingSource(UskinPressSource())) as (driver, server):
+        driver.wait_frames(3, timeout_s=5.0)
+        server.faults.force_stall()
+        collect(driver, 10_000, timeout_s=0.4)  # 0.4 s > 0.1 s stall timeout
+        assert driver.stalled and driver.health().stalls == 1
+        server.faults.force_stall(False)
+        driver.wait_frames(3, timeout_s=5.0)
+        assert not driver.stalled
+
+
+def test_no_server_is_device_not_found_with_a_hint() -> None:
+    with socket.socket() as probe:  # a port nobody listens on
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    driver = UskinXelaServerDriver(f"ws://127.0.0.1:{port}", connect_timeout_s=0.3)
+    with pytest.raises(DeviceNotFound) as info:
+        driver.connect()
+    assert info.value.hint is not None and "xela_server" in info.value.hint
+
+
+def test_tare_over_the_server_frames() -> None:
+    with server_rig(RecordingSource(UskinPressSource(peak_load_n=0.0))) as (driver, _):
+        frames = driver.wait_frames(20, timeout_s=5.0)
+        record = driver.tare(frames)
+    np.testing.assert_allclose(record.baseline, np.mean([f.values for f in frames], axis=0))
+    assert record.method == "host-mean"

@@ -38,6 +38,8 @@ from unitac_rig.objects import DEFAULT_OBJECT_CENTER_M, MaterialSpec, ObjectSpec
 
 log = logging.getLogger(__name__)
 
+RAYS_KEPT = 8  # press rays whose tables stay cached (a press, its retract, and a few neighbours)
+
 
 @dataclass(frozen=True)
 class SceneParams:
@@ -56,6 +58,8 @@ class SceneParams:
     pillar_tip_radius_mm: float = 3.0  # [S] pillars 6 mm diameter, hemispherical tips
     pillar_edge_recess_mm: float = 0.4  # [I] edge pillars below the centre one (spec: centre tallest), 0.3-0.5
     pillar_corner_recess_mm: float = 0.8  # [I] corner pillars, 0.6-1.0
+    pillar_friction_scale: float = 0.6  # [I] fitted: the material's friction x this caps pillar shear; recorded
+    # pillar shear stays within ~1.9 N (displacement ~1.5-1.9 mm) while a steep contact still loads ~4 N normal
     # ---- contact and object --------------------------------------------------------------------------------
     shear_projection: float = 1.0  # [I] c in q = c * p * tan(tilt); 1 = frictionless projection, capped at mu*p
     mount_stiffness_n_per_mm: float = 20.0  # [I] printed object adapter + sensor adapter + arm, fitted so that
@@ -136,10 +140,11 @@ class PressScene:
         self.kind = pad_kind(layout)
         rng = rng if rng is not None else np.random.default_rng(0)
         offset_mm = rng.normal(0.0, self.params.centring_error_mm, 2) if self.params.centring_error_mm > 0 else 0.0
-        self.center_mm = np.asarray(object_center_m, dtype=np.float64) * 1e3 + offset_mm
+        self.nominal_center_m = (float(object_center_m[0]), float(object_center_m[1]))  # where presses aim
+        self.center_mm = np.asarray(object_center_m, dtype=np.float64) * 1e3 + offset_mm  # where the object is
         self._outline = _Outline(obj, self.rotation_deg)
         self._pad = _SkinPad(layout, self.params) if self.kind == "skin" else _PillarPad(layout, self.params)
-        self._ray: _RayTable | None = None
+        self._rays: list[_RayTable] = []  # most recent first, a few kept so alternating rays stay cheap
         self._last_rotvec: tuple[float, float, float] | None = None
         self._frame: tuple[np.ndarray, float, float, float, float, float] | None = None
         self.rays_built = 0
@@ -166,13 +171,17 @@ class PressScene:
         return float(ray.interp(ray.force, travel)) if travel > 0 else 0.0
 
     def touch_distance_mm(self, angle_deg: float) -> float:
-        """Distance (mm) from the object's axis to the TCP at first touch, pressing at ``angle_deg`` on centre."""
+        """Distance (mm) from the nominal object centre to the TCP at first touch, pressing at ``angle_deg``."""
         ray = self._ray_for_angle(angle_deg)
-        return ray.touch_cn
+        a = math.radians(angle_deg)
+        offset_mm = self.center_mm - np.asarray(self.nominal_center_m) * 1e3  # placement error
+        return ray.touch_cn - float(offset_mm @ np.array([-math.sin(a), math.cos(a)]))
 
     def pose_at_travel(self, angle_deg: float, travel_mm: float) -> np.ndarray:
         """TCP pose after travelling ``travel_mm`` past first touch at ``angle_deg`` (negative: before touch)."""
-        return press_pose(angle_deg, self.touch_distance_mm(angle_deg) - travel_mm, object_center_m=self._center_m)
+        return press_pose(
+            angle_deg, self.touch_distance_mm(angle_deg) - travel_mm, object_center_m=self.nominal_center_m
+        )
 
     def travel_at_force_mm(self, angle_deg: float, force_n: float) -> float:
         """Travel past first touch (mm) at which the press force reaches ``force_n``."""
@@ -189,12 +198,8 @@ class PressScene:
         ray = self._ray_for_angle(angle_deg)
         return ray.loads_at(float(np.interp(force_n, ray.force, ray.travel)))
 
-    @property
-    def _center_m(self) -> tuple[float, float]:
-        return (float(self.center_mm[0]) * 1e-3, float(self.center_mm[1]) * 1e-3)
-
     def _ray_for_angle(self, angle_deg: float) -> _RayTable:
-        ray, _ = self._locate(press_pose(angle_deg, 200.0, object_center_m=self._center_m))
+        ray, _ = self._locate(press_pose(angle_deg, 200.0, object_center_m=self.nominal_center_m))
         return ray
 
     # ---- internals ---------------------------------------------------------------------------------------
@@ -224,14 +229,16 @@ class PressScene:
         rel_y = self.center_mm[1] - pose[1] * 1e3
         c_s = rel_x * xx + rel_y * xy
         c_n = rel_x * zx + rel_y * zy
-        ray = self._ray
         p = self.params
-        if (
-            ray is None
-            or abs(ray.c_s - c_s) > p.ray_tolerance_mm
-            or abs(math.remainder(ray.psi - psi, 2 * math.pi)) > p.ray_tolerance_rad
-        ):
-            ray = self._build_ray(rot, (xx, xy), (zx, zy), psi, c_s)
+        for i, ray in enumerate(self._rays):
+            if (
+                abs(ray.c_s - c_s) <= p.ray_tolerance_mm
+                and abs(math.remainder(ray.psi - psi, 2 * math.pi)) <= p.ray_tolerance_rad
+            ):
+                if i:
+                    self._rays.insert(0, self._rays.pop(i))
+                return ray, ray.touch_cn - c_n
+        ray = self._build_ray(rot, (xx, xy), (zx, zy), psi, c_s)
         return ray, ray.touch_cn - c_n
 
     def _build_ray(
@@ -240,7 +247,8 @@ class PressScene:
         section = self._outline.section(np.array(x_axis), np.array(z_axis), c_s)
         table = self._pad.table(section, self.obj.material_params)
         ray = _RayTable(table, self.obj.material_params, self.params, rot, psi, c_s)
-        self._ray = ray
+        self._rays.insert(0, ray)
+        del self._rays[RAYS_KEPT:]
         self.rays_built += 1
         return ray
 
@@ -443,17 +451,21 @@ class _SkinPad:
         ratio = np.clip(p.shear_projection * tilt, -material.friction, material.friction)
         area = self.step * self.height  # mm^2 per section sample
 
+        finite_k, finite_gap = k_eff[finite], gap[finite]
+
         def force(e: float) -> float:
-            return float(np.sum(k_eff * np.maximum(0.0, e - gap)) * area)
+            return float(np.dot(finite_k, np.maximum(0.0, e - finite_gap)) * area)
 
         e_max = _depth_for_force(force, p.table_max_force_n)
         u = np.linspace(0.0, 1.0, p.table_points)
         depth = e_max * u**2
-        pressure = k_eff[None, :] * np.maximum(0.0, depth[:, None] - gap[None, :])  # (m, n_s) N/mm^2
+        near = gap <= e_max  # only section samples the table's deepest press reaches
+        pressure = k_eff[near] * np.maximum(0.0, depth[:, None] - gap[near])  # (m, n_near) N/mm^2
         normal_cells = pressure * area  # N per section sample
-        shear_cells = normal_cells * ratio[None, :]
-        col_n = normal_cells @ self.col_weights.T  # (m, cols)
-        col_x = shear_cells @ self.col_weights.T
+        shear_cells = normal_cells * ratio[near]
+        weights = self.col_weights[:, near]
+        col_n = normal_cells @ weights.T  # (m, cols)
+        col_x = shear_cells @ weights.T
         m = depth.size
         loads = np.zeros((m, layout.rows, layout.cols, 3))
         loads[..., 2] = col_n[:, None, :] * self.row_share[None, :, None]
@@ -463,7 +475,7 @@ class _SkinPad:
         wrench = np.zeros((m, 6))
         wrench[:, 0] = total_x
         wrench[:, 2] = -total_n
-        wrench[:, 4] = normal_cells @ self.s * 1e-3  # tau_y = sum s * p (contacts in the pad plane, y-symmetric)
+        wrench[:, 4] = normal_cells @ self.s[near] * 1e-3  # tau_y = sum s * p (contacts in the pad plane, y-symmetric)
         contact = gap < p.corner_contact_depth_mm
         proximity = float(np.max(np.exp(-xi[contact] / p.corner_decay_mm))) if np.any(contact) else 0.0
         return _PadTable(
@@ -507,13 +519,15 @@ class _PillarPad:
         pillar_cn = col_cn[self.cols] - self.recess  # c_n at which each pillar touches
         touch = float(np.max(pillar_cn))
         gap = touch - pillar_cn  # pad-side depth at which each pillar starts to load (inf: never)
-        k_n = p.pillar_axial_n_per_mm
-        if material.wall_point_stiffness_n_per_mm is None:
-            k = np.full(layout.n_taxels, k_n)
-        else:
+        # contact force direction: tangential/normal = the tip's slope at the contact, capped by friction
+        mu = material.friction * p.pillar_friction_scale
+        ratio = np.clip(p.shear_projection * col_slope[self.cols], -mu, mu)
+        # an off-axis contact also bends the pillar sideways: with the tip's lateral spring in the load path the
+        # pillar is softer along the press, 1/k = 1/k_axial + ratio^2/k_lateral (compatibility along the normal)
+        k = 1.0 / (1.0 / p.pillar_axial_n_per_mm + ratio**2 / p.pillar_lateral_n_per_mm)
+        if material.wall_point_stiffness_n_per_mm is not None:
             k_wall = material.wall_point_stiffness_n_per_mm * _near_corner(material, col_xi[self.cols], p)
-            k = 1.0 / (1.0 / k_n + 1.0 / k_wall)
-        ratio = np.clip(p.shear_projection * col_slope[self.cols], -material.friction, material.friction)
+            k = 1.0 / (1.0 / k + 1.0 / k_wall)
         k_sum = float(np.sum(k[np.isfinite(gap)]))
         finite_gap = gap[np.isfinite(gap)]
         e_max = float(np.max(finite_gap)) + p.table_max_force_n / k_sum

@@ -193,17 +193,23 @@ class PumpedSensor:
     def poll(self) -> list[TactileFrame]:
         """Every frame completed since the last call (never blocks). Raises the reader thread's error once."""
         self._require_connected()
+        frames = self._take_queued()
         if self._reader is not None or self._reader_error is not None:
-            with self._lock:
-                frames = list(self._queue)
-                self._queue.clear()
             if not frames and self._reader_error is not None:
                 error, self._reader_error = self._reader_error, None
                 raise error
         else:
-            frames = self._pump(0.0)
-            self._account(frames)
+            pumped = self._pump(0.0)
+            self._account(pumped)
+            frames += pumped
         self._check_stall()
+        return frames
+
+    def _take_queued(self) -> list[TactileFrame]:
+        """Frames the reader thread queued (also those left over after ``stop_reader``)."""
+        with self._lock:
+            frames = list(self._queue)
+            self._queue.clear()
         return frames
 
     def wait_frames(self, n_frames: int, timeout_s: float) -> list[TactileFrame]:
@@ -222,8 +228,10 @@ class PumpedSensor:
                 )
             if self._reader is None and self._reader_error is None:
                 self._require_connected()
-                new = self._pump(min(remaining, 0.05))
-                self._account(new)
+                new = self._take_queued()
+                pumped = self._pump(min(remaining, 0.05))
+                self._account(pumped)
+                new += pumped
                 self._check_stall()
             else:
                 new = self.poll()

@@ -1,0 +1,408 @@
+"""Downstream contact geometry (paper Section IV): predict the local surface profile under the pad from the 16-d
+UniTac-NV latent, train on one sensor's latents, test on every sensor's.
+
+Ground truth, cut from the object's outline (CAD frame, mm) as the paper describes:
+
+1. the ray from the object's centre toward the pad (approach angle, object rotation) meets the outline at the
+   contact origin;
+2. the outline is turned about that origin so the press runs along -y (the pad sits on the +y side); the new x axis
+   is the pad's column direction (tool x), i.e. ``(u_y, -u_x)`` for the pad-side direction ``u``;
+3. 11 points evenly over 14 mm of x, centred on the origin; at each, the depth (mm, >= 0 on a convex object) is
+   how far below the origin's tangent line the outline's pad-facing surface lies.
+
+Model: MLP 16 -> 64 -> 128 -> 64 -> 32 -> 11, ReLU and dropout (0.2 for uSkin latents, 0.3 for PapillArray, 0.2 for
+other sensors) between layers, Adam lr 5e-5, weight decay 1e-3, L1 loss (mm), 80 epochs, batch 64. Split: a seeded
+10% of the object's approach directions (rotation, angle) go to test with all their forces.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from unitac_rig.errors import DataError, ModelError
+from unitac_rig.learning.data import PairedDataset, held_out_directions
+from unitac_rig.learning.engine import UNITAC_GROUP
+from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM
+from unitac_rig.learning.train import LoadedRun, load_run, load_test_set
+
+log = logging.getLogger(__name__)
+
+GEOMETRY_JSON = "geometry.json"
+GEOMETRY_PNG = "geometry.png"
+DEFAULT_DROPOUT = {"uskin": 0.2, "papillarray": 0.3}
+
+
+def profile_offsets_mm(points: int = 11, span_mm: float = 14.0) -> np.ndarray:
+    """Where the profile is sampled across the pad, mm from the contact origin (11 points over 14 mm)."""
+    return np.linspace(-span_mm / 2.0, span_mm / 2.0, points)
+
+
+def surface_frame(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(x_hat, u): unit vectors of the profile frame in object coordinates; ``u`` points from the object toward
+    the pad (profile +y), ``x_hat = (u_y, -u_x)`` runs across the pad (the sensor's columns)."""
+    u = np.asarray(direction, dtype=np.float64)
+    u = u / np.linalg.norm(u)
+    return np.array([u[1], -u[0]]), u
+
+
+def local_depth_profile(
+    outline_mm: np.ndarray, direction: np.ndarray, origin_mm: np.ndarray, offsets_mm: np.ndarray
+) -> np.ndarray:
+    """Depths (mm) of the pad-facing surface below the origin at each lateral offset.
+
+    ``outline_mm``: (N, 2) closed polygon; ``direction``: toward the pad; ``origin_mm``: the contact origin on the
+    outline. Where a line across misses the outline (past the object's edge) the depth is NaN.
+    """
+    x_hat, u = surface_frame(direction)
+    points = np.asarray(outline_mm, dtype=np.float64) - np.asarray(origin_mm, dtype=np.float64)
+    local = np.stack([points @ x_hat, points @ u], axis=1)  # (N, 2): across, toward the pad
+    a = local
+    b = np.roll(local, -1, axis=0)
+    depths = np.full(len(offsets_mm), np.nan)
+    for i, x in enumerate(np.asarray(offsets_mm, dtype=np.float64)):
+        lo = np.minimum(a[:, 0], b[:, 0])
+        hi = np.maximum(a[:, 0], b[:, 0])
+        crossing = (lo <= x + 1e-9) & (hi >= x - 1e-9) & (hi - lo > 1e-12)
+        if not crossing.any():
+            continue
+        t = (x - a[crossing, 0]) / (b[crossing, 0] - a[crossing, 0])
+        y = a[crossing, 1] + t * (b[crossing, 1] - a[crossing, 1])
+        depths[i] = -float(np.max(y))
+    return depths
+
+
+DirectionFn = Callable[[float, float], np.ndarray]
+
+
+@dataclass(frozen=True)
+class OutlineGeometry:
+    """An object's outline plus the rig's convention for where the pad comes from (catalogue by default)."""
+
+    outline_mm: np.ndarray
+    outline_hit: Callable[[np.ndarray], np.ndarray]
+    pad_direction: DirectionFn
+
+    @classmethod
+    def from_catalogue(cls, object_id: str) -> OutlineGeometry:
+        from unitac_rig.objects import get_object, pad_side_direction
+
+        spec = get_object(object_id)
+        return cls(np.asarray(spec.outer_mm), spec.outline_hit, pad_side_direction)
+
+    def contact(self, angle_deg: float, rotation_deg: float) -> tuple[np.ndarray, np.ndarray]:
+        """(direction toward the pad, contact origin) in object coordinates, mm."""
+        u = np.asarray(self.pad_direction(angle_deg, rotation_deg), dtype=np.float64)
+        return u, np.asarray(self.outline_hit(u), dtype=np.float64)
+
+    def profiles(self, angle_deg: np.ndarray, rotation_deg: np.ndarray, offsets_mm: np.ndarray) -> np.ndarray:
+        """(M, K) depth profiles for each (angle, rotation); computed once per distinct direction."""
+        cache: dict[tuple[float, float], np.ndarray] = {}
+        out = np.empty((len(angle_deg), len(offsets_mm)))
+        for i, (angle, rotation) in enumerate(zip(angle_deg, rotation_deg, strict=True)):
+            key = (float(angle), float(rotation))
+            if key not in cache:
+                u, origin = self.contact(*key)
+                cache[key] = local_depth_profile(self.outline_mm, u, origin, offsets_mm)
+            out[i] = cache[key]
+        return out
+
+
+@dataclass(frozen=True)
+class GeometryConfig:
+    """The paper's downstream model and training settings."""
+
+    hidden: tuple[int, ...] = (64, 128, 64, 32)
+    learning_rate: float = 5e-5
+    weight_decay: float = 1e-3
+    epochs: int = 80
+    batch_size: int = 64
+    test_fraction: float = 0.1
+    points: int = 11
+    span_mm: float = 14.0
+    dropout: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_DROPOUT))
+    other_dropout: float = 0.2
+
+    def dropout_for(self, sensor: str) -> float:
+        return float(self.dropout.get(sensor, self.other_dropout))
+
+
+class StackedProfileMLP(nn.Module):
+    """K independent MLPs (one per training sensor) evaluated together with batched matmuls.
+
+    Member ``k``: latent -> hidden... -> outputs, ReLU and dropout ``dropouts[k]`` after every hidden layer.
+    Initialised like ``nn.Linear`` (uniform +-1/sqrt(fan_in)).
+    """
+
+    def __init__(
+        self,
+        members: int,
+        latent_dim: int,
+        outputs: int,
+        hidden: Sequence[int],
+        dropouts: Sequence[float],
+        generator: torch.Generator,
+    ) -> None:
+        super().__init__()
+        widths = [latent_dim, *hidden, outputs]
+        self.weights = nn.ParameterList()
+        self.biases = nn.ParameterList()
+        for fan_in, fan_out in itertools.pairwise(widths):
+            bound = 1.0 / fan_in**0.5
+            self.weights.append(
+                nn.Parameter(torch.empty(members, fan_in, fan_out).uniform_(-bound, bound, generator=generator))
+            )
+            self.biases.append(
+                nn.Parameter(torch.empty(members, 1, fan_out).uniform_(-bound, bound, generator=generator))
+            )
+        self.keep = 1.0 - torch.tensor(list(dropouts), dtype=torch.float32).view(members, 1, 1)
+        self.generator = generator
+
+    def forward(self, z: torch.Tensor) -> torch.Tensor:
+        """(members, B, latent) -> (members, B, outputs)."""
+        h = z
+        last = len(self.weights) - 1
+        for k, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
+            h = torch.baddbmm(bias, h, weight)
+            if k < last:
+                h = torch.relu(h)
+                if self.training:
+                    noise = torch.rand(h.shape, generator=self.generator)
+                    h = h * (noise < self.keep) / self.keep
+        return h
+
+
+def fit_profile_mlps(
+    latents: Sequence[np.ndarray],
+    profiles_mm: np.ndarray,
+    config: GeometryConfig,
+    dropouts: Sequence[float],
+    seed: int,
+) -> StackedProfileMLP:
+    """Train one MLP per latent set (L1 loss in mm) on the same targets (M, K), all at once; each member sees
+    its own shuffles. Batches are index slices of tensors already in memory (no DataLoader)."""
+    generator = torch.Generator().manual_seed(seed)
+    members = len(latents)
+    model = StackedProfileMLP(members, latents[0].shape[1], profiles_mm.shape[1], config.hidden, dropouts, generator)
+    optimizer = torch.optim.Adam(
+        model.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay, foreach=True
+    )
+    x = torch.as_tensor(np.stack(latents), dtype=torch.float32)  # (members, M, latent)
+    y = torch.as_tensor(profiles_mm, dtype=torch.float32)
+    rows = x.shape[1]
+    model.train()
+    for _ in range(config.epochs):
+        order = torch.stack([torch.randperm(rows, generator=generator) for _ in range(members)])
+        xs = torch.gather(x, 1, order.unsqueeze(-1).expand(-1, -1, x.shape[2]))
+        ys = y[order]
+        for start in range(0, rows, config.batch_size):
+            predicted = model(xs[:, start : start + config.batch_size])
+            # mean over each member's batch, summed over members: each member's own L1 loss
+            loss = (predicted - ys[:, start : start + config.batch_size]).abs().mean(dim=(1, 2)).sum()
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+    model.eval()
+    return model
+
+
+@dataclass
+class GeometryResult:
+    object_id: str
+    member: int
+    seed: int
+    offsets_mm: np.ndarray
+    scenarios: dict[str, dict[str, Any]]  # "<train>_to_<test>" -> errors
+    test_rows: np.ndarray  # indices into the object's rows
+    predictions: dict[str, np.ndarray]  # scenario -> (T, K) predicted depths, mm
+    truth_mm: np.ndarray  # (T, K)
+    angle_deg: np.ndarray  # (T,)
+    rotation_deg: np.ndarray  # (T,)
+    config: GeometryConfig
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "object": self.object_id,
+            "member": self.member,
+            "seed": self.seed,
+            "offsets_mm": self.offsets_mm.tolist(),
+            "test_contacts": len(self.test_rows),
+            "scenarios": self.scenarios,
+            "mean_mae_mm": float(np.mean([s["mae_mm"] for s in self.scenarios.values()])),
+            "paper_mean_mae_mm": float(np.mean(list(PAPER_GEOMETRY_MAE_MM.values()))),
+            "config": asdict(self.config),
+        }
+
+
+def run_geometry(
+    run: LoadedRun,
+    test_set: PairedDataset,
+    object_id: str | None = None,
+    *,
+    member: int = 0,
+    config: GeometryConfig | None = None,
+    outline: OutlineGeometry | None = None,
+    seed: int | None = None,
+) -> GeometryResult:
+    """The four (N x N) scenarios on one object's contacts (default: the run's unseen object)."""
+    config = config or GeometryConfig()
+    if object_id is None:
+        unseen = [o for o in run.unseen_objects if o in set(test_set.object_id.tolist())]
+        if not unseen:
+            raise DataError(
+                "the run's test data holds no unseen object to estimate geometry on",
+                hint="collect the irregular prism (irregular_pla) with every sensor",
+            )
+        object_id = unseen[0]
+    rows = np.flatnonzero(test_set.object_id == object_id)
+    if rows.size == 0:
+        raise DataError(
+            f"no test contacts of object {object_id!r} in this run",
+            hint=f"objects in the run's test data: {', '.join(test_set.objects)}",
+        )
+    if not 0 <= member < run.engine.members:
+        raise ModelError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
+    seed = run.engine.seeds[member] if seed is None else seed
+    subset = test_set.subset(rows)
+    outline = outline or OutlineGeometry.from_catalogue(object_id)
+    offsets = profile_offsets_mm(config.points, config.span_mm)
+    truth = outline.profiles(subset.angle_deg, subset.rotation_deg, offsets)
+    valid = ~np.isnan(truth).any(axis=1)
+    if not valid.all():
+        log.warning("%d contacts have profile points off the object and are left out", int((~valid).sum()))
+
+    directions = list(
+        zip(
+            np.round(subset.rotation_deg).astype(int).tolist(),
+            np.round(subset.angle_deg).astype(int).tolist(),
+            strict=True,
+        )
+    )
+    held = set(held_out_directions(directions, object_id, seed, config.test_fraction))
+    is_test = np.array([d in held for d in directions]) & valid
+    is_train = ~np.array([d in held for d in directions]) & valid
+    if not is_test.any() or not is_train.any():
+        raise DataError(f"object {object_id} has too few approach directions to split for geometry")
+
+    engine = run.engine.member(member, groups=[UNITAC_GROUP])
+    latents = {
+        s: engine.encode(UNITAC_GROUP, s, torch.from_numpy(run.normaliser.normalise(s, subset.values[s])))[0].numpy()
+        for s in run.sensors
+    }
+    scenarios: dict[str, dict[str, Any]] = {}
+    predictions: dict[str, np.ndarray] = {}
+    sensors = run.sensors
+    previous_threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # tiny layers: one thread is fastest (see train.default_threads)
+    try:
+        model = fit_profile_mlps(
+            [latents[s][is_train] for s in sensors],
+            truth[is_train],
+            config,
+            [config.dropout_for(s) for s in sensors],
+            seed,
+        )
+    finally:
+        torch.set_num_threads(previous_threads)
+    for k, train_sensor in enumerate(sensors):
+        for test_sensor in sensors:
+            with torch.no_grad():
+                stacked = torch.from_numpy(np.stack([latents[test_sensor][is_test]] * len(sensors)))
+                predicted = model(stacked)[k].numpy()
+            name = f"{train_sensor}_to_{test_sensor}"
+            errors = np.abs(predicted - truth[is_test])
+            scenarios[name] = {
+                "train_sensor": train_sensor,
+                "test_sensor": test_sensor,
+                "mae_mm": float(errors.mean()),
+                "per_point_mae_mm": errors.mean(axis=0).tolist(),
+                "paper_mae_mm": PAPER_GEOMETRY_MAE_MM.get(name),
+                "dropout": config.dropout_for(train_sensor),
+            }
+            predictions[name] = predicted
+    return GeometryResult(
+        object_id=object_id,
+        member=member,
+        seed=seed,
+        offsets_mm=offsets,
+        scenarios=scenarios,
+        test_rows=rows[is_test],
+        predictions=predictions,
+        truth_mm=truth[is_test],
+        angle_deg=subset.angle_deg[is_test],
+        rotation_deg=subset.rotation_deg[is_test],
+        config=config,
+    )
+
+
+def plot_geometry(result: GeometryResult, outline: OutlineGeometry, sensors: Sequence[str], path: Path) -> Path:
+    """The paper's picture: predicted local profiles put back around the outline; columns = training sensor,
+    rows = test sensor."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import LineCollection
+
+    n = len(sensors)
+    fig, axes = plt.subplots(n, n, figsize=(4.2 * n, 4.2 * n), squeeze=False)
+    closed = np.vstack([outline.outline_mm, outline.outline_mm[:1]])
+    for col, train_sensor in enumerate(sensors):
+        for row, test_sensor in enumerate(sensors):
+            ax = axes[row][col]
+            name = f"{train_sensor}_to_{test_sensor}"
+            predicted = result.predictions[name]
+            segments = []
+            colours = []
+            for i in range(len(predicted)):
+                u, origin = outline.contact(float(result.angle_deg[i]), float(result.rotation_deg[i]))
+                x_hat, u = surface_frame(u)
+                pts = origin + np.outer(result.offsets_mm, x_hat) - np.outer(predicted[i], u)
+                segments.append(pts)
+                colours.append(float(np.abs(predicted[i] - result.truth_mm[i]).mean()))
+            ax.plot(closed[:, 0], closed[:, 1], color="0.6", lw=1.0, ls="--", label="outline")
+            lines = LineCollection(segments, array=np.asarray(colours), cmap="viridis_r", linewidths=1.4)
+            lines.set_clim(0.0, max(1.0, float(np.percentile(colours, 95))))
+            ax.add_collection(lines)
+            ax.set_aspect("equal")
+            ax.set_title(
+                f"train {train_sensor} / test {test_sensor}\nMAE {result.scenarios[name]['mae_mm']:.3f} mm", fontsize=9
+            )
+            ax.set_xlabel("x (mm)")
+            ax.set_ylabel("y (mm)")
+            fig.colorbar(lines, ax=ax, fraction=0.046, label="profile MAE (mm)")
+    fig.suptitle(f"Contact geometry on {result.object_id}: predicted 14 mm profiles placed on the outline")
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def geometry_for_run(
+    run_dir: Path,
+    object_id: str | None = None,
+    *,
+    member: int = 0,
+    config: GeometryConfig | None = None,
+    outline: OutlineGeometry | None = None,
+) -> tuple[GeometryResult, Path, Path]:
+    """Run the downstream task for a trained run; writes ``RUN/geometry.json`` and ``RUN/figures/geometry.png``."""
+    run = load_run(run_dir)
+    test_set = load_test_set(run_dir)
+    result = run_geometry(run, test_set, object_id, member=member, config=config, outline=outline)
+    outline = outline or OutlineGeometry.from_catalogue(result.object_id)
+    json_path = Path(run_dir) / GEOMETRY_JSON
+    json_path.write_text(json.dumps(result.to_json(), indent=2) + "\n", encoding="utf-8")
+    png_path = plot_geometry(result, outline, run.sensors, Path(run_dir) / "figures" / GEOMETRY_PNG)
+    return result, json_path, png_path

@@ -1,0 +1,104 @@
+"""The same UniTac-NV model written the ordinary way (``nn.Module``, autograd, ``DataLoader``, standard Adam).
+
+It is the yardstick for the fast engine: benchmarks time it against :class:`StackedAutoencoders` on the same data
+and batch size, and tests check that both compute the same function and the same gradients.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import torch
+from torch import nn
+from torch.utils.data import DataLoader, TensorDataset
+
+from unitac_rig.learning.engine import UNITAC_GROUP, ModelShape, StackedAutoencoders
+
+
+def _mlp(widths: Sequence[int], dropout: float, dropout_after_last: bool) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    for i in range(len(widths) - 1):
+        layers.append(nn.Linear(widths[i], widths[i + 1]))
+        last = i == len(widths) - 2
+        if not last:
+            layers.append(nn.ReLU())
+        if not last or dropout_after_last:
+            layers.append(nn.Dropout(dropout))
+    return nn.Sequential(*layers)
+
+
+class UniTacModule(nn.Module):
+    """One encoder per sensor, one shared decoder that outputs every sensor's (flattened, normalised) frame."""
+
+    def __init__(self, feature_dims: Mapping[str, int], shape: ModelShape = ModelShape()) -> None:
+        super().__init__()
+        self.sensors = tuple(feature_dims)
+        self.feature_dims = dict(feature_dims)
+        self.encoders = nn.ModuleDict(
+            {
+                s: _mlp([d, *shape.encoder_hidden, shape.latent_dim], shape.dropout, dropout_after_last=True)
+                for s, d in feature_dims.items()
+            }
+        )
+        self.decoder = _mlp([shape.latent_dim, *shape.decoder_hidden, sum(feature_dims.values())], shape.dropout, False)
+
+    def forward(self, inputs: Sequence[torch.Tensor]) -> list[torch.Tensor]:
+        """Reconstructions of all sensors (B, sum F) from each sensor's latent, in sensor order."""
+        return [self.decoder(self.encoders[s](x)) for s, x in zip(self.sensors, inputs, strict=True)]
+
+    def loss(self, inputs: Sequence[torch.Tensor]) -> torch.Tensor:
+        """Sum over (source, target) of MAE(target frame, its reconstruction from the source's latent)."""
+        target = torch.cat(list(inputs), dim=1)
+        total = torch.zeros(())
+        for recon in self.forward(inputs):
+            start = 0
+            for sensor in self.sensors:
+                stop = start + self.feature_dims[sensor]
+                total = total + nn.functional.l1_loss(recon[:, start:stop], target[:, start:stop])
+                start = stop
+        return total
+
+    def load_from_engine(self, engine: StackedAutoencoders, member: int = 0) -> None:
+        """Copy the UniTac-NV weights of one engine member into this module."""
+        params = engine.layer_parameters(UNITAC_GROUP, member)
+        with torch.no_grad():
+            for sensor in self.sensors:
+                encoder = self.encoders[sensor]
+                assert isinstance(encoder, nn.Sequential)
+                linears = [m for m in encoder if isinstance(m, nn.Linear)]
+                for i, linear in enumerate(linears):
+                    weight, bias = params[f"enc_{sensor}/{i}"]
+                    linear.weight.copy_(torch.from_numpy(weight.T))
+                    linear.bias.copy_(torch.from_numpy(bias))
+            for i, linear in enumerate(m for m in self.decoder if isinstance(m, nn.Linear)):
+                weight, bias = params[f"dec/{i}"]
+                linear.weight.copy_(torch.from_numpy(weight.T))
+                linear.bias.copy_(torch.from_numpy(bias))
+
+
+def train_plain(
+    model: UniTacModule,
+    inputs: Sequence[torch.Tensor],
+    epochs: int,
+    batch_size: int = 64,
+    lr: float = 5e-4,
+    seed: int = 0,
+) -> list[float]:
+    """The textbook loop: DataLoader over a TensorDataset, shuffled batches, ``torch.optim.Adam``. Mean train loss
+    per epoch."""
+    torch.manual_seed(seed)
+    loader = DataLoader(TensorDataset(*inputs), batch_size=batch_size, shuffle=True)
+    optimizer = torch.optim.Adam(model.parameters(), lr=lr)
+    history = []
+    model.train()
+    for _ in range(epochs):
+        total, batches = 0.0, 0
+        for batch in loader:
+            loss = model.loss(batch)
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+            total += float(loss.detach())
+            batches += 1
+        history.append(total / max(batches, 1))
+    return history

@@ -1,0 +1,433 @@
+"""Training UniTac-NV (and the per-sensor autoencoder baselines) on a paired dataset, with per-epoch test metrics,
+atomic checkpoints and resume.
+
+The loop has no per-sample Python: the training rows sit on the device as one tensor, each member gets its own
+shuffled index per epoch (one gather), and batches are slices of it; see :mod:`unitac_rig.learning.engine` for the
+step itself.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from unitac_rig.errors import DataError, ModelError, UsageError
+from unitac_rig.learning.data import Normaliser, PairedDataset, Split, split_by_direction
+from unitac_rig.learning.engine import UNITAC_GROUP, ModelShape, StackedAutoencoders, baseline_name, default_groups
+from unitac_rig.learning.metrics import latent_l1_per_pair, nmae_per_frame, ssim_per_frame
+from unitac_rig.learning.run import checkpoint_path, load_checkpoint, provenance, save_checkpoint
+
+log = logging.getLogger(__name__)
+
+TEST_SET_NAME = "test_set.npz"
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """What a run trains; the defaults are the paper's (Adam 5e-4, batch 64, 1000 epochs, dropout 0.007)."""
+
+    epochs: int = 1000
+    batch_size: int = 64
+    learning_rate: float = 5e-4
+    seeds: tuple[int, ...] = (0,)
+    split_seed: int = 0
+    test_fraction: float = 0.1
+    baselines: bool = True
+    shape: ModelShape = field(default_factory=ModelShape)
+    eval_every: int = 1  # epochs between test-set evaluations (the last epoch is always evaluated)
+    checkpoint_every: int = 50  # epochs between checkpoints (the last epoch is always saved)
+    unseen_objects: tuple[str, ...] | None = None  # None: the object catalogue decides (irregular prism)
+    tsne_contacts: int = 600  # test contacts whose latents are kept for the t-SNE figures
+
+    def __post_init__(self) -> None:
+        if self.epochs < 1 or self.batch_size < 1 or self.eval_every < 1 or self.checkpoint_every < 1:
+            raise UsageError("epochs, batch size, eval interval and checkpoint interval must be at least 1")
+        if not self.seeds:
+            raise UsageError("give at least one seed")
+        if len(set(self.seeds)) != len(self.seeds):
+            raise UsageError(f"seeds must differ, got {list(self.seeds)}")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["seeds"] = list(self.seeds)
+        d["shape"] = self.shape.to_dict()
+        d["unseen_objects"] = None if self.unseen_objects is None else list(self.unseen_objects)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> TrainConfig:
+        kwargs = dict(d)
+        kwargs["seeds"] = tuple(int(s) for s in kwargs["seeds"])
+        kwargs["shape"] = ModelShape.from_dict(kwargs["shape"])
+        if kwargs.get("unseen_objects") is not None:
+            kwargs["unseen_objects"] = tuple(kwargs["unseen_objects"])
+        return cls(**kwargs)
+
+
+def resolve_device(name: str) -> torch.device:
+    """``auto`` -> CUDA when available, else CPU; ``cuda`` without a GPU is a UsageError."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise UsageError("--device cuda asked for, but torch sees no CUDA device", hint="use --device cpu or auto")
+    if name not in ("cpu", "cuda"):
+        raise UsageError(f"unknown device {name!r}", hint="use auto, cpu or cuda")
+    return torch.device(name)
+
+
+def default_threads() -> int:
+    """CPU threads for training: one. The matrices are tiny (64 x 99), so a second OpenMP thread costs more in
+    synchronisation than it saves, and on a shared 2-core box it can be many times slower (benchmarks/)."""
+    return 1
+
+
+def direction_name(source: str, target: str) -> str:
+    return f"{source}_to_{target}"
+
+
+class Evaluator:
+    """Test-set metrics for every model and member: NMAE and SSIM per frame (in sensor units), latent distances."""
+
+    def __init__(
+        self, test: PairedDataset, normaliser: Normaliser, unseen_objects: Sequence[str], device: torch.device
+    ):
+        self.dataset = test
+        self.sensors = test.sensors
+        self.device = device
+        self.inputs = {s: torch.from_numpy(normaliser.normalise(s, test.values[s])).to(device) for s in self.sensors}
+        self.targets = {s: torch.from_numpy(test.values[s]).to(device, torch.float32) for s in self.sensors}
+        self.mean = {s: torch.tensor(normaliser.mean[s], dtype=torch.float32, device=device) for s in self.sensors}
+        self.std = {s: torch.tensor(normaliser.std[s], dtype=torch.float32, device=device) for s in self.sensors}
+        self.range = {
+            s: torch.tensor(normaliser.data_range[s], dtype=torch.float32, device=device) for s in self.sensors
+        }
+        unseen = np.isin(test.object_id, list(unseen_objects))
+        self.subsets = {
+            "all": torch.ones(len(test), dtype=torch.bool, device=device),
+            "seen": torch.from_numpy(~unseen).to(device),
+            "unseen": torch.from_numpy(unseen).to(device),
+        }
+
+    def to_frames(self, sensor: str, flat: torch.Tensor) -> torch.Tensor:
+        """Normalised (..., F) -> (..., n_taxels, 3) in sensor units."""
+        return flat.reshape(*flat.shape[:-1], -1, 3) * self.std[sensor] + self.mean[sensor]
+
+    @torch.no_grad()
+    def latents(self, engine: StackedAutoencoders) -> dict[str, torch.Tensor]:
+        """UniTac-NV latents of every test contact, per sensor: (members, M, latent)."""
+        return {s: engine.encode(UNITAC_GROUP, s, self.inputs[s]) for s in self.sensors}
+
+    @torch.no_grad()
+    def per_frame(self, engine: StackedAutoencoders) -> tuple[dict[str, dict[str, torch.Tensor]], torch.Tensor | None]:
+        """{column: {"nmae"|"ssim": (members, M)}} and the mean pairwise latent L1 (members, M) (None for 1 sensor).
+
+        Columns: ``<src>_to_<dst>`` for UniTac-NV, ``ae_<sensor>`` for baselines the run trained.
+        """
+        out: dict[str, dict[str, torch.Tensor]] = {}
+        latents = self.latents(engine)
+        for source in self.sensors:
+            decoded = engine.decode(UNITAC_GROUP, latents[source])
+            for target in self.sensors:
+                out[direction_name(source, target)] = self._scores(target, decoded[target])
+        names = {g.name for g in engine.groups}
+        for sensor in self.sensors:
+            if baseline_name(sensor) in names:
+                z = engine.encode(baseline_name(sensor), sensor, self.inputs[sensor])
+                out[baseline_name(sensor)] = self._scores(sensor, engine.decode(baseline_name(sensor), z)[sensor])
+        pairs = [(a, b) for i, a in enumerate(self.sensors) for b in self.sensors[i + 1 :]]
+        distance = None
+        if pairs:
+            distance = torch.stack([latent_l1_per_pair(latents[a], latents[b]) for a, b in pairs]).mean(dim=0)
+        return out, distance
+
+    def _scores(self, sensor: str, flat: torch.Tensor) -> dict[str, torch.Tensor]:
+        estimate = self.to_frames(sensor, flat)
+        target = self.targets[sensor]
+        return {
+            "nmae": nmae_per_frame(target, estimate, self.range[sensor]),
+            "ssim": ssim_per_frame(target, estimate, self.range[sensor]),
+        }
+
+    def summary(self, engine: StackedAutoencoders) -> dict[str, Any]:
+        """Means over the test subsets ("all", "seen" objects' held-out angles, "unseen" objects), per member."""
+        scores, distance = self.per_frame(engine)
+        summary: dict[str, Any] = {}
+        for subset, mask in self.subsets.items():
+            if not bool(mask.any()):
+                continue
+            entry: dict[str, Any] = {
+                column: {metric: values[:, mask].mean(dim=1).tolist() for metric, values in metrics.items()}
+                for column, metrics in scores.items()
+            }
+            if distance is not None:
+                entry["latent_l1"] = distance[:, mask].mean(dim=1).tolist()
+            summary[subset] = entry
+        return summary
+
+
+@dataclass
+class TrainOutcome:
+    run_dir: Path
+    engine: StackedAutoencoders
+    normaliser: Normaliser
+    split: Split
+    config: TrainConfig
+    history: list[dict[str, Any]]
+    train_seconds: float
+    epochs_done: int
+
+
+ProgressCallback = Callable[[dict[str, Any]], None]
+
+
+def _test_subset_path(run_dir: Path) -> Path:
+    return Path(run_dir) / TEST_SET_NAME
+
+
+def save_test_set(run_dir: Path, test: PairedDataset) -> None:
+    """The test rows (every sensor's frames and the keys), so evaluation, reports and geometry need no --data."""
+    arrays: dict[str, np.ndarray] = {
+        "sensors": np.array(test.sensors, dtype=str),
+        "object_id": test.object_id.astype(str),
+        "rotation_deg": test.rotation_deg,
+        "angle_deg": test.angle_deg,
+        "target_n": test.target_n,
+        "simulated": np.array(test.simulated),
+    }
+    for sensor in test.sensors:
+        arrays[f"values__{sensor}"] = test.values[sensor]
+        arrays[f"force_n__{sensor}"] = test.force_n[sensor]
+    tmp = Path(run_dir) / (TEST_SET_NAME + ".tmp.npz")
+    np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
+    os.replace(tmp, _test_subset_path(run_dir))
+
+
+def load_test_set(run_dir: Path) -> PairedDataset:
+    path = _test_subset_path(run_dir)
+    if not path.is_file():
+        raise UsageError(f"{run_dir} has no {TEST_SET_NAME}", hint="it is written by `unitac-rig train`; retrain")
+    with np.load(path, allow_pickle=False) as data:
+        sensors = tuple(str(s) for s in data["sensors"])
+        return PairedDataset(
+            sensors=sensors,
+            object_id=data["object_id"].astype(str),
+            rotation_deg=data["rotation_deg"],
+            angle_deg=data["angle_deg"],
+            target_n=data["target_n"],
+            values={s: data[f"values__{s}"] for s in sensors},
+            force_n={s: data[f"force_n__{s}"] for s in sensors},
+            simulated=bool(data["simulated"]),
+        )
+
+
+def train(
+    dataset: PairedDataset,
+    run_dir: Path,
+    config: TrainConfig | None = None,
+    *,
+    device: str = "auto",
+    threads: int | None = None,
+    resume: bool = False,
+    epochs: int | None = None,
+    progress: ProgressCallback | None = None,
+) -> TrainOutcome:
+    """Train (or resume) a run in ``run_dir``. ``epochs`` on resume extends or keeps the stored budget."""
+    run_dir = Path(run_dir)
+    torch_device = resolve_device(device)
+    previous_threads = torch.get_num_threads()
+    if torch_device.type == "cpu":
+        torch.set_num_threads(threads or default_threads())
+    try:
+        return _train(dataset, run_dir, config, torch_device, resume, epochs, progress)
+    finally:
+        torch.set_num_threads(previous_threads)
+
+
+def _train(
+    dataset: PairedDataset,
+    run_dir: Path,
+    config: TrainConfig | None,
+    device: torch.device,
+    resume: bool,
+    epochs: int | None,
+    progress: ProgressCallback | None,
+) -> TrainOutcome:
+    dataset_hash = dataset.content_hash()
+    payload: dict[str, Any] | None = None
+    if resume:
+        payload = load_checkpoint(run_dir)
+        if payload["dataset_hash"] != dataset_hash:
+            raise DataError(
+                f"the data differs from the data {run_dir} was trained on (content hash changed)",
+                hint="resume with the same --data, or start a new run with another --out",
+            )
+        config = TrainConfig.from_dict(payload["config"])
+        if epochs is not None:
+            config = replace(config, epochs=max(epochs, int(payload["epoch"])))
+    else:
+        if checkpoint_path(run_dir).exists():
+            raise UsageError(
+                f"{run_dir} already holds a run", hint="pass --resume to continue it, or choose another --out"
+            )
+        config = config or TrainConfig()
+        if epochs is not None:
+            config = replace(config, epochs=epochs)
+
+    if payload is not None:
+        test_mask = np.asarray(payload["test_mask"], dtype=bool)
+        split_info = payload["split"]
+        split = Split(
+            test_mask,
+            int(split_info["seed"]),
+            float(split_info["test_fraction"]),
+            tuple(split_info["unseen_objects"]),
+            {k: [tuple(d) for d in v] for k, v in split_info["test_directions"].items()},
+        )
+        normaliser = Normaliser.from_dict(payload["normaliser"])
+        engine = StackedAutoencoders.from_state(payload["engine"], device)
+    else:
+        split = split_by_direction(dataset, config.split_seed, config.test_fraction, config.unseen_objects)
+        normaliser = Normaliser.fit(dataset, split.train_mask)
+        feature_dims = {s: dataset.n_taxels(s) * 3 for s in dataset.sensors}
+        engine = StackedAutoencoders(
+            feature_dims, default_groups(dataset.sensors, config.baselines), config.seeds, config.shape, device
+        )
+
+    train_rows = dataset.subset(split.train_mask)
+    test_rows = dataset.subset(split.test_mask)
+    if len(test_rows) == 0:
+        raise DataError("the split left no test rows", hint="use more approach angles per object")
+    train_x = torch.from_numpy(
+        np.concatenate([normaliser.normalise(s, train_rows.values[s]) for s in dataset.sensors], axis=1)
+    ).to(device)
+    evaluator = Evaluator(test_rows, normaliser, split.unseen_objects, device)
+
+    optimizer = engine.make_optimizer(config.learning_rate)
+    shuffle_rngs = [np.random.default_rng([seed, 1]) for seed in engine.seeds]
+    history: list[dict[str, Any]] = []
+    start_epoch, seconds = 0, 0.0
+    tsne_rows = _tsne_rows(len(test_rows), config.tsne_contacts, config.split_seed)
+    first_latents: dict[str, np.ndarray] | None = None
+    if payload is not None:
+        try:
+            optimizer.load_state_dict(payload["optimizer"])
+        except (ValueError, KeyError, RuntimeError) as exc:
+            raise ModelError(f"optimizer state in {run_dir} does not fit the model", hint="retrain") from exc
+        for rng, state in zip(shuffle_rngs, payload["shuffle_rng"], strict=True):
+            rng.bit_generator.state = state
+        history = list(payload["history"])
+        start_epoch = int(payload["epoch"])
+        seconds = float(payload["train_seconds"])
+        tsne_rows = np.asarray(payload["tsne_rows"])
+        first_latents = payload.get("latents_first_epoch")
+    else:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        save_test_set(run_dir, test_rows)
+
+    def checkpoint(done: int) -> None:
+        save_checkpoint(
+            run_dir,
+            {
+                "config": config.to_dict(),
+                "engine": engine.state(),
+                "optimizer": optimizer.state_dict(),
+                "shuffle_rng": [rng.bit_generator.state for rng in shuffle_rngs],
+                "normaliser": normaliser.to_dict(),
+                "split": split.to_dict(),
+                "test_mask": split.test_mask,
+                "dataset_hash": dataset_hash,
+                "dataset_summary": {
+                    "sensors": list(dataset.sensors),
+                    "objects": list(dataset.objects),
+                    "rows": len(dataset),
+                    "train_rows": len(train_rows),
+                    "test_rows": len(test_rows),
+                    "simulated": dataset.simulated,
+                },
+                "epoch": done,
+                "history": history,
+                "train_seconds": seconds,
+                "tsne_rows": tsne_rows,
+                "latents_first_epoch": first_latents,
+                "provenance": provenance(),
+            },
+        )
+
+    n_train = len(train_rows)
+    batch = config.batch_size
+    with torch.no_grad():
+        for epoch in range(start_epoch, config.epochs):
+            began = time.perf_counter()
+            order = torch.from_numpy(np.stack([rng.permutation(n_train) for rng in shuffle_rngs])).to(device)
+            shuffled = train_x[order]  # (members, n_train, features)
+            loss_sum = torch.zeros(len(engine.groups), engine.members, device=device)
+            for start in range(0, n_train, batch):
+                chunk = shuffled[:, start : start + batch]
+                loss_sum += engine.train_step(chunk, optimizer) * chunk.shape[1]
+            train_loss = (loss_sum / n_train).cpu()
+            seconds += time.perf_counter() - began
+            record: dict[str, Any] = {
+                "epoch": epoch + 1,
+                "seconds": seconds,
+                "train_loss": {g.name: train_loss[i].tolist() for i, g in enumerate(engine.groups)},
+            }
+            last = epoch + 1 == config.epochs
+            if (epoch + 1) % config.eval_every == 0 or last or epoch == 0:
+                record["test"] = evaluator.summary(engine)
+            if epoch == 0 and first_latents is None:
+                latents = evaluator.latents(engine)
+                first_latents = {s: z[0, tsne_rows].cpu().numpy() for s, z in latents.items()}
+            history.append(record)
+            if progress is not None:
+                progress(record)
+            if (epoch + 1) % config.checkpoint_every == 0 or last:
+                checkpoint(epoch + 1)
+    return TrainOutcome(run_dir, engine, normaliser, split, config, history, seconds, config.epochs)
+
+
+def _tsne_rows(n_test: int, wanted: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng([seed, 3])
+    count = min(n_test, wanted)
+    return np.sort(rng.choice(n_test, size=count, replace=False))
+
+
+@dataclass
+class LoadedRun:
+    """A finished (or paused) run read back from disk."""
+
+    run_dir: Path
+    payload: dict[str, Any]
+    config: TrainConfig
+    engine: StackedAutoencoders
+    normaliser: Normaliser
+
+    @property
+    def sensors(self) -> tuple[str, ...]:
+        return self.engine.sensors
+
+    @property
+    def history(self) -> list[dict[str, Any]]:
+        return list(self.payload["history"])
+
+    @property
+    def unseen_objects(self) -> tuple[str, ...]:
+        return tuple(self.payload["split"]["unseen_objects"])
+
+
+def load_run(run_dir: Path, device: str = "cpu") -> LoadedRun:
+    payload = load_checkpoint(run_dir)
+    try:
+        config = TrainConfig.from_dict(payload["config"])
+        engine = StackedAutoencoders.from_state(payload["engine"], resolve_device(device))
+        normaliser = Normaliser.from_dict(payload["normaliser"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelError(f"checkpoint in {run_dir} is incomplete ({exc})", hint="retrain") from exc
+    return LoadedRun(Path(run_dir), payload, config, engine, normaliser)

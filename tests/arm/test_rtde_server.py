@@ -87,54 +87,58 @@ def test_real_receive_client_reads_the_state_back_exactly(controller: tuple[SimU
     assert wait_until(lambda: server.client_count == 0)
 
 
-def recv_package(sock: socket.socket, parser: rtde.RtdePackageParser) -> rtde.RtdePackage:
-    while True:
-        packages = parser.feed(sock.recv(4096))
-        if packages:
-            assert len(packages) == 1
-            return packages[0]
+class PackageReader:
+    """Whole packages from a socket, in order, however the bytes were split across recv calls."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.sock = sock
+        self.parser = rtde.RtdePackageParser()
+        self.queue: list[rtde.RtdePackage] = []
+
+    def next(self) -> rtde.RtdePackage:
+        while not self.queue:
+            data = self.sock.recv(4096)
+            assert data, "server closed the connection"
+            self.queue += self.parser.feed(data)
+        return self.queue.pop(0)
 
 
-def handshake(server: SimURController, names: list[str], frequency_hz: float) -> tuple[socket.socket, rtde.RecipeReply]:
+def handshake(server: SimURController, names: list[str], frequency_hz: float) -> tuple[PackageReader, rtde.RecipeReply]:
     sock = socket.create_connection(server.address, timeout=2.0)
-    parser = rtde.RtdePackageParser()
+    reader = PackageReader(sock)
     sock.sendall(rtde.encode_request_protocol_version())
-    assert rtde.decode_protocol_version_reply(recv_package(sock, parser).payload)
+    assert rtde.decode_protocol_version_reply(reader.next().payload)
     sock.sendall(rtde.encode_get_controller_version())
-    assert rtde.decode_controller_version_reply(recv_package(sock, parser).payload).major == 5
+    assert rtde.decode_controller_version_reply(reader.next().payload).major == 5
     sock.sendall(rtde.encode_setup_outputs(frequency_hz, names, trailing_comma=True))
-    return sock, rtde.decode_recipe_reply(recv_package(sock, parser).payload)
+    return reader, rtde.decode_recipe_reply(reader.next().payload)
 
 
 def test_unknown_output_names_are_not_found_and_inputs_in_use_are_flagged() -> None:
     with start_on_free_loopback(first=20) as plain:
-        sock, reply = handshake(plain, ["timestamp", "warp_drive"], 500.0)
-        with sock:
+        reader, reply = handshake(plain, ["timestamp", "warp_drive"], 500.0)
+        with reader.sock:
             assert reply.types == ("DOUBLE", rtde.NOT_FOUND)
             assert reply.recipe_id == 0
-    host = plain.host
-    with SimURController(host, registers_in_use=frozenset({"input_int_register_0"})) as server:
-        sock, _ = handshake(server, ["timestamp"], 500.0)
-        with sock:
-            sock.sendall(rtde.encode_setup_inputs(["input_int_register_0", "input_double_register_1"]))
-            reply = rtde.decode_recipe_reply(recv_package(sock, rtde.RtdePackageParser()).payload)
-            assert reply.types == (rtde.IN_USE, "DOUBLE")
+    with SimURController(plain.host, registers_in_use=frozenset({"input_int_register_0"})) as server:
+        reader, _ = handshake(server, ["timestamp"], 500.0)
+        with reader.sock:
+            reader.sock.sendall(rtde.encode_setup_inputs(["input_int_register_0", "input_double_register_1"]))
+            assert rtde.decode_recipe_reply(reader.next().payload).types == (rtde.IN_USE, "DOUBLE")
 
 
 def test_streams_after_start_and_stops_on_pause() -> None:
     with start_on_free_loopback(first=20) as server:
-        sock, reply = handshake(server, ["timestamp", "robot_mode"], 125.0)
-        with sock:
+        reader, reply = handshake(server, ["timestamp", "robot_mode"], 125.0)
+        with reader.sock:
             assert reply.ok and reply.types == ("DOUBLE", "INT32")
-            parser = rtde.RtdePackageParser()
-            sock.sendall(rtde.encode_start())
-            assert rtde.decode_accepted_reply(recv_package(sock, parser).payload)
-            data = recv_package(sock, parser)
-            recipe_id, values = rtde.decode_data_package(data.payload, reply.types)
+            reader.sock.sendall(rtde.encode_start())
+            assert rtde.decode_accepted_reply(reader.next().payload)
+            recipe_id, values = rtde.decode_data_package(reader.next().payload, reply.types)
             assert recipe_id == reply.recipe_id and values[1] == 7
-            sock.sendall(rtde.encode_pause())
+            reader.sock.sendall(rtde.encode_pause())
             # data packages already in flight may precede the pause reply
-            while (package := recv_package(sock, parser)).type == rtde.PackageType.DATA_PACKAGE:
+            while (package := reader.next()).type == rtde.PackageType.DATA_PACKAGE:
                 pass
             assert package.type == rtde.PackageType.CONTROL_PACKAGE_PAUSE
             sent = server.sent_packages

@@ -8,37 +8,50 @@ TCP force, TCP speed, robot mode, safety mode, ``safety_status_bits`` (bit 2 pro
 stop) and the controller timestamp. Variables the sim has no model for (joint values, currents, registers...) are
 sent as zeros so a client may still subscribe to them; names it does not know get ``NOT_FOUND``.
 
+The protocol runs in a child process (``python -m unitac_rig.sim.rtde_server``); a thread named ``sim-rtde`` in the
+caller's process polls the state provider and hands each snapshot over through a small shared memory block (a
+sequence lock, so a writer that stalls mid-update never blocks the server). Why not a thread:
+
 Gotchas found by running ``rtde_receive.RTDEReceiveInterface`` (ur-rtde 1.6.5) against this server:
 
-* The client has no port argument: it always connects to 30004. Run several servers side by side on different
-  loopback addresses (Linux routes all of 127.0.0.0/8 to ``lo``; macOS only has 127.0.0.1 unless aliased).
-* Pass an explicit ``variables`` list. With an empty list the client subscribes to its large default list, whose
-  content depends on the controller version it was told (e.g. ``ft_raw_wrench`` from 5.9, payload fields), and
-  every name must be answered; an explicit list keeps the contract small and version independent.
+* **Its Python constructor holds the GIL** until the handshake is over and the first data package has arrived, so
+  a server thread in the same interpreter never gets to answer: the constructor hangs. Hence the child process.
+  (``multiprocessing`` with "spawn" re-imports the caller's ``__main__`` and breaks scripts without a
+  ``__main__`` guard; "fork" is unsafe with threads running. A plain subprocess has neither problem.)
+* The client has no port argument: it always dials 30004. Run several servers side by side on different loopback
+  addresses (Linux routes all of 127.0.0.0/8 to ``lo``; macOS only has 127.0.0.1 unless aliased).
+* Pass an explicit ``variables`` list. An empty list subscribes to ur_rtde's long default list (whose content
+  depends on the controller version, per its source); this server answers that too, but an explicit list keeps the
+  contract small.
 * The client parses ``U`` packages with its own type table, not with the types named in the ``O`` reply; it only
   looks for ``NOT_FOUND``/``IN_USE`` there and fails the constructor if it finds one. So the server's type table
   must agree with ur_rtde's for every variable it serves.
-* A getter for a variable that was not in the subscribed list raises ``RuntimeError`` in the client;
-  ``isProtectiveStopped``/``isEmergencyStopped`` need ``safety_status_bits`` in the list.
-* The constructor blocks until the first data package arrives, so the server must start streaming on ``S``.
-* On connection failure the C++ library prints ``connect: Connection refused`` to stderr itself, then raises
-  ``RuntimeError``.
+* A getter for a variable that was not subscribed raises ``RuntimeError("unable to get state data for specified
+  key: ...")``; ``isProtectiveStopped``/``isEmergencyStopped`` need ``safety_status_bits``.
+* ``disconnect()`` takes about 0.5 s; on a failed connection the C++ library prints ``connect: Connection refused``
+  to stderr itself before raising ``RuntimeError``.
 """
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import logging
-import multiprocessing
+import mmap
+import os
+import select
 import selectors
 import socket
+import struct
+import subprocess
+import sys
+import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from multiprocessing.connection import Connection
 from types import TracebackType
-from typing import Any
+from typing import NamedTuple
 
 import numpy as np
 
@@ -52,7 +65,6 @@ logger = logging.getLogger(__name__)
 ROBOT_MODE_RUNNING = 7  # RTDE robot_mode: 7 = RUNNING (powered, brakes released)
 SAFETY_MODE_NORMAL = 1
 SAFETY_MODE_PROTECTIVE_STOP = 3
-SAFETY_MODE_ROBOT_EMERGENCY_STOP = 7
 ROBOT_STATUS_POWER_ON = 1 << 0  # robot_status_bits bit 0
 RUNTIME_STATE_STOPPED = 1  # no program running (a receive-only client never starts one)
 
@@ -61,19 +73,49 @@ DEFAULT_STILL_POSE = np.array([-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214])
 
 _SEND_TIMEOUT_S = 1.0  # a client that stops reading for this long is dropped
 _MAX_IDLE_WAIT_S = 0.05  # selector timeout when nothing is due
-_START_TIMEOUT_S = 10.0  # the server process imports numpy; allow for a slow CI box
+_START_TIMEOUT_S = 10.0  # a fresh interpreter that imports numpy; allow for a slow CI box
 
 
-def safety_status_bits(state: ArmState) -> int:
-    """The ``safety_status_bits`` word for a state: bit 0 normal, bit 2 protective stop, bit 7 emergency stop."""
+class Snapshot(NamedTuple):
+    """What the server streams: one arm state in plain numbers (no numpy, it crosses a process boundary)."""
+
+    controller_t_s: float
+    tcp_pose: tuple[float, ...]  # m, rad
+    tcp_force: tuple[float, ...]  # N, N*m
+    tcp_speed: tuple[float, ...]  # m/s, rad/s
+    robot_mode: int
+    safety_mode: int
+    protective_stop: bool
+    emergency_stop: bool
+
+    @classmethod
+    def from_state(cls, state: ArmState) -> Snapshot:
+        return cls(
+            float(state.controller_t_s),
+            _vector6(state.tcp_pose),
+            _vector6(state.tcp_force),
+            _vector6(state.tcp_speed),
+            int(state.robot_mode),
+            int(state.safety_mode),
+            bool(state.protective_stop),
+            bool(state.emergency_stop),
+        )
+
+
+def _vector6(values: np.ndarray | None) -> tuple[float, ...]:
+    if values is None:
+        return (0.0,) * 6
+    return tuple(float(v) for v in np.asarray(values, dtype=np.float64).reshape(6))
+
+
+def safety_status_bits(state: Snapshot) -> int:
+    """The ``safety_status_bits`` word: bit 0 normal mode, bit 2 protective stop, bit 7 emergency stop."""
     bits = 0
     if state.protective_stop:
         bits |= rtde.SAFETY_BIT_PROTECTIVE_STOP
     if state.emergency_stop:
         bits |= rtde.SAFETY_BIT_EMERGENCY_STOP
-    if not bits:
-        bits |= rtde.SAFETY_BIT_NORMAL_MODE
-    return bits
+    return bits or rtde.SAFETY_BIT_NORMAL_MODE
 
 
 def _zero_value(field_type: str) -> rtde.FieldValue:
@@ -90,28 +132,22 @@ def _zero_value(field_type: str) -> rtde.FieldValue:
     return 0
 
 
-def _vector6(values: np.ndarray | None) -> tuple[float, ...]:
-    if values is None:
-        return (0.0,) * 6
-    return tuple(float(v) for v in np.asarray(values, dtype=float).reshape(6))
-
-
-def state_values(state: ArmState, names: tuple[str, ...], types: tuple[str, ...]) -> list[rtde.FieldValue]:
+def state_values(state: Snapshot, names: Sequence[str], types: Sequence[str]) -> list[rtde.FieldValue]:
     """Values of an output recipe for one state (zeros for variables the simulation does not model)."""
     values: list[rtde.FieldValue] = []
     for name, field_type in zip(names, types, strict=True):
         if name == "timestamp":
-            values.append(float(state.controller_t_s))
+            values.append(state.controller_t_s)
         elif name in ("actual_TCP_pose", "target_TCP_pose"):
-            values.append(_vector6(state.tcp_pose))
+            values.append(state.tcp_pose)
         elif name in ("actual_TCP_force", "ft_raw_wrench"):
-            values.append(_vector6(state.tcp_force))
+            values.append(state.tcp_force)
         elif name in ("actual_TCP_speed", "target_TCP_speed"):
-            values.append(_vector6(state.tcp_speed))
+            values.append(state.tcp_speed)
         elif name == "robot_mode":
-            values.append(int(state.robot_mode))
+            values.append(state.robot_mode)
         elif name in ("safety_mode", "safety_status"):
-            values.append(int(state.safety_mode))
+            values.append(state.safety_mode)
         elif name == "safety_status_bits":
             values.append(safety_status_bits(state))
         elif name == "robot_status_bits":
@@ -125,46 +161,72 @@ def state_values(state: ArmState, names: tuple[str, ...], types: tuple[str, ...]
     return values
 
 
-# ---- state handed from the simulation (parent process) to the server process ----------------------------------
+# ---- the shared block between the caller (writer) and the server process (reader) -----------------------------
 
-_SLOT_SEQ, _SLOT_T = 0, 1
-_SLOT_POSE, _SLOT_FORCE, _SLOT_SPEED = slice(2, 8), slice(8, 14), slice(14, 20)
-_SLOT_ROBOT_MODE, _SLOT_SAFETY_MODE, _SLOT_PROTECTIVE, _SLOT_EMERGENCY = 20, 21, 22, 23
-_STATE_SLOTS = 24
-_STAT_CLIENTS, _STAT_SENT = 0, 1
-
-
-def _write_state(shared: Any, state: ArmState) -> None:
-    """Seqlock write: the sequence slot is odd while the snapshot is being written."""
-    shared[_SLOT_SEQ] += 1
-    shared[_SLOT_T] = float(state.controller_t_s)
-    shared[_SLOT_POSE] = _vector6(state.tcp_pose)
-    shared[_SLOT_FORCE] = _vector6(state.tcp_force)
-    shared[_SLOT_SPEED] = _vector6(state.tcp_speed)
-    shared[_SLOT_ROBOT_MODE] = float(state.robot_mode)
-    shared[_SLOT_SAFETY_MODE] = float(state.safety_mode)
-    shared[_SLOT_PROTECTIVE] = 1.0 if state.protective_stop else 0.0
-    shared[_SLOT_EMERGENCY] = 1.0 if state.emergency_stop else 0.0
-    shared[_SLOT_SEQ] += 1
+# uint64 sequence (odd while a write is in progress), then the snapshot, then two counters the server writes.
+_SEQ = struct.Struct("<Q")
+_STATE = struct.Struct("<d6d6d6diiBB")
+_STATS = struct.Struct("<QQ")  # connected clients, data packages sent
+_STATE_AT = _SEQ.size
+_STATS_AT = _STATE_AT + _STATE.size
+_SHARED_SIZE = _STATS_AT + _STATS.size
 
 
-def _read_state(shared: Any) -> ArmState | None:
-    """Seqlock read; None while a write is in progress (the caller keeps its last snapshot)."""
-    before = shared[_SLOT_SEQ]
-    values = shared[:_STATE_SLOTS]
-    if before % 2 or shared[_SLOT_SEQ] != before:
-        return None
-    return ArmState(
-        host_t_ns=time.monotonic_ns(),
-        controller_t_s=values[_SLOT_T],
-        tcp_pose=np.array(values[_SLOT_POSE]),
-        tcp_force=np.array(values[_SLOT_FORCE]),
-        robot_mode=int(values[_SLOT_ROBOT_MODE]),
-        safety_mode=int(values[_SLOT_SAFETY_MODE]),
-        protective_stop=values[_SLOT_PROTECTIVE] != 0.0,
-        emergency_stop=values[_SLOT_EMERGENCY] != 0.0,
-        tcp_speed=np.array(values[_SLOT_SPEED]),
-    )
+class _SharedState:
+    """A sequence-locked snapshot in a memory-mapped temporary file that both processes map."""
+
+    def __init__(self, fd: int) -> None:
+        self._map = mmap.mmap(fd, _SHARED_SIZE)
+
+    def close(self) -> None:
+        self._map.close()
+
+    def write_state(self, state: Snapshot) -> None:
+        (seq,) = _SEQ.unpack_from(self._map, 0)
+        _SEQ.pack_into(self._map, 0, seq + 1)
+        _STATE.pack_into(
+            self._map,
+            _STATE_AT,
+            state.controller_t_s,
+            *state.tcp_pose,
+            *state.tcp_force,
+            *state.tcp_speed,
+            state.robot_mode,
+            state.safety_mode,
+            state.protective_stop,
+            state.emergency_stop,
+        )
+        _SEQ.pack_into(self._map, 0, seq + 2)
+
+    def read_state(self) -> Snapshot | None:
+        """The snapshot, or None while a write is in progress (the caller keeps its previous one)."""
+        (before,) = _SEQ.unpack_from(self._map, 0)
+        fields = _STATE.unpack_from(self._map, _STATE_AT)
+        (after,) = _SEQ.unpack_from(self._map, 0)
+        if before % 2 or before != after or before == 0:
+            return None
+        return Snapshot(
+            fields[0],
+            fields[1:7],
+            fields[7:13],
+            fields[13:19],
+            fields[19],
+            fields[20],
+            bool(fields[21]),
+            bool(fields[22]),
+        )
+
+    def set_client_count(self, count: int) -> None:
+        _, sent = _STATS.unpack_from(self._map, _STATS_AT)
+        _STATS.pack_into(self._map, _STATS_AT, count, sent)
+
+    def count_sent(self) -> None:
+        clients, sent = _STATS.unpack_from(self._map, _STATS_AT)
+        _STATS.pack_into(self._map, _STATS_AT, clients, sent + 1)
+
+    def stats(self) -> tuple[int, int]:
+        clients, sent = _STATS.unpack_from(self._map, _STATS_AT)
+        return int(clients), int(sent)
 
 
 # ---- the server process ---------------------------------------------------------------------------------------
@@ -197,27 +259,29 @@ class _ServerSettings:
 class _RtdeServerLoop:
     """The RTDE protocol server; runs in its own process (see :class:`SimURController` for why)."""
 
-    def __init__(self, settings: _ServerSettings, listener: socket.socket, shared: Any, stats: Any) -> None:
+    def __init__(self, settings: _ServerSettings, listener: socket.socket, shared: _SharedState) -> None:
         self.settings = settings
         self._listener = listener
         self._shared = shared
-        self._stats = stats
         self._clients: list[_Client] = []
         self._selector = selectors.DefaultSelector()
         self._selector.register(listener, selectors.EVENT_READ, None)
-        self._last_state = _read_state(shared)
+        self._last_state = shared.read_state() or Snapshot(
+            0.0, tuple(DEFAULT_STILL_POSE), (0.0,) * 6, (0.0,) * 6, ROBOT_MODE_RUNNING, SAFETY_MODE_NORMAL, False, False
+        )
 
-    def run(self, control: Connection) -> None:
-        """Serve until the parent says stop or goes away (its end of ``control`` closes)."""
-        self._selector.register(control, selectors.EVENT_READ, None)
+    def run(self, control_fd: int) -> None:
+        """Serve until ``control_fd`` (the parent's pipe) closes: the parent asked to stop, or it died."""
+        self._selector.register(control_fd, selectors.EVENT_READ, None)
         try:
             while True:
                 self._send_due_packages()
                 for key, _ in self._selector.select(self._wait_time_s()):
                     if key.fileobj is self._listener:
                         self._accept()
-                    elif key.fileobj is control:
-                        return  # "stop" or EOF: either way we are done
+                    elif key.fileobj == control_fd:
+                        if not os.read(control_fd, 64):
+                            return
                     else:
                         self._read(key.data)
         finally:
@@ -240,7 +304,7 @@ class _RtdeServerLoop:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         client = _Client(sock=sock, peer=f"{peer[0]}:{peer[1]}")
         self._clients.append(client)
-        self._stats[_STAT_CLIENTS] = len(self._clients)
+        self._shared.set_client_count(len(self._clients))
         self._selector.register(sock, selectors.EVENT_READ, client)
         logger.debug("RTDE client %s connected", client.peer)
 
@@ -248,7 +312,7 @@ class _RtdeServerLoop:
         logger.debug("RTDE client %s dropped: %s", client.peer, why)
         if client in self._clients:
             self._clients.remove(client)
-        self._stats[_STAT_CLIENTS] = len(self._clients)
+        self._shared.set_client_count(len(self._clients))
         with contextlib.suppress(KeyError, ValueError):
             self._selector.unregister(client.sock)
         client.sock.close()
@@ -341,9 +405,8 @@ class _RtdeServerLoop:
         due = [c for c in self._clients if c.streaming and c.output_types and c.next_due_s <= now_s]
         if not due:
             return
-        state = _read_state(self._shared) or self._last_state
+        state = self._shared.read_state() or self._last_state
         self._last_state = state
-        assert state is not None  # the parent writes a first snapshot before starting this process
         for client in due:
             values = state_values(state, client.output_names, client.output_types)
             package = rtde.encode_data_package(client.output_recipe_id, client.output_types, values)
@@ -352,14 +415,26 @@ class _RtdeServerLoop:
             except OSError as exc:
                 self._drop(client, f"send failed: {exc}")
                 continue
-            self._stats[_STAT_SENT] += 1
+            self._shared.count_sent()
             client.next_due_s += client.period_s
             if client.next_due_s < now_s - client.period_s:  # fell behind: skip, do not burst
                 client.next_due_s = now_s + client.period_s
 
 
-def _serve_process(settings: _ServerSettings, shared: Any, stats: Any, control: Connection) -> None:
-    """Entry point of the server process: bind, report ("ready", port) or ("error", text), then serve."""
+def _server_main(argv: Sequence[str]) -> int:
+    """Entry point of the server process: bind, print ``ready PORT`` (or ``error TEXT``), serve until stdin closes."""
+    parser = argparse.ArgumentParser(prog="python -m unitac_rig.sim.rtde_server")
+    parser.add_argument("--host", required=True)
+    parser.add_argument("--port", type=int, required=True)
+    parser.add_argument("--max-frequency-hz", type=float, required=True)
+    parser.add_argument("--controller-version", required=True, help="major.minor.bugfix.build")
+    parser.add_argument("--registers-in-use", default="", help="comma-joined input names to answer IN_USE")
+    parser.add_argument("--shared-fd", type=int, required=True)
+    args = parser.parse_args(argv)
+    version = ControllerVersion(*(int(part) for part in args.controller_version.split(".")))
+    settings = _ServerSettings(
+        args.host, args.port, args.max_frequency_hz, version, frozenset(filter(None, args.registers_in_use.split(",")))
+    )
     listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     try:
         listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -367,16 +442,17 @@ def _serve_process(settings: _ServerSettings, shared: Any, stats: Any, control: 
         listener.listen(4)
     except OSError as exc:
         listener.close()
-        control.send(("error", exc.strerror or str(exc)))
-        control.close()
-        return
+        print(f"error {exc.strerror or exc}", flush=True)  # noqa: T201 - the parent reads this line
+        return 1
     listener.setblocking(False)
-    control.send(("ready", listener.getsockname()[1]))
+    shared = _SharedState(args.shared_fd)
+    print(f"ready {listener.getsockname()[1]}", flush=True)  # noqa: T201 - the parent reads this line
     try:
-        _RtdeServerLoop(settings, listener, shared, stats).run(control)
+        _RtdeServerLoop(settings, listener, shared).run(sys.stdin.fileno())
     finally:
         listener.close()
-        control.close()
+        shared.close()
+    return 0
 
 
 # ---- the object users hold ------------------------------------------------------------------------------------
@@ -385,15 +461,12 @@ def _serve_process(settings: _ServerSettings, shared: Any, stats: Any, control: 
 class SimURController:
     """RTDE server of a simulated UR controller on ``host``:``port`` (30004 by default, what ur_rtde dials).
 
-    ``state_provider`` is polled ``frequency_hz`` times a second by a thread named ``sim-rtde`` and must be
-    thread safe (return an immutable snapshot, e.g. ``SimArm.latest_state``); without one the arm stands still at
+    ``state_provider`` is polled ``frequency_hz`` times a second by a thread named ``sim-rtde`` and must be thread
+    safe (return an immutable snapshot, e.g. ``SimArm.latest_state``); without one the arm stands still at
     :data:`DEFAULT_STILL_POSE` with zero force and the timestamp counts seconds since the server started.
     ``frequency_hz`` is also the highest stream rate (500 Hz on e-Series); a client asking for more gets this rate.
     Names in ``registers_in_use`` are answered ``IN_USE`` in input recipes (like a running fieldbus adapter).
-
-    The protocol itself is served by a child process, because ur_rtde's Python constructor holds the GIL while it
-    waits for the handshake replies: a server thread in the same interpreter could never answer (deadlock). The
-    state crosses to the child through shared memory with a sequence lock, so a stalled writer never blocks it.
+    Raises DeviceError if the address is taken. POSIX only (the shared block is passed as a file descriptor).
     """
 
     def __init__(
@@ -414,38 +487,43 @@ class SimURController:
         self._started_at_s = time.monotonic()
         self._closed = False
         self._stop = threading.Event()
-        context = multiprocessing.get_context("spawn")
-        self._shared = context.RawArray("d", _STATE_SLOTS)
-        self._stats = context.RawArray("d", 2)
-        _write_state(self._shared, self._state_provider())
-        self._control, child_end = context.Pipe()
-        settings = _ServerSettings(host, port, frequency_hz, controller_version, frozenset(registers_in_use))
-        self._process = context.Process(
-            target=_serve_process,
-            args=(settings, self._shared, self._stats, child_end),
-            name=f"sim-rtde-{host}",
-            daemon=True,
+        self._file = tempfile.TemporaryFile()  # noqa: SIM115 - lives as long as the server; closed in close()
+        self._file.truncate(_SHARED_SIZE)
+        self._shared = _SharedState(self._file.fileno())
+        self._shared.write_state(Snapshot.from_state(self._state_provider()))
+        v = controller_version
+        command = [
+            sys.executable, "-m", "unitac_rig.sim.rtde_server",
+            "--host", host, "--port", str(port), "--max-frequency-hz", repr(frequency_hz),
+            "--controller-version", f"{v.major}.{v.minor}.{v.bugfix}.{v.build}",
+            "--registers-in-use", ",".join(sorted(registers_in_use)),
+            "--shared-fd", str(self._file.fileno()),
+        ]  # fmt: skip
+        self._process = subprocess.Popen(
+            command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, pass_fds=(self._file.fileno(),)
         )
-        self._process.start()
-        child_end.close()
-        self.port = self._await_ready(port)
-        _write_state(self._shared, self._state_provider())  # fresh: start-up took a while
+        try:
+            self.port = self._await_ready(port)
+        except BaseException:
+            self._shut_down_process()
+            raise
+        self._shared.write_state(Snapshot.from_state(self._state_provider()))  # fresh: start-up took a while
         self._pump = threading.Thread(target=self._pump_states, name="sim-rtde", daemon=True)
         self._pump.start()
-        logger.debug("simulated UR controller listening on %s:%d", host, self.port)
+        logger.debug("simulated UR controller listening on %s:%d (pid %d)", host, self.port, self._process.pid)
 
     def _await_ready(self, port: int) -> int:
-        reply: tuple[str, Any] = ("error", "the server process did not start within 10 s")
-        try:
-            if self._control.poll(_START_TIMEOUT_S):
-                reply = self._control.recv()
-        except EOFError:
-            reply = ("error", "the server process exited during start-up")
-        if reply[0] == "ready":
-            return int(reply[1])
-        self._shut_down_process()
+        assert self._process.stdout is not None
+        line = b""
+        ready, _, _ = select.select([self._process.stdout], [], [], _START_TIMEOUT_S)
+        if ready:
+            line = self._process.stdout.readline()
+        word, _, rest = line.decode("utf-8", "replace").strip().partition(" ")
+        if word == "ready":
+            return int(rest)
+        why = rest if word == "error" else f"the server process did not start within {_START_TIMEOUT_S} s"
         raise DeviceError(
-            f"simulated UR controller cannot listen on {self.host}:{port}: {reply[1]}",
+            f"simulated UR controller cannot listen on {self.host}:{port}: {why}",
             hint="another controller (or URSim) already uses this address; pick another 127.0.0.x",
         )
 
@@ -458,15 +536,15 @@ class SimURController:
     @property
     def client_count(self) -> int:
         """RTDE clients connected right now."""
-        return int(self._stats[_STAT_CLIENTS])
+        return self._shared.stats()[0]
 
     @property
     def sent_packages(self) -> int:
         """Data packages streamed so far (all clients)."""
-        return int(self._stats[_STAT_SENT])
+        return self._shared.stats()[1]
 
     def close(self) -> None:
-        """Stop serving, drop clients, stop the server process and the ``sim-rtde`` thread. Idempotent."""
+        """Stop serving, drop clients, end the server process and the ``sim-rtde`` thread. Idempotent."""
         if self._closed:
             return
         self._closed = True
@@ -485,15 +563,20 @@ class SimURController:
     # ---- internals ------------------------------------------------------------------------------------------
 
     def _shut_down_process(self) -> None:
-        with contextlib.suppress(OSError, ValueError):
-            self._control.send("stop")
-        self._control.close()
-        self._process.join(timeout=5.0)
-        if self._process.is_alive():  # pragma: no cover - the loop polls the pipe at least every 50 ms
-            logger.warning("simulated UR controller process did not stop; terminating it")
-            self._process.terminate()
-            self._process.join(timeout=5.0)
-        self._process.close()
+        process = self._process
+        if process.stdin is not None:
+            with contextlib.suppress(OSError):
+                process.stdin.close()  # EOF on its stdin is the server's signal to stop
+        try:
+            process.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:  # pragma: no cover - the loop polls stdin at least every 50 ms
+            logger.warning("simulated UR controller process did not stop; killing it")
+            process.kill()
+            process.wait(timeout=5.0)
+        if process.stdout is not None:
+            process.stdout.close()
+        self._shared.close()
+        self._file.close()
 
     def _still_state(self) -> ArmState:
         return ArmState(
@@ -515,7 +598,7 @@ class SimURController:
             except Exception:
                 logger.exception("simulated UR controller: the state provider failed; streaming the last state")
                 continue
-            _write_state(self._shared, state)
+            self._shared.write_state(Snapshot.from_state(state))
 
 
 def start_on_free_loopback(
@@ -540,3 +623,7 @@ def start_on_free_loopback(
         "no free loopback address for a simulated UR controller (127.0.0.2-254 all have port 30004 in use)",
         hint="close other simulated controllers or URSim instances",
     )
+
+
+if __name__ == "__main__":
+    sys.exit(_server_main(sys.argv[1:]))

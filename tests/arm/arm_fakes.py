@@ -1,0 +1,133 @@
+"""Fakes for the arm tests: a linear-spring world, and stand-ins for ur_rtde's control and receive objects."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from drivers.clock import VirtualClock
+from unitac_rig.sim.arm import SimArm, SimArmParams
+
+PRESS_DIR = np.array([0.0, 1.0, 0.0])  # press along base +y
+START_POSE = np.array([0.0, 0.0, 0.2, 0.0, 0.0, 0.0])
+
+# A sensor with no noise, bias, drift or filter: only the latency is left, so results can be worked by hand.
+EXACT_FT = SimArmParams(
+    ft_noise_sigma_n=0.0,
+    ft_bias_sigma_n=0.0,
+    ft_bias_drift_n_per_sqrt_s=0.0,
+    ft_filter_cutoff_hz=None,
+    ft_latency_s=0.010,
+)
+
+
+class SpringWorld:
+    """A flat wall normal to ``direction``: force = stiffness x penetration past ``contact_m`` along it, else 0."""
+
+    def __init__(self, stiffness_n_m: float, contact_m: float, direction: np.ndarray = PRESS_DIR) -> None:
+        self.stiffness_n_m = stiffness_n_m
+        self.contact_m = contact_m
+        self.direction = direction
+
+    def wrench_on_tool(self, tcp_pose: np.ndarray) -> np.ndarray:
+        penetration = float(np.dot(tcp_pose[:3] - START_POSE[:3], self.direction)) - self.contact_m
+        wrench = np.zeros(6)
+        wrench[:3] = -self.stiffness_n_m * max(0.0, penetration) * self.direction
+        return wrench
+
+
+def make_arm(world: SpringWorld, params: SimArmParams = EXACT_FT, seed: int = 0) -> SimArm:
+    return SimArm(world, clock=VirtualClock(), rng=np.random.default_rng(seed), params=params, start_pose=START_POSE)
+
+
+class FakeControl:
+    """Records every call like a flight recorder; ``results`` sets what a method returns (True by default)."""
+
+    def __init__(self, **results: object) -> None:
+        self.calls: list[tuple[str, tuple[object, ...]]] = []
+        self.results = results
+        self.raise_on: dict[str, Exception] = {}
+        self.period_starts = 0
+
+    def names(self) -> list[str]:
+        return [name for name, _ in self.calls]
+
+    def _record(self, name: str, *args: object) -> object:
+        self.calls.append((name, args))
+        if name in self.raise_on:
+            raise self.raise_on[name]
+        return self.results.get(name, True)
+
+    def moveL(self, pose: list[float], speed: float, acceleration: float, asynchronous: bool) -> object:
+        return self._record("moveL", pose, speed, acceleration, asynchronous)
+
+    def speedL(self, xd: list[float], acceleration: float, time: float) -> object:
+        return self._record("speedL", xd, acceleration, time)
+
+    def speedStop(self, a: float) -> object:
+        return self._record("speedStop", a)
+
+    def zeroFtSensor(self) -> object:
+        return self._record("zeroFtSensor")
+
+    def forceMode(self, *args: object) -> object:
+        return self._record("forceMode", *args)
+
+    def forceModeStop(self) -> object:
+        return self._record("forceModeStop")
+
+    def stopScript(self) -> None:
+        self._record("stopScript")
+
+    def disconnect(self) -> None:
+        self._record("disconnect")
+
+    def initPeriod(self) -> int:
+        self.period_starts += 1
+        return self.period_starts
+
+    def waitPeriod(self, start: int) -> None:
+        self._record("waitPeriod", start)
+
+
+class FakeReceive:
+    """RTDEReceiveInterface stand-in whose values a test sets directly."""
+
+    def __init__(self) -> None:
+        self.timestamp = 1.0
+        self.pose = [0.1, 0.2, 0.3, 0.0, 0.0, 0.0]
+        self.force = [0.0] * 6
+        self.protective = False
+        self.emergency = False
+        self.connected = True
+        self.disconnects = 0
+
+    def isConnected(self) -> bool:
+        return self.connected
+
+    def getTimestamp(self) -> float:
+        self.timestamp += 0.002  # a fresh package every read
+        return self.timestamp
+
+    def getActualTCPPose(self) -> list[float]:
+        return list(self.pose)
+
+    def getActualTCPForce(self) -> list[float]:
+        return list(self.force)
+
+    def getActualTCPSpeed(self) -> list[float]:
+        return [0.0] * 6
+
+    def getRobotMode(self) -> int:
+        return 7
+
+    def getSafetyMode(self) -> int:
+        return 3 if self.protective else 1
+
+    def isProtectiveStopped(self) -> bool:
+        return self.protective
+
+    def isEmergencyStopped(self) -> bool:
+        return self.emergency
+
+    def disconnect(self) -> None:
+        self.disconnects += 1

@@ -121,7 +121,8 @@ class SimSerialEndpoint:
             self._pending.append((self.faults.release_t_ns(t_ns) if faulted else t_ns, out))
 
     def _release_due(self) -> None:
-        self.refill()
+        if not self._ready:  # pull lazily: python-can's slcan reads one byte per call
+            self.refill()
         now_ns = self.clock.now_ns()
         while self._pending and self._pending[0][0] <= now_ns:
             self._ready += self._pending.popleft()[1]

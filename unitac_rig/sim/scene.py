@@ -281,10 +281,10 @@ class _Section:
         s = np.asarray(s, dtype=np.float64)
         if self.radius is not None:
             ds = s - self.c_s
-            inside = np.abs(ds) < self.radius
+            inside = np.abs(ds) <= self.radius
             root = np.sqrt(np.where(inside, self.radius**2 - ds**2, 1.0))
             front = np.where(inside, -root, np.inf)
-            slope = np.where(inside, ds / root, 0.0)
+            slope = np.where(inside & (root > 0), ds / np.where(root > 0, root, 1.0), 0.0)
             return front, slope, np.full(s.shape, np.inf)
         a_s, a_n = self.s, self.n
         b_s, b_n = np.roll(a_s, -1), np.roll(a_n, -1)
@@ -413,70 +413,91 @@ def _erf(x: np.ndarray) -> np.ndarray:
 
 
 class _SkinPad:
-    """uSkin: Winkler skin over the whole pad, read by taxels through Gaussian spreading + cell integration."""
+    """uSkin: Winkler skin over the whole pad, read by taxels through Gaussian spreading + cell integration.
+
+    The pad section is cut into segments at a uniform step *and* at every outline vertex, so within a segment the
+    outline is straight: the overlap is integrated exactly (a corner is found exactly where it is, whatever the
+    step). The step only sets how finely load is placed on the taxels and how a circle is approximated by chords.
+    """
+
+    WEIGHT_LOOKUP_STEP_MM = 0.01
 
     def __init__(self, layout: SensorLayout, params: SceneParams) -> None:
         self.layout = layout
         self.params = params
         pitch = layout.pitch_mm
-        half_w = (layout.cols - 1) / 2 * pitch + params.skin_margin_x_mm
+        self.half_w = half_w = (layout.cols - 1) / 2 * pitch + params.skin_margin_x_mm
         half_h = (layout.rows - 1) / 2 * pitch + params.skin_margin_y_mm
-        n_half = max(1, math.ceil(half_w / params.section_step_mm))
-        self.step = half_w / n_half
-        self.s = (np.arange(-n_half, n_half) + 0.5) * self.step  # symmetric, no sample on the centre line
+        n_steps = max(2, 2 * math.ceil(half_w / params.section_step_mm))
+        self.grid = np.linspace(-half_w, half_w, n_steps + 1)  # symmetric about the pad centre
         self.height = 2 * half_h
-        self.col_weights = _cell_weights(self.s, layout.cols, pitch, params.skin_spread_sigma_mm)  # (cols, n_s)
+        self.lookup_s = np.linspace(-half_w, half_w, round(2 * half_w / self.WEIGHT_LOOKUP_STEP_MM) + 1)
+        self.lookup_w = _cell_weights(self.lookup_s, layout.cols, pitch, params.skin_spread_sigma_mm)  # (cols, n)
         y = np.linspace(-half_h, half_h, 401)
         row_w = _cell_weights(-y, layout.rows, pitch, params.skin_spread_sigma_mm)  # row 0 on top (+y)
         self.row_share = np.trapezoid(row_w, y, axis=1) / (2 * half_h)
         self.row_share /= self.row_share.sum()
 
+    def _nodes(self, section: _Section) -> np.ndarray:
+        extra = (
+            [section.c_s]
+            if section.radius is None
+            else [section.c_s - section.radius, section.c_s, section.c_s + section.radius]
+        )
+        cuts = np.concatenate([section.s, np.asarray(extra)]) if section.radius is None else np.asarray(extra)
+        cuts = cuts[(cuts > -self.half_w) & (cuts < self.half_w)]
+        return np.unique(np.concatenate([self.grid, cuts]))
+
     def table(self, section: _Section, material: MaterialSpec) -> _PadTable:
         p = self.params
         layout = self.layout
-        front, slope, xi = section.front(self.s)
-        finite = np.isfinite(front)
-        if not np.any(finite):
+        nodes = self._nodes(section)
+        front_nodes, _, _ = section.front(nodes)
+        a, b = front_nodes[:-1], front_nodes[1:]
+        segment = np.isfinite(a) & np.isfinite(b) & (np.diff(nodes) > 1e-9)  # outline in front all along
+        if not np.any(segment):
             return _no_contact(layout)
-        fmin = float(np.min(front[finite]))
-        gap = np.where(finite, front - fmin, np.inf)
+        left, right = nodes[:-1][segment], nodes[1:][segment]
+        fa, fb = a[segment], b[segment]
+        length = right - left
+        mid = 0.5 * (left + right)
+        slope = (fb - fa) / length
+        _, _, xi = section.front(mid)
+        fmin = float(min(fa.min(), fb.min()))
+        gap_a, gap_b = fa - fmin, fb - fmin
         k_skin = p.skin_foundation_n_per_mm3
         if material.wall_foundation_n_per_mm3 is None:
-            k_eff = np.full(self.s.shape, k_skin)
+            k_eff = np.full(mid.shape, k_skin)
         else:
             k_wall = material.wall_foundation_n_per_mm3 * _near_corner(material, xi, p)
             k_eff = 1.0 / (1.0 / k_skin + 1.0 / k_wall)
         # interface tilt: a soft wall takes part of the overlap, flattening the interface
         tilt = slope * (k_eff / k_skin)
         ratio = np.clip(p.shear_projection * tilt, -material.friction, material.friction)
-        area = self.step * self.height  # mm^2 per section sample
-
-        finite_k, finite_gap = k_eff[finite], gap[finite]
+        scale = k_eff * self.height * length  # N per mm of mean overlap over the segment
 
         def force(e: float) -> float:
-            return float(np.dot(finite_k, np.maximum(0.0, e - finite_gap)) * area)
+            return float(np.dot(scale, _mean_positive(e - gap_a, e - gap_b)))
 
         e_max = _depth_for_force(force, p.table_max_force_n)
         u = np.linspace(0.0, 1.0, p.table_points)
         depth = e_max * u**2
-        near = gap <= e_max  # only section samples the table's deepest press reaches
-        pressure = k_eff[near] * np.maximum(0.0, depth[:, None] - gap[near])  # (m, n_near) N/mm^2
-        normal_cells = pressure * area  # N per section sample
-        shear_cells = normal_cells * ratio[near]
-        weights = self.col_weights[:, near]
-        col_n = normal_cells @ weights.T  # (m, cols)
-        col_x = shear_cells @ weights.T
+        near = np.minimum(gap_a, gap_b) <= e_max  # only segments the table's deepest press reaches
+        d = depth[:, None]
+        normal_seg = scale[near] * _mean_positive(d - gap_a[near], d - gap_b[near])  # (m, n_near) N
+        shear_seg = normal_seg * ratio[near]
+        weights = np.stack([np.interp(mid[near], self.lookup_s, w) for w in self.lookup_w])  # (cols, n_near)
+        col_n = normal_seg @ weights.T  # (m, cols)
+        col_x = shear_seg @ weights.T
         m = depth.size
         loads = np.zeros((m, layout.rows, layout.cols, 3))
         loads[..., 2] = col_n[:, None, :] * self.row_share[None, :, None]
         loads[..., 0] = col_x[:, None, :] * self.row_share[None, :, None]
-        total_n = normal_cells.sum(axis=1)
-        total_x = shear_cells.sum(axis=1)
         wrench = np.zeros((m, 6))
-        wrench[:, 0] = total_x
-        wrench[:, 2] = -total_n
-        wrench[:, 4] = normal_cells @ self.s[near] * 1e-3  # tau_y = sum s * p (contacts in the pad plane, y-symmetric)
-        contact = gap < p.corner_contact_depth_mm
+        wrench[:, 0] = shear_seg.sum(axis=1)
+        wrench[:, 2] = -normal_seg.sum(axis=1)
+        wrench[:, 4] = normal_seg @ mid[near] * 1e-3  # tau_y = sum s * p (contacts in the pad plane, y-symmetric)
+        contact = np.minimum(gap_a, gap_b) < p.corner_contact_depth_mm
         proximity = float(np.max(np.exp(-xi[contact] / p.corner_decay_mm))) if np.any(contact) else 0.0
         return _PadTable(
             depth=depth,
@@ -552,6 +573,14 @@ class _PillarPad:
         contact = gap < p.corner_contact_depth_mm
         proximity = float(np.max(np.exp(-col_xi[self.cols][contact] / p.corner_decay_mm))) if np.any(contact) else 0.0
         return _PadTable(depth, loads, disp, wrench, touch, proximity)
+
+
+def _mean_positive(at_a: np.ndarray, at_b: np.ndarray) -> np.ndarray:
+    """Mean over a segment of max(0, v) for v linear from ``at_a`` to ``at_b`` (exact)."""
+    hi = np.maximum(at_a, at_b)
+    lo = np.minimum(at_a, at_b)
+    crossing = hi * hi / (2.0 * np.where(hi > lo, hi - lo, 1.0))
+    return np.where(lo >= 0.0, 0.5 * (hi + lo), np.where(hi <= 0.0, 0.0, crossing))
 
 
 def _cell_weights(pos: np.ndarray, n_cells: int, pitch: float, sigma: float) -> np.ndarray:

@@ -12,9 +12,12 @@ import pytest
 import rtde_receive
 
 from drivers.arm import ArmState
+from drivers.clock import VirtualClock
 from drivers.errors import DeviceError
 from protocols import rtde
+from unitac_rig.sim.arm import SimArm
 from unitac_rig.sim.rtde_server import SimURController, start_on_free_loopback
+from unitac_rig.sim.world import FreeSpace
 
 VARIABLES = [
     "timestamp",
@@ -151,3 +154,18 @@ def test_address_in_use_is_a_device_error() -> None:
         with pytest.raises(DeviceError) as excinfo:
             SimURController(server.host)
         assert excinfo.value.hint
+
+
+def test_a_simulated_arm_is_served_as_its_latest_state() -> None:
+    arm = SimArm(FreeSpace(), clock=VirtualClock(), rng=np.random.default_rng(0))
+    goal = arm.true_tcp_pose() + np.array([0.0, 0.02, 0.0, 0.0, 0.0, 0.0])
+    arm.move_linear(goal, 0.1, 1.0)  # virtual time: done before the server starts
+    with start_on_free_loopback(arm.latest_state, first=20) as server:
+        client = rtde_receive.RTDEReceiveInterface(server.host, 500.0, VARIABLES)
+        try:
+            assert client.getActualTCPPose() == pytest.approx(list(goal), abs=1e-12)
+            assert client.getTimestamp() == arm.clock.now_ns() / 1e9
+            assert client.getActualTCPForce() == list(arm.read_state().tcp_force)
+        finally:
+            client.disconnect()
+    arm.close()

@@ -107,7 +107,7 @@ class SimArm:
         if pose.shape != (6,) or not np.all(np.isfinite(pose)):
             raise ArmError(f"start pose must be 6 finite numbers, got {start_pose!r}")
         self._position = pose[:3].copy()
-        self._rotation = rotvec_to_matrix(pose[3:])
+        self._set_rotation(rotvec_to_matrix(pose[3:]), pose[3:])
         self._velocity = np.zeros(3)  # m/s, base frame
         self._angular_velocity = np.zeros(3)  # rad/s, base frame
         self._mode: _Mode = "idle"
@@ -136,7 +136,7 @@ class SimArm:
 
     def true_tcp_pose(self) -> np.ndarray:
         """Noise-free TCP pose (6,) [m, rad rotation vector], base frame: what simulated sensors feel."""
-        return np.concatenate([self._position, matrix_to_rotvec(self._rotation)])
+        return np.concatenate([self._position, self._rotvec])
 
     def true_wrench(self) -> np.ndarray:
         """The world's wrench on the tool now (6,) [N, N*m], base axes; no latency, noise, bias or filter."""
@@ -176,8 +176,12 @@ class SimArm:
             while elapsed_s < profile.duration_s:
                 elapsed_s = min(elapsed_s + self.control_period_s, profile.duration_s)
                 fraction, rate = profile.at(elapsed_s)
-                self._position = start_position + fraction * delta_position
-                self._rotation = rotvec_to_matrix(fraction * delta_rotvec) @ start_rotation
+                if fraction >= 1.0:  # land exactly on the commanded pose
+                    self._position = goal[:3].copy()
+                    self._set_rotation(rotvec_to_matrix(goal[3:]), goal[3:])
+                else:
+                    self._position = start_position + fraction * delta_position
+                    self._set_rotation(rotvec_to_matrix(fraction * delta_rotvec) @ start_rotation)
                 self._velocity = rate * delta_position
                 self._angular_velocity = rate * delta_rotvec
                 self._advance_one_period(integrate=False)
@@ -280,6 +284,14 @@ class SimArm:
 
     # ---- internals ------------------------------------------------------------------------------------------
 
+    def _set_rotation(self, rotation: np.ndarray, rotvec: np.ndarray | None = None) -> None:
+        """Keep the matrix and its rotation vector together (the vector is read every period).
+
+        Pass ``rotvec`` when it is known exactly: converting back loses ~1e-7 rad near a half turn.
+        """
+        self._rotation = rotation
+        self._rotvec = matrix_to_rotvec(rotation) if rotvec is None else np.array(rotvec, dtype=np.float64)
+
     def _check_command(self) -> None:
         if self._closed:
             raise ArmError("the simulated arm is closed", hint="open a new rig")
@@ -349,12 +361,17 @@ class SimArm:
             self._velocity, self._angular_velocity = commanded[:3].copy(), commanded[3:].copy()
         else:
             self._velocity, step = _ramp(self._velocity, self._target_twist[:3], self._accel_m_s2, dt)
-            self._angular_velocity, turn = _ramp(self._angular_velocity, self._target_twist[3:], self._accel_m_s2, dt)
+            if np.any(self._angular_velocity) or np.any(self._target_twist[3:]):
+                self._angular_velocity, turn = _ramp(
+                    self._angular_velocity, self._target_twist[3:], self._accel_m_s2, dt
+                )
+            else:
+                turn = np.zeros(3)
             if self._mode == "stop" and not np.any(self._velocity) and not np.any(self._angular_velocity):
                 self._mode = "idle"
         self._position = self._position + step
         if np.any(turn):
-            self._rotation = rotvec_to_matrix(turn) @ self._rotation
+            self._set_rotation(rotvec_to_matrix(turn) @ self._rotation)
 
     def _update_sensor(self) -> None:
         """One F/T sample: true wrench -> latency -> + bias + noise -> low-pass; and the protective-stop check."""

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import logging
 import mmap
 import os
@@ -50,6 +51,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from types import TracebackType
 from typing import NamedTuple
 
@@ -442,7 +444,7 @@ def _server_main(argv: Sequence[str]) -> int:
         listener.listen(4)
     except OSError as exc:
         listener.close()
-        print(f"error {exc.strerror or exc}", flush=True)  # noqa: T201 - the parent reads this line
+        print(f"error {exc.errno or 0} {exc.strerror or exc}", flush=True)  # noqa: T201 - the parent reads this line
         return 1
     listener.setblocking(False)
     shared = _SharedState(args.shared_fd)
@@ -456,6 +458,13 @@ def _server_main(argv: Sequence[str]) -> int:
 
 
 # ---- the object users hold ------------------------------------------------------------------------------------
+
+
+class _AddressTaken(DeviceError):
+    """The server process could not bind: something already listens there."""
+
+
+_PACKAGE_ROOT = str(Path(__file__).resolve().parents[2])  # the directory that holds unitac_rig/
 
 
 class SimURController:
@@ -499,8 +508,10 @@ class SimURController:
             "--registers-in-use", ",".join(sorted(registers_in_use)),
             "--shared-fd", str(self._file.fileno()),
         ]  # fmt: skip
+        environment = dict(os.environ)  # the child imports this very package, wherever the caller found it
+        environment["PYTHONPATH"] = os.pathsep.join(filter(None, [_PACKAGE_ROOT, environment.get("PYTHONPATH")]))
         self._process = subprocess.Popen(
-            command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, pass_fds=(self._file.fileno(),)
+            command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, pass_fds=(self._file.fileno(),), env=environment
         )
         try:
             self.port = self._await_ready(port)
@@ -521,10 +532,19 @@ class SimURController:
         word, _, rest = line.decode("utf-8", "replace").strip().partition(" ")
         if word == "ready":
             return int(rest)
-        why = rest if word == "error" else f"the server process did not start within {_START_TIMEOUT_S} s"
+        if word == "error":
+            code, _, why = rest.partition(" ")
+            message = f"simulated UR controller cannot listen on {self.host}:{port}: {why}"
+            if int(code or 0) == errno.EADDRINUSE:
+                raise _AddressTaken(
+                    message, hint="another controller (or URSim) uses this address; try another 127.0.0.x"
+                )
+            raise DeviceError(message, hint="use a loopback address such as 127.0.0.2")
+        exit_code = self._process.poll()
+        why = f"it exited with status {exit_code}" if exit_code is not None else f"no answer in {_START_TIMEOUT_S} s"
         raise DeviceError(
-            f"simulated UR controller cannot listen on {self.host}:{port}: {why}",
-            hint="another controller (or URSim) already uses this address; pick another 127.0.0.x",
+            f"the simulated UR controller's server process did not start ({why})",
+            hint="see its error output above; is unitac-rig installed in this Python environment?",
         )
 
     # ---- public ---------------------------------------------------------------------------------------------
@@ -617,7 +637,7 @@ def start_on_free_loopback(
             probe.close()
         try:
             return SimURController(host, state_provider=state_provider, frequency_hz=frequency_hz)
-        except DeviceError:
+        except _AddressTaken:
             continue  # taken between the check and the start
     raise DeviceError(
         "no free loopback address for a simulated UR controller (127.0.0.2-254 all have port 30004 in use)",

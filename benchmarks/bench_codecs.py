@@ -45,15 +45,21 @@ HARDWARE_PEAK = {
 }
 
 
-def best_rate(run: Callable[[], int], repeats: int) -> float:
-    """Items per second of the fastest of ``repeats`` runs (``run`` returns how many items it processed)."""
-    best = 0.0
+Bench = tuple[Callable[[], int], dict[str, float]]  # (run -> items processed, facts about the workload)
+
+
+def measure(benches: dict[str, Bench], repeats: int) -> dict[str, dict[str, float]]:
+    """Time every bench ``repeats`` times, interleaved so each one samples the whole window; best and median rate."""
+    rates: dict[str, list[float]] = {name: [] for name in benches}
     for _ in range(repeats):
-        start = time.perf_counter()
-        items = run()
-        elapsed = time.perf_counter() - start
-        best = max(best, items / elapsed)
-    return best
+        for name, (run, _) in benches.items():
+            start = time.perf_counter()
+            items = run()
+            rates[name].append(items / (time.perf_counter() - start))
+    return {
+        name: {**facts, "best_per_s": max(rates[name]), "median_per_s": float(np.median(rates[name]))}
+        for name, (_, facts) in benches.items()
+    }
 
 
 def papillarray_stream(n_packets: int, rng: np.random.Generator) -> bytes:
@@ -74,7 +80,8 @@ def papillarray_stream(n_packets: int, rng: np.random.Generator) -> bytes:
     return b"".join(templates[i % len(templates)] for i in range(n_packets))
 
 
-def bench_papillarray(n_packets: int, repeats: int, read_size: int) -> dict[str, float]:
+def bench_papillarray(n_packets: int, read_size: int) -> Bench:
+    """Packets through PacketParser, fed in reads of ``read_size`` bytes."""
     stream = papillarray_stream(n_packets, np.random.default_rng(1))
     chunks = [stream[i : i + read_size] for i in range(0, len(stream), read_size)]
 
@@ -86,16 +93,11 @@ def bench_papillarray(n_packets: int, repeats: int, read_size: int) -> dict[str,
         assert count == n_packets and parser.bytes_dropped == 0
         return count
 
-    rate = best_rate(run, repeats)
-    return {
-        "packets_per_s": rate,
-        "bytes_per_packet": len(stream) / n_packets,
-        "read_size_bytes": read_size,
-        "items": n_packets,
-    }
+    return run, {"bytes_per_packet": len(stream) / n_packets, "read_size_bytes": read_size, "items": n_packets}
 
 
-def bench_uskin_can(n_frames: int, repeats: int) -> dict[str, float]:
+def bench_uskin_can(n_frames: int) -> Bench:
+    """Frames (24 taxel messages each) through FrameAssembler."""
     rng = np.random.default_rng(2)
     ids = USPA46_ID_MAP.ids
     messages = []
@@ -114,11 +116,11 @@ def bench_uskin_can(n_frames: int, repeats: int) -> dict[str, float]:
         assert frames == n_frames and assembler.messages == 24 * n_frames and assembler.incomplete_frames == 0
         return frames
 
-    frames_per_s = best_rate(run, repeats)
-    return {"frames_per_s": frames_per_s, "messages_per_s": 24 * frames_per_s, "items": n_frames}
+    return run, {"messages_per_frame": 24, "items": n_frames}
 
 
-def bench_xela_server(n_messages: int, repeats: int, as_hex: bool) -> dict[str, float]:
+def bench_xela_server(n_messages: int, as_hex: bool) -> Bench:
+    """One-sensor (24 taxel) xela_server JSON messages through decode_message."""
     rng = np.random.default_rng(3)
     texts = [
         encode_data_message(
@@ -135,7 +137,7 @@ def bench_xela_server(n_messages: int, repeats: int, as_hex: bool) -> dict[str, 
             decode_message(text)
         return len(texts)
 
-    return {"msgs_per_s": best_rate(run, repeats), "bytes_per_msg": sum(map(len, texts)) / n_messages}
+    return run, {"bytes_per_msg": sum(map(len, texts)) / n_messages, "items": n_messages}
 
 
 def machine() -> dict[str, object]:
@@ -157,42 +159,34 @@ def machine() -> dict[str, object]:
     }
 
 
+# name -> (chart label, unit of one item, device peak rate in items/s)
+CASES: dict[str, tuple[str, str, float]] = {
+    "papillarray_4k_reads": ("PapillArray\n4 KiB reads\n(peak 1000 packets/s)", "packets", 1000.0),
+    "papillarray_64b_reads": ("PapillArray\n64 B reads\n(peak 1000 packets/s)", "packets", 1000.0),
+    "uskin_can": ("uSkin CAN\nFrameAssembler\n(~100 frames/s)", "frames", 100.0),
+    "xela_server_hex": ("xela_server JSON\nhex data\n(~100 msg/s)", "msgs", 100.0),
+    "xela_server_list": ("xela_server JSON\nint-list data\n(~100 msg/s)", "msgs", 100.0),
+}
+
+
 def plot(results: dict[str, dict[str, float]], path: Path) -> None:
-    labels = [
-        "PapillArray\n4 KiB reads\n(peak 1000 packets/s)",
-        "PapillArray\n64 B reads\n(peak 1000 packets/s)",
-        "uSkin CAN\nFrameAssembler\n(~100 frames/s)",
-        "xela_server JSON\nhex data\n(~100 msg/s)",
-        "xela_server JSON\nint-list data\n(~100 msg/s)",
-    ]
-    multiples = [
-        results["papillarray"]["x_hardware"],
-        results["papillarray_64b_reads"]["x_hardware"],
-        results["uskin_can"]["x_hardware"],
-        results["xela_server_hex"]["x_hardware"],
-        results["xela_server_list"]["x_hardware"],
-    ]
+    names = list(CASES)
+    multiples = [results[name]["x_device_peak"] for name in names]
     fig, ax = plt.subplots(figsize=(10.5, 5.4), dpi=120)
     colors = ["#3b7dd8", "#7fa7e3", "#2a9d8f", "#c0462a", "#b5651d"]
-    bars = ax.bar(labels, multiples, color=colors, edgecolor="black", linewidth=0.6)
+    bars = ax.bar([CASES[name][0] for name in names], multiples, color=colors, edgecolor="black", linewidth=0.6)
     ax.set_yscale("log")
     ax.axhline(TARGET_MULTIPLE, color="black", linestyle="--", linewidth=1.2, label=f"target {TARGET_MULTIPLE:.0f}x")
     ax.axhline(1.0, color="dimgrey", linestyle=":", linewidth=1.2, label="device peak rate (1x)")
     ax.legend(loc="upper right", fontsize=10, framealpha=0.95)
-    absolute = [
-        f"{results['papillarray']['packets_per_s'] / 1000:,.0f}k packets/s",
-        f"{results['papillarray_64b_reads']['packets_per_s'] / 1000:,.0f}k packets/s",
-        f"{results['uskin_can']['frames_per_s'] / 1000:,.0f}k frames/s",
-        f"{results['xela_server_hex']['msgs_per_s'] / 1000:,.0f}k msg/s",
-        f"{results['xela_server_list']['msgs_per_s'] / 1000:,.0f}k msg/s",
-    ]
-    for bar, multiple, rate in zip(bars, multiples, absolute, strict=True):
+    for bar, name, multiple in zip(bars, names, multiples, strict=True):
         x = bar.get_x() + bar.get_width() / 2
+        rate = f"{results[name]['best_per_s'] / 1000:,.0f}k {CASES[name][1]}/s"
         ax.text(x, multiple * 1.12, f"{multiple:,.0f}x", ha="center", va="bottom", fontsize=12, fontweight="bold")
         ax.text(x, 1.6, rate, ha="center", va="bottom", fontsize=10, color="white", fontweight="bold")
     ax.set_ylim(0.5, max(multiples) * 8)
     ax.set_ylabel("decode throughput / device peak rate (log scale)", fontsize=11)
-    ax.set_title("Wire codec decode throughput on one CPU core", fontsize=13)
+    ax.set_title("Wire codec decode throughput, one Python thread (best of repeats)", fontsize=13)
     ax.tick_params(axis="x", labelsize=10)
     fig.tight_layout()
     fig.savefig(path)
@@ -202,32 +196,28 @@ def plot(results: dict[str, dict[str, float]], path: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer items and repeats (smoke run)")
+    parser.add_argument("--repeats", type=int, default=9, help="timed runs per case, interleaved (default 9)")
     args = parser.parse_args()
-    scale, repeats = (0.1, 2) if args.quick else (1.0, 5)
+    scale, repeats = (0.1, 2) if args.quick else (1.0, args.repeats)
     host = machine()
 
-    papillarray = bench_papillarray(int(20_000 * scale), repeats, read_size=4096)
-    papillarray_small = bench_papillarray(int(20_000 * scale), repeats, read_size=64)
-    uskin = bench_uskin_can(int(10_000 * scale), repeats)
-    xela_hex = bench_xela_server(int(10_000 * scale), repeats, as_hex=True)
-    xela_list = bench_xela_server(int(10_000 * scale), repeats, as_hex=False)
-
-    papillarray["x_hardware"] = papillarray["packets_per_s"] / HARDWARE_PEAK["papillarray_packets_per_s"]
-    papillarray_small["x_hardware"] = papillarray_small["packets_per_s"] / HARDWARE_PEAK["papillarray_packets_per_s"]
-    uskin["x_hardware"] = uskin["frames_per_s"] / HARDWARE_PEAK["uskin_can_frames_per_s"]
-    xela_hex["x_hardware"] = xela_hex["msgs_per_s"] / HARDWARE_PEAK["xela_server_msgs_per_s"]
-    xela_list["x_hardware"] = xela_list["msgs_per_s"] / HARDWARE_PEAK["xela_server_msgs_per_s"]
-    results = {
-        "papillarray": papillarray,
-        "papillarray_64b_reads": papillarray_small,
-        "uskin_can": uskin,
-        "xela_server_hex": xela_hex,
-        "xela_server_list": xela_list,
+    benches = {
+        "papillarray_4k_reads": bench_papillarray(int(10_000 * scale), read_size=4096),
+        "papillarray_64b_reads": bench_papillarray(int(10_000 * scale), read_size=64),
+        "uskin_can": bench_uskin_can(int(5_000 * scale)),
+        "xela_server_hex": bench_xela_server(int(5_000 * scale), as_hex=True),
+        "xela_server_list": bench_xela_server(int(5_000 * scale), as_hex=False),
     }
+    results = measure(benches, repeats)
+    for name, (_, unit, peak) in CASES.items():
+        results[name]["unit"] = unit  # type: ignore[assignment]
+        results[name]["device_peak_per_s"] = peak
+        results[name]["x_device_peak"] = results[name]["best_per_s"] / peak
+        results[name]["x_device_peak_median"] = results[name]["median_per_s"] / peak
+    host["load_average_1min_after"] = round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None
     report = {
         "command": "python benchmarks/bench_codecs.py" + (" --quick" if args.quick else ""),
         "machine": host,
-        "hardware_peak": HARDWARE_PEAK,
         "target_multiple": TARGET_MULTIPLE,
         "repeats": repeats,
         "results": results,
@@ -236,18 +226,14 @@ def main() -> None:
     (FIGURES / "bench_codecs.json").write_text(json.dumps(report, indent=2) + "\n")
     plot(results, FIGURES / "bench_codecs.png")
 
-    print(f"machine: {host['cpu']} ({host['logical_cpus']} logical CPUs, load average {host['load_average_1min']})")
-    print(f"PapillArray  {papillarray['packets_per_s']:>10,.0f} packets/s  = {papillarray['x_hardware']:6.0f}x 1000/s")
-    print(
-        f"  64 B reads {papillarray_small['packets_per_s']:>10,.0f} packets/s  = "
-        f"{papillarray_small['x_hardware']:6.0f}x 1000/s"
-    )
-    print(
-        f"uSkin CAN    {uskin['frames_per_s']:>10,.0f} frames/s   = {uskin['x_hardware']:6.0f}x 100/s"
-        f"  ({uskin['messages_per_s']:,.0f} messages/s)"
-    )
-    print(f"xela hex     {xela_hex['msgs_per_s']:>10,.0f} msgs/s     = {xela_hex['x_hardware']:6.0f}x 100/s")
-    print(f"xela list    {xela_list['msgs_per_s']:>10,.0f} msgs/s     = {xela_list['x_hardware']:6.0f}x 100/s")
+    print(f"machine: {host['cpu']}, {host['logical_cpus']} logical CPUs, load average {host['load_average_1min']}")
+    print(f"{'case':<24}{'best/s':>12}{'median/s':>12}{'best x peak':>13}{'median x peak':>15}")
+    for name, (_, unit, peak) in CASES.items():
+        row = results[name]
+        print(
+            f"{name:<24}{row['best_per_s']:>12,.0f}{row['median_per_s']:>12,.0f}"
+            f"{row['x_device_peak']:>12,.0f}x{row['x_device_peak_median']:>14,.0f}x   ({unit}, peak {peak:,.0f}/s)"
+        )
     print(f"wrote {FIGURES / 'bench_codecs.json'} and {FIGURES / 'bench_codecs.png'}")
 
 

@@ -47,6 +47,7 @@ def test_catalogue_irregular_prism_has_its_80_degree_corner_at_minus_x() -> None
     outline = OutlineGeometry.from_catalogue("irregular_pla")
     # rotation 90 turns the 80-degree corner V3 (-25, 0) toward the pad at angle 0 (pad side -y in the base frame)
     u, origin = outline.contact(0.0, 90.0)
+    assert u.tolist() == pytest.approx([-1.0, 0.0])
     assert origin.tolist() == pytest.approx([-25.0, 0.0], abs=1e-6)
     depths = outline.profiles(np.array([0.0]), np.array([90.0]), np.array([-7.0, 7.0]))[0]
     # both walls leave the tip at 90 - 40 = 50 degrees off the pad: depth = 7 * tan(50 deg)

@@ -183,18 +183,23 @@ def _loads_at_10n(params: SceneParams, layout: SensorLayout, angles: list[int]) 
 
 
 def fidelity(angles: list[int], steps: list[float], points: list[int]) -> dict[str, Any]:
-    finest = SceneParams(section_step_mm=min(steps) / 2, table_points=max(points) * 2)
+    """Each setting against the finest value of that setting, the other one at its default."""
+    references = {
+        "section_step_mm": SceneParams(section_step_mm=min(steps) / 4),
+        "table_points": SceneParams(table_points=max(points) * 4),
+    }
     results: dict[str, Any] = {
-        "reference": {"section_step_mm": finest.section_step_mm, "table_points": finest.table_points}
+        "reference": {"section_step_mm": min(steps) / 4, "table_points": max(points) * 4},
+        "angles_deg": angles,
     }
     for layout in (USKIN, PAPILLARRAY):
-        ref_loads, ref_travel, _ = _loads_at_10n(finest, layout, angles)
         rows = []
         settings = [("section_step_mm", s) for s in steps] if layout is USKIN else []
         settings += [("table_points", p) for p in points]
+        reference_results = {name: _loads_at_10n(ref, layout, angles) for name, ref in references.items()}
         for name, value in settings:
-            params = replace(SceneParams(), **{name: value})
-            loads, travel, build_ms = _loads_at_10n(params, layout, angles)
+            ref_loads, ref_travel, _ = reference_results[name]
+            loads, travel, build_ms = _loads_at_10n(replace(SceneParams(), **{name: value}), layout, angles)
             diff = np.abs(loads - ref_loads)
             rows.append(
                 {
@@ -211,31 +216,41 @@ def fidelity(angles: list[int], steps: list[float], points: list[int]) -> dict[s
 
 
 def plot(report: dict[str, Any], out: Path) -> Path:
-    fig = new_figure(10, 4)
-    ax_step, ax_points = fig.subplots(1, 2)
+    fig = new_figure(11, 4)
+    ax_step, ax_points, ax_travel = fig.subplots(1, 3)
+    panels = (
+        (ax_step, "section_step_mm", "max_taxel_error_n", "max |taxel load - finest| at 10 N (N)"),
+        (ax_points, "table_points", "max_taxel_error_n", "max |taxel load - finest| at 10 N (N)"),
+        (ax_travel, "table_points", "max_travel_error_mm", "max |travel to 10 N - finest| (mm)"),
+    )
     for layout_name, colour in (("uskin", "C0"), ("papillarray", "C1")):
         rows = report["fidelity"][layout_name]
-        for ax, setting in ((ax_step, "section_step_mm"), (ax_points, "table_points")):
+        for ax, setting, metric, _ in panels:
             chosen = [r for r in rows if r["setting"] == setting]
             if not chosen:
                 continue
             x = [r["ray_build_ms"] for r in chosen]
-            y = [max(r["max_taxel_error_n"], 1e-6) for r in chosen]
-            ax.loglog(x, y, "o-", color=colour, label=f"{layout_name}: max taxel error")
+            y = [max(r[metric], 1e-7) for r in chosen]
+            ax.loglog(x, y, "o-", color=colour, label=layout_name)
             for r, xi, yi in zip(chosen, x, y, strict=True):
                 ax.annotate(f"{r['value']:g}", (xi, yi), fontsize=7, xytext=(3, 3), textcoords="offset points")
     default = SceneParams()
-    ax_step.set_title(f"uSkin section step (mm), default {default.section_step_mm:g}", fontsize=9)
-    ax_points.set_title(f"table points per ray, default {default.table_points}", fontsize=9)
-    for ax in (ax_step, ax_points):
+    titles = (
+        f"uSkin section step (mm), default {default.section_step_mm:g}",
+        f"table points per ray, default {default.table_points}",
+        "table points: travel to 10 N",
+    )
+    for (ax, _, _, ylabel), title in zip(panels, titles, strict=True):
+        ax.set_title(title, fontsize=9)
         ax.set_xlabel("time to build one press ray (ms)")
-        ax.set_ylabel("max |taxel load - finest| at 10 N (N)")
+        ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
     camp = report["campaign_scene"]
     fig.suptitle(
-        f"Scene fidelity vs speed. Campaign ({camp['presses']} presses, {camp['simulated_s']:.0f} simulated s): "
-        f"{camp['wall_s']:.1f} s wall, {camp['simulated_s_per_wall_s']:.0f}x real time (scene alone)",
+        f"Scene fidelity vs speed (errors floored at 1e-7). Campaign ({camp['presses']} presses, "
+        f"{camp['simulated_s']:.0f} simulated s): {camp['wall_s']:.1f} s wall, {camp['simulated_s_per_wall_s']:.0f}x "
+        "real time (scene alone)",
         fontsize=9,
     )
     return save_figure(fig, out)

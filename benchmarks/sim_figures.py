@@ -50,27 +50,32 @@ def taxel_maps(layout: SensorLayout, out: Path) -> Path:
     fig = new_figure(1.6 * (len(ANGLES_DEG) + 1) + 0.8, 1.45 * len(objects) + 0.4)
     axes = fig.subplots(len(objects), len(ANGLES_DEG) + 1)
     vmax = 5.0 if layout is PAPILLARRAY else 2.2
+    frames, travels = {}, {}
+    for obj in objects:
+        scene = PressScene(obj, 0.0, layout)
+        for angle in ANGLES_DEG:
+            frames[obj.id, angle] = scene.loads_at_force(angle, FORCE_N).forces_n
+            travels[obj.id, angle] = scene.travel_at_force_mm(angle, FORCE_N)
+    longest = max(float(np.hypot(f[:, 0], f[:, 1]).max()) for f in frames.values())
+    arrow_scale = longest / (0.9 * layout.pitch_mm)  # the largest shear in the figure draws 0.9 pitch long
     mappable = None
     for row, obj in enumerate(objects):
-        scene = PressScene(obj, 0.0, layout)
         draw_outline(axes[row, 0], obj, 0.0, ANGLES_DEG)
         for col, angle in enumerate(ANGLES_DEG, start=1):
-            loads = scene.loads_at_force(angle, FORCE_N)
-            travel = scene.travel_at_force_mm(angle, FORCE_N)
             mappable = draw_taxel_map(
                 axes[row, col],
                 layout,
-                loads.forces_n,
+                frames[obj.id, angle],
                 vmin=0.0,
                 vmax=vmax,
-                arrow_scale=0.25 if layout is USKIN else 0.5,
-                title=f"{angle} deg, {travel:.2f} mm",
+                arrow_scale=arrow_scale,
+                title=f"{angle} deg, {travels[obj.id, angle]:.2f} mm",
             )
     assert mappable is not None
     fig.colorbar(mappable, ax=axes[:, 1:], shrink=0.5, label="normal force per taxel (N)")
     fig.suptitle(
-        f"{layout.model}: taxel loads at {FORCE_N:g} N (colour = normal, red arrows = shear; "
-        f"arrow of one pitch = {(0.25 if layout is USKIN else 0.5) * layout.pitch_mm:.1f} N)",
+        f"{layout.model}: taxel loads at {FORCE_N:g} N, travel past touch in titles (colour = normal; red arrows = "
+        f"shear, one pitch = {arrow_scale * layout.pitch_mm:.2f} N)",
         fontsize=9,
     )
     return save_figure(fig, out)

@@ -33,7 +33,7 @@ from typing import Literal
 import numpy as np
 
 from drivers.arm import ArmState
-from drivers.clock import VirtualClock
+from drivers.clock import Clock, VirtualClock
 from drivers.errors import ArmError, ProtectiveStop
 from unitac_rig.geometry import matrix_to_rotvec, rotvec_to_matrix
 from unitac_rig.sim.world import ContactWorld
@@ -100,7 +100,8 @@ class SimArm:
         start_pose: np.ndarray | None = None,
     ) -> None:
         self.world = world
-        self.clock = clock
+        self.clock: Clock = clock  # typed as the Arm protocol's Clock; the arm itself drives the virtual one
+        self.virtual_clock = clock
         self.params = params or SimArmParams()
         self._rng = rng
         pose = DEFAULT_START_POSE if start_pose is None else np.asarray(start_pose, dtype=np.float64)
@@ -264,7 +265,7 @@ class SimArm:
         self._velocity[:] = 0.0
         self._angular_velocity[:] = 0.0
         self._latest = self._snapshot()
-        self.clock.remove_listener(self._on_clock_advance)
+        self.virtual_clock.remove_listener(self._on_clock_advance)
 
     # ---- faults ---------------------------------------------------------------------------------------------
 
@@ -335,7 +336,7 @@ class SimArm:
             self._integrate_motion()
         self._update_sensor()
         self._integrated_ns += self._period_ns
-        self.clock.advance_ns(self._period_ns)  # our listener takes the new snapshot
+        self.virtual_clock.advance_ns(self._period_ns)  # our listener takes the new snapshot
 
     def _command_twist(self) -> np.ndarray | None:
         """Velocity the controller wants this period, or None in speed/stop mode (accel-limited target)."""

@@ -18,7 +18,7 @@ import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -34,7 +34,26 @@ from unitac_rig.recording import PressRecord, press_id
 
 log = logging.getLogger(__name__)
 
-UNLOADED_FORCE_N = 0.5  # wrist force below which the pad counts as unloaded for a tare
+UNLOADED_FORCE_N = 3.0  # mean wrist force (since the last zero) below which the pad counts as unloaded, N
+
+
+class ZeroedArm:
+    """An :class:`Arm` whose force readings have a host-side offset removed (the mean over an unloaded window)."""
+
+    def __init__(self, arm: Arm, offset: np.ndarray) -> None:
+        self._arm = arm
+        self.offset = np.asarray(offset, dtype=np.float64)
+
+    def read_state(self) -> ArmState:
+        from dataclasses import replace
+
+        state = self._arm.read_state()
+        return replace(state, tcp_force=np.asarray(state.tcp_force, dtype=np.float64) - self.offset)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._arm, name)
+
+
 
 
 @dataclass(frozen=True)
@@ -151,17 +170,19 @@ class _Streams:
             self.tick(self.arm.read_state())
 
 
-def settle_frames(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[list[TactileFrame], float]:
-    """Wait ``seconds`` at rest, returning the frames seen and the largest wrist force magnitude (N)."""
+def settle_frames(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[list[TactileFrame], np.ndarray]:
+    """Wait ``seconds`` at rest; returns the frames seen and the mean wrench (6,) over the window (N, N*m).
+
+    The mean, not the largest sample: a UR's F/T has ~1 N of sample noise, while a real contact shifts the mean.
+    """
     sensor.poll()  # drop anything queued during the transit move
     frames: list[TactileFrame] = []
-    max_force = 0.0
+    forces = []
     for _ in range(max(1, round(seconds / arm.control_period_s))):
         arm.wait_period()
-        state = arm.read_state()
-        max_force = max(max_force, float(np.linalg.norm(state.tcp_force[:3])))
+        forces.append(np.asarray(arm.read_state().tcp_force, dtype=np.float64))
         frames.extend(sensor.poll())
-    return frames, max_force
+    return frames, np.mean(forces, axis=0)
 
 
 def run_press(
@@ -183,17 +204,20 @@ def run_press(
     _check_workspace(plan.start_pose, limits)
     arm.move_linear(plan.start_pose, press.transit_speed_mm_s / 1000.0, 0.5)
 
-    # F/T zero and tare, only while unloaded
-    before = arm.read_state()
-    ft_offset = np.asarray(before.tcp_force, dtype=np.float64)
-    arm.zero_ft()
-    frames, max_force = settle_frames(arm, sensor, settle_s)
-    if max_force > UNLOADED_FORCE_N:
+    # Unloaded check, F/T zero and tare. The check uses the mean force since the previous zero (a UR's F/T drifts
+    # by well under UNLOADED_FORCE_N between presses); after zeroing, the mean over a second window is kept as a
+    # host-side offset, because a zero taken from one noisy sample is off by ~0.5 N.
+    _, mean_wrench = settle_frames(arm, sensor, settle_s)
+    mean_force = float(np.linalg.norm(mean_wrench[:3]))
+    if mean_force > UNLOADED_FORCE_N:
         raise SafetyLimit(
-            f"wrist reads {max_force:.2f} N at the stand-off pose of press {plan.press_id}: the pad is touching "
+            f"wrist reads {mean_force:.2f} N at the stand-off pose of press {plan.press_id}: the pad is touching "
             "something, refusing to tare",
             hint="check the object's position in the rig file and the stand-off",
         )
+    arm.zero_ft()
+    frames, ft_offset = settle_frames(arm, sensor, settle_s)
+    arm = cast(Arm, ZeroedArm(arm, ft_offset))
     if not frames:
         raise DeviceTimeout(f"{sensor.layout.name} sent no frames while settling before press {plan.press_id}")
     stack = np.stack([f.values for f in frames]).astype(np.float64)

@@ -55,12 +55,15 @@ class _SensorFeed:
         self.model = model
 
     def sample(self, t_ns: int) -> SensorSample:
+        from unitac_rig.sim.scene import TaxelLoads
+
         scene = self.rig.world.scene
         if scene is None or self.rig.mounted_sensor != self.sensor:
-            loads = None
+            shape = self.model.layout.frame_shape
+            loads = TaxelLoads(np.zeros(shape), np.zeros(shape) if self.model.layout.has_displacement else None)
         else:
             loads = scene.taxel_loads(self.rig.sim_arm.true_tcp_pose())
-        result: SensorSample = self.model.sample(loads, t_ns)
+        result: SensorSample = self.model.sample(loads)
         return result
 
 

@@ -211,7 +211,9 @@ def collect(
             hint="omit --rotation to run every rotation",
         )
     if config.simulated:
-        console.print("[bold yellow]SIMULATED RIG[/] (no rig file given): every device is simulated, no hardware moves.")
+        console.print(
+            "[bold yellow]SIMULATED RIG[/] (no rig file given): every device is simulated, no hardware moves."
+        )
     with open_rig(config, seed=seed) as rig:
         chosen = _choose_sensor(rig, obj, sensor, data)
         outcome = _run_session(rig, obj, chosen, data, [rotation] if rotation is not None else None, live, max_presses)

@@ -142,6 +142,8 @@ def collect_session(
     sensor = rig.open_sensor(sensor_name)
     try:
         writer.update_root_attrs({"sensor_identity": sensor.identity(), "layout": sensor.layout.name})
+        rig.mount(obj, todo[0].rotation_deg, sensor_name)
+        writer.update_root_attrs({"session_tare": _session_tare(rig, sensor, todo[0])})
         current_rotation: float | None = None
         for index, plan in enumerate(todo):
             if plan.rotation_deg != current_rotation:
@@ -158,6 +160,28 @@ def collect_session(
     finally:
         sensor.disconnect()
     return outcome
+
+
+def _session_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> dict[str, Any]:
+    """Zero the wrist F/T and tare the sensor (device bias where it has one) at the first stand-off pose.
+
+    The stand-off is clear of the object by construction (the object's outline plus the stand-off gap), so this is
+    the one moment the session can assume the pad is unloaded without a previous zero to check against.
+    """
+    from unitac_rig.press import settle_frames
+
+    rig.arm.move_linear(first.start_pose, rig.config.press.transit_speed_mm_s / 1000.0, 0.5)
+    rig.arm.zero_ft()
+    frames, _ = settle_frames(rig.arm, sensor, 0.3)
+    record = sensor.tare(frames)
+    sensor.poll()  # frames from during a device bias are not kept
+    return {
+        "method": record.method,
+        "n_frames": record.n_frames,
+        "spread": record.spread,
+        "baseline": np.asarray(record.baseline).tolist(),
+        "host_t_s": record.host_t_ns / 1e9,
+    }
 
 
 def _one_press(

@@ -54,8 +54,6 @@ class ZeroedArm:
         return getattr(self._arm, name)
 
 
-
-
 @dataclass(frozen=True)
 class PressPlan:
     """Where one press starts and which way it goes (base frame)."""

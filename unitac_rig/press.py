@@ -29,7 +29,7 @@ from drivers.motion import guarded_move
 from drivers.sensor import TactileSensor
 from unitac_rig.config import LimitsConfig, PressConfig
 from unitac_rig.errors import SafetyLimit
-from unitac_rig.geometry import press_force_n, press_rotation, pose_from
+from unitac_rig.geometry import approach_direction, pose_from, press_force_n, press_rotation
 from unitac_rig.recording import PressRecord, press_id
 
 log = logging.getLogger(__name__)
@@ -77,9 +77,7 @@ def make_plan(
     support_distance_mm: float,
     standoff_mm: float,
 ) -> PressPlan:
-    """Stand-off pose on the ray at ``angle_deg``: ``support_distance_mm`` is how far the object reaches toward the pad."""
-    from unitac_rig.geometry import approach_direction
-
+    """Stand-off pose on the ray at ``angle_deg``; ``support_distance_mm``: how far the object reaches to the pad."""
     u = approach_direction(angle_deg)
     distance_m = (support_distance_mm + standoff_mm) / 1000.0
     position = np.array([center_m[0], center_m[1], press_height_m]) + u * distance_m

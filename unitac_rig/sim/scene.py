@@ -142,6 +142,8 @@ class PressScene:
         offset_mm = rng.normal(0.0, self.params.centring_error_mm, 2) if self.params.centring_error_mm > 0 else 0.0
         self.nominal_center_m = (float(object_center_m[0]), float(object_center_m[1]))  # where presses aim
         self.center_mm = np.asarray(object_center_m, dtype=np.float64) * 1e3 + offset_mm  # where the object is
+        # farthest any outline point reaches from the axis, plus room for pillar tips proud of the pad (mm)
+        self._reach_mm = float(np.max(np.linalg.norm(np.asarray(obj.outer_mm), axis=1))) + 10.0
         self._outline = _Outline(obj, self.rotation_deg)
         self._pad = _SkinPad(layout, self.params) if self.kind == "skin" else _PillarPad(layout, self.params)
         self._rays: list[_RayTable] = []  # most recent first, a few kept so alternating rays stay cheap
@@ -199,16 +201,20 @@ class PressScene:
         return ray.loads_at(float(np.interp(force_n, ray.force, ray.travel)))
 
     def _ray_for_angle(self, angle_deg: float) -> _RayTable:
-        ray, _ = self._locate(press_pose(angle_deg, 200.0, object_center_m=self.nominal_center_m))
+        ray, _ = self._locate(press_pose(angle_deg, 200.0, object_center_m=self.nominal_center_m), need_table=True)
         return ray
 
     # ---- internals ---------------------------------------------------------------------------------------
-    def _locate(self, tcp_pose: np.ndarray) -> tuple[_RayTable, float]:
-        """The table of the press ray through ``tcp_pose`` (cached) and the travel past first touch (mm)."""
-        with self._lock:
-            return self._locate_unlocked(np.asarray(tcp_pose, dtype=np.float64))
+    def _locate(self, tcp_pose: np.ndarray, need_table: bool = False) -> tuple[_RayTable, float]:
+        """The table of the press ray through ``tcp_pose`` (cached) and the travel past first touch (mm).
 
-    def _locate_unlocked(self, pose: np.ndarray) -> tuple[_RayTable, float]:
+        Out of the object's reach, any cached table is returned with a negative travel (no contact), unless
+        ``need_table`` asks for the table of that very ray.
+        """
+        with self._lock:
+            return self._locate_unlocked(np.asarray(tcp_pose, dtype=np.float64), need_table)
+
+    def _locate_unlocked(self, pose: np.ndarray, need_table: bool) -> tuple[_RayTable, float]:
         rotvec = (float(pose[3]), float(pose[4]), float(pose[5]))
         if rotvec != self._last_rotvec or self._frame is None:
             rot = _rotvec_to_matrix(rotvec)
@@ -230,6 +236,10 @@ class PressScene:
         c_s = rel_x * xx + rel_y * xy
         c_n = rel_x * zx + rel_y * zy
         p = self.params
+        if self._rays and c_n > self._reach_mm and not need_table:
+            # Nothing of the object is within reach of the pad (transit moves between presses): no contact, and no
+            # point building a table for a ray that will never touch.
+            return self._rays[0], -1.0
         for i, ray in enumerate(self._rays):
             if (
                 abs(ray.c_s - c_s) <= p.ray_tolerance_mm

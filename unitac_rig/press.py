@@ -216,9 +216,11 @@ def run_press(
     arm = cast(Arm, ZeroedArm(arm, ft_offset))
     if not frames:
         raise DeviceTimeout(f"{sensor.layout.name} sent no frames while settling before press {plan.press_id}")
-    stack = np.stack([f.values for f in frames]).astype(np.float64)
-    baseline = stack.mean(axis=0)
-    tare = {"method": "host-mean", "n_frames": len(frames), "spread": float(stack.std(axis=0).max())}
+    valid = [f for f in frames if f.valid] or frames
+    stack = np.stack([f.values for f in valid]).astype(np.float64)
+    # the median, not the mean: one frame damaged on the wire (a corrupt SLCAN line) must not shift the baseline
+    baseline = np.median(stack, axis=0)
+    tare = {"method": "host-median", "n_frames": len(valid), "spread": float(stack.std(axis=0).max())}
 
     streams = _Streams(arm, sensor, plan, press, limits, stall_timeout_s, on_tick)
     streams.event("start", f"strategy={press.strategy} speed={press.speed_mm_s} mm/s")

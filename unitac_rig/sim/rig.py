@@ -25,6 +25,7 @@ from unitac_rig.errors import UsageError
 from unitac_rig.geometry import approach_direction, pose_from, press_rotation
 from unitac_rig.objects import ObjectSpec
 from unitac_rig.rig import Rig
+from unitac_rig.sim.faults import FaultPlan
 from unitac_rig.sim.signals import SensorSample
 
 log = logging.getLogger(__name__)
@@ -72,7 +73,17 @@ class SimRig(Rig):
 
     simulated = True
 
-    def __init__(self, config: RigConfig, *, seed: int = 0, papillarray_rate_hz: int = 100) -> None:
+    def __init__(
+        self,
+        config: RigConfig,
+        *,
+        seed: int = 0,
+        papillarray_rate_hz: int = 100,
+        faults: FaultPlan | None = None,
+        uskin_transport: str = "can",
+    ) -> None:
+        """``faults`` damages every simulated sensor transport; ``uskin_transport`` is ``can`` (python-can virtual
+        bus) or ``slcan`` (python-can's own slcan client on a ``simslcan://`` serial URL, slower)."""
         from unitac_rig.sim.arm import SimArm
         from unitac_rig.sim.sensor_models import PapillArrayModel, UskinModel
 
@@ -90,6 +101,10 @@ class SimRig(Rig):
             "papillarray": PapillArrayModel(rng=np.random.default_rng([seed, 3])),
         }
         self.papillarray_rate_hz = papillarray_rate_hz
+        self.faults = faults
+        if uskin_transport not in ("can", "slcan"):
+            raise UsageError(f"unknown simulated uSkin transport {uskin_transport!r}", hint="use 'can' or 'slcan'")
+        self.uskin_transport = uskin_transport
         self._devices: list[Any] = []
         self._object: ObjectSpec | None = None
         self._rotation = 0.0
@@ -136,14 +151,25 @@ class SimRig(Rig):
             from unitac_rig.sim.devices import SimXelaController
 
             channel = f"unitac-sim-{self._instance}-{len(self._devices)}"
-            self._devices.append(SimXelaController(channel, source=feed, clock=self.clock, rate_hz=100.0))
-            bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+            if self.uskin_transport == "slcan":
+                from unitac_rig.sim.devices import SimSlcanAdapter
+
+                adapter = SimSlcanAdapter(channel, clock=self.clock, faults=self.faults)
+                self._devices.append(adapter)
+                controller_faults = None
+                bus = can.Bus(interface="slcan", channel=adapter.url, bitrate=1_000_000)
+            else:
+                controller_faults = self.faults
+                bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+            self._devices.append(
+                SimXelaController(channel, source=feed, clock=self.clock, rate_hz=100.0, faults=controller_faults)
+            )
             sensor = UskinCanDriver(bus, clock=self.clock, owns_bus=True)
         else:
             from drivers.papillarray import PapillArrayDriver
             from unitac_rig.sim.devices.papillarray import SimPapillArrayHub
 
-            hub = SimPapillArrayHub(source=feed, clock=self.clock)
+            hub = SimPapillArrayHub(source=feed, clock=self.clock, faults=self.faults)
             self._devices.append(hub)
             sensor = PapillArrayDriver(hub.url, rate_hz=self.papillarray_rate_hz, clock=self.clock)
         sensor.connect()

@@ -150,7 +150,9 @@ def load_rig_config(path: Path | None) -> RigConfig:
         raise ConfigError(f"rig file {path} does not exist") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML ({exc})") from exc
-    return parse_rig_config(data, source=str(path))
+    config = parse_rig_config(data, source=str(path))
+    files = tuple(f if f.is_absolute() else (path.parent / f) for f in config.object.objects_files)
+    return config.model_copy(update={"object": config.object.model_copy(update={"objects_files": files})})
 
 
 def parse_rig_config(data: dict[str, object], source: str = "rig file") -> RigConfig:

@@ -8,6 +8,7 @@ step itself.
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import time
@@ -331,6 +332,14 @@ def _train(
     else:
         run_dir.mkdir(parents=True, exist_ok=True)
         save_test_set(run_dir, test_rows)
+        readable = {
+            "config": config.to_dict(),
+            "split": split.to_dict(),
+            "sensors": list(dataset.sensors),
+            "dataset_hash": dataset_hash,
+            "provenance": provenance(),
+        }
+        (run_dir / "config.json").write_text(json.dumps(readable, indent=2) + "\n", encoding="utf-8")
 
     def checkpoint(done: int) -> None:
         save_checkpoint(

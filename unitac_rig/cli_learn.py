@@ -36,8 +36,9 @@ def train_command(
 
     from unitac_rig.learning.data import build_paired_dataset, load_sets
     from unitac_rig.learning.report import write_report
-    from unitac_rig.learning.train import TrainConfig, load_run, train
+    from unitac_rig.learning.train import TrainConfig, load_run, resolve_device, train
 
+    resolve_device(device)  # a bad --device fails before the data is read
     console = Console()
     dataset = build_paired_dataset(load_sets(data))
     console.print(

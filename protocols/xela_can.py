@@ -225,19 +225,28 @@ class FrameAssembler:
 
     A frame closes when every taxel has reported once since the previous frame. If a taxel reports a second time
     before that (its cycle lost a message), the frame closes early, flagging the taxels that did not report, and
-    the repeating message opens the next frame. Unknown ids are counted and ignored; payloads too short to decode or
-    carrying the sentinel count as invalid reports and flag their taxel. Known limit (no counter on the wire): when a
-    cycle loses the taxels it starts with, the next cycle's reports of them complete it, so that frame mixes two
-    cycles one period apart; ``stale_after_ns`` bounds how far apart values in one frame can be.
+    the repeating message opens the next frame. The controller sends each cycle in id order, so the message of
+    ``cycle_start_id`` (default: the lowest id of the map) also closes a partial frame: without that, a cycle that
+    lost its *first* message would be completed by the next cycle's first message, and every later frame would mix
+    two cycles until another loss. Pass ``cycle_start_id=None`` for firmware with another send order. Unknown ids are
+    counted and ignored; payloads too short to decode or carrying the sentinel count as invalid reports and flag
+    their taxel. ``stale_after_ns`` bounds how old a value in an emitted frame can be.
     """
 
-    def __init__(self, id_map: TaxelIdMap = USPA46_ID_MAP, stale_after_ns: int = 50_000_000) -> None:
+    def __init__(
+        self,
+        id_map: TaxelIdMap = USPA46_ID_MAP,
+        stale_after_ns: int = 50_000_000,
+        cycle_start_id: int | None = -1,
+    ) -> None:
         if stale_after_ns <= 0:
             raise ProtocolError(f"stale_after_ns must be > 0, got {stale_after_ns}", hint="e.g. 50_000_000 (50 ms)")
         self.id_map = id_map
         self.stale_after_ns = stale_after_ns
         n = id_map.n_taxels
         self._index = id_map._index
+        start_id = min(id_map.ids) if cycle_start_id == -1 else cycle_start_id
+        self._cycle_start_index = None if start_id is None else self._index.get(start_id)
         self._values: list[list[int]] = [[0, 0, 0] for _ in range(n)]  # last good counts per taxel
         self._good_t_ns: list[int | None] = [None] * n  # time of each taxel's last good value
         self._bad_this_cycle: list[bool] = [False] * n  # reported, but invalid
@@ -263,7 +272,7 @@ class FrameAssembler:
             self.unknown_ids += 1
             return None
         emitted: AssembledFrame | None = None
-        if self._seen[index]:
+        if self._seen[index] or (index == self._cycle_start_index and self._n_seen > 0):
             emitted = self._emit(incomplete=True)
         self._seen[index] = True
         self._n_seen += 1

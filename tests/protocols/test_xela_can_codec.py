@@ -177,7 +177,7 @@ def _send_cycle(
 
 
 def test_frame_closes_when_every_taxel_has_reported_in_any_order() -> None:
-    assembler = FrameAssembler()
+    assembler = FrameAssembler(cycle_start_id=None)  # firmware whose send order is not by id
     order = [23, 0, 5, 12, *[i for i in range(24) if i not in (23, 0, 5, 12)]]
     frames = _send_cycle(assembler, cycle=0, t0_ns=0, order=order)
     assert len(frames) == 1
@@ -216,16 +216,18 @@ def test_taxel_never_seen_reads_zero_and_is_flagged() -> None:
     assert tuple(first.values[23]) == (0, 0, 0)
 
 
-def test_lost_leading_taxel_is_filled_by_the_next_cycle_known_limit() -> None:
-    """No frame counter on the wire: a cycle that loses the taxels it starts with is completed by the next cycle's
-    reports of them (one cycle apart, within stale_after), exactly as the vendor hosts do."""
+def test_lost_leading_taxel_is_flagged_and_the_next_cycle_stays_whole() -> None:
+    """The cycle's first id opens a new frame, so losing it flags one frame instead of shifting every later one."""
     assembler = FrameAssembler()
-    _send_cycle(assembler, cycle=0, t0_ns=0, skip=frozenset({0}))
-    frames = _send_cycle(assembler, cycle=1, t0_ns=10 * MS)
-    assert len(frames) == 1  # cycle 0 + cycle 1's taxel 0; the rest of cycle 1 is still open
-    assert frames[0].valid
-    assert tuple(frames[0].values[0]) == _counts(1, 0)
-    assert tuple(frames[0].values[1]) == _counts(0, 1)
+    _send_cycle(assembler, cycle=0, t0_ns=0)
+    assert _send_cycle(assembler, cycle=1, t0_ns=10 * MS, skip=frozenset({0})) == []
+    lossy, whole = _send_cycle(assembler, cycle=2, t0_ns=20 * MS)
+    assert list(np.flatnonzero(lossy.stale_mask)) == [0]
+    assert tuple(lossy.values[1]) == _counts(1, 1)
+    assert whole.valid
+    assert tuple(whole.values[0]) == _counts(2, 0) and tuple(whole.values[23]) == _counts(2, 23)
+    (after,) = _send_cycle(assembler, cycle=3, t0_ns=30 * MS)
+    assert after.valid and tuple(after.values[0]) == _counts(3, 0)
 
 
 def test_sentinel_flags_the_taxel_and_keeps_its_last_good_value() -> None:

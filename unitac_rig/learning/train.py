@@ -315,7 +315,7 @@ def _train(
     shuffle_rngs = [np.random.default_rng([seed, 1]) for seed in engine.seeds]
     history: list[dict[str, Any]] = []
     start_epoch, seconds = 0, 0.0
-    tsne_rows = _tsne_rows(len(test_rows), config.tsne_contacts, config.split_seed)
+    tsne_rows = _tsne_rows(test_rows.object_id, config.tsne_contacts, config.split_seed)
     first_latents: dict[str, np.ndarray] | None = None
     if payload is not None:
         try:
@@ -402,10 +402,17 @@ def _train(
     return TrainOutcome(run_dir, engine, normaliser, split, config, history, seconds, config.epochs)
 
 
-def _tsne_rows(n_test: int, wanted: int, seed: int) -> np.ndarray:
+def _tsne_rows(object_ids: np.ndarray, wanted: int, seed: int) -> np.ndarray:
+    """Up to ``wanted`` test rows, the same number from every object (the unseen object would swamp a plain
+    random pick: it is most of the test set)."""
     rng = np.random.default_rng([seed, 3])
-    count = min(n_test, wanted)
-    return np.sort(rng.choice(n_test, size=count, replace=False))
+    objects = sorted(set(object_ids.tolist()))
+    per_object = max(1, wanted // max(1, len(objects)))
+    picked = []
+    for object_id in objects:
+        rows = np.flatnonzero(object_ids == object_id)
+        picked.append(rng.choice(rows, size=min(per_object, rows.size), replace=False))
+    return np.sort(np.concatenate(picked)) if picked else np.zeros(0, dtype=int)
 
 
 @dataclass

@@ -54,6 +54,9 @@ class ObjectPlacement(_Strict):
     center_m: tuple[float, float] = Field((-0.15, 0.625), description="object axis in the base frame (x, y), m")
     press_height_m: float = Field(0.20, description="height of the press plane (TCP z) in the base frame, m")
     standoff_mm: float = Field(3.0, gt=0, le=50, description="gap between pad and object at the start pose, mm")
+    clearance_mm: float = Field(
+        90.0, gt=0, description="moves between press rays go out to this distance from the object axis, mm"
+    )
     objects_files: tuple[Path, ...] = Field((), description="extra object files (TOML/JSON) to add to the catalogue")
 
 

@@ -35,6 +35,15 @@ from unitac_rig.recording import PressRecord, press_id
 log = logging.getLogger(__name__)
 
 UNLOADED_FORCE_N = 3.0  # mean wrist force (since the last zero) below which the pad counts as unloaded, N
+# First contact is declared at max(contact_force_n, CONTACT_NOISE_SIGMAS x the press-force noise measured at the
+# stand-off). A UR's wrist F/T has ~0.5 N of noise per 500 Hz sample even after its filter, so a fixed 1 N trigger
+# fires on noise millimetres before the pad touches (every fast approach did on the simulated rig).
+CONTACT_NOISE_SIGMAS = 4.5
+# Force ramp anti-windup: the set-point may lead the measured press force (mean of the last RAMP_MEAN_PERIODS
+# control periods) by at most this, N. Without it a set-point ramping while nothing pushes back drives the
+# admittance loop to its speed limit and the pad hits the object with the set-point already near the threshold.
+RAMP_MAX_LEAD_N = 3.0
+RAMP_MEAN_PERIODS = 10
 
 
 class ZeroedArm:
@@ -63,6 +72,7 @@ class PressPlan:
     start_pose: np.ndarray  # (6,) stand-off pose
     direction: np.ndarray  # (3,) unit press direction
     contact_distance_m: float  # expected travel from the stand-off to first contact
+    center_xy_m: tuple[float, float] = (0.0, 0.0)  # the object axis the press aims at (base frame)
 
     @property
     def press_id(self) -> str:
@@ -88,7 +98,30 @@ def make_plan(
         start_pose=pose_from(position, press_rotation(direction)),
         direction=direction,
         contact_distance_m=standoff_mm / 1000.0,
+        center_xy_m=(float(center_m[0]), float(center_m[1])),
     )
+
+
+def move_clear(arm: Arm, plan: PressPlan, clearance_m: float, speed_m_s: float) -> None:
+    """Move to ``plan.start_pose`` without sweeping the pad through the object.
+
+    A straight line between two press rays far apart (the last angle of one sweep and the first of the next, or a
+    new object) would cut through the prism. So unless the arm is already on the plan's ray, it backs out radially to
+    ``clearance_m`` from the object axis, crosses at that radius, and comes in along the new ray.
+    """
+    here = np.asarray(arm.read_state().tcp_pose, dtype=np.float64)
+    target = np.asarray(plan.start_pose, dtype=np.float64)
+    center = np.array([*plan.center_xy_m, target[2]])
+    outward = -np.asarray(plan.direction, dtype=np.float64)
+    offset = here[:3] - center
+    radial = float(np.linalg.norm(offset[:2]))
+    on_ray = radial > 1e-6 and float(np.dot(offset[:2] / radial, outward[:2])) > np.cos(np.radians(3.0))
+    if not on_ray:
+        if radial < clearance_m:
+            out_dir = offset / radial if radial > 1e-6 else outward
+            arm.move_linear(np.concatenate([center + out_dir * clearance_m, here[3:]]), speed_m_s, 0.5)
+        arm.move_linear(np.concatenate([center + outward * clearance_m, target[3:]]), speed_m_s, 0.5)
+    arm.move_linear(target, speed_m_s, 0.5)
 
 
 @dataclass
@@ -116,6 +149,7 @@ class _Streams:
     limits: LimitsConfig
     stall_timeout_s: float
     on_tick: Callable[[TickInfo], None] | None
+    contact_threshold_n: float  # press force that counts as first contact, N (above the F/T noise)
     robot_t: list[float] = field(default_factory=list)
     robot_force: list[np.ndarray] = field(default_factory=list)
     robot_pose: list[np.ndarray] = field(default_factory=list)
@@ -145,7 +179,7 @@ class _Streams:
         elif now - self.last_frame_ns > self.stall_timeout_s * 1e9:
             self.event("stall", f"no tactile frame for {(now - self.last_frame_ns) / 1e9:.3f} s")
             raise DeviceTimeout(f"{self.sensor.layout.name} stopped sending frames during press {self.plan.press_id}")
-        if self.contact_pose is None and force >= self.press.contact_force_n:
+        if self.contact_pose is None and force >= self.contact_threshold_n:
             self.contact_pose = np.asarray(state.tcp_pose, dtype=np.float64)
             self.event("contact", f"{force:.2f} N")
         if self.contact_pose is not None and self.phase in ("approach", "press"):
@@ -171,6 +205,12 @@ def settle_frames(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[list
 
     The mean, not the largest sample: a UR's F/T has ~1 N of sample noise, while a real contact shifts the mean.
     """
+    frames, wrenches = _settle_window(arm, sensor, seconds)
+    return frames, wrenches.mean(axis=0)
+
+
+def _settle_window(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[list[TactileFrame], np.ndarray]:
+    """Wait ``seconds`` at rest; -> (frames seen, every wrench read (K, 6) in N, N*m)."""
     sensor.poll()  # drop anything queued during the transit move
     frames: list[TactileFrame] = []
     forces = []
@@ -178,7 +218,7 @@ def settle_frames(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[list
         arm.wait_period()
         forces.append(np.asarray(arm.read_state().tcp_force, dtype=np.float64))
         frames.extend(sensor.poll())
-    return frames, np.mean(forces, axis=0)
+    return frames, np.asarray(forces)
 
 
 def run_press(
@@ -191,6 +231,7 @@ def run_press(
     on_tick: Callable[[TickInfo], None] | None = None,
     stall_timeout_s: float = 0.5,
     settle_s: float = 0.2,
+    clearance_m: float = 0.09,
 ) -> PressRecord:
     """Do one press and return everything recorded (status complete, failed or aborted).
 
@@ -198,7 +239,7 @@ def run_press(
     record is attached to the exception as ``exc.press_record`` so the caller can keep it.
     """
     _check_workspace(plan.start_pose, limits)
-    arm.move_linear(plan.start_pose, press.transit_speed_mm_s / 1000.0, 0.5)
+    move_clear(arm, plan, clearance_m, press.transit_speed_mm_s / 1000.0)
 
     # Unloaded check, F/T zero and tare. The check uses the mean force since the previous zero (a UR's F/T drifts
     # by well under UNLOADED_FORCE_N between presses); after zeroing, the mean over a second window is kept as a
@@ -212,8 +253,11 @@ def run_press(
             hint="check the object's position in the rig file and the stand-off",
         )
     arm.zero_ft()
-    frames, ft_offset = settle_frames(arm, sensor, settle_s)
+    frames, wrenches = _settle_window(arm, sensor, settle_s)
+    ft_offset = wrenches.mean(axis=0)
     arm = cast(Arm, ZeroedArm(arm, ft_offset))
+    noise_n = float(np.std(-(wrenches[:, :3] @ plan.direction)))
+    contact_threshold_n = max(press.contact_force_n, CONTACT_NOISE_SIGMAS * noise_n)
     if not frames:
         raise DeviceTimeout(f"{sensor.layout.name} sent no frames while settling before press {plan.press_id}")
     valid = [f for f in frames if f.valid] or frames
@@ -222,8 +266,9 @@ def run_press(
     baseline = np.median(stack, axis=0)
     tare = {"method": "host-median", "n_frames": len(valid), "spread": float(stack.std(axis=0).max())}
 
-    streams = _Streams(arm, sensor, plan, press, limits, stall_timeout_s, on_tick)
+    streams = _Streams(arm, sensor, plan, press, limits, stall_timeout_s, on_tick, contact_threshold_n)
     streams.event("start", f"strategy={press.strategy} speed={press.speed_mm_s} mm/s")
+    streams.event("contact_threshold", f"{contact_threshold_n:.2f} N (press-force noise {noise_n:.3f} N rms)")
     streams.event("ft_zero", json_list(ft_offset))
     streams.event("tare", f"{tare['n_frames']} frames, spread {tare['spread']:.3g}")
     status, reason = "aborted", "interrupted"
@@ -284,7 +329,7 @@ def _press_strategy(arm: Arm, streams: _Streams, plan: PressPlan, press: PressCo
     # two-phase and force-ramp: fast to first contact
     streams.phase = "approach"
     result = guarded_move(
-        arm, plan.direction, press.fast_speed_mm_s / 1000.0, press.contact_force_n,
+        arm, plan.direction, press.fast_speed_mm_s / 1000.0, streams.contact_threshold_n,
         max_travel_m=backstop_m, hard_limit_n=limits.hard_force_n, on_period=streams.tick,
     )  # fmt: skip
     if result.reason != "force":
@@ -309,17 +354,22 @@ def _reason(guarded_reason: str) -> str:
 
 
 def _force_ramp(arm: Arm, streams: _Streams, plan: PressPlan, press: PressConfig) -> str:
-    """Force control along the press with a set-point rising at ``ramp_rate_n_s`` until the threshold is measured."""
+    """Force control along the press with a set-point rising at ``ramp_rate_n_s`` until the threshold is measured.
+
+    The set-point is rate-limited from the force at the start and never leads the measured press force (mean of the
+    last ``RAMP_MEAN_PERIODS`` readings) by more than ``RAMP_MAX_LEAD_N``: while nothing pushes back (contact lost,
+    or the approach stopped short) the pad creeps at gain x lead instead of winding up to the speed limit.
+    """
     task_frame = np.asarray(plan.start_pose, dtype=np.float64)
     selection = np.array([0, 0, 1, 0, 0, 0], dtype=np.float64)  # compliant along tool z (the press direction)
     limits = np.array([0.01, 0.01, press.speed_mm_s / 1000.0 * 4, 0.1, 0.1, 0.1])
-    start_force = streams.press_force[-1] if streams.press_force else press.contact_force_n
-    started = arm.clock.now_ns()
+    setpoint = streams.press_force[-1] if streams.press_force else press.contact_force_n
+    step_n = press.ramp_rate_n_s * arm.control_period_s
     max_periods = math.ceil((press.threshold_n / press.ramp_rate_n_s + 5.0) / arm.control_period_s)
     try:
         for _ in range(max_periods):
-            elapsed = (arm.clock.now_ns() - started) / 1e9
-            setpoint = min(press.threshold_n * 1.2, start_force + press.ramp_rate_n_s * elapsed)
+            measured = float(np.mean(streams.press_force[-RAMP_MEAN_PERIODS:])) if streams.press_force else 0.0
+            setpoint = min(setpoint + step_n, measured + RAMP_MAX_LEAD_N, press.threshold_n * 1.2)
             arm.force_mode(task_frame, selection, np.array([0, 0, setpoint, 0, 0, 0.0]), limits)
             arm.wait_period()
             state = arm.read_state()

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 from drivers.arm import Arm
 from drivers.clock import Clock, MonotonicClock
 from drivers.errors import DeviceError, DeviceNotFound
+from drivers.frames import TactileFrame
 from drivers.sensor import TactileSensor
 from unitac_rig.config import PapillArrayConfig, RigConfig, UskinCanConfig, UskinXelaServerConfig
 from unitac_rig.errors import UsageError
@@ -62,7 +63,7 @@ class Rig(ABC):
                 log.info("sensor %s does not answer: %s", name, exc)
                 continue
             try:
-                frames = []
+                frames: list[TactileFrame] = []
                 deadline = self.clock.now_ns() + int(probe_s * 1e9)
                 while not frames and self.clock.now_ns() < deadline:
                     self.clock.sleep(0.02)

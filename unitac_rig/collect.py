@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 import unitac_rig
-from drivers.errors import DeviceTimeout, ProtectiveStop
+from drivers.errors import ArmError, DeviceError, DeviceTimeout, ProtectiveStop
 from drivers.sensor import TactileSensor
 from unitac_rig.config import RigConfig
 from unitac_rig.errors import SafetyLimit
@@ -29,6 +29,9 @@ from unitac_rig.recording import PressRecord, SessionWriter
 from unitac_rig.rig import Rig
 
 log = logging.getLogger(__name__)
+
+RECONNECT_WAIT_S = 3.0  # how long a lost sensor may take to come back (USB replug, controller reboot), s
+RECONNECT_POLL_S = 0.25  # pause between reconnect attempts, s
 
 
 @dataclass
@@ -139,11 +142,19 @@ def collect_session(
     if not todo:
         return outcome
 
-    sensor = rig.open_sensor(sensor_name)
     try:
-        writer.update_root_attrs({"sensor_identity": sensor.identity(), "layout": sensor.layout.name})
-        rig.mount(obj, todo[0].rotation_deg, sensor_name)
-        writer.update_root_attrs({"session_tare": _session_tare(rig, sensor, todo[0])})
+        sensor = rig.open_sensor(sensor_name)
+    except BaseException:
+        writer.discard_if_unused()  # a missing port must not leave an empty session file behind
+        raise
+    try:
+        try:
+            writer.update_root_attrs({"sensor_identity": sensor.identity(), "layout": sensor.layout.name})
+            rig.mount(obj, todo[0].rotation_deg, sensor_name)
+            writer.update_root_attrs({"session_tare": _session_tare(rig, sensor, todo[0])})
+        except BaseException:
+            writer.discard_if_unused()  # nor may an arm or sensor that fails before the first press
+            raise
         current_rotation: float | None = None
         for index, plan in enumerate(todo):
             if plan.rotation_deg != current_rotation:
@@ -168,9 +179,9 @@ def _session_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> dict[str
     The stand-off is clear of the object by construction (the object's outline plus the stand-off gap), so this is
     the one moment the session can assume the pad is unloaded without a previous zero to check against.
     """
-    from unitac_rig.press import settle_frames
+    from unitac_rig.press import move_clear, settle_frames
 
-    rig.arm.move_linear(first.start_pose, rig.config.press.transit_speed_mm_s / 1000.0, 0.5)
+    move_clear(rig.arm, first, rig.config.object.clearance_mm / 1000.0, rig.config.press.transit_speed_mm_s / 1000.0)
     rig.arm.zero_ft()
     frames, _ = settle_frames(rig.arm, sensor, 0.3)
     record = sensor.tare(frames)
@@ -193,37 +204,90 @@ def _one_press(
     outcome: SessionOutcome,
     on_tick: Callable[[TickInfo], None] | None,
 ) -> tuple[PressRecord | None, bool]:
-    """Run one press (retrying once after a sensor stall) and record it; also says whether the session must stop."""
+    """Run one press and record it; also says whether the session must stop.
+
+    A sensor that stalls or drops off the bus/port mid-press aborts the press (kept, marked ``aborted``); the sensor
+    is reconnected and the press retried once. A second failure, or a sensor that does not come back, stops the
+    session cleanly (the arm backed off to the stand-off). Safety stops and Ctrl-C are re-raised after saving.
+    """
     config = rig.config
     for attempt in (1, 2):
         try:
-            record = run_press(rig.arm, sensor, plan, config.press, config.limits, on_tick=on_tick)
-        except DeviceTimeout as exc:
+            record = run_press(
+                rig.arm, sensor, plan, config.press, config.limits, on_tick=on_tick,
+                clearance_m=config.object.clearance_mm / 1000.0,
+            )  # fmt: skip
+        except (SafetyLimit, ProtectiveStop, ArmError, KeyboardInterrupt) as exc:
             partial = getattr(exc, "press_record", None)
             if partial is not None:
-                _save(writer, partial, extraction, outcome)
-            if attempt == 1:
-                log.warning("%s; reconnecting the sensor and retrying the press once", exc)
-                sensor.disconnect()
-                sensor.connect()
-                continue
-            outcome.stopped = f"sensor stalled twice at press {plan.press_id}: {exc}"
-            return partial, True
-        except (SafetyLimit, ProtectiveStop, KeyboardInterrupt) as exc:
-            partial = getattr(exc, "press_record", None)
-            if partial is not None:
-                _save(writer, partial, extraction, outcome)
+                _save(writer, sensor, partial, extraction, outcome)
             if isinstance(exc, KeyboardInterrupt):
                 outcome.stopped = f"interrupted at press {plan.press_id}"
                 raise
+            if isinstance(exc, SafetyLimit):
+                _back_off(rig, plan)
             outcome.stopped = f"{type(exc).__name__} at press {plan.press_id}: {exc}"
             raise
-        _save(writer, record, extraction, outcome)
+        except DeviceError as exc:  # the sensor stalled (DeviceTimeout) or its link failed (port/bus gone)
+            partial = getattr(exc, "press_record", None)
+            if partial is not None:
+                _save(writer, sensor, partial, extraction, outcome)
+            what = "stalled" if isinstance(exc, DeviceTimeout) else "failed"
+            _back_off(rig, plan)
+            if attempt == 1:
+                log.warning("%s; reconnecting the sensor and retrying the press once", exc)
+                try:
+                    _reconnect(rig, sensor)
+                except DeviceError as again:
+                    outcome.stopped = f"sensor {what} at press {plan.press_id} and did not come back: {again}"
+                    return partial, True
+                outcome.recovery_notes.append(f"press {plan.press_id}: sensor {what} ({exc}); reconnected, retried")
+                continue
+            outcome.stopped = f"sensor {what} twice at press {plan.press_id}: {exc}"
+            return partial, True
+        _save(writer, sensor, record, extraction, outcome)
         return record, False
     return None, True
 
 
-def _save(writer: SessionWriter, record: PressRecord, settings: ExtractionSettings, outcome: SessionOutcome) -> None:
+def _reconnect(rig: Rig, sensor: TactileSensor) -> None:
+    """Close and reopen the sensor's transport, trying for up to RECONNECT_WAIT_S (rig clock) before giving up."""
+    deadline_ns = rig.clock.now_ns() + round(RECONNECT_WAIT_S * 1e9)
+    while True:
+        try:
+            reconnect = getattr(sensor, "reconnect", None)
+            if callable(reconnect):
+                reconnect()  # keeps a bus the driver owns (disconnect() would shut it down for good)
+            else:
+                sensor.disconnect()
+                sensor.connect()
+            return
+        except DeviceError as exc:
+            if rig.clock.now_ns() >= deadline_ns:
+                raise
+            log.info("sensor not back yet (%s); retrying in %.2f s", exc, RECONNECT_POLL_S)
+            rig.clock.sleep(RECONNECT_POLL_S)
+
+
+def _back_off(rig: Rig, plan: PressPlan) -> None:
+    """Move back to the press's stand-off after an abort, so a stopped session never leaves the pad loaded."""
+    try:
+        rig.arm.move_linear(plan.start_pose, rig.config.press.transit_speed_mm_s / 1000.0, 0.5)
+    except Exception:  # best effort: the arm may be in a protective stop; the next run starts with the same move
+        log.exception("backing off to the stand-off of press %s failed", plan.press_id)
+
+
+def _save(
+    writer: SessionWriter,
+    sensor: TactileSensor,
+    record: PressRecord,
+    settings: ExtractionSettings,
+    outcome: SessionOutcome,
+) -> None:
+    try:  # what the link lost so far (checksum errors, gaps, invalid frames...), kept with the press
+        record.attrs.setdefault("sensor_health", sensor.health().as_dict())
+    except DeviceError as exc:
+        log.info("no sensor health for press %s: %s", record.press_id, exc)
     record.extraction = extract_press(
         record.robot_t_s, record.press_force_n, record.tactile_t_s, record.tactile_valid, settings
     )

@@ -18,6 +18,7 @@ Schema (see docs/dataset.md): root attributes describe the session; ``/presses/<
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import os
@@ -248,6 +249,46 @@ def _decode_attr(value: Any) -> Any:
     return value
 
 
+ROOM_MARGIN_BYTES = 64 * 1024  # HDF5 metadata (object headers, B-trees, heaps) on top of the raw data, bytes
+
+
+def record_nbytes(rec: PressRecord) -> int:
+    """Uncompressed size of a press's arrays (bytes): an upper bound on what writing it adds to a file."""
+    arrays = [rec.robot_t_s, rec.robot_force, rec.robot_pose, rec.press_force_n, rec.tactile_t_s, rec.tactile_values,
+              rec.tactile_seq, rec.tactile_device_t_us, rec.tactile_valid, rec.tare_baseline]  # fmt: skip
+    if rec.tactile_displacement_mm is not None:
+        arrays.append(rec.tactile_displacement_mm)
+    total = sum(np.asarray(a).nbytes for a in arrays)
+    frame_bytes = int(np.prod(np.shape(rec.tactile_values)[1:])) * 4
+    total += 32 * (8 * 6 + frame_bytes)  # extraction: ~25 targets x (6 per-target numbers + one float32 frame)
+    return int(total) + 200 * len(rec.events)
+
+
+def ensure_room(path: Path, extra_bytes: int) -> None:
+    """Raise OSError (ENOSPC, EDQUOT, EFBIG) unless ``path`` can grow by ``extra_bytes`` right now.
+
+    HDF5 does not survive a failed write: the failed flush leaves its metadata cache inconsistent and a later flush
+    or close can crash the whole process (seen with a file-size limit). So the room is claimed first with
+    ``posix_fallocate``, which fails cleanly, and handed back by truncating to the old size. Filesystems without
+    fallocate skip the check.
+    """
+    existed = path.exists()
+    size = path.stat().st_size if existed else 0
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        os.posix_fallocate(fd, size, max(1, extra_bytes + ROOM_MARGIN_BYTES))
+    except OSError as exc:
+        if exc.errno not in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS):
+            raise
+    finally:
+        try:
+            os.ftruncate(fd, size)
+        finally:
+            os.close(fd)
+            if not existed:
+                path.unlink(missing_ok=True)
+
+
 def _fsync_dir(path: Path) -> None:
     try:
         fd = os.open(path, os.O_RDONLY)
@@ -276,6 +317,9 @@ class SessionWriter:
         self.journal = journal_dir(self.data_dir, object_id, sensor)
         self.root_attrs = dict(root_attrs)
         self.recovery_notes: list[str] = []
+        # True when this writer started the session (no file, no journal yet): see discard_if_unused()
+        self.created = not self.path.exists() and not (self.journal / "_session.json").exists()
+        self._presses_written = 0
         try:
             self.journal.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -287,7 +331,7 @@ class SessionWriter:
     def _write_journal_header(self) -> None:
         header = self.journal / "_session.json"
         if header.exists():
-            existing = json.loads(header.read_text())
+            existing = self._journal_header()
             for key in ("object", "sensor"):
                 if existing.get(key) != self.root_attrs.get(key):
                     raise DataError(
@@ -300,13 +344,21 @@ class SessionWriter:
         os.replace(tmp, header)
 
     def _journal_header(self) -> dict[str, Any]:
-        data: dict[str, Any] = json.loads((self.journal / "_session.json").read_text())
+        header = self.journal / "_session.json"
+        try:
+            data: dict[str, Any] = json.loads(header.read_text())
+        except (OSError, ValueError) as exc:
+            raise DataError(
+                f"{header} is unreadable ({exc})",
+                hint="restore it from a backup, or move the session aside and collect into a new --data directory",
+            ) from exc
         return data
 
     def _journal_press_files(self) -> dict[str, Path]:
         return {p.stem: p for p in sorted(self.journal.glob("*.h5"))}
 
     def _create_file(self, path: Path) -> None:
+        self._room(path, 0)
         with h5py.File(path, "w") as f:
             attrs = self._journal_header()
             attrs["schema_version"] = SCHEMA_VERSION
@@ -356,9 +408,19 @@ class SessionWriter:
                 except (OSError, KeyError) as exc:
                     self.recovery_notes.append(f"journal entry {path.name} unreadable ({exc}); ignored")
                     continue
+                self._room(self.path, record_nbytes(rec))
                 write_press_group(presses, rec)
                 self.recovery_notes.append(f"press {pid} ({rec.status}) restored from the journal")
             f.flush()
+
+    def _room(self, path: Path, nbytes: int, what: str = "the session") -> None:
+        try:
+            ensure_room(path, nbytes)
+        except OSError as exc:
+            raise DataError(
+                f"no room to record {what} in {path}: {exc.strerror or exc}",
+                hint="free disk space (or raise the quota / file-size limit); rerun the same command to resume",
+            ) from exc
 
     # -- public API -------------------------------------------------------------------------------------------------
     def press_statuses(self) -> dict[str, str]:
@@ -375,6 +437,7 @@ class SessionWriter:
         tmp = self.journal / "_session.tmp"
         tmp.write_text(json.dumps(header, default=_json_default, indent=1))
         os.replace(tmp, self.journal / "_session.json")
+        self._room(self.path, len(json.dumps(dict(attrs), default=_json_default)))
         with h5py.File(self.path, "a") as f:
             for key, value in attrs.items():
                 f.attrs[key] = _attr_value(value)
@@ -383,6 +446,8 @@ class SessionWriter:
         """Make ``rec`` durable (journal), then add it to the session file."""
         final = self.journal / f"{rec.press_id}.h5"
         tmp = self.journal / f"{rec.press_id}.h5.tmp"
+        nbytes = record_nbytes(rec)
+        self._room(tmp, nbytes, f"press {rec.press_id}")
         try:
             with h5py.File(tmp, "w") as jf:
                 write_press_group(jf, rec, name="press")
@@ -390,6 +455,9 @@ class SessionWriter:
                 os.fsync(fh.fileno())
             os.replace(tmp, final)
             _fsync_dir(self.journal)
+            self._presses_written += 1
+            # durable from here on: a failure below only delays the copy into the session file to the next open
+            self._room(self.path, nbytes, f"press {rec.press_id} (it is safe in the journal)")
             with h5py.File(self.path, "a") as f:
                 write_press_group(f["presses"], rec)
                 f.flush()
@@ -399,6 +467,23 @@ class SessionWriter:
                 f"could not record press {rec.press_id} in {self.path}: {exc}",
                 hint="check free disk space; rerun the same command to resume",
             ) from exc
+
+    def discard_if_unused(self) -> None:
+        """Remove the session file and journal this writer created when no press was ever written to them.
+
+        Called when the session cannot start (no sensor on the port, no arm), so a failed start leaves the dataset
+        directory as it was instead of holding an empty session that ``inspect`` would list.
+        """
+        if not self.created or self._presses_written or self._journal_press_files():
+            return
+        self.path.unlink(missing_ok=True)
+        for leftover in ("_session.json", "_session.tmp"):
+            (self.journal / leftover).unlink(missing_ok=True)
+        for folder in (self.journal, self.journal.parent, self.data_dir):
+            try:
+                folder.rmdir()  # only when empty
+            except OSError:
+                break
 
 
 def iter_press_groups(f: h5py.File) -> Iterator[tuple[str, h5py.Group]]:

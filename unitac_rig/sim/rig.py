@@ -25,7 +25,7 @@ from unitac_rig.errors import UsageError
 from unitac_rig.geometry import approach_direction, pose_from, press_rotation
 from unitac_rig.objects import ObjectSpec
 from unitac_rig.rig import Rig
-from unitac_rig.sim.faults import FaultPlan
+from unitac_rig.sim.faults import FaultInjector, FaultPlan
 from unitac_rig.sim.signals import SensorSample
 
 log = logging.getLogger(__name__)
@@ -174,6 +174,10 @@ class SimRig(Rig):
             sensor = PapillArrayDriver(hub.url, rate_hz=self.papillarray_rate_hz, clock=self.clock)
         sensor.connect()
         return sensor
+
+    def sensor_fault_injectors(self) -> list[FaultInjector]:
+        """The fault injectors of the open sensor's simulated devices (tests force stalls and unplugs by hand)."""
+        return [device.faults for device in self._devices if isinstance(getattr(device, "faults", None), FaultInjector)]
 
     def _close_devices(self) -> None:
         for device in self._devices:

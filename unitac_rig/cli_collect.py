@@ -74,6 +74,8 @@ def _choose_sensor(rig: Rig, obj: ObjectSpec, sensor: str | None, data_dir: Path
                 f"sensor {sensor!r} is not configured on this rig",
                 hint=f"configured: {', '.join(rig.sensor_names())}",
             )
+        if not rig.simulated:
+            rig.check_sensor(sensor)  # the named sensor must be the one streaming, before the arm moves
         return sensor
     if not rig.simulated:
         found = rig.detect_sensor()

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 from drivers.arm import Arm
 from drivers.clock import Clock, MonotonicClock
-from drivers.errors import DeviceError, DeviceNotFound
+from drivers.errors import DeviceError, DeviceNotFound, DeviceTimeout
 from drivers.frames import TactileFrame
 from drivers.sensor import TactileSensor
 from unitac_rig.config import PapillArrayConfig, RigConfig, UskinCanConfig, UskinXelaServerConfig
@@ -53,25 +53,31 @@ class Rig(ABC):
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    def sensor_answers(self, name: str, probe_s: float = 1.0) -> bool:
+        """True when the named sensor sends a frame within ``probe_s`` (rig clock); it is closed again afterwards.
+
+        Raises what ``open_sensor`` raises (DeviceNotFound: the port or channel is not there).
+        """
+        sensor = self.open_sensor(name)
+        try:
+            frames: list[TactileFrame] = []
+            deadline = self.clock.now_ns() + int(probe_s * 1e9)
+            while not frames and self.clock.now_ns() < deadline:
+                self.clock.sleep(0.02)
+                frames = sensor.poll()
+            return bool(frames)
+        finally:
+            sensor.disconnect()
+
     def detect_sensor(self, probe_s: float = 1.0) -> str:
         """The one configured sensor that answers; an error if none or more than one does."""
         answering = []
         for name in self.sensor_names():
             try:
-                sensor = self.open_sensor(name)
+                if self.sensor_answers(name, probe_s):
+                    answering.append(name)
             except DeviceError as exc:
                 log.info("sensor %s does not answer: %s", name, exc)
-                continue
-            try:
-                frames: list[TactileFrame] = []
-                deadline = self.clock.now_ns() + int(probe_s * 1e9)
-                while not frames and self.clock.now_ns() < deadline:
-                    self.clock.sleep(0.02)
-                    frames = sensor.poll()
-                if frames:
-                    answering.append(name)
-            finally:
-                sensor.disconnect()
         if not answering:
             raise DeviceNotFound(
                 "no configured sensor answers",
@@ -83,6 +89,27 @@ class Rig(ABC):
                 hint="unplug the one that is not on the arm, or name the mounted sensor with --sensor",
             )
         return answering[0]
+
+    def check_sensor(self, name: str, probe_s: float = 1.0) -> None:
+        """Make sure the sensor the operator named is the one streaming; a clear error naming the one that is."""
+        if self.sensor_answers(name, probe_s):
+            return
+        others = []
+        for other in self.sensor_names():
+            if other == name:
+                continue
+            try:
+                if self.sensor_answers(other, probe_s):
+                    others.append(other)
+            except DeviceError as exc:
+                log.info("sensor %s does not answer either: %s", other, exc)
+        instead = f"; {', '.join(others)} answers instead" if others else ""
+        raise DeviceTimeout(
+            f"sensor {name!r} is connected but sent no frame within {probe_s:g} s{instead}",
+            hint="mount and power the sensor you named, or omit --sensor to use the one that answers"
+            if others
+            else "check the sensor's power, cable and rig-file settings (CAN channel/bitrate, controller id)",
+        )
 
 
 class HardwareRig(Rig):

@@ -64,7 +64,8 @@ def _open(path: Path) -> h5py.File:
     if version is None or int(version) != SCHEMA_VERSION:
         f.close()
         raise DataError(
-            f"{path} has session schema version {version!r}, this unitac-rig reads version {SCHEMA_VERSION}",
+            f"{path} has session schema version {'none' if version is None else int(version)}, this unitac-rig "
+            f"reads version {SCHEMA_VERSION}",
             hint="re-collect or re-import the data with this version",
         )
     return f

@@ -296,7 +296,7 @@ def inspect(
 def extract(
     data: Path = typer.Argument(..., help="Dataset directory."),
     tolerance: float = typer.Option(0.5, "--tolerance", help="Largest matching error that still counts, N."),
-    smoothing: int = typer.Option(5, "--smoothing", help="Moving-average window on the wrist force, samples."),
+    smoothing: int = typer.Option(15, "--smoothing", help="Moving-average window on the wrist force, samples."),
     latency: float = typer.Option(0.0, "--latency", help="Tactile latency to subtract from frame times, s."),
 ) -> None:
     """Recompute the force-matched frames of every session from the raw streams with other settings."""

@@ -63,7 +63,7 @@ class ObjectPlacement(_Strict):
 class PressConfig(_Strict):
     threshold_n: float = Field(10.0, gt=0, description="stop force along the press, N")
     strategy: Literal["guarded", "two-phase", "force-ramp"] = "guarded"
-    speed_mm_s: float = Field(5.0, gt=0, description="press speed (guarded) / slow speed (two-phase), mm/s")
+    speed_mm_s: float = Field(2.0, gt=0, description="press speed (guarded) / slow speed (two-phase), mm/s")
     fast_speed_mm_s: float = Field(15.0, gt=0, description="approach speed before contact (two-phase, force-ramp)")
     contact_force_n: float = Field(1.0, gt=0, description="force that counts as first contact, N")
     ramp_rate_n_s: float = Field(8.0, gt=0, description="force-ramp strategy: force rise rate after contact, N/s")

@@ -5,7 +5,8 @@ For every target force F* (25 targets, 4.00..10.00 N in 0.25 N steps, as in the 
 1. the press force (wrist force along the press direction, N) is smoothed with a centred moving average
    (``smoothing_samples``; the UR's F/T is noisy, and a single noisy sample must not decide a crossing);
 2. the crossing time t* is the first upward crossing of F* before the peak, linearly interpolated between the two
-   force samples that bracket it;
+   force samples that bracket it (a target only the raw force reached, because smoothing lowered the peak, is
+   matched on the raw force throughout);
 3. the matched frame is the tactile frame nearest in time to t* (after shifting tactile host times by
    ``tactile_latency_s``, the sensor's known delay, 0 by default);
 4. the force at that frame is the smoothed press force interpolated at the frame's time; the matching error is that
@@ -33,7 +34,7 @@ def default_targets_n() -> np.ndarray:
 class ExtractionSettings:
     targets_n: tuple[float, ...] = tuple(float(x) for x in default_targets_n())
     tolerance_n: float = 0.5
-    smoothing_samples: int = 5  # 10 ms at 500 Hz
+    smoothing_samples: int = 15  # 30 ms at 500 Hz: the UR F/T noise is correlated over ~10 ms
     max_frame_gap_s: float = 0.05
     tactile_latency_s: float = 0.0
 
@@ -122,6 +123,12 @@ def extract_press(
     valid = np.ones(frame_t.size, bool) if tactile_valid is None else np.asarray(tactile_valid, bool)
 
     crossing = first_upward_crossings(robot_t, force, targets)
+    # Smoothing lowers a short peak: a target the raw force reached but the smoothed force did not (the last ones,
+    # at the stop) takes its crossing from the raw force.
+    raw = np.asarray(press_force_n, np.float64)
+    from_raw = np.isnan(crossing)
+    if from_raw.any():
+        crossing[from_raw] = first_upward_crossings(robot_t, raw, targets[from_raw])
     frame_index = np.full(n, -1, dtype=np.int64)
     frame_time = np.full(n, np.nan)
     force_at = np.full(n, np.nan)
@@ -136,7 +143,9 @@ def extract_press(
         nearest = np.where(pick_right, right, left)
         frame_index[reached] = nearest
         frame_time[reached] = frame_t[nearest]
-        force_at[reached] = np.interp(frame_t[nearest], robot_t, force)
+        force_at[reached] = np.where(
+            from_raw[reached], np.interp(frame_t[nearest], robot_t, raw), np.interp(frame_t[nearest], robot_t, force)
+        )
         gap_ok = np.abs(frame_t[nearest] - crossing[reached]) <= settings.max_frame_gap_s
         miss[reached] = ~(gap_ok & valid[nearest])
     error = force_at - targets

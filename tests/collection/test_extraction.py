@@ -73,3 +73,14 @@ def test_smoothing_keeps_length_and_linear_signals():
     x = np.arange(20.0)
     assert np.allclose(smooth(x, 5)[2:-2], x[2:-2])
     assert smooth(x, 5).shape == x.shape
+
+
+def test_target_only_the_raw_peak_reaches_is_matched_on_the_raw_force():
+    # a ramp to exactly 10.2 N then a drop: a 15-sample average peaks below 10.2, the raw force crosses 10.1 N
+    robot_t = np.arange(0, 1.0, 0.002)
+    force = np.where(robot_t <= 0.51, 20 * robot_t, 0.0)
+    settings = ExtractionSettings(targets_n=(5.0, 10.1), smoothing_samples=15)
+    ex = extract_press(robot_t, force, np.arange(0.0, 1.0, 0.001), settings=settings)
+    assert ex.crossing_t_s[1] == pytest.approx(0.505, abs=1e-9)
+    assert not ex.miss.any()
+    assert abs(ex.error_n[1]) <= 0.02 + 1e-9

@@ -9,15 +9,14 @@ the normalisation statistics, the split, the dataset's content hash, the per-epo
 from __future__ import annotations
 
 import os
-import subprocess
 import tempfile
 from pathlib import Path
 from typing import Any
 
 import torch
 
-import unitac_rig
 from unitac_rig.errors import ModelError, UsageError
+from unitac_rig.provenance import git_commit, package_version
 
 CHECKPOINT_NAME = "checkpoint.pt"
 CHECKPOINT_FORMAT = "unitac-rig/unitac-nv-run"
@@ -70,16 +69,4 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any]:
 
 def provenance() -> dict[str, str]:
     """Package version, git commit (or "unknown") and torch version, for checkpoints and reports."""
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            cwd=Path(unitac_rig.__file__).resolve().parent.parent,
-            capture_output=True,
-            text=True,
-            timeout=5,
-            check=False,
-        )
-        commit = out.stdout.strip() or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        commit = "unknown"
-    return {"package_version": unitac_rig.__version__, "git_commit": commit, "torch_version": torch.__version__}
+    return {"package_version": package_version(), "git_commit": git_commit(), "torch_version": torch.__version__}

@@ -120,7 +120,7 @@ class LivePanel:
         if self.last_frame is not None and self.first_frame is not None:
             z = (self.last_frame - self.first_frame)[:, 2].reshape(self.layout.rows, self.layout.cols)
             scale = max(float(np.abs(z).max()), 1e-9)
-            shades = " .:-=+*#%@"
+            shades = "·.:-=+*#%@"
             for row in z:
                 grid.append(" ".join(shades[min(9, int(9 * max(0.0, v) / scale))] * 2 for v in row) + "\n")
         return Group(self.progress, status, grid, Text(self.last_result, style="dim"))

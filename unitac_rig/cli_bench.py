@@ -1,7 +1,125 @@
-"""Placeholder: commands for this area are added by its own work item."""
+"""``unitac-rig bench press|recorder|inference``: the speed-against-accuracy benchmarks (same code as benchmarks/*.py).
+
+Each prints a summary and writes ``OUT/bench_<name>.json`` and ``OUT/bench_<name>.png`` (OUT defaults to the
+checkout's docs/figures, else ./bench-out). ``--quick`` is a smoke run of well under a minute.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
 
 import typer
 
+bench_app = typer.Typer(
+    help="Benchmarks: press strategy vs matching error, recorder vs stream rates, inference vs the 1 ms budget.",
+    no_args_is_help=True,
+)
+
+_QUICK = typer.Option(False, "--quick", help="Smoke run (well under a minute).")
+_OUT = typer.Option(None, "--out", help="Folder for the JSON and PNG (default: docs/figures of this checkout).")
+
+
+def _out_dir(out: Path | None) -> Path:
+    from unitac_rig.benchmarks import default_out_dir
+
+    return default_out_dir() if out is None else out
+
+
+def _finish(lines: list[str], json_path: Path, png_path: Path) -> None:
+    for line in lines:
+        typer.echo(line)
+    typer.echo(f"wrote {json_path} and {png_path}")
+
+
+@bench_app.command("press")
+def press_command(
+    quick: bool = _QUICK,
+    out: Path | None = _OUT,
+    jobs: int = typer.Option(os.cpu_count() or 1, "--jobs", help="Processes pressing in parallel."),
+) -> None:
+    """Press strategies and speeds on the simulated rig: campaign time against force-matching error."""
+    from rich.progress import Progress
+
+    from unitac_rig.benchmarks import write_json
+    from unitac_rig.benchmarks.press import (
+        full_plan,
+        plot_press_benchmark,
+        quick_plan,
+        run_press_benchmark,
+        summary_lines,
+    )
+
+    folder = _out_dir(out)
+    with Progress(transient=True) as progress:
+        task = progress.add_task("rig sessions", total=None)
+
+        def on_cell(done: int, total: int) -> None:
+            progress.update(task, completed=done, total=total)
+
+        doc = run_press_benchmark(quick_plan() if quick else full_plan(), jobs=max(1, jobs), on_cell=on_cell)
+    _finish(
+        summary_lines(doc),
+        write_json(doc, folder / "bench_press.json"),
+        plot_press_benchmark(doc, folder / "bench_press.png"),
+    )
+
+
+@bench_app.command("recorder")
+def recorder_command(
+    quick: bool = _QUICK,
+    out: Path | None = _OUT,
+    work_dir: Path | None = typer.Option(
+        None, "--work-dir", help="Where to write the test sessions (default: a temporary folder, removed after)."
+    ),
+) -> None:
+    """Recorder write rate and the live PapillArray path against the hardware's stream rates."""
+    from unitac_rig.benchmarks import write_json
+    from unitac_rig.benchmarks.recorder import (
+        full_plan,
+        plot_recorder_benchmark,
+        quick_plan,
+        run_recorder_benchmark,
+        summary_lines,
+    )
+
+    folder = _out_dir(out)
+    doc = run_recorder_benchmark(quick_plan() if quick else full_plan(), work_dir)
+    _finish(
+        summary_lines(doc),
+        write_json(doc, folder / "bench_recorder.json"),
+        plot_recorder_benchmark(doc, folder / "bench_recorder.png"),
+    )
+
+
+@bench_app.command("inference")
+def inference_command(
+    quick: bool = _QUICK,
+    out: Path | None = _OUT,
+    run: Path | None = typer.Option(None, "--run", help="A trained run (default: train a tiny one on synthetic data)."),
+) -> None:
+    """Encode / decode / translate latency against the 1 ms a 1000 Hz stream leaves."""
+    from unitac_rig.benchmarks import write_json
+    from unitac_rig.benchmarks.inference import (
+        full_plan,
+        plot_inference_benchmark,
+        quick_plan,
+        run_inference_benchmark,
+        summary_lines,
+    )
+    from unitac_rig.errors import UsageError
+
+    if run is not None and not (run / "checkpoint.pt").is_file():
+        raise UsageError(f"{run} has no checkpoint.pt", hint="give a run directory written by `unitac-rig train`")
+    folder = _out_dir(out)
+    doc = run_inference_benchmark(quick_plan() if quick else full_plan(), run)
+    _finish(
+        summary_lines(doc),
+        write_json(doc, folder / "bench_inference.json"),
+        plot_inference_benchmark(doc, folder / "bench_inference.png"),
+    )
+
 
 def register(app: typer.Typer) -> None:
-    """Add this area's commands to the root app."""
+    """Add ``bench`` and its subcommands to the root app."""
+    app.add_typer(bench_app, name="bench")

@@ -1,0 +1,66 @@
+"""Speed-against-accuracy benchmarks that the ``benchmarks/bench_*.py`` scripts and ``unitac-rig bench`` share.
+
+Each module measures and returns a JSON-ready dict and draws its figure; printing belongs to the callers. Simulated
+time (virtual clock) is reported as-is; wall-clock figures are reported next to the hardware rate they must beat, as
+ratios, because the machine's speed would otherwise decide the number.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def machine_info() -> dict[str, Any]:
+    """The box a benchmark ran on: CPU count, model, Python and numpy versions, load average (1 min)."""
+    model = platform.processor() or "unknown"
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    model = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return {
+        "cpus": os.cpu_count(),
+        "cpu_model": model,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "platform": platform.platform(),
+        "load_average_1min": round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None,
+    }
+
+
+def _jsonable(value: Any) -> Any:
+    """numpy scalars/arrays to Python; non-finite floats to None (JSON has no inf/NaN)."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        return _jsonable(value.item())
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+def write_json(doc: dict[str, Any], path: Path) -> Path:
+    """Write ``doc`` as indented JSON (inf/NaN as null), creating the folder; returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(_jsonable(doc), indent=1) + "\n")
+    return path
+
+
+def default_out_dir() -> Path:
+    """docs/figures of the checkout this package lives in, else ./bench-out."""
+    docs = Path(__file__).resolve().parents[2] / "docs" / "figures"
+    return docs if docs.is_dir() else Path("bench-out")

@@ -51,12 +51,27 @@ def test_twenty_kills_at_random_moments_lose_and_duplicate_nothing(tmp_path: Pat
     cmd = _collect_cmd(tmp_path, angles)
     journal = tmp_path / ".journal" / "hex_pla__uskin"
     seen: dict[str, tuple[int, int]] = {}  # every finished press ever observed, with the identity of its file
+    header = journal / "_session.json"
     killed = 0
     while killed < kills:
+        before = len(_journal_entries(journal))
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
-            # start-up is ~1 s; some kills land during it, most during presses, transit moves or writes
-            time.sleep(float(rng.uniform(0.2, 1.4)))
+            # Timed from what the process has done, not from its start, so a slow or loaded box still sees progress:
+            # during start-up; some time into the session (tare, presses, transit moves); or just after a press
+            # became durable (while it is copied into the session file, or the next press starts).
+            moment = int(rng.integers(3))
+            if moment == 0:
+                time.sleep(float(rng.uniform(0.05, 0.6)))
+            else:
+                deadline = time.monotonic() + 60
+                while (
+                    proc.poll() is None
+                    and time.monotonic() < deadline
+                    and not (header.exists() if moment == 1 else len(_journal_entries(journal)) > before)
+                ):
+                    time.sleep(0.005)
+                time.sleep(float(rng.uniform(0.0, 0.8 if moment == 1 else 0.15)))
             finished = proc.poll() is not None
             proc.send_signal(signal.SIGKILL)
         finally:

@@ -8,7 +8,6 @@ a Ctrl-C or a protective stop. Library code: no printing; progress goes through 
 from __future__ import annotations
 
 import logging
-import subprocess
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -25,6 +24,7 @@ from unitac_rig.errors import SafetyLimit
 from unitac_rig.extraction import ExtractionSettings, extract_press
 from unitac_rig.objects import ObjectSpec, pad_side_direction
 from unitac_rig.press import PressPlan, TickInfo, make_plan, run_press
+from unitac_rig.provenance import git_commit
 from unitac_rig.recording import PressRecord, SessionWriter
 from unitac_rig.rig import Rig
 
@@ -60,22 +60,6 @@ class PressDone:
     planned: int
     record: PressRecord
     matched: int
-
-
-def git_commit() -> str:
-    """The project's git commit, or "unknown" outside a checkout."""
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            cwd=Path(unitac_rig.__file__).resolve().parent.parent,
-            capture_output=True,
-            text=True,
-            timeout=5,
-            check=False,
-        )
-        return out.stdout.strip() or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
 
 
 def support_distance_mm(obj: ObjectSpec, rotation_deg: float, angle_deg: float) -> float:

@@ -55,13 +55,13 @@ def print_summary(report: dict[str, Any]) -> None:
     if geometry is not None:
         print(f"\ncontact-geometry profile MAE (mm) by feature, {geometry['folds']}-fold:")
         scenarios = geometry["scenarios"]
-        print(f"{'feature':<18}{'depth':>7}{'no-latent':>10}  " + "  ".join(f"{s:>26}" for s in scenarios))
+        print(f"{'feature':<18}{'|depth|':>7}{'no-latent':>10}  " + "  ".join(f"{s:>26}" for s in scenarios))
         rows = {**geometry["per_feature"], "whole object": geometry["whole_object"]}
         for name, entry in rows.items():
             if entry is None:
                 continue
             cells = "  ".join(f"{_fmt(entry[s]):>26}" for s in scenarios)
-            print(f"{name:<18}{entry['mean_true_depth_mm']:>7.2f}{entry['mean_profile_mae_mm']:>10.3f}  {cells}")
+            print(f"{name:<18}{entry['mean_abs_depth_mm']:>7.2f}{entry['mean_profile_mae_mm']:>10.3f}  {cells}")
     pooled = report["materials"]["pooled"]
     if pooled is not None:
         print("\nPLA vs TPU (pooled seen objects' held-out angles), NMAE:")

@@ -174,7 +174,7 @@ def test_geometry_per_feature_covers_every_contact_once_with_the_true_corner_dep
     corner = per_feature["corner 80 (V3)"]
     # at V3 both walls leave the pad at 50 deg: depth |x| tan 50 deg at x = 0, +-1.4, ..., +-7 mm
     mean_abs_x = 2 * (1.4 + 2.8 + 4.2 + 5.6 + 7.0) / 11
-    assert corner["mean_true_depth_mm"] == pytest.approx(mean_abs_x * math.tan(math.radians(50)), rel=1e-4)
+    assert corner["mean_abs_depth_mm"] == pytest.approx(mean_abs_x * math.tan(math.radians(50)), rel=1e-4)
     for scenario in geometry["scenarios"]:
         cell = corner[scenario]
         assert len(cell["members"]) == 2

@@ -410,7 +410,7 @@ def _geometry_by_feature(
             return None
         out: dict[str, Any] = {
             "contacts": int(tested.sum()),
-            "mean_true_depth_mm": float(truth[tested].mean()),
+            "mean_abs_depth_mm": float(np.abs(truth[tested]).mean()),
             "mean_profile_mae_mm": float(np.nanmean(mean_profile_error[tested])),
         }
         for name, values in error.items():
@@ -427,7 +427,8 @@ def _geometry_by_feature(
         "epochs": config.epochs,
         "scenarios": list(error),
         "reference": "mean_profile_mae_mm: the error of predicting the training folds' mean profile for every "
-        "contact (no latent); mean_true_depth_mm: how far the true profile falls away from the contact origin",
+        "contact (no latent); mean_abs_depth_mm: mean |true depth| over the profile points, how far the surface "
+        "departs from the pad plane through the contact origin",
         "paper_mae_mm": {name: PAPER_GEOMETRY_MAE_MM.get(name) for name in error},
         "left_out_contacts": int((~valid).sum()),
         "whole_object": summarise(np.ones(len(subset), dtype=bool)),
@@ -695,7 +696,7 @@ def _plot_seeds(report: dict[str, Any], path: Path) -> Path:
     table = report["seed_spread"]
     rows = list(table)
     columns = report["columns"]
-    fig, axes = plt.subplots(1, 2, figsize=(2.1 * len(columns) * 2 + 2.0, 0.62 * len(rows) + 2.2))
+    fig, axes = plt.subplots(2, 1, figsize=(1.9 * len(columns) + 2.5, 2 * (0.75 * len(rows) + 1.2)))
     for ax, metric in zip(axes, METRICS, strict=True):
         text_values = np.empty((len(rows), len(columns)), dtype=object)
         colour = np.full((len(rows), len(columns)), np.nan)
@@ -705,7 +706,11 @@ def _plot_seeds(report: dict[str, Any], path: Path) -> Path:
                 mean, low, high = _value(cell), _value(cell, "min"), _value(cell, "max")
                 width = high - low
                 colour[i, j] = 100.0 * width / abs(mean) if metric == "nmae" and mean else width
-                text_values[i, j] = f"{mean:.3f}±{_value(cell, 'std'):.3f}\n[{low:.3f}, {high:.3f}]"
+                digits = 4 if metric == "nmae" else 3
+                text = f"{mean:.{digits}f}±{_value(cell, 'std'):.{digits}f}\n[{low:.{digits}f}, {high:.{digits}f}]"
+                if cell.get("paper") is not None:
+                    text += f"\npaper {cell['paper']:.3f}"
+                text_values[i, j] = text
         image = ax.imshow(colour, cmap="Oranges", aspect="auto", vmin=0.0)
         for i in range(len(rows)):
             for j in range(len(columns)):
@@ -716,7 +721,7 @@ def _plot_seeds(report: dict[str, Any], path: Path) -> Path:
         ax.set_yticklabels(rows, fontsize=8)
         label = "(max - min) / mean over seeds (%)" if metric == "nmae" else "max - min over seeds"
         fig.colorbar(image, ax=ax, fraction=0.04, label=label)
-        ax.set_title(f"{metric.upper()}: mean ± std [min, max] over seeds", fontsize=9)
+        ax.set_title(f"{metric.upper()}: mean ± std [min, max] over seeds, and the paper's value", fontsize=9)
     seeds = report["seeds"]
     fig.suptitle(f"Table I spread over {len(seeds)} seed(s) {seeds} (population std)", fontsize=9)
     fig.tight_layout()

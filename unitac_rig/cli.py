@@ -78,6 +78,9 @@ def main(argv: list[str] | None = None) -> None:
             sys.exit(130)
         if debug:
             raise
-        typer.secho(f"error: unexpected {type(exc).__name__}: {exc} (rerun with --debug for details)", err=True,
-                    fg=typer.colors.RED)
+        typer.secho(
+            f"error: unexpected {type(exc).__name__}: {exc} (rerun with --debug for details)",
+            err=True,
+            fg=typer.colors.RED,
+        )
         sys.exit(1)

@@ -74,12 +74,17 @@ def print_summary(report: dict[str, Any]) -> None:
                 f"{paper_text}"
             )
     widest = max(
-        ((cell["nmae"]["max"] - cell["nmae"]["min"]) / cell["nmae"]["mean"], row, column)
-        for row, cells in report["seed_spread"].items()
-        for column, cell in cells.items()
-        if cell["nmae"]["mean"]
+        (
+            ((cell["nmae"]["max"] - cell["nmae"]["min"]) / cell["nmae"]["mean"], row, column)
+            for row, cells in report["seed_spread"].items()
+            for column, cell in cells.items()
+            if cell["nmae"]["mean"]
+        ),
+        default=None,
     )
-    print(f"\nwidest seed spread of a Table I NMAE cell: {100 * widest[0]:.1f}% of its mean ({widest[1]}, {widest[2]})")
+    if widest is not None:
+        share, row, column = widest
+        print(f"\nwidest seed spread of a Table I NMAE cell: {100 * share:.1f}% of its mean ({row}, {column})")
 
 
 def main() -> None:

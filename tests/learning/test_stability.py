@@ -119,7 +119,7 @@ def metrics(run_dir: Path) -> dict[str, Any]:
 
 
 def test_report_is_json_and_names_the_object_seeds_and_paper_remark(report: dict[str, Any]) -> None:
-    json.dumps(report)  # the benchmark script writes it as is
+    json.dumps(report, allow_nan=False)  # the benchmark script writes it as is: strict JSON
     assert report["object"] == "irregular_pla"
     assert report["seeds"] == [0, 1]
     assert report["paper_failing_corner_deg"] == 80.0
@@ -227,3 +227,11 @@ def test_bad_requests_are_refused(run_dir: Path) -> None:
         stability_report(run_dir, geometry_folds=1)
     with pytest.raises(DataError, match="no test contacts of object 'hex_pla'"):
         stability_report(run_dir, object_id="hex_pla", geometry_folds=0)
+
+
+def test_an_object_without_corners_is_all_face(run_dir: Path) -> None:
+    report = stability_report(run_dir, object_id="circle_pla", geometry_folds=0)
+    assert [(f["name"], f["test_contacts"]) for f in report["features"]] == [("face", 5)]
+    assert report["features"][0]["max_corner_distance_mm"] is None  # no corner to be near
+    assert report["geometry"] is None
+    json.dumps(report, allow_nan=False)

@@ -285,10 +285,15 @@ def _feature_table(
                 "vertex_mm": None if feature.vertex is None else spec.outer_mm[feature.vertex].tolist(),
                 "test_contacts": int(members.sum()),
                 "directions": len(directions),
-                "max_corner_distance_mm": float(corner_distance[members].max()) if members.any() else None,
+                "max_corner_distance_mm": _finite_or_none(corner_distance[members].max()) if members.any() else None,
             }
         )
     return out
+
+
+def _finite_or_none(value: float) -> float | None:
+    """JSON has no infinity: an object without corners has no corner distance."""
+    return float(value) if math.isfinite(value) else None
 
 
 def _reconstruction_by_feature(

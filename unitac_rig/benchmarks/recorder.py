@@ -334,7 +334,9 @@ def plot_recorder_benchmark(doc: dict[str, Any], path: Path) -> Path:
         f"frames lost: {doc['recorder']['frames_lost']}",
         fontsize=9,
     )
-    ax.legend(fontsize=8, loc="lower right")
+    top = max(max(values) for _, values in series)
+    ax.set_ylim(GOAL_HEADROOM / 3, top * 3)
+    ax.legend(fontsize=8, loc="upper left")
     ax.grid(True, axis="y", which="both", alpha=0.3)
     live = doc["live_papillarray"]
     labels = ["hub sent", "driver delivered", "counter gaps"]

@@ -34,6 +34,7 @@ import numpy as np
 
 from drivers.layouts import SensorLayout
 from unitac_rig.errors import ConfigError
+from unitac_rig.geometry import matrix_to_rotvec, rotvec_to_matrix
 from unitac_rig.objects import DEFAULT_OBJECT_CENTER_M, MaterialSpec, ObjectSpec
 
 log = logging.getLogger(__name__)
@@ -117,7 +118,7 @@ def press_pose(
     y = object_center_m[1] + u[1] * distance_mm * 1e-3
     d = (-u[0], -u[1], 0.0)
     rot = np.array([[-d[1], 0.0, d[0]], [d[0], 0.0, d[1]], [0.0, 1.0, 0.0]])
-    return np.concatenate([[x, y, height_m], _matrix_to_rotvec(rot)])
+    return np.concatenate([[x, y, height_m], matrix_to_rotvec(rot)])
 
 
 class PressScene:
@@ -217,7 +218,7 @@ class PressScene:
     def _locate_unlocked(self, pose: np.ndarray, need_table: bool) -> tuple[_RayTable, float]:
         rotvec = (float(pose[3]), float(pose[4]), float(pose[5]))
         if rotvec != self._last_rotvec or self._frame is None:
-            rot = _rotvec_to_matrix(rotvec)
+            rot = rotvec_to_matrix(np.array(rotvec))
             if abs(rot[2, 1]) < 0.99 and not self._warned_tilt:
                 log.warning(
                     "tool y is %.1f deg off vertical; the 2-D scene ignores the tilt",
@@ -699,34 +700,3 @@ def _cubic_spring_deflection(force: np.ndarray, k0: float, k3: float) -> np.ndar
     p3 = (k0 / (3.0 * k3)) ** 3
     root = np.sqrt(q * q + p3)
     return np.cbrt(q + root) + np.cbrt(q - root)
-
-
-def _rotvec_to_matrix(rotvec: tuple[float, float, float]) -> np.ndarray:
-    rx, ry, rz = rotvec
-    theta = math.sqrt(rx * rx + ry * ry + rz * rz)
-    if theta < 1e-12:
-        return np.eye(3)
-    kx, ky, kz = rx / theta, ry / theta, rz / theta
-    c, s = math.cos(theta), math.sin(theta)
-    v = 1.0 - c
-    return np.array(
-        [
-            [c + kx * kx * v, kx * ky * v - kz * s, kx * kz * v + ky * s],
-            [ky * kx * v + kz * s, c + ky * ky * v, ky * kz * v - kx * s],
-            [kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v],
-        ]
-    )
-
-
-def _matrix_to_rotvec(rot: np.ndarray) -> np.ndarray:
-    cos_theta = max(-1.0, min(1.0, (float(np.trace(rot)) - 1.0) / 2.0))
-    theta = math.acos(cos_theta)
-    if theta < 1e-9:
-        return np.zeros(3)
-    if math.pi - theta < 1e-6:
-        b = (rot + np.eye(3)) / 2.0
-        i = int(np.argmax(np.diag(b)))
-        axis = b[:, i] / math.sqrt(b[i, i])
-        return axis * theta
-    axis = np.array([rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0], rot[1, 0] - rot[0, 1]]) / (2.0 * math.sin(theta))
-    return axis * theta

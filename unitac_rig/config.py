@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import tomllib
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -133,7 +133,8 @@ class RigConfig(_Strict):
         return [float(a) for a in np.round(np.linspace(p.angle_min_deg, p.angle_max_deg, p.angle_count), 6)]
 
 
-def _describe(err: ValidationError, source: str) -> str:
+def describe_validation_error(err: ValidationError, source: str) -> str:
+    """The first pydantic error as one line naming the field: ``rig.toml: press.speed_mm_s: ...``."""
     first = err.errors()[0]
     where = ".".join(str(p) for p in first["loc"])
     message = str(first["msg"]).removeprefix("Value error, ")
@@ -142,18 +143,22 @@ def _describe(err: ValidationError, source: str) -> str:
     return f"{source}: {where}: {message}" if where else f"{source}: {message}"
 
 
+def read_toml(path: Path, what: str) -> dict[str, Any]:
+    """Parse a TOML file; a missing file or bad syntax becomes one ConfigError line naming ``what`` and the path."""
+    try:
+        return tomllib.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{what} {path} does not exist") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML ({exc})") from exc
+
+
 def load_rig_config(path: Path | None) -> RigConfig:
     """Read and validate a rig file; ``None`` gives the simulated rig's defaults."""
     if path is None:
         return RigConfig()
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"rig file {path} does not exist") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc})") from exc
-    config = parse_rig_config(data, source=str(path))
+    config = parse_rig_config(read_toml(path, "rig file"), source=str(path))
     files = tuple(f if f.is_absolute() else (path.parent / f) for f in config.object.objects_files)
     return config.model_copy(update={"object": config.object.model_copy(update={"objects_files": files})})
 
@@ -162,4 +167,4 @@ def parse_rig_config(data: dict[str, object], source: str = "rig file") -> RigCo
     try:
         return RigConfig.model_validate(data)
     except ValidationError as exc:
-        raise ConfigError(_describe(exc, source), hint="see docs/rig-file.md for every field") from exc
+        raise ConfigError(describe_validation_error(exc, source), hint="see docs/rig-file.md for every field") from exc

@@ -18,12 +18,12 @@ from __future__ import annotations
 
 import json
 import math
-import tomllib
 from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from unitac_rig.config import describe_validation_error, read_toml
 from unitac_rig.errors import ConfigError
 from unitac_rig.extraction import ExtractionSettings, default_targets_n
 
@@ -204,20 +204,13 @@ def _merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _describe(err: ValidationError, source: str) -> str:
-    first = err.errors()[0]
-    where = ".".join(str(p) for p in first["loc"]) or "(top level)"
-    message = "unknown key (typo?)" if first["type"] == "extra_forbidden" else first["msg"]
-    return f"{source}: {where}: {message}"
-
-
 def conventions_from_dict(data: dict[str, Any], source: str = "conventions") -> ImportConventions:
     """Defaults overridden by ``data`` (tables merge with the defaults, so a file only lists what it changes)."""
     merged = _merge(ImportConventions().as_json_dict(), data)
     try:
         return ImportConventions.model_validate(merged)
     except ValidationError as exc:
-        raise ConfigError(_describe(exc, source), hint="see docs/import.md for every field") from exc
+        raise ConfigError(describe_validation_error(exc, source), hint="see docs/import.md for every field") from exc
 
 
 def load_conventions(path: Path | None) -> ImportConventions:
@@ -225,13 +218,7 @@ def load_conventions(path: Path | None) -> ImportConventions:
     if path is None:
         return ImportConventions()
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"conventions file {path} does not exist") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc})") from exc
-    return conventions_from_dict(data, source=str(path))
+    return conventions_from_dict(read_toml(path, "conventions file"), source=str(path))
 
 
 # ---------------------------------------------------------------------------------------------------------------------

@@ -243,6 +243,31 @@ class GeometryResult:
         }
 
 
+def contact_profiles(
+    test_set: PairedDataset,
+    rows: np.ndarray,
+    object_id: str,
+    config: GeometryConfig,
+    outline: OutlineGeometry | None = None,
+) -> tuple[PairedDataset, np.ndarray, np.ndarray, list[tuple[int, int]]]:
+    """The contacts ``rows`` of ``object_id``: their subset, true depth profiles (M, points) in mm, which profiles lie
+    wholly on the object, and each contact's (rotation, angle) direction in whole degrees."""
+    subset = test_set.subset(rows)
+    outline = outline or OutlineGeometry.from_catalogue(object_id)
+    truth = outline.profiles(subset.angle_deg, subset.rotation_deg, profile_offsets_mm(config.points, config.span_mm))
+    valid = ~np.isnan(truth).any(axis=1)
+    if not valid.all():
+        log.warning("%d contacts have profile points off the object and are left out", int((~valid).sum()))
+    directions = list(
+        zip(
+            np.round(subset.rotation_deg).astype(int).tolist(),
+            np.round(subset.angle_deg).astype(int).tolist(),
+            strict=True,
+        )
+    )
+    return subset, truth, valid, directions
+
+
 def run_geometry(
     run: LoadedRun,
     test_set: PairedDataset,
@@ -272,21 +297,7 @@ def run_geometry(
     if not 0 <= member < run.engine.members:
         raise ModelError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
     seed = run.engine.seeds[member] if seed is None else seed
-    subset = test_set.subset(rows)
-    outline = outline or OutlineGeometry.from_catalogue(object_id)
-    offsets = profile_offsets_mm(config.points, config.span_mm)
-    truth = outline.profiles(subset.angle_deg, subset.rotation_deg, offsets)
-    valid = ~np.isnan(truth).any(axis=1)
-    if not valid.all():
-        log.warning("%d contacts have profile points off the object and are left out", int((~valid).sum()))
-
-    directions = list(
-        zip(
-            np.round(subset.rotation_deg).astype(int).tolist(),
-            np.round(subset.angle_deg).astype(int).tolist(),
-            strict=True,
-        )
-    )
+    subset, truth, valid, directions = contact_profiles(test_set, rows, object_id, config, outline)
     held = set(held_out_directions(directions, object_id, seed, config.test_fraction))
     is_test = np.array([d in held for d in directions]) & valid
     is_train = ~np.array([d in held for d in directions]) & valid
@@ -333,7 +344,7 @@ def run_geometry(
         object_id=object_id,
         member=member,
         seed=seed,
-        offsets_mm=offsets,
+        offsets_mm=profile_offsets_mm(config.points, config.span_mm),
         scenarios=scenarios,
         test_rows=rows[is_test],
         predictions=predictions,

@@ -42,7 +42,11 @@ from unitac_rig.errors import DataError, UsageError
 from unitac_rig.learning.data import PairedDataset, object_shape_material
 from unitac_rig.learning.engine import UNITAC_GROUP
 from unitac_rig.learning.evaluate import table_rows
-from unitac_rig.learning.geometry import GeometryConfig, OutlineGeometry, fit_profile_mlps, profile_offsets_mm
+from unitac_rig.learning.geometry import (
+    GeometryConfig,
+    contact_profiles,
+    fit_profile_mlps,
+)
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM, PAPER_TABLE1
 from unitac_rig.learning.report import table_columns
 from unitac_rig.learning.train import Evaluator, LoadedRun, load_run, load_test_set
@@ -353,20 +357,7 @@ def _geometry_by_feature(
 ) -> dict[str, Any]:
     """Out-of-fold profile errors (mm) of every ``<train>_to_<test>`` scenario and member, grouped by feature."""
     config = config or GeometryConfig()
-    subset = test.subset(rows)
-    outline = OutlineGeometry.from_catalogue(object_id)
-    offsets = profile_offsets_mm(config.points, config.span_mm)
-    truth = outline.profiles(subset.angle_deg, subset.rotation_deg, offsets)
-    valid = ~np.isnan(truth).any(axis=1)
-    if not valid.all():
-        log.warning("%d contacts have profile points off the object and are left out", int((~valid).sum()))
-    directions = list(
-        zip(
-            np.round(subset.rotation_deg).astype(int).tolist(),
-            np.round(subset.angle_deg).astype(int).tolist(),
-            strict=True,
-        )
-    )
+    subset, truth, valid, directions = contact_profiles(test, rows, object_id, config)
     fold_of = _direction_folds(directions, folds, run.config.split_seed, object_id)
 
     sensors = run.sensors

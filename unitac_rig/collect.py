@@ -16,15 +16,14 @@ from typing import Any
 
 import numpy as np
 
-import unitac_rig
 from drivers.errors import ArmError, DeviceError, DeviceTimeout, ProtectiveStop
 from drivers.sensor import TactileSensor
 from unitac_rig.config import RigConfig
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.extraction import ExtractionSettings, extract_press
 from unitac_rig.objects import ObjectSpec, pad_side_direction
-from unitac_rig.press import PressPlan, TickInfo, make_plan, run_press
-from unitac_rig.provenance import git_commit
+from unitac_rig.press import PressPlan, TickInfo, make_plan, move_clear, run_press, settle_frames
+from unitac_rig.provenance import git_commit, package_version
 from unitac_rig.recording import PressRecord, SessionWriter
 from unitac_rig.rig import Rig
 
@@ -112,7 +111,7 @@ def collect_session(
         "rotations_deg": [float(r) for r in rotations],
         "planned_presses": [p.press_id for p in plans],
         "extraction_settings": extraction.to_dict(),
-        "package_version": unitac_rig.__version__,
+        "package_version": package_version(),
         "git_commit": git_commit(),
         "created_unix": time.time(),
     }
@@ -163,8 +162,6 @@ def _session_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> dict[str
     The stand-off is clear of the object by construction (the object's outline plus the stand-off gap), so this is
     the one moment the session can assume the pad is unloaded without a previous zero to check against.
     """
-    from unitac_rig.press import move_clear, settle_frames
-
     move_clear(rig.arm, first, rig.config.object.clearance_mm / 1000.0, rig.config.press.transit_speed_mm_s / 1000.0)
     rig.arm.zero_ft()
     frames, _ = settle_frames(rig.arm, sensor, 0.3)

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -33,6 +32,7 @@ import matplotlib.pyplot as plt
 from protocols.papillarray import PacketParser, PapillArrayPacket, PillarSensorData, encode_packet
 from protocols.xela_can import USPA46_ID_MAP, FrameAssembler, encode_taxel_message
 from protocols.xela_ws import XelaSensorData, XelaWelcome, decode_message, encode_data_message
+from unitac_rig.benchmarks import machine_info
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGURES = ROOT / "docs" / "figures"
@@ -141,21 +141,15 @@ def bench_xela_server(n_messages: int, as_hex: bool) -> Bench:
 
 
 def machine() -> dict[str, object]:
-    model = platform.processor() or "unknown"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    """The shared machine record, under the key names this benchmark's JSON has always used."""
+    info = machine_info()
     return {
-        "cpu": model,
-        "load_average_1min": round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None,
-        "logical_cpus": os.cpu_count(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "platform": platform.platform(),
+        "cpu": info["cpu_model"],
+        "load_average_1min": info["load_average_1min"],
+        "logical_cpus": info["cpus"],
+        "python": info["python"],
+        "numpy": info["numpy"],
+        "platform": info["platform"],
     }
 
 

@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from unitac_rig.benchmarks import save_png
+
 BUDGET_MS = 1.0  # one frame period at 1000 Hz
 STREAM_HZ = 1000.0
 
@@ -229,11 +231,7 @@ def plot_inference_benchmark(doc: dict[str, Any], path: Path) -> Path:
     ax2.legend(fontsize=7)
     fig.suptitle(f"UniTac-NV inference ({doc['run']}); {doc['machine']['cpus']} CPUs", fontsize=10)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_png(fig, path)
 
 
 def summary_lines(doc: dict[str, Any]) -> list[str]:

@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from unitac_rig.benchmarks import save_png
+
 CAMPAIGN_PRESSES = 1820  # 7 objects x 91 angles x 2 sensors, the irregular prism at 4 rotations
 GOAL_MEDIAN_ERROR_N = 0.05
 GOAL_TIME_FRACTION = 0.5  # of the campaign time guarded needs for the same error
@@ -586,11 +588,7 @@ def plot_press_benchmark(doc: dict[str, Any], path: Path) -> Path:
         fontsize=11,
     )
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_png(fig, path)
 
 
 def _wrap(text: str, width: int = 60) -> str:

@@ -26,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from unitac_rig.benchmarks import save_png
+
 ROBOT_HZ = 500.0
 PAPILLARRAY_HZ = 1000.0
 USKIN_HZ = 100.0
@@ -351,11 +353,7 @@ def plot_recorder_benchmark(doc: dict[str, Any], path: Path) -> Path:
     )
     ax2.grid(True, axis="y", alpha=0.3)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_png(fig, path)
 
 
 def summary_lines(doc: dict[str, Any]) -> list[str]:

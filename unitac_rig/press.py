@@ -286,30 +286,31 @@ def run_press(
         streams.event("stop", f"travel limit: {exc}")
         _safe_stop(arm)
         _retract_quietly(arm, streams, plan, press)
-    except SafetyLimit as exc:
-        status, reason, pending = "aborted", "hard_limit", exc
-        streams.event("abort", str(exc))
-        _safe_stop(arm)
-    except ProtectiveStop as exc:
-        status, reason, pending = "aborted", "protective_stop", exc
-        streams.event("abort", f"protective stop: {exc}")
-    except DeviceTimeout as exc:
-        status, reason, pending = "aborted", "stall", exc
-        streams.event("abort", str(exc))
-        _safe_stop(arm)
-    except DeviceError as exc:
-        status, reason, pending = "aborted", "device_error", exc
-        streams.event("abort", str(exc))
-        _safe_stop(arm)
-    except KeyboardInterrupt as exc:
-        status, reason, pending = "aborted", "interrupted", exc
-        streams.event("abort", "interrupted by the operator")
-        _safe_stop(arm)
+    except (SafetyLimit, ProtectiveStop, DeviceError, KeyboardInterrupt) as exc:
+        status, reason, pending = "aborted", _abort_reason(exc), exc
+        detail = "interrupted by the operator" if isinstance(exc, KeyboardInterrupt) else f"{reason}: {exc}"
+        streams.event("abort", detail)
+        if not isinstance(exc, ProtectiveStop):  # the controller has already stopped the arm
+            _safe_stop(arm)
     record = _to_record(streams, plan, press, status, reason, baseline, tare, ft_offset)
     if pending is not None:
         pending.press_record = record  # type: ignore[attr-defined]
         raise pending
     return record
+
+
+# Why a press was aborted, by exception type; the first match wins (DeviceTimeout is a DeviceError).
+_ABORT_REASONS: tuple[tuple[type[BaseException], str], ...] = (
+    (SafetyLimit, "hard_limit"),
+    (ProtectiveStop, "protective_stop"),
+    (DeviceTimeout, "stall"),
+    (DeviceError, "device_error"),
+    (KeyboardInterrupt, "interrupted"),
+)
+
+
+def _abort_reason(exc: BaseException) -> str:
+    return next(reason for kind, reason in _ABORT_REASONS if isinstance(exc, kind))
 
 
 def json_list(values: np.ndarray) -> str:

@@ -14,6 +14,7 @@ import sys
 import typer
 
 from protocols.errors import UnitacError
+from unitac_rig.errors import UsageError
 
 app = typer.Typer(
     name="unitac-rig",
@@ -52,7 +53,12 @@ for _module in COMMAND_MODULES:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Console entry point: run the app, mapping project errors to one line and a non-zero exit."""
+    """Console entry point: run the app, mapping every error to one line and a non-zero exit.
+
+    Usage errors (unknown command or option, missing or bad value) exit 2, other project errors 1, Ctrl-C 130.
+    Only names typer itself exports are used here: typer 0.29 dropped its click dependency, so importing click
+    (which is not declared) broke this very path on a fresh install.
+    """
     args = sys.argv[1:] if argv is None else argv
     debug = "--debug" in args
     try:
@@ -61,21 +67,18 @@ def main(argv: list[str] | None = None) -> None:
         if debug:
             raise
         typer.secho(f"error: {exc.one_line()}", err=True, fg=typer.colors.RED)
-        sys.exit(2 if type(exc).__name__ == "UsageError" else 1)
-    except KeyboardInterrupt:
+        sys.exit(2 if isinstance(exc, UsageError) else 1)
+    except typer.Exit as exc:
+        sys.exit(exc.exit_code)
+    except (KeyboardInterrupt, typer.Abort):
         typer.secho("interrupted", err=True)
         sys.exit(130)
-    except Exception as exc:  # click usage errors and the like
-        import click
-
-        if isinstance(exc, click.exceptions.Exit):
-            sys.exit(exc.exit_code)
-        if isinstance(exc, click.ClickException):
-            exc.show()
-            sys.exit(exc.exit_code)
-        if isinstance(exc, click.exceptions.Abort):
-            typer.secho("aborted", err=True)
-            sys.exit(130)
+    except typer.TyperException as exc:  # typer's usage errors: unknown command/option, bad or missing value
+        if debug:
+            raise
+        typer.secho(f"error: {_usage_line(exc)}", err=True, fg=typer.colors.RED)
+        sys.exit(getattr(exc, "exit_code", 2))
+    except Exception as exc:
         if debug:
             raise
         typer.secho(
@@ -84,3 +87,13 @@ def main(argv: list[str] | None = None) -> None:
             fg=typer.colors.RED,
         )
         sys.exit(1)
+
+
+def _usage_line(exc: Exception) -> str:
+    """typer's own message for a usage error, on one line, with where to look for help."""
+    format_message = getattr(exc, "format_message", None)
+    message = format_message() if callable(format_message) else str(exc)
+    message = " ".join(str(message).split())
+    ctx = getattr(exc, "ctx", None)
+    command_path = getattr(ctx, "command_path", None) or "unitac-rig"
+    return f"{message} (see '{command_path} --help')"

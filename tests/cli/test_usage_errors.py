@@ -1,0 +1,60 @@
+"""Usage errors through the real console script, as a fresh install runs it: one line on stderr, exit 2, no
+traceback (and a traceback with --debug)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+
+def _console_script() -> str:
+    """The installed ``unitac-rig`` entry point of the interpreter running the tests."""
+    beside = Path(sys.executable).parent / "unitac-rig"
+    found = str(beside) if beside.exists() else shutil.which("unitac-rig")
+    if found is None:
+        pytest.fail("the unitac-rig console script is not installed (pip install -e .)")
+    return found
+
+
+def _run(*args: str) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "COLUMNS": "80", "NO_COLOR": "1"}
+    return subprocess.run(
+        [_console_script(), *args], capture_output=True, text=True, timeout=120, env=env, check=False
+    )
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["collect", "--objct", "hex_tpu"], "No such option: --objct"),
+        (["no-such-command"], "No such command 'no-such-command'"),
+        (["collect"], "Missing option '--object'"),
+        (["train", "--epochs", "many"], "Invalid value for '--epochs'"),
+    ],
+)
+def test_usage_error_is_one_line_and_exit_2(args: list[str], expected: str) -> None:
+    result = _run(*args)
+    assert result.returncode == 2, result.stderr
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("error: ")
+    assert expected in lines[0]
+    assert "Traceback" not in result.stderr
+    assert result.stdout == ""
+
+
+def test_debug_shows_the_traceback_of_a_usage_error() -> None:
+    result = _run("--debug", "collect", "--objct", "hex_tpu")
+    assert result.returncode != 0
+    assert "Traceback" in result.stderr
+
+
+def test_help_still_exits_0() -> None:
+    result = _run("--help")
+    assert result.returncode == 0
+    assert "collect" in result.stdout

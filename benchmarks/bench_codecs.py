@@ -32,7 +32,7 @@ import matplotlib.pyplot as plt
 from protocols.papillarray import PacketParser, PapillArrayPacket, PillarSensorData, encode_packet
 from protocols.xela_can import USPA46_ID_MAP, FrameAssembler, encode_taxel_message
 from protocols.xela_ws import XelaSensorData, XelaWelcome, decode_message, encode_data_message
-from unitac_rig.benchmarks import machine_info
+from unitac_rig.bench import machine_info
 
 ROOT = Path(__file__).resolve().parents[1]
 FIGURES = ROOT / "docs" / "figures"

@@ -1,4 +1,4 @@
-"""Encode / decode / translate latency against the 1 ms budget of a 1000 Hz stream (unitac_rig/benchmarks/inference.py).
+"""Encode / decode / translate latency against the 1 ms budget of a 1000 Hz stream (unitac_rig/bench/inference.py).
 
     python benchmarks/bench_inference.py [--quick] [--run RUN] [--out docs/figures]
 
@@ -13,8 +13,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from unitac_rig.benchmarks import default_out_dir, write_json
-from unitac_rig.benchmarks.inference import (
+from unitac_rig.bench import default_out_dir, write_json
+from unitac_rig.bench.inference import (
     full_plan,
     plot_inference_benchmark,
     quick_plan,

@@ -1,4 +1,6 @@
-"""Press strategy and speed against force-matching accuracy on the simulated rig (see unitac_rig/benchmarks/press.py).
+"""Press strategy and speed against force-matching accuracy on the simulated rig.
+
+The measuring code is unitac_rig/bench/press_strategies.py.
 
     python benchmarks/bench_press.py [--quick] [--jobs 2] [--out docs/figures]
 
@@ -14,8 +16,14 @@ import argparse
 import os
 from pathlib import Path
 
-from unitac_rig.benchmarks import default_out_dir, write_json
-from unitac_rig.benchmarks.press import full_plan, plot_press_benchmark, quick_plan, run_press_benchmark, summary_lines
+from unitac_rig.bench import default_out_dir, write_json
+from unitac_rig.bench.press_strategies import (
+    full_plan,
+    plot_press_benchmark,
+    quick_plan,
+    run_press_benchmark,
+    summary_lines,
+)
 
 
 def progress(done: int, total: int) -> None:

@@ -1,4 +1,4 @@
-"""The data path against the hardware's rates (see unitac_rig/benchmarks/recorder.py).
+"""The data path against the hardware's rates (see unitac_rig/bench/recorder.py).
 
     python benchmarks/bench_recorder.py [--quick] [--out docs/figures] [--work-dir DIR]
 
@@ -16,8 +16,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from unitac_rig.benchmarks import default_out_dir, write_json
-from unitac_rig.benchmarks.recorder import (
+from unitac_rig.bench import default_out_dir, write_json
+from unitac_rig.bench.recorder import (
     full_plan,
     plot_recorder_benchmark,
     quick_plan,

@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
-from unitac_rig.objects import list_objects
 from unitac_rig.plotting import new_figure, save_figure
+from unitac_rig.rig.objects import list_objects
 from unitac_rig.sim.scene import PressScene, SceneParams
 from unitac_rig.sim.sensor_models import model_for
 from unitac_rig.sim.source import SceneSensorSource
@@ -124,7 +124,7 @@ def with_sim_arm(angles: list[int]) -> dict[str, Any] | None:
         from unitac_rig.sim.arm import SimArm
     except ImportError:
         return None
-    from unitac_rig.objects import get_object
+    from unitac_rig.rig.objects import get_object
 
     presses, sim_s, peaks = 0, 0.0, []
     wall0 = time.perf_counter()

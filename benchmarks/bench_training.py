@@ -10,7 +10,7 @@
    few epochs, charted against epochs and wall time.
 
 Data: ``--data DIR`` (session files), else synthetic contacts of the paper's size (7 objects x 91 angles x 25
-targets, irregular prism x 4 rotations; ``unitac_rig.learning.synthetic``).
+targets, irregular prism x 4 rotations; ``unitac_rig.learning.synthetic_data``).
 
     python benchmarks/bench_training.py [--data DIR] [--epochs 300] [--eval-every 5] [--speed-epochs 3]
 
@@ -34,7 +34,7 @@ from drivers.layouts import PAPILLARRAY, USKIN
 from unitac_rig.learning.data import Normaliser, build_paired_dataset, load_sets, split_by_direction
 from unitac_rig.learning.engine import ModelShape, StackedAutoencoders, default_groups
 from unitac_rig.learning.reference import UniTacModule, train_plain
-from unitac_rig.learning.synthetic import synthetic_matched_sets
+from unitac_rig.learning.synthetic_data import synthetic_matched_sets
 from unitac_rig.learning.train import TrainConfig, train
 
 PAPER_OBJECTS = ("circle_pla", "square_pla", "hex_pla", "circle_tpu", "square_tpu", "hex_tpu", "irregular_pla")
@@ -87,7 +87,7 @@ def main() -> None:
         source = str(args.data)
     else:
         sets = synthetic_matched_sets(PAPER_OBJECTS, [USKIN, PAPILLARRAY])
-        source = "synthetic (unitac_rig.learning.synthetic), paper-sized"
+        source = "synthetic (unitac_rig.learning.synthetic_data), paper-sized"
     dataset = build_paired_dataset(sets)
     split = split_by_direction(dataset, 0)
     norm = Normaliser.fit(dataset, split.train_mask)

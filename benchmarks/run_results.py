@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from unitac_rig.learning.contact_geometry import geometry_for_run, run_geometry
 from unitac_rig.learning.data import build_paired_dataset, load_sets
-from unitac_rig.learning.geometry import geometry_for_run, run_geometry
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM, PAPER_TABLE1
 from unitac_rig.learning.report import table_columns, write_report
 from unitac_rig.learning.train import TrainConfig, load_run, load_test_set, train

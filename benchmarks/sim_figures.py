@@ -16,8 +16,8 @@ import numpy as np
 from matplotlib.axes import Axes
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
-from unitac_rig.objects import ObjectSpec, list_objects, pad_side_direction
 from unitac_rig.plotting import draw_taxel_map, new_figure, save_figure
+from unitac_rig.rig.objects import ObjectSpec, list_objects, pad_side_direction
 from unitac_rig.sim.scene import PressScene
 from unitac_rig.sim.sensor_models import PapillArrayModel, UskinModel
 

@@ -26,13 +26,13 @@ from typing import Any
 
 import numpy as np
 
-from unitac_rig.collect import collect_session
-from unitac_rig.config import parse_rig_config
-from unitac_rig.extraction import ExtractionSettings, extract_press
-from unitac_rig.objects import get_object
-from unitac_rig.recording import PressRecord, session_path
-from unitac_rig.session import read_presses
-from unitac_rig.sim.rig import SimRig
+from unitac_rig.collection.extraction import ExtractionSettings, extract_press
+from unitac_rig.collection.session import collect_session
+from unitac_rig.rig.config import parse_rig_config
+from unitac_rig.rig.objects import get_object
+from unitac_rig.sim.fast_rig import SimRig
+from unitac_rig.storage.reader import read_presses
+from unitac_rig.storage.recorder import PressRecord, session_path
 
 OUT_DIR = Path(__file__).resolve().parent.parent / "docs" / "figures"
 THRESHOLD_N = 10.0

@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from unitac_rig.learning.geometry import GeometryConfig
+from unitac_rig.learning.contact_geometry import GeometryConfig
 from unitac_rig.learning.stability import (
     DEFAULT_GEOMETRY_FOLDS,
     FACE_DISTANCE_MM,

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 
 from drivers.errors import DeviceNotFound
 from unitac_rig.cli import main
-from unitac_rig.cli_probe_ur5e import register_ur5e
+from unitac_rig.cli.probe_ur5e import register_ur5e
 
 
 def probe_app() -> typer.Typer:

@@ -9,12 +9,20 @@ import pytest
 from drivers.clock import VirtualClock
 from drivers.frames import TactileFrame
 from drivers.layouts import PAPILLARRAY
-from unitac_rig.collect import plan_presses
-from unitac_rig.config import LimitsConfig, PressConfig, parse_rig_config
-from unitac_rig.objects import get_object
-from unitac_rig.press import RAMP_MAX_LEAD_N, PressPlan, TickInfo, _force_ramp, _Streams, run_press, settle_frames
+from unitac_rig.collection.press import (
+    RAMP_MAX_LEAD_N,
+    PressPlan,
+    TickInfo,
+    _force_ramp,
+    _Streams,
+    run_press,
+    settle_frames,
+)
+from unitac_rig.collection.session import plan_presses
+from unitac_rig.rig.config import LimitsConfig, PressConfig, parse_rig_config
+from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.arm import SimArm, SimArmParams
-from unitac_rig.sim.rig import SimRig
+from unitac_rig.sim.fast_rig import SimRig
 
 PRESS_DIR = np.array([0.0, 1.0, 0.0])
 START_POSE = np.array([0.0, 0.0, 0.2, -np.pi / 2, 0.0, 0.0])  # tool z (the compliant axis) along base +y

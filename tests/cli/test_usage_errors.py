@@ -23,9 +23,7 @@ def _console_script() -> str:
 
 def _run(*args: str) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "COLUMNS": "80", "NO_COLOR": "1"}
-    return subprocess.run(
-        [_console_script(), *args], capture_output=True, text=True, timeout=120, env=env, check=False
-    )
+    return subprocess.run([_console_script(), *args], capture_output=True, text=True, timeout=120, env=env, check=False)
 
 
 @pytest.mark.parametrize(

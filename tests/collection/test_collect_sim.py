@@ -16,14 +16,14 @@ import pytest
 
 from drivers.errors import ProtectiveStop
 from unitac_rig.cli import main
-from unitac_rig.collect import collect_session
-from unitac_rig.config import RigConfig, parse_rig_config
-from unitac_rig.inspect import inspect_dataset
-from unitac_rig.objects import get_object
-from unitac_rig.press import TickInfo
-from unitac_rig.recording import session_path
-from unitac_rig.session import load_matched_set, read_presses
-from unitac_rig.sim.rig import SimRig
+from unitac_rig.collection.press import TickInfo
+from unitac_rig.collection.session import collect_session
+from unitac_rig.rig.config import RigConfig, parse_rig_config
+from unitac_rig.rig.objects import get_object
+from unitac_rig.sim.fast_rig import SimRig
+from unitac_rig.storage.reader import load_matched_set, read_presses
+from unitac_rig.storage.recorder import session_path
+from unitac_rig.storage.summary import inspect_dataset
 
 FEW_ANGLES = {"press": {"angle_count": 3}}
 

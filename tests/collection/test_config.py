@@ -4,9 +4,9 @@ from pathlib import Path
 
 import pytest
 
-from unitac_rig.config import load_rig_config, parse_rig_config
 from unitac_rig.errors import ConfigError
-from unitac_rig.objects import get_object
+from unitac_rig.rig.config import load_rig_config, parse_rig_config
+from unitac_rig.rig.objects import get_object
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 

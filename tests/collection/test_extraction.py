@@ -3,7 +3,13 @@
 import numpy as np
 import pytest
 
-from unitac_rig.extraction import ExtractionSettings, default_targets_n, extract_press, first_upward_crossings, smooth
+from unitac_rig.collection.extraction import (
+    ExtractionSettings,
+    default_targets_n,
+    extract_press,
+    first_upward_crossings,
+    smooth,
+)
 
 
 def test_paper_targets():

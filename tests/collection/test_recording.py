@@ -6,10 +6,10 @@ import h5py
 import numpy as np
 import pytest
 
+from unitac_rig.collection.extraction import extract_press
 from unitac_rig.errors import DataError
-from unitac_rig.extraction import extract_press
-from unitac_rig.recording import PressRecord, SessionWriter, press_id, session_path
-from unitac_rig.session import list_sessions, load_matched_set, read_presses
+from unitac_rig.storage.reader import list_sessions, load_matched_set, read_presses
+from unitac_rig.storage.recorder import PressRecord, SessionWriter, press_id, session_path
 
 
 def make_press(rotation: float, angle: float, status: str = "complete", n_taxels: int = 24) -> PressRecord:

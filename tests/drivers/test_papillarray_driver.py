@@ -19,7 +19,7 @@ from drivers.papillarray import PapillArrayDriver
 from unitac_rig.sim.devices import SimPapillArrayHub
 from unitac_rig.sim.faults import FaultPlan
 from unitac_rig.sim.signals import SensorSample, SignalSource
-from unitac_rig.sim.synthetic import PapillArrayPressSource, RecordingSource
+from unitac_rig.sim.synthetic_sources import PapillArrayPressSource, RecordingSource
 
 
 @contextlib.contextmanager

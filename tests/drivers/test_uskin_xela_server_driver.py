@@ -16,7 +16,7 @@ from drivers.uskin import UskinXelaServerDriver
 from unitac_rig.sim.devices import counts_from_sample
 from unitac_rig.sim.devices.xela_server import SimXelaServer
 from unitac_rig.sim.faults import FaultPlan
-from unitac_rig.sim.synthetic import RecordingSource, UskinPressSource
+from unitac_rig.sim.synthetic_sources import RecordingSource, UskinPressSource
 
 RATE_HZ = 500  # fast, to keep the real-time tests short
 

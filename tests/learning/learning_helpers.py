@@ -1,5 +1,5 @@
 """Test helpers for the learning tests: small synthetic paired data and session files written through the
-recorder's real API (so ``unitac-rig train --data`` reads them back through ``unitac_rig.session``)."""
+recorder's real API (so ``unitac-rig train --data`` reads them back through ``unitac_rig.storage.reader``)."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
-from unitac_rig.extraction import ExtractionSettings, extract_press
-from unitac_rig.learning.synthetic import synthetic_matched_sets
-from unitac_rig.recording import PressRecord, SessionWriter, press_id
-from unitac_rig.session import MatchedSet
+from unitac_rig.collection.extraction import ExtractionSettings, extract_press
+from unitac_rig.learning.synthetic_data import synthetic_matched_sets
+from unitac_rig.storage.reader import MatchedSet
+from unitac_rig.storage.recorder import PressRecord, SessionWriter, press_id
 
 SMALL_OBJECTS = ("circle_pla", "hex_tpu", "irregular_pla")
 SMALL_ANGLES = tuple(float(a) for a in range(-45, 46, 9))  # 11 approach angles

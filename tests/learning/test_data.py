@@ -13,7 +13,7 @@ from unitac_rig.learning.data import (
     held_out_directions,
     split_by_direction,
 )
-from unitac_rig.session import MatchedSet
+from unitac_rig.storage.reader import MatchedSet
 
 
 def matched(

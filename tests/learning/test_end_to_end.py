@@ -14,8 +14,8 @@ from learning_helpers import small_sets, write_sessions
 from drivers.layouts import PAPILLARRAY, USKIN
 from unitac_rig.cli import main
 from unitac_rig.errors import DataError, ModelError, UsageError
+from unitac_rig.learning.contact_geometry import GeometryConfig, geometry_for_run
 from unitac_rig.learning.data import build_paired_dataset
-from unitac_rig.learning.geometry import GeometryConfig, geometry_for_run
 from unitac_rig.learning.paper import TABLE1_COLUMNS
 from unitac_rig.learning.report import write_report
 from unitac_rig.learning.train import TrainConfig, load_run, train

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from unitac_rig.learning.geometry import OutlineGeometry, local_depth_profile, profile_offsets_mm, surface_frame
+from unitac_rig.learning.contact_geometry import OutlineGeometry, local_depth_profile, profile_offsets_mm, surface_frame
 
 
 def test_profile_is_11_points_over_14_mm() -> None:

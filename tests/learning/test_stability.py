@@ -13,9 +13,9 @@ import pytest
 from learning_helpers import small_sets
 
 from unitac_rig.errors import DataError, UsageError
+from unitac_rig.learning.contact_geometry import GeometryConfig
 from unitac_rig.learning.data import build_paired_dataset
 from unitac_rig.learning.evaluate import write_metrics
-from unitac_rig.learning.geometry import GeometryConfig
 from unitac_rig.learning.paper import PAPER_TABLE1
 from unitac_rig.learning.stability import (
     CORNERS_PNG,
@@ -28,7 +28,7 @@ from unitac_rig.learning.stability import (
     stability_report,
 )
 from unitac_rig.learning.train import TrainConfig, train
-from unitac_rig.objects import get_object
+from unitac_rig.rig.objects import get_object
 
 IRREGULAR = get_object("irregular_pla")
 V2 = np.array([0.0, 20.977491])  # 100 deg corner

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from unitac_rig.cli import main
-from unitac_rig.config import parse_rig_config
+from unitac_rig.rig.config import parse_rig_config
 
 FEW_ANGLES = {"press": {"angle_count": 3}}
 
@@ -59,9 +59,9 @@ def write_synthetic_sessions(data_dir: Path, objects: tuple[str, ...] = ("circle
     import numpy as np
 
     from drivers.layouts import PAPILLARRAY, USKIN
-    from unitac_rig.extraction import ExtractionSettings, extract_press
-    from unitac_rig.learning.synthetic import synthetic_matched_sets
-    from unitac_rig.recording import PressRecord, SessionWriter, press_id
+    from unitac_rig.collection.extraction import ExtractionSettings, extract_press
+    from unitac_rig.learning.synthetic_data import synthetic_matched_sets
+    from unitac_rig.storage.recorder import PressRecord, SessionWriter, press_id
 
     targets = (4.0, 6.0, 8.0, 10.0)
     angles = tuple(float(a) for a in range(-45, 46, 9))

@@ -12,16 +12,16 @@ import numpy as np
 import pytest
 from robustness_helpers import cli, few_angles, one_error_line, tree_hashes, write_synthetic_sessions
 
-from unitac_rig.collect import collect_session
-from unitac_rig.config import parse_rig_config
+from unitac_rig.collection.session import collect_session
 from unitac_rig.errors import UsageError
-from unitac_rig.objects import get_object
-from unitac_rig.recording import session_path
-from unitac_rig.rig import HardwareRig
-from unitac_rig.session import read_presses
+from unitac_rig.rig.config import parse_rig_config
+from unitac_rig.rig.hardware import HardwareRig
+from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.devices import SimPapillArrayHub
-from unitac_rig.sim.rig import SimRig
-from unitac_rig.sim.synthetic import PapillArrayPressSource
+from unitac_rig.sim.fast_rig import SimRig
+from unitac_rig.sim.synthetic_sources import PapillArrayPressSource
+from unitac_rig.storage.reader import read_presses
+from unitac_rig.storage.recorder import session_path
 
 
 @pytest.fixture(scope="module")
@@ -135,7 +135,7 @@ def wrong_sensor_rig(tmp_path: Path) -> Iterator[Path]:
 
 
 def test_detection_picks_the_sensor_that_answers(wrong_sensor_rig: Path) -> None:
-    from unitac_rig.config import load_rig_config
+    from unitac_rig.rig.config import load_rig_config
 
     rig = HardwareRig(load_rig_config(wrong_sensor_rig))
     try:

@@ -19,7 +19,7 @@ import h5py
 import numpy as np
 import pytest
 
-from unitac_rig.recording import session_path
+from unitac_rig.storage.recorder import session_path
 
 
 def _collect_cmd(data: Path, angles: int, obj: str = "hex_pla") -> list[str]:

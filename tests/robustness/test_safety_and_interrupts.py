@@ -18,13 +18,13 @@ import numpy as np
 import pytest
 from robustness_helpers import cli, few_angles, one_error_line
 
-from unitac_rig.collect import collect_session
+from unitac_rig.collection.press import TickInfo
+from unitac_rig.collection.session import collect_session
 from unitac_rig.errors import SafetyLimit
-from unitac_rig.objects import get_object
-from unitac_rig.press import TickInfo
-from unitac_rig.recording import session_path
-from unitac_rig.session import read_presses
-from unitac_rig.sim.rig import SimRig
+from unitac_rig.rig.objects import get_object
+from unitac_rig.sim.fast_rig import SimRig
+from unitac_rig.storage.reader import read_presses
+from unitac_rig.storage.recorder import session_path
 
 # a stiff PLA prism pressed at 40 mm/s overshoots the 10 N threshold by more than 1 N
 HARD_LIMIT_RIG = {"press": {"speed_mm_s": 40.0}, "limits": {"hard_force_n": 11.0}}

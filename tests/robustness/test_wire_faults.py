@@ -13,12 +13,12 @@ from pathlib import Path
 import numpy as np
 from robustness_helpers import few_angles
 
-from unitac_rig.collect import collect_session
-from unitac_rig.objects import get_object
-from unitac_rig.recording import PressRecord, session_path
-from unitac_rig.session import read_presses
+from unitac_rig.collection.session import collect_session
+from unitac_rig.rig.objects import get_object
+from unitac_rig.sim.fast_rig import SimRig
 from unitac_rig.sim.faults import FaultPlan
-from unitac_rig.sim.rig import SimRig
+from unitac_rig.storage.reader import read_presses
+from unitac_rig.storage.recorder import PressRecord, session_path
 
 
 def _collect(tmp_path: Path, sensor: str, faults: FaultPlan, angles: int, **rig_options: str) -> list[PressRecord]:

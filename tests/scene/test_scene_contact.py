@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
-from unitac_rig.objects import get_object, list_objects
+from unitac_rig.rig.objects import get_object, list_objects
 from unitac_rig.sim.scene import PressScene, SceneParams, press_pose
 from unitac_rig.sim.sensor_models import UskinModel
 from unitac_rig.sim.world import ContactWorld

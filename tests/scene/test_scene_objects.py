@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from unitac_rig.errors import ConfigError, UsageError
-from unitac_rig.objects import (
+from unitac_rig.rig.objects import (
     get_object,
     interior_angles_deg,
     list_objects,

@@ -10,8 +10,8 @@ from matplotlib import _pylab_helpers
 
 from drivers.layouts import PAPILLARRAY, USKIN
 from unitac_rig.errors import ConfigError, DataError
-from unitac_rig.objects import get_object
 from unitac_rig.plotting import draw_taxel_map, new_figure, save_figure
+from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.scene import PressScene, TaxelLoads
 from unitac_rig.sim.sensor_models import COUNTS_MAX, PapillArrayModel, PapillArrayParams, UskinModel, UskinParams
 from unitac_rig.sim.source import SceneSensorSource

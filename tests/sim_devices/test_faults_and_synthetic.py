@@ -7,7 +7,7 @@ import pytest
 
 from drivers.layouts import PAPILLARRAY, USKIN
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
-from unitac_rig.sim.synthetic import PapillArrayPressSource, UskinPressSource, press_load_n
+from unitac_rig.sim.synthetic_sources import PapillArrayPressSource, UskinPressSource, press_load_n
 
 
 def _run(plan: FaultPlan, n: int = 200) -> list[bytes | None]:

@@ -28,9 +28,9 @@ from unitac_rig.importer.presses import (
     streams_from_processed,
     streams_from_raw,
 )
-from unitac_rig.objects import get_object
-from unitac_rig.recording import SessionWriter, journal_dir, session_path
-from unitac_rig.session import press_summaries, read_session_info
+from unitac_rig.rig.objects import get_object
+from unitac_rig.storage.reader import press_summaries, read_session_info
+from unitac_rig.storage.recorder import SessionWriter, journal_dir, session_path
 
 log = logging.getLogger(__name__)
 

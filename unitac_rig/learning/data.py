@@ -28,7 +28,7 @@ JoinKey = tuple[str, int, int, int]
 
 
 class MatchedSetLike(Protocol):
-    """What the learning side reads from one (object, sensor) session (``unitac_rig.session.MatchedSet``)."""
+    """What the learning side reads from one (object, sensor) session (``unitac_rig.storage.reader.MatchedSet``)."""
 
     @property
     def object_id(self) -> str: ...
@@ -52,7 +52,7 @@ class MatchedSetLike(Protocol):
 
 def load_sets(data_dir: Path) -> list[MatchedSetLike]:
     """Every force-matched set under ``data_dir`` (one per session file), via the session reader."""
-    from unitac_rig.session import load_matched_sets
+    from unitac_rig.storage.reader import load_matched_sets
 
     data_dir = Path(data_dir)
     if not data_dir.is_dir():
@@ -218,7 +218,7 @@ def default_unseen_objects(object_ids: Iterable[str]) -> tuple[str, ...]:
 
 
 def _catalogue_training_flag(object_id: str) -> bool | None:
-    from unitac_rig.objects import get_object
+    from unitac_rig.rig.objects import get_object
 
     try:
         return bool(get_object(object_id).in_autoencoder_training)
@@ -360,7 +360,7 @@ class Normaliser:
 
 def object_shape_material(object_id: str) -> tuple[str, str]:
     """(shape, material) of an object: from the catalogue where it knows the id, else from ``<shape>_<material>``."""
-    from unitac_rig.objects import get_object
+    from unitac_rig.rig.objects import get_object
 
     try:
         spec = get_object(object_id)

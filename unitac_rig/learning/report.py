@@ -13,10 +13,10 @@ import numpy as np
 import torch
 
 from unitac_rig.errors import UnitacError
+from unitac_rig.learning.contact_geometry import GEOMETRY_JSON
 from unitac_rig.learning.data import PairedDataset, object_shape_material
 from unitac_rig.learning.engine import UNITAC_GROUP, baseline_name
 from unitac_rig.learning.evaluate import METRICS_JSON, write_metrics
-from unitac_rig.learning.geometry import GEOMETRY_JSON
 from unitac_rig.learning.paper import PAPER_TABLE1
 from unitac_rig.learning.train import Evaluator, LoadedRun, direction_name, load_run, load_test_set
 

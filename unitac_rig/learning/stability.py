@@ -3,7 +3,7 @@ TPU, and the spread of every Table I cell over the seeds of a run.
 
 1. **Per outline feature** of the unseen object (default: the run's unseen object, the irregular prism with six
    corners of 80..160 deg interior angle). Each test contact is assigned by its *contact origin* (where the ray
-   from the prism axis toward the pad meets the outline, :func:`unitac_rig.objects.pad_side_direction` and
+   from the prism axis toward the pad meets the outline, :func:`unitac_rig.rig.objects.pad_side_direction` and
    ``ObjectSpec.outline_hit``): to the nearest corner vertex when that vertex is within ``face_distance_mm``
    (3 mm by default), else to ``face``. Per feature: reconstruction NMAE and SSIM for every UniTac-NV direction (self
    and cross) and every baseline, the latent L1 distance between sensors, and the contact-geometry profile error
@@ -14,7 +14,7 @@ TPU, and the spread of every Table I cell over the seeds of a run.
 
 Metrics come from the existing code: per-frame NMAE/SSIM from :class:`unitac_rig.learning.train.Evaluator`, Table I
 rows from :func:`unitac_rig.learning.evaluate.table_rows`, the ground-truth profiles and the profile MLP from
-:mod:`unitac_rig.learning.geometry`.
+:mod:`unitac_rig.learning.contact_geometry`.
 
 Contact geometry is cross-validated here: the object's approach directions are split into ``geometry_folds`` folds
 (10 by default, so each fold holds out 10% of directions as the paper's single split does); the paper's MLP is trained
@@ -39,18 +39,18 @@ import numpy as np
 import torch
 
 from unitac_rig.errors import DataError, UsageError
-from unitac_rig.learning.data import PairedDataset, object_shape_material
-from unitac_rig.learning.engine import UNITAC_GROUP
-from unitac_rig.learning.evaluate import table_rows
-from unitac_rig.learning.geometry import (
+from unitac_rig.learning.contact_geometry import (
     GeometryConfig,
     contact_profiles,
     fit_profile_mlps,
 )
+from unitac_rig.learning.data import PairedDataset, object_shape_material
+from unitac_rig.learning.engine import UNITAC_GROUP
+from unitac_rig.learning.evaluate import table_rows
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM, PAPER_TABLE1
 from unitac_rig.learning.report import table_columns
 from unitac_rig.learning.train import Evaluator, LoadedRun, load_run, load_test_set
-from unitac_rig.objects import ObjectSpec, get_object, interior_angles_deg, pad_side_direction
+from unitac_rig.rig.objects import ObjectSpec, get_object, interior_angles_deg, pad_side_direction
 
 log = logging.getLogger(__name__)
 

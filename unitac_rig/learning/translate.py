@@ -106,7 +106,7 @@ def read_frames(path: Path, sensor: str) -> FramesInput:
         raise UsageError(f"{path} does not exist")
     suffix = path.suffix.lower()
     if suffix in (".h5", ".hdf5"):
-        from unitac_rig.session import load_matched_set
+        from unitac_rig.storage.reader import load_matched_set
 
         matched = load_matched_set(path)
         if matched.sensor != sensor:

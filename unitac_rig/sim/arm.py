@@ -35,7 +35,7 @@ import numpy as np
 from drivers.arm import ArmState
 from drivers.clock import Clock, VirtualClock
 from drivers.errors import ArmError, ProtectiveStop
-from unitac_rig.geometry import matrix_to_rotvec, rotvec_to_matrix
+from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
 from unitac_rig.sim.world import ContactWorld
 
 ROBOT_MODE_RUNNING = 7

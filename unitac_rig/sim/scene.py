@@ -2,7 +2,7 @@
 
 What it models (no more than the scene needs; parameters and sources in :class:`SceneParams` and docs/simulator.md):
 
-* the exact outline of the object (``unitac_rig.objects``), as mounted and rotated, cut by the pad's horizontal
+* the exact outline of the object (``unitac_rig.rig.objects``), as mounted and rotated, cut by the pad's horizontal
   section: ``f(s)`` = how far the outline reaches toward the pad at each point ``s`` across the pad;
 * the pad: **uSkin** = a bed of springs (Winkler skin, N/mm^3) over the whole pad, its pressure read by 4x6 magnets
   through the skin's spreading (a Gaussian of width ``skin_spread_sigma_mm`` followed by cell integration, which
@@ -17,7 +17,7 @@ Along one press ray (fixed pad orientation and lateral offset) everything depend
 touch, so the scene builds one vectorised table per ray (loads and wrench against travel) and interpolates; it
 rebuilds only when the pose leaves the ray.
 
-Frames: see ``unitac_rig.objects`` (rig geometry). ``wrench_on_tool`` is in base axes about the TCP and is the force
+Frames: see ``unitac_rig.rig.objects`` (rig geometry). ``wrench_on_tool`` is in base axes about the TCP and is the force
 the object exerts on the tool; taxel loads are in the sensor frame (x, y shear; z normal, pushing = +), newtons.
 """
 
@@ -34,8 +34,8 @@ import numpy as np
 
 from drivers.layouts import SensorLayout
 from unitac_rig.errors import ConfigError
-from unitac_rig.geometry import matrix_to_rotvec, rotvec_to_matrix
-from unitac_rig.objects import DEFAULT_OBJECT_CENTER_M, MaterialSpec, ObjectSpec
+from unitac_rig.rig.objects import DEFAULT_OBJECT_CENTER_M, MaterialSpec, ObjectSpec
+from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
 
 log = logging.getLogger(__name__)
 

@@ -1,7 +1,7 @@
 """The data path against the hardware's rates: the recorder's sustained write rate, and the live PapillArray path.
 
-1. Recorder: :meth:`unitac_rig.recording.SessionWriter.write_press` (journal file written, fsynced and renamed, then
-   appended to the session file) on presses of realistic length carrying the streams the hardware produces: the
+1. Recorder: :meth:`unitac_rig.storage.recorder.SessionWriter.write_press` (journal file written, fsynced and renamed,
+   then appended to the session file) on presses of realistic length carrying the streams the hardware produces: the
    robot at 500 Hz, the PapillArray at 1000 Hz (forces + displacements) and the uSkin at 100 Hz. The rate that counts
    is seconds of streams recorded per second of writing (the *real-time factor*); the combined figure writes one
    uSkin and one PapillArray press of the same length, so it covers all three streams (the robot twice). Every press
@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from unitac_rig.benchmarks import save_png
+from unitac_rig.bench import save_png
 
 ROBOT_HZ = 500.0
 PAPILLARRAY_HZ = 1000.0
@@ -61,8 +61,8 @@ def synthetic_press(sensor: str, length_s: float, index: int, rng: np.random.Gen
     (PapillArray forces in N with displacements, uSkin raw counts around 33 000). Extraction computed as in a session.
     """
     from drivers.layouts import get_layout
-    from unitac_rig.extraction import extract_press
-    from unitac_rig.recording import PressRecord, press_id
+    from unitac_rig.collection.extraction import extract_press
+    from unitac_rig.storage.recorder import PressRecord, press_id
 
     layout = get_layout(sensor)
     k = round(ROBOT_HZ * length_s)
@@ -121,8 +121,8 @@ def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
 
 def measure_recorder(plan: RecorderPlan, work_dir: Path) -> dict[str, Any]:
     """Write ``presses_per_length`` presses per length and sensor, read them back, compare; timings and losses."""
-    from unitac_rig.recording import SessionWriter
-    from unitac_rig.session import read_presses
+    from unitac_rig.storage.reader import read_presses
+    from unitac_rig.storage.recorder import SessionWriter
 
     rng = np.random.default_rng(0)
     rows = []
@@ -203,7 +203,7 @@ def measure_live_papillarray(seconds: float, poll_period_s: float = 0.002) -> di
     """A real-time simulated hub at 1000 Hz read by the driver's reader thread for ``seconds``; sent vs delivered."""
     from drivers.papillarray import PapillArrayDriver
     from unitac_rig.sim.devices.papillarray import SimPapillArrayHub
-    from unitac_rig.sim.synthetic import PapillArrayPressSource
+    from unitac_rig.sim.synthetic_sources import PapillArrayPressSource
 
     hub = SimPapillArrayHub(source=PapillArrayPressSource(), rate_hz=1000)
     driver = PapillArrayDriver(hub.url, rate_hz=1000)
@@ -265,7 +265,7 @@ def measure_live_papillarray(seconds: float, poll_period_s: float = 0.002) -> di
 
 def run_recorder_benchmark(plan: RecorderPlan, work_dir: Path | None = None) -> dict[str, Any]:
     """Both measurements; ``work_dir`` (default: a temporary folder, removed afterwards) holds the sessions."""
-    from unitac_rig.benchmarks import machine_info
+    from unitac_rig.bench import machine_info
 
     host = machine_info()
     own = work_dir is None

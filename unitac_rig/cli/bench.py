@@ -21,7 +21,7 @@ _OUT = typer.Option(None, "--out", help="Folder for the JSON and PNG (default: d
 
 
 def _out_dir(out: Path | None) -> Path:
-    from unitac_rig.benchmarks import default_out_dir
+    from unitac_rig.bench import default_out_dir
 
     return default_out_dir() if out is None else out
 
@@ -41,8 +41,8 @@ def press_command(
     """Press strategies and speeds on the simulated rig: campaign time against force-matching error."""
     from rich.progress import Progress
 
-    from unitac_rig.benchmarks import write_json
-    from unitac_rig.benchmarks.press import (
+    from unitac_rig.bench import write_json
+    from unitac_rig.bench.press_strategies import (
         full_plan,
         plot_press_benchmark,
         quick_plan,
@@ -74,8 +74,8 @@ def recorder_command(
     ),
 ) -> None:
     """Recorder write rate and the live PapillArray path against the hardware's stream rates."""
-    from unitac_rig.benchmarks import write_json
-    from unitac_rig.benchmarks.recorder import (
+    from unitac_rig.bench import write_json
+    from unitac_rig.bench.recorder import (
         full_plan,
         plot_recorder_benchmark,
         quick_plan,
@@ -99,8 +99,8 @@ def inference_command(
     run: Path | None = typer.Option(None, "--run", help="A trained run (default: train a tiny one on synthetic data)."),
 ) -> None:
     """Encode / decode / translate latency against the 1 ms a 1000 Hz stream leaves."""
-    from unitac_rig.benchmarks import write_json
-    from unitac_rig.benchmarks.inference import (
+    from unitac_rig.bench import write_json
+    from unitac_rig.bench.inference import (
         full_plan,
         plot_inference_benchmark,
         quick_plan,

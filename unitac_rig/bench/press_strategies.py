@@ -2,12 +2,13 @@
 
 Every setting (``guarded`` at several speeds, ``two-phase`` at several slow speeds, ``force-ramp`` at several ramp
 rates) presses the same object mix (a PLA and a TPU prism, both sensors, several angles, a few seeds) through the
-real press routine (:func:`unitac_rig.press.run_press`) and the real drivers. Per setting it reports
+real press routine (:func:`unitac_rig.collection.press.run_press`) and the real drivers. Per setting it reports
 
 * the simulated time of one press cycle (stand-off settle + zero + tare, approach, press, dwell, retract; the transit
   between stand-offs is added from the 91-angle plan) and of a paper campaign (x 1820 presses);
-* the force-matching error of :func:`unitac_rig.extraction.extract_press` over the 25 targets: median and p95 of
-  |error| with every miss counted as an infinite error, the miss rate, and the median of the matched targets alone;
+* the force-matching error of :func:`unitac_rig.collection.extraction.extract_press` over the 25 targets: median
+  and p95 of |error| with every miss counted as an infinite error, the miss rate, and the median of the matched
+  targets alone;
 * what the simulator knows and the recording cannot: the *true* press force at each matched frame minus its target,
   and the true peak minus the threshold (overshoot; negative = stopped short because a noisy sample crossed first);
 * the force rise rate between the 4 N and 9.5 N crossings (N/s).
@@ -30,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from unitac_rig.benchmarks import save_png
+from unitac_rig.bench import save_png
 
 CAMPAIGN_PRESSES = 1820  # 7 objects x 91 angles x 2 sensors, the irregular prism at 4 rotations
 GOAL_MEDIAN_ERROR_N = 0.05
@@ -181,9 +182,9 @@ def transit_time_s(distance_m: float, speed_m_s: float, accel_m_s2: float) -> fl
 
 def campaign_transit_s(object_id: str) -> float:
     """Mean transit time (s) between consecutive stand-off poses of the 91-angle plan (press transit speed)."""
-    from unitac_rig.collect import plan_presses
-    from unitac_rig.config import RigConfig
-    from unitac_rig.objects import get_object
+    from unitac_rig.collection.session import plan_presses
+    from unitac_rig.rig.config import RigConfig
+    from unitac_rig.rig.objects import get_object
 
     config = RigConfig()
     obj = get_object(object_id)
@@ -197,13 +198,13 @@ def campaign_transit_s(object_id: str) -> float:
 def run_cell(cell: Cell) -> list[PressSample]:
     """Press every angle of ``cell`` on a fresh simulated rig; returns one sample per press."""
     from drivers.errors import DeviceTimeout, ProtectiveStop
-    from unitac_rig.collect import plan_presses
-    from unitac_rig.config import parse_rig_config
+    from unitac_rig.collection.press import run_press, settle_frames
+    from unitac_rig.collection.session import plan_presses
     from unitac_rig.errors import SafetyLimit
-    from unitac_rig.objects import get_object
-    from unitac_rig.press import run_press, settle_frames
-    from unitac_rig.recording import PressRecord
-    from unitac_rig.sim.rig import SimRig
+    from unitac_rig.rig.config import parse_rig_config
+    from unitac_rig.rig.objects import get_object
+    from unitac_rig.sim.fast_rig import SimRig
+    from unitac_rig.storage.recorder import PressRecord
 
     config = parse_rig_config({"press": {**cell.setting.press_config(), "angle_count": cell.angle_count}})
     obj = get_object(cell.object_id)
@@ -363,7 +364,7 @@ class Score:
     statuses: dict[str, int] = field(default_factory=dict)
 
     def add(self, sample: PressSample, variant: ExtractionVariant, threshold_n: float) -> None:
-        from unitac_rig.extraction import ExtractionSettings, extract_press
+        from unitac_rig.collection.extraction import ExtractionSettings, extract_press
 
         settings = ExtractionSettings(
             smoothing_samples=variant.smoothing_samples,
@@ -465,7 +466,7 @@ def _finite(value: Any) -> bool:
 
 def score(plan: PressBenchPlan, samples: list[PressSample]) -> dict[str, Any]:
     """Per variant and setting: the pooled summary, per-sensor summaries, the Pareto front and the goal verdict."""
-    from unitac_rig.config import PressConfig
+    from unitac_rig.rig.config import PressConfig
 
     threshold_n = PressConfig().threshold_n
     transit = float(np.mean([campaign_transit_s(o) for o in plan.objects]))
@@ -520,7 +521,7 @@ def run_press_benchmark(
     plan: PressBenchPlan, jobs: int = 1, on_cell: Callable[[int, int], None] | None = None
 ) -> dict[str, Any]:
     """Press, score, and return the whole result as a JSON-ready dict."""
-    from unitac_rig.benchmarks import machine_info
+    from unitac_rig.bench import machine_info
 
     host = machine_info()
     began = time.perf_counter()

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from unitac_rig.benchmarks import save_png
+from unitac_rig.bench import save_png
 
 BUDGET_MS = 1.0  # one frame period at 1000 Hz
 STREAM_HZ = 1000.0
@@ -53,7 +53,7 @@ def train_tiny_run(run_dir: Path, epochs: int) -> Path:
     """Train UniTac-NV (no baselines) for ``epochs`` on synthetic sets of three objects x 11 angles x 5 targets."""
     from drivers.layouts import PAPILLARRAY, USKIN
     from unitac_rig.learning.data import build_paired_dataset
-    from unitac_rig.learning.synthetic import synthetic_matched_sets
+    from unitac_rig.learning.synthetic_data import synthetic_matched_sets
     from unitac_rig.learning.train import TrainConfig, train
 
     sets = synthetic_matched_sets(
@@ -137,7 +137,7 @@ def run_inference_benchmark(plan: InferencePlan, run_dir: Path | None = None) ->
     """Load ``run_dir`` (or train a tiny run in a temporary folder) and time it at 1 thread and torch's default."""
     import torch
 
-    from unitac_rig.benchmarks import machine_info
+    from unitac_rig.bench import machine_info
     from unitac_rig.learning.translate import Translator
 
     host = machine_info()

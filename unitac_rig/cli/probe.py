@@ -116,7 +116,7 @@ def _simulated_uskin(
     """Start the simulated device for ``probe uskin --simulated``; yields (can interface, channel, server url)."""
     from unitac_rig.sim.devices import SimSlcanAdapter, SimXelaController
     from unitac_rig.sim.devices.xela_server import SimXelaServer
-    from unitac_rig.sim.synthetic import synthetic_press
+    from unitac_rig.sim.synthetic_sources import synthetic_press
 
     source = synthetic_press(USKIN.name)
     if xela_server is not None:
@@ -197,7 +197,7 @@ def probe_papillarray(
     with contextlib.ExitStack() as stack:
         if simulated:
             from unitac_rig.sim.devices import SimPapillArrayHub
-            from unitac_rig.sim.synthetic import synthetic_press
+            from unitac_rig.sim.synthetic_sources import synthetic_press
 
             hub = stack.enter_context(SimPapillArrayHub(source=synthetic_press(PAPILLARRAY.name), slot=slot))
             port = hub.url
@@ -211,6 +211,6 @@ def register(app: typer.Typer) -> None:
     app.add_typer(probe_app, name="probe")
 
 
-from unitac_rig.cli_probe_ur5e import register_ur5e  # noqa: E402
+from unitac_rig.cli.probe_ur5e import register_ur5e  # noqa: E402
 
 register_ur5e(probe_app)

@@ -27,11 +27,11 @@ app = typer.Typer(
 
 # Modules that add commands to ``app`` through a ``register(app)`` function, in help order.
 COMMAND_MODULES = (
-    "unitac_rig.cli_collect",  # collect, campaign, inspect, extract
-    "unitac_rig.cli_learn",  # train, translate, geometry
-    "unitac_rig.cli_probe",  # probe uskin|papillarray|ur5e
-    "unitac_rig.cli_import",  # import-unitac-nv
-    "unitac_rig.cli_bench",  # bench ...
+    "unitac_rig.cli.collect",  # collect, campaign, inspect, extract
+    "unitac_rig.cli.learn",  # train, translate, geometry
+    "unitac_rig.cli.probe",  # probe uskin|papillarray|ur5e
+    "unitac_rig.cli.import_unitac_nv",  # import-unitac-nv
+    "unitac_rig.cli.bench",  # bench ...
 )
 
 _state = {"debug": False}

@@ -20,11 +20,11 @@ from drivers.arm import Arm
 from drivers.clock import VirtualClock
 from drivers.layouts import get_layout
 from drivers.sensor import TactileSensor
-from unitac_rig.config import RigConfig
 from unitac_rig.errors import UsageError
-from unitac_rig.geometry import approach_direction, pose_from, press_rotation
-from unitac_rig.objects import ObjectSpec
-from unitac_rig.rig import Rig
+from unitac_rig.rig.base import Rig
+from unitac_rig.rig.config import RigConfig
+from unitac_rig.rig.objects import ObjectSpec
+from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
 from unitac_rig.sim.signals import SensorSample
 

@@ -15,15 +15,16 @@ from rich.table import Table
 from rich.text import Text
 
 from drivers.layouts import LAYOUTS, get_layout
-from unitac_rig.collect import PressDone, SessionOutcome, collect_session
-from unitac_rig.config import STRATEGIES, RigConfig, load_rig_config, parse_rig_config
+from unitac_rig.collection.extraction import ExtractionSettings
+from unitac_rig.collection.press import TickInfo
+from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session
 from unitac_rig.errors import UsageError
-from unitac_rig.extraction import ExtractionSettings
-from unitac_rig.objects import ObjectSpec, get_object, list_objects
-from unitac_rig.press import TickInfo
-from unitac_rig.recording import FINISHED_STATUSES, reextract_session, session_path
-from unitac_rig.rig import Rig, open_rig
-from unitac_rig.session import list_sessions, press_summaries
+from unitac_rig.rig.backends import open_rig
+from unitac_rig.rig.base import Rig
+from unitac_rig.rig.config import STRATEGIES, RigConfig, load_rig_config, parse_rig_config
+from unitac_rig.rig.objects import ObjectSpec, get_object, list_objects
+from unitac_rig.storage.reader import list_sessions, press_summaries
+from unitac_rig.storage.recorder import FINISHED_STATUSES, reextract_session, session_path
 
 console = Console(stderr=False)
 SENSOR_ORDER = ("uskin", "papillarray")
@@ -261,7 +262,7 @@ def inspect(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
 ) -> None:
     """Per session: presses, matched targets, matching error, peak force; per object: pairs joined across sensors."""
-    from unitac_rig.inspect import inspect_dataset
+    from unitac_rig.storage.summary import inspect_dataset
 
     report = inspect_dataset(data)
     if as_json:

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from unitac_rig.session import list_sessions, press_summaries
+from unitac_rig.storage.reader import list_sessions, press_summaries
 
 
 def _stats(values: list[float], keys: tuple[str, ...]) -> dict[str, float | None]:

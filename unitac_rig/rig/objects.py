@@ -4,7 +4,7 @@ Built-in objects are the UniTac-NV prisms (``unitac_rig/data/objects.json``, out
 files): ``circle_pla circle_tpu square_pla square_tpu hex_pla hex_tpu irregular_pla``. Users add their own prisms
 with TOML or JSON object files (:func:`load_object_file`).
 
-Geometry conventions (shared with ``unitac_rig.geometry``, the press routine and the simulator):
+Geometry conventions (shared with ``unitac_rig.rig.poses``, the press routine and the simulator):
 
 * An outline lives in the object's CAD cross-section frame ``(x, z)`` in mm, origin on the prism axis (the collar
   axis, where every press is aimed), vertices counter-clockwise (``atan2(z, x)`` increasing).

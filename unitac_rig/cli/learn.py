@@ -169,7 +169,7 @@ def geometry_command(
     from rich.console import Console
     from rich.table import Table
 
-    from unitac_rig.learning.geometry import GeometryConfig, geometry_for_run
+    from unitac_rig.learning.contact_geometry import GeometryConfig, geometry_for_run
     from unitac_rig.learning.report import write_report
 
     console = Console()

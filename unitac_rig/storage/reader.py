@@ -11,7 +11,7 @@ import h5py
 import numpy as np
 
 from unitac_rig.errors import DataError
-from unitac_rig.recording import (
+from unitac_rig.storage.recorder import (
     SCHEMA_VERSION,
     PressRecord,
     _as_str,

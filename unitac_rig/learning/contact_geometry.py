@@ -94,7 +94,7 @@ class OutlineGeometry:
 
     @classmethod
     def from_catalogue(cls, object_id: str) -> OutlineGeometry:
-        from unitac_rig.objects import get_object, pad_side_direction
+        from unitac_rig.rig.objects import get_object, pad_side_direction
 
         spec = get_object(object_id)
         return cls(np.asarray(spec.outer_mm), spec.outline_hit, pad_side_direction)

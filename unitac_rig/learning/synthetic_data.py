@@ -5,7 +5,8 @@ closed-form contact picture that gives every sensor a frame for the same (object
 learning code has realistic sizes and a real cross-sensor signal to learn:
 
 * the surface under the pad is the object's outline profile across the pad (catalogue outline, see
-  :mod:`unitac_rig.learning.geometry`); each taxel column at lateral offset x sits ``depth(x)`` mm below contact;
+  :mod:`unitac_rig.learning.contact_geometry`); each taxel column at lateral offset x sits ``depth(x)`` mm below
+  contact;
 * the pad sinks ``delta = delta10 * (F / 10 N)^(2/3)`` mm (Hertz-like; soft TPU conforms more), each taxel carries a
   share of the normal force ``F`` proportional to ``max(0, delta - depth)^1.5``; the PapillArray's centre pillar is
   0.3 mm proud;
@@ -21,7 +22,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from drivers.layouts import SensorLayout
-from unitac_rig.learning.geometry import OutlineGeometry, local_depth_profile
+from unitac_rig.learning.contact_geometry import OutlineGeometry, local_depth_profile
 
 PAPER_TARGETS_N = tuple(float(x) for x in np.round(np.arange(4.0, 10.0 + 1e-9, 0.25), 2))
 PAPER_ANGLES_DEG = tuple(float(a) for a in range(-45, 46))
@@ -76,12 +77,12 @@ def synthetic_matched_sets(
     rotations_deg: dict[str, Sequence[float]] | None = None,
     seed: int = 0,
 ) -> list:
-    """One :class:`unitac_rig.session.MatchedSet` per (object, layout), marked ``simulated``.
+    """One :class:`unitac_rig.storage.reader.MatchedSet` per (object, layout), marked ``simulated``.
 
     Rotations default to the catalogue's (four for the irregular prism).
     """
-    from unitac_rig.objects import get_object
-    from unitac_rig.session import MatchedSet
+    from unitac_rig.rig.objects import get_object
+    from unitac_rig.storage.reader import MatchedSet
 
     out = []
     for object_index, object_id in enumerate(object_ids):

@@ -1,0 +1,1 @@
+"""Storage: the crash-safe HDF5 session recorder, the reader, and dataset summaries."""

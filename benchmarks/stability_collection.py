@@ -26,11 +26,11 @@ from typing import Any
 
 import numpy as np
 
-from unitac_rig.collection.extraction import ExtractionSettings, extract_press
 from unitac_rig.collection.session import collect_session
 from unitac_rig.rig.config import parse_rig_config
 from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.fast_rig import SimRig
+from unitac_rig.storage.extraction import ExtractionSettings, extract_press
 from unitac_rig.storage.reader import read_presses
 from unitac_rig.storage.recorder import PressRecord, session_path
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from unitac_rig.collection.extraction import (
+from unitac_rig.storage.extraction import (
     ExtractionSettings,
     default_targets_n,
     extract_press,

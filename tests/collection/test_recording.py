@@ -6,8 +6,8 @@ import h5py
 import numpy as np
 import pytest
 
-from unitac_rig.collection.extraction import extract_press
 from unitac_rig.errors import DataError
+from unitac_rig.storage.extraction import extract_press
 from unitac_rig.storage.reader import list_sessions, load_matched_set, read_presses
 from unitac_rig.storage.recorder import PressRecord, SessionWriter, press_id, session_path
 

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
-from unitac_rig.collection.extraction import ExtractionSettings, extract_press
 from unitac_rig.learning.synthetic_data import synthetic_matched_sets
+from unitac_rig.storage.extraction import ExtractionSettings, extract_press
 from unitac_rig.storage.reader import MatchedSet
 from unitac_rig.storage.recorder import PressRecord, SessionWriter, press_id
 

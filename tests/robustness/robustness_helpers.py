@@ -59,8 +59,8 @@ def write_synthetic_sessions(data_dir: Path, objects: tuple[str, ...] = ("circle
     import numpy as np
 
     from drivers.layouts import PAPILLARRAY, USKIN
-    from unitac_rig.collection.extraction import ExtractionSettings, extract_press
     from unitac_rig.learning.synthetic_data import synthetic_matched_sets
+    from unitac_rig.storage.extraction import ExtractionSettings, extract_press
     from unitac_rig.storage.recorder import PressRecord, SessionWriter, press_id
 
     targets = (4.0, 6.0, 8.0, 10.0)

@@ -6,7 +6,7 @@ real press routine (:func:`unitac_rig.collection.press.run_press`) and the real 
 
 * the simulated time of one press cycle (stand-off settle + zero + tare, approach, press, dwell, retract; the transit
   between stand-offs is added from the 91-angle plan) and of a paper campaign (x 1820 presses);
-* the force-matching error of :func:`unitac_rig.collection.extraction.extract_press` over the 25 targets: median
+* the force-matching error of :func:`unitac_rig.storage.extraction.extract_press` over the 25 targets: median
   and p95 of |error| with every miss counted as an infinite error, the miss rate, and the median of the matched
   targets alone;
 * what the simulator knows and the recording cannot: the *true* press force at each matched frame minus its target,
@@ -364,7 +364,7 @@ class Score:
     statuses: dict[str, int] = field(default_factory=dict)
 
     def add(self, sample: PressSample, variant: ExtractionVariant, threshold_n: float) -> None:
-        from unitac_rig.collection.extraction import ExtractionSettings, extract_press
+        from unitac_rig.storage.extraction import ExtractionSettings, extract_press
 
         settings = ExtractionSettings(
             smoothing_samples=variant.smoothing_samples,

@@ -61,7 +61,7 @@ def synthetic_press(sensor: str, length_s: float, index: int, rng: np.random.Gen
     (PapillArray forces in N with displacements, uSkin raw counts around 33 000). Extraction computed as in a session.
     """
     from drivers.layouts import get_layout
-    from unitac_rig.collection.extraction import extract_press
+    from unitac_rig.storage.extraction import extract_press
     from unitac_rig.storage.recorder import PressRecord, press_id
 
     layout = get_layout(sensor)

@@ -15,7 +15,6 @@ from rich.table import Table
 from rich.text import Text
 
 from drivers.layouts import LAYOUTS, get_layout
-from unitac_rig.collection.extraction import ExtractionSettings
 from unitac_rig.collection.press import TickInfo
 from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session
 from unitac_rig.errors import UsageError
@@ -23,6 +22,7 @@ from unitac_rig.rig.backends import open_rig
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import STRATEGIES, RigConfig, load_rig_config, parse_rig_config
 from unitac_rig.rig.objects import ObjectSpec, get_object, list_objects
+from unitac_rig.storage.extraction import ExtractionSettings
 from unitac_rig.storage.reader import list_sessions, press_summaries
 from unitac_rig.storage.recorder import FINISHED_STATUSES, reextract_session, session_path
 

@@ -18,13 +18,13 @@ import numpy as np
 
 from drivers.errors import ArmError, DeviceError, DeviceTimeout, ProtectiveStop
 from drivers.sensor import TactileSensor
-from unitac_rig.collection.extraction import ExtractionSettings, extract_press
 from unitac_rig.collection.press import PressPlan, TickInfo, make_plan, move_clear, run_press, settle_frames
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.provenance import git_commit, package_version
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import RigConfig
 from unitac_rig.rig.objects import ObjectSpec, pad_side_direction
+from unitac_rig.storage.extraction import ExtractionSettings, extract_press
 from unitac_rig.storage.recorder import PressRecord, SessionWriter
 
 log = logging.getLogger(__name__)

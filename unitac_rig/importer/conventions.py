@@ -23,9 +23,9 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from unitac_rig.collection.extraction import ExtractionSettings, default_targets_n
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.config import describe_validation_error, read_toml
+from unitac_rig.storage.extraction import ExtractionSettings, default_targets_n
 
 # What the authors' script (0_data_preprocessing.py) already applied to every processed .npz file.
 AUTHORS_PROCESSED_STEPS: dict[str, Any] = {

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.layouts import SensorLayout
-from unitac_rig.collection.extraction import extract_press
 from unitac_rig.importer.conventions import AUTHORS_PROCESSED_STEPS, ImportConventions, TactileMapping
 from unitac_rig.importer.parsing import ProcessedArrays, RawColumns
+from unitac_rig.storage.extraction import extract_press
 from unitac_rig.storage.recorder import PressRecord, press_id
 
 

@@ -31,8 +31,8 @@ from typing import Any
 import h5py
 import numpy as np
 
-from unitac_rig.collection.extraction import Extraction, ExtractionSettings
 from unitac_rig.errors import DataError
+from unitac_rig.storage.extraction import Extraction, ExtractionSettings
 
 log = logging.getLogger(__name__)
 
@@ -497,7 +497,7 @@ def iter_press_groups(f: h5py.File) -> Iterator[tuple[str, h5py.Group]]:
 
 
 def _reextract_group(g: h5py.Group, settings: ExtractionSettings) -> Extraction:
-    from unitac_rig.collection.extraction import extract_press
+    from unitac_rig.storage.extraction import extract_press
 
     values = g["tactile/values"][()]
     extraction = extract_press(

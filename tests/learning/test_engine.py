@@ -1,84 +1,130 @@
-"""The hand-written batched engine computes what the textbook nn.Module + autograd computes."""
+"""The stacked engine computes what independent textbook modules compute: the same losses and the same gradient for
+every parameter of every model and seed, with dropout on."""
 
 from __future__ import annotations
 
-import numpy as np
+from collections.abc import Iterator
+
 import pytest
 import torch
 
-from unitac_rig.learning.engine import ModelShape, StackedAutoencoders, default_groups
+from unitac_rig.learning.engine import GroupSpec, ModelShape, StackedAutoencoders, default_groups
 from unitac_rig.learning.reference import UniTacModule
 
+TWO_SENSORS = {"uskin": 72, "papillarray": 27}
 THREE_SENSORS = {"uskin": 72, "papillarray": 27, "fakepad": 12}
+SEEDS = [3, 5, 8]
+ROWS = 64
 
 
-def linears(module: torch.nn.Module) -> list[torch.nn.Linear]:
-    return [m for m in module.modules() if isinstance(m, torch.nn.Linear)]
+@pytest.fixture(autouse=True, scope="module")
+def one_thread() -> Iterator[None]:
+    """Train as `unitac-rig train` does on a CPU: one thread (a second one only waits on a loaded 2-core box)."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(previous)
 
 
-@pytest.mark.parametrize("feature_dims", [{"uskin": 72, "papillarray": 27}, THREE_SENSORS])
-def test_loss_and_every_gradient_match_autograd(feature_dims: dict[str, int]) -> None:
-    shape = ModelShape(dropout=0.0)
-    engine = StackedAutoencoders(feature_dims, default_groups(list(feature_dims), False), [7], shape)
-    module = UniTacModule(feature_dims, shape)
-    module.load_from_engine(engine, 0)
-    batch = torch.randn(64, sum(feature_dims.values()), generator=torch.Generator().manual_seed(1))
-    inputs = list(torch.split(batch, list(feature_dims.values()), dim=1))
+def reference_keep_masks(masks: dict[str, torch.Tensor], group: GroupSpec, member: int) -> dict[str, torch.Tensor]:
+    """The engine's masks of one member and model, in the reference module's terms (True = kept). The engine decodes
+    all sources' latents in one batch (rows of source 0, then source 1, ...); the module decodes one source at a
+    time."""
+    keep = {}
+    for key, mask in masks.items():
+        name, part, index = key.split("/")
+        if name != group.name:
+            continue
+        if part == "dec":
+            for j, source in enumerate(group.sensors):
+                keep[f"dec_{source}/{index}"] = mask[member, j * ROWS : (j + 1) * ROWS] != 0
+        else:
+            keep[f"{part}/{index}"] = mask[member] != 0
+    return keep
 
-    frozen = torch.optim.SGD([engine.theta], lr=0.0)  # computes grads, changes nothing
-    loss = engine.train_step(batch.unsqueeze(0), frozen)
-    reference = module.loss(inputs)
-    reference.backward()
-    assert float(loss[0, 0]) == pytest.approx(float(reference.detach()), rel=1e-5)
 
-    grads = StackedAutoencoders(feature_dims, engine.groups, [7], shape, initialise=False)
-    grads.theta.copy_(engine.grad)
-    ours = grads.layer_parameters("unitac", 0)
-    for sensor in feature_dims:
-        for i, layer in enumerate(linears(module.encoders[sensor])):
-            assert layer.weight.grad is not None and layer.bias.grad is not None
-            np.testing.assert_allclose(ours[f"enc_{sensor}/{i}"][0], layer.weight.grad.T.numpy(), rtol=1e-4, atol=1e-7)
-            np.testing.assert_allclose(ours[f"enc_{sensor}/{i}"][1], layer.bias.grad.numpy(), rtol=1e-4, atol=1e-7)
-    for i, layer in enumerate(linears(module.decoder)):
-        assert layer.weight.grad is not None
-        np.testing.assert_allclose(ours[f"dec/{i}"][0], layer.weight.grad.T.numpy(), rtol=1e-4, atol=1e-7)
+@pytest.mark.parametrize("dropout", [0.007, 0.2])
+@pytest.mark.parametrize("feature_dims", [TWO_SENSORS, THREE_SENSORS], ids=["2 sensors", "3 sensors"])
+def test_every_gradient_matches_independent_modules_with_dropout_seeds_and_baselines(
+    feature_dims: dict[str, int], dropout: float
+) -> None:
+    shape = ModelShape(dropout=dropout)
+    engine = StackedAutoencoders(feature_dims, default_groups(list(feature_dims), True), SEEDS, shape)
+    batch = torch.randn(len(SEEDS), ROWS, sum(feature_dims.values()), generator=torch.Generator().manual_seed(1))
+    masks = engine.draw_masks(ROWS)
+    assert masks is not None
+    dropped = {key: int((mask == 0).sum()) for key, mask in masks.items()}
+    assert sum(dropped.values()) > 0
+    if dropout >= 0.2:  # every layer's mask, the latent's included, really drops units here
+        assert min(dropped.values()) > 0
+
+    frozen = torch.optim.SGD(engine.parameters(), lr=0.0)  # computes gradients, changes nothing
+    losses = engine.train_step(batch, frozen, masks=masks)
+
+    per_sensor = torch.split(batch, list(feature_dims.values()), dim=-1)
+    columns = dict(zip(feature_dims, per_sensor, strict=True))
+    compared = 0
+    for g, group in enumerate(engine.groups):
+        dims = {s: feature_dims[s] for s in group.sensors}
+        for member in range(len(SEEDS)):
+            module = UniTacModule(dims, shape)
+            module.load_from_engine(engine, member, group.name)
+            inputs = [columns[s][member] for s in group.sensors]
+            reference = module.loss(inputs, keep=reference_keep_masks(masks, group, member))
+            reference.backward()
+            assert float(losses[g, member]) == pytest.approx(float(reference.detach()), rel=1e-5)
+
+            ours = engine.layer_gradients(group.name, member)
+            theirs = {f"enc_{s}": module.encoders[s] for s in group.sensors} | {"dec": module.decoder}
+            for part, mlp in theirs.items():
+                linears = [m for m in mlp.modules() if isinstance(m, torch.nn.Linear)]
+                for i, layer in enumerate(linears):
+                    assert layer.weight.grad is not None and layer.bias.grad is not None
+                    weight_grad, bias_grad = ours[f"{part}/{i}"]
+                    torch.testing.assert_close(torch.from_numpy(weight_grad), layer.weight.grad.T, rtol=1e-4, atol=1e-7)
+                    torch.testing.assert_close(torch.from_numpy(bias_grad), layer.bias.grad, rtol=1e-4, atol=1e-7)
+                    compared += 2
+    assert compared == len(SEEDS) * sum(2 * 3 * (len(g.sensors) + 1) for g in engine.groups)  # every tensor
 
 
 def test_inference_matches_the_module_in_eval_mode() -> None:
-    dims = {"uskin": 72, "papillarray": 27}
-    engine = StackedAutoencoders(dims, default_groups(list(dims), True), [0, 1], ModelShape())
-    module = UniTacModule(dims, ModelShape())
+    engine = StackedAutoencoders(TWO_SENSORS, default_groups(list(TWO_SENSORS), True), [0, 1], ModelShape())
+    module = UniTacModule(TWO_SENSORS, ModelShape())
     module.load_from_engine(engine, 1)
     module.eval()
     x = torch.randn(5, 27)
     z = engine.encode("unitac", "papillarray", x)
     assert z.shape == (2, 5, 16)
     decoded = engine.decode("unitac", z)
-    expected = module.decoder(module.encoders["papillarray"](x))
-    np.testing.assert_allclose(decoded["uskin"][1].numpy(), expected[:, :72].detach().numpy(), rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(
-        decoded["papillarray"][1].numpy(), expected[:, 72:].detach().numpy(), rtol=1e-5, atol=1e-6
-    )
+    expected = module.decoder(module.encoders["papillarray"](x)).detach()
+    torch.testing.assert_close(decoded["uskin"][1], expected[:, :72], rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(decoded["papillarray"][1], expected[:, 72:], rtol=1e-5, atol=1e-6)
     # a baseline has its own encoder and a decoder for its sensor only
     assert set(engine.decode("ae_uskin", engine.encode("ae_uskin", "uskin", torch.randn(3, 72)))) == {"uskin"}
 
 
-def test_dropout_drops_the_asked_fraction_and_rescales_the_rest() -> None:
+def test_dropout_drops_the_asked_fraction_everywhere_and_rescales_the_rest() -> None:
     engine = StackedAutoencoders({"a": 6, "b": 3}, default_groups(["a", "b"], False), [0, 1], ModelShape(dropout=0.2))
-    masks = engine._draw_masks(64)
-    assert masks is not None
-    values = torch.cat([m.reshape(-1) for m in masks.values()])
-    dropped = float((values == 0).float().mean())
-    assert dropped == pytest.approx(0.2, abs=0.01)  # ~100k mask entries: binomial sd ~0.0013
+    draws = []
+    for _ in range(20):
+        masks = engine.draw_masks(ROWS)
+        assert masks is not None
+        draws.append(torch.cat([m.reshape(2, -1) for m in masks.values()], dim=1).clone())
+    values = torch.stack(draws)  # (draws, members, units): units in buffer order, ~50k per member and draw
+    dropped = (values == 0).float()
+    assert float(dropped.mean()) == pytest.approx(0.2, abs=0.005)
+    # the sparse draw covers the whole buffer: its last units are dropped as often as its first
+    tenth = values.shape[-1] // 10
+    assert float(dropped[..., :tenth].mean()) == pytest.approx(0.2, abs=0.01)
+    assert float(dropped[..., -tenth:].mean()) == pytest.approx(0.2, abs=0.01)
     assert torch.allclose(values[values != 0], torch.tensor(1 / 0.8))
-    member0, member1 = (torch.cat([m[i].reshape(-1) for m in masks.values()]) for i in range(2))
-    assert not torch.equal(member0, member1)  # each member has its own stream
+    assert not torch.equal(values[:, 0], values[:, 1])  # each member has its own stream
 
 
 def test_members_are_independent_and_state_round_trips() -> None:
     dims = {"a": 9, "b": 6}
-    together = StackedAutoencoders(dims, default_groups(["a", "b"], True), [3, 4], ModelShape())
-    alone = StackedAutoencoders(dims, default_groups(["a", "b"], True), [4], ModelShape())
+    together = StackedAutoencoders(dims, default_groups(["a", "b"], True), [3, 4], ModelShape(dropout=0.1))
+    alone = StackedAutoencoders(dims, default_groups(["a", "b"], True), [4], ModelShape(dropout=0.1))
     assert torch.equal(together.member(1).theta, alone.theta)  # seed 4 starts the same wherever it sits
     data = torch.randn(256, 15, generator=torch.Generator().manual_seed(0))
     opt_t, opt_a = together.make_optimizer(1e-3), alone.make_optimizer(1e-3)
@@ -86,8 +132,23 @@ def test_members_are_independent_and_state_round_trips() -> None:
         together.train_step(data[start : start + 64].unsqueeze(0).expand(2, -1, -1).contiguous(), opt_t)
         alone.train_step(data[start : start + 64].unsqueeze(0), opt_a)
     torch.testing.assert_close(together.member(1).theta, alone.theta, rtol=1e-5, atol=1e-6)
+
     restored = StackedAutoencoders.from_state(together.state())
     assert torch.equal(restored.theta, together.theta)
+    next_masks, restored_masks = together.draw_masks(64), restored.draw_masks(64)
+    assert next_masks is not None and restored_masks is not None
+    assert all(torch.equal(next_masks[k], restored_masks[k]) for k in next_masks)  # dropout streams continue
+
+    version_1 = {k: v for k, v in together.state().items() if k not in ("parameters", "dropout_rng")}
+    version_1["theta"] = together.theta  # checkpoints before the autograd engine kept one flat vector
+    assert torch.equal(StackedAutoencoders.from_state(version_1).theta, together.theta)
+
+
+def test_state_loads_without_pickled_objects(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    engine = StackedAutoencoders(TWO_SENSORS, default_groups(list(TWO_SENSORS), True), [0, 1], ModelShape())
+    torch.save(engine.state(), tmp_path / "state.pt")
+    state = torch.load(tmp_path / "state.pt", weights_only=True)
+    assert torch.equal(StackedAutoencoders.from_state(state).theta, engine.theta)
 
 
 def test_training_lowers_the_loss_on_a_learnable_pairing() -> None:

@@ -1,19 +1,24 @@
-"""A fast CPU/GPU engine for the UniTac-NV autoencoders: every model of a run in one flat parameter tensor.
+"""The UniTac-NV training engine: every model of a run stacked layer by layer, gradients by autograd.
 
-Why not ``nn.Module`` + autograd: at the paper's batch size (64) the networks are so small that PyTorch's per-op
-overhead (autograd bookkeeping, DataLoader collation, one optimizer kernel per tensor, one RNG call per dropout
-layer) costs more than the arithmetic. Here
+At the paper's batch size (64) the networks are so small that PyTorch's per-operation overhead, not arithmetic, sets
+the speed of an ordinary loop (one ``nn.Module`` per model, a ``DataLoader``, an optimizer kernel per tensor, one
+random number per dropout unit). What this engine keeps to stay fast, and why:
 
-* all models (UniTac-NV and the per-sensor baselines) and all seeds ("members") live in one contiguous tensor; each
-  layer is a view of shape (members, in, out), so one ``baddbmm`` runs a layer of every member at once;
-* forward and backward are written out by hand (ReLU MLPs with dropout and an MAE loss have short, exact
-  gradients), so there is no autograd graph; gradients land directly in one flat buffer;
-* one fused Adam step updates everything (Adam is element-wise, so this equals a separate Adam per model);
-* dropout masks for a whole step come from one buffer: with p = 0.007 the dropped positions are drawn directly
-  (a binomial count, then that many distinct positions), which is an exact Bernoulli(p) mask at a fraction of
-  the cost of one uniform number per unit.
+* all models of a run (UniTac-NV and the per-sensor baselines) for all seeds ("members") are trained in lock-step:
+  each layer of a model is ONE weight parameter ``(members, in, out)`` and one bias ``(members, 1, out)``, and one
+  ``baddbmm`` runs that layer for every member, so the operation count does not grow with the number of seeds;
+* the loss is the sum over models and members of each one's loss; members share no parameter, so autograd's
+  gradient of the sum (``loss.backward()``) is each member's own gradient;
+* the L1 losses of all (source, target) sensor pairs of a model are one weighted ``abs().sum()``;
+* one fused Adam step updates every parameter tensor (Adam is element-wise, so this equals a separate Adam per model);
+* a whole step's dropout masks come from one buffer on the device, drawn sparsely: the dropped positions of a
+  Bernoulli(p) sequence are the running sums of geometric gaps, so a fixed number of geometric draws per member
+  (mean + 12 sd + 50 of the binomial count, or every unit if that is fewer) gives an exact Bernoulli(p) mask unless
+  the gaps run out before the buffer's end (probability below 1e-20) - at p = 0.007 about 1/100 of the random
+  numbers of a dense mask, with no host round-trip.
 
-Each member has its own random streams (initialisation, shuffling, dropout) seeded from its own seed.
+Each member has its own random streams (initialisation, shuffling in :mod:`unitac_rig.learning.train`, dropout)
+derived from its own seed, so a seed trains the same whether it runs alone or stacked with others (tested).
 
 Layout of a frame in the model: the sensor's (n_taxels, 3) frame flattened taxel-major, normalised per channel
 (:class:`unitac_rig.learning.data.Normaliser`); the decoder of a group outputs the concatenation of its sensors'
@@ -22,6 +27,7 @@ frames in the group's sensor order.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
@@ -32,7 +38,14 @@ import torch
 
 from unitac_rig.errors import ModelError
 
+log = logging.getLogger(__name__)
+
 UNITAC_GROUP = "unitac"
+
+# Sparse dropout draws this many geometric gaps beyond the binomial mean (in standard deviations, plus a constant),
+# which makes running out before the end of the mask buffer rarer than 1e-20 (Chernoff bound).
+_GAP_MARGIN_SD = 12.0
+_GAP_MARGIN_ABS = 50
 
 
 @dataclass(frozen=True)
@@ -79,20 +92,37 @@ def default_groups(sensors: Sequence[str], baselines: bool) -> list[GroupSpec]:
     return groups
 
 
+def _stream_seed(seed: int, stream: int) -> int:
+    """A 63-bit torch seed for one of a member's random streams (2 = dropout), independent across streams."""
+    return int(np.random.SeedSequence([seed, stream]).generate_state(1, np.uint64)[0] >> np.uint64(1))
+
+
 @dataclass(frozen=True)
 class _Layer:
-    key: str
+    key: str  # "<group>/<part>/<index>", part = "enc_<sensor>" or "dec"
     fan_in: int
     fan_out: int
-    w_offset: int
-    b_offset: int
+
+
+@dataclass(frozen=True)
+class _Encoder:
+    sensor: str
+    layers: tuple[str, ...]  # layer keys, input to latent
+    columns: tuple[int, int]  # the sensor's columns in a batch row
+
+
+@dataclass(frozen=True)
+class _Group:
+    spec: GroupSpec
+    encoders: tuple[_Encoder, ...]
+    decoder: tuple[str, ...]  # layer keys, latent to output
 
 
 class StackedAutoencoders:
     """Every group x member of a run, trained in lock-step.
 
     ``feature_dims``: sensor -> flattened frame length (n_taxels * 3), in the run's sensor order.
-    ``seeds``: one per member; member ``m`` is initialised, shuffled and dropped out from ``seeds[m]`` alone.
+    ``seeds``: one per member; member ``m`` is initialised and dropped out from ``seeds[m]`` alone.
     """
 
     def __init__(
@@ -121,24 +151,25 @@ class StackedAutoencoders:
             if unknown:
                 raise ModelError(f"group {group.name} names unknown sensor(s) {unknown}")
 
-        self._layers: dict[str, _Layer] = {}
-        offset = 0
-        for key, fan_in, fan_out in self._layer_plan():
-            w_offset = offset
-            offset += self.members * fan_in * fan_out
-            b_offset = offset
-            offset += self.members * fan_out
-            self._layers[key] = _Layer(key, fan_in, fan_out, w_offset, b_offset)
-        self.theta = torch.zeros(offset, dtype=torch.float32, device=self.device)
-        self.grad = torch.zeros_like(self.theta)
-        self.theta.grad = self.grad
-        self._param_views = {k: self._views(self.theta, layer) for k, layer in self._layers.items()}
-        self._grad_views = {k: self._views(self.grad, layer) for k, layer in self._layers.items()}
-        self._mask_plans: dict[int, tuple[int, dict[str, tuple[int, int, int]]]] = {}
-        self._dropout_rngs = [np.random.default_rng([seed, 2]) for seed in self.seeds]
-        self._weight_cache: dict[tuple[str, int], torch.Tensor] = {}
+        self._layers = {layer.key: layer for layer in self._layer_plan()}
+        self.weights: dict[str, torch.Tensor] = {}
+        self.biases: dict[str, torch.Tensor] = {}
+        for key, layer in self._layers.items():
+            self.weights[key] = self._parameter(self.members, layer.fan_in, layer.fan_out)
+            self.biases[key] = self._parameter(self.members, 1, layer.fan_out)
+        self._plan = self._forward_plan()
+        self._mask_plans: dict[int, tuple[int, int, dict[str, tuple[int, int, int]]]] = {}
+        self._mask_buffers: dict[int, torch.Tensor] = {}
+        self._loss_weight_cache: dict[tuple[str, int], torch.Tensor] = {}
+        self._dropout_generators = [self._generator(_stream_seed(seed, 2)) for seed in self.seeds]
         if initialise:
             self._initialise()
+
+    def _parameter(self, *size: int) -> torch.Tensor:
+        return torch.zeros(size, dtype=torch.float32, device=self.device, requires_grad=True)
+
+    def _generator(self, seed: int) -> torch.Generator:
+        return torch.Generator(device=self.device).manual_seed(seed)
 
     # ---- structure -------------------------------------------------------------------------------------------
     def group(self, name: str) -> GroupSpec:
@@ -147,61 +178,66 @@ class StackedAutoencoders:
                 return group
         raise ModelError(f"no model {name!r} in this run", hint=f"models: {', '.join(g.name for g in self.groups)}")
 
-    def _encoder_widths(self, sensor: str) -> list[int]:
-        return [self.feature_dims[sensor], *self.shape.encoder_hidden, self.shape.latent_dim]
-
-    def _decoder_widths(self, group: GroupSpec) -> list[int]:
-        out = sum(self.feature_dims[s] for s in group.sensors)
-        return [self.shape.latent_dim, *self.shape.decoder_hidden, out]
-
     @staticmethod
     def _key(group: str, part: str, index: int) -> str:
         return f"{group}/{part}/{index}"
 
-    def _layer_plan(self) -> list[tuple[str, int, int]]:
+    def _layer_plan(self) -> list[_Layer]:
+        """Every layer in a fixed order (per group: each sensor's encoder, then the decoder), input to output."""
         plan = []
         for group in self.groups:
             for sensor in group.sensors:
-                widths = self._encoder_widths(sensor)
+                widths = [self.feature_dims[sensor], *self.shape.encoder_hidden, self.shape.latent_dim]
                 plan += [
-                    (self._key(group.name, f"enc_{sensor}", i), widths[i], widths[i + 1])
+                    _Layer(self._key(group.name, f"enc_{sensor}", i), widths[i], widths[i + 1])
                     for i in range(len(widths) - 1)
                 ]
-            widths = self._decoder_widths(group)
-            plan += [(self._key(group.name, "dec", i), widths[i], widths[i + 1]) for i in range(len(widths) - 1)]
+            widths = [
+                self.shape.latent_dim,
+                *self.shape.decoder_hidden,
+                sum(self.feature_dims[s] for s in group.sensors),
+            ]
+            plan += [_Layer(self._key(group.name, "dec", i), widths[i], widths[i + 1]) for i in range(len(widths) - 1)]
         return plan
 
-    def _views(self, flat: torch.Tensor, layer: _Layer) -> tuple[torch.Tensor, torch.Tensor]:
-        m, i, o = self.members, layer.fan_in, layer.fan_out
-        weight = flat[layer.w_offset : layer.w_offset + m * i * o].view(m, i, o)
-        bias = flat[layer.b_offset : layer.b_offset + m * o].view(m, 1, o)
-        return weight, bias
+    def _forward_plan(self) -> list[_Group]:
+        columns, start = {}, 0
+        for sensor in self.sensors:
+            columns[sensor] = (start, start + self.feature_dims[sensor])
+            start += self.feature_dims[sensor]
+        n_enc, n_dec = len(self.shape.encoder_hidden) + 1, len(self.shape.decoder_hidden) + 1
+        return [
+            _Group(
+                group,
+                tuple(
+                    _Encoder(s, tuple(self._key(group.name, f"enc_{s}", i) for i in range(n_enc)), columns[s])
+                    for s in group.sensors
+                ),
+                tuple(self._key(group.name, "dec", i) for i in range(n_dec)),
+            )
+            for group in self.groups
+        ]
 
-    def _stack(self, group: str, part: str, n_layers: int) -> list[tuple[torch.Tensor, torch.Tensor]]:
-        return [self._param_views[self._key(group, part, i)] for i in range(n_layers)]
-
-    def _grad_stack(self, group: str, part: str, n_layers: int) -> list[tuple[torch.Tensor, torch.Tensor]]:
-        return [self._grad_views[self._key(group, part, i)] for i in range(n_layers)]
+    def parameters(self) -> list[torch.Tensor]:
+        """Every parameter tensor, in the fixed order (per layer: weight, bias) the optimizer state refers to."""
+        return [p for key in self._layers for p in (self.weights[key], self.biases[key])]
 
     @property
-    def _n_enc(self) -> int:
-        return len(self.shape.encoder_hidden) + 1
-
-    @property
-    def _n_dec(self) -> int:
-        return len(self.shape.decoder_hidden) + 1
+    def theta(self) -> torch.Tensor:
+        """All parameters as one flat copy (per layer: weight then bias, each member-major), for comparisons."""
+        return torch.cat([p.detach().reshape(-1) for p in self.parameters()])
 
     def _initialise(self) -> None:
         """PyTorch's ``nn.Linear`` default: weights and biases uniform in +-1/sqrt(fan_in), per member."""
-        for member, seed in enumerate(self.seeds):
-            generator = torch.Generator().manual_seed(seed)
-            for key, layer in self._layers.items():
-                bound = 1.0 / math.sqrt(layer.fan_in)
-                weight, bias = self._param_views[key]
-                w = torch.empty(layer.fan_in, layer.fan_out).uniform_(-bound, bound, generator=generator)
-                b = torch.empty(1, layer.fan_out).uniform_(-bound, bound, generator=generator)
-                weight[member].copy_(w)
-                bias[member].copy_(b)
+        with torch.no_grad():
+            for member, seed in enumerate(self.seeds):
+                generator = torch.Generator().manual_seed(seed)
+                for key, layer in self._layers.items():
+                    bound = 1.0 / math.sqrt(layer.fan_in)
+                    w = torch.empty(layer.fan_in, layer.fan_out).uniform_(-bound, bound, generator=generator)
+                    b = torch.empty(1, layer.fan_out).uniform_(-bound, bound, generator=generator)
+                    self.weights[key][member].copy_(w)
+                    self.biases[key][member].copy_(b)
 
     def parameter_count(self, group: str) -> int:
         """Parameters of one member of ``group``."""
@@ -210,199 +246,135 @@ class StackedAutoencoders:
         )
 
     # ---- dropout masks ---------------------------------------------------------------------------------------
-    def _mask_plan(self, batch: int) -> tuple[int, dict[str, tuple[int, int, int]]]:
-        """Per-member mask buffer layout for a batch size: key -> (offset, rows, width)."""
-        if batch in self._mask_plans:
-            return self._mask_plans[batch]
+    def _mask_plan(self, rows: int) -> tuple[int, int, dict[str, tuple[int, int, int]]]:
+        """Per-member mask buffer for a batch of ``rows``: total units, geometric draws, key -> (offset, rows, width).
+
+        A mask follows every layer except a decoder's output layer (so the latent is dropped out too).
+        """
+        if rows in self._mask_plans:
+            return self._mask_plans[rows]
         plan: dict[str, tuple[int, int, int]] = {}
         offset = 0
-        for group in self.groups:
-            for sensor in group.sensors:
-                for i, width in enumerate([*self.shape.encoder_hidden, self.shape.latent_dim]):
-                    plan[self._key(group.name, f"enc_{sensor}", i)] = (offset, batch, width)
-                    offset += batch * width
-            rows = batch * len(group.sensors)
-            for i, width in enumerate(self.shape.decoder_hidden):
-                plan[self._key(group.name, "dec", i)] = (offset, rows, width)
-                offset += rows * width
-        self._mask_plans[batch] = (offset, plan)
-        return offset, plan
+        for group in self._plan:
+            for encoder in group.encoders:
+                for key in encoder.layers:
+                    width = self._layers[key].fan_out
+                    plan[key] = (offset, rows, width)
+                    offset += rows * width
+            dec_rows = rows * len(group.encoders)
+            for key in group.decoder[:-1]:
+                width = self._layers[key].fan_out
+                plan[key] = (offset, dec_rows, width)
+                offset += dec_rows * width
+        mean = offset * self.shape.dropout
+        draws = min(offset, math.ceil(mean + _GAP_MARGIN_SD * math.sqrt(mean) + _GAP_MARGIN_ABS))
+        self._mask_plans[rows] = (offset, draws, plan)
+        return self._mask_plans[rows]
 
-    def _draw_masks(self, batch: int) -> dict[str, torch.Tensor] | None:
+    def draw_masks(self, rows: int) -> dict[str, torch.Tensor] | None:
+        """Dropout masks for one step on a batch of ``rows``: layer key -> (members, rows, width) holding 0 (dropped)
+        or 1 / (1 - p) (kept); None without dropout. Advances each member's dropout stream. The masks are views of
+        one buffer that the next draw for the same batch size overwrites."""
         p = self.shape.dropout
         if p == 0.0:
             return None
-        total, plan = self._mask_plan(batch)
-        buffer = torch.full((self.members, total), 1.0 / (1.0 - p), device=self.device)
-        dropped = []
-        for member, rng in enumerate(self._dropout_rngs):
-            count = int(rng.binomial(total, p))
-            if count:
-                dropped.append(rng.choice(total, size=count, replace=False) + member * total)
-        if dropped:
-            index = torch.from_numpy(np.concatenate(dropped)).to(self.device)
-            buffer.view(-1).index_fill_(0, index, 0.0)
+        total, draws, plan = self._mask_plan(rows)
+        gaps = torch.empty(self.members, draws, dtype=torch.float64, device=self.device)
+        for member, generator in enumerate(self._dropout_generators):
+            gaps[member].geometric_(p, generator=generator)  # trials up to and including the next drop, >= 1
+        # dropped positions = running sums of the gaps, minus one; past the end lands in a spare last column
+        positions = gaps.cumsum_(dim=1).sub_(1.0).clamp_(max=total).long()
+        buffer = self._mask_buffers.get(rows)
+        if buffer is None:  # reused: a fresh CPU allocation of this size costs more in page faults than the fill
+            buffer = self._mask_buffers[rows] = torch.empty((self.members, total + 1), device=self.device)
+        buffer.fill_(1.0 / (1.0 - p)).scatter_(1, positions, 0.0)
         return {
-            key: buffer[:, off : off + rows * width].view(self.members, rows, width)
-            for key, (off, rows, width) in plan.items()
+            key: buffer[:, off : off + n * width].view(self.members, n, width) for key, (off, n, width) in plan.items()
         }
 
-    # ---- forward / backward ----------------------------------------------------------------------------------
-    @staticmethod
-    def _mlp_forward(
-        layers: list[tuple[torch.Tensor, torch.Tensor]],
-        h: torch.Tensor,
-        masks: list[torch.Tensor | None],
-        keep_inputs: bool,
-    ) -> tuple[torch.Tensor, list[torch.Tensor]]:
-        """ReLU between layers, dropout after every layer whose mask is given; returns output and layer inputs."""
-        inputs: list[torch.Tensor] = []
-        last = len(layers) - 1
-        for k, (weight, bias) in enumerate(layers):
-            if keep_inputs:
-                inputs.append(h)
-            h = torch.baddbmm(bias, h, weight)
+    # ---- forward / loss --------------------------------------------------------------------------------------
+    def _mlp(self, keys: Sequence[str], h: torch.Tensor, masks: Mapping[str, torch.Tensor] | None) -> torch.Tensor:
+        """ReLU between layers; each layer's output is multiplied by its dropout mask when there is one."""
+        last = len(keys) - 1
+        for k, key in enumerate(keys):
+            h = torch.baddbmm(self.biases[key], h, self.weights[key])
             if k < last:
-                h = torch.relu_(h)
-            mask = masks[k]
-            if mask is not None:
-                h = h.mul_(mask)
-        return h, inputs
+                h = torch.relu_(h)  # in place on baddbmm's output, which its backward does not need
+            if masks is not None and key in masks:
+                h = h * masks[key]
+        return h
 
-    def _mlp_backward(
+    def train_step(
         self,
-        layers: list[tuple[torch.Tensor, torch.Tensor]],
-        grads: list[tuple[torch.Tensor, torch.Tensor]],
-        inputs: list[torch.Tensor],
-        masks: list[torch.Tensor | None],
-        grad_out: torch.Tensor,
-        need_input_grad: bool,
-    ) -> torch.Tensor | None:
-        """Writes every layer's weight/bias gradient; returns d(loss)/d(input) when asked."""
-        scale = 1.0 / (1.0 - self.shape.dropout)
-        last = len(layers) - 1
-        dy = grad_out
-        last_mask = masks[last]
-        if last_mask is not None:
-            dy = dy * last_mask
-        for k in range(last, -1, -1):
-            weight, _ = layers[k]
-            grad_w, grad_b = grads[k]
-            torch.bmm(inputs[k].transpose(1, 2), dy, out=grad_w)
-            torch.sum(dy, dim=1, keepdim=True, out=grad_b)
-            if k == 0:
-                return torch.bmm(dy, weight.transpose(1, 2)) if need_input_grad else None
-            dy = torch.bmm(dy, weight.transpose(1, 2))
-            # inputs[k] = relu(pre) * mask: zero where it is zero (ReLU off or dropped), else times the mask scale.
-            dy = torch.ops.aten.threshold_backward(dy, inputs[k], 0.0)
-            if masks[k - 1] is not None:
-                dy = dy.mul_(scale)
-        return None
-
-    def train_step(self, batch: torch.Tensor, optimizer: torch.optim.Optimizer) -> torch.Tensor:
+        batch: torch.Tensor,
+        optimizer: torch.optim.Optimizer,
+        masks: Mapping[str, torch.Tensor] | None = None,
+    ) -> torch.Tensor:
         """One optimisation step on ``batch`` (members, B, sum of feature dims), normalised, sensor order.
 
         Loss per group: sum over (source, target) sensor pairs of the MAE of target's frame reconstructed from the
-        source's latent. Returns the loss of every (group, member) as a (groups, members) tensor.
+        source's latent. ``masks`` (from :meth:`draw_masks`) replaces this step's own draw. Returns the loss of
+        every (group, member) as a detached (groups, members) tensor; the gradients stay in the parameters' ``.grad``.
         """
-        members, rows, _ = batch.shape
-        masks = self._draw_masks(rows)
-        losses = []
-        columns = self._columns()
-        for group in self.groups:
-            name = group.name
-            encoded, caches = [], []
-            for sensor in group.sensors:
-                part = f"enc_{sensor}"
-                start, stop = columns[sensor]
-                layer_masks = [masks[self._key(name, part, i)] if masks else None for i in range(self._n_enc)]
-                z, inputs = self._mlp_forward(
-                    self._stack(name, part, self._n_enc), batch[..., start:stop], layer_masks, True
-                )
-                encoded.append(z)
-                caches.append((part, inputs, layer_masks))
-            latent = encoded[0] if len(encoded) == 1 else torch.cat(encoded, dim=1)
-            dec_masks: list[torch.Tensor | None] = [
-                masks[self._key(name, "dec", i)] if masks else None for i in range(self._n_dec - 1)
-            ]
-            dec_masks.append(None)
-            recon, dec_inputs = self._mlp_forward(self._stack(name, "dec", self._n_dec), latent, dec_masks, True)
-            target = self._group_target(batch, group, columns)
-            n_src = len(group.sensors)
-            diff = recon.view(members, n_src, rows, -1) - target.unsqueeze(1)
-            weights = self._loss_weights(group, rows)
-            grad_recon = torch.sign(diff).mul_(weights)
-            losses.append((grad_recon * diff).sum(dim=(1, 2, 3)))  # = sum of |diff| * weight
-            grad_recon = grad_recon.view(members, n_src * rows, -1)
-            grad_latent = self._mlp_backward(
-                self._stack(name, "dec", self._n_dec),
-                self._grad_stack(name, "dec", self._n_dec),
-                dec_inputs,
-                dec_masks,
-                grad_recon,
-                need_input_grad=True,
-            )
-            assert grad_latent is not None
-            for i, (part, inputs, layer_masks) in enumerate(caches):
-                self._mlp_backward(
-                    self._stack(name, part, self._n_enc),
-                    self._grad_stack(name, part, self._n_enc),
-                    inputs,
-                    layer_masks,
-                    grad_latent[:, i * rows : (i + 1) * rows],
-                    need_input_grad=False,
-                )
+        rows = batch.shape[1]
+        if masks is None:
+            masks = self.draw_masks(rows)
+        optimizer.zero_grad(set_to_none=True)
+        with torch.enable_grad():
+            losses = torch.stack([self._group_loss(group, batch, masks) for group in self._plan])
+            losses.sum().backward()
         optimizer.step()
-        return torch.stack(losses)
+        return losses.detach()
 
-    def _columns(self) -> dict[str, tuple[int, int]]:
-        columns, start = {}, 0
-        for sensor in self.sensors:
-            columns[sensor] = (start, start + self.feature_dims[sensor])
-            start += self.feature_dims[sensor]
-        return columns
-
-    def _group_target(self, batch: torch.Tensor, group: GroupSpec, columns: dict[str, tuple[int, int]]) -> torch.Tensor:
-        if group.sensors == self.sensors:
-            return batch
-        return torch.cat([batch[..., columns[s][0] : columns[s][1]] for s in group.sensors], dim=-1)
+    def _group_loss(self, group: _Group, batch: torch.Tensor, masks: Mapping[str, torch.Tensor] | None) -> torch.Tensor:
+        """(members,) sum over the group's (source, target) pairs of the per-pair MAE."""
+        members, rows, _ = batch.shape
+        encoded = [self._mlp(e.layers, batch[..., e.columns[0] : e.columns[1]], masks) for e in group.encoders]
+        latent = encoded[0] if len(encoded) == 1 else torch.cat(encoded, dim=1)
+        recon = self._mlp(group.decoder, latent, masks)
+        if len(group.encoders) == len(self.sensors):
+            target = batch
+        else:
+            target = torch.cat([batch[..., e.columns[0] : e.columns[1]] for e in group.encoders], dim=-1)
+        diff = recon.view(members, len(group.encoders), rows, -1) - target.unsqueeze(1)
+        return (diff.abs() * self._loss_weights(group.spec, rows)).sum(dim=(1, 2, 3))
 
     def _loss_weights(self, group: GroupSpec, rows: int) -> torch.Tensor:
-        """d(sum of per-pair MAEs)/d|error| per output column: 1 / (rows * features of that column's sensor)."""
-        cache = self._weight_cache
+        """Weight of |error| per output column in the sum of per-pair MAEs: 1 / (rows * that sensor's features)."""
         key = (group.name, rows)
-        if key not in cache:
-            cache[key] = torch.cat(
+        if key not in self._loss_weight_cache:
+            self._loss_weight_cache[key] = torch.cat(
                 [torch.full((self.feature_dims[s],), 1.0 / (rows * self.feature_dims[s])) for s in group.sensors]
             ).to(self.device)
-        return cache[key]
+        return self._loss_weight_cache[key]
 
     # ---- inference -------------------------------------------------------------------------------------------
     @torch.no_grad()
     def encode(self, group: str, sensor: str, x: torch.Tensor) -> torch.Tensor:
         """Latents (members, M, latent) of normalised frames ``x`` (M, F) or (members, M, F); no dropout."""
-        spec = self.group(group)
-        if sensor not in spec.sensors:
-            raise ModelError(
-                f"model {group} has no encoder for {sensor!r}", hint=f"it encodes {', '.join(spec.sensors)}"
-            )
-        h = self._broadcast(x)
-        out, _ = self._mlp_forward(self._stack(group, f"enc_{sensor}", self._n_enc), h, [None] * self._n_enc, False)
-        return out
+        spec = self._group_plan(group)
+        for encoder in spec.encoders:
+            if encoder.sensor == sensor:
+                return self._mlp(encoder.layers, self._broadcast(x), None)
+        raise ModelError(
+            f"model {group} has no encoder for {sensor!r}", hint=f"it encodes {', '.join(spec.spec.sensors)}"
+        )
 
     @torch.no_grad()
     def decode(self, group: str, z: torch.Tensor) -> dict[str, torch.Tensor]:
         """Every sensor's normalised frame (members, M, F_s) from latents (members, M, latent)."""
-        spec = self.group(group)
-        out, _ = self._mlp_forward(
-            self._stack(group, "dec", self._n_dec), self._broadcast(z), [None] * self._n_dec, False
-        )
+        spec = self._group_plan(group)
+        out = self._mlp(spec.decoder, self._broadcast(z), None)
         frames, start = {}, 0
-        for sensor in spec.sensors:
+        for sensor in spec.spec.sensors:
             stop = start + self.feature_dims[sensor]
             frames[sensor] = out[..., start:stop]
             start = stop
         return frames
+
+    def _group_plan(self, name: str) -> _Group:
+        spec = self.group(name)
+        return next(g for g in self._plan if g.spec == spec)
 
     def _broadcast(self, x: torch.Tensor) -> torch.Tensor:
         x = x.to(self.device, torch.float32)
@@ -414,24 +386,32 @@ class StackedAutoencoders:
 
     # ---- state -----------------------------------------------------------------------------------------------
     def make_optimizer(self, lr: float) -> torch.optim.Adam:
-        """One fused Adam over the flat parameters (the ``foreach`` kernel where fused is not available)."""
+        """One fused Adam over every parameter tensor (the ``foreach`` kernel where fused is not available)."""
         try:
-            return torch.optim.Adam([self.theta], lr=lr, fused=True)
+            return torch.optim.Adam(self.parameters(), lr=lr, fused=True)
         except (RuntimeError, ValueError):  # pragma: no cover - builds without fused Adam on this device
-            return torch.optim.Adam([self.theta], lr=lr, foreach=True)
+            return torch.optim.Adam(self.parameters(), lr=lr, foreach=True)
 
     def state(self) -> dict[str, Any]:
+        """Structure, parameters and dropout streams as tensors and plain Python values (no pickled objects)."""
         return {
             "feature_dims": dict(self.feature_dims),
             "groups": [{"name": g.name, "sensors": list(g.sensors)} for g in self.groups],
             "seeds": list(self.seeds),
             "shape": self.shape.to_dict(),
-            "theta": self.theta.detach().cpu().clone(),
-            "dropout_rng": [rng.bit_generator.state for rng in self._dropout_rngs],
+            "parameters": {
+                key: {
+                    "weight": self.weights[key].detach().cpu().clone(),
+                    "bias": self.biases[key].detach().cpu().clone(),
+                }
+                for key in self._layers
+            },
+            "dropout_rng": {"device": self.device.type, "states": [g.get_state() for g in self._dropout_generators]},
         }
 
     @classmethod
     def from_state(cls, state: Mapping[str, Any], device: torch.device | str = "cpu") -> StackedAutoencoders:
+        """The engine a :meth:`state` describes; also reads the flat ``theta`` of checkpoint version 1."""
         engine = cls(
             state["feature_dims"],
             [GroupSpec(g["name"], tuple(g["sensors"])) for g in state["groups"]],
@@ -440,13 +420,41 @@ class StackedAutoencoders:
             device,
             initialise=False,
         )
-        theta = torch.as_tensor(state["theta"])
-        if theta.shape != engine.theta.shape:
-            raise ModelError("checkpoint parameters do not match the model they describe", hint="the file is damaged")
-        engine.theta.copy_(theta)
-        for rng, rng_state in zip(engine._dropout_rngs, state.get("dropout_rng", []), strict=False):
-            rng.bit_generator.state = rng_state
+        if "parameters" in state:
+            tensors = []
+            for key in engine._layers:
+                layer = state["parameters"].get(key)
+                if layer is None:
+                    raise ModelError(f"checkpoint has no parameters for layer {key}", hint="the file is damaged")
+                tensors += [torch.as_tensor(layer["weight"]), torch.as_tensor(layer["bias"])]
+        else:
+            tensors = engine.split_flat(torch.as_tensor(state["theta"]))
+        with torch.no_grad():
+            for target, source in zip(engine.parameters(), tensors, strict=True):
+                if source.shape != target.shape:
+                    raise ModelError(
+                        "checkpoint parameters do not match the model they describe", hint="the file is damaged"
+                    )
+                target.copy_(source)
+        engine._restore_dropout_streams(state.get("dropout_rng"))
         return engine
+
+    def _restore_dropout_streams(self, saved: Any) -> None:
+        """Continue each member's dropout stream where the checkpoint left it, when it was drawn on this kind of
+        device (a CPU stream cannot continue on a GPU); otherwise the streams restart from the seeds."""
+        if isinstance(saved, Mapping) and saved.get("device") == self.device.type:
+            for generator, rng_state in zip(self._dropout_generators, saved["states"], strict=True):
+                generator.set_state(torch.as_tensor(rng_state))
+        else:
+            log.warning("the dropout streams restart from the seeds: the checkpoint's were drawn elsewhere")
+
+    def split_flat(self, flat: torch.Tensor) -> list[torch.Tensor]:
+        """A flat vector in :attr:`theta`'s layout cut into tensors shaped like :meth:`parameters`."""
+        shapes = [p.shape for p in self.parameters()]
+        sizes = [math.prod(s) for s in shapes]
+        if flat.numel() != sum(sizes):
+            raise ModelError("checkpoint parameters do not match the model they describe", hint="the file is damaged")
+        return [part.reshape(s) for part, s in zip(torch.split(flat.reshape(-1), sizes), shapes, strict=True)]
 
     def member(self, index: int, groups: Sequence[str] | None = None) -> StackedAutoencoders:
         """A one-member copy of member ``index`` (optionally only some groups), e.g. for inference."""
@@ -454,19 +462,43 @@ class StackedAutoencoders:
         single = StackedAutoencoders(
             self.feature_dims, keep, [self.seeds[index]], self.shape, self.device, initialise=False
         )
-        for key in single._layers:
-            weight, bias = single._param_views[key]
-            src_w, src_b = self._param_views[key]
-            weight[0].copy_(src_w[index])
-            bias[0].copy_(src_b[index])
+        with torch.no_grad():
+            for key in single._layers:
+                single.weights[key][0].copy_(self.weights[key][index])
+                single.biases[key][0].copy_(self.biases[key][index])
         return single
 
     def layer_parameters(self, group: str, member: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Weights (in, out) and biases (out,) of one member's layers, keyed ``enc_<sensor>/<i>`` / ``dec/<i>``."""
+        return self._per_layer(group, member, lambda t: t.detach())
+
+    def layer_gradients(self, group: str, member: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """The last step's gradients, shaped and keyed like :meth:`layer_parameters`."""
+
+        def grad(t: torch.Tensor) -> torch.Tensor:
+            if t.grad is None:
+                raise ModelError("no gradients yet", hint="run train_step first")
+            return t.grad
+
+        return self._per_layer(group, member, grad)
+
+    def _per_layer(self, group: str, member: int, pick: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         out = {}
         for key in self._layers:
             g, part, index = key.split("/")
             if g == group:
-                weight, bias = self._param_views[key]
+                weight, bias = pick(self.weights[key]), pick(self.biases[key])
                 out[f"{part}/{index}"] = (weight[member].cpu().numpy().copy(), bias[member, 0].cpu().numpy().copy())
         return out
+
+    def optimizer_state_from_flat(self, flat_state: Mapping[str, Any]) -> dict[str, Any]:
+        """An Adam ``state_dict`` of checkpoint version 1 (one flat parameter) for this engine's parameter list."""
+        (moments,) = flat_state["state"].values()
+        group = dict(flat_state["param_groups"][0])
+        n = len(self.parameters())
+        group["params"] = list(range(n))
+        exp_avg, exp_avg_sq = self.split_flat(moments["exp_avg"]), self.split_flat(moments["exp_avg_sq"])
+        state = {
+            i: {"step": moments["step"].clone(), "exp_avg": exp_avg[i], "exp_avg_sq": exp_avg_sq[i]} for i in range(n)
+        }
+        return {"state": state, "param_groups": [group]}

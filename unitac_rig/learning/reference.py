@@ -1,7 +1,10 @@
 """The same UniTac-NV model written the ordinary way (``nn.Module``, autograd, ``DataLoader``, standard Adam).
 
-It is the yardstick for the fast engine: benchmarks time it against :class:`StackedAutoencoders` on the same data
-and batch size, and tests check that both compute the same function and the same gradients.
+It is the yardstick for the stacked engine: benchmarks time it against :class:`StackedAutoencoders` on the same data
+and batch size, and tests check that both compute the same function and the same gradients, dropout included. It
+shares no code with the engine's forward pass: one module per model and seed, ``nn.Linear`` layers, ``nn.Dropout``
+(or explicit keep masks that it rescales itself) and one ``l1_loss`` per (source, target) pair. A per-sensor baseline
+autoencoder is a ``UniTacModule`` of that one sensor.
 """
 
 from __future__ import annotations
@@ -27,6 +30,20 @@ def _mlp(widths: Sequence[int], dropout: float, dropout_after_last: bool) -> nn.
     return nn.Sequential(*layers)
 
 
+def _run(mlp: nn.Module, h: torch.Tensor, keep: Mapping[str, torch.Tensor] | None, prefix: str) -> torch.Tensor:
+    """``mlp(h)``, with each ``nn.Dropout`` replaced by ``keep[f"{prefix}/{i}"] / (1 - p)`` (i = index of the
+    linear layer it follows) when ``keep`` is given."""
+    linear = -1
+    for module in mlp.children():
+        if isinstance(module, nn.Linear):
+            linear += 1
+        if isinstance(module, nn.Dropout) and keep is not None:
+            h = h * keep[f"{prefix}/{linear}"].to(h.dtype) / (1.0 - module.p)
+        else:
+            h = module(h)
+    return h
+
+
 class UniTacModule(nn.Module):
     """One encoder per sensor, one shared decoder that outputs every sensor's (flattened, normalised) frame."""
 
@@ -42,15 +59,26 @@ class UniTacModule(nn.Module):
         )
         self.decoder = _mlp([shape.latent_dim, *shape.decoder_hidden, sum(feature_dims.values())], shape.dropout, False)
 
-    def forward(self, inputs: Sequence[torch.Tensor]) -> list[torch.Tensor]:
-        """Reconstructions of all sensors (B, sum F) from each sensor's latent, in sensor order."""
-        return [self.decoder(self.encoders[s](x)) for s, x in zip(self.sensors, inputs, strict=True)]
+    def forward(
+        self, inputs: Sequence[torch.Tensor], keep: Mapping[str, torch.Tensor] | None = None
+    ) -> list[torch.Tensor]:
+        """Reconstructions of all sensors (B, sum F) from each sensor's latent, in sensor order.
 
-    def loss(self, inputs: Sequence[torch.Tensor]) -> torch.Tensor:
+        ``keep`` replaces the ``nn.Dropout`` draws with given masks (True = kept; kept units are scaled by 1/(1-p)
+        here): ``enc_<sensor>/<i>`` (B, width) after encoder layer i, ``dec_<source>/<i>`` (B, width) after decoder
+        layer i when decoding ``source``'s latent.
+        """
+        out = []
+        for sensor, x in zip(self.sensors, inputs, strict=True):
+            z = _run(self.encoders[sensor], x, keep, f"enc_{sensor}")
+            out.append(_run(self.decoder, z, keep, f"dec_{sensor}"))
+        return out
+
+    def loss(self, inputs: Sequence[torch.Tensor], keep: Mapping[str, torch.Tensor] | None = None) -> torch.Tensor:
         """Sum over (source, target) of MAE(target frame, its reconstruction from the source's latent)."""
         target = torch.cat(list(inputs), dim=1)
         total = torch.zeros(())
-        for recon in self.forward(inputs):
+        for recon in self.forward(inputs, keep):
             start = 0
             for sensor in self.sensors:
                 stop = start + self.feature_dims[sensor]
@@ -58,9 +86,9 @@ class UniTacModule(nn.Module):
                 start = stop
         return total
 
-    def load_from_engine(self, engine: StackedAutoencoders, member: int = 0) -> None:
-        """Copy the UniTac-NV weights of one engine member into this module."""
-        params = engine.layer_parameters(UNITAC_GROUP, member)
+    def load_from_engine(self, engine: StackedAutoencoders, member: int = 0, group: str = UNITAC_GROUP) -> None:
+        """Copy the weights of one engine member's model ``group`` (UniTac-NV or a baseline) into this module."""
+        params = engine.layer_parameters(group, member)
         with torch.no_grad():
             for sensor in self.sensors:
                 encoder = self.encoders[sensor]

@@ -20,7 +20,7 @@ from unitac_rig.provenance import git_commit, package_version
 
 CHECKPOINT_NAME = "checkpoint.pt"
 CHECKPOINT_FORMAT = "unitac-rig/unitac-nv-run"
-CHECKPOINT_VERSION = 1
+CHECKPOINT_VERSION = 2  # 2: one tensor per layer (autograd engine); 1: one flat parameter vector, still read
 
 
 def checkpoint_path(run_dir: Path) -> Path:

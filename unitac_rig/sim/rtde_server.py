@@ -49,7 +49,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
@@ -134,33 +134,37 @@ def _zero_value(field_type: str) -> rtde.FieldValue:
     return 0
 
 
+def snapshot_values(state: Snapshot) -> dict[str, rtde.FieldValue]:
+    """The output variables a :class:`Snapshot` determines, by RTDE name (see :func:`values_for`)."""
+    return {
+        "timestamp": state.controller_t_s,
+        "actual_TCP_pose": state.tcp_pose,
+        "target_TCP_pose": state.tcp_pose,
+        "actual_TCP_force": state.tcp_force,
+        "ft_raw_wrench": state.tcp_force,
+        "actual_TCP_speed": state.tcp_speed,
+        "target_TCP_speed": state.tcp_speed,
+        "robot_mode": state.robot_mode,
+        "safety_mode": state.safety_mode,
+        "safety_status": state.safety_mode,
+        "safety_status_bits": safety_status_bits(state),
+        "robot_status_bits": ROBOT_STATUS_POWER_ON,
+        "runtime_state": RUNTIME_STATE_STOPPED,
+        "speed_scaling": 1.0,
+        "target_speed_fraction": 1.0,
+    }
+
+
+def values_for(
+    names: Sequence[str], types: Sequence[str], known: Mapping[str, rtde.FieldValue]
+) -> list[rtde.FieldValue]:
+    """Values of an output recipe: from ``known`` by name, zeros for variables the simulation does not model."""
+    return [known[name] if name in known else _zero_value(t) for name, t in zip(names, types, strict=True)]
+
+
 def state_values(state: Snapshot, names: Sequence[str], types: Sequence[str]) -> list[rtde.FieldValue]:
     """Values of an output recipe for one state (zeros for variables the simulation does not model)."""
-    values: list[rtde.FieldValue] = []
-    for name, field_type in zip(names, types, strict=True):
-        if name == "timestamp":
-            values.append(state.controller_t_s)
-        elif name in ("actual_TCP_pose", "target_TCP_pose"):
-            values.append(state.tcp_pose)
-        elif name in ("actual_TCP_force", "ft_raw_wrench"):
-            values.append(state.tcp_force)
-        elif name in ("actual_TCP_speed", "target_TCP_speed"):
-            values.append(state.tcp_speed)
-        elif name == "robot_mode":
-            values.append(state.robot_mode)
-        elif name in ("safety_mode", "safety_status"):
-            values.append(state.safety_mode)
-        elif name == "safety_status_bits":
-            values.append(safety_status_bits(state))
-        elif name == "robot_status_bits":
-            values.append(ROBOT_STATUS_POWER_ON)
-        elif name == "runtime_state":
-            values.append(RUNTIME_STATE_STOPPED)
-        elif name in ("speed_scaling", "target_speed_fraction"):
-            values.append(1.0)
-        else:
-            values.append(_zero_value(field_type))
-    return values
+    return values_for(names, types, snapshot_values(state))
 
 
 # ---- the shared block between the caller (writer) and the server process (reader) -----------------------------
@@ -234,19 +238,141 @@ class _SharedState:
 # ---- the server process ---------------------------------------------------------------------------------------
 
 
+# Input-only variables a controller accepts besides the registers (ur_rtde's setExternalForceTorque recipe).
+INPUT_VARIABLE_TYPES: dict[str, str] = {"external_force_torque": "VECTOR6D"}
+
+
+def input_variable_type(name: str) -> str:
+    """RTDE type of an input (client -> controller) variable, or ``NOT_FOUND``."""
+    if name in INPUT_VARIABLE_TYPES:
+        return INPUT_VARIABLE_TYPES[name]
+    known = rtde.variable_type(name) if name.startswith("input_") else None
+    return known or rtde.NOT_FOUND
+
+
+class RtdeSession:
+    """The server side of one RTDE connection, without the socket: recipes, start/pause and the stream schedule.
+
+    Shared by this module's receive-only server and the controller twin (:mod:`unitac_rig.sim.twin`). Output and
+    input recipes are numbered 1, 2, 3... on **separate counters**: ur_rtde's control client hard-codes its input
+    recipe ids 1..23 in setup order and ignores the ids in the replies, so one shared counter (output recipe = 1,
+    inputs from 2) breaks it silently. Every input recipe request gets an id, even one with ``NOT_FOUND`` in it
+    (the client ignores that reply and counts on the next id); one with ``IN_USE`` gets 0, as a controller refuses it.
+    """
+
+    def __init__(
+        self,
+        peer: str,
+        *,
+        controller_version: ControllerVersion,
+        max_frequency_hz: float,
+        registers_in_use: frozenset[str] = frozenset(),
+    ) -> None:
+        self.peer = peer
+        self.controller_version = controller_version
+        self.max_frequency_hz = max_frequency_hz
+        self.registers_in_use = registers_in_use
+        self.output_names: tuple[str, ...] = ()
+        self.output_types: tuple[str, ...] = ()
+        self.output_recipe_id = 0
+        self.input_recipes: dict[int, tuple[tuple[str, ...], tuple[str, ...]]] = {}
+        self._next_output_id = 1
+        self._next_input_id = 1
+        self.period_s = 1.0 / max_frequency_hz
+        self.streaming = False
+        self.next_due_s = 0.0
+
+    @property
+    def wants_data(self) -> bool:
+        """Started and subscribed to something: data packages are due every ``period_s``."""
+        return self.streaming and bool(self.output_types)
+
+    def handle(self, package: rtde.RtdePackage) -> bytes | None:
+        """The reply to a request package (None for data packages and text messages, which get none)."""
+        kind = package.type
+        if kind == PackageType.REQUEST_PROTOCOL_VERSION:
+            version = rtde.decode_request_protocol_version(package.payload)
+            return rtde.encode_protocol_version_reply(version == rtde.PROTOCOL_VERSION)
+        if kind == PackageType.GET_URCONTROL_VERSION:
+            return rtde.encode_controller_version_reply(self.controller_version)
+        if kind == PackageType.CONTROL_PACKAGE_SETUP_OUTPUTS:
+            return self._setup_outputs(package.payload)
+        if kind == PackageType.CONTROL_PACKAGE_SETUP_INPUTS:
+            return self._setup_inputs(package.payload)
+        if kind == PackageType.CONTROL_PACKAGE_START:
+            self.streaming = True
+            self.next_due_s = time.monotonic()
+            return rtde.encode_accepted_reply(kind, True)
+        if kind == PackageType.CONTROL_PACKAGE_PAUSE:
+            self.streaming = False
+            return rtde.encode_accepted_reply(kind, True)
+        if kind == PackageType.TEXT_MESSAGE:
+            message = rtde.decode_text_message(package.payload)
+            logger.info("RTDE client %s says [%s] %s", self.peer, message.source, message.message)
+        return None
+
+    def input_values(self, payload: bytes) -> dict[str, rtde.FieldValue] | None:
+        """The variables a data package from the client writes, by name; None for an unknown recipe id."""
+        recipe_id = payload[0] if payload else -1
+        recipe = self.input_recipes.get(recipe_id)
+        if recipe is None:
+            logger.debug("RTDE client %s sent data for unknown input recipe %d", self.peer, recipe_id)
+            return None
+        names, types = recipe
+        _, values = rtde.decode_data_package(payload, types)
+        return dict(zip(names, values, strict=True))
+
+    def take_due(self, now_s: float) -> bool:
+        """True (and the schedule moves on) when a data package is due at ``now_s``; never bursts to catch up."""
+        if not self.wants_data or self.next_due_s > now_s:
+            return False
+        self.next_due_s += self.period_s
+        if self.next_due_s < now_s - self.period_s:  # fell behind: skip, do not burst
+            self.next_due_s = now_s + self.period_s
+        return True
+
+    def data_package(self, known: Mapping[str, rtde.FieldValue]) -> bytes:
+        """One output data package, values by name from ``known`` (zeros for the rest)."""
+        values = values_for(self.output_names, self.output_types, known)
+        return rtde.encode_data_package(self.output_recipe_id, self.output_types, values)
+
+    def _setup_outputs(self, payload: bytes) -> bytes:
+        frequency_hz, names = rtde.decode_setup_outputs(payload)
+        types = tuple(rtde.variable_type(name) or rtde.NOT_FOUND for name in names)
+        recipe_id = 0
+        if names and rtde.NOT_FOUND not in types:
+            limit_hz = self.max_frequency_hz
+            if frequency_hz <= 0 or frequency_hz > limit_hz:
+                logger.info("RTDE client %s asked for %.1f Hz; streaming at %.1f Hz", self.peer, frequency_hz, limit_hz)
+                frequency_hz = limit_hz
+            recipe_id = self._next_output_id
+            self._next_output_id += 1
+            self.output_names, self.output_types = names, types
+            self.output_recipe_id = recipe_id
+            self.period_s = 1.0 / frequency_hz
+        return rtde.encode_recipe_reply(PackageType.CONTROL_PACKAGE_SETUP_OUTPUTS, RecipeReply(recipe_id, types))
+
+    def _setup_inputs(self, payload: bytes) -> bytes:
+        names = rtde.decode_setup_inputs(payload)
+        types = tuple(rtde.IN_USE if n in self.registers_in_use else input_variable_type(n) for n in names)
+        recipe_id = 0
+        if names and rtde.IN_USE not in types:
+            recipe_id = self._next_input_id
+            self._next_input_id += 1
+            if rtde.NOT_FOUND not in types:
+                self.input_recipes[recipe_id] = (names, types)
+        return rtde.encode_recipe_reply(PackageType.CONTROL_PACKAGE_SETUP_INPUTS, RecipeReply(recipe_id, types))
+
+
 @dataclass
 class _Client:
     sock: socket.socket
-    peer: str
+    session: RtdeSession
     parser: rtde.RtdePackageParser = field(default_factory=rtde.RtdePackageParser)
-    output_names: tuple[str, ...] = ()
-    output_types: tuple[str, ...] = ()
-    output_recipe_id: int = 0
-    input_recipe_ids: set[int] = field(default_factory=set)
-    next_recipe_id: int = 1
-    period_s: float = 0.002
-    streaming: bool = False
-    next_due_s: float = 0.0
+
+    @property
+    def peer(self) -> str:
+        return self.session.peer
 
 
 @dataclass(frozen=True)
@@ -292,7 +418,7 @@ class _RtdeServerLoop:
             self._selector.close()
 
     def _wait_time_s(self) -> float:
-        due = [c.next_due_s for c in self._clients if c.streaming and c.output_types]
+        due = [c.session.next_due_s for c in self._clients if c.session.wants_data]
         if not due:
             return _MAX_IDLE_WAIT_S
         return min(max(0.0, min(due) - time.monotonic()), _MAX_IDLE_WAIT_S)
@@ -304,7 +430,13 @@ class _RtdeServerLoop:
             return
         sock.settimeout(_SEND_TIMEOUT_S)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        client = _Client(sock=sock, peer=f"{peer[0]}:{peer[1]}")
+        session = RtdeSession(
+            f"{peer[0]}:{peer[1]}",
+            controller_version=self.settings.controller_version,
+            max_frequency_hz=self.settings.max_frequency_hz,
+            registers_in_use=self.settings.registers_in_use,
+        )
+        client = _Client(sock=sock, session=session)
         self._clients.append(client)
         self._shared.set_client_count(len(self._clients))
         self._selector.register(sock, selectors.EVENT_READ, client)
@@ -332,7 +464,10 @@ class _RtdeServerLoop:
             return
         try:
             for package in client.parser.feed(data):
-                reply = self._handle(client, package)
+                if package.type == PackageType.DATA_PACKAGE:
+                    client.session.input_values(package.payload)  # accepted and ignored: nothing is driven here
+                    continue
+                reply = client.session.handle(package)
                 if reply:
                     client.sock.sendall(reply)
         except OSError as exc:
@@ -340,87 +475,21 @@ class _RtdeServerLoop:
         except rtde.ProtocolError as exc:
             self._drop(client, f"bad package: {exc}")
 
-    def _handle(self, client: _Client, package: rtde.RtdePackage) -> bytes | None:
-        kind = package.type
-        if kind == PackageType.REQUEST_PROTOCOL_VERSION:
-            version = rtde.decode_request_protocol_version(package.payload)
-            return rtde.encode_protocol_version_reply(version == rtde.PROTOCOL_VERSION)
-        if kind == PackageType.GET_URCONTROL_VERSION:
-            return rtde.encode_controller_version_reply(self.settings.controller_version)
-        if kind == PackageType.CONTROL_PACKAGE_SETUP_OUTPUTS:
-            return self._setup_outputs(client, package.payload)
-        if kind == PackageType.CONTROL_PACKAGE_SETUP_INPUTS:
-            return self._setup_inputs(client, package.payload)
-        if kind == PackageType.CONTROL_PACKAGE_START:
-            client.streaming = True
-            client.next_due_s = time.monotonic()
-            return rtde.encode_accepted_reply(kind, True)
-        if kind == PackageType.CONTROL_PACKAGE_PAUSE:
-            client.streaming = False
-            return rtde.encode_accepted_reply(kind, True)
-        if kind == PackageType.DATA_PACKAGE:
-            recipe_id = package.payload[0] if package.payload else -1
-            if recipe_id not in client.input_recipe_ids:
-                logger.debug("RTDE client %s sent data for unknown input recipe %d", client.peer, recipe_id)
-            return None  # inputs are accepted and ignored: the simulated arm is not driven over RTDE
-        if kind == PackageType.TEXT_MESSAGE:
-            message = rtde.decode_text_message(package.payload)
-            logger.info("RTDE client %s says [%s] %s", client.peer, message.source, message.message)
-        return None
-
-    def _setup_outputs(self, client: _Client, payload: bytes) -> bytes:
-        frequency_hz, names = rtde.decode_setup_outputs(payload)
-        types = tuple(rtde.variable_type(name) or rtde.NOT_FOUND for name in names)
-        recipe_id = 0
-        if names and rtde.NOT_FOUND not in types:
-            limit_hz = self.settings.max_frequency_hz
-            if frequency_hz <= 0 or frequency_hz > limit_hz:
-                logger.info(
-                    "RTDE client %s asked for %.1f Hz; streaming at %.1f Hz", client.peer, frequency_hz, limit_hz
-                )
-                frequency_hz = limit_hz
-            recipe_id = client.next_recipe_id
-            client.next_recipe_id += 1
-            client.output_names, client.output_types = names, types
-            client.output_recipe_id = recipe_id
-            client.period_s = 1.0 / frequency_hz
-        return rtde.encode_recipe_reply(PackageType.CONTROL_PACKAGE_SETUP_OUTPUTS, RecipeReply(recipe_id, types))
-
-    def _setup_inputs(self, client: _Client, payload: bytes) -> bytes:
-        names = rtde.decode_setup_inputs(payload)
-        types = tuple(self._input_type(name) for name in names)
-        recipe_id = 0
-        if names and all(t not in (rtde.NOT_FOUND, rtde.IN_USE) for t in types):
-            recipe_id = client.next_recipe_id
-            client.next_recipe_id += 1
-            client.input_recipe_ids.add(recipe_id)
-        return rtde.encode_recipe_reply(PackageType.CONTROL_PACKAGE_SETUP_INPUTS, RecipeReply(recipe_id, types))
-
-    def _input_type(self, name: str) -> str:
-        if name in self.settings.registers_in_use:
-            return rtde.IN_USE
-        known = rtde.variable_type(name) if name.startswith("input_") else None
-        return known or rtde.NOT_FOUND
-
     def _send_due_packages(self) -> None:
         now_s = time.monotonic()
-        due = [c for c in self._clients if c.streaming and c.output_types and c.next_due_s <= now_s]
+        due = [c for c in self._clients if c.session.take_due(now_s)]
         if not due:
             return
         state = self._shared.read_state() or self._last_state
         self._last_state = state
+        known = snapshot_values(state)
         for client in due:
-            values = state_values(state, client.output_names, client.output_types)
-            package = rtde.encode_data_package(client.output_recipe_id, client.output_types, values)
             try:
-                client.sock.sendall(package)
+                client.sock.sendall(client.session.data_package(known))
             except OSError as exc:
                 self._drop(client, f"send failed: {exc}")
                 continue
             self._shared.count_sent()
-            client.next_due_s += client.period_s
-            if client.next_due_s < now_s - client.period_s:  # fell behind: skip, do not burst
-                client.next_due_s = now_s + client.period_s
 
 
 def _server_main(argv: Sequence[str]) -> int:

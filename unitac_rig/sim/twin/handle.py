@@ -1,0 +1,263 @@
+"""The parent's handle on a controller twin: start it, read its ground truth, pull its test hooks, stop it."""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import json
+import logging
+import os
+import select
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from drivers.errors import DeviceError
+from unitac_rig.sim.twin.params import CONTROLLER_PORTS, ControllerParams, SceneSpec, TwinSettings
+from unitac_rig.sim.twin.truth import TruthBlock, TwinTruth
+
+logger = logging.getLogger(__name__)
+
+_START_TIMEOUT_S = 20.0  # a fresh interpreter importing numpy and the scene on a loaded 2-core box
+_HOOK_TIMEOUT_S = 10.0
+_PACKAGE_ROOT = str(Path(__file__).resolve().parents[3])  # the directory that holds unitac_rig/
+
+# A still pad in front of where the default object stands (m, rad): used when no start pose is given.
+DEFAULT_START_POSE = (-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214)
+
+
+class AddressTaken(DeviceError):
+    """The controller twin could not bind one of its ports on that address."""
+
+
+class ControllerTwin:
+    """A simulated UR e-Series controller in its own process, serving 29999/30003/30004 on ``host`` (127.0.0.x).
+
+    The unmodified ``rtde_control.RTDEControlInterface(host)`` and ``rtde_receive.RTDEReceiveInterface(host)``
+    connect to it and drive a simulated arm in real time. ``scene`` puts an object in front of the arm (the wrist
+    force is the scene's contact force); ``start_pose`` is the pad's pose (m, rad); ``params`` sets what the
+    controller answers and its safety limits. Raises :class:`AddressTaken` when a port on ``host`` is in use.
+
+    Ground truth: :meth:`truth` (a :class:`TwinTruth` snapshot, read from shared memory without a round trip) and
+    :meth:`true_pad_pose`. Test hooks: :meth:`reset_peak`, :meth:`emergency_stop`, :meth:`release_emergency_stop`,
+    :meth:`trigger_protective_stop`, :meth:`set_placement_error`, :meth:`set_remote_control`,
+    :meth:`set_pendant_tcp`, :meth:`set_pendant_payload`; :meth:`status` for the program state and last error.
+
+    Disconnect every ur_rtde client *before* :meth:`close`: a controller that vanishes under a connected control
+    client makes its next blocking command wait 300 s.
+    """
+
+    def __init__(
+        self,
+        host: str = "127.0.0.2",
+        *,
+        scene: SceneSpec | None = None,
+        start_pose: np.ndarray | tuple[float, ...] | None = None,
+        params: ControllerParams | None = None,
+        seed: int = 0,
+    ) -> None:
+        self.host = host
+        self.params = params or ControllerParams()
+        self.scene = scene
+        pose = DEFAULT_START_POSE if start_pose is None else tuple(float(v) for v in start_pose)
+        self.settings = TwinSettings(host=host, start_pose=pose, params=self.params, scene=scene, seed=seed)
+        self._closed = False
+        self._lock = threading.Lock()
+        self._file = tempfile.TemporaryFile()  # noqa: SIM115 - lives as long as the twin; closed in close()
+        self._file.truncate(TruthBlock.size)
+        self._truth = TruthBlock(self._file.fileno())
+        environment = dict(os.environ)
+        environment["PYTHONPATH"] = os.pathsep.join(filter(None, [_PACKAGE_ROOT, environment.get("PYTHONPATH")]))
+        command = [sys.executable, "-m", "unitac_rig.sim.twin.controller", "--truth-fd", str(self._file.fileno())]
+        self._process = subprocess.Popen(
+            command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, pass_fds=(self._file.fileno(),), env=environment
+        )
+        try:
+            assert self._process.stdin is not None
+            self._process.stdin.write((self.settings.to_json() + "\n").encode())
+            self._process.stdin.flush()
+            self._await_ready()
+        except BaseException:
+            self._shut_down()
+            raise
+        logger.debug("controller twin on %s (pid %d)", host, self._process.pid)
+
+    def _await_ready(self) -> None:
+        assert self._process.stdout is not None
+        line = b""
+        ready, _, _ = select.select([self._process.stdout], [], [], _START_TIMEOUT_S)
+        if ready:
+            line = self._process.stdout.readline()
+        word, _, rest = line.decode("utf-8", "replace").strip().partition(" ")
+        if word == "ready":
+            return
+        if word == "error":
+            code, _, why = rest.partition(" ")
+            message = f"controller twin cannot listen on {self.host}: {why}"
+            if int(code or 0) == errno.EADDRINUSE:
+                raise AddressTaken(message, hint="another controller twin (or URSim) uses this address; try another")
+            raise DeviceError(message, hint="use a loopback address such as 127.0.0.2")
+        exit_code = self._process.poll()
+        why = f"it exited with status {exit_code}" if exit_code is not None else f"no answer in {_START_TIMEOUT_S} s"
+        raise DeviceError(
+            f"the controller twin's process did not start ({why})",
+            hint="see its error output above; is unitac-rig installed in this Python environment?",
+        )
+
+    # ---- ground truth ---------------------------------------------------------------------------------------
+
+    @property
+    def pid(self) -> int:
+        return self._process.pid
+
+    def truth(self) -> TwinTruth:
+        """The controller's state this cycle (what really happens, not what RTDE reports)."""
+        snapshot = self._truth.read()
+        if snapshot is None:
+            raise DeviceError("the controller twin has not published its state", hint="is its process alive?")
+        return snapshot
+
+    def true_pad_pose(self) -> np.ndarray:
+        """Pose (6,) of the physical tool, the pad centre (m, rad): what the scene and the sensors feel."""
+        pose = self._truth.read_pad_pose()
+        if pose is None:
+            return np.asarray(self.settings.start_pose, dtype=np.float64)
+        return pose
+
+    def wait_for(self, condition: Callable[[TwinTruth], bool], timeout_s: float = 5.0, poll_s: float = 0.002) -> bool:
+        """Poll the truth until ``condition`` holds (True) or ``timeout_s`` of wall time passes (False)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            if condition(self.truth()):
+                return True
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(poll_s)
+
+    # ---- hooks ----------------------------------------------------------------------------------------------
+
+    def _hook(self, op: str, **fields: Any) -> dict[str, Any]:
+        with self._lock:
+            if self._closed or self._process.poll() is not None:
+                raise DeviceError("the controller twin is not running")
+            assert self._process.stdin is not None and self._process.stdout is not None
+            self._process.stdin.write((json.dumps({"op": op, **fields}) + "\n").encode())
+            self._process.stdin.flush()
+            ready, _, _ = select.select([self._process.stdout], [], [], _HOOK_TIMEOUT_S)
+            if not ready:
+                raise DeviceError(f"the controller twin did not answer the {op!r} hook in {_HOOK_TIMEOUT_S} s")
+            reply: dict[str, Any] = json.loads(self._process.stdout.readline())
+        if not reply.get("ok"):
+            raise DeviceError(f"controller twin hook {op!r} failed: {reply.get('error')}")
+        return reply
+
+    def reset_peak(self) -> None:
+        """Start a new peak-force window (the peak becomes the force now)."""
+        self._hook("reset_peak")
+
+    def emergency_stop(self) -> None:
+        """Press the emergency stop: the arm brakes, the program stops, the arm powers off once at rest."""
+        self._hook("emergency_stop")
+
+    def release_emergency_stop(self) -> None:
+        """Release the button; the arm stays powered off until the dashboard powers it on and releases the brakes."""
+        self._hook("release_emergency_stop")
+
+    def trigger_protective_stop(self, why: str = "test hook") -> None:
+        """Inject a protective stop (as if a safety limit tripped)."""
+        self._hook("protective_stop", why=why)
+
+    def set_placement_error(self, dx_m: float, dy_m: float) -> None:
+        """Move the object by (dx, dy) m from where the rig file says it stands (the controller's scene only)."""
+        self._hook("placement_error", error_m=[dx_m, dy_m])
+
+    def set_remote_control(self, on: bool) -> None:
+        """Pendant in Remote Control (True) or Local mode (False: clients refused, uploads ignored)."""
+        self._hook("remote_control", on=on)
+
+    def set_pendant_tcp(self, pose: np.ndarray | tuple[float, ...]) -> None:
+        """Set the active TCP as an operator would on the pendant (m, rad)."""
+        self._hook("pendant_tcp", pose=[float(v) for v in pose])
+
+    def set_pendant_payload(self, mass_kg: float, cog_m: tuple[float, float, float]) -> None:
+        self._hook("pendant_payload", mass_kg=mass_kg, cog_m=list(cog_m))
+
+    def status(self) -> dict[str, Any]:
+        """Program state, last error (a refused upload, a runtime error, why the program stopped), TCP, payload."""
+        return self._hook("status")
+
+    # ---- lifetime -------------------------------------------------------------------------------------------
+
+    @property
+    def alive(self) -> bool:
+        return not self._closed and self._process.poll() is None
+
+    def close(self) -> None:
+        """Stop the controller process (its sockets close with it). Idempotent."""
+        if self._closed:
+            return
+        self._shut_down()
+
+    def _shut_down(self) -> None:
+        self._closed = True
+        process = self._process
+        if process.stdin is not None:
+            with contextlib.suppress(OSError):
+                process.stdin.close()  # EOF on its stdin is the controller's signal to stop
+        try:
+            process.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:  # pragma: no cover - the loop polls stdin every cycle
+            logger.warning("controller twin process did not stop; killing it")
+            process.kill()
+            process.wait(timeout=5.0)
+        if process.stdout is not None:
+            process.stdout.close()
+        self._truth.close()
+        self._file.close()
+
+    def __enter__(self) -> ControllerTwin:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+def address_free(host: str) -> bool:
+    """Whether none of the controller ports is bound on ``host`` (TIME_WAIT is no obstacle, as for the twin)."""
+    for port in CONTROLLER_PORTS:
+        probe = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError:
+            return False
+        finally:
+            probe.close()
+    return True
+
+
+def start_twin_on_free_loopback(first: int, last: int = 254, **kwargs: Any) -> ControllerTwin:
+    """A :class:`ControllerTwin` on the first 127.0.0.x (``first`` <= x <= ``last``) whose ports are all free."""
+    for octet in range(first, last + 1):
+        host = f"127.0.0.{octet}"
+        if not address_free(host):
+            continue
+        try:
+            return ControllerTwin(host, **kwargs)
+        except AddressTaken:
+            continue  # taken between the check and the start
+    raise DeviceError(
+        f"no free loopback address for a controller twin in 127.0.0.{first}-{last}",
+        hint="close other controller twins or URSim instances",
+    )

@@ -1,4 +1,4 @@
-"""One declarative registry of tactile sensor layouts: taxel grids, pitches, units and axis conventions.
+"""The tactile sensor layouts this package has drivers for: taxel grids, pitches, units and axis conventions.
 
 Conventions used everywhere in the project (drivers, simulator, recorder, learning):
 
@@ -10,6 +10,8 @@ Conventions used everywhere in the project (drivers, simulator, recorder, learni
   displacements) for the PapillArray.
 
 Drivers declare their layout before connecting (``driver.layout``), so a recorder can size its datasets up front.
+The application looks a layout up by sensor name in its sensor registry (``unitac_rig.rig.sensors``), which names
+these constants; this module keeps no list of its own.
 """
 
 from __future__ import annotations
@@ -77,16 +79,3 @@ PAPILLARRAY = SensorLayout(
     has_displacement=True,
     description="3x3 optical pillars, centre pillar proud; forces in N and tip displacements in mm",
 )
-
-LAYOUTS: dict[str, SensorLayout] = {layout.name: layout for layout in (USKIN, PAPILLARRAY)}
-
-
-def get_layout(name: str) -> SensorLayout:
-    """Look up a sensor layout by id (``uskin``, ``papillarray``)."""
-    from drivers.errors import DeviceError
-
-    try:
-        return LAYOUTS[name]
-    except KeyError:
-        known = ", ".join(sorted(LAYOUTS))
-        raise DeviceError(f"unknown sensor {name!r}", hint=f"known sensors: {known}") from None

@@ -60,11 +60,11 @@ def synthetic_press(sensor: str, length_s: float, index: int, rng: np.random.Gen
     A force ramp to 10 N and back; robot at 500 Hz; tactile at the sensor's rate with a contiguous counter
     (PapillArray forces in N with displacements, uSkin raw counts around 33 000). Extraction computed as in a session.
     """
-    from drivers.layouts import get_layout
+    from unitac_rig.rig.sensors import sensor_layout
     from unitac_rig.storage.extraction import extract_press
     from unitac_rig.storage.recorder import PressRecord, press_id
 
-    layout = get_layout(sensor)
+    layout = sensor_layout(sensor)
     k = round(ROBOT_HZ * length_s)
     m = round(SENSOR_RATES_HZ[sensor] * length_s)
     robot_t = np.arange(k) / ROBOT_HZ

@@ -14,20 +14,20 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 from rich.text import Text
 
-from drivers.layouts import LAYOUTS, get_layout
 from unitac_rig.collection.press import TickInfo
+from unitac_rig.collection.sensor_choice import choose_sensor, collection_order, session_complete
 from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.backends import open_rig
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import STRATEGIES, RigConfig, load_rig_config, parse_rig_config
 from unitac_rig.rig.objects import ObjectSpec, get_object, list_objects
+from unitac_rig.rig.sensors import sensor_layout
 from unitac_rig.storage.extraction import ExtractionSettings
-from unitac_rig.storage.reader import list_sessions, press_summaries
-from unitac_rig.storage.recorder import FINISHED_STATUSES, reextract_session, session_path
+from unitac_rig.storage.reader import list_sessions
+from unitac_rig.storage.recorder import reextract_session
 
 console = Console(stderr=False)
-SENSOR_ORDER = ("uskin", "papillarray")
 
 DATA_OPTION = typer.Option(Path("data"), "--data", help="Dataset directory (one HDF5 file per object and sensor).")
 RIG_OPTION = typer.Option(None, "--rig", help="Rig file (TOML). Without one, the simulated rig is used.")
@@ -53,50 +53,11 @@ def _configure(
     return parse_rig_config(data, source="command-line options")
 
 
-def _session_complete(data_dir: Path, object_id: str, sensor: str) -> bool:
-    path = session_path(data_dir, object_id, sensor)
-    if not path.exists():
-        return False
-    try:
-        presses = press_summaries(path)
-        planned = {s.path: s for s in list_sessions(data_dir)}[path].attrs.get("planned_presses", [])
-    except Exception:  # an unreadable file is not complete; collect will recover it from the journal
-        return False
-    done = {p["press_id"] for p in presses if p["status"] in FINISHED_STATUSES}
-    return bool(planned) and set(planned) <= done
-
-
-def _choose_sensor(rig: Rig, obj: ObjectSpec, sensor: str | None, data_dir: Path) -> str:
-    if sensor is not None:
-        if sensor not in LAYOUTS:
-            raise UsageError(f"unknown sensor {sensor!r}", hint=f"use one of: {', '.join(SENSOR_ORDER)}")
-        if sensor not in rig.sensor_names():
-            raise UsageError(
-                f"sensor {sensor!r} is not configured on this rig",
-                hint=f"configured: {', '.join(rig.sensor_names())}",
-            )
-        if not rig.simulated:
-            rig.check_sensor(sensor)  # the named sensor must be the one streaming, before the arm moves
-        return sensor
-    if not rig.simulated:
-        found = rig.detect_sensor()
-        console.print(f"detected mounted sensor: [bold]{found}[/]")
-        return found
-    for name in SENSOR_ORDER:
-        if name in rig.sensor_names() and not _session_complete(data_dir, obj.id, name):
-            console.print(f"simulated rig: mounting [bold]{name}[/] (no complete data yet for {obj.id})")
-            return name
-    raise UsageError(
-        f"every simulated sensor already has a complete session for {obj.id} in {data_dir}",
-        hint="use --sensor to redo one into another --data directory, or run `unitac-rig inspect`",
-    )
-
-
 class LivePanel:
     """Progress over presses with time left, the current force, and a small taxel map (normal channel)."""
 
     def __init__(self, title: str, planned: int, done: int, sensor: str, threshold_n: float) -> None:
-        self.layout = get_layout(sensor)
+        self.layout = sensor_layout(sensor)
         self.threshold_n = threshold_n
         self.progress = Progress(
             TextColumn("[bold]{task.description}"),
@@ -218,7 +179,12 @@ def collect(
             "[bold yellow]SIMULATED RIG[/] (no rig file given): every device is simulated, no hardware moves."
         )
     with open_rig(config, seed=seed) as rig:
-        chosen = _choose_sensor(rig, obj, sensor, data)
+        choice = choose_sensor(rig, obj.id, sensor, data)
+        if choice.how == "detected":
+            console.print(f"detected mounted sensor: [bold]{choice.name}[/]")
+        elif choice.how == "next-incomplete":
+            console.print(f"simulated rig: mounting [bold]{choice.name}[/] (no complete data yet for {obj.id})")
+        chosen = choice.name
         outcome = _run_session(rig, obj, chosen, data, [rotation] if rotation is not None else None, live, max_presses)
     if outcome.stopped:
         raise UsageError(f"session stopped early: {outcome.stopped}", hint="rerun the same command to resume")
@@ -242,11 +208,11 @@ def campaign(
         console.print("[bold yellow]SIMULATED RIG[/]: running the whole campaign unattended.")
     started = time.monotonic()
     with open_rig(config, seed=seed) as rig:
-        for sensor in [s for s in SENSOR_ORDER if s in rig.sensor_names()]:
+        for sensor in collection_order(rig):
             if not rig.simulated:
                 typer.prompt(f"Mount the {sensor} on the arm, then press Enter", default="", show_default=False)
             for obj in catalogue:
-                if _session_complete(data, obj.id, sensor):
+                if session_complete(data, obj.id, sensor):
                     console.print(f"{obj.id} / {sensor}: already complete")
                     continue
                 if not rig.simulated:

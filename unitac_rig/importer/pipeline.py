@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.layouts import SensorLayout, get_layout
+from drivers.layouts import SensorLayout
 from unitac_rig.errors import ConfigError, DataError, UnitacError
 from unitac_rig.importer.conventions import AUTHORS_PROCESSED_STEPS, ImportConventions
 from unitac_rig.importer.discovery import SourceFile, discover
@@ -29,6 +29,7 @@ from unitac_rig.importer.presses import (
     streams_from_raw,
 )
 from unitac_rig.rig.objects import get_object
+from unitac_rig.rig.sensors import sensor_layout
 from unitac_rig.storage.reader import press_summaries, read_session_info
 from unitac_rig.storage.recorder import SessionWriter, journal_dir, session_path
 
@@ -312,7 +313,7 @@ def _import_session(
     on_file: Callable[[FileReport], None] | None,
 ) -> None:
     object_id, sensor = session.object_id, session.sensor
-    layout = get_layout(sensor)
+    layout = sensor_layout(sensor)
     writer = _LazyWriter(data_dir, object_id, sensor, _root_attrs(object_id, sensor, conv, source))
     imported: dict[str, Any] = {}
     existing: dict[str, dict[str, Any]] = {}

@@ -61,10 +61,10 @@ def load_sets(data_dir: Path) -> list[MatchedSetLike]:
 
 
 def sensor_order(names: Iterable[str]) -> tuple[str, ...]:
-    """Canonical sensor order: the registered layouts' order first (uskin, papillarray), then the rest by name."""
-    from drivers.layouts import LAYOUTS
+    """Canonical sensor order: the sensor registry's order first (uskin, papillarray), then the rest by name."""
+    from unitac_rig.rig.sensors import SENSORS
 
-    registered = list(LAYOUTS)
+    registered = list(SENSORS)
     unique = set(names)
     known = [n for n in registered if n in unique]
     return tuple(known + sorted(unique - set(known)))

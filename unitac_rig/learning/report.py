@@ -136,11 +136,11 @@ def pick_examples(test: PairedDataset, cross_nmae: np.ndarray, unseen: tuple[str
 
 def plot_reconstructions(run: LoadedRun, evaluator: Evaluator, rows: list[int], path: Path, title: str) -> Path | None:
     """One line of taxel maps per contact: each sensor's original, then every source -> target reconstruction."""
-    from drivers.layouts import get_layout
     from unitac_rig.plotting import draw_taxel_map
+    from unitac_rig.rig.sensors import sensor_layout
 
     try:
-        layouts = {s: get_layout(s) for s in run.sensors}
+        layouts = {s: sensor_layout(s) for s in run.sensors}
     except UnitacError:
         log.info("reconstruction figure skipped: a sensor of this run has no registered layout")
         return None

@@ -1,16 +1,16 @@
 """The backend table: which :class:`~unitac_rig.rig.base.Rig` a rig file opens.
 
 Backends are named by import path and imported only when chosen (python-can's interface registry does the same),
-so the seam never imports a backend and nothing but this table (and the CLI's ``--simulated`` paths) reaches
-``unitac_rig.sim``. The import-layer contract in ``pyproject.toml`` checks that.
+so the seam never imports a backend and nothing but this table, the sensor registry's ``simulated`` entries (also by
+path) and the CLI's ``--simulated`` paths reach ``unitac_rig.sim``. The import contract in ``pyproject.toml`` checks
+that.
 """
 
 from __future__ import annotations
 
-import importlib
-
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import RigConfig
+from unitac_rig.rig.lazy import load
 
 #: backend name -> "module:Class". ``sim`` is the fast lockstep twin; ``hardware`` the real devices (or the
 #: real-time twin, which is served on loopback addresses and looks like hardware to this code).
@@ -22,8 +22,7 @@ RIG_BACKENDS: dict[str, str] = {
 
 def backend_class(name: str) -> type[Rig]:
     """The Rig class registered under ``name`` (imported on first use)."""
-    module_name, _, class_name = RIG_BACKENDS[name].partition(":")
-    cls = getattr(importlib.import_module(module_name), class_name)
+    cls = load(RIG_BACKENDS[name])
     assert isinstance(cls, type) and issubclass(cls, Rig)
     return cls
 

@@ -10,9 +10,11 @@ import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, SerializeAsAny, ValidationError, model_validator
 
+from drivers.arm import DEFAULT_WATCHDOG_HZ
 from unitac_rig.errors import ConfigError
+from unitac_rig.rig.sensors import SENSORS, SensorConfigBase, parse_sensor_config
 
 STRATEGIES = ("guarded", "two-phase", "force-ramp")
 
@@ -24,36 +26,35 @@ class _Strict(BaseModel):
 class ArmConfig(_Strict):
     host: str = Field(description="IP address or host name of the UR controller")
     frequency_hz: float = Field(500.0, gt=0, le=500, description="RTDE control/receive frequency")
+    watchdog_hz: float = Field(
+        DEFAULT_WATCHDOG_HZ,
+        gt=5,
+        le=100,
+        description="RTDE watchdog: the controller stops the program when the host sends nothing for 1/this s",
+    )
+    tcp_offset: tuple[float, float, float, float, float, float] | None = Field(
+        None, description="TCP set on the pendant, [x, y, z (m), rx, ry, rz (rad)] from the flange; checked at connect"
+    )
+    payload_kg: float | None = Field(
+        None, ge=0, le=5, description="payload mass set on the pendant, kg; checked at connect"
+    )
 
 
-class UskinCanConfig(_Strict):
-    type: Literal["uskin-can"] = "uskin-can"
-    can_interface: str = Field("socketcan", description="python-can interface: socketcan, pcan, slcan, virtual, ...")
-    can_channel: str = Field("can0", description="python-can channel, e.g. can0, PCAN_USBBUS1, /dev/ttyUSB0")
-    bitrate: int = 1_000_000
-    controller_id: int = Field(1, ge=0, le=15)
-
-
-class UskinXelaServerConfig(_Strict):
-    type: Literal["uskin-xela-server"] = "uskin-xela-server"
-    url: str = Field("ws://127.0.0.1:5000", description="xela_server WebSocket address")
-    sensor_number: int = Field(1, ge=1)
-
-
-class PapillArrayConfig(_Strict):
-    type: Literal["papillarray"] = "papillarray"
-    port: str = Field(description="pyserial URL of the hub, e.g. /dev/ttyACM0")
-    slot: int = Field(0, ge=0, le=1, description="the hub's sensor slot")
-    rate_hz: Literal[100, 250, 500, 1000] = 100
-
-
-SensorConfig = Annotated[UskinCanConfig | UskinXelaServerConfig | PapillArrayConfig, Field(discriminator="type")]
+#: one ``[sensors.<name>]`` table: any registered sensor's config type (unitac_rig/rig/sensors), told apart by ``type``;
+#: dumped with its own fields, not just the base's
+SensorConfig = Annotated[SerializeAsAny[SensorConfigBase], BeforeValidator(parse_sensor_config)]
 
 
 class ObjectPlacement(_Strict):
     center_m: tuple[float, float] = Field((-0.15, 0.625), description="object axis in the base frame (x, y), m")
     press_height_m: float = Field(0.20, description="height of the press plane (TCP z) in the base frame, m")
-    standoff_mm: float = Field(3.0, gt=0, le=50, description="gap between pad and object at the start pose, mm")
+    standoff_mm: float = Field(
+        8.0,
+        gt=0,
+        le=50,
+        description="gap between pad and object at the start pose, where position moves end and the F/T is zeroed; "
+        "from there the pad approaches under force control, mm",
+    )
     clearance_mm: float = Field(
         90.0, gt=0, description="moves between press rays go out to this distance from the object axis, mm"
     )
@@ -69,13 +70,32 @@ class PressConfig(_Strict):
     ramp_rate_n_s: float = Field(8.0, gt=0, description="force-ramp strategy: force rise rate after contact, N/s")
     dwell_s: float = Field(0.2, ge=0, description="hold at the stop before retracting, s")
     transit_speed_mm_s: float = Field(50.0, gt=0, description="speed between presses, mm/s")
+    setpoint_margin_n: float = Field(
+        0.5, gt=0, description="the controller's force set-point during contact is threshold + this, N"
+    )
+    stop_samples: int = Field(
+        5, ge=1, le=50, description="the press stops when the mean of this many wrist readings reaches the threshold"
+    )
     angle_min_deg: float = -45.0
     angle_max_deg: float = 45.0
     angle_count: int = Field(91, ge=1)
 
 
 class LimitsConfig(_Strict):
-    hard_force_n: float = Field(25.0, gt=0, description="abort a press when the press force passes this, N")
+    hard_force_n: float = Field(25.0, gt=0, description="abort a press when |F| (all force axes) passes this, N")
+    hard_torque_nm: float = Field(2.0, gt=0, description="abort a press when |T| at the TCP passes this, N*m")
+    move_force_n: float = Field(
+        5.0, gt=0, description="stop a transit move when the wrist force changes by more than this, N"
+    )
+    min_standoff_mm: float = Field(
+        5.0, gt=0, description="object.standoff_mm may not be smaller: no position move ends closer, mm"
+    )
+    max_presses_without_contact: int = Field(
+        3, ge=1, description="stop the session after this many presses in a row that touch nothing"
+    )
+    max_reach_m: float = Field(
+        0.85, gt=0, description="no waypoint farther than this from the shoulder (0, 0, 0.1625 m): UR5e reach"
+    )
     max_travel_after_contact_mm: float = Field(8.0, gt=0, description="fail a press that travels further, mm")
     max_speed_mm_s: float = Field(100.0, gt=0, description="no press or transit speed may exceed this, mm/s")
     workspace_min_m: tuple[float, float, float] = (-0.6, 0.2, 0.0)
@@ -111,17 +131,25 @@ class RigConfig(_Strict):
                 f"limits.hard_force_n = {self.limits.hard_force_n} must be above press.threshold_n = "
                 f"{self.press.threshold_n}"
             )
+        if self.object.standoff_mm < self.limits.min_standoff_mm:
+            raise ValueError(
+                f"object.standoff_mm = {self.object.standoff_mm} is below limits.min_standoff_mm = "
+                f"{self.limits.min_standoff_mm}: position moves would end that close to the object"
+            )
+        if self.press.threshold_n + self.press.setpoint_margin_n >= self.limits.hard_force_n:
+            raise ValueError("press.threshold_n + press.setpoint_margin_n must stay below limits.hard_force_n")
         if self.press.angle_min_deg > self.press.angle_max_deg:
             raise ValueError("press.angle_min_deg is above press.angle_max_deg")
         lo, hi = self.limits.workspace_min_m, self.limits.workspace_max_m
         if any(a >= b for a, b in zip(lo, hi, strict=True)):
             raise ValueError("limits.workspace_min_m must be below limits.workspace_max_m on every axis")
-        for name in self.sensors:
-            if name not in ("uskin", "papillarray"):
-                raise ValueError(f"sensors.{name}: unknown sensor id (use 'uskin' or 'papillarray')")
-            expected = "papillarray" if name == "papillarray" else "uskin"
-            if not self.sensors[name].type.startswith(expected):
-                raise ValueError(f"sensors.{name}: type {self.sensors[name].type!r} does not fit sensor {name!r}")
+        for name, sensor in self.sensors.items():
+            if name not in SENSORS:
+                known = [repr(n) for n in SENSORS]
+                listed = f"{', '.join(known[:-1])} or {known[-1]}" if len(known) > 1 else known[0]
+                raise ValueError(f"sensors.{name}: unknown sensor id (use {listed})")
+            if not isinstance(sensor, SENSORS[name].config_types):
+                raise ValueError(f"sensors.{name}: type {sensor.type!r} does not fit sensor {name!r}")
         if self.arm is not None and not self.sensors:
             raise ValueError("an [arm] is configured but no [sensors.*]: a real rig needs at least one sensor")
         return self

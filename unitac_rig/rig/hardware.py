@@ -7,7 +7,8 @@ from drivers.clock import MonotonicClock
 from drivers.sensor import TactileSensor
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.base import Rig
-from unitac_rig.rig.config import PapillArrayConfig, RigConfig, UskinCanConfig, UskinXelaServerConfig
+from unitac_rig.rig.config import RigConfig
+from unitac_rig.rig.sensors import get_sensor
 
 
 class HardwareRig(Rig):
@@ -27,8 +28,16 @@ class HardwareRig(Rig):
         if self._arm is None:
             from drivers.ur5e import UR5eArm
 
-            assert self.config.arm is not None
-            self._arm = UR5eArm(self.config.arm.host, frequency_hz=self.config.arm.frequency_hz, clock=self.clock)
+            arm = self.config.arm
+            assert arm is not None
+            self._arm = UR5eArm(
+                arm.host,
+                frequency_hz=arm.frequency_hz,
+                clock=self.clock,
+                watchdog_hz=arm.watchdog_hz,
+                expected_tcp_offset=arm.tcp_offset,
+                expected_payload_kg=arm.payload_kg,
+            )
         return self._arm
 
     def sensor_names(self) -> list[str]:
@@ -41,22 +50,7 @@ class HardwareRig(Rig):
                 f"sensor {name!r} is not in the rig file",
                 hint=f"configured: {', '.join(self.config.sensors) or 'none'}",
             )
-        sensor: TactileSensor
-        if isinstance(cfg, UskinCanConfig):
-            from drivers.uskin import UskinCanDriver, open_can_bus
-
-            bus = open_can_bus(cfg.can_interface, cfg.can_channel, cfg.bitrate)
-            sensor = UskinCanDriver(bus, controller_id=cfg.controller_id, clock=self.clock, owns_bus=True)
-        elif isinstance(cfg, UskinXelaServerConfig):
-            from drivers.uskin import UskinXelaServerDriver
-
-            sensor = UskinXelaServerDriver(cfg.url, sensor_number=cfg.sensor_number, clock=self.clock)
-        elif isinstance(cfg, PapillArrayConfig):
-            from drivers.papillarray import PapillArrayDriver
-
-            sensor = PapillArrayDriver(cfg.port, slot=cfg.slot, rate_hz=cfg.rate_hz, clock=self.clock)
-        else:  # pragma: no cover - pydantic's discriminator makes this unreachable
-            raise UsageError(f"unsupported sensor configuration {cfg!r}")
+        sensor = get_sensor(name).open_driver(cfg, self.clock)
         sensor.connect()
         sensor.start_reader()
         return sensor

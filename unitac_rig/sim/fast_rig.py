@@ -12,26 +12,66 @@ from __future__ import annotations
 
 import itertools
 import logging
-from typing import Any
+from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
 from drivers.arm import Arm
 from drivers.clock import VirtualClock
-from drivers.layouts import get_layout
+from drivers.layouts import SensorLayout
 from drivers.sensor import TactileSensor
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import RigConfig
 from unitac_rig.rig.objects import ObjectSpec
 from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation
+from unitac_rig.rig.sensors import SENSORS, SensorSpec, sensor_layout
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
-from unitac_rig.sim.signals import SensorSample
+from unitac_rig.sim.scene import TaxelLoads
+from unitac_rig.sim.signals import SensorSample, SignalSource
 
 log = logging.getLogger(__name__)
 
-SIM_SENSORS = ("uskin", "papillarray")
 _instance_ids = itertools.count()
+_Device = TypeVar("_Device")
+
+
+class SensorOutputModel(Protocol):
+    """What a taxel feels (N) -> what the sensor reports, in its layout's units (sim/sensor_models.py)."""
+
+    layout: SensorLayout
+
+    def sample(self, loads: TaxelLoads) -> SensorSample: ...
+
+
+@runtime_checkable
+class SimulatedSensor(Protocol):
+    """A registered sensor's simulated side (the registry's ``simulated`` entry names one; see sim/fast_sensors.py).
+
+    ``rng_stream`` keys the sensor's own random stream under the rig seed (``default_rng([seed, rng_stream])``), so
+    adding a sensor leaves the others' noise as it was. It must be unique: the arm draws from stream 1, the
+    scenes from 4, the uSkin 2 and the PapillArray 3.
+    """
+
+    rng_stream: int
+
+    def model(self, rng: np.random.Generator) -> SensorOutputModel:
+        """The sensor's output model, its static parts (baselines, gains, offsets) drawn from ``rng``."""
+        ...
+
+    def open(self, rig: SimRig, feed: SignalSource) -> TactileSensor:
+        """Serve the sensor's simulated device(s) (``rig.serve``) and return its real driver on them, unconnected."""
+        ...
+
+
+def _simulated_sensor(spec: SensorSpec) -> SimulatedSensor:
+    device = spec.simulated_device()
+    if not isinstance(device, SimulatedSensor):
+        raise UsageError(
+            f"sensor {spec.name!r}: {spec.simulated} is not a simulated sensor",
+            hint="name an object with rng_stream, model() and open() (see unitac_rig/sim/fast_sensors.py)",
+        )
+    return device
 
 
 class _SceneSwitch:
@@ -50,26 +90,23 @@ class _SceneSwitch:
 class _SensorFeed:
     """SignalSource for one simulated sensor: the scene's loads through that sensor's (persistent) output model."""
 
-    def __init__(self, rig: SimRig, sensor: str, model: Any) -> None:
+    def __init__(self, rig: SimRig, sensor: str, model: SensorOutputModel) -> None:
         self.rig = rig
         self.sensor = sensor
         self.model = model
 
     def sample(self, t_ns: int) -> SensorSample:
-        from unitac_rig.sim.scene import TaxelLoads
-
         scene = self.rig.world.scene
         if scene is None or self.rig.mounted_sensor != self.sensor:
             shape = self.model.layout.frame_shape
             loads = TaxelLoads(np.zeros(shape), np.zeros(shape) if self.model.layout.has_displacement else None)
         else:
             loads = scene.taxel_loads(self.rig.sim_arm.true_tcp_pose())
-        result: SensorSample = self.model.sample(loads)
-        return result
+        return self.model.sample(loads)
 
 
 class SimRig(Rig):
-    """Both sensor models are available; one is mounted at a time, as on the real arm."""
+    """Every registered sensor with a simulated device is available; one is mounted at a time, as on the real arm."""
 
     simulated = True
 
@@ -85,7 +122,6 @@ class SimRig(Rig):
         """``faults`` damages every simulated sensor transport; ``uskin_transport`` is ``can`` (python-can virtual
         bus) or ``slcan`` (python-can's own slcan client on a ``simslcan://`` serial URL, slower)."""
         from unitac_rig.sim.arm import SimArm
-        from unitac_rig.sim.sensor_models import PapillArrayModel, UskinModel
 
         self.config = config
         self.seed = seed
@@ -96,9 +132,12 @@ class SimRig(Rig):
         self._instance = next(_instance_ids)
         home = self._home_pose()
         self.sim_arm = SimArm(self.world, clock=self.clock, rng=np.random.default_rng([seed, 1]), start_pose=home)
-        self._models: dict[str, Any] = {
-            "uskin": UskinModel(rng=np.random.default_rng([seed, 2])),
-            "papillarray": PapillArrayModel(rng=np.random.default_rng([seed, 3])),
+        self._simulated: dict[str, SimulatedSensor] = {
+            name: _simulated_sensor(spec) for name, spec in SENSORS.items() if spec.simulated is not None
+        }
+        self._models = {
+            name: device.model(np.random.default_rng([seed, device.rng_stream]))
+            for name, device in self._simulated.items()
         }
         self.papillarray_rate_hz = papillarray_rate_hz
         self.faults = faults
@@ -120,7 +159,7 @@ class SimRig(Rig):
         return self.sim_arm
 
     def sensor_names(self) -> list[str]:
-        return list(SIM_SENSORS)
+        return list(self._simulated)
 
     def mount(self, obj: ObjectSpec, rotation_deg: float, sensor_name: str) -> None:
         from unitac_rig.sim.scene import PressScene
@@ -130,50 +169,31 @@ class SimRig(Rig):
         self.world.scene = PressScene(
             obj,
             rotation_deg,
-            get_layout(sensor_name),
+            sensor_layout(sensor_name),
             object_center_m=self.config.object.center_m,
             rng=np.random.default_rng([self.seed, 4, self._instance]),
         )
 
     def open_sensor(self, name: str) -> TactileSensor:
-        if name not in SIM_SENSORS:
-            raise UsageError(f"the simulated rig has no sensor {name!r}", hint=f"use one of: {', '.join(SIM_SENSORS)}")
+        if name not in self._simulated:
+            names = ", ".join(self._simulated)
+            raise UsageError(f"the simulated rig has no sensor {name!r}", hint=f"use one of: {names}")
         self._close_devices()
         self.mounted_sensor = name
         if self._object is not None:
             self.mount(self._object, self._rotation, name)
-        feed = _SensorFeed(self, name, self._models[name])
-        sensor: TactileSensor
-        if name == "uskin":
-            import can
-
-            from drivers.uskin import UskinCanDriver
-            from unitac_rig.sim.devices import SimXelaController
-
-            channel = f"unitac-sim-{self._instance}-{len(self._devices)}"
-            if self.uskin_transport == "slcan":
-                from unitac_rig.sim.devices import SimSlcanAdapter
-
-                adapter = SimSlcanAdapter(channel, clock=self.clock, faults=self.faults)
-                self._devices.append(adapter)
-                controller_faults = None
-                bus = can.Bus(interface="slcan", channel=adapter.url, bitrate=1_000_000)
-            else:
-                controller_faults = self.faults
-                bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-            self._devices.append(
-                SimXelaController(channel, source=feed, clock=self.clock, rate_hz=100.0, faults=controller_faults)
-            )
-            sensor = UskinCanDriver(bus, clock=self.clock, owns_bus=True)
-        else:
-            from drivers.papillarray import PapillArrayDriver
-            from unitac_rig.sim.devices.papillarray import SimPapillArrayHub
-
-            hub = SimPapillArrayHub(source=feed, clock=self.clock, faults=self.faults)
-            self._devices.append(hub)
-            sensor = PapillArrayDriver(hub.url, rate_hz=self.papillarray_rate_hz, clock=self.clock)
+        sensor = self._simulated[name].open(self, _SensorFeed(self, name, self._models[name]))
         sensor.connect()
         return sensor
+
+    def new_channel(self) -> str:
+        """A name no other simulated transport of this process uses (virtual CAN channel, serial URL stem)."""
+        return f"unitac-sim-{self._instance}-{len(self._devices)}"
+
+    def serve(self, device: _Device) -> _Device:
+        """Keep a simulated device running until the sensor is swapped or the rig closes; returns it."""
+        self._devices.append(device)
+        return device
 
     def sensor_fault_injectors(self) -> list[FaultInjector]:
         """The fault injectors of the open sensor's simulated devices (tests force stalls and unplugs by hand)."""

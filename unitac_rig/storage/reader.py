@@ -11,6 +11,7 @@ import h5py
 import numpy as np
 
 from unitac_rig.errors import DataError
+from unitac_rig.rig.sensors import SENSORS
 from unitac_rig.storage.recorder import (
     SCHEMA_VERSION,
     PressRecord,
@@ -132,9 +133,8 @@ def load_matched_set(path: Path) -> MatchedSet:
             vals.append(frames[keep])
             force.append(extraction.force_at_frame_n[keep])
             err.append(extraction.error_n[keep])
-    from drivers.layouts import LAYOUTS
-
-    layout = LAYOUTS.get(info.sensor)
+    spec = SENSORS.get(info.sensor)
+    layout = spec.layout if spec else None
     n_taxels = layout.n_taxels if layout else (vals[0].shape[1] if vals else 0)
 
     def cat(parts: list[np.ndarray], shape: tuple[int, ...] = ()) -> np.ndarray:

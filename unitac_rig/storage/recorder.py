@@ -6,11 +6,19 @@ readable, and the same command resumes without duplicating a finished press. How
 1. A finished press is first written to its own small HDF5 file in the session's *journal*
    (``DATA/.journal/<object>__<sensor>/<press_id>.h5``): written under a temporary name, fsynced, then atomically
    renamed. A press is durable from that rename on.
-2. The press is then copied into the session file (opened, appended, flushed, closed; the group's ``write_complete``
-   attribute is set last).
+2. The press is then added to the session file by *copy-on-write*: the writer copies the published file to a private
+   hidden name, appends the press there (the group's ``write_complete`` attribute set last), and atomically renames
+   the copy over the published name.
 3. On every open, the session file is checked against the journal: a file that no longer opens is moved aside
    (``*.broken-<time>.h5``) and rebuilt from the journal; a press group without ``write_complete`` is replaced from the
    journal; a journalled press missing from the file (a kill between steps 1 and 2) is copied in.
+
+Readers never disturb the writer, and the writer never disturbs readers: a published session file is never opened
+for writing, so ``inspect``, ``train``, ``extract``'s reader path or a notebook's plain ``h5py.File(path, "r")``
+can open it at any moment, take HDF5's shared lock and keep it open as long as they like. They see a complete
+snapshot (the file as of the last finished press: a rename is atomic, a reader holding the old file keeps reading
+the old inode), and the writer's next rename is unaffected by their locks. One process at a time may *write* a
+session: see :mod:`unitac_rig.storage.lease`. The cost is one file copy per press (measured in docs/dataset.md).
 
 Schema (see docs/dataset.md): root attributes describe the session; ``/presses/<press_id>`` holds the raw streams
 (``robot/*``, ``tactile/*``, ``events``), the tare, and ``extraction/*`` (force-matched frames).
@@ -18,12 +26,14 @@ Schema (see docs/dataset.md): root attributes describe the session; ``/presses/<
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import logging
 import os
+import shutil
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,6 +43,7 @@ import numpy as np
 
 from unitac_rig.errors import DataError
 from unitac_rig.storage.extraction import Extraction, ExtractionSettings
+from unitac_rig.storage.lease import SessionLease
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +61,36 @@ def session_path(data_dir: Path, object_id: str, sensor: str) -> Path:
 
 def journal_dir(data_dir: Path, object_id: str, sensor: str) -> Path:
     return Path(data_dir) / ".journal" / session_stem(object_id, sensor)
+
+
+def private_copy_path(path: Path) -> Path:
+    """Where a process builds the next version of ``path`` before renaming it over ``path``.
+
+    Hidden and ending in ``.tmp``, so no session glob (``*__*.h5``) ever lists it; the pid keeps two processes apart.
+    """
+    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
+
+
+def remove_stale_copies(path: Path, journal: Path) -> None:
+    """Delete private copies of the session file and its journal entries left by a killed writer or ``extract``
+    (call only while holding the session's lease)."""
+    for leftover in [*path.parent.glob(f".{path.name}.*.tmp"), *journal.glob(".*.h5.*.tmp")]:
+        leftover.unlink(missing_ok=True)
+
+
+def replace_by_copy(path: Path, change: Callable[[h5py.File], None], *, create: bool = False) -> None:
+    """Copy-on-write: apply ``change`` to a private copy of ``path`` (a new file when ``create``), then atomically
+    rename the copy over ``path``. A reader that has ``path`` open keeps its complete old version; on any error
+    ``path`` is left as it was."""
+    tmp = private_copy_path(path)
+    try:
+        if not create:
+            shutil.copyfile(path, tmp)
+        with h5py.File(tmp, "w" if create else "a") as f:
+            change(f)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def press_id(rotation_deg: float, angle_deg: float) -> str:
@@ -324,8 +365,31 @@ class SessionWriter:
             self.journal.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise DataError(f"cannot create the dataset directory {self.data_dir}: {exc.strerror}") from exc
-        self._write_journal_header()
-        self._open_or_recover()
+        self._lease = SessionLease(self.journal, session_stem(object_id, sensor))
+        self._lease.acquire()
+        try:
+            remove_stale_copies(self.path, self.journal)
+            self._write_journal_header()
+            self._open_or_recover()
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Give up the right to write this session (also done when the writer is garbage collected)."""
+        lease = getattr(self, "_lease", None)
+        if lease is not None:
+            lease.release()
+
+    def __enter__(self) -> SessionWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        with contextlib.suppress(Exception):  # interpreter shutdown: the kernel drops the lock with the process
+            self.close()
 
     # -- set-up / recovery ------------------------------------------------------------------------------------------
     def _write_journal_header(self) -> None:
@@ -358,13 +422,22 @@ class SessionWriter:
         return {p.stem: p for p in sorted(self.journal.glob("*.h5"))}
 
     def _create_file(self, path: Path) -> None:
-        self._room(path, 0)
-        with h5py.File(path, "w") as f:
-            attrs = self._journal_header()
-            attrs["schema_version"] = SCHEMA_VERSION
+        self._room(private_copy_path(path), 0, shown=path)
+        attrs = self._journal_header()
+        attrs["schema_version"] = SCHEMA_VERSION
+
+        def create(f: h5py.File) -> None:
             for key, value in attrs.items():
                 f.attrs[key] = _attr_value(value)
             f.create_group("presses")
+
+        replace_by_copy(path, create, create=True)
+
+    def _rewrite(self, change: Callable[[h5py.File], None], extra_bytes: int, what: str = "the session") -> None:
+        """Publish a new version of the session file with ``change`` applied (see ``replace_by_copy``)."""
+        size = self.path.stat().st_size
+        self._room(private_copy_path(self.path), size + extra_bytes, what, shown=self.path)
+        replace_by_copy(self.path, change)
 
     def _open_or_recover(self) -> None:
         if self.path.exists():
@@ -380,6 +453,11 @@ class SessionWriter:
                         raise DataError(f"{self.path} is not a session of {self.object_id}")
                     _ = f.get("presses")  # touching the index proves the file is readable
             except OSError as exc:
+                if "unable to lock file" in str(exc):  # someone opened it for writing (e.g. h5py mode "a")
+                    raise DataError(
+                        f"{self.path} is held open for writing by another program ({exc})",
+                        hint="close it there (readers must open session files with mode 'r'), then rerun",
+                    ) from exc
                 broken = self.path.with_name(f"{self.path.stem}.broken-{time.strftime('%Y%m%d-%H%M%S')}.h5")
                 os.replace(self.path, broken)
                 self.recovery_notes.append(
@@ -392,33 +470,44 @@ class SessionWriter:
         self._reconcile_with_journal()
 
     def _reconcile_with_journal(self) -> None:
-        journal = self._journal_press_files()
-        with h5py.File(self.path, "a") as f:
-            presses = f.require_group("presses")
-            for pid in list(presses):
-                if not presses[pid].attrs.get("write_complete", False):
-                    del presses[pid]
-                    self.recovery_notes.append(f"press {pid} was half written; dropped")
-            for pid, path in journal.items():
-                if pid in presses and _as_str(presses[pid].attrs.get("status", "")) in FINISHED_STATUSES:
-                    continue
-                try:
-                    with h5py.File(path, "r") as jf:
-                        rec = read_press_group(jf["press"])
-                except (OSError, KeyError) as exc:
-                    self.recovery_notes.append(f"journal entry {path.name} unreadable ({exc}); ignored")
-                    continue
-                self._room(self.path, record_nbytes(rec))
-                write_press_group(presses, rec)
-                self.recovery_notes.append(f"press {pid} ({rec.status}) restored from the journal")
-            f.flush()
+        """Make the file agree with the journal; rewrites it only when something is missing or half written."""
+        with h5py.File(self.path, "r") as f:
+            presses = f.get("presses")
+            names = list(presses) if presses is not None else []
+            half = [pid for pid in names if not presses[pid].attrs.get("write_complete", False)]
+            status = {pid: _as_str(presses[pid].attrs.get("status", "")) for pid in names if pid not in half}
+        restore: list[PressRecord] = []
+        for pid, path in self._journal_press_files().items():
+            if status.get(pid) in FINISHED_STATUSES:
+                continue
+            try:
+                with h5py.File(path, "r") as jf:
+                    if pid in status and _as_str(jf["press"].attrs.get("status", "")) == status[pid]:
+                        continue  # the same unfinished (aborted) press in both: nothing to restore
+                    rec = read_press_group(jf["press"])
+            except (OSError, KeyError) as exc:
+                self.recovery_notes.append(f"journal entry {path.name} unreadable ({exc}); ignored")
+                continue
+            restore.append(rec)
+        if presses is None or half or restore:
 
-    def _room(self, path: Path, nbytes: int, what: str = "the session") -> None:
+            def apply(f: h5py.File) -> None:
+                group = f.require_group("presses")
+                for pid in half:
+                    del group[pid]
+                for rec in restore:
+                    write_press_group(group, rec)
+
+            self._rewrite(apply, sum(record_nbytes(rec) for rec in restore))
+        self.recovery_notes.extend(f"press {pid} was half written; dropped" for pid in half)
+        self.recovery_notes.extend(f"press {rec.press_id} ({rec.status}) restored from the journal" for rec in restore)
+
+    def _room(self, path: Path, nbytes: int, what: str = "the session", shown: Path | None = None) -> None:
         try:
             ensure_room(path, nbytes)
         except OSError as exc:
             raise DataError(
-                f"no room to record {what} in {path}: {exc.strerror or exc}",
+                f"no room to record {what} in {shown or path}: {exc.strerror or exc}",
                 hint="free disk space (or raise the quota / file-size limit); rerun the same command to resume",
             ) from exc
 
@@ -437,10 +526,12 @@ class SessionWriter:
         tmp = self.journal / "_session.tmp"
         tmp.write_text(json.dumps(header, default=_json_default, indent=1))
         os.replace(tmp, self.journal / "_session.json")
-        self._room(self.path, len(json.dumps(dict(attrs), default=_json_default)))
-        with h5py.File(self.path, "a") as f:
+
+        def apply(f: h5py.File) -> None:
             for key, value in attrs.items():
                 f.attrs[key] = _attr_value(value)
+
+        self._rewrite(apply, len(json.dumps(dict(attrs), default=_json_default)))
 
     def write_press(self, rec: PressRecord) -> None:
         """Make ``rec`` durable (journal), then add it to the session file."""
@@ -457,10 +548,8 @@ class SessionWriter:
             _fsync_dir(self.journal)
             self._presses_written += 1
             # durable from here on: a failure below only delays the copy into the session file to the next open
-            self._room(self.path, nbytes, f"press {rec.press_id} (it is safe in the journal)")
-            with h5py.File(self.path, "a") as f:
-                write_press_group(f["presses"], rec)
-                f.flush()
+            self._rewrite(lambda f: write_press_group(f["presses"], rec), nbytes,
+                          f"press {rec.press_id} (it is safe in the journal)")  # fmt: skip
         except OSError as exc:
             tmp.unlink(missing_ok=True)
             raise DataError(
@@ -479,6 +568,7 @@ class SessionWriter:
         self.path.unlink(missing_ok=True)
         for leftover in ("_session.json", "_session.tmp"):
             (self.journal / leftover).unlink(missing_ok=True)
+        self._lease.release(unlink=True)
         for folder in (self.journal, self.journal.parent, self.data_dir):
             try:
                 folder.rmdir()  # only when empty
@@ -509,9 +599,7 @@ def _reextract_group(g: h5py.Group, settings: ExtractionSettings) -> Extraction:
 
 def _rewrite_atomically(path: Path, settings: ExtractionSettings, root_group: str | None) -> tuple[int, int]:
     """Copy ``path``, recompute every extraction in the copy, fsync, and swap it in; returns (presses, matched)."""
-    import shutil
-
-    tmp = path.with_name(path.name + ".tmp")
+    tmp = private_copy_path(path)
     shutil.copy2(path, tmp)
     presses = matched = 0
     try:
@@ -537,9 +625,19 @@ def reextract_session(path: Path, settings: ExtractionSettings) -> tuple[int, in
     old or the new extraction, never a mix within a file. Returns (presses, targets matched).
     """
     path = Path(path)
-    result = _rewrite_atomically(path, settings, None)
     stem = path.stem
     journal = path.parent / ".journal" / stem
+    lease = SessionLease(journal, stem)
+    if journal.is_dir():  # a session being collected is refused (a session without a journal has no writer)
+        lease.acquire(wait_s=0.5, hint="rerun extract when that collection has finished")
+    try:
+        return _reextract_locked(path, journal, settings)
+    finally:
+        lease.release()
+
+
+def _reextract_locked(path: Path, journal: Path, settings: ExtractionSettings) -> tuple[int, int]:
+    result = _rewrite_atomically(path, settings, None)
     for entry in sorted(journal.glob("*.h5")) if journal.is_dir() else []:
         _rewrite_atomically(entry, settings, "press")
     header = journal / "_session.json"

@@ -69,4 +69,4 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any]:
 
 def provenance() -> dict[str, str]:
     """Package version, git commit (or "unknown") and torch version, for checkpoints and reports."""
-    return {"package_version": package_version(), "git_commit": git_commit(), "torch_version": torch.__version__}
+    return {"package_version": package_version(), "git_commit": git_commit(), "torch_version": str(torch.__version__)}

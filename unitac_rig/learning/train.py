@@ -252,6 +252,48 @@ def train(
         torch.set_num_threads(previous_threads)
 
 
+@dataclass
+class _Run:
+    """Everything a run carries from epoch to epoch: exactly what its checkpoint stores."""
+
+    run_dir: Path
+    config: TrainConfig
+    dataset_hash: str
+    dataset_summary: dict[str, Any]
+    split: Split
+    normaliser: Normaliser
+    engine: StackedAutoencoders
+    optimizer: torch.optim.Optimizer
+    shuffle_rngs: list[np.random.Generator]  # one per member: the order of its training rows each epoch
+    tsne_rows: np.ndarray
+    history: list[dict[str, Any]] = field(default_factory=list)
+    epoch: int = 0  # epochs done
+    seconds: float = 0.0  # training wall time so far (evaluation excluded)
+    first_latents: dict[str, np.ndarray] | None = None  # UniTac-NV latents of the t-SNE rows after epoch 1
+
+    def checkpoint(self) -> dict[str, Any]:
+        """The checkpoint payload: tensors and plain Python values only (numpy arrays as tensors)."""
+        return {
+            "config": self.config.to_dict(),
+            "engine": self.engine.state(),
+            "optimizer": self.optimizer.state_dict(),
+            "shuffle_rng": [rng.bit_generator.state for rng in self.shuffle_rngs],
+            "normaliser": self.normaliser.to_dict(),
+            "split": self.split.to_dict(),
+            "test_mask": torch.from_numpy(self.split.test_mask.copy()),
+            "dataset_hash": self.dataset_hash,
+            "dataset_summary": self.dataset_summary,
+            "epoch": self.epoch,
+            "history": self.history,
+            "train_seconds": self.seconds,
+            "tsne_rows": torch.from_numpy(self.tsne_rows.astype(np.int64)),
+            "latents_first_epoch": (
+                None if self.first_latents is None else {s: torch.from_numpy(z) for s, z in self.first_latents.items()}
+            ),
+            "provenance": provenance(),
+        }
+
+
 def _train(
     dataset: PairedDataset,
     run_dir: Path,
@@ -261,145 +303,178 @@ def _train(
     epochs: int | None,
     progress: ProgressCallback | None,
 ) -> TrainOutcome:
-    dataset_hash = dataset.content_hash()
-    payload: dict[str, Any] | None = None
-    if resume:
-        payload = load_checkpoint(run_dir)
-        if payload["dataset_hash"] != dataset_hash:
-            raise DataError(
-                f"the data differs from the data {run_dir} was trained on (content hash changed)",
-                hint="resume with the same --data, or start a new run with another --out",
-            )
-        config = TrainConfig.from_dict(payload["config"])
-        if epochs is not None:
-            config = replace(config, epochs=max(epochs, int(payload["epoch"])))
-    else:
-        if checkpoint_path(run_dir).exists():
-            raise UsageError(
-                f"{run_dir} already holds a run", hint="pass --resume to continue it, or choose another --out"
-            )
-        config = config or TrainConfig()
-        if epochs is not None:
-            config = replace(config, epochs=epochs)
+    run = (
+        _resume_run(dataset, run_dir, epochs, device)
+        if resume
+        else _start_run(dataset, run_dir, config, epochs, device)
+    )
+    train_rows, test_rows = _split_rows(dataset, run.split)
+    train_x = torch.from_numpy(
+        np.concatenate([run.normaliser.normalise(s, train_rows.values[s]) for s in dataset.sensors], axis=1)
+    ).to(device)
+    evaluator = Evaluator(test_rows, run.normaliser, run.split.unseen_objects, device)
+    while run.epoch < run.config.epochs:
+        record = _train_epoch(run, train_x)
+        done, last = run.epoch, run.epoch == run.config.epochs
+        if done % run.config.eval_every == 0 or last or done == 1:
+            record["test"] = evaluator.summary(run.engine)
+        if done == 1 and run.first_latents is None:
+            run.first_latents = {s: z[0, run.tsne_rows].cpu().numpy() for s, z in evaluator.latents(run.engine).items()}
+        run.history.append(record)
+        if progress is not None:
+            progress(record)
+        if done % run.config.checkpoint_every == 0 or last:
+            save_checkpoint(run.run_dir, run.checkpoint())
+    return TrainOutcome(
+        run.run_dir, run.engine, run.normaliser, run.split, run.config, run.history, run.seconds, run.config.epochs
+    )
 
-    if payload is not None:
-        test_mask = np.asarray(payload["test_mask"], dtype=bool)
-        split_info = payload["split"]
-        split = Split(
-            test_mask,
-            int(split_info["seed"]),
-            float(split_info["test_fraction"]),
-            tuple(split_info["unseen_objects"]),
-            {k: [tuple(d) for d in v] for k, v in split_info["test_directions"].items()},
-        )
-        normaliser = Normaliser.from_dict(payload["normaliser"])
-        engine = StackedAutoencoders.from_state(payload["engine"], device)
-    else:
-        split = split_by_direction(dataset, config.split_seed, config.test_fraction, config.unseen_objects)
-        normaliser = Normaliser.fit(dataset, split.train_mask)
-        feature_dims = {s: dataset.n_taxels(s) * 3 for s in dataset.sensors}
-        engine = StackedAutoencoders(
-            feature_dims, default_groups(dataset.sensors, config.baselines), config.seeds, config.shape, device
-        )
 
-    train_rows = dataset.subset(split.train_mask)
+def _train_epoch(run: _Run, train_x: torch.Tensor) -> dict[str, Any]:
+    """One pass over the training rows for every member (its own order: one gather), batches are slices."""
+    began = time.perf_counter()
+    engine, n_train, batch = run.engine, train_x.shape[0], run.config.batch_size
+    order = torch.from_numpy(np.stack([rng.permutation(n_train) for rng in run.shuffle_rngs])).to(train_x.device)
+    shuffled = train_x[order]  # (members, n_train, features)
+    loss_sum = torch.zeros(len(engine.groups), engine.members, device=train_x.device)
+    for start in range(0, n_train, batch):
+        chunk = shuffled[:, start : start + batch]
+        loss_sum += engine.train_step(chunk, run.optimizer) * chunk.shape[1]
+    train_loss = (loss_sum / n_train).cpu()
+    run.seconds += time.perf_counter() - began
+    run.epoch += 1
+    return {
+        "epoch": run.epoch,
+        "seconds": run.seconds,
+        "train_loss": {g.name: train_loss[i].tolist() for i, g in enumerate(engine.groups)},
+    }
+
+
+def _split_rows(dataset: PairedDataset, split: Split) -> tuple[PairedDataset, PairedDataset]:
     test_rows = dataset.subset(split.test_mask)
     if len(test_rows) == 0:
         raise DataError("the split left no test rows", hint="use more approach angles per object")
-    train_x = torch.from_numpy(
-        np.concatenate([normaliser.normalise(s, train_rows.values[s]) for s in dataset.sensors], axis=1)
-    ).to(device)
-    evaluator = Evaluator(test_rows, normaliser, split.unseen_objects, device)
+    return dataset.subset(split.train_mask), test_rows
 
-    optimizer = engine.make_optimizer(config.learning_rate)
-    shuffle_rngs = [np.random.default_rng([seed, 1]) for seed in engine.seeds]
-    history: list[dict[str, Any]] = []
-    start_epoch, seconds = 0, 0.0
-    tsne_rows = _tsne_rows(test_rows.object_id, config.tsne_contacts, config.split_seed)
-    first_latents: dict[str, np.ndarray] | None = None
-    if payload is not None:
-        try:
-            optimizer.load_state_dict(payload["optimizer"])
-        except (ValueError, KeyError, RuntimeError) as exc:
-            raise ModelError(f"optimizer state in {run_dir} does not fit the model", hint="retrain") from exc
-        for rng, state in zip(shuffle_rngs, payload["shuffle_rng"], strict=True):
-            rng.bit_generator.state = state
-        history = list(payload["history"])
-        start_epoch = int(payload["epoch"])
-        seconds = float(payload["train_seconds"])
-        tsne_rows = np.asarray(payload["tsne_rows"])
-        first_latents = payload.get("latents_first_epoch")
-    else:
-        run_dir.mkdir(parents=True, exist_ok=True)
-        save_test_set(run_dir, test_rows)
-        readable = {
-            "config": config.to_dict(),
-            "split": split.to_dict(),
+
+def _start_run(
+    dataset: PairedDataset, run_dir: Path, config: TrainConfig | None, epochs: int | None, device: torch.device
+) -> _Run:
+    """A new run: split, normalisation, freshly initialised models; writes the test set and config.json."""
+    if checkpoint_path(run_dir).exists():
+        raise UsageError(f"{run_dir} already holds a run", hint="pass --resume to continue it, or choose another --out")
+    config = config or TrainConfig()
+    if epochs is not None:
+        config = replace(config, epochs=epochs)
+    split = split_by_direction(dataset, config.split_seed, config.test_fraction, config.unseen_objects)
+    train_rows, test_rows = _split_rows(dataset, split)
+    feature_dims = {s: dataset.n_taxels(s) * 3 for s in dataset.sensors}
+    groups = default_groups(dataset.sensors, config.baselines)
+    engine = StackedAutoencoders(feature_dims, groups, config.seeds, config.shape, device)
+    run = _Run(
+        run_dir=run_dir,
+        config=config,
+        dataset_hash=dataset.content_hash(),
+        dataset_summary={
             "sensors": list(dataset.sensors),
-            "dataset_hash": dataset_hash,
-            "provenance": provenance(),
-        }
-        (run_dir / "config.json").write_text(json.dumps(readable, indent=2) + "\n", encoding="utf-8")
+            "objects": list(dataset.objects),
+            "rows": len(dataset),
+            "train_rows": len(train_rows),
+            "test_rows": len(test_rows),
+            "simulated": dataset.simulated,
+        },
+        split=split,
+        normaliser=Normaliser.fit(dataset, split.train_mask),
+        engine=engine,
+        optimizer=engine.make_optimizer(config.learning_rate),
+        shuffle_rngs=[np.random.default_rng([seed, 1]) for seed in config.seeds],
+        tsne_rows=_tsne_rows(test_rows.object_id, config.tsne_contacts, config.split_seed),
+    )
+    run_dir.mkdir(parents=True, exist_ok=True)
+    save_test_set(run_dir, test_rows)
+    readable = {
+        "config": config.to_dict(),
+        "split": split.to_dict(),
+        "sensors": list(dataset.sensors),
+        "dataset_hash": run.dataset_hash,
+        "provenance": provenance(),
+    }
+    (run_dir / "config.json").write_text(json.dumps(readable, indent=2) + "\n", encoding="utf-8")
+    return run
 
-    def checkpoint(done: int) -> None:
-        save_checkpoint(
-            run_dir,
-            {
-                "config": config.to_dict(),
-                "engine": engine.state(),
-                "optimizer": optimizer.state_dict(),
-                "shuffle_rng": [rng.bit_generator.state for rng in shuffle_rngs],
-                "normaliser": normaliser.to_dict(),
-                "split": split.to_dict(),
-                "test_mask": split.test_mask,
-                "dataset_hash": dataset_hash,
-                "dataset_summary": {
-                    "sensors": list(dataset.sensors),
-                    "objects": list(dataset.objects),
-                    "rows": len(dataset),
-                    "train_rows": len(train_rows),
-                    "test_rows": len(test_rows),
-                    "simulated": dataset.simulated,
-                },
-                "epoch": done,
-                "history": history,
-                "train_seconds": seconds,
-                "tsne_rows": tsne_rows,
-                "latents_first_epoch": first_latents,
-                "provenance": provenance(),
-            },
+
+def _resume_run(dataset: PairedDataset, run_dir: Path, epochs: int | None, device: torch.device) -> _Run:
+    """The run in ``run_dir`` as its last checkpoint left it; ``epochs`` extends (never shortens) its budget."""
+    payload = _readable(load_checkpoint(run_dir))
+    dataset_hash = dataset.content_hash()
+    if payload["dataset_hash"] != dataset_hash:
+        raise DataError(
+            f"the data differs from the data {run_dir} was trained on (content hash changed)",
+            hint="resume with the same --data, or start a new run with another --out",
         )
+    config = TrainConfig.from_dict(payload["config"])
+    if epochs is not None:
+        config = replace(config, epochs=max(epochs, int(payload["epoch"])))
+    engine = StackedAutoencoders.from_state(payload["engine"], device)
+    run = _Run(
+        run_dir=run_dir,
+        config=config,
+        dataset_hash=dataset_hash,
+        dataset_summary=dict(payload["dataset_summary"]),
+        split=_stored_split(payload),
+        normaliser=Normaliser.from_dict(payload["normaliser"]),
+        engine=engine,
+        optimizer=engine.make_optimizer(config.learning_rate),
+        shuffle_rngs=[_restored_rng(state) for state in payload["shuffle_rng"]],
+        tsne_rows=payload["tsne_rows"],
+        history=list(payload["history"]),
+        epoch=int(payload["epoch"]),
+        seconds=float(payload["train_seconds"]),
+        first_latents=payload.get("latents_first_epoch"),
+    )
+    optimizer_state = payload["optimizer"]
+    if int(payload["version"]) < 2:  # one flat parameter then
+        optimizer_state = engine.optimizer_state_from_flat(optimizer_state)
+    try:
+        run.optimizer.load_state_dict(optimizer_state)
+    except (ValueError, KeyError, RuntimeError) as exc:
+        raise ModelError(f"optimizer state in {run_dir} does not fit the model", hint="retrain") from exc
+    if len(run.shuffle_rngs) != engine.members:
+        raise ModelError(
+            f"checkpoint in {run_dir} has {len(run.shuffle_rngs)} shuffle streams for {engine.members} seeds"
+        )
+    return run
 
-    n_train = len(train_rows)
-    batch = config.batch_size
-    with torch.no_grad():
-        for epoch in range(start_epoch, config.epochs):
-            began = time.perf_counter()
-            order = torch.from_numpy(np.stack([rng.permutation(n_train) for rng in shuffle_rngs])).to(device)
-            shuffled = train_x[order]  # (members, n_train, features)
-            loss_sum = torch.zeros(len(engine.groups), engine.members, device=device)
-            for start in range(0, n_train, batch):
-                chunk = shuffled[:, start : start + batch]
-                loss_sum += engine.train_step(chunk, optimizer) * chunk.shape[1]
-            train_loss = (loss_sum / n_train).cpu()
-            seconds += time.perf_counter() - began
-            record: dict[str, Any] = {
-                "epoch": epoch + 1,
-                "seconds": seconds,
-                "train_loss": {g.name: train_loss[i].tolist() for i, g in enumerate(engine.groups)},
-            }
-            last = epoch + 1 == config.epochs
-            if (epoch + 1) % config.eval_every == 0 or last or epoch == 0:
-                record["test"] = evaluator.summary(engine)
-            if epoch == 0 and first_latents is None:
-                latents = evaluator.latents(engine)
-                first_latents = {s: z[0, tsne_rows].cpu().numpy() for s, z in latents.items()}
-            history.append(record)
-            if progress is not None:
-                progress(record)
-            if (epoch + 1) % config.checkpoint_every == 0 or last:
-                checkpoint(epoch + 1)
-    return TrainOutcome(run_dir, engine, normaliser, split, config, history, seconds, config.epochs)
+
+def _restored_rng(state: Mapping[str, Any]) -> np.random.Generator:
+    rng = np.random.default_rng()
+    rng.bit_generator.state = state
+    return rng
+
+
+def _stored_split(payload: Mapping[str, Any]) -> Split:
+    info = payload["split"]
+    return Split(
+        np.asarray(payload["test_mask"], dtype=bool),
+        int(info["seed"]),
+        float(info["test_fraction"]),
+        tuple(info["unseen_objects"]),
+        {k: [tuple(d) for d in v] for k, v in info["test_directions"].items()},
+    )
+
+
+def _readable(payload: dict[str, Any]) -> dict[str, Any]:
+    """The checkpoint with its arrays as numpy, whether stored as tensors (version 2) or as numpy (version 1)."""
+    out = dict(payload)
+    out["test_mask"] = _numpy(payload["test_mask"])
+    out["tsne_rows"] = _numpy(payload.get("tsne_rows", np.zeros(0, dtype=np.int64)))
+    first = payload.get("latents_first_epoch")
+    out["latents_first_epoch"] = None if first is None else {s: _numpy(z) for s, z in first.items()}
+    return out
+
+
+def _numpy(value: Any) -> np.ndarray:
+    return value.numpy() if isinstance(value, torch.Tensor) else np.asarray(value)
 
 
 def _tsne_rows(object_ids: np.ndarray, wanted: int, seed: int) -> np.ndarray:
@@ -439,8 +514,9 @@ class LoadedRun:
 
 
 def load_run(run_dir: Path, device: str = "cpu") -> LoadedRun:
-    payload = load_checkpoint(run_dir)
+    """A run read back for evaluation, reports and translation (its arrays as numpy)."""
     try:
+        payload = _readable(load_checkpoint(run_dir))
         config = TrainConfig.from_dict(payload["config"])
         engine = StackedAutoencoders.from_state(payload["engine"], resolve_device(device))
         normaliser = Normaliser.from_dict(payload["normaliser"])

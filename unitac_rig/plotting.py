@@ -1,12 +1,14 @@
-"""Figure helpers shared by the simulator docs, the collection report and the learning report.
+"""The one figure helper: every figure the library draws (learning reports, stability, benchmarks, simulator docs).
 
-Figures are drawn on axes the caller owns, created from :class:`matplotlib.figure.Figure` (never pyplot) on an Agg
-canvas, so nothing leaks into pyplot's global figure registry and it works without a display.
+Figures are :class:`matplotlib.figure.Figure` objects on their own Agg canvas (:func:`new_figure`), never pyplot, and
+:func:`save_figure` writes them: nothing touches matplotlib's global backend or pyplot's figure registry, so library
+code works without a display and leaves an interactive session (a notebook, a user's own pyplot) as it was.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -81,17 +83,19 @@ def draw_taxel_map(
     return mesh
 
 
-def new_figure(width_in: float, height_in: float, dpi: int = 110) -> Figure:
-    """A pyplot-free figure (Agg canvas attached) for ``savefig``."""
+def new_figure(
+    width_in: float, height_in: float, dpi: int = 110, *, layout: Literal["constrained", "tight"] = "constrained"
+) -> Figure:
+    """A pyplot-free figure (Agg canvas attached), laid out when saved; add axes with ``fig.subplots``."""
     fig = Figure(figsize=(width_in, height_in), dpi=dpi)
     FigureCanvasAgg(fig)
-    fig.set_layout_engine("constrained")
+    fig.set_layout_engine(layout)
     return fig
 
 
-def save_figure(fig: Figure, path: Path) -> Path:
-    """Write ``fig`` as PNG, creating the folder; returns the path."""
+def save_figure(fig: Figure, path: Path, dpi: float | None = None) -> Path:
+    """Write ``fig`` as PNG (at the figure's dpi unless ``dpi`` is given), creating the folder; returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+    fig.savefig(path, dpi="figure" if dpi is None else dpi)
     return path

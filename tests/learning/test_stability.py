@@ -18,15 +18,13 @@ from unitac_rig.learning.data import build_paired_dataset
 from unitac_rig.learning.evaluate import write_metrics
 from unitac_rig.learning.paper import PAPER_TABLE1
 from unitac_rig.learning.stability import (
-    CORNERS_PNG,
-    MATERIALS_PNG,
-    SEEDS_PNG,
     _direction_folds,
     feature_at_point,
     feature_of_press,
     outline_features,
     stability_report,
 )
+from unitac_rig.learning.stability_figures import CORNERS_PNG, MATERIALS_PNG, SEEDS_PNG
 from unitac_rig.learning.train import TrainConfig, train
 from unitac_rig.rig.objects import get_object
 

@@ -37,17 +37,6 @@ def machine_info() -> dict[str, Any]:
     }
 
 
-def save_png(fig: Any, path: Path) -> Path:
-    """Write a pyplot figure as PNG (100 dpi), creating the folder, and close it; returns the path."""
-    import matplotlib.pyplot as plt
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
-
-
 def _jsonable(value: Any) -> Any:
     """numpy scalars/arrays to Python; non-finite floats to None (JSON has no inf/NaN)."""
     if isinstance(value, dict):

@@ -27,8 +27,6 @@ from typing import Any
 
 import numpy as np
 
-from unitac_rig.bench import save_png
-
 BUDGET_MS = 1.0  # one frame period at 1000 Hz
 STREAM_HZ = 1000.0
 
@@ -179,12 +177,10 @@ def run_inference_benchmark(plan: InferencePlan, run_dir: Path | None = None) ->
 
 def plot_inference_benchmark(doc: dict[str, Any], path: Path) -> Path:
     """Per-frame cost and the delay a batch adds: where each operation sits against the 1 ms budget."""
-    import matplotlib
+    from unitac_rig.plotting import new_figure, save_figure  # matplotlib loads slowly: only when drawing
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12.5, 4.8))
+    fig = new_figure(12.5, 4.8, dpi=100, layout="tight")
+    ax, ax2 = fig.subplots(1, 2)
     results = doc["by_threads"]["1"]
     styles = {"encode": "-", "decode": "--", "translate": ":"}
     for name, rows in results.items():
@@ -230,8 +226,7 @@ def plot_inference_benchmark(doc: dict[str, Any], path: Path) -> Path:
     ax2.grid(True, which="both", alpha=0.3)
     ax2.legend(fontsize=7)
     fig.suptitle(f"UniTac-NV inference ({doc['run']}); {doc['machine']['cpus']} CPUs", fontsize=10)
-    fig.tight_layout()
-    return save_png(fig, path)
+    return save_figure(fig, path)
 
 
 def summary_lines(doc: dict[str, Any]) -> list[str]:

@@ -31,8 +31,6 @@ from typing import Any
 
 import numpy as np
 
-from unitac_rig.bench import save_png
-
 CAMPAIGN_PRESSES = 1820  # 7 objects x 91 angles x 2 sensors, the irregular prism at 4 rotations
 GOAL_MEDIAN_ERROR_N = 0.05
 GOAL_TIME_FRACTION = 0.5  # of the campaign time guarded needs for the same error
@@ -556,10 +554,7 @@ def run_press_benchmark(
 def plot_press_benchmark(doc: dict[str, Any], path: Path) -> Path:
     """Campaign time against median matching error (Pareto front dashed) for the as-collected variant, the best
     variant at the default PapillArray rate, the best overall, and the simulator-truth error of the best overall."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from unitac_rig.plotting import new_figure, save_figure  # matplotlib loads slowly: only when drawing
 
     variants = doc["variants"]
     chosen = [variants[0]]
@@ -573,7 +568,8 @@ def plot_press_benchmark(doc: dict[str, Any], path: Path) -> Path:
     panels.append((chosen[-1], "true_median_abs_error_n", "median |true force at matched frame - target| (N)"))
     columns = 2
     rows = math.ceil(len(panels) / columns)
-    fig, axes = plt.subplots(rows, columns, figsize=(13.0, 5.0 * rows), squeeze=False)
+    fig = new_figure(13.0, 5.0 * rows, dpi=100, layout="tight")
+    axes = fig.subplots(rows, columns, squeeze=False)
     values = [r[key] for v, key, _ in panels for r in v["rows"] if _finite(r[key])]
     limits = (min([*values, GOAL_MEDIAN_ERROR_N]) / 1.5, max([*values, GOAL_MEDIAN_ERROR_N]) * 1.5)
     for ax, (variant, key, ylabel) in zip(axes.flat, panels, strict=False):
@@ -588,8 +584,7 @@ def plot_press_benchmark(doc: dict[str, Any], path: Path) -> Path:
         f"({doc['presses_run']} presses: {', '.join(doc['plan']['objects'])}; {', '.join(doc['plan']['sensors'])})",
         fontsize=11,
     )
-    fig.tight_layout()
-    return save_png(fig, path)
+    return save_figure(fig, path)
 
 
 def _wrap(text: str, width: int = 60) -> str:

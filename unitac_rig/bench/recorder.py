@@ -26,8 +26,6 @@ from typing import Any
 
 import numpy as np
 
-from unitac_rig.bench import save_png
-
 ROBOT_HZ = 500.0
 PAPILLARRAY_HZ = 1000.0
 USKIN_HZ = 100.0
@@ -309,14 +307,12 @@ def _filesystem(path: Path) -> str:
 
 def plot_recorder_benchmark(doc: dict[str, Any], path: Path) -> Path:
     """Headroom (recorded stream seconds per writing second) per press length and sensor, against the 10x goal."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from unitac_rig.plotting import new_figure, save_figure  # matplotlib loads slowly: only when drawing
 
     rows = doc["recorder"]["rows"]
     lengths = [r["press_length_s"] for r in rows]
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12.0, 4.6))
+    fig = new_figure(12.0, 4.6, dpi=100, layout="tight")
+    ax, ax2 = fig.subplots(1, 2)
     x = np.arange(len(rows))
     width = 0.27
     series = [
@@ -352,8 +348,7 @@ def plot_recorder_benchmark(doc: dict[str, Any], path: Path) -> Path:
         fontsize=9,
     )
     ax2.grid(True, axis="y", alpha=0.3)
-    fig.tight_layout()
-    return save_png(fig, path)
+    return save_figure(fig, path)
 
 
 def summary_lines(doc: dict[str, Any]) -> list[str]:

@@ -358,14 +358,13 @@ def run_geometry(
 def plot_geometry(result: GeometryResult, outline: OutlineGeometry, sensors: Sequence[str], path: Path) -> Path:
     """The paper's picture: predicted local profiles put back around the outline; columns = training sensor,
     rows = test sensor."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from matplotlib.collections import LineCollection
 
+    from unitac_rig.plotting import new_figure, save_figure
+
     n = len(sensors)
-    fig, axes = plt.subplots(n, n, figsize=(4.2 * n, 4.2 * n), squeeze=False)
+    fig = new_figure(4.2 * n, 4.2 * n, layout="tight")
+    axes = fig.subplots(n, n, squeeze=False)
     closed = np.vstack([outline.outline_mm, outline.outline_mm[:1]])
     for col, train_sensor in enumerate(sensors):
         for row, test_sensor in enumerate(sensors):
@@ -392,12 +391,7 @@ def plot_geometry(result: GeometryResult, outline: OutlineGeometry, sensors: Seq
             ax.set_ylabel("y (mm)")
             fig.colorbar(lines, ax=ax, fraction=0.046, label="profile MAE (mm)")
     fig.suptitle(f"Contact geometry on {result.object_id}: predicted 14 mm profiles placed on the outline")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def geometry_for_run(

@@ -19,20 +19,12 @@ from unitac_rig.learning.engine import UNITAC_GROUP, baseline_name
 from unitac_rig.learning.evaluate import METRICS_JSON, write_metrics
 from unitac_rig.learning.paper import PAPER_TABLE1
 from unitac_rig.learning.train import Evaluator, LoadedRun, direction_name, load_run, load_test_set
+from unitac_rig.plotting import draw_taxel_map, new_figure, save_figure
 
 log = logging.getLogger(__name__)
 
 REPORT_MD = "report.md"
 FIGURES = "figures"
-
-
-def _plt() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def table_columns(sensors: tuple[str, ...], trained: set[str]) -> list[str]:
@@ -46,10 +38,10 @@ def table_columns(sensors: tuple[str, ...], trained: set[str]) -> list[str]:
 
 def plot_curves(history: list[dict[str, Any]], sensors: tuple[str, ...], path: Path) -> Path:
     """Test NMAE per direction (seen objects' held-out angles, unseen objects) and latent L1 against epoch."""
-    plt = _plt()
     evaluated = [h for h in history if "test" in h]
     subsets = [s for s in ("seen", "unseen") if any(s in h["test"] for h in evaluated)]
-    fig, axes = plt.subplots(1, len(subsets) + 1, figsize=(5.2 * (len(subsets) + 1), 4.0), squeeze=False)
+    fig = new_figure(5.2 * (len(subsets) + 1), 4.0, layout="tight")
+    axes = fig.subplots(1, len(subsets) + 1, squeeze=False)
     for ax, subset in zip(axes[0], subsets, strict=False):
         points = [h for h in evaluated if subset in h["test"]]
         epochs = [h["epoch"] for h in points]
@@ -75,8 +67,7 @@ def plot_curves(history: list[dict[str, Any]], sensors: tuple[str, ...], path: P
     ax.set_ylabel("mean L1 distance")
     ax.set_title("latent distance between matched contacts")
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_tsne(
@@ -91,7 +82,6 @@ def plot_tsne(
     sensor, by shape and by material."""
     from sklearn.manifold import TSNE
 
-    plt = _plt()
     sensors = [s for s in test.sensors if s in first and s in last]
     labels_shape, labels_material = zip(*(object_shape_material(o) for o in test.object_id[rows]), strict=True)
     colourings = {
@@ -99,7 +89,8 @@ def plot_tsne(
         "shape": np.tile(np.array(labels_shape), len(sensors)),
         "material": np.tile(np.array(labels_material), len(sensors)),
     }
-    fig, axes = plt.subplots(2, 3, figsize=(14, 9))
+    fig = new_figure(14, 9, layout="tight")
+    axes = fig.subplots(2, 3)
     for r, (label, latents) in enumerate((("after epoch 1", first), ("after the last epoch", last))):
         stacked = np.concatenate([latents[s] for s in sensors], axis=0)
         perplexity = float(min(30.0, max(2.0, (len(stacked) - 1) / 3.0)))
@@ -113,8 +104,7 @@ def plot_tsne(
             ax.set_xticks([])
             ax.set_yticks([])
             ax.legend(fontsize=7, markerscale=3)
-    fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def pick_examples(test: PairedDataset, cross_nmae: np.ndarray, unseen: tuple[str, ...]) -> dict[str, list[int]]:
@@ -136,7 +126,6 @@ def pick_examples(test: PairedDataset, cross_nmae: np.ndarray, unseen: tuple[str
 
 def plot_reconstructions(run: LoadedRun, evaluator: Evaluator, rows: list[int], path: Path, title: str) -> Path | None:
     """One line of taxel maps per contact: each sensor's original, then every source -> target reconstruction."""
-    from unitac_rig.plotting import draw_taxel_map
     from unitac_rig.rig.sensors import sensor_layout
 
     try:
@@ -144,11 +133,11 @@ def plot_reconstructions(run: LoadedRun, evaluator: Evaluator, rows: list[int], 
     except UnitacError:
         log.info("reconstruction figure skipped: a sensor of this run has no registered layout")
         return None
-    plt = _plt()
     sensors = run.sensors
     engine = run.engine.member(0, groups=[UNITAC_GROUP])
     panels = len(sensors) + len(sensors) ** 2
-    fig, axes = plt.subplots(len(rows), panels, figsize=(2.6 * panels, 2.9 * len(rows)), squeeze=False)
+    fig = new_figure(2.6 * panels, 2.9 * len(rows), layout="tight")
+    axes = fig.subplots(len(rows), panels, squeeze=False)
     index = torch.tensor(rows)
     latents = {s: engine.encode(UNITAC_GROUP, s, evaluator.inputs[s][index]) for s in sensors}
     decoded = {s: engine.decode(UNITAC_GROUP, latents[s]) for s in sensors}
@@ -180,17 +169,7 @@ def plot_reconstructions(run: LoadedRun, evaluator: Evaluator, rows: list[int], 
             fontsize=8,
         )
     fig.suptitle(title)
-    fig.tight_layout()
-    return _save(fig, path)
-
-
-def _save(fig: Any, path: Path) -> Path:
-    plt = _plt()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def _cell(value: dict[str, float] | None) -> str:

@@ -1,0 +1,478 @@
+"""Training speed of the UniTac-NV trainer against the ways it could have been written, measured in one run.
+
+Four trainers train the same models from the same initial weights at the paper's batch size (64):
+
+* ``autograd`` - the project's trainer (:class:`unitac_rig.learning.engine.StackedAutoencoders`): every model and
+  seed stacked, one parameter tensor per layer, ``baddbmm``, ``loss.backward()``, fused Adam, sparse dropout masks
+  drawn on the device, the training rows gathered once per epoch on the device;
+* ``legacy`` - the hand-written engine it replaced (:mod:`unitac_rig.bench.legacy_engine`): the same stacking with
+  the backward written out by hand, one flat parameter tensor, masks drawn with numpy on the host;
+* ``vmap`` - ``torch.func``: the reference ``nn.Module`` of each architecture stacked over seeds with
+  ``stack_module_state`` and run through ``vmap(functional_call)`` (dropout ``randomness="different"``), fed by the
+  same per-epoch gather, ``loss.backward()``, fused Adam;
+* ``plain`` - the textbook loop (:mod:`unitac_rig.learning.reference`): one ``nn.Module`` per model, a shuffling
+  ``DataLoader`` over a ``TensorDataset``, ``torch.optim.Adam`` with its defaults, models trained one after another.
+
+A stack of n models is UniTac-NV alone (1), UniTac-NV and the two per-sensor baselines of one seed (3, the paper's
+single run) or of five seeds (15, the 5-seed run). One stack step moves every model of the stack by one batch
+(the plain loop does n single-model steps). Every cell is timed for a fixed wall time in each of several rounds,
+the rounds interleaved so a burst of load on a shared machine hits every trainer alike; the median round counts.
+
+Everything runs on the CPU at one torch thread, as ``unitac-rig train`` does on a CPU.
+"""
+
+from __future__ import annotations
+
+import copy
+import itertools
+import statistics
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+from torch.func import functional_call, stack_module_state, vmap
+from torch.utils.data import DataLoader, TensorDataset
+
+from unitac_rig.bench.legacy_engine import LegacyStackedAutoencoders
+from unitac_rig.learning.data import PairedDataset
+from unitac_rig.learning.engine import ModelShape, StackedAutoencoders, default_groups
+from unitac_rig.learning.reference import UniTacModule
+
+TRAINERS = ("autograd", "legacy", "vmap", "plain")
+BATCH = 64
+LEARNING_RATE = 5e-4
+PAPER_EPOCHS = 1000
+PAPER_SEEDS = 5
+
+Step = Callable[[], torch.Tensor]  # one stack step; returns the summed loss of every model of the stack
+
+
+@dataclass(frozen=True)
+class TrainingBenchPlan:
+    stack_sizes: tuple[int, ...] = (1, 3, 15)
+    rounds: int = 3
+    seconds_per_cell: float = 1.5  # wall time each (trainer, stack) cell is timed for in each round
+    warmup_steps: int = 5
+    paper_run_epochs: int = 4  # epochs of the real 5-seed `train()` run that the 1000-epoch figure extrapolates
+    budget_epochs: int = 300  # budget vs accuracy run (UniTac-NV + baselines, one seed); 0 skips it
+    eval_every: int = 5
+
+
+def full_plan() -> TrainingBenchPlan:
+    return TrainingBenchPlan()
+
+
+def quick_plan() -> TrainingBenchPlan:
+    return TrainingBenchPlan(
+        stack_sizes=(1, 3), rounds=1, seconds_per_cell=0.05, warmup_steps=1, paper_run_epochs=2, budget_epochs=2,
+        eval_every=1,
+    )  # fmt: skip
+
+
+def stack(size: int) -> tuple[list[int], bool]:
+    """Seeds and whether the baselines are in, for a stack of ``size`` models."""
+    if size == 1:
+        return [0], False
+    if size % 3 == 0:
+        return list(range(size // 3)), True
+    raise ValueError(f"a stack holds 1 model or a multiple of 3 (UniTac-NV + 2 baselines per seed), not {size}")
+
+
+class _Batches:
+    """Each member's rows in its own order, gathered on the device once per epoch; batches are slices of it (what
+    :func:`unitac_rig.learning.train._train_epoch` does)."""
+
+    def __init__(self, x: torch.Tensor, seeds: Sequence[int]) -> None:
+        self.x = x
+        self.rngs = [np.random.default_rng([seed, 1]) for seed in seeds]
+        self.start = x.shape[0]
+        self.shuffled = x[None]
+
+    def next(self) -> torch.Tensor:
+        n = self.x.shape[0]
+        if self.start >= n:
+            order = torch.from_numpy(np.stack([rng.permutation(n) for rng in self.rngs])).to(self.x.device)
+            self.shuffled = self.x[order]
+            self.start = 0
+        chunk = self.shuffled[:, self.start : self.start + BATCH]
+        self.start += BATCH
+        return chunk
+
+
+def autograd_step(x: torch.Tensor, dims: dict[str, int], seeds: list[int], baselines: bool, shape: ModelShape) -> Step:
+    engine = StackedAutoencoders(dims, default_groups(list(dims), baselines), seeds, shape)
+    optimizer = engine.make_optimizer(LEARNING_RATE)
+    batches = _Batches(x, seeds)
+    return lambda: engine.train_step(batches.next(), optimizer).sum()
+
+
+def legacy_step(x: torch.Tensor, dims: dict[str, int], seeds: list[int], baselines: bool, shape: ModelShape) -> Step:
+    engine = LegacyStackedAutoencoders(dims, default_groups(list(dims), baselines), seeds, shape)
+    optimizer = engine.make_optimizer(LEARNING_RATE)
+    batches = _Batches(x, seeds)
+
+    def step() -> torch.Tensor:
+        with torch.no_grad():
+            return engine.train_step(batches.next(), optimizer).sum()
+
+    return step
+
+
+def _modules(dims: dict[str, int], seeds: list[int], baselines: bool, shape: ModelShape) -> list[list[UniTacModule]]:
+    """Per model of the stack (UniTac-NV, then each baseline), one reference module per seed, initialised as the
+    engine initialises that seed."""
+    groups = default_groups(list(dims), baselines)
+    init = StackedAutoencoders(dims, groups, seeds, shape)
+    out = []
+    for group in groups:
+        per_seed = []
+        for member in range(len(seeds)):
+            module = UniTacModule({s: dims[s] for s in group.sensors}, shape)
+            module.load_from_engine(init, member, group.name)
+            per_seed.append(module)
+        out.append(per_seed)
+    return out
+
+
+class _Loss(nn.Module):
+    """``model.loss`` as ``forward``, so ``functional_call`` can run it."""
+
+    def __init__(self, model: UniTacModule) -> None:
+        super().__init__()
+        self.model = model
+
+    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+        return self.model.loss(list(inputs))
+
+
+def vmap_step(x: torch.Tensor, dims: dict[str, int], seeds: list[int], baselines: bool, shape: ModelShape) -> Step:
+    columns = dict(zip(dims, torch.split(torch.arange(x.shape[1]), list(dims.values())), strict=True))
+    models = []
+    for per_seed in _modules(dims, seeds, baselines, shape):
+        params, buffers = stack_module_state([_Loss(m) for m in per_seed])  # leaves with requires_grad
+        base = copy.deepcopy(_Loss(per_seed[0])).to("meta")
+        sensors = per_seed[0].sensors
+
+        def member_loss(p: dict, b: dict, *inputs: torch.Tensor, base: nn.Module = base) -> torch.Tensor:
+            return functional_call(base, (p, b), inputs)
+
+        batched = vmap(member_loss, in_dims=(0, 0, *([0] * len(sensors))), randomness="different")
+        models.append((params, buffers, sensors, batched))
+    optimizer = torch.optim.Adam([p for params, *_ in models for p in params.values()], lr=LEARNING_RATE, fused=True)
+    batches = _Batches(x, seeds)
+
+    def step() -> torch.Tensor:
+        batch = batches.next()
+        optimizer.zero_grad(set_to_none=True)
+        loss = sum(
+            fn(params, buffers, *(batch[..., columns[s]] for s in sensors)).sum()
+            for params, buffers, sensors, fn in models
+        )
+        assert isinstance(loss, torch.Tensor)
+        loss.backward()
+        optimizer.step()
+        return loss.detach()
+
+    return step
+
+
+def plain_step(x: torch.Tensor, dims: dict[str, int], seeds: list[int], baselines: bool, shape: ModelShape) -> Step:
+    per_model = []
+    split = dict(zip(dims, torch.split(x, list(dims.values()), dim=1), strict=True))
+    for per_seed in _modules(dims, seeds, baselines, shape):
+        for seed, module in zip(seeds, per_seed, strict=True):
+            loader = DataLoader(
+                TensorDataset(*(split[s] for s in module.sensors)),
+                batch_size=BATCH,
+                shuffle=True,
+                generator=torch.Generator().manual_seed(seed),
+            )
+            per_model.append(_PlainModel(module, loader))
+
+    def step() -> torch.Tensor:
+        return torch.stack([model.step() for model in per_model]).sum()
+
+    return step
+
+
+class _PlainModel:
+    """One model of the textbook loop (``unitac_rig.learning.reference.train_plain``), a step at a time."""
+
+    def __init__(self, module: UniTacModule, loader: DataLoader) -> None:
+        self.module = module.train()
+        self.loader = loader
+        self.batches = iter(loader)
+        self.optimizer = torch.optim.Adam(module.parameters(), lr=LEARNING_RATE)
+
+    def step(self) -> torch.Tensor:
+        try:
+            batch = next(self.batches)
+        except StopIteration:
+            self.batches = iter(self.loader)
+            batch = next(self.batches)
+        loss = self.module.loss(batch)
+        self.optimizer.zero_grad()
+        loss.backward()
+        self.optimizer.step()
+        return loss.detach()
+
+
+BUILDERS: dict[str, Callable[..., Step]] = {
+    "autograd": autograd_step,
+    "legacy": legacy_step,
+    "vmap": vmap_step,
+    "plain": plain_step,
+}
+
+
+def build_step(trainer: str, x: torch.Tensor, dims: dict[str, int], size: int, shape: ModelShape) -> Step:
+    seeds, baselines = stack(size)
+    return BUILDERS[trainer](x, dims, seeds, baselines, shape)
+
+
+def training_matrix(dataset: PairedDataset) -> tuple[torch.Tensor, dict[str, int], int]:
+    """Normalised training rows (sensor columns side by side), feature dims, and the number of pairs, split and
+    normalised as ``train()`` does."""
+    from unitac_rig.learning.data import Normaliser, split_by_direction
+
+    split = split_by_direction(dataset, 0)
+    normaliser = Normaliser.fit(dataset, split.train_mask)
+    rows = dataset.subset(split.train_mask)
+    x = np.concatenate([normaliser.normalise(s, rows.values[s]) for s in dataset.sensors], axis=1)
+    return torch.from_numpy(x), {s: dataset.n_taxels(s) * 3 for s in dataset.sensors}, len(rows)
+
+
+def measure_rates(x: torch.Tensor, dims: dict[str, int], plan: TrainingBenchPlan) -> dict[str, dict[str, Any]]:
+    """Stack steps per second of every trainer at every stack size: rounds interleaved, each cell timed for
+    ``plan.seconds_per_cell``. Returns {trainer: {size: {"steps_per_s": median round, "rounds": [...]}}}."""
+    steps = {(t, n): build_step(t, x, dims, n, ModelShape()) for t in TRAINERS for n in plan.stack_sizes}
+    for step in steps.values():
+        for _ in range(plan.warmup_steps):
+            step()
+    rounds: dict[tuple[str, int], list[float]] = {key: [] for key in steps}
+    for _ in range(plan.rounds):
+        for key, step in steps.items():
+            done, began = 0, time.perf_counter()
+            while True:
+                step()
+                done += 1
+                elapsed = time.perf_counter() - began
+                if elapsed >= plan.seconds_per_cell:
+                    break
+            rounds[key].append(done / elapsed)
+    return {
+        trainer: {
+            str(n): {"steps_per_s": statistics.median(rounds[trainer, n]), "rounds": rounds[trainer, n]}
+            for n in plan.stack_sizes
+        }
+        for trainer in TRAINERS
+    }
+
+
+def measure_paper_run(dataset: PairedDataset, epochs: int) -> dict[str, Any]:
+    """The real 5-seed run (``train()`` with UniTac-NV + baselines, evaluation every epoch as the CLI's default) for
+    ``epochs``, timed per epoch, and extrapolated to the paper's 1000 epochs at --eval-every 1 and 5."""
+    from unitac_rig.learning.train import TrainConfig, train
+
+    stamps: list[float] = []
+    config = TrainConfig(epochs=epochs, seeds=tuple(range(PAPER_SEEDS)), eval_every=1)
+    with tempfile.TemporaryDirectory() as tmp:
+        began = time.perf_counter()
+        outcome = train(
+            dataset, Path(tmp) / "run", config, device="cpu", progress=lambda _: stamps.append(time.perf_counter())
+        )
+        ended = time.perf_counter()
+    train_s = [outcome.history[0]["seconds"]]
+    train_s += [b["seconds"] - a["seconds"] for a, b in itertools.pairwise(outcome.history)]
+    epoch_wall = [b - a for a, b in itertools.pairwise(stamps)]  # epochs 2..: train + evaluation
+    train_epoch = statistics.median(train_s[1:] or train_s)
+    eval_epoch = max(0.0, statistics.median(epoch_wall) - train_epoch) if epoch_wall else 0.0
+    checkpoint = ended - stamps[-1]
+    setup = stamps[0] - began - train_s[0] - eval_epoch  # split, normalisation, test set, t-SNE latents
+    checkpoints = PAPER_EPOCHS // config.checkpoint_every
+    return {
+        "epochs_measured": epochs,
+        "train_seconds_per_epoch": train_epoch,
+        "eval_seconds_per_evaluation": eval_epoch,
+        "checkpoint_seconds": checkpoint,
+        "setup_seconds": setup,
+        "extrapolated_1000_epochs": {
+            "train_only_s": PAPER_EPOCHS * train_epoch,
+            "eval_every_1_s": setup + PAPER_EPOCHS * (train_epoch + eval_epoch) + checkpoints * checkpoint,
+            "eval_every_5_s": setup + PAPER_EPOCHS * train_epoch + PAPER_EPOCHS / 5 * eval_epoch
+            + checkpoints * checkpoint,
+        },
+    }  # fmt: skip
+
+
+def measure_budget(dataset: PairedDataset, epochs: int, eval_every: int) -> dict[str, Any]:
+    """Test NMAE / SSIM (seen objects, one seed) against epochs and training wall time for UniTac-NV + baselines."""
+    from unitac_rig.learning.train import TrainConfig, train
+
+    config = TrainConfig(epochs=epochs, eval_every=eval_every, checkpoint_every=10**6, tsne_contacts=10)
+    with tempfile.TemporaryDirectory() as tmp:
+        outcome = train(dataset, Path(tmp) / "run", config, device="cpu")
+    curve = []
+    for record in outcome.history:
+        if "test" not in record:
+            continue
+        entry: dict[str, Any] = {"epoch": record["epoch"], "seconds": record["seconds"]}
+        seen = record["test"].get("seen", {})
+        for column, metrics in seen.items():
+            if column == "latent_l1":
+                entry["seen/latent_l1"] = metrics[0]
+            else:
+                entry[f"seen/{column}/nmae"] = metrics["nmae"][0]
+                entry[f"seen/{column}/ssim"] = metrics["ssim"][0]
+        curve.append(entry)
+    return {"epochs": epochs, "eval_every": eval_every, "train_seconds": outcome.train_seconds, "curve": curve}
+
+
+def run_training_benchmark(dataset: PairedDataset, source: str, plan: TrainingBenchPlan) -> dict[str, Any]:
+    """Every measurement of this module on ``dataset``, at one torch thread; a JSON-ready dict."""
+    from unitac_rig.bench import machine_info
+
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        x, dims, n_train = training_matrix(dataset)
+        began = time.perf_counter()
+        rates = measure_rates(x, dims, plan)
+        rates_seconds = time.perf_counter() - began
+        paper = measure_paper_run(dataset, plan.paper_run_epochs)
+        budget = measure_budget(dataset, plan.budget_epochs, plan.eval_every) if plan.budget_epochs else None
+    finally:
+        torch.set_num_threads(previous)
+    steps_per_epoch = -(-n_train // BATCH)
+    largest = str(max(plan.stack_sizes))
+    return {
+        "benchmark": "training",
+        "data": source,
+        "pairs": len(dataset),
+        "train_rows": n_train,
+        "batch_size": BATCH,
+        "torch": torch.__version__,
+        "torch_threads": 1,
+        "machine": machine_info(),
+        "plan": asdict(plan),
+        "rates": rates,
+        "rates_wall_seconds": rates_seconds,
+        "ratios": ratios(rates),
+        "paper_run": paper,
+        "paper_run_train_only_from_rates_s": {
+            trainer: PAPER_EPOCHS * steps_per_epoch / rates[trainer][largest]["steps_per_s"] for trainer in TRAINERS
+        },
+        "paper_run_stack": largest,
+        "budget_run": budget,
+    }
+
+
+def ratios(rates: dict[str, dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """Per stack size: how many times faster the autograd trainer is than each other trainer (< 1: slower)."""
+    return {
+        other: {n: rates["autograd"][n]["steps_per_s"] / cell["steps_per_s"] for n, cell in rates[other].items()}
+        for other in TRAINERS
+        if other != "autograd"
+    }
+
+
+def summary_lines(doc: dict[str, Any]) -> list[str]:
+    lines = [f"data: {doc['data']}: {doc['pairs']} pairs, {doc['train_rows']} training rows, batch {doc['batch_size']}"]
+    sizes = list(doc["rates"]["autograd"])
+    lines.append("stack steps/s (median of rounds) " + " ".join(f"{n:>9} models" for n in sizes))
+    for trainer in TRAINERS:
+        cells = " ".join(f"{doc['rates'][trainer][n]['steps_per_s']:16.1f}" for n in sizes)
+        lines.append(f"  {trainer:<31}{cells}")
+    for other, by_size in doc["ratios"].items():
+        lines.append(f"  autograd / {other:<20}" + " ".join(f"{by_size[n]:15.2f}x" for n in sizes))
+    paper = doc["paper_run"]
+    extra = paper["extrapolated_1000_epochs"]
+    lines.append(
+        f"5-seed paper run (train(), {paper['epochs_measured']} epochs measured, 1000 extrapolated): training "
+        f"{paper['train_seconds_per_epoch']:.2f} s/epoch, evaluation {paper['eval_seconds_per_evaluation']:.2f} s; "
+        f"1000 epochs: train only {extra['train_only_s'] / 60:.1f} min, "
+        f"--eval-every 1 {extra['eval_every_1_s'] / 60:.1f} min, --eval-every 5 {extra['eval_every_5_s'] / 60:.1f} min"
+    )
+    lines.append(
+        f"1000 epochs of the {doc['paper_run_stack']}-model stack from the rates (training only): "
+        + ", ".join(f"{t} {s / 60:.1f} min" for t, s in doc["paper_run_train_only_from_rates_s"].items())
+    )
+    if doc["budget_run"]:
+        budget = doc["budget_run"]
+        lines.append(
+            f"budget run: {budget['epochs']} epochs (UniTac-NV + 2 baselines) in {budget['train_seconds']:.1f} s"
+        )
+    return lines
+
+
+def plot_training_benchmark(doc: dict[str, Any], path: Path) -> Path:
+    """Stack steps/s per trainer and stack size; the 5-seed paper run's 1000 epochs; budget against accuracy."""
+    from unitac_rig.plotting import new_figure, save_figure
+
+    fig = new_figure(14.0, 9.0)
+    (ax_rate, ax_paper), (ax_nmae, ax_ssim) = fig.subplots(2, 2)
+    sizes = list(doc["rates"]["autograd"])
+    colours = {"autograd": "tab:green", "legacy": "tab:blue", "vmap": "tab:orange", "plain": "0.55"}
+    width = 0.8 / len(TRAINERS)
+    for i, trainer in enumerate(TRAINERS):
+        cells = [doc["rates"][trainer][n] for n in sizes]
+        median = np.array([c["steps_per_s"] for c in cells])
+        low = median - np.array([min(c["rounds"]) for c in cells])
+        high = np.array([max(c["rounds"]) for c in cells]) - median
+        xs = np.arange(len(sizes)) + (i - (len(TRAINERS) - 1) / 2) * width
+        ax_rate.bar(xs, median, width, yerr=[low, high], capsize=2, color=colours[trainer], label=trainer)
+        for xpos, value in zip(xs, median, strict=True):
+            ax_rate.text(xpos, value * 1.08, f"{value:.0f}", ha="center", va="bottom", fontsize=7)
+    ax_rate.set_xticks(np.arange(len(sizes)), [f"{n} model{'s' if n != '1' else ''}" for n in sizes])
+    ax_rate.set_yscale("log")
+    top = max(cell["steps_per_s"] for cells in doc["rates"].values() for cell in cells.values())
+    ax_rate.set_ylim(top=top * 2.0)
+    ax_rate.set_ylabel("stack steps / s (batch 64; bars: median round, whiskers: range)")
+    ax_rate.set_title("every model of the stack one batch further, per second (1 CPU thread)", fontsize=9)
+    ax_rate.legend(fontsize=8)
+    ax_rate.grid(axis="y", which="both", alpha=0.3)
+
+    from_rates = doc["paper_run_train_only_from_rates_s"]
+    extra = doc["paper_run"]["extrapolated_1000_epochs"]
+    labels = [f"{t}\ntraining only" for t in TRAINERS] + [
+        "autograd, train()\n--eval-every 5",
+        "autograd, train()\n--eval-every 1",
+    ]
+    minutes = [from_rates[t] / 60 for t in TRAINERS] + [extra["eval_every_5_s"] / 60, extra["eval_every_1_s"] / 60]
+    bars = ax_paper.bar(labels, minutes, color=[colours[t] for t in TRAINERS] + ["darkgreen", "darkgreen"])
+    for bar, value in zip(bars, minutes, strict=True):
+        ax_paper.text(bar.get_x() + bar.get_width() / 2, value, f"{value:.1f}", ha="center", va="bottom", fontsize=8)
+    ax_paper.set_ylabel("minutes for 1000 epochs (extrapolated)")
+    ax_paper.set_title(
+        f"1000 epochs on {doc['train_rows']} training pairs: the {doc['paper_run_stack']}-model stack from the rates; "
+        f"train() of 5 seeds x (UniTac-NV + 2 baselines)",
+        fontsize=9,
+    )
+    ax_paper.tick_params(axis="x", labelsize=7)
+    ax_paper.grid(axis="y", alpha=0.3)
+
+    budget = doc.get("budget_run")
+    if budget and budget["curve"]:
+        curve = budget["curve"]
+        seconds = [c["seconds"] for c in curve]
+        columns = sorted({k.split("/")[1] for k in curve[0] if k.endswith("/nmae")})
+        for column in columns:
+            style = "--" if column.startswith("ae_") else "-"
+            label = column.replace("_to_", " → ")
+            ax_nmae.plot(seconds, [c[f"seen/{column}/nmae"] for c in curve], style, label=label)
+            ax_ssim.plot(seconds, [c[f"seen/{column}/ssim"] for c in curve], style, label=label)
+        for ax, name in ((ax_nmae, "test NMAE (seen objects)"), (ax_ssim, "test SSIM (seen objects)")):
+            ax.set_xlabel(f"training wall time (s, 1 CPU thread; {budget['epochs']} epochs, one seed)")
+            ax.set_ylabel(name)
+            ax.grid(alpha=0.3)
+        ax_nmae.set_yscale("log")
+        ax_nmae.legend(fontsize=7)
+    fig.suptitle(f"UniTac-NV training speed ({doc['data']}; {doc['machine']['cpus']} CPUs, load "
+                 f"{doc['machine']['load_average_1min']})", fontsize=10)  # fmt: skip
+    return save_figure(fig, path)

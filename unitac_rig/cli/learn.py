@@ -106,9 +106,22 @@ def report_command(
     console.print(f"report: {path}")
 
 
+def _short_sensor_names(sensors: list[str]) -> dict[str, str]:
+    """Each sensor's shortest prefix that no other sensor shares (uskin -> u, papillarray -> p), for table headers."""
+    short = {}
+    for name in sensors:
+        others = [o for o in sensors if o != name]
+        short[name] = next((name[:k] for k in range(1, len(name)) if not any(o.startswith(name[:k]) for o in others)),
+                           name)  # fmt: skip
+    return short
+
+
 def _print_table(console: Any, run: Path) -> None:
+    """Table I for the terminal: short headers with a legend, and the columns split over as many tables as the
+    terminal's width needs, so no cell is ever cut (the full table is in RUN/report.md and RUN/metrics.json)."""
     import json
 
+    from rich.measure import Measurement
     from rich.table import Table
 
     from unitac_rig.learning.paper import PAPER_TABLE1
@@ -116,20 +129,46 @@ def _print_table(console: Any, run: Path) -> None:
     metrics = json.loads((Path(run) / "metrics.json").read_text(encoding="utf-8"))
     rows = metrics["table1"]
     columns = list(next(iter(rows.values())).keys())
-    table = Table(title="Test NMAE / SSIM (paper below where it has the row)")
-    table.add_column("row")
-    for column in columns:
-        table.add_column(column.replace("_to_", "→"), justify="right")
-    for row, cells in rows.items():
-        table.add_row(row, *(f"{cells[c]['nmae']:.3f}/{cells[c]['ssim']:.3f}" for c in columns))
-        if row in PAPER_TABLE1:
-            paper = PAPER_TABLE1[row]
-            table.add_row(
-                "  paper",
-                *(f"{paper[c][0]:.3f}/{paper[c][1]:.3f}" if c in paper else "–" for c in columns),
-                style="dim",
-            )
-    console.print(table)
+    sensors = list(metrics.get("sensors") or [])
+    short = _short_sensor_names(sensors)
+
+    def header(column: str) -> str:
+        if column.startswith("ae_"):
+            return "AE " + short.get(column[3:], column[3:])
+        source, _, target = column.partition("_to_")
+        return f"{short.get(source, source)}→{short.get(target, target)}"
+
+    def cell(pair: Any) -> str:
+        return "–" if pair is None else f"{pair[0]:.3f}/{pair[1]:.3f}"
+
+    def build(chunk: list[str]) -> Table:
+        table = Table(box=None, pad_edge=False)
+        table.add_column("row", overflow="fold")
+        for column in chunk:
+            table.add_column(header(column), justify="right", overflow="fold")
+        for row, cells in rows.items():
+            ours = [cells.get(c) for c in chunk]
+            table.add_row(row, *(cell(None if v is None else (v["nmae"], v["ssim"])) for v in ours))
+            if row in PAPER_TABLE1:
+                table.add_row("  paper", *(cell(PAPER_TABLE1[row].get(c)) for c in chunk), style="dim")
+        return table
+
+    unbounded = console.options.update_width(10_000)  # measure a table's natural width, not the terminal's
+    fits = 1  # how many columns fit beside the row names; then chunks of even size (3 + 3 rather than 5 + 1)
+    while (
+        fits < len(columns) and Measurement.get(console, unbounded, build(columns[: fits + 1])).maximum <= console.width
+    ):
+        fits += 1
+    size = -(-len(columns) // -(-len(columns) // fits))
+    chunks = [columns[i : i + size] for i in range(0, len(columns), size)]
+    console.print("Test NMAE/SSIM (the paper's values dim below its rows)", style="bold")
+    for index, chunk in enumerate(chunks):
+        if index:
+            console.print()
+        console.print(build(chunk))
+    legend = [f"{s} = {name}" for name, s in short.items() if s != name]
+    legend.append("AE = the sensor's own autoencoder (baseline); a→b = encode a, decode b")
+    console.print("; ".join(legend), style="dim")
     latent = metrics["latent_l1"]
     if latent["final"] is not None:
         console.print(f"latent L1 between matched contacts: {latent['first_epoch']:.3f} -> {latent['final']:.3f}")

@@ -27,7 +27,8 @@ app = typer.Typer(
 
 # Modules that add commands to ``app`` through a ``register(app)`` function, in help order.
 COMMAND_MODULES = (
-    "unitac_rig.cli.collect",  # collect, campaign, inspect, extract
+    "unitac_rig.cli.collect",  # collect, campaign, extract, objects
+    "unitac_rig.cli.dataset",  # inspect [--watch], export, verify
     "unitac_rig.cli.learn",  # train, translate, geometry
     "unitac_rig.cli.probe",  # probe uskin|papillarray|ur5e
     "unitac_rig.cli.import_unitac_nv",  # import-unitac-nv

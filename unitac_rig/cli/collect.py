@@ -1,8 +1,7 @@
-"""CLI: ``collect``, ``campaign``, ``inspect`` and ``extract``."""
+"""CLI: ``collect``, ``campaign``, ``extract`` and ``objects`` (``inspect`` is in cli/dataset.py)."""
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -223,43 +222,6 @@ def campaign(
     console.print(f"campaign done in {time.monotonic() - started:.1f} s wall time -> {data}")
 
 
-def inspect(
-    data: Path = typer.Argument(..., help="Dataset directory."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
-) -> None:
-    """Per session: presses, matched targets, matching error, peak force; per object: pairs joined across sensors."""
-    from unitac_rig.storage.summary import inspect_dataset
-
-    report = inspect_dataset(data)
-    if as_json:
-        typer.echo(json.dumps(report, indent=1))
-        return
-    table = Table(title=f"sessions in {data}")
-    for col in ("object", "sensor", "sim", "presses ok/fail/plan", "targets hit/miss", "|err| med/p95/max N",
-                "peak med/max N", "time s"):  # fmt: skip
-        table.add_column(col)
-    for s in report["sessions"]:
-        e, p = s["match_error_n"], s["peak_force_n"]
-
-        def f(v: float | None) -> str:
-            return "-" if v is None else f"{v:.3f}"
-
-        table.add_row(
-            s["object"], s["sensor"], "yes" if s["simulated"] else "no",
-            f"{s['presses_complete']}/{s['presses_failed']}/{s['presses_planned']}",
-            f"{s['targets_matched']}/{s['targets_missed']}",
-            f"{f(e['median'])}/{f(e['p95'])}/{f(e['max'])}", f"{f(p['median'])}/{f(p['max'])}",
-            f"{s['duration_s']:.1f}",
-        )  # fmt: skip
-    console.print(table)
-    pairs = Table(title="pairs joined across sensors (rotation, angle, target)")
-    pairs.add_column("object")
-    pairs.add_column("pairs")
-    for obj_id, count in report["pairs"].items():
-        pairs.add_row(obj_id, str(count))
-    console.print(pairs)
-
-
 def extract(
     data: Path = typer.Argument(..., help="Dataset directory."),
     tolerance: float = typer.Option(0.5, "--tolerance", help="Largest matching error that still counts, N."),
@@ -296,6 +258,5 @@ def register(app: typer.Typer) -> None:
     """Add collection commands to the root app."""
     app.command("collect")(collect)
     app.command("campaign")(campaign)
-    app.command("inspect")(inspect)
     app.command("extract")(extract)
     app.command("objects")(objects_cmd)

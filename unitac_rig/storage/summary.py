@@ -8,7 +8,9 @@ from typing import Any
 
 import numpy as np
 
+from unitac_rig.storage.lease import lease_holder
 from unitac_rig.storage.reader import list_sessions, press_summaries
+from unitac_rig.storage.recorder import journal_dir
 
 
 def _stats(values: list[float], keys: tuple[str, ...]) -> dict[str, float | None]:
@@ -57,6 +59,8 @@ def inspect_dataset(data_dir: Path) -> dict[str, Any]:
                 "match_error_n": _stats(errors, ("median", "p95", "max")),
                 "peak_force_n": _stats(peaks, ("median", "max")),
                 "duration_s": round(float(sum(float(p.get("duration_s", 0.0)) for p in presses)), 3),
+                # who holds the session's write lease now (pid, host, command, since_unix), None when nobody writes
+                "writer": lease_holder(journal_dir(Path(data_dir), info.object_id, info.sensor)),
             }
         )
     pairs = {}

@@ -1,0 +1,161 @@
+"""CLI: ``inspect`` (also ``--watch`` while a collection runs), ``export`` and ``verify``.
+
+Tables are laid out for an 80-column terminal: short headers explained in a caption, no cell ever cut with an
+ellipsis (long values fold onto a second line). The full numbers are in ``inspect --json``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import typer
+from rich.console import Console, Group, RenderableType
+from rich.live import Live
+from rich.table import Table
+from rich.text import Text
+
+from unitac_rig.errors import DataError, UsageError
+
+console = Console()
+
+
+def _num(value: float | None, fmt: str, scale: float = 1.0) -> str:
+    return "-" if value is None else format(value * scale, fmt)
+
+
+def inspect_tables(report: dict[str, Any], data: Path) -> RenderableType:
+    """The ``inspect`` tables: one row per session, then the cross-sensor join per object (fits 80 columns)."""
+    sessions = report["sessions"]
+    if not sessions:
+        return Text(f"no sessions in {data} yet")
+    table = Table(box=None, pad_edge=False)
+    for name, justify in (("object", "left"), ("sensor", "left"), ("presses", "right"), ("targets", "right"),
+                          ("|err| mN", "right"), ("peak N", "right"), ("time s", "right")):  # fmt: skip
+        table.add_column(name, justify=justify, overflow="fold")  # type: ignore[arg-type]
+    for s in sessions:
+        e, p = s["match_error_n"], s["peak_force_n"]
+        sensor = s["sensor"] + ("*" if s["simulated"] else "") + (" ●" if s.get("writer") else "")
+        table.add_row(
+            s["object"], sensor,
+            f"{s['presses_complete']}/{s['presses_failed']}/{s['presses_planned']}",
+            f"{s['targets_matched']}/{s['targets_missed']}",
+            "/".join(_num(e[k], ".0f", 1000.0) for k in ("median", "p95", "max")),
+            "/".join(_num(p[k], ".1f") for k in ("median", "max")),
+            f"{s['duration_s']:.0f}",
+        )  # fmt: skip
+    notes = [
+        "presses: complete/failed/planned   targets: matched/missed   time: pressing",
+        "|err|: force-matching error median/p95/max   peak: press force median/max",
+    ]
+    if any(s["simulated"] for s in sessions):
+        notes.append("* simulated rig")
+    writers = [s for s in sessions if s.get("writer")]
+    if writers:
+        notes.append(
+            "● being written now: "
+            + ", ".join(f"{s['object']}/{s['sensor']} (pid {s['writer'].get('pid', '?')})" for s in writers)
+        )
+    pairs = Table(box=None, pad_edge=False)
+    pairs.add_column("object", overflow="fold")
+    pairs.add_column("pairs", justify="right")
+    for obj_id, count in report["pairs"].items():
+        pairs.add_row(obj_id, str(count))
+    heading = Text("pairs joined across sensors on (rotation, angle, target)", style="italic")
+    notes_text = Text("\n".join(notes), style="dim")
+    return Group(Text(f"sessions in {data}", style="italic"), table, notes_text, Text(""), heading, pairs)
+
+
+def _watch(data: Path, interval: float, as_json: bool) -> None:
+    """Redraw every ``interval`` seconds until Ctrl-C. Reading never disturbs a running collection (see
+    docs/dataset.md); a refresh that fails (directory not created yet) shows why and tries again."""
+    from unitac_rig.storage.summary import inspect_dataset
+
+    def frame() -> RenderableType:
+        stamp = time.strftime("%H:%M:%S")
+        try:
+            report = inspect_dataset(data)
+        except DataError as exc:
+            return Text(f"{stamp}  {exc.one_line()} (retrying every {interval:g} s)")
+        if as_json:
+            return Text(json.dumps({"time": stamp, **report}))
+        head = Text(f"{stamp}  refreshing every {interval:g} s, Ctrl-C to stop", style="bold")
+        return Group(head, inspect_tables(report, data))
+
+    try:
+        if as_json or not console.is_terminal:  # a pipe or a log: one refresh after the other (JSON: one per line)
+            while True:
+                rendered = frame()
+                if as_json:
+                    typer.echo(rendered.plain if isinstance(rendered, Text) else "")
+                else:
+                    console.print(rendered)
+                    console.print()
+                time.sleep(interval)
+        with Live(frame(), console=console, auto_refresh=False) as live:
+            while True:
+                time.sleep(interval)
+                live.update(frame(), refresh=True)
+    except KeyboardInterrupt:
+        return
+
+
+def inspect(
+    data: Path = typer.Argument(..., help="Dataset directory."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+    watch: bool = typer.Option(
+        False, "--watch", help="Refresh until Ctrl-C; safe while a collection writes the directory."
+    ),
+    interval: float = typer.Option(2.0, "--interval", help="Seconds between refreshes with --watch."),
+) -> None:
+    """Per session: presses, matched targets, matching error, peak force; per object: pairs joined across sensors."""
+    from unitac_rig.storage.summary import inspect_dataset
+
+    if watch:
+        if interval <= 0:
+            raise UsageError(f"--interval must be positive, got {interval:g}")
+        _watch(data, interval, as_json)
+        return
+    report = inspect_dataset(data)
+    if as_json:
+        typer.echo(json.dumps(report, indent=1))
+        return
+    console.print(inspect_tables(report, data))
+
+
+def export(
+    data: list[Path] = typer.Argument(..., help="Dataset directories to pool (each one a collect/campaign --data)."),
+    out: Path = typer.Option(..., "--out", help="New directory to write the export into (must not hold files)."),
+) -> None:
+    """Write the force-matched paired dataset as Parquet, the raw sessions, a dataset card and manifest.json."""
+    from unitac_rig.learning.data import build_paired_dataset
+    from unitac_rig.storage.export import export_dataset
+
+    summary = export_dataset(data, out, build_paired_dataset)
+    console.print(
+        f"exported {summary.contacts} contacts x {len(summary.sensors)} sensors ({', '.join(summary.sensors)}) = "
+        f"{summary.rows} rows from {summary.sessions} sessions, objects {', '.join(summary.objects)}"
+    )
+    console.print(f"{summary.files} files, {summary.bytes / 1e6:.1f} MB -> {summary.out}")
+    console.print(f"check a copy with: unitac-rig verify {summary.out}")
+
+
+def verify(
+    directory: Path = typer.Argument(..., metavar="DIR", help="An export directory (holds manifest.json)."),
+) -> None:
+    """Check every file of an export against manifest.json (size and SHA-256); exit 1 at the first mismatch."""
+    from unitac_rig.storage.manifest import verify_manifest
+
+    report = verify_manifest(directory)
+    console.print(f"ok: {report.files} files, {report.bytes / 1e6:.1f} MB match {directory / 'manifest.json'}")
+    if report.unlisted:
+        console.print(f"not in the manifest (not checked): {', '.join(report.unlisted)}", style="yellow")
+
+
+def register(app: typer.Typer) -> None:
+    """Add the dataset commands to the root app."""
+    app.command("inspect")(inspect)
+    app.command("export")(export)
+    app.command("verify")(verify)

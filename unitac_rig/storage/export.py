@@ -1,0 +1,412 @@
+"""``unitac-rig export``: the force-matched paired dataset as Parquet, with a manifest and a dataset card.
+
+An export directory holds:
+
+* ``pairs.parquet``: one row per joined contact and sensor (object, rotation, angle, target, the wrist force at that
+  sensor's matched frame, its error, and the frame), units in the schema's field metadata. pandas and
+  ``datasets.load_dataset("parquet", ...)`` read it as it is (plain Arrow types, nested lists for the frames).
+* ``raw/<object>__<sensor>.h5``: the session files it was built from, unchanged (HDF5, docs/dataset.md).
+* ``README.md``: the dataset card (what, how to load, columns and units, sessions, limits).
+* ``manifest.json``: schema, units, counts, every session's provenance and the SHA-256 of every file
+  (:mod:`unitac_rig.storage.manifest`; ``unitac-rig verify DIR`` checks it).
+
+The join itself (which contacts every sensor recorded) belongs to the learning side; the caller passes it in as
+``pair`` (the CLI passes ``unitac_rig.learning.data.build_paired_dataset``), so storage does not import learning
+and an export holds exactly the pairs ``train`` would use.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from unitac_rig.errors import DataError
+from unitac_rig.provenance import git_commit, package_version
+from unitac_rig.storage.lease import lease_holder
+from unitac_rig.storage.manifest import MANIFEST_NAME, sha256_file, write_manifest
+from unitac_rig.storage.pooling import PooledSession, pool_sessions
+from unitac_rig.storage.reader import MatchedSet, load_matched_set, press_summaries, read_session_info
+from unitac_rig.storage.recorder import journal_dir
+
+log = logging.getLogger(__name__)
+
+PARQUET_NAME = "pairs.parquet"
+RAW_DIR = "raw"
+CARD_NAME = "README.md"
+METADATA_KEY = b"unitac_rig"
+
+# name, unit ("" for none), description; the Arrow types are in _arrow_schema
+COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("contact", "", "index of the joined contact: the rows of one contact (one per sensor) share it"),
+    ("object", "", "object id (see `unitac-rig objects`)"),
+    ("shape", "", "object shape, from the session's object_spec (null when the session has none)"),
+    ("material", "", "object material (PLA, TPU), from the session's object_spec (null when none)"),
+    ("rotation_deg", "deg", "rotation of the object on its mount"),
+    ("angle_deg", "deg", "approach angle of the press"),
+    ("target_n", "N", "target press force the frame was matched to"),
+    ("sensor", "", "sensor that recorded the frame"),
+    ("force_n", "N", "wrist force along the press direction at this sensor's matched frame"),
+    ("error_n", "N", "force_n - target_n (the force-matching error)"),
+    ("frame", "frame_unit", "tare-subtracted tactile frame, (n_taxels, 3): taxels row-major, channels x, y, z"),
+    ("frame_unit", "", "unit of frame: counts (uSkin raw counts) or N (PapillArray)"),
+    ("session", "", "the raw session file (under raw/) the frame comes from"),
+    ("simulated", "", "true when recorded on the simulated rig"),
+)
+
+
+class PairedLike(Protocol):
+    """What the export reads from the join (``unitac_rig.learning.data.PairedDataset``)."""
+
+    @property
+    def sensors(self) -> tuple[str, ...]: ...
+    @property
+    def object_id(self) -> np.ndarray: ...
+    @property
+    def rotation_deg(self) -> np.ndarray: ...
+    @property
+    def angle_deg(self) -> np.ndarray: ...
+    @property
+    def target_n(self) -> np.ndarray: ...
+    @property
+    def values(self) -> dict[str, np.ndarray]: ...
+    @property
+    def force_n(self) -> dict[str, np.ndarray]: ...
+    @property
+    def dropped_per_sensor(self) -> dict[str, int]: ...
+    def content_hash(self) -> str: ...
+    def __len__(self) -> int: ...
+
+
+PairFn = Callable[[list[MatchedSet]], PairedLike]
+
+
+@dataclass(frozen=True)
+class ExportSummary:
+    out: Path
+    contacts: int
+    rows: int
+    sessions: int
+    files: int
+    bytes: int
+    sensors: tuple[str, ...]
+    objects: tuple[str, ...]
+
+
+def _sensor_layout_info(sensor: str) -> dict[str, Any]:
+    from unitac_rig.rig.sensors import SENSORS
+
+    spec = SENSORS.get(sensor)
+    if spec is None:
+        return {"units": "sensor units", "model": "unknown"}
+    layout = spec.layout
+    return {"model": layout.model, "rows": layout.rows, "cols": layout.cols, "n_taxels": layout.n_taxels,
+            "pitch_mm": layout.pitch_mm, "units": layout.units}  # fmt: skip
+
+
+def _frames_array(values: np.ndarray) -> Any:
+    """(M, n_taxels, 3) float32 -> an Arrow list<list<float32>> array of M frames, without Python loops."""
+    import pyarrow as pa
+
+    values = np.ascontiguousarray(values, dtype=np.float32)
+    m, n = int(values.shape[0]), int(values.shape[1])
+    inner = pa.ListArray.from_arrays(pa.array(np.arange(0, m * n * 3 + 1, 3, dtype=np.int32)),
+                                     pa.array(values.reshape(-1)))  # fmt: skip
+    return pa.ListArray.from_arrays(pa.array(np.arange(0, m * n + 1, n, dtype=np.int32)), inner)
+
+
+def _arrow_schema(sensors: Sequence[str], extra: dict[str, Any]) -> Any:
+    import json
+
+    import pyarrow as pa
+
+    types = {
+        "contact": pa.int64(), "object": pa.string(), "shape": pa.string(), "material": pa.string(),
+        "rotation_deg": pa.float64(), "angle_deg": pa.float64(), "target_n": pa.float64(), "sensor": pa.string(),
+        "force_n": pa.float64(), "error_n": pa.float64(), "frame": pa.list_(pa.list_(pa.float32())),
+        "frame_unit": pa.string(), "session": pa.string(), "simulated": pa.bool_(),
+    }  # fmt: skip
+    fields = [pa.field(name, types[name], metadata={"unit": unit, "description": text}) for name, unit, text in COLUMNS]
+    metadata = {
+        "units": {name: unit for name, unit, _ in COLUMNS if unit},
+        "frame_layout": "frame[k][c]: taxel k (row k // cols, column k % cols of the sensor's grid), channel c "
+        "(0 x, 1 y, 2 z in the sensor's frame); tare-subtracted",
+        "sensors": {s: _sensor_layout_info(s) for s in sensors},
+        **extra,
+    }
+    return pa.schema(fields, metadata={METADATA_KEY: json.dumps(metadata).encode("utf-8")})
+
+
+def paired_table(paired: PairedLike, sessions: dict[tuple[str, str], dict[str, Any]], simulated: bool) -> Any:
+    """The Arrow table: contact-major, one row per sensor of each contact, in ``paired.sensors`` order.
+
+    ``sessions`` maps (object, sensor) to {"file", "shape", "material", "simulated"} of the session it came from.
+    """
+    import pyarrow as pa
+
+    m = len(paired)
+    sensors = list(paired.sensors)
+    objects = np.asarray(paired.object_id).astype(str)
+    parts = []
+    for sensor in sensors:
+        info = [sessions.get((str(o), sensor), {}) for o in objects]
+        force = np.asarray(paired.force_n[sensor], dtype=np.float64)
+        parts.append(
+            pa.table(
+                {
+                    "contact": pa.array(np.arange(m, dtype=np.int64)),
+                    "object": pa.array(objects.tolist(), pa.string()),
+                    "shape": pa.array([i.get("shape") for i in info], pa.string()),
+                    "material": pa.array([i.get("material") for i in info], pa.string()),
+                    "rotation_deg": pa.array(np.asarray(paired.rotation_deg, dtype=np.float64)),
+                    "angle_deg": pa.array(np.asarray(paired.angle_deg, dtype=np.float64)),
+                    "target_n": pa.array(np.asarray(paired.target_n, dtype=np.float64)),
+                    "sensor": pa.array([sensor] * m, pa.string()),
+                    "force_n": pa.array(force),
+                    "error_n": pa.array(force - np.asarray(paired.target_n, dtype=np.float64)),
+                    "frame": _frames_array(paired.values[sensor]),
+                    "frame_unit": pa.array([str(_sensor_layout_info(sensor)["units"])] * m, pa.string()),
+                    "session": pa.array([i.get("file") for i in info], pa.string()),
+                    "simulated": pa.array([bool(i.get("simulated", simulated)) for i in info], pa.bool_()),
+                }
+            )
+        )
+    table = pa.concat_tables(parts)
+    # interleave: contact 0 of every sensor, then contact 1, ...
+    order = (np.arange(len(sensors))[None, :] * m + np.arange(m)[:, None]).reshape(-1)
+    return table.take(pa.array(order))
+
+
+def _session_provenance(item: PooledSession, copy: Path, sha256: str) -> dict[str, Any]:
+    attrs = read_session_info(copy).attrs
+    presses = press_summaries(copy)
+    planned = attrs.get("planned_presses") or []
+    writer = lease_holder(journal_dir(item.source, item.info.object_id, item.info.sensor))
+    keep = ("rig", "created_unix", "package_version", "git_commit", "sensor_identity", "layout",
+            "extraction_settings", "object_spec", "rotations_deg")  # fmt: skip
+    return {
+        "file": f"{RAW_DIR}/{copy.name}",
+        "object": item.info.object_id,
+        "sensor": item.info.sensor,
+        "simulated": item.info.simulated,
+        "sha256": sha256,
+        "bytes": copy.stat().st_size,
+        "source": str(item.source),
+        "also_in": [str(p) for p in item.also_in],
+        "being_collected_at_export": writer is not None,
+        "presses": {
+            "planned": len(planned) if planned else len(presses),
+            "complete": sum(p["status"] == "complete" for p in presses),
+            "failed": sum(p["status"] == "failed" for p in presses),
+            "aborted": sum(p["status"] == "aborted" for p in presses),
+        },
+        **{key: attrs[key] for key in keep if key in attrs},
+    }
+
+
+def _prepare_out(out: Path) -> Path:
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise DataError(
+            f"{out} already exists and is not an empty directory",
+            hint="choose a new --out directory (an export is never merged into another one)",
+        )
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = out.parent / f".{out.name}.partial-{os.getpid()}"
+    if staging.exists():
+        shutil.rmtree(staging)
+    (staging / RAW_DIR).mkdir(parents=True)
+    return staging
+
+
+def export_dataset(data_dirs: Sequence[Path], out: Path, pair: PairFn) -> ExportSummary:
+    """Pool ``data_dirs``, copy the raw sessions, write the Parquet, the card and the manifest into ``out``.
+
+    Built in a hidden sibling directory and renamed into place at the end, so ``out`` is either complete or absent.
+    The Parquet is computed from the *copies*, so it, the raw files and the checksums agree even when a source is
+    still being collected.
+    """
+    import pyarrow.parquet as pq
+
+    out = Path(out)
+    pooled = pool_sessions([Path(d) for d in data_dirs])
+    staging = _prepare_out(out)
+    try:
+        provenance: list[dict[str, Any]] = []
+        sets: list[MatchedSet] = []
+        for item in pooled:
+            copy = staging / RAW_DIR / item.info.path.name
+            shutil.copyfile(item.info.path, copy)
+            digest = sha256_file(copy)
+            if digest != item.sha256:
+                log.warning("%s changed while it was exported (a collection is running); exported the newer version",
+                            item.info.path)  # fmt: skip
+            provenance.append(_session_provenance(item, copy, digest))
+            sets.append(load_matched_set(copy))
+        paired = pair(sets)
+        sensors = tuple(paired.sensors)
+        by_key = {}
+        for entry in provenance:
+            raw_spec = entry.get("object_spec")
+            spec: dict[str, Any] = raw_spec if isinstance(raw_spec, dict) else {}
+            material = spec.get("material")
+            by_key[(entry["object"], entry["sensor"])] = {
+                "file": entry["file"],
+                "shape": spec.get("shape"),
+                "material": str(material).upper() if material is not None else None,
+                "simulated": entry["simulated"],
+            }
+        simulated = all(bool(e["simulated"]) for e in provenance if e["sensor"] in sensors)
+        objects = tuple(sorted(set(np.asarray(paired.object_id).astype(str).tolist())))
+        counts = {
+            "contacts": len(paired),
+            "rows": len(paired) * len(sensors),
+            "sensors": {s: len(paired) for s in sensors},
+            "contacts_per_object": {o: int(np.sum(np.asarray(paired.object_id).astype(str) == o)) for o in objects},
+            "matched_frames_without_partner": {s: int(n) for s, n in paired.dropped_per_sensor.items()},
+            "sessions": len(provenance),
+        }
+        schema = _arrow_schema(sensors, {"join": ["object", "rotation_deg", "angle_deg", "target_n"]})
+        table = paired_table(paired, by_key, simulated).cast(schema)
+        pq.write_table(table, staging / PARQUET_NAME, compression="zstd")
+        document = {
+            "format": "unitac-rig paired tactile dataset",
+            "created_unix": time.time(),
+            "exported_by": {"package_version": package_version(), "git_commit": git_commit(),
+                            "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else ""},
+            "paired_content_hash": paired.content_hash(),
+            "parquet": PARQUET_NAME,
+            "schema": [
+                {"name": f.name, "type": str(f.type), "unit": f.metadata[b"unit"].decode(),
+                 "description": f.metadata[b"description"].decode()}
+                for f in schema
+            ],
+            "units": {name: unit for name, unit, _ in COLUMNS if unit},
+            "sensors": {s: _sensor_layout_info(s) for s in sensors},
+            "simulated": simulated,
+            "counts": counts,
+            "sessions": provenance,
+        }  # fmt: skip
+        (staging / CARD_NAME).write_text(render_card(document), encoding="utf-8")
+        files = [PARQUET_NAME, CARD_NAME, *(entry["file"] for entry in provenance)]
+        write_manifest(staging, document, files)
+        if out.exists():
+            out.rmdir()  # empty (checked above)
+        os.replace(staging, out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    total = sum((out / rel).stat().st_size for rel in files)
+    return ExportSummary(out, len(paired), len(paired) * len(sensors), len(provenance), len(files) + 1, total,
+                         sensors, objects)  # fmt: skip
+
+
+def render_card(doc: dict[str, Any]) -> str:
+    """The dataset card (README.md): YAML front matter a dataset hub reads, then what a colleague needs to know."""
+    counts = doc["counts"]
+    sensors = list(doc["sensors"])
+    kind = "the simulated rig (the project's twin)" if doc["simulated"] else "a UR5e press rig"
+    lines = [
+        "---",
+        "pretty_name: unitac-rig paired tactile dataset",
+        "tags: [tactile, robotics, cross-sensor, unitac-rig]",
+        "configs:",
+        "- config_name: default",
+        "  data_files:",
+        "  - split: train",
+        f"    path: {PARQUET_NAME}",
+        "---",
+        "",
+        "# Paired tactile dataset (unitac-rig export)",
+        "",
+        f"{counts['contacts']} contacts, each recorded by every one of {len(sensors)} sensors ({', '.join(sensors)}): "
+        f"{counts['rows']} rows in `{PARQUET_NAME}`, from {counts['sessions']} sessions recorded on {kind}. "
+        "Every contact is one press of an object at one rotation and approach angle, at one target force; each "
+        "sensor's row holds its tactile frame at the moment the wrist force crossed that target.",
+        "",
+        "## Load it",
+        "",
+        "```python",
+        "import pandas as pd",
+        f'df = pd.read_parquet("{PARQUET_NAME}")',
+        "import numpy as np",
+        'frame = np.stack(df.loc[0, "frame"])            # (n_taxels, 3), in the unit of df.loc[0, "frame_unit"]',
+        "",
+        "import datasets",
+        f'ds = datasets.load_dataset("parquet", data_files="{PARQUET_NAME}")["train"]',
+        "```",
+        "",
+        "Check the copy first: `unitac-rig verify .` (every file's SHA-256 against `manifest.json`).",
+        "",
+        "## Columns",
+        "",
+        "| column | unit | meaning |",
+        "|---|---|---|",
+        *(f"| `{c['name']}` | {c['unit'] or ''} | {c['description']} |" for c in doc["schema"]),
+        "",
+        "Rows of one `contact` share object, rotation, angle and target: pivot on `contact` to get the pairs. "
+        "Units are also in the Parquet schema (each field's `unit` metadata).",
+        "",
+        "## Sensors",
+        "",
+        "| sensor | model | taxel grid | frame unit |",
+        "|---|---|---|---|",
+        *(
+            f"| {s} | {info.get('model', '?')} | {info.get('rows', '?')} x {info.get('cols', '?')} "
+            f"| {info.get('units', '?')} |"
+            for s, info in doc["sensors"].items()
+        ),
+        "",
+        "## Contacts per object",
+        "",
+        "| object | contacts |",
+        "|---|---:|",
+        *(f"| {o} | {n} |" for o, n in counts["contacts_per_object"].items()),
+        "",
+        "## Sessions (raw recordings, HDF5, under `raw/`)",
+        "",
+        "| file | presses complete/planned | simulated | SHA-256 |",
+        "|---|---|---|---|",
+        *(
+            f"| `{s['file']}` | {s['presses']['complete']}/{s['presses']['planned']} | "
+            f"{'yes' if s['simulated'] else 'no'} | `{s['sha256'][:16]}…` |"
+            for s in doc["sessions"]
+        ),
+        "",
+        "The session format (raw arm and tactile streams, tare, events, the extraction) is documented in "
+        "unitac-rig's docs/dataset.md; full provenance of each session (rig, software version, commit, sensor "
+        "identity, extraction settings) is in `manifest.json`.",
+        "",
+        "## How it was made, and limits",
+        "",
+        "- Frames are force-matched: the tactile frame nearest the moment the smoothed wrist force first crossed "
+        "each target on the loading ramp, kept only when within the extraction tolerance (`error_n`).",
+        "- A contact is kept only when every sensor has it (join on object, rotation, angle, target); matched frames "
+        "without a partner are left out ("
+        + ", ".join(f"{s}: {n}" for s, n in counts["matched_frames_without_partner"].items())
+        + ").",
+        "- Frames are tare-subtracted, in each sensor's own unit (uSkin raw counts are not newtons).",
+        "- No train/test split is given. Do not split rows at random: the forces of one press are near-identical "
+        "frames. Split by approach direction (object, rotation, angle), as unitac-rig's `train` does.",
+    ]
+    if doc["simulated"]:
+        lines.append(
+            "- **Simulated.** Recorded on the project's simulated rig: contact mechanics and sensor responses are "
+            "models, not measurements; do not report results on it as real-sensor results."
+        )
+    exported = doc["exported_by"]
+    lines += [
+        "",
+        f"Exported by unitac-rig {exported['package_version']} (commit `{str(exported['git_commit'])[:12]}`) on "
+        f"{time.strftime('%Y-%m-%d %H:%M', time.localtime(doc['created_unix']))}; `{MANIFEST_NAME}` lists every file "
+        "with its SHA-256.",
+        "",
+    ]
+    return "\n".join(lines)

@@ -1,0 +1,53 @@
+"""Pooling dataset directories: every session of several ``--data`` directories, each (object, sensor) once.
+
+A session's identity is its (object, sensor): the file name, the join and the learning side all key on it. Pooled
+directories may hold the *same* session twice (a copy on a laptop and on the lab server): byte-identical files are
+one session. Two different files for one (object, sensor) are a conflict the tool refuses to settle silently (which
+one is right? both are real presses), so pooling stops with an error naming both files.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from unitac_rig.errors import DataError
+from unitac_rig.storage.manifest import sha256_file
+from unitac_rig.storage.reader import SessionInfo, list_sessions
+
+
+@dataclass(frozen=True)
+class PooledSession:
+    info: SessionInfo
+    source: Path  # the dataset directory it was taken from
+    sha256: str
+    also_in: tuple[Path, ...] = ()  # other directories holding a byte-identical copy
+
+
+def pool_sessions(data_dirs: Sequence[Path]) -> list[PooledSession]:
+    """Every session of ``data_dirs`` once, sorted by (object, sensor); DataError on an identity conflict or when
+    there is no session at all."""
+    if not data_dirs:
+        raise DataError("no dataset directory given")
+    chosen: dict[tuple[str, str], PooledSession] = {}
+    for data_dir in data_dirs:
+        for info in list_sessions(Path(data_dir)):
+            key = (info.object_id, info.sensor)
+            digest = sha256_file(info.path)
+            first = chosen.get(key)
+            if first is None:
+                chosen[key] = PooledSession(info, Path(data_dir), digest)
+            elif first.sha256 == digest:
+                if info.path.resolve() != first.info.path.resolve():
+                    chosen[key] = PooledSession(first.info, first.source, digest, (*first.also_in, Path(data_dir)))
+            else:
+                raise DataError(
+                    f"two sources disagree on session {info.object_id}/{info.sensor}: {first.info.path} "
+                    f"(sha256 {first.sha256[:12]}) and {info.path} (sha256 {digest[:12]}) hold different presses",
+                    hint="pool only one of them, or record the repeat under another object id",
+                )
+    if not chosen:
+        listed = ", ".join(str(d) for d in data_dirs)
+        raise DataError(f"no session files (*__*.h5) in {listed}", hint="run `unitac-rig collect` first")
+    return [chosen[key] for key in sorted(chosen)]

@@ -21,13 +21,8 @@ from drivers.errors import DeviceError, DeviceNotFound
 from drivers.frames import TactileFrame
 from drivers.layouts import PAPILLARRAY
 from drivers.sensor import TareRecord
-from protocols.papillarray import (
-    N_SENSOR_SLOTS,
-    VALID_RATES_HZ,
-    Command,
-    PacketParser,
-    encode_command,
-)
+from protocols.papillarray import N_SENSOR_SLOTS, PacketParser
+from protocols.papillarray_commands import VALID_RATES_HZ, Command, encode_command
 
 logger = logging.getLogger(__name__)
 

@@ -14,17 +14,13 @@ from protocols.errors import ProtocolError
 from protocols.papillarray import (
     END_MARKER,
     START_MARKER,
-    VALID_RATES_HZ,
-    Command,
-    CommandParser,
-    HubCommand,
     PacketParser,
     PapillArrayPacket,
     PillarSensorData,
     decode_packet,
-    encode_command,
     encode_packet,
 )
+from protocols.papillarray_commands import VALID_RATES_HZ, Command, CommandParser, HubCommand, encode_command
 
 # ------------------------------------------------------------------------------------------ golden vector no. 1
 # One sensor slot, one pillar, index size 1, blocks hub (1), pillar (3), global (4). Offsets count from body byte 0.

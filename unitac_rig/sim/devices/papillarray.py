@@ -17,14 +17,9 @@ import numpy as np
 
 from drivers.clock import Clock, MonotonicClock
 from drivers.layouts import PAPILLARRAY
-from protocols.papillarray import (
-    N_SENSOR_SLOTS,
-    CommandParser,
-    PapillArrayPacket,
-    PillarSensorData,
-    encode_packet,
-)
-from protocols.papillarray import Command as HubCommandKind
+from protocols.papillarray import N_SENSOR_SLOTS, PapillArrayPacket, PillarSensorData, encode_packet
+from protocols.papillarray_commands import Command as HubCommandKind
+from protocols.papillarray_commands import CommandParser
 from unitac_rig.sim.devices._timing import SampleTimer
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
 from unitac_rig.sim.serial_urls import SimSerialEndpoint, unique_name

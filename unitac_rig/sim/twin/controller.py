@@ -347,7 +347,7 @@ class Controller:
         if self.now_s - self.protective_since_s < self.params.unlock_delay_s:
             return dashboard.UNLOCK_TOO_EARLY
         self.protective = False
-        self.arm.sim.unlock_protective_stop()  # trips again at once if the force is still over the limit
+        self.arm.unlock()  # trips again at once if the force is still over the limit
         logger.info("protective stop unlocked")
         return "Protective stop releasing"
 
@@ -368,7 +368,7 @@ class Controller:
         """Reboot the safety system: stops clear, the arm is powered off (as PolyScope does)."""
         self.stop_program("restart safety")
         self.protective = False
-        self.arm.sim.unlock_protective_stop()
+        self.arm.unlock()
         self.robot_mode = ROBOT_MODE_POWER_OFF
 
     # ---- script port ----------------------------------------------------------------------------------------
@@ -429,8 +429,7 @@ class Controller:
         self.counts["protective"] += 1
         self.last_error = f"protective stop: {why}"
         logger.warning(self.last_error)
-        if not self.arm.sim.protective_stopped:
-            self.arm.sim.trigger_protective_stop()
+        self.arm.protective_stop()
         if self.runtime_state == RUNTIME_PLAYING:
             self.runtime_state = RUNTIME_PAUSED
 
@@ -509,6 +508,18 @@ class Controller:
         force = float(np.linalg.norm(arm.true_wrench()[:3]))
         if force > self.peak_force_n:
             self.peak_force_n = force
+
+    def _safe_cycle(self) -> None:
+        """One cycle; a bug in the twin stops the program (clients see False) instead of killing the controller,
+        which would leave a connected control client waiting 300 s."""
+        try:
+            self._cycle()
+        except Exception as exc:
+            self.last_error = f"controller twin internal error: {type(exc).__name__}: {exc}"
+            logger.exception("controller twin cycle failed")
+            self.cycles += 1
+            with contextlib.suppress(Exception):
+                self.stop_program("internal error")
 
     def _inside_reach(self) -> bool:
         pad = self.arm.sim.true_tcp_pose()
@@ -712,7 +723,7 @@ class Controller:
                     owed = self.params.max_catch_up_cycles
                     due = now - PERIOD_S * (owed - 1)
                 for _ in range(owed):
-                    self._cycle()
+                    self._safe_cycle()
                 due += owed * PERIOD_S
                 self._publish()
                 self._measure_rate(now)

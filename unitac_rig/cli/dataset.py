@@ -78,6 +78,8 @@ def _watch(data: Path, interval: float, as_json: bool) -> None:
         try:
             report = inspect_dataset(data)
         except DataError as exc:
+            if as_json:
+                return Text(json.dumps({"time": stamp, "error": exc.one_line()}))
             return Text(f"{stamp}  {exc.one_line()} (retrying every {interval:g} s)")
         if as_json:
             return Text(json.dumps({"time": stamp, **report}))

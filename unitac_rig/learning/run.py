@@ -1,5 +1,5 @@
-"""A training run on disk: ``RUN/checkpoint.pt`` (everything needed to resume, evaluate or translate) plus
-human-readable ``config.json``, ``metrics.json``, ``report.md`` and ``figures/*.png``.
+"""A training run on disk: ``RUN/checkpoint.pt`` (everything needed to resume, evaluate or translate), the test rows
+in ``RUN/test_set.npz``, plus human-readable ``config.json``, ``metrics.json``, ``report.md`` and ``figures/*.png``.
 
 The checkpoint holds the model configuration, every member's parameters, the optimizer state and random streams,
 the normalisation statistics, the split, the dataset's content hash, the per-epoch history, and provenance
@@ -13,12 +13,15 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 
 from unitac_rig.errors import ModelError, UsageError
+from unitac_rig.learning.data import PairedDataset
 from unitac_rig.provenance import git_commit, package_version
 
 CHECKPOINT_NAME = "checkpoint.pt"
+TEST_SET_NAME = "test_set.npz"
 CHECKPOINT_FORMAT = "unitac-rig/unitac-nv-run"
 CHECKPOINT_VERSION = 2  # 2: one tensor per layer (autograd engine); 1: one flat parameter vector, still read
 
@@ -70,3 +73,43 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any]:
 def provenance() -> dict[str, str]:
     """Package version, git commit (or "unknown") and torch version, for checkpoints and reports."""
     return {"package_version": package_version(), "git_commit": git_commit(), "torch_version": str(torch.__version__)}
+
+
+def _test_subset_path(run_dir: Path) -> Path:
+    return Path(run_dir) / TEST_SET_NAME
+
+
+def save_test_set(run_dir: Path, test: PairedDataset) -> None:
+    """The test rows (every sensor's frames and the keys), so evaluation, reports and geometry need no --data."""
+    arrays: dict[str, np.ndarray] = {
+        "sensors": np.array(test.sensors, dtype=str),
+        "object_id": test.object_id.astype(str),
+        "rotation_deg": test.rotation_deg,
+        "angle_deg": test.angle_deg,
+        "target_n": test.target_n,
+        "simulated": np.array(test.simulated),
+    }
+    for sensor in test.sensors:
+        arrays[f"values__{sensor}"] = test.values[sensor]
+        arrays[f"force_n__{sensor}"] = test.force_n[sensor]
+    tmp = Path(run_dir) / (TEST_SET_NAME + ".tmp.npz")
+    np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
+    os.replace(tmp, _test_subset_path(run_dir))
+
+
+def load_test_set(run_dir: Path) -> PairedDataset:
+    path = _test_subset_path(run_dir)
+    if not path.is_file():
+        raise UsageError(f"{run_dir} has no {TEST_SET_NAME}", hint="it is written by `unitac-rig train`; retrain")
+    with np.load(path, allow_pickle=False) as data:
+        sensors = tuple(str(s) for s in data["sensors"])
+        return PairedDataset(
+            sensors=sensors,
+            object_id=data["object_id"].astype(str),
+            rotation_deg=data["rotation_deg"],
+            angle_deg=data["angle_deg"],
+            target_n=data["target_n"],
+            values={s: data[f"values__{s}"] for s in sensors},
+            force_n={s: data[f"force_n__{s}"] for s in sensors},
+            simulated=bool(data["simulated"]),
+        )

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
@@ -24,11 +23,10 @@ from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.data import Normaliser, PairedDataset, Split, split_by_direction
 from unitac_rig.learning.engine import UNITAC_GROUP, ModelShape, StackedAutoencoders, baseline_name, default_groups
 from unitac_rig.learning.metrics import latent_l1_per_pair, nmae_per_frame, ssim_per_frame
-from unitac_rig.learning.run import checkpoint_path, load_checkpoint, provenance, save_checkpoint
+from unitac_rig.learning.run import checkpoint_path, load_checkpoint, provenance, save_checkpoint, save_test_set
+from unitac_rig.learning.run import load_test_set as load_test_set  # where reports and geometry look for it
 
 log = logging.getLogger(__name__)
-
-TEST_SET_NAME = "test_set.npz"
 
 
 @dataclass(frozen=True)
@@ -187,46 +185,6 @@ class TrainOutcome:
 
 
 ProgressCallback = Callable[[dict[str, Any]], None]
-
-
-def _test_subset_path(run_dir: Path) -> Path:
-    return Path(run_dir) / TEST_SET_NAME
-
-
-def save_test_set(run_dir: Path, test: PairedDataset) -> None:
-    """The test rows (every sensor's frames and the keys), so evaluation, reports and geometry need no --data."""
-    arrays: dict[str, np.ndarray] = {
-        "sensors": np.array(test.sensors, dtype=str),
-        "object_id": test.object_id.astype(str),
-        "rotation_deg": test.rotation_deg,
-        "angle_deg": test.angle_deg,
-        "target_n": test.target_n,
-        "simulated": np.array(test.simulated),
-    }
-    for sensor in test.sensors:
-        arrays[f"values__{sensor}"] = test.values[sensor]
-        arrays[f"force_n__{sensor}"] = test.force_n[sensor]
-    tmp = Path(run_dir) / (TEST_SET_NAME + ".tmp.npz")
-    np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
-    os.replace(tmp, _test_subset_path(run_dir))
-
-
-def load_test_set(run_dir: Path) -> PairedDataset:
-    path = _test_subset_path(run_dir)
-    if not path.is_file():
-        raise UsageError(f"{run_dir} has no {TEST_SET_NAME}", hint="it is written by `unitac-rig train`; retrain")
-    with np.load(path, allow_pickle=False) as data:
-        sensors = tuple(str(s) for s in data["sensors"])
-        return PairedDataset(
-            sensors=sensors,
-            object_id=data["object_id"].astype(str),
-            rotation_deg=data["rotation_deg"],
-            angle_deg=data["angle_deg"],
-            target_n=data["target_n"],
-            values={s: data[f"values__{s}"] for s in sensors},
-            force_n={s: data[f"force_n__{s}"] for s in sensors},
-            simulated=bool(data["simulated"]),
-        )
 
 
 def train(

@@ -152,24 +152,20 @@ class StackedAutoencoders:
                 raise ModelError(f"group {group.name} names unknown sensor(s) {unknown}")
 
         self._layers = {layer.key: layer for layer in self._layer_plan()}
-        self.weights: dict[str, torch.Tensor] = {}
-        self.biases: dict[str, torch.Tensor] = {}
-        for key, layer in self._layers.items():
-            self.weights[key] = self._parameter(self.members, layer.fan_in, layer.fan_out)
-            self.biases[key] = self._parameter(self.members, 1, layer.fan_out)
+        dev, m = self.device, self.members
+        self.weights = {
+            k: torch.zeros(m, n.fan_in, n.fan_out, device=dev, requires_grad=True) for k, n in self._layers.items()
+        }
+        self.biases = {k: torch.zeros(m, 1, n.fan_out, device=dev, requires_grad=True) for k, n in self._layers.items()}
         self._plan = self._forward_plan()
         self._mask_plans: dict[int, tuple[int, int, dict[str, tuple[int, int, int]]]] = {}
         self._mask_buffers: dict[int, torch.Tensor] = {}
         self._loss_weight_cache: dict[tuple[str, int], torch.Tensor] = {}
-        self._dropout_generators = [self._generator(_stream_seed(seed, 2)) for seed in self.seeds]
+        self._dropout_generators = [
+            torch.Generator(device=self.device).manual_seed(_stream_seed(seed, 2)) for seed in self.seeds
+        ]
         if initialise:
             self._initialise()
-
-    def _parameter(self, *size: int) -> torch.Tensor:
-        return torch.zeros(size, dtype=torch.float32, device=self.device, requires_grad=True)
-
-    def _generator(self, seed: int) -> torch.Generator:
-        return torch.Generator(device=self.device).manual_seed(seed)
 
     # ---- structure -------------------------------------------------------------------------------------------
     def group(self, name: str) -> GroupSpec:

@@ -42,6 +42,9 @@ SATURATED_LOW_COUNTS = 500  # at or below: likewise at the bottom (or a shorted 
 MAX_TARE_SPREAD_COUNTS = 50.0  # idle noise peaks ~25 counts; a larger per-channel std means a press in progress
 MIN_TARE_FRAMES = 5
 MAX_MESSAGES_PER_PUMP = 50_000  # bound one poll() on a bus that never goes quiet
+# ... and bound it in time: a reader only slightly faster than the bus (python-can's slcan reads one byte per call,
+# ~4,000 messages/s on a 2-core box against the uSkin's 2,400) would otherwise hold every frame for seconds
+PUMP_BUDGET_S = 0.02
 STALE_AFTER_S = 0.05  # a taxel value older than this (host clock) is flagged stale
 
 
@@ -215,7 +218,11 @@ class UskinCanDriver(PumpedSensor):
     def _pump(self, wait_s: float) -> list[TactileFrame]:
         frames: list[TactileFrame] = []
         timeout = wait_s
+        # on the driver's clock, so a virtual clock (the fast twin, lockstep) never cuts a pump short
+        give_back_ns = self.clock.now_ns() + round((wait_s + PUMP_BUDGET_S) * 1e9)
         for _ in range(MAX_MESSAGES_PER_PUMP):
+            if frames and self.clock.now_ns() > give_back_ns:
+                break  # hand these frames over; the rest stays in the transport for the next pump
             try:
                 message = self.bus.recv(timeout=timeout)
             except (can.CanError, OSError, ValueError, IndexError) as exc:

@@ -33,6 +33,7 @@ COMMAND_MODULES = (
     "unitac_rig.cli.probe",  # probe uskin|papillarray|ur5e
     "unitac_rig.cli.import_unitac_nv",  # import-unitac-nv
     "unitac_rig.cli.bench",  # bench ...
+    "unitac_rig.cli.twin",  # twin (the real-time twin of the rig)
 )
 
 _state = {"debug": False}

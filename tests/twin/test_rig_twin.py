@@ -1,0 +1,135 @@
+"""The real-time twin of the whole rig: its rig file, its sensors on loopback transports, and collect through it.
+
+The sensors are opened the way the hardware rig opens them (HardwareRig.open_sensor with the printed rig file); the
+arm is moved by the real ur_rtde control client. Loopback addresses 127.0.0.130-139 belong to these tests.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rtde_control
+
+from drivers.frames import TactileFrame
+from drivers.sensor import TactileSensor
+from tests.twin.conftest import wait_until
+from unitac_rig.rig.config import ObjectPlacement, load_rig_config, parse_rig_config
+from unitac_rig.rig.hardware import HardwareRig
+from unitac_rig.sim.twin import address_free
+from unitac_rig.sim.twin.controller import build_scene
+from unitac_rig.sim.twin.rig import DEFAULT_HOST, RigTwin, SensorPorts, rig_file_text
+from unitac_rig.storage.reader import press_summaries
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def free_host() -> str:
+    for octet in range(130, 140):
+        host = f"127.0.0.{octet}"
+        if address_free(host):
+            return host
+    raise RuntimeError("no free loopback address in 127.0.0.130-139")
+
+
+@pytest.fixture
+def papillarray_twin() -> Iterator[RigTwin]:
+    with RigTwin("circle_pla", sensor="papillarray", host=free_host(), seed=3) as rig:
+        yield rig
+
+
+def frames_for(sensor: TactileSensor, seconds: float) -> list[TactileFrame]:
+    frames: list[TactileFrame] = []
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        frames += sensor.poll()
+        time.sleep(0.02)
+    return frames
+
+
+def test_the_example_rig_file_is_the_one_the_twin_prints_and_points_at_it() -> None:
+    text = rig_file_text(DEFAULT_HOST, ObjectPlacement(), SensorPorts())
+    assert (REPO / "examples" / "twin.toml").read_text() == text
+    config = load_rig_config(REPO / "examples" / "twin.toml")
+    assert config.arm is not None and config.arm.host == DEFAULT_HOST
+    assert config.sensors["papillarray"].port == f"socket://{DEFAULT_HOST}:30100"  # type: ignore[attr-defined]
+    assert config.sensors["uskin"].url == f"ws://{DEFAULT_HOST}:5000"  # type: ignore[attr-defined]
+    assert config.object == ObjectPlacement()  # the twin's scene stands where the file says
+
+
+def test_the_mounted_sensor_feels_the_arm_the_controller_moves(papillarray_twin: RigTwin) -> None:
+    rig = papillarray_twin
+    config = parse_rig_config(tomllib.loads(rig.rig_file()))
+    hardware = HardwareRig(config)
+    sensor = hardware.open_sensor("papillarray")
+    control = rtde_control.RTDEControlInterface(rig.host, 500.0)
+    try:
+        rest = frames_for(sensor, 0.5)
+        assert len(rest) > 10
+        baseline = np.mean([f.values for f in rest], axis=0)
+        pressed = build_scene(rig.spec).pose_at_travel(0.0, 1.0)  # 1 mm past first touch, at approach angle 0
+        assert control.moveL(list(pressed), 0.05, 0.5)
+        sensor.poll()  # drop frames from the way there
+        truth = rig.controller.truth()
+        assert truth.force_n > 1.0
+        loaded = np.mean([f.values for f in frames_for(sensor, 0.3)], axis=0) - baseline
+        assert float(loaded[:, 2].sum()) == pytest.approx(truth.force_n, rel=0.35)  # pillars carry the contact
+        assert control.moveL(list(rig.controller.settings.start_pose), 0.05, 0.5)
+        sensor.poll()
+        unloaded = np.mean([f.values for f in frames_for(sensor, 0.3)], axis=0) - baseline
+        assert abs(float(unloaded[:, 2].sum())) < 0.3
+    finally:
+        control.disconnect()
+        sensor.disconnect()
+        hardware.close()
+
+
+def test_both_uskin_transports_stream_from_the_twin() -> None:
+    with RigTwin("circle_pla", sensor="uskin", host=free_host(), seed=4) as rig:
+        for via in ("xela-server", "slcan"):
+            config = parse_rig_config(tomllib.loads(rig.rig_file(via)))
+            hardware = HardwareRig(config)
+            sensor = hardware.open_sensor("uskin")
+            try:
+                assert wait_until(lambda s=sensor: s.poll(), 4.0), via  # type: ignore[misc]
+            finally:
+                sensor.disconnect()
+                hardware.close()
+
+
+@pytest.mark.slow
+def test_collect_runs_through_the_hardware_path_against_the_twin(tmp_path: Path) -> None:
+    host = free_host()
+    rig_file = tmp_path / "twin.toml"
+    environment = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    twin = subprocess.Popen(
+        [sys.executable, "-m", "unitac_rig", "twin", "--object", "circle_pla", "--host", host,
+         "--write-rig", str(rig_file), "--unlock-delay", "0.5"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=environment,
+    )  # fmt: skip
+    try:
+        assert wait_until(rig_file.exists, 30.0), "the twin did not start"
+        collect = subprocess.run(
+            [sys.executable, "-m", "unitac_rig", "collect", "--rig", str(rig_file), "--object", "circle_pla",
+             "--angles", "2", "--data", str(tmp_path / "data"), "--no-live"],
+            capture_output=True, text=True, timeout=300, env=environment,
+        )  # fmt: skip
+        assert collect.returncode == 0, collect.stdout + collect.stderr
+        assert "detected mounted sensor: uskin" in collect.stdout
+        presses = press_summaries(tmp_path / "data" / "circle_pla__uskin.h5")
+        assert [p["status"] for p in presses] == ["complete", "complete"]
+        assert all(p["tactile_frames"] > 10 and p["robot_samples"] > 100 for p in presses)
+    finally:
+        twin.send_signal(signal.SIGTERM)
+        out, err = twin.communicate(timeout=30)
+    assert twin.returncode == 0, err.decode()
+    assert err.decode().rstrip().endswith("twin: stopped")
+    assert out.decode().startswith("# Rig file of the real-time twin")

@@ -1,0 +1,113 @@
+"""``unitac-rig twin``: the real-time twin of the whole rig on a loopback address, until Ctrl-C or SIGTERM.
+
+It starts the controller twin (a simulated UR e-Series controller that the real ur_rtde clients drive) with the
+object in front of the arm, serves the mounted sensor on loopback network transports from the same scene, prints the
+rig file that points the hardware code path at it (stdout; ``--write-rig`` also saves it), and then reports what the
+controller does (program started or stopped, protective and emergency stops, watchdog trips) on stderr. In another
+terminal, ``unitac-rig collect --rig <that file> --object <same object>`` runs exactly as on the robot.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+from pathlib import Path
+from types import FrameType
+
+import typer
+
+from unitac_rig.errors import UsageError
+
+
+def _status_line(truth: object) -> str:
+    from unitac_rig.sim.twin import TwinTruth
+
+    assert isinstance(truth, TwinTruth)
+    program = {1: "stopped", 2: "running", 4: "paused"}.get(truth.runtime_state, str(truth.runtime_state))
+    safety = "normal"
+    if truth.safety_status_bits & (1 << 7):
+        safety = "EMERGENCY STOP"
+    elif truth.safety_status_bits & (1 << 2):
+        safety = "PROTECTIVE STOP"
+    return f"program {program}, safety {safety}, robot mode {truth.robot_mode}, clients {truth.rtde_clients}"
+
+
+def twin(
+    object_id: str = typer.Option(..., "--object", help="Object in front of the arm, e.g. circle_pla."),
+    rotation: float | None = typer.Option(None, "--rotation", help="Object rotation (deg); its first by default."),
+    sensor: str = typer.Option("uskin", "--sensor", help="Mounted sensor: uskin or papillarray."),
+    host: str = typer.Option("127.0.0.210", "--host", help="Loopback address to serve on (127.0.0.x)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the scene and the sensors' noise."),
+    uskin_via: str = typer.Option(
+        "xela-server",
+        "--uskin-via",
+        help="uSkin transport in the rig file: xela-server or slcan (both served).",
+    ),
+    protective_stop_n: float = typer.Option(150.0, "--protective-stop-n", help="Controller force limit (N)."),
+    unlock_delay_s: float = typer.Option(5.0, "--unlock-delay", help="Wait before a protective stop unlocks (s)."),
+    write_rig: Path | None = typer.Option(None, "--write-rig", help="Also write the rig file here."),
+    quiet: bool = typer.Option(False, "--quiet", help="Print the rig file only, no status lines."),
+) -> None:
+    """Serve the real-time twin of the rig (controller + mounted sensor) until Ctrl-C or SIGTERM."""
+    from unitac_rig.sim.twin import ControllerParams
+    from unitac_rig.sim.twin.rig import USKIN_VIA, RigTwin
+
+    if uskin_via not in USKIN_VIA:
+        raise UsageError(f"unknown uSkin transport {uskin_via!r}", hint=f"use one of: {', '.join(USKIN_VIA)}")
+    if not host.startswith("127."):
+        raise UsageError(f"the twin serves on loopback only, not {host!r}", hint="use an address like 127.0.0.210")
+    params = ControllerParams(protective_stop_n=protective_stop_n, unlock_delay_s=unlock_delay_s)
+
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    handled = [signal.SIGINT, signal.SIGTERM] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
+    previous = {sig: signal.signal(sig, on_signal) for sig in handled}
+    try:
+        with RigTwin(object_id, rotation_deg=rotation, sensor=sensor, host=host, seed=seed, params=params) as rig:
+            text = rig.rig_file(uskin_via)
+            if write_rig is not None:
+                write_rig.write_text(text)
+            typer.echo(text)
+            sys.stdout.flush()
+            if not quiet:
+                typer.echo(
+                    f"twin: {rig.object_id} at {rig.rotation_deg:g} deg, {rig.sensor} mounted, controller on "
+                    f"{host} (pid {rig.controller.pid}); Ctrl-C stops it",
+                    err=True,
+                )
+            _watch(rig, stop, quiet)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if not quiet:
+        typer.echo("twin: stopped", err=True)
+
+
+def _watch(rig: object, stop: threading.Event, quiet: bool) -> None:
+    """Wait for a signal; meanwhile report each change of the controller's state (stderr)."""
+    from unitac_rig.sim.twin.rig import RigTwin
+
+    assert isinstance(rig, RigTwin)
+    last_line = ""
+    last_counts = (0, 0, 0)
+    while not stop.wait(0.1):
+        if not rig.controller.alive:
+            raise UsageError("the controller twin's process ended", hint="see its error output above")
+        if quiet:
+            continue
+        truth = rig.controller.truth()
+        line = _status_line(truth)
+        counts = (truth.protective_stops, truth.emergency_stops, truth.watchdog_trips)
+        if line != last_line or counts != last_counts:
+            error = rig.controller.status().get("last_error") if counts != last_counts else ""
+            typer.echo(f"twin: {line}" + (f" ({error})" if error else ""), err=True)
+            last_line, last_counts = line, counts
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``twin`` to the root app."""
+    app.command("twin")(twin)

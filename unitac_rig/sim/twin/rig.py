@@ -1,0 +1,233 @@
+"""The real-time twin of the whole rig: the controller twin and the mounted sensor, on loopback network transports.
+
+:class:`RigTwin` starts a :class:`~unitac_rig.sim.twin.ControllerTwin` with an object in front of the arm and serves
+the mounted sensor from the same scene, on the transports a lab uses:
+
+* **PapillArray**: the simulated hub (:class:`~unitac_rig.sim.devices.SimPapillArrayHub`, the PTS v2.0 packets and
+  ASCII commands) behind a TCP server, reached with the pyserial URL ``socket://HOST:PORT``;
+* **uSkin**: the simulated XELA controller board on a CAN channel, reached two ways at once: through a simulated
+  SLCAN adapter (:class:`~unitac_rig.sim.devices.SimSlcanAdapter`) behind a TCP server, which python-can's own
+  ``slcan`` interface opens with ``channel = "socket://HOST:PORT"``, and through a simulated xela_server
+  (:class:`~unitac_rig.sim.devices.SimXelaServer`, WebSocket ``ws://HOST:PORT``).
+
+Only the mounted sensor is served (the other one is "unplugged"), so ``collect`` without ``--sensor`` detects it as on
+the real rig. :meth:`RigTwin.rig_file` is the rig file that points the unchanged hardware code path
+(:class:`~unitac_rig.rig.hardware.HardwareRig`, :class:`drivers.ur5e.UR5eArm`, the real drivers) at all of it.
+
+Where the sensors run: in this process (threads), while the controller runs in its own. The sensors read the pad
+pose from the controller's shared ground-truth block at every sample (a sequence-locked read, no round trip) and
+feel it through their own copy of the scene, built from the same :class:`~unitac_rig.sim.twin.SceneSpec` (object,
+rotation, pad, placement, seed) as the controller's. Two processes keep the 500 Hz controller loop off the GIL the
+sensor threads (and a uSkin at 2,400 CAN frames a second) need; the price is two identical scene tables.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import logging
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from unitac_rig.rig.config import ObjectPlacement
+from unitac_rig.rig.objects import get_object
+from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation
+from unitac_rig.rig.sensors import sensor_layout
+from unitac_rig.sim.twin.controller import build_scene
+from unitac_rig.sim.twin.handle import ControllerTwin
+from unitac_rig.sim.twin.params import ControllerParams, SceneSpec
+
+logger = logging.getLogger(__name__)
+
+DEFAULT_HOST = "127.0.0.210"  # examples/twin.toml points here
+USKIN_VIA = ("slcan", "xela-server")
+HOME_DISTANCE_M = 0.08  # the arm starts this far from the object's axis, facing it from approach angle 0
+_channels = itertools.count(1)
+
+
+@dataclass(frozen=True)
+class SensorPorts:
+    """TCP ports of the sensor transports, on the twin's loopback address (fixed, so a rig file works as-is)."""
+
+    papillarray: int = 30100  # socket:// serial URL of the PapillArray hub
+    slcan: int = 30101  # socket:// serial URL of the uSkin's SLCAN adapter
+    xela_server: int = 5000  # xela_server's own default port
+
+
+def home_pose(placement: ObjectPlacement) -> np.ndarray:
+    """Where the twin's arm starts: the pad at the press height, facing the object from approach angle 0."""
+    u = approach_direction(0.0)
+    position = np.array([*placement.center_m, placement.press_height_m]) + u * HOME_DISTANCE_M
+    return pose_from(position, press_rotation(-u))
+
+
+class RigTwin:
+    """The controller twin with ``object_id`` in front of the arm, and the mounted ``sensor`` served on loopback.
+
+    ``placement`` is where the printed rig file says the object stands (the rig file's defaults if None); ``params``
+    configures the controller. Raises :class:`~unitac_rig.sim.twin.AddressTaken` (a DeviceError) when the address or a
+    port is in use.
+    """
+
+    def __init__(
+        self,
+        object_id: str,
+        *,
+        rotation_deg: float | None = None,
+        sensor: str = "uskin",
+        host: str = DEFAULT_HOST,
+        seed: int = 0,
+        placement: ObjectPlacement | None = None,
+        params: ControllerParams | None = None,
+        ports: SensorPorts | None = None,
+        papillarray_rate_hz: int = 100,
+    ) -> None:
+        obj = get_object(object_id)
+        sensor_layout(sensor)  # an unknown sensor is a usage error before anything starts
+        self.object_id = object_id
+        self.rotation_deg = float(obj.rotations_deg[0] if rotation_deg is None else rotation_deg)
+        self.sensor = sensor
+        self.host = host
+        self.seed = seed
+        self.placement = placement or ObjectPlacement()
+        self.ports = ports or SensorPorts()
+        self.papillarray_rate_hz = papillarray_rate_hz
+        self.spec = SceneSpec(
+            object_id, rotation_deg=self.rotation_deg, sensor=sensor, center_m=self.placement.center_m, seed=seed
+        )
+        self._devices: list[Any] = []
+        self._source: Any = None
+        self.controller = ControllerTwin(
+            host, scene=self.spec, start_pose=home_pose(self.placement), params=params, seed=seed
+        )
+        try:
+            self._start_sensor()
+        except BaseException:
+            self.close()
+            raise
+
+    # ---- sensors --------------------------------------------------------------------------------------------
+
+    def _start_sensor(self) -> None:
+        from unitac_rig.sim.sensor_models import model_for
+        from unitac_rig.sim.source import SceneSensorSource
+        from unitac_rig.sim.twin.bridge import TcpSerialBridge
+
+        scene = build_scene(self.spec)
+        stream = 2 if self.sensor == "uskin" else 3  # the fast twin's per-sensor random streams
+        model = model_for(scene.layout, rng=np.random.default_rng([self.seed, stream]))
+        self._source = SceneSensorSource(scene, model, self.controller.true_pad_pose)
+        if self.sensor == "uskin":
+            from unitac_rig.sim.devices import SimSlcanAdapter, SimXelaController, SimXelaServer
+
+            channel = f"unitac-twin-{self.host}-{next(_channels)}"
+            adapter = self._serve(SimSlcanAdapter(channel))
+            self._serve(SimXelaController(channel, source=self._source, rate_hz=100.0))
+            self._serve(TcpSerialBridge(adapter.url, self.host, self.ports.slcan))
+            self._serve(SimXelaServer(self.host, self.ports.xela_server, source=self._source, rate_hz=100))
+        else:
+            from unitac_rig.sim.devices import SimPapillArrayHub
+
+            hub = self._serve(SimPapillArrayHub(source=self._source))
+            self._serve(TcpSerialBridge(hub.url, self.host, self.ports.papillarray))
+
+    def _serve(self, device: Any) -> Any:
+        self._devices.append(device)
+        return device
+
+    # ---- hooks ----------------------------------------------------------------------------------------------
+
+    def set_placement_error(self, dx_m: float, dy_m: float) -> None:
+        """Move the object (dx, dy) m from where the rig file says it stands: the arm and the sensor feel it."""
+        self.controller.set_placement_error(dx_m, dy_m)
+        self.spec = dataclasses.replace(self.spec, placement_error_m=(dx_m, dy_m))
+        if self._source is not None:
+            self._source.scene = build_scene(self.spec)
+
+    # ---- the rig file ---------------------------------------------------------------------------------------
+
+    def rig_file(self, uskin_via: str = "xela-server") -> str:
+        """The rig file (TOML) that points the hardware code path at this twin."""
+        if uskin_via not in USKIN_VIA:
+            raise ValueError(f"uskin_via must be one of {USKIN_VIA}, got {uskin_via!r}")
+        return rig_file_text(
+            self.host, self.placement, self.ports, uskin_via, self.papillarray_rate_hz, self.controller.params
+        )
+
+    # ---- lifetime -------------------------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Unplug the sensors, then stop the controller. Disconnect the hosts' clients first (see ControllerTwin)."""
+        for device in reversed(self._devices):
+            try:
+                device.close()
+            except Exception:
+                logger.exception("closing %r failed", device)
+        self._devices.clear()
+        controller = getattr(self, "controller", None)
+        if controller is not None:
+            controller.close()
+
+    def __enter__(self) -> RigTwin:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+def rig_file_text(
+    host: str,
+    placement: ObjectPlacement,
+    ports: SensorPorts,
+    uskin_via: str = "xela-server",
+    papillarray_rate_hz: int = 100,
+    params: ControllerParams | None = None,
+) -> str:
+    """The rig file for a rig twin on ``host`` (both sensors listed: the twin serves only the mounted one).
+
+    The uSkin entry uses ``uskin_via``; the other transport follows as a comment. The arm's TCP offset and payload
+    are what the twin's pendant is set to, so the driver's read-back check at connect passes.
+    """
+    params = params or ControllerParams()
+    tcp = params.tool_offset if params.pendant_tcp is None else params.pendant_tcp
+    tcp_text = ", ".join(repr(float(v)) for v in tcp)
+    slcan = (
+        f'type = "uskin-can"\ncan_interface = "slcan"\ncan_channel = "socket://{host}:{ports.slcan}"\n'
+        "bitrate = 1000000\n"
+    )
+    xela = f'type = "uskin-xela-server"\nurl = "ws://{host}:{ports.xela_server}"\n'
+    chosen, other = (slcan, xela) if uskin_via == "slcan" else (xela, slcan)
+    other_commented = "".join(f"# {line}\n" for line in other.splitlines())
+    center = ", ".join(repr(float(v)) for v in placement.center_m)
+    return (
+        "# Rig file of the real-time twin (`unitac-rig twin`): the hardware code path, pointed at loopback.\n"
+        "# Start it with `unitac-rig twin --object OBJECT [--sensor papillarray]`, then run\n"
+        "# `unitac-rig collect --rig <this file> --object OBJECT` exactly as on the robot. The twin serves only the\n"
+        "# mounted sensor; `collect` without --sensor detects it, as on the real rig.\n"
+        'name = "twin"\n'
+        "\n"
+        "[arm]\n"
+        f'host = "{host}"  # the controller twin: dashboard 29999, script 30003, RTDE 30004\n'
+        "frequency_hz = 500.0\n"
+        f"tcp_offset = [{tcp_text}]  # as set on the (twin's) pendant: m, rad from the flange\n"
+        f"payload_kg = {float(params.payload_kg)!r}\n"
+        "\n"
+        "[sensors.uskin]\n"
+        f"{chosen}"
+        "# the same uSkin through the other transport the twin serves:\n"
+        f"{other_commented}"
+        "\n"
+        "[sensors.papillarray]\n"
+        'type = "papillarray"\n'
+        f'port = "socket://{host}:{ports.papillarray}"\n'
+        f"rate_hz = {papillarray_rate_hz}\n"
+        "\n"
+        "[object]  # where the twin's scene puts the object\n"
+        f"center_m = [{center}]\n"
+        f"press_height_m = {float(placement.press_height_m)!r}\n"
+    )

@@ -31,8 +31,9 @@ from unitac_rig.rig.config import parse_rig_config
 from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.fast_rig import SimRig
 from unitac_rig.storage.extraction import ExtractionSettings, extract_press
+from unitac_rig.storage.press_record import PressRecord
 from unitac_rig.storage.reader import read_presses
-from unitac_rig.storage.recorder import PressRecord, session_path
+from unitac_rig.storage.recorder import session_path
 
 OUT_DIR = Path(__file__).resolve().parent.parent / "docs" / "figures"
 THRESHOLD_N = 10.0

@@ -8,8 +8,9 @@ import pytest
 
 from unitac_rig.errors import DataError
 from unitac_rig.storage.extraction import extract_press
+from unitac_rig.storage.press_record import PressRecord, press_id
 from unitac_rig.storage.reader import list_sessions, load_matched_set, read_presses
-from unitac_rig.storage.recorder import PressRecord, SessionWriter, press_id, session_path
+from unitac_rig.storage.recorder import SessionWriter, session_path
 
 
 def make_press(rotation: float, angle: float, status: str = "complete", n_taxels: int = 24) -> PressRecord:

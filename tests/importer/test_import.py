@@ -13,8 +13,9 @@ from unitac_nv_fixtures import QUIET, Press, write_processed_npz, write_raw_csv
 from unitac_rig.cli import main
 from unitac_rig.errors import ConfigError, DataError
 from unitac_rig.importer import ImportConventions, conventions_from_dict, import_unitac_nv
+from unitac_rig.storage.press_record import PressRecord
 from unitac_rig.storage.reader import list_sessions, load_matched_set, load_matched_sets, read_presses
-from unitac_rig.storage.recorder import PressRecord, SessionWriter, journal_dir
+from unitac_rig.storage.recorder import SessionWriter, journal_dir
 
 RAW_XELA = "UniTac-NV Dataset/hexagonal_TPU/xela/sensor_data_20250203_154424.csv"
 RAW_PAPIL = "UniTac-NV Dataset/hexagonal_TPU/papillarray/sensor_data_20250202_174333.csv"

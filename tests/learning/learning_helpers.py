@@ -11,8 +11,9 @@ import numpy as np
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
 from unitac_rig.learning.synthetic_data import synthetic_matched_sets
 from unitac_rig.storage.extraction import ExtractionSettings, extract_press
+from unitac_rig.storage.press_record import PressRecord, press_id
 from unitac_rig.storage.reader import MatchedSet
-from unitac_rig.storage.recorder import PressRecord, SessionWriter, press_id
+from unitac_rig.storage.recorder import SessionWriter
 
 SMALL_OBJECTS = ("circle_pla", "hex_tpu", "irregular_pla")
 SMALL_ANGLES = tuple(float(a) for a in range(-45, 46, 9))  # 11 approach angles

@@ -61,7 +61,8 @@ def write_synthetic_sessions(data_dir: Path, objects: tuple[str, ...] = ("circle
     from drivers.layouts import PAPILLARRAY, USKIN
     from unitac_rig.learning.synthetic_data import synthetic_matched_sets
     from unitac_rig.storage.extraction import ExtractionSettings, extract_press
-    from unitac_rig.storage.recorder import PressRecord, SessionWriter, press_id
+    from unitac_rig.storage.press_record import PressRecord, press_id
+    from unitac_rig.storage.recorder import SessionWriter
 
     targets = (4.0, 6.0, 8.0, 10.0)
     angles = tuple(float(a) for a in range(-45, 46, 9))

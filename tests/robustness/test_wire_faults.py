@@ -17,8 +17,9 @@ from unitac_rig.collection.session import collect_session
 from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.fast_rig import SimRig
 from unitac_rig.sim.faults import FaultPlan
+from unitac_rig.storage.press_record import PressRecord
 from unitac_rig.storage.reader import read_presses
-from unitac_rig.storage.recorder import PressRecord, session_path
+from unitac_rig.storage.recorder import session_path
 
 
 def _collect(tmp_path: Path, sensor: str, faults: FaultPlan, angles: int, **rig_options: str) -> list[PressRecord]:

@@ -171,13 +171,14 @@ class Cell:
 def run_cell(cell: Cell) -> list[PressSample]:
     """Press every angle of ``cell`` on a fresh simulated rig; returns one sample per press."""
     from drivers.errors import DeviceTimeout, ProtectiveStop
+    from drivers.motion import move_to
     from unitac_rig.collection.press import run_press, settle_frames
     from unitac_rig.collection.session import plan_presses
     from unitac_rig.errors import SafetyLimit
     from unitac_rig.rig.config import parse_rig_config
     from unitac_rig.rig.objects import get_object
     from unitac_rig.sim.fast_rig import SimRig
-    from unitac_rig.storage.recorder import PressRecord
+    from unitac_rig.storage.press_record import PressRecord
 
     config = parse_rig_config({"press": {**cell.setting.press_config(), "angle_count": cell.angle_count}})
     obj = get_object(cell.object_id)
@@ -190,13 +191,13 @@ def run_cell(cell: Cell) -> list[PressSample]:
         try:
             rig.mount(obj, rotation, cell.sensor)
             # session start, as collect_session does it: zero the wrist and tare the sensor at the first stand-off
-            rig.arm.move_linear(plans[0].start_pose, config.press.transit_speed_mm_s / 1000.0, 0.5)
+            move_to(rig.arm, plans[0].start_pose, config.press.transit_speed_mm_s / 1000.0, 0.5)
             rig.arm.zero_ft()
             frames, _ = settle_frames(rig.arm, sensor, 0.3)
             sensor.tare(frames)
             sensor.poll()
             for plan in plans:
-                rig.arm.move_linear(plan.start_pose, config.press.transit_speed_mm_s / 1000.0, 0.5)
+                move_to(rig.arm, plan.start_pose, config.press.transit_speed_mm_s / 1000.0, 0.5)
                 truth = _TruthRecorder(rig, plan.direction)
                 began_ns, began_wall = rig.clock.now_ns(), time.perf_counter()
                 record: PressRecord | None
@@ -207,6 +208,7 @@ def run_cell(cell: Cell) -> list[PressSample]:
                     if record is None:
                         raise
                     rig.sim_arm.unlock_protective_stop()
+                    rig.sim_arm.reupload_script()  # as on a controller: unlocking alone does not restart it
                 samples.append(
                     PressSample(
                         setting=cell.setting.label,

@@ -60,7 +60,7 @@ def synthetic_press(sensor: str, length_s: float, index: int, rng: np.random.Gen
     """
     from unitac_rig.rig.sensors import sensor_layout
     from unitac_rig.storage.extraction import extract_press
-    from unitac_rig.storage.recorder import PressRecord, press_id
+    from unitac_rig.storage.press_record import PressRecord, press_id
 
     layout = sensor_layout(sensor)
     k = round(ROBOT_HZ * length_s)

@@ -30,7 +30,7 @@ from drivers.sensor import TactileSensor
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.rig.config import LimitsConfig, PressConfig
 from unitac_rig.rig.poses import approach_direction, pose_from, press_force_n, press_rotation
-from unitac_rig.storage.recorder import PressRecord, press_id
+from unitac_rig.storage.press_record import PressRecord, press_id
 
 log = logging.getLogger(__name__)
 

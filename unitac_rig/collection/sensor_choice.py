@@ -11,8 +11,9 @@ from typing import Literal
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.sensors import SENSORS, get_sensor
+from unitac_rig.storage.press_record import FINISHED_STATUSES
 from unitac_rig.storage.reader import press_summaries, read_session_info
-from unitac_rig.storage.recorder import FINISHED_STATUSES, session_path
+from unitac_rig.storage.recorder import session_path
 
 log = logging.getLogger(__name__)
 

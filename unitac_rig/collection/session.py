@@ -25,7 +25,8 @@ from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import RigConfig
 from unitac_rig.rig.objects import ObjectSpec, pad_side_direction
 from unitac_rig.storage.extraction import ExtractionSettings, extract_press
-from unitac_rig.storage.recorder import PressRecord, SessionWriter
+from unitac_rig.storage.press_record import PressRecord
+from unitac_rig.storage.recorder import SessionWriter
 
 log = logging.getLogger(__name__)
 

@@ -20,7 +20,7 @@ from drivers.layouts import SensorLayout
 from unitac_rig.importer.conventions import AUTHORS_PROCESSED_STEPS, ImportConventions, TactileMapping
 from unitac_rig.importer.parsing import ProcessedArrays, RawColumns
 from unitac_rig.storage.extraction import extract_press
-from unitac_rig.storage.recorder import PressRecord, press_id
+from unitac_rig.storage.press_record import PressRecord, press_id
 
 
 @dataclass

@@ -12,15 +12,15 @@ import numpy as np
 
 from unitac_rig.errors import DataError
 from unitac_rig.rig.sensors import SENSORS
-from unitac_rig.storage.recorder import (
-    SCHEMA_VERSION,
+from unitac_rig.storage.press_record import (
     PressRecord,
-    _as_str,
-    _decode_attr,
+    as_str,
+    decode_attr,
     iter_press_groups,
     read_extraction,
     read_press_group,
 )
+from unitac_rig.storage.recorder import SCHEMA_VERSION
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,7 @@ def _open(path: Path) -> h5py.File:
 
 def read_session_info(path: Path) -> SessionInfo:
     with _open(path) as f:
-        attrs = {k: _decode_attr(v) for k, v in f.attrs.items()}
+        attrs = {k: decode_attr(v) for k, v in f.attrs.items()}
     return SessionInfo(
         path=Path(path),
         object_id=str(attrs.get("object", "")),
@@ -103,9 +103,9 @@ def press_summaries(path: Path) -> list[dict[str, Any]]:
     out = []
     with _open(path) as f:
         for pid, g in iter_press_groups(f):
-            item = {k: _decode_attr(v) for k, v in g.attrs.items()}
+            item = {k: decode_attr(v) for k, v in g.attrs.items()}
             item["press_id"] = pid
-            item["status"] = _as_str(g.attrs["status"])
+            item["status"] = as_str(g.attrs["status"])
             ex = read_extraction(g)
             item["extraction"] = ex[0] if ex else None
             item["tactile_frames"] = int(g["tactile/t_s"].shape[0])
@@ -119,7 +119,7 @@ def load_matched_set(path: Path) -> MatchedSet:
     rot, ang, tgt, vals, force, err = [], [], [], [], [], []
     with _open(path) as f:
         for _, g in iter_press_groups(f):
-            if _as_str(g.attrs["status"]) != "complete":
+            if as_str(g.attrs["status"]) != "complete":
                 continue
             ex = read_extraction(g)
             if ex is None:
@@ -164,5 +164,5 @@ def load_matched_sets(data_dir: Path) -> list[MatchedSet]:
 def root_config(path: Path) -> dict[str, Any]:
     with _open(path) as f:
         raw = f.attrs.get("config", "{}")
-    value = json.loads(_as_str(raw)) if isinstance(raw, bytes | str) else {}
+    value = json.loads(as_str(raw)) if isinstance(raw, bytes | str) else {}
     return value if isinstance(value, dict) else {}

@@ -21,7 +21,8 @@ the old inode), and the writer's next rename is unaffected by their locks. One p
 session: see :mod:`unitac_rig.storage.lease`. The cost is one file copy per press (measured in docs/dataset.md).
 
 Schema (see docs/dataset.md): root attributes describe the session; ``/presses/<press_id>`` holds the raw streams
-(``robot/*``, ``tactile/*``, ``events``), the tare, and ``extraction/*`` (force-matched frames).
+(``robot/*``, ``tactile/*``, ``events``), the tare, and ``extraction/*`` (force-matched frames): the group's format is
+:mod:`unitac_rig.storage.press_record`.
 """
 
 from __future__ import annotations
@@ -33,8 +34,7 @@ import logging
 import os
 import shutil
 import time
-from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -44,11 +44,22 @@ import numpy as np
 from unitac_rig.errors import DataError
 from unitac_rig.storage.extraction import Extraction, ExtractionSettings
 from unitac_rig.storage.lease import SessionLease
+from unitac_rig.storage.press_record import (
+    FINISHED_STATUSES,
+    PressRecord,
+    as_str,
+    attr_value,
+    iter_press_groups,
+    json_default,
+    read_press_group,
+    record_nbytes,
+    write_extraction,
+    write_press_group,
+)
 
 log = logging.getLogger(__name__)
 
 SCHEMA_VERSION = 1
-FINISHED_STATUSES = ("complete", "failed")  # never redone on resume; "aborted" presses are redone
 
 
 def session_stem(object_id: str, sensor: str) -> str:
@@ -93,216 +104,7 @@ def replace_by_copy(path: Path, change: Callable[[h5py.File], None], *, create: 
         tmp.unlink(missing_ok=True)
 
 
-def press_id(rotation_deg: float, angle_deg: float) -> str:
-    """Stable, sortable name of a press: ``rot090_ang-12``."""
-    return f"rot{round(rotation_deg) % 360:03d}_ang{round(angle_deg):+03d}"
-
-
-@dataclass
-class PressRecord:
-    """Everything recorded for one press. Times are host-clock seconds (monotonic on hardware, virtual in sim)."""
-
-    press_id: str
-    rotation_deg: float
-    angle_deg: float
-    status: str  # complete | failed | aborted
-    reason: str  # force | travel | hard_limit | protective_stop | stall | interrupted | ...
-    robot_t_s: np.ndarray  # (K,)
-    robot_force: np.ndarray  # (K, 6) N, N*m, base axes (after the F/T zero)
-    robot_pose: np.ndarray  # (K, 6) m, rad
-    press_force_n: np.ndarray  # (K,) force along the press direction, N
-    tactile_t_s: np.ndarray  # (M,) host time
-    tactile_values: np.ndarray  # (M, n_taxels, 3) raw, layout units
-    tactile_seq: np.ndarray  # (M,) int64, -1 where the device has no counter
-    tactile_device_t_us: np.ndarray  # (M,) int64, -1 where the device has no clock
-    tactile_valid: np.ndarray  # (M,) bool
-    tare_baseline: np.ndarray  # (n_taxels, 3) subtracted from raw values for extraction and learning
-    tactile_displacement_mm: np.ndarray | None = None  # (M, n_taxels, 3), PapillArray only
-    events: list[tuple[float, str, str]] = field(default_factory=list)
-    attrs: dict[str, Any] = field(default_factory=dict)  # strategy, speed, threshold, tare info, F/T zero, ...
-    extraction: Extraction | None = None
-
-    @property
-    def finished(self) -> bool:
-        return self.status in FINISHED_STATUSES
-
-
-# ---------------------------------------------------------------------------------------------------------------------
-# low-level HDF5 helpers
-
-
-def _attr_value(value: Any) -> Any:
-    if isinstance(value, dict | list | tuple) and not (
-        isinstance(value, list | tuple) and value and all(isinstance(v, int | float) for v in value)
-    ):
-        return json.dumps(value, default=_json_default)
-    if value is None:
-        return "null"
-    return value
-
-
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"cannot serialise {type(obj).__name__}")
-
-
-def write_extraction(group: h5py.Group, extraction: Extraction, tared_values: np.ndarray) -> None:
-    """(Re)write ``group/extraction`` from an Extraction and the press's tare-subtracted frames."""
-    if "extraction" in group:
-        del group["extraction"]
-    ex = group.create_group("extraction")
-    ex.attrs["settings"] = json.dumps(extraction.settings.to_dict())
-    ex["targets_n"] = extraction.targets_n
-    ex["crossing_t_s"] = extraction.crossing_t_s
-    ex["frame_index"] = extraction.frame_index
-    ex["frame_t_s"] = extraction.frame_t_s
-    ex["force_at_frame_n"] = extraction.force_at_frame_n
-    ex["error_n"] = extraction.error_n
-    ex["miss"] = extraction.miss
-    n_taxels = tared_values.shape[1] if tared_values.ndim == 3 else 0
-    frames = np.full((extraction.targets_n.size, n_taxels, 3), np.nan, dtype=np.float32)
-    chosen = extraction.frame_index >= 0
-    if chosen.any() and tared_values.size:
-        frames[chosen] = tared_values[extraction.frame_index[chosen]]
-    ex["values"] = frames
-
-
-def read_extraction(group: h5py.Group) -> tuple[Extraction, np.ndarray] | None:
-    if "extraction" not in group:
-        return None
-    ex = group["extraction"]
-    extraction = Extraction(
-        targets_n=ex["targets_n"][()],
-        crossing_t_s=ex["crossing_t_s"][()],
-        frame_index=ex["frame_index"][()],
-        frame_t_s=ex["frame_t_s"][()],
-        force_at_frame_n=ex["force_at_frame_n"][()],
-        error_n=ex["error_n"][()],
-        miss=ex["miss"][()].astype(bool),
-        settings=ExtractionSettings.from_dict(json.loads(ex.attrs["settings"])),
-    )
-    return extraction, ex["values"][()]
-
-
-def write_press_group(parent: h5py.Group, rec: PressRecord, name: str | None = None) -> h5py.Group:
-    """Write one press under ``parent/<name or press_id>``; the ``write_complete`` attribute is set last."""
-    name = name or rec.press_id
-    if name in parent:
-        del parent[name]
-    g = parent.create_group(name)
-    g.attrs["press_id"] = rec.press_id
-    g.attrs["rotation_deg"] = float(rec.rotation_deg)
-    g.attrs["angle_deg"] = float(rec.angle_deg)
-    g.attrs["status"] = rec.status
-    g.attrs["reason"] = rec.reason
-    for key, value in rec.attrs.items():
-        g.attrs[key] = _attr_value(value)
-    robot = g.create_group("robot")
-    robot.create_dataset("t_s", data=np.asarray(rec.robot_t_s, np.float64))
-    robot.create_dataset("force", data=np.asarray(rec.robot_force, np.float32).reshape(-1, 6))
-    robot.create_dataset("tcp_pose", data=np.asarray(rec.robot_pose, np.float64).reshape(-1, 6))
-    robot.create_dataset("press_force_n", data=np.asarray(rec.press_force_n, np.float32))
-    tac = g.create_group("tactile")
-    tac.create_dataset("t_s", data=np.asarray(rec.tactile_t_s, np.float64))
-    values = np.asarray(rec.tactile_values, np.float32)
-    tac.create_dataset(
-        "values",
-        data=values,
-        compression="gzip",
-        compression_opts=1,
-        shuffle=True,
-        chunks=True if values.size else None,
-    )
-    tac.create_dataset("seq", data=np.asarray(rec.tactile_seq, np.int64))
-    tac.create_dataset("device_t_us", data=np.asarray(rec.tactile_device_t_us, np.int64))
-    tac.create_dataset("valid", data=np.asarray(rec.tactile_valid, bool))
-    if rec.tactile_displacement_mm is not None:
-        disp = np.asarray(rec.tactile_displacement_mm, np.float32)
-        tac.create_dataset(
-            "displacement_mm",
-            data=disp,
-            compression="gzip",
-            compression_opts=1,
-            shuffle=True,
-            chunks=True if disp.size else None,
-        )
-    g.create_dataset("tare_baseline", data=np.asarray(rec.tare_baseline, np.float64))
-    ev_dtype = np.dtype([("t_s", np.float64), ("kind", h5py.string_dtype()), ("detail", h5py.string_dtype())])
-    g.create_dataset("events", data=np.array([(t, k, d) for t, k, d in rec.events], dtype=ev_dtype))
-    if rec.extraction is not None:
-        write_extraction(g, rec.extraction, values - np.asarray(rec.tare_baseline, np.float32)[None])
-    g.attrs["write_complete"] = True
-    return g
-
-
-def read_press_group(g: h5py.Group) -> PressRecord:
-    attrs = {k: _decode_attr(v) for k, v in g.attrs.items()}
-    for key in ("press_id", "rotation_deg", "angle_deg", "status", "reason", "write_complete"):
-        attrs.pop(key, None)
-    tac = g["tactile"]
-    ex = read_extraction(g)
-    events = [(float(e["t_s"]), _as_str(e["kind"]), _as_str(e["detail"])) for e in g["events"][()]]
-    return PressRecord(
-        press_id=_as_str(g.attrs.get("press_id", g.name.rsplit("/", 1)[-1])),
-        rotation_deg=float(g.attrs["rotation_deg"]),
-        angle_deg=float(g.attrs["angle_deg"]),
-        status=_as_str(g.attrs["status"]),
-        reason=_as_str(g.attrs["reason"]),
-        robot_t_s=g["robot/t_s"][()],
-        robot_force=g["robot/force"][()],
-        robot_pose=g["robot/tcp_pose"][()],
-        press_force_n=g["robot/press_force_n"][()],
-        tactile_t_s=tac["t_s"][()],
-        tactile_values=tac["values"][()],
-        tactile_seq=tac["seq"][()],
-        tactile_device_t_us=tac["device_t_us"][()],
-        tactile_valid=tac["valid"][()].astype(bool),
-        tactile_displacement_mm=tac["displacement_mm"][()] if "displacement_mm" in tac else None,
-        tare_baseline=g["tare_baseline"][()],
-        events=events,
-        attrs=attrs,
-        extraction=ex[0] if ex else None,
-    )
-
-
-def _as_str(value: Any) -> str:
-    return value.decode() if isinstance(value, bytes) else str(value)
-
-
-def _decode_attr(value: Any) -> Any:
-    if isinstance(value, bytes | str):
-        value = _as_str(value)
-        if value[:1] in ("[", "{") or value == "null":
-            try:
-                return json.loads(value)
-            except json.JSONDecodeError:
-                return value
-        return value
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
-
-
 ROOM_MARGIN_BYTES = 64 * 1024  # HDF5 metadata (object headers, B-trees, heaps) on top of the raw data, bytes
-
-
-def record_nbytes(rec: PressRecord) -> int:
-    """Uncompressed size of a press's arrays (bytes): an upper bound on what writing it adds to a file."""
-    arrays = [rec.robot_t_s, rec.robot_force, rec.robot_pose, rec.press_force_n, rec.tactile_t_s, rec.tactile_values,
-              rec.tactile_seq, rec.tactile_device_t_us, rec.tactile_valid, rec.tare_baseline]  # fmt: skip
-    if rec.tactile_displacement_mm is not None:
-        arrays.append(rec.tactile_displacement_mm)
-    total = sum(np.asarray(a).nbytes for a in arrays)
-    frame_bytes = int(np.prod(np.shape(rec.tactile_values)[1:])) * 4
-    total += 32 * (8 * 6 + frame_bytes)  # extraction: ~25 targets x (6 per-target numbers + one float32 frame)
-    return int(total) + 200 * len(rec.events)
 
 
 def ensure_room(path: Path, extra_bytes: int) -> None:
@@ -404,7 +206,7 @@ class SessionWriter:
                     )
             return
         tmp = header.with_suffix(".tmp")
-        tmp.write_text(json.dumps(self.root_attrs, default=_json_default, indent=1))
+        tmp.write_text(json.dumps(self.root_attrs, default=json_default, indent=1))
         os.replace(tmp, header)
 
     def _journal_header(self) -> dict[str, Any]:
@@ -428,7 +230,7 @@ class SessionWriter:
 
         def create(f: h5py.File) -> None:
             for key, value in attrs.items():
-                f.attrs[key] = _attr_value(value)
+                f.attrs[key] = attr_value(value)
             f.create_group("presses")
 
         replace_by_copy(path, create, create=True)
@@ -449,7 +251,7 @@ class SessionWriter:
                             f"{self.path} has schema version {version}; this unitac-rig writes {SCHEMA_VERSION}",
                             hint="collect into a new --data directory",
                         )
-                    if _as_str(f.attrs.get("object", "")) != self.object_id:
+                    if as_str(f.attrs.get("object", "")) != self.object_id:
                         raise DataError(f"{self.path} is not a session of {self.object_id}")
                     _ = f.get("presses")  # touching the index proves the file is readable
             except OSError as exc:
@@ -475,14 +277,14 @@ class SessionWriter:
             presses = f.get("presses")
             names = list(presses) if presses is not None else []
             half = [pid for pid in names if not presses[pid].attrs.get("write_complete", False)]
-            status = {pid: _as_str(presses[pid].attrs.get("status", "")) for pid in names if pid not in half}
+            status = {pid: as_str(presses[pid].attrs.get("status", "")) for pid in names if pid not in half}
         restore: list[PressRecord] = []
         for pid, path in self._journal_press_files().items():
             if status.get(pid) in FINISHED_STATUSES:
                 continue
             try:
                 with h5py.File(path, "r") as jf:
-                    if pid in status and _as_str(jf["press"].attrs.get("status", "")) == status[pid]:
+                    if pid in status and as_str(jf["press"].attrs.get("status", "")) == status[pid]:
                         continue  # the same unfinished (aborted) press in both: nothing to restore
                     rec = read_press_group(jf["press"])
             except (OSError, KeyError) as exc:
@@ -514,7 +316,7 @@ class SessionWriter:
     # -- public API -------------------------------------------------------------------------------------------------
     def press_statuses(self) -> dict[str, str]:
         with h5py.File(self.path, "r") as f:
-            return {pid: _as_str(g.attrs.get("status", "")) for pid, g in f["presses"].items()}
+            return {pid: as_str(g.attrs.get("status", "")) for pid, g in f["presses"].items()}
 
     def finished_press_ids(self) -> set[str]:
         return {pid for pid, status in self.press_statuses().items() if status in FINISHED_STATUSES}
@@ -524,14 +326,14 @@ class SessionWriter:
         header = self._journal_header()
         header.update(attrs)
         tmp = self.journal / "_session.tmp"
-        tmp.write_text(json.dumps(header, default=_json_default, indent=1))
+        tmp.write_text(json.dumps(header, default=json_default, indent=1))
         os.replace(tmp, self.journal / "_session.json")
 
         def apply(f: h5py.File) -> None:
             for key, value in attrs.items():
-                f.attrs[key] = _attr_value(value)
+                f.attrs[key] = attr_value(value)
 
-        self._rewrite(apply, len(json.dumps(dict(attrs), default=_json_default)))
+        self._rewrite(apply, len(json.dumps(dict(attrs), default=json_default)))
 
     def write_press(self, rec: PressRecord) -> None:
         """Make ``rec`` durable (journal), then add it to the session file."""
@@ -574,16 +376,6 @@ class SessionWriter:
                 folder.rmdir()  # only when empty
             except OSError:
                 break
-
-
-def iter_press_groups(f: h5py.File) -> Iterator[tuple[str, h5py.Group]]:
-    presses = f.get("presses")
-    if presses is None:
-        return
-    for pid in sorted(presses):
-        g = presses[pid]
-        if g.attrs.get("write_complete", False):
-            yield pid, g
 
 
 def _reextract_group(g: h5py.Group, settings: ExtractionSettings) -> Extraction:
@@ -645,6 +437,6 @@ def _reextract_locked(path: Path, journal: Path, settings: ExtractionSettings) -
         data = json.loads(header.read_text())
         data["extraction_settings"] = settings.to_dict()
         tmp = journal / "_session.tmp"
-        tmp.write_text(json.dumps(data, default=_json_default, indent=1))
+        tmp.write_text(json.dumps(data, default=json_default, indent=1))
         os.replace(tmp, header)
     return result

@@ -1,0 +1,238 @@
+"""One press in a session file: :class:`PressRecord` and its HDF5 group (raw streams, tare, events, the extraction).
+
+Layout of ``/presses/<press_id>`` (see docs/dataset.md): attributes (press id, rotation, angle, status, reason, and
+whatever the press routine adds, JSON-encoded when not a plain number or string), ``robot/*`` (t_s, force, tcp_pose,
+press_force_n), ``tactile/*`` (t_s, values, seq, device_t_us, valid, displacement_mm for the PapillArray),
+``tare_baseline``, ``events`` and ``extraction/*``; ``write_complete`` is set last. How groups reach a session file
+durably is :mod:`unitac_rig.storage.recorder`'s job.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from unitac_rig.storage.extraction import Extraction, ExtractionSettings
+
+FINISHED_STATUSES = ("complete", "failed")  # never redone on resume; "aborted" presses are redone
+
+
+def press_id(rotation_deg: float, angle_deg: float) -> str:
+    """Stable, sortable name of a press: ``rot090_ang-12``."""
+    return f"rot{round(rotation_deg) % 360:03d}_ang{round(angle_deg):+03d}"
+
+
+@dataclass
+class PressRecord:
+    """Everything recorded for one press. Times are host-clock seconds (monotonic on hardware, virtual in sim)."""
+
+    press_id: str
+    rotation_deg: float
+    angle_deg: float
+    status: str  # complete | failed | aborted
+    reason: str  # force | travel | hard_limit | protective_stop | stall | interrupted | ...
+    robot_t_s: np.ndarray  # (K,)
+    robot_force: np.ndarray  # (K, 6) N, N*m, base axes (after the F/T zero)
+    robot_pose: np.ndarray  # (K, 6) m, rad
+    press_force_n: np.ndarray  # (K,) force along the press direction, N
+    tactile_t_s: np.ndarray  # (M,) host time
+    tactile_values: np.ndarray  # (M, n_taxels, 3) raw, layout units
+    tactile_seq: np.ndarray  # (M,) int64, -1 where the device has no counter
+    tactile_device_t_us: np.ndarray  # (M,) int64, -1 where the device has no clock
+    tactile_valid: np.ndarray  # (M,) bool
+    tare_baseline: np.ndarray  # (n_taxels, 3) subtracted from raw values for extraction and learning
+    tactile_displacement_mm: np.ndarray | None = None  # (M, n_taxels, 3), PapillArray only
+    events: list[tuple[float, str, str]] = field(default_factory=list)
+    attrs: dict[str, Any] = field(default_factory=dict)  # strategy, speed, threshold, tare info, F/T zero, ...
+    extraction: Extraction | None = None
+
+    @property
+    def finished(self) -> bool:
+        return self.status in FINISHED_STATUSES
+
+
+def attr_value(value: Any) -> Any:
+    if isinstance(value, dict | list | tuple) and not (
+        isinstance(value, list | tuple) and value and all(isinstance(v, int | float) for v in value)
+    ):
+        return json.dumps(value, default=json_default)
+    if value is None:
+        return "null"
+    return value
+
+
+def json_default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"cannot serialise {type(obj).__name__}")
+
+
+def write_extraction(group: h5py.Group, extraction: Extraction, tared_values: np.ndarray) -> None:
+    """(Re)write ``group/extraction`` from an Extraction and the press's tare-subtracted frames."""
+    if "extraction" in group:
+        del group["extraction"]
+    ex = group.create_group("extraction")
+    ex.attrs["settings"] = json.dumps(extraction.settings.to_dict())
+    ex["targets_n"] = extraction.targets_n
+    ex["crossing_t_s"] = extraction.crossing_t_s
+    ex["frame_index"] = extraction.frame_index
+    ex["frame_t_s"] = extraction.frame_t_s
+    ex["force_at_frame_n"] = extraction.force_at_frame_n
+    ex["error_n"] = extraction.error_n
+    ex["miss"] = extraction.miss
+    n_taxels = tared_values.shape[1] if tared_values.ndim == 3 else 0
+    frames = np.full((extraction.targets_n.size, n_taxels, 3), np.nan, dtype=np.float32)
+    chosen = extraction.frame_index >= 0
+    if chosen.any() and tared_values.size:
+        frames[chosen] = tared_values[extraction.frame_index[chosen]]
+    ex["values"] = frames
+
+
+def read_extraction(group: h5py.Group) -> tuple[Extraction, np.ndarray] | None:
+    if "extraction" not in group:
+        return None
+    ex = group["extraction"]
+    extraction = Extraction(
+        targets_n=ex["targets_n"][()],
+        crossing_t_s=ex["crossing_t_s"][()],
+        frame_index=ex["frame_index"][()],
+        frame_t_s=ex["frame_t_s"][()],
+        force_at_frame_n=ex["force_at_frame_n"][()],
+        error_n=ex["error_n"][()],
+        miss=ex["miss"][()].astype(bool),
+        settings=ExtractionSettings.from_dict(json.loads(ex.attrs["settings"])),
+    )
+    return extraction, ex["values"][()]
+
+
+def write_press_group(parent: h5py.Group, rec: PressRecord, name: str | None = None) -> h5py.Group:
+    """Write one press under ``parent/<name or press_id>``; the ``write_complete`` attribute is set last."""
+    name = name or rec.press_id
+    if name in parent:
+        del parent[name]
+    g = parent.create_group(name)
+    g.attrs["press_id"] = rec.press_id
+    g.attrs["rotation_deg"] = float(rec.rotation_deg)
+    g.attrs["angle_deg"] = float(rec.angle_deg)
+    g.attrs["status"] = rec.status
+    g.attrs["reason"] = rec.reason
+    for key, value in rec.attrs.items():
+        g.attrs[key] = attr_value(value)
+    robot = g.create_group("robot")
+    robot.create_dataset("t_s", data=np.asarray(rec.robot_t_s, np.float64))
+    robot.create_dataset("force", data=np.asarray(rec.robot_force, np.float32).reshape(-1, 6))
+    robot.create_dataset("tcp_pose", data=np.asarray(rec.robot_pose, np.float64).reshape(-1, 6))
+    robot.create_dataset("press_force_n", data=np.asarray(rec.press_force_n, np.float32))
+    tac = g.create_group("tactile")
+    tac.create_dataset("t_s", data=np.asarray(rec.tactile_t_s, np.float64))
+    values = np.asarray(rec.tactile_values, np.float32)
+    tac.create_dataset(
+        "values",
+        data=values,
+        compression="gzip",
+        compression_opts=1,
+        shuffle=True,
+        chunks=True if values.size else None,
+    )
+    tac.create_dataset("seq", data=np.asarray(rec.tactile_seq, np.int64))
+    tac.create_dataset("device_t_us", data=np.asarray(rec.tactile_device_t_us, np.int64))
+    tac.create_dataset("valid", data=np.asarray(rec.tactile_valid, bool))
+    if rec.tactile_displacement_mm is not None:
+        disp = np.asarray(rec.tactile_displacement_mm, np.float32)
+        tac.create_dataset(
+            "displacement_mm",
+            data=disp,
+            compression="gzip",
+            compression_opts=1,
+            shuffle=True,
+            chunks=True if disp.size else None,
+        )
+    g.create_dataset("tare_baseline", data=np.asarray(rec.tare_baseline, np.float64))
+    ev_dtype = np.dtype([("t_s", np.float64), ("kind", h5py.string_dtype()), ("detail", h5py.string_dtype())])
+    g.create_dataset("events", data=np.array([(t, k, d) for t, k, d in rec.events], dtype=ev_dtype))
+    if rec.extraction is not None:
+        write_extraction(g, rec.extraction, values - np.asarray(rec.tare_baseline, np.float32)[None])
+    g.attrs["write_complete"] = True
+    return g
+
+
+def read_press_group(g: h5py.Group) -> PressRecord:
+    attrs = {k: decode_attr(v) for k, v in g.attrs.items()}
+    for key in ("press_id", "rotation_deg", "angle_deg", "status", "reason", "write_complete"):
+        attrs.pop(key, None)
+    tac = g["tactile"]
+    ex = read_extraction(g)
+    events = [(float(e["t_s"]), as_str(e["kind"]), as_str(e["detail"])) for e in g["events"][()]]
+    return PressRecord(
+        press_id=as_str(g.attrs.get("press_id", g.name.rsplit("/", 1)[-1])),
+        rotation_deg=float(g.attrs["rotation_deg"]),
+        angle_deg=float(g.attrs["angle_deg"]),
+        status=as_str(g.attrs["status"]),
+        reason=as_str(g.attrs["reason"]),
+        robot_t_s=g["robot/t_s"][()],
+        robot_force=g["robot/force"][()],
+        robot_pose=g["robot/tcp_pose"][()],
+        press_force_n=g["robot/press_force_n"][()],
+        tactile_t_s=tac["t_s"][()],
+        tactile_values=tac["values"][()],
+        tactile_seq=tac["seq"][()],
+        tactile_device_t_us=tac["device_t_us"][()],
+        tactile_valid=tac["valid"][()].astype(bool),
+        tactile_displacement_mm=tac["displacement_mm"][()] if "displacement_mm" in tac else None,
+        tare_baseline=g["tare_baseline"][()],
+        events=events,
+        attrs=attrs,
+        extraction=ex[0] if ex else None,
+    )
+
+
+def as_str(value: Any) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def decode_attr(value: Any) -> Any:
+    if isinstance(value, bytes | str):
+        value = as_str(value)
+        if value[:1] in ("[", "{") or value == "null":
+            try:
+                return json.loads(value)
+            except json.JSONDecodeError:
+                return value
+        return value
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def record_nbytes(rec: PressRecord) -> int:
+    """Uncompressed size of a press's arrays (bytes): an upper bound on what writing it adds to a file."""
+    arrays = [rec.robot_t_s, rec.robot_force, rec.robot_pose, rec.press_force_n, rec.tactile_t_s, rec.tactile_values,
+              rec.tactile_seq, rec.tactile_device_t_us, rec.tactile_valid, rec.tare_baseline]  # fmt: skip
+    if rec.tactile_displacement_mm is not None:
+        arrays.append(rec.tactile_displacement_mm)
+    total = sum(np.asarray(a).nbytes for a in arrays)
+    frame_bytes = int(np.prod(np.shape(rec.tactile_values)[1:])) * 4
+    total += 32 * (8 * 6 + frame_bytes)  # extraction: ~25 targets x (6 per-target numbers + one float32 frame)
+    return int(total) + 200 * len(rec.events)
+
+
+def iter_press_groups(f: h5py.File) -> Iterator[tuple[str, h5py.Group]]:
+    presses = f.get("presses")
+    if presses is None:
+        return
+    for pid in sorted(presses):
+        g = presses[pid]
+        if g.attrs.get("write_complete", False):
+            yield pid, g

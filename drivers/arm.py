@@ -3,16 +3,28 @@
 It mirrors ur_rtde's split between ``RTDEReceiveInterface`` (state) and ``RTDEControlInterface`` (commands).
 Implementations: :class:`drivers.ur5e.UR5eArm` (real arm over ur_rtde) and ``unitac_rig.sim.arm.SimArm``
 (simulated arm on a virtual clock). Units: metres, seconds, newtons, rotation vectors in radians, base frame.
+
+The protocol has no blocking move on purpose. A controller executes what it was told whether or not the host is
+still there, so every motion is started and then watched one control period at a time (``wait_period`` feeds the
+controller's RTDE watchdog, which stops the program when the host stops writing): a straight-line move is started
+asynchronously (``start_move_linear``) and polled (``move_running``), so the host can stop it (``stop``) the
+moment something is wrong, Ctrl-C included. ``drivers.motion.move_to`` is that loop.
 """
 
 from __future__ import annotations
 
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from drivers.clock import Clock
+
+# RTDE watchdog frequency (Hz): the control program stops when the host writes nothing for 1 / 8 Hz = 125 ms. Above
+# 1 / 0.2 s, so the arm is at rest within 0.2 s of a dead host's last write (125 ms + braking from press speed);
+# below 10 Hz, so a 100 ms host stall (a slow disk, a GC pause) does not end a press.
+DEFAULT_WATCHDOG_HZ = 8.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -33,6 +45,7 @@ class ArmState:
     protective_stop: bool
     emergency_stop: bool = False
     tcp_speed: np.ndarray | None = None  # (6,) [vx, vy, vz (m/s), wx, wy, wz (rad/s)], base frame, if known
+    program_running: bool = True  # the controller's control program runs (it refuses every command otherwise)
 
 
 @runtime_checkable
@@ -46,20 +59,28 @@ class Arm(Protocol):
     def read_state(self) -> ArmState: ...
 
     # ---- commands (control side) ----------------------------------------------------------------------------
-    def move_linear(self, pose: np.ndarray, speed_m_s: float, accel_m_s2: float) -> None:
-        """Blocking straight-line move to ``pose``; raises ProtectiveStop if the controller stops."""
+    def start_move_linear(self, pose: np.ndarray, speed_m_s: float, accel_m_s2: float) -> None:
+        """Start a straight-line move to ``pose`` and return at once (``moveL(..., asynchronous=True)``).
+
+        Poll :meth:`move_running` once per control period; :meth:`stop` ends it early.
+        """
+        ...
+
+    def move_running(self) -> bool:
+        """True while the move started by :meth:`start_move_linear` runs."""
         ...
 
     def speed_linear(self, twist: np.ndarray, accel_m_s2: float) -> None:
-        """Start or update a Cartesian velocity command (m/s, rad/s) that lasts until the next command or stop."""
+        """Cartesian velocity command (m/s, rad/s); send it every control period. It holds until the next command
+        or a stop, on the controller too: only the watchdog stops it when the host dies."""
         ...
 
     def stop(self, decel_m_s2: float = 10.0) -> None:
-        """Decelerate to rest (stopL / speedStop semantics)."""
+        """Decelerate to rest, whatever runs: force mode, a speed command, an asynchronous move."""
         ...
 
     def zero_ft(self) -> None:
-        """Zero the wrist force/torque sensor (only call when nothing touches the tool)."""
+        """Zero the wrist force/torque sensor (only call at rest, when nothing touches the tool)."""
         ...
 
     def force_mode(
@@ -69,13 +90,25 @@ class Arm(Protocol):
         wrench: np.ndarray,
         limits: np.ndarray,
     ) -> None:
-        """Compliant control along selected axes (URScript force_mode type 2); call once per control period."""
+        """Compliant control along selected axes (URScript force_mode type 2); call once per control period.
+
+        The controller regulates toward ``wrench`` at most at the speed ``limits`` of the compliant axes and goes on
+        doing so while the host is stalled: this bounds the contact force on the controller.
+        """
         ...
 
     def force_mode_stop(self) -> None: ...
 
     def wait_period(self) -> None:
-        """Block until the next control period (2 ms at 500 Hz). On the simulated arm this advances the clock."""
+        """Block until the next control period (2 ms at 500 Hz) and feed the watchdog.
+
+        On the simulated arm this advances the clock.
+        """
+        ...
+
+    def keep_alive(self) -> AbstractContextManager[None]:
+        """Feed the watchdog while the host does non-motion work (writing a press, waiting for the operator) with
+        the arm at rest; motion commands must not be sent inside."""
         ...
 
     def close(self) -> None:

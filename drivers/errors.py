@@ -21,3 +21,15 @@ class ArmError(DeviceError):
 
 class ProtectiveStop(ArmError):
     """The robot controller entered a protective (or emergency) stop."""
+
+
+class ControlScriptStopped(ArmError):
+    """The control program on the robot controller is not running, so it refuses every command.
+
+    It stops when the RTDE watchdog sees no write from the host in time (a stalled or dead host), after a protective
+    or emergency stop, or when someone stops it on the teach pendant.
+    """
+
+
+class RobotStateLost(ArmError, DeviceTimeout):
+    """The robot's state stream (RTDE) stalled or dropped: the host can no longer see what the arm does."""

@@ -1,9 +1,18 @@
-"""Motion primitives on top of :class:`drivers.arm.Arm`: a guarded (force-terminated) move and a settle helper.
+"""Motion primitives on top of :class:`drivers.arm.Arm`: watched moves, the guarded (force-terminated) move, settling.
 
-``guarded_move`` is the press: a constant-speed ``speedL`` along a direction, one state read per control period, and a
-stop as soon as the press force reaches a threshold. It keeps reading through the stopping transient (deceleration,
-then the F/T sensor's latency and filter catching up) so the recorded peak includes the overshoot, and it stops the
-arm on every exit path: a reached condition, an exception from a callback or the arm, or Ctrl-C.
+Every motion here is started and then watched one control period at a time (``wait_period`` also feeds the
+controller's watchdog), and every way out (a reached condition, an exception from a callback or the arm, Ctrl-C, a
+second Ctrl-C during the stop) stops the arm before it returns or raises.
+
+* :func:`move_to`: a straight-line move, asynchronous on the controller and polled here, so a callback that sees
+  something wrong (a force where there should be none) or Ctrl-C stops it at once;
+* :func:`guarded_move`: the press. With ``force_setpoint_n`` it runs in **controller-side force mode**: the controller
+  moves the pad along the press direction at most at the press speed and regulates the contact force toward the
+  set-point (just above the stop threshold) by itself, so a host that stalls mid-press cannot push the force much
+  past the set-point; the host only decides when to end the press. Without it, a plain ``speedL`` every period (for
+  moves where nothing can be crushed). The stop rule takes the mean of the last ``stop_samples`` readings, so one
+  noise spike of the wrist force does not end a press early; the hard limit acts on any single reading of |F| (all
+  force axes) or |T|.
 
 "Press force" along a unit direction d is ``-dot(F[:3], d)`` (N): ``tcp_force`` is what the environment exerts on the
 tool, which points against the press.
@@ -12,6 +21,8 @@ tool, which points against the press.
 from __future__ import annotations
 
 import logging
+import math
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
@@ -19,7 +30,8 @@ from typing import Literal
 import numpy as np
 
 from drivers.arm import Arm, ArmState
-from drivers.errors import ArmError, ProtectiveStop
+from drivers.errors import ArmError, ControlScriptStopped, ProtectiveStop
+from drivers.rotations import angle_between, matrix_to_rotvec
 
 logger = logging.getLogger(__name__)
 
@@ -28,6 +40,14 @@ StopReason = Literal["force", "travel", "hard_limit", "protective_stop"]
 REST_SPEED_M_S = 0.0005  # below 0.5 mm/s the TCP counts as at rest
 DEFAULT_SETTLE_S = 0.05  # after rest: covers F/T latency (<= 20 ms) + 3 time constants of an 8 ms filter
 STOP_GRACE_S = 0.5  # extra time allowed for the arm to come to rest beyond v / decel
+MOVE_GRACE_S = 2.0  # a watched move may take this much longer than its trapezoid before it counts as stuck
+MOVE_TOLERANCE_M = 2e-4  # a finished move must end within 0.2 mm ...
+MOVE_TOLERANCE_RAD = 2e-3  # ... and 2 mrad of its target
+ARRIVED_PERIODS = 5  # at rest on the target this many periods = arrived, even if the controller's progress word lags
+# Force mode: largest deviation the controller allows on the non-compliant axes (URScript force_mode ``limits``
+# for those axes), m and rad.
+FORCE_MODE_DEVIATION_M = 0.005
+FORCE_MODE_DEVIATION_RAD = 0.05
 
 
 @dataclass(frozen=True)
@@ -51,6 +71,64 @@ def press_force(state: ArmState, direction: np.ndarray) -> float:
     return -float(np.dot(np.asarray(state.tcp_force, dtype=np.float64)[:3], direction))
 
 
+def force_magnitude(state: ArmState) -> tuple[float, float]:
+    """(|F| in N over all three force axes, |T| in N*m over the three torque axes)."""
+    wrench = np.asarray(state.tcp_force, dtype=np.float64)
+    return float(np.linalg.norm(wrench[:3])), float(np.linalg.norm(wrench[3:6]))
+
+
+def check_controller(state: ArmState, what: str) -> None:
+    """Raise if the controller stopped on its own: ProtectiveStop (safety stop) or ControlScriptStopped."""
+    if state.protective_stop or state.emergency_stop:
+        kind = "an emergency" if state.emergency_stop else "a protective"
+        raise ProtectiveStop(f"{kind} stop during {what}")
+    if not state.program_running:
+        raise ControlScriptStopped(f"the control program stopped during {what}")
+
+
+def move_to(
+    arm: Arm,
+    pose: np.ndarray,
+    speed_m_s: float,
+    accel_m_s2: float,
+    *,
+    on_period: Callable[[ArmState], None] | None = None,
+) -> ArmState:
+    """Straight-line move to ``pose``, started asynchronously and watched every control period; -> the state at rest.
+
+    ``on_period`` sees every state and may raise to stop the move (the arm is stopped, the error propagates).
+    Raises ProtectiveStop / ControlScriptStopped if the controller stops, ArmError if the move does not finish in
+    time or ends away from ``pose`` (0.2 mm, 2 mrad).
+    """
+    target = np.asarray(pose, dtype=np.float64).reshape(-1)
+    start = arm.read_state()
+    distance = float(np.linalg.norm(target[:3] - np.asarray(start.tcp_pose[:3])))
+    budget_s = _trapezoid_s(distance, speed_m_s, accel_m_s2) + MOVE_GRACE_S
+    arm.start_move_linear(target, speed_m_s, accel_m_s2)
+    try:
+        arrived = 0
+        for _ in range(max(1, math.ceil(budget_s / arm.control_period_s))):
+            arm.wait_period()
+            state = arm.read_state()
+            if on_period is not None:
+                on_period(state)
+            check_controller(state, "a move")
+            if not arm.move_running():
+                break
+            arrived = arrived + 1 if _on_target(state, target) and _resting(state) else 0
+            if arrived >= ARRIVED_PERIODS:
+                break
+        else:
+            raise ArmError(f"a move to {np.round(target[:3], 4).tolist()} m did not finish within {budget_s:.1f} s")
+    except BaseException:
+        stop_arm(arm)
+        raise
+    if not _on_target(state, target):
+        off_mm = 1000 * float(np.linalg.norm(np.asarray(state.tcp_pose[:3]) - target[:3]))
+        raise ArmError(f"a move ended {off_mm:.1f} mm from its target {np.round(target[:3], 4).tolist()} m")
+    return state
+
+
 def guarded_move(
     arm: Arm,
     direction: np.ndarray,
@@ -63,14 +141,22 @@ def guarded_move(
     stop_decel_m_s2: float = 10.0,
     on_period: Callable[[ArmState], None] | None = None,
     settle_s: float = DEFAULT_SETTLE_S,
+    force_setpoint_n: float | None = None,
+    stop_samples: int = 1,
+    hard_torque_nm: float | None = None,
 ) -> GuardedMoveResult:
     """Move along ``direction`` at ``speed_m_s`` until the press force reaches ``force_threshold_n``.
 
-    Also stops when the travel along the direction exceeds ``max_travel_m`` (reason "travel"), the press force
-    reaches ``hard_limit_n`` ("hard_limit") or the controller reports a protective stop ("protective_stop");
-    the caller decides what each reason means. ``on_period`` sees every state read, the stopping transient
-    included (it may raise to abort; the arm is still stopped). After the arm is at rest, reading goes on for
-    ``settle_s`` so a lagging F/T reading reaches its peak. Raises ArmError for nonsensical arguments.
+    ``force_setpoint_n``: run in controller-side force mode, compliant along ``direction`` with this force set-point
+    (N, a little above the threshold, as the controller measures it) and ``speed_m_s`` as the speed limit (see the
+    module docstring); None: ``speedL``.
+    ``stop_samples``: the threshold applies to the mean of the last this-many press-force readings.
+    Also stops when the travel along the direction exceeds ``max_travel_m`` (reason "travel"), any single reading
+    has |F| >= ``hard_limit_n`` or |T| >= ``hard_torque_nm`` ("hard_limit") or the controller reports a protective
+    stop ("protective_stop"); the caller decides what each reason means. ``on_period`` sees every state read, the
+    stopping transient included (it may raise to abort; the arm is still stopped). After the arm is at rest,
+    reading goes on for ``settle_s`` so a lagging F/T reading reaches its peak. Raises ArmError for nonsensical
+    arguments, ControlScriptStopped if the controller's program stops (the watchdog after a host stall).
     """
     unit = _unit_direction(direction)
     if not speed_m_s > 0:
@@ -80,63 +166,105 @@ def guarded_move(
             f"guarded move needs 0 < threshold ({force_threshold_n} N) < hard limit ({hard_limit_n} N)",
             hint="check the press threshold and the hard force limit in the rig file",
         )
+    if force_setpoint_n is not None and not 0 < force_setpoint_n < hard_limit_n:
+        raise ArmError(f"guarded move force set-point {force_setpoint_n} N must be within (0, {hard_limit_n}) N")
     if not max_travel_m > 0:
         raise ArmError(f"guarded move travel limit must be > 0 m, got {max_travel_m}")
     if not (accel_m_s2 > 0 and stop_decel_m_s2 > 0):
         raise ArmError("guarded move accelerations must be > 0 m/s^2")
+    if stop_samples < 1:
+        raise ArmError(f"guarded move stop_samples must be >= 1, got {stop_samples}")
 
-    twist = np.concatenate([unit * speed_m_s, np.zeros(3)])
     start_state = arm.read_state()
     start_position = np.asarray(start_state.tcp_pose[:3], dtype=np.float64)
+    command = _speed_command(arm, unit, speed_m_s, accel_m_s2)
+    if force_setpoint_n is not None:
+        command = _force_command(arm, unit, start_position, speed_m_s, force_setpoint_n)
     peak = press_force(start_state, unit)
     stop_sent = False
     try:
-        if start_state.protective_stop:
+        if start_state.protective_stop or start_state.emergency_stop:
             reason: StopReason = "protective_stop"
             trigger = start_state
         else:
-            reason, trigger, peak = _approach(arm, twist, accel_m_s2, unit, start_position, max_travel_m,
-                                             force_threshold_n, hard_limit_n, on_period, peak)  # fmt: skip
+            reason, trigger, peak = _approach(arm, command, unit, start_position, max_travel_m, force_threshold_n,
+                                             hard_limit_n, hard_torque_nm, stop_samples, on_period, peak)  # fmt: skip
         arm.stop(stop_decel_m_s2)
         stop_sent = True
         final, peak = _ride_out_stop(arm, unit, speed_m_s, stop_decel_m_s2, settle_s, on_period, peak)
     finally:
         if not stop_sent:
-            _stop_quietly(arm, stop_decel_m_s2)
+            stop_arm(arm, stop_decel_m_s2)
     travel = float(np.dot(np.asarray(final.tcp_pose[:3]) - start_position, unit))
     logger.debug("guarded move stopped (%s): peak %.2f N, travel %.2f mm", reason, peak, travel * 1e3)
     return GuardedMoveResult(reason, trigger, peak, travel, np.asarray(final.tcp_pose, dtype=np.float64).copy())
 
 
+def press_frame(position: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """A task frame (6,) [x, y, z (m), rotation vector (rad)] at ``position`` whose z axis is ``direction``."""
+    z = _unit_direction(direction)
+    helper = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return np.concatenate([np.asarray(position, dtype=np.float64), matrix_to_rotvec(np.column_stack([x, y, z]))])
+
+
+def force_limits(speed_m_s: float) -> np.ndarray:
+    """force_mode ``limits`` for a press along task z: the speed limit there, small deviations elsewhere."""
+    d, r = FORCE_MODE_DEVIATION_M, FORCE_MODE_DEVIATION_RAD
+    return np.array([d, d, speed_m_s, r, r, r])
+
+
+def _speed_command(arm: Arm, unit: np.ndarray, speed_m_s: float, accel_m_s2: float) -> Callable[[], None]:
+    twist = np.concatenate([unit * speed_m_s, np.zeros(3)])
+    return lambda: arm.speed_linear(twist, accel_m_s2)
+
+
+def _force_command(
+    arm: Arm, unit: np.ndarray, position: np.ndarray, speed_m_s: float, setpoint_n: float
+) -> Callable[[], None]:
+    frame = press_frame(position, unit)
+    selection = np.array([0, 0, 1, 0, 0, 0], dtype=np.float64)
+    wrench = np.array([0.0, 0.0, setpoint_n, 0.0, 0.0, 0.0])
+    limits = force_limits(speed_m_s)
+    return lambda: arm.force_mode(frame, selection, wrench, limits)
+
+
 def _approach(
     arm: Arm,
-    twist: np.ndarray,
-    accel_m_s2: float,
+    command: Callable[[], None],
     unit: np.ndarray,
     start_position: np.ndarray,
     max_travel_m: float,
     force_threshold_n: float,
     hard_limit_n: float,
+    hard_torque_nm: float | None,
+    stop_samples: int,
     on_period: Callable[[ArmState], None] | None,
     peak: float,
 ) -> tuple[StopReason, ArmState, float]:
-    """Command the speed every period until a stop condition; -> (reason, state that triggered it, peak)."""
+    """Command the motion every period until a stop condition; -> (reason, state that triggered it, peak)."""
+    recent: deque[float] = deque(maxlen=stop_samples)
     while True:
         try:
-            arm.speed_linear(twist, accel_m_s2)
+            command()
         except ProtectiveStop:
             return "protective_stop", arm.read_state(), peak
         arm.wait_period()
         state = arm.read_state()
         force = press_force(state, unit)
         peak = max(peak, force)
+        recent.append(force)
         if on_period is not None:
             on_period(state)
         if state.protective_stop or state.emergency_stop:
             return "protective_stop", state, peak
-        if force >= hard_limit_n:
+        check_controller(state, "a guarded move")
+        magnitude, torque = force_magnitude(state)
+        if magnitude >= hard_limit_n or (hard_torque_nm is not None and torque >= hard_torque_nm):
             return "hard_limit", state, peak
-        if force >= force_threshold_n:
+        if len(recent) == stop_samples and sum(recent) / stop_samples >= force_threshold_n:
             return "force", state, peak
         if float(np.dot(np.asarray(state.tcp_pose[:3]) - start_position, unit)) > max_travel_m:
             return "travel", state, peak
@@ -181,6 +309,17 @@ def _at_rest(state: ArmState, position: np.ndarray, previous: np.ndarray, period
     return speed < REST_SPEED_M_S
 
 
+def _resting(state: ArmState) -> bool:
+    return state.tcp_speed is None or float(np.linalg.norm(np.asarray(state.tcp_speed)[:3])) < REST_SPEED_M_S
+
+
+def _on_target(state: ArmState, target: np.ndarray) -> bool:
+    pose = np.asarray(state.tcp_pose, dtype=np.float64)
+    if float(np.linalg.norm(pose[:3] - target[:3])) > MOVE_TOLERANCE_M:
+        return False
+    return angle_between(pose[3:], target[3:]) <= MOVE_TOLERANCE_RAD
+
+
 def settle(arm: Arm, duration_s: float, on_period: Callable[[ArmState], None] | None = None) -> ArmState:
     """Wait ``duration_s`` one control period at a time, reading (and reporting) every state; -> the last state."""
     state = arm.read_state()
@@ -192,17 +331,52 @@ def settle(arm: Arm, duration_s: float, on_period: Callable[[ArmState], None] | 
     return state
 
 
+def wait_until_at_rest(arm: Arm, timeout_s: float = 1.0, periods: int = 5) -> ArmState:
+    """Wait (one control period at a time) until the TCP has been at rest for ``periods``; ArmError after timeout."""
+    state = arm.read_state()
+    quiet = 0
+    for _ in range(max(1, round(timeout_s / arm.control_period_s))):
+        arm.wait_period()
+        state = arm.read_state()
+        check_controller(state, "settling")
+        quiet = quiet + 1 if _resting(state) else 0
+        if quiet >= periods:
+            return state
+    raise ArmError(f"the arm did not come to rest within {timeout_s} s")
+
+
+def stop_arm(arm: Arm, decel_m_s2: float = 10.0) -> None:
+    """Stop on an error path without hiding the error that got us here; a second Ctrl-C cannot skip it.
+
+    If the stop is interrupted (KeyboardInterrupt, or a termination signal turned into one) it is sent again before
+    that interrupt propagates. Other failures are logged: the error being handled matters more.
+    """
+    held: BaseException | None = None
+    for _ in range(3):
+        try:
+            arm.stop(decel_m_s2)
+            break
+        except Exception:
+            logger.exception("could not stop the arm after an error; it may still be moving")
+            break
+        except BaseException as exc:
+            logger.warning("interrupted while stopping the arm; sending the stop again")
+            held = held or exc
+    if held is not None:
+        raise held
+
+
+def _trapezoid_s(distance_m: float, speed_m_s: float, accel_m_s2: float) -> float:
+    if distance_m <= 0 or speed_m_s <= 0 or accel_m_s2 <= 0:
+        return 0.0
+    if distance_m < speed_m_s**2 / accel_m_s2:
+        return 2.0 * math.sqrt(distance_m / accel_m_s2)
+    return distance_m / speed_m_s + speed_m_s / accel_m_s2
+
+
 def _unit_direction(direction: np.ndarray) -> np.ndarray:
     vector = np.asarray(direction, dtype=np.float64).reshape(-1)
     norm = float(np.linalg.norm(vector)) if vector.shape == (3,) else 0.0
     if not np.isfinite(norm) or norm < 1e-9:
         raise ArmError(f"guarded move direction must be a non-zero 3-vector, got {direction!r}")
     return vector / norm
-
-
-def _stop_quietly(arm: Arm, decel_m_s2: float) -> None:
-    """Stop on an error path without hiding the error that got us here."""
-    try:
-        arm.stop(decel_m_s2)
-    except Exception:
-        logger.exception("could not stop the arm after an error; it may still be moving")

@@ -2,16 +2,32 @@
 
 State comes from ``rtde_receive.RTDEReceiveInterface`` (RTDE port 30004, 500 Hz on e-Series), commands go through
 ``rtde_control.RTDEControlInterface`` (which uploads a URScript program and needs the robot in Remote Control mode).
-Both objects can be injected, so tests run the real receive client against
-:class:`unitac_rig.sim.rtde_server.SimURController` and a small fake in place of the control interface.
+Both objects can be injected (tests use the real clients against the controller twin, and a recording fake where
+the twin cannot reach).
 
-Safety: ``close`` (and leaving a ``with`` block, whatever the reason) always tries forceModeStop, speedStop,
-stopScript and disconnect, each on its own, so one failing step does not skip the others. A blocking command that
-returns False becomes :class:`~drivers.errors.ProtectiveStop` when the receive side reports a protective or emergency
-stop, else :class:`~drivers.errors.ArmError`. ur_rtde's own ``RuntimeError`` is wrapped at this boundary.
+Safety (what a real controller does when the host misbehaves, ``hardware-facts`` 3.8, and what this class adds):
+
+* the controller executes the last command until told otherwise: ur_rtde's speed and force threads run forever,
+  even after the host dies. The one thing that stops them is the **RTDE watchdog**, armed at connect
+  (``setWatchdog``): the program stops when the host writes nothing for 1 / ``watchdog_hz``. Every control period
+  (``wait_period``) kicks it; while the host does non-motion work at rest, :meth:`UR5eArm.keep_alive` kicks it from
+  a thread;
+* ``speedL`` is always sent with a time limit of a few control periods. ur_rtde's script repeats ``speedl`` in its
+  speed thread, so on a real controller this does *not* stop the arm (the watchdog does); it bounds each ``speedl``
+  call and costs nothing;
+* straight-line moves are asynchronous (``moveL(..., asynchronous=True)``) and polled, so ``stop`` (``stopL``) can
+  end them and the watchdog stays fed: a blocking ``moveL`` longer than 1 / ``watchdog_hz`` would trip it and
+  cannot be stopped from the host;
+* ``stop`` and ``close`` run every step (forceModeStop, stopL, speedStop; then stopScript and disconnect) on its own,
+  and a second Ctrl-C during them is held until they are done;
+* after a protective or emergency stop the controller refuses everything: commands are refused up front with
+  :class:`~drivers.errors.ProtectiveStop` (what to do on the pendant in the hint), and a program that stopped (the
+  watchdog, the pendant) gives :class:`~drivers.errors.ControlScriptStopped`;
+* at connect, the TCP offset (``getTCPOffset``) and payload (RTDE ``payload``) are read back and compared with what
+  the rig file expects; ur_rtde's ``RuntimeError`` and ``ValueError`` are wrapped at this boundary.
 
 Gotchas: ur_rtde's Python constructors hold the GIL until the handshake finishes (a Python RTDE server in the same
-process would deadlock, hence the simulator's server process); the C++ library prints to file descriptor 2 itself
+process would deadlock, hence the twins' server processes); the C++ library prints to file descriptor 2 itself
 (e.g. ``connect: Connection refused``), so the constructors run with fd 2 routed to the log.
 """
 
@@ -19,18 +35,29 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import os
 import sys
 import tempfile
-from collections.abc import Callable, Iterator
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, replace
 from types import TracebackType
 from typing import Any
 
 import numpy as np
 
-from drivers.arm import ArmState
+from drivers.arm import DEFAULT_WATCHDOG_HZ, ArmState
 from drivers.clock import Clock, MonotonicClock
-from drivers.errors import ArmError, DeviceError, DeviceNotFound, DeviceTimeout, ProtectiveStop
+from drivers.errors import (
+    ArmError,
+    ControlScriptStopped,
+    DeviceError,
+    DeviceNotFound,
+    ProtectiveStop,
+    RobotStateLost,
+)
+from drivers.rotations import angle_between
 
 logger = logging.getLogger(__name__)
 
@@ -44,8 +71,16 @@ RECEIVE_VARIABLES = (
     "safety_mode",
     "safety_status_bits",
 )
+PAYLOAD_VARIABLE = "payload"  # kg; subscribed only when the rig file gives a payload to check
 FORCE_MODE_TYPE = 2  # URScript force_mode type 2: the task frame is used as given
 STALL_TIMEOUT_S = 0.5  # no new controller timestamp for this long = the RTDE stream stalled
+SPEED_TIME_LIMIT_PERIODS = 4  # speedL's t: a few control periods (see the module docstring for what it does not do)
+KEEP_ALIVE_KICK_S = 0.02  # keep_alive's kicker thread writes at 50 Hz, far above any sensible watchdog frequency
+MAX_TOOL_SPEED_M_S = 3.0  # ur_rtde refuses faster tool speeds (hardware-facts 3.4)
+MAX_TOOL_ACCEL_M_S2 = 150.0  # ... and larger tool accelerations
+TCP_TOLERANCE_M = 0.001  # read-back TCP offset must match the rig file within 1 mm ...
+TCP_TOLERANCE_RAD = 0.01  # ... and 0.01 rad
+PAYLOAD_TOLERANCE_KG = 0.05  # read-back payload must match within 50 g
 
 _RECEIVE_HINT = (
     "check the cable/network (can you ping it?), that the robot is powered on, and that nothing blocks TCP port 30004"
@@ -54,7 +89,20 @@ _CONTROL_HINT = (
     "put the teach pendant in Remote Control mode, turn off EtherNet/IP, PROFINET and MODBUS (they hold the RTDE "
     "input registers), and check the network"
 )
-_STOPPED_HINT = "clear the stop on the teach pendant, move the arm clear, then run again"
+STOPPED_HINT = (
+    "on the teach pendant: unlock the protective stop (if the pad is still pressing on something, move the arm clear "
+    "in freedrive first), then run the same command again to resume"
+)
+
+
+def _program_stopped_hint(watchdog_hz: float | None) -> str:
+    why = (
+        f"the RTDE watchdog stops it when this computer sends nothing for {1000.0 / watchdog_hz:.0f} ms, e.g. an "
+        "overloaded or stalled host"
+        if watchdog_hz
+        else "it may have been stopped on the teach pendant"
+    )
+    return f"{why}; check the pendant's log, then run the same command again to resume"
 
 
 @contextlib.contextmanager
@@ -79,13 +127,13 @@ def _native_stderr_to_log(what: str) -> Iterator[None]:
                 logger.info("ur_rtde (%s) printed: %s", what, text)
 
 
-def _connect_receive(host: str, frequency_hz: float) -> Any:
+def _connect_receive(host: str, frequency_hz: float, variables: Sequence[str]) -> Any:
     import rtde_receive
 
     try:
         with _native_stderr_to_log("receive"):
-            return rtde_receive.RTDEReceiveInterface(host, frequency_hz, list(RECEIVE_VARIABLES))
-    except RuntimeError as exc:
+            return rtde_receive.RTDEReceiveInterface(host, frequency_hz, list(variables))
+    except (RuntimeError, ValueError) as exc:
         raise DeviceNotFound(f"no UR controller answers RTDE at {host}: {exc}", hint=_RECEIVE_HINT) from exc
 
 
@@ -95,7 +143,7 @@ def _connect_control(host: str, frequency_hz: float) -> Any:
     try:
         with _native_stderr_to_log("control"):
             return rtde_control.RTDEControlInterface(host, frequency_hz)
-    except RuntimeError as exc:
+    except (RuntimeError, ValueError) as exc:
         raise DeviceNotFound(f"cannot take control of the UR at {host}: {exc}", hint=_CONTROL_HINT) from exc
 
 
@@ -103,7 +151,8 @@ class UR5eReceiver:
     """Read-only view of a UR controller over RTDE; never moves the arm (used by ``probe ur5e``).
 
     ``receive``: an object with RTDEReceiveInterface's methods (injected in tests); connected to ``host`` if None.
-    Raises DeviceNotFound when nothing answers at ``host``.
+    ``read_payload``: also subscribe to the payload (kg); if the controller does not offer it, the receiver connects
+    without it and :meth:`payload_kg` returns None. Raises DeviceNotFound when nothing answers at ``host``.
     """
 
     def __init__(
@@ -113,10 +162,22 @@ class UR5eReceiver:
         frequency_hz: float = 500.0,
         receive: Any | None = None,
         clock: Clock | None = None,
+        read_payload: bool = False,
     ) -> None:
         self.host = host
         self.clock: Clock = clock or MonotonicClock()
-        self._receive = receive if receive is not None else _connect_receive(host, frequency_hz)
+        self._has_payload = read_payload
+        if receive is not None:
+            self._receive = receive
+        elif read_payload:
+            try:
+                self._receive = _connect_receive(host, frequency_hz, (*RECEIVE_VARIABLES, PAYLOAD_VARIABLE))
+            except DeviceNotFound as exc:  # an older controller has no "payload" output; connect without it
+                logger.info("RTDE without %r (%s); retrying without it", PAYLOAD_VARIABLE, exc)
+                self._has_payload = False
+                self._receive = _connect_receive(host, frequency_hz, RECEIVE_VARIABLES)
+        else:
+            self._receive = _connect_receive(host, frequency_hz, RECEIVE_VARIABLES)
         self._closed = False
         self._last_controller_t_s: float | None = None
         self._last_change_ns = self.clock.now_ns()
@@ -124,15 +185,15 @@ class UR5eReceiver:
     def read_state(self) -> ArmState:
         """The latest state the RTDE client holds, stamped with the host clock (ns).
 
-        Raises DeviceTimeout if the connection dropped or the controller timestamp has not moved for
-        ``STALL_TIMEOUT_S``, DeviceError if the client fails.
+        Raises RobotStateLost (a DeviceTimeout) if the connection dropped or the controller timestamp has not moved
+        for ``STALL_TIMEOUT_S``, DeviceError if the client fails.
         """
         if self._closed:
             raise DeviceError(f"the RTDE connection to {self.host} is closed")
         receive = self._receive
         try:
             if not receive.isConnected():
-                raise DeviceTimeout(f"lost the RTDE connection to {self.host}", hint=_RECEIVE_HINT)
+                raise RobotStateLost(f"lost the RTDE connection to {self.host}", hint=_RECEIVE_HINT)
             controller_t_s = float(receive.getTimestamp())
             pose = np.asarray(receive.getActualTCPPose(), dtype=np.float64)
             force = np.asarray(receive.getActualTCPForce(), dtype=np.float64)
@@ -141,14 +202,14 @@ class UR5eReceiver:
             safety_mode = int(receive.getSafetyMode())
             protective = bool(receive.isProtectiveStopped())
             emergency = bool(receive.isEmergencyStopped())
-        except RuntimeError as exc:
+        except (RuntimeError, ValueError) as exc:
             raise DeviceError(f"reading the UR state from {self.host} failed: {exc}", hint=_RECEIVE_HINT) from exc
         now_ns = self.clock.now_ns()
         if controller_t_s != self._last_controller_t_s:
             self._last_controller_t_s = controller_t_s
             self._last_change_ns = now_ns
         elif now_ns - self._last_change_ns > STALL_TIMEOUT_S * 1e9:
-            raise DeviceTimeout(
+            raise RobotStateLost(
                 f"the UR at {self.host} sent no new state for {(now_ns - self._last_change_ns) / 1e9:.2f} s",
                 hint=_RECEIVE_HINT,
             )
@@ -164,8 +225,18 @@ class UR5eReceiver:
             tcp_speed=speed,
         )
 
+    def payload_kg(self) -> float | None:
+        """The payload mass the controller uses (kg), or None when the controller does not report it."""
+        if not self._has_payload:
+            return None
+        try:
+            return float(self._receive.getPayload())
+        except (RuntimeError, ValueError) as exc:
+            logger.info("the UR at %s does not report its payload: %s", self.host, exc)
+            return None
+
     def wait_for_new_state(self, timeout_s: float = 1.0, poll_s: float = 0.0005) -> ArmState:
-        """Block until the controller timestamp moves on, then return that state; DeviceTimeout after ``timeout_s``."""
+        """Block until the controller timestamp moves on, then return that state; RobotStateLost after ``timeout_s``."""
         previous = self._last_controller_t_s
         deadline_ns = self.clock.now_ns() + round(timeout_s * 1e9)
         while True:
@@ -173,7 +244,9 @@ class UR5eReceiver:
             if state.controller_t_s != previous:
                 return state
             if self.clock.now_ns() > deadline_ns:
-                raise DeviceTimeout(f"no new state from the UR at {self.host} within {timeout_s} s", hint=_RECEIVE_HINT)
+                raise RobotStateLost(
+                    f"no new state from the UR at {self.host} within {timeout_s} s", hint=_RECEIVE_HINT
+                )
             self.clock.sleep(poll_s)
 
     def close(self) -> None:
@@ -183,7 +256,7 @@ class UR5eReceiver:
         self._closed = True
         try:
             self._receive.disconnect()
-        except RuntimeError as exc:
+        except (RuntimeError, ValueError) as exc:
             logger.warning("RTDE receive disconnect from %s failed: %s", self.host, exc)
 
     def __enter__(self) -> UR5eReceiver:
@@ -195,12 +268,24 @@ class UR5eReceiver:
         self.close()
 
 
+@dataclass
+class _AsyncMove:
+    """An asynchronous moveL in flight: the progress word before it started, and whether it was seen running."""
+
+    progress_before: int
+    seen_running: bool = False
+
+
 class UR5eArm:
-    """A UR5e (any e-Series arm) over ur_rtde, implementing :class:`drivers.arm.Arm`.
+    """A UR5e (any e-Series arm) over ur_rtde, implementing :class:`drivers.arm.Arm` (see the module docstring).
 
     ``control`` / ``receive``: objects with RTDEControlInterface / RTDEReceiveInterface's methods (injected in
     tests); connected to ``host`` if None. ``control_period_s`` = 1 / ``frequency_hz`` (2 ms at 500 Hz).
-    Raises DeviceNotFound with what to check when either interface cannot connect.
+    ``watchdog_hz``: the RTDE watchdog armed at connect (None: none, for read-mostly tools only).
+    ``expected_tcp_offset`` ((6,) m, rad, from the flange) and ``expected_payload_kg``: what the rig file says is set
+    on the pendant; the connection is refused with ArmError when the controller reports something else.
+    Raises DeviceNotFound with what to check when either interface cannot connect, ProtectiveStop when the arm is in
+    a protective or emergency stop.
     """
 
     def __init__(
@@ -211,55 +296,121 @@ class UR5eArm:
         control: Any | None = None,
         receive: Any | None = None,
         clock: Clock | None = None,
+        watchdog_hz: float | None = DEFAULT_WATCHDOG_HZ,
+        expected_tcp_offset: Sequence[float] | None = None,
+        expected_payload_kg: float | None = None,
     ) -> None:
         if frequency_hz <= 0:
             raise ArmError(f"RTDE frequency must be > 0 Hz, got {frequency_hz}")
+        if watchdog_hz is not None and not 0 < watchdog_hz <= frequency_hz:
+            raise ArmError(f"watchdog frequency must be within (0, {frequency_hz}] Hz, got {watchdog_hz}")
         self.host = host
         self.control_period_s = 1.0 / frequency_hz
-        self._receiver = UR5eReceiver(host, frequency_hz=frequency_hz, receive=receive, clock=clock)
+        self._watchdog_hz = watchdog_hz
+        self._closed = False
+        self._in_force_mode = False
+        self._speeding = False
+        self._move: _AsyncMove | None = None
+        self._period_start: Any = None
+        self._kicker: tuple[threading.Thread, threading.Event] | None = None
+        self.tcp_offset: np.ndarray | None = None  # as read back at connect
+        self.payload_kg: float | None = None
+        self._receiver = UR5eReceiver(
+            host, frequency_hz=frequency_hz, receive=receive, clock=clock, read_payload=expected_payload_kg is not None
+        )
         self.clock: Clock = self._receiver.clock
         try:
+            state = self._receiver.read_state()
+            if state.protective_stop or state.emergency_stop:
+                kind = "an emergency" if state.emergency_stop else "a protective"
+                raise ProtectiveStop(f"the UR at {host} is in {kind} stop", hint=STOPPED_HINT)
             self._control = control if control is not None else _connect_control(host, frequency_hz)
         except BaseException:
             self._receiver.close()
             raise
-        self._closed = False
-        self._in_force_mode = False
-        self._period_start: Any = None
+        try:
+            self._check_setup(expected_tcp_offset, expected_payload_kg)
+            if watchdog_hz is not None:
+                self._expect_ok("setWatchdog", self._call("setWatchdog", self._control.setWatchdog, float(watchdog_hz)))
+        except BaseException:
+            self.close()
+            raise
 
     # ---- state ----------------------------------------------------------------------------------------------
 
     def read_state(self) -> ArmState:
-        return self._receiver.read_state()
+        """The receive side's latest state, with ``program_running`` from the control side."""
+        state = self._receiver.read_state()
+        if self._closed:
+            return state
+        running = bool(self._call("isProgramRunning", self._control.isProgramRunning))
+        return state if running else replace(state, program_running=False)
 
     # ---- commands -------------------------------------------------------------------------------------------
 
-    def move_linear(self, pose: np.ndarray, speed_m_s: float, accel_m_s2: float) -> None:
-        """Blocking moveL; raises ProtectiveStop if the controller stops the move, ArmError if it refuses it."""
+    def start_move_linear(self, pose: np.ndarray, speed_m_s: float, accel_m_s2: float) -> None:
+        """moveL with ``asynchronous=True``: returns once the controller started the move; poll ``move_running``."""
         target = _as_list(pose, 6, "pose")
+        _check_motion(speed_m_s, accel_m_s2)
         self._require_ready("moveL")
-        ok = self._call("moveL", self._control.moveL, target, float(speed_m_s), float(accel_m_s2), False)
+        before = self._async_progress()
+        ok = self._call("moveL", self._control.moveL, target, float(speed_m_s), float(accel_m_s2), True)
         self._expect_ok("moveL", ok)
+        self._move = _AsyncMove(before)
+
+    def move_running(self) -> bool:
+        """True while the asynchronous move runs, from ur_rtde's async progress word (``getAsyncOperationProgress``):
+        >= 0 while it runs; < 0 and different from before the move (the value toggles between -1 and -2) once over.
+
+        Until the controller shows the move as started it counts as running: callers bound the wait.
+        """
+        move = self._move
+        if move is None:
+            return False
+        progress = self._async_progress()
+        if progress >= 0:
+            move.seen_running = True
+            return True
+        if move.seen_running or progress != move.progress_before:
+            self._move = None
+            return False
+        return True
 
     def speed_linear(self, twist: np.ndarray, accel_m_s2: float) -> None:
-        """speedL with no time limit: the velocity holds until the next command or a stop."""
+        """speedL with a time limit of ``SPEED_TIME_LIMIT_PERIODS`` control periods; send it every period."""
         xd = _as_list(twist, 6, "twist")
+        _check_motion(float(np.linalg.norm(xd[:3])), accel_m_s2, allow_zero_speed=True)
         self._require_ready("speedL")
-        ok = self._call("speedL", self._control.speedL, xd, float(accel_m_s2), 0.0)
+        time_s = SPEED_TIME_LIMIT_PERIODS * self.control_period_s
+        ok = self._call("speedL", self._control.speedL, xd, float(accel_m_s2), time_s)
+        self._speeding = True
         self._expect_ok("speedL", ok)
 
     def stop(self, decel_m_s2: float = 10.0) -> None:
-        """Leave force mode if in it, then speedStop at ``decel_m_s2``; a stopped controller counts as stopped.
+        """Stop whatever runs: forceModeStop (in force mode), stopL (an asynchronous move), speedStop (always).
 
-        A no-op after ``close`` (which already stopped the arm).
+        Every step runs even when an earlier one fails or a second Ctrl-C arrives (held until the end). A stopped
+        controller (protective stop, program not running) counts as stopped. A no-op after ``close``.
         """
         if self._closed:
             return
+        if not decel_m_s2 > 0:
+            raise ArmError(f"deceleration must be > 0 m/s^2, got {decel_m_s2}")
+        self._end_keep_alive()  # stopping always wins; the kicker must not share the client with us
+        decel = float(min(decel_m_s2, MAX_TOOL_ACCEL_M_S2))
+        steps: list[tuple[str, Callable[[], object]]] = []
         if self._in_force_mode:
-            self.force_mode_stop()
-        ok = self._call("speedStop", self._control.speedStop, float(decel_m_s2))
-        if ok is False and not self._stopped_by_safety():
-            raise ArmError(f"the UR at {self.host} refused speedStop", hint=_STOPPED_HINT)
+            steps.append(("forceModeStop", self._control.forceModeStop))
+        if self._move is not None:
+            steps.append(("stopL", lambda: self._control.stopL(decel, False)))
+        steps.append(("speedStop", lambda: self._control.speedStop(decel)))
+        try:
+            refused = _run_all(steps, on_error=lambda name, exc: logger.warning("UR stop: %s failed: %s", name, exc))
+        finally:
+            self._in_force_mode = self._speeding = False
+            self._move = None
+        if refused and not self._stopped_anyway():
+            raise ArmError(f"the UR at {self.host} refused {', '.join(refused)}", hint=STOPPED_HINT)
 
     def zero_ft(self) -> None:
         self._require_ready("zeroFtSensor")
@@ -286,37 +437,70 @@ class UR5eArm:
         self._check_open()
         ok = self._call("forceModeStop", self._control.forceModeStop)
         self._in_force_mode = False
-        if ok is False and not self._stopped_by_safety():
-            raise ArmError(f"the UR at {self.host} refused forceModeStop", hint=_STOPPED_HINT)
+        if ok is False and not self._stopped_anyway():
+            raise ArmError(f"the UR at {self.host} refused forceModeStop", hint=STOPPED_HINT)
 
     def wait_period(self) -> None:
-        """Pace the loop at the RTDE frequency with ur_rtde's initPeriod/waitPeriod."""
+        """Kick the watchdog, then pace the loop at the RTDE frequency with ur_rtde's initPeriod/waitPeriod."""
         self._check_open()
+        self._refuse_while_kept_alive("wait_period")
+        if self._watchdog_hz is not None:
+            self._call("kickWatchdog", self._control.kickWatchdog)
         if self._period_start is None:
             self._period_start = self._control.initPeriod()
         self._control.waitPeriod(self._period_start)
         self._period_start = self._control.initPeriod()
 
+    @contextlib.contextmanager
+    def keep_alive(self) -> Iterator[None]:
+        """Kick the watchdog from a thread at 50 Hz while the host does non-motion work with the arm at rest.
+
+        Raises ArmError if a motion is still commanded (stop it first). Inside, this object refuses every command
+        (ur_rtde's client must not be used from two threads). If the process dies, the thread dies with it and the
+        watchdog stops the program as usual.
+        """
+        self._check_open()
+        if self._in_force_mode or self._speeding or self._move is not None:
+            raise ArmError("keep_alive needs the arm at rest: stop the motion first")
+        if self._watchdog_hz is None or self._kicker is not None:
+            yield
+            return
+        done = threading.Event()
+        thread = threading.Thread(target=self._kick_until, args=(done,), name="ur5e-watchdog-kick", daemon=True)
+        self._kicker = (thread, done)
+        thread.start()
+        try:
+            yield
+        finally:
+            self._end_keep_alive()
+
     def close(self) -> None:
-        """Stop force mode and motion, stop the control script, disconnect both interfaces. Idempotent."""
+        """Stop force mode and motion, stop the control script, disconnect both interfaces. Idempotent.
+
+        Every step runs even if an earlier one fails or a second Ctrl-C arrives; such an interrupt is re-raised
+        once everything ran.
+        """
         if self._closed:
             return
         self._closed = True
-        steps: list[tuple[str, Callable[[], object]]] = []
-        if self._in_force_mode:
-            steps.append(("forceModeStop", self._control.forceModeStop))
-        steps += [
-            ("speedStop", lambda: self._control.speedStop(10.0)),
-            ("stopScript", self._control.stopScript),
-            ("disconnect", self._control.disconnect),
-        ]
-        for name, step in steps:
-            try:
-                step()
-            except Exception as exc:  # keep going: the remaining steps still matter
-                logger.warning("UR close: %s failed: %s", name, exc)
-        self._in_force_mode = False
-        self._receiver.close()
+        control = getattr(self, "_control", None)
+        steps: list[tuple[str, Callable[[], object]]] = [("keep_alive", self._end_keep_alive)]
+        if control is not None:
+            if self._in_force_mode:
+                steps.append(("forceModeStop", control.forceModeStop))
+            if self._move is not None:
+                steps.append(("stopL", lambda: control.stopL(10.0, False)))
+            steps += [
+                ("speedStop", lambda: control.speedStop(10.0)),
+                ("stopScript", control.stopScript),
+                ("disconnect", control.disconnect),
+            ]
+        steps.append(("receive disconnect", self._receiver.close))
+        try:
+            _run_all(steps, on_error=lambda name, exc: logger.warning("UR close: %s failed: %s", name, exc))
+        finally:
+            self._in_force_mode = self._speeding = False
+            self._move = None
 
     def __enter__(self) -> UR5eArm:
         return self
@@ -328,40 +512,157 @@ class UR5eArm:
 
     # ---- internals ------------------------------------------------------------------------------------------
 
+    def _check_setup(self, expected_tcp: Sequence[float] | None, expected_payload_kg: float | None) -> None:
+        """Read the TCP offset and payload back and refuse to go on if the rig file expects something else."""
+        actual = np.asarray(self._call("getTCPOffset", self._control.getTCPOffset), dtype=np.float64).reshape(-1)
+        self.tcp_offset = actual
+        if expected_tcp is not None:
+            expected = np.asarray(_as_list(np.asarray(expected_tcp), 6, "expected TCP offset"))
+            off_m = float(np.linalg.norm(actual[:3] - expected[:3])) if actual.shape == (6,) else math.inf
+            off_rad = angle_between(actual[3:], expected[3:]) if actual.shape == (6,) else math.inf
+            if off_m > TCP_TOLERANCE_M or off_rad > TCP_TOLERANCE_RAD:
+                raise ArmError(
+                    f"the UR at {self.host} has TCP offset {_fmt(actual)} but the rig file's arm.tcp_offset is "
+                    f"{_fmt(expected)} (m, rad)",
+                    hint="set the TCP on the teach pendant (Installation > General > TCP) or correct arm.tcp_offset",
+                )
+        elif actual.shape == (6,):
+            logger.warning(
+                "the UR at %s uses TCP offset %s; add arm.tcp_offset to the rig file so a changed TCP is caught",
+                self.host,
+                _fmt(actual),
+            )
+        self.payload_kg = self._receiver.payload_kg() if expected_payload_kg is not None else None
+        if expected_payload_kg is not None:
+            if self.payload_kg is None:
+                logger.warning("the UR at %s does not report its payload; check it on the pendant", self.host)
+            elif abs(self.payload_kg - expected_payload_kg) > PAYLOAD_TOLERANCE_KG:
+                raise ArmError(
+                    f"the UR at {self.host} has a payload of {self.payload_kg:.3f} kg but the rig file's "
+                    f"arm.payload_kg is {expected_payload_kg:.3f} kg",
+                    hint="set the payload on the teach pendant (Installation > General > Payload) or correct "
+                    "arm.payload_kg (a wrong payload shifts the wrist force and weakens the robot's collision check)",
+                )
+
+    def _kick_until(self, done: threading.Event) -> None:
+        while not done.wait(KEEP_ALIVE_KICK_S):
+            try:
+                self._control.kickWatchdog()
+            except Exception as exc:  # the connection went away: the watchdog will stop the program, as it should
+                logger.warning("keep_alive: kickWatchdog failed (%s); stopping the kicker", exc)
+                return
+
+    def _end_keep_alive(self) -> None:
+        kicker, self._kicker = self._kicker, None
+        if kicker is not None:
+            thread, done = kicker
+            done.set()
+            thread.join()
+
     def _check_open(self) -> None:
         if self._closed:
             raise ArmError(f"the connection to the UR at {self.host} is closed")
 
-    def _stopped_by_safety(self) -> bool:
+    def _refuse_while_kept_alive(self, what: str) -> None:
+        if self._kicker is not None:
+            raise ArmError(f"{what} inside keep_alive: the arm must stay at rest there")
+
+    def _stopped_anyway(self) -> bool:
+        """A refused stop is fine when the controller stopped on its own (safety stop, program not running)."""
         try:
             state = self._receiver.read_state()
-        except DeviceError:
+            running = bool(self._control.isProgramRunning())
+        except (DeviceError, RuntimeError, ValueError):
             return False
-        return state.protective_stop or state.emergency_stop
+        return state.protective_stop or state.emergency_stop or not running
 
     def _require_ready(self, what: str) -> None:
-        """Refuse a motion command up front while the controller is in a protective or emergency stop."""
+        """Refuse a motion command up front while the controller is stopped (safety stop, program not running)."""
         self._check_open()
+        self._refuse_while_kept_alive(what)
         state = self._receiver.read_state()
         if state.protective_stop or state.emergency_stop:
             kind = "an emergency" if state.emergency_stop else "a protective"
-            raise ProtectiveStop(f"{what}: the UR at {self.host} is in {kind} stop", hint=_STOPPED_HINT)
+            raise ProtectiveStop(f"{what}: the UR at {self.host} is in {kind} stop", hint=STOPPED_HINT)
+        if not self._call("isProgramRunning", self._control.isProgramRunning):
+            raise ControlScriptStopped(
+                f"{what}: the control program on the UR at {self.host} is not running",
+                hint=_program_stopped_hint(self._watchdog_hz),
+            )
+
+    def _async_progress(self) -> int:
+        return int(self._call("getAsyncOperationProgress", self._control.getAsyncOperationProgress))
 
     def _call(self, what: str, method: Callable[..., Any], *args: Any) -> Any:
         try:
             return method(*args)
+        except ValueError as exc:  # ur_rtde checks arguments (tool speed, acceleration) and raises ValueError
+            raise ArmError(f"{what}: the UR client refused the arguments {args!r}: {exc}") from exc
         except RuntimeError as exc:
             raise ArmError(f"{what} on the UR at {self.host} failed: {exc}", hint=_CONTROL_HINT) from exc
 
     def _expect_ok(self, what: str, ok: object) -> None:
-        if ok is False:
-            if self._stopped_by_safety():
-                raise ProtectiveStop(f"{what}: the UR at {self.host} stopped (protective/emergency stop)",
-                                     hint=_STOPPED_HINT)  # fmt: skip
-            raise ArmError(
-                f"{what} was not completed by the UR at {self.host}",
-                hint="look at the teach pendant's log; the rtde_control script may have stopped",
+        if ok is not False:
+            return
+        try:
+            state = self._receiver.read_state()
+            stopped = state.protective_stop or state.emergency_stop
+        except DeviceError:
+            stopped = False
+        if stopped:
+            raise ProtectiveStop(f"{what}: the UR at {self.host} stopped (protective/emergency stop)",
+                                 hint=STOPPED_HINT)  # fmt: skip
+        try:
+            running = bool(self._control.isProgramRunning())
+        except (RuntimeError, ValueError):
+            running = True
+        if not running:
+            raise ControlScriptStopped(
+                f"{what}: the control program on the UR at {self.host} stopped",
+                hint=_program_stopped_hint(self._watchdog_hz),
             )
+        raise ArmError(
+            f"{what} was not completed by the UR at {self.host}",
+            hint="look at the teach pendant's log; the rtde_control script may have stopped",
+        )
+
+
+def _run_all(
+    steps: Sequence[tuple[str, Callable[[], object]]], on_error: Callable[[str, Exception], None]
+) -> list[str]:
+    """Run every step whatever the earlier ones did; -> the names of steps that returned False.
+
+    An exception is reported to ``on_error``; a KeyboardInterrupt (a second Ctrl-C) or SystemExit is held and
+    re-raised after the last step, so an impatient operator cannot skip stopping the arm.
+    """
+    refused: list[str] = []
+    held: BaseException | None = None
+    for name, step in steps:
+        try:
+            if step() is False:
+                refused.append(name)
+        except Exception as exc:
+            on_error(name, exc)
+            refused.append(name)
+        except BaseException as exc:  # Ctrl-C again, SIGTERM turned into an interrupt: finish stopping first
+            logger.warning("interrupted during %s; finishing the stop sequence first", name)
+            held = held or exc
+    if held is not None:
+        raise held
+    return refused
+
+
+def _check_motion(speed_m_s: float, accel_m_s2: float, *, allow_zero_speed: bool = False) -> None:
+    """The limits ur_rtde checks, checked here first so they fail as ArmError naming the value."""
+    low_ok = speed_m_s >= 0 if allow_zero_speed else speed_m_s > 0
+    if not (low_ok and speed_m_s <= MAX_TOOL_SPEED_M_S):
+        raise ArmError(f"tool speed {speed_m_s} m/s is outside the UR's range (0, {MAX_TOOL_SPEED_M_S}] m/s")
+    if not 0 < accel_m_s2 <= MAX_TOOL_ACCEL_M_S2:
+        raise ArmError(f"tool acceleration {accel_m_s2} m/s^2 is outside (0, {MAX_TOOL_ACCEL_M_S2}] m/s^2")
+
+
+def _fmt(values: np.ndarray) -> str:
+    return "[" + ", ".join(f"{v:.4f}" for v in np.asarray(values).ravel()) + "]"
 
 
 def _as_list(values: np.ndarray, size: int, what: str) -> list[float]:

@@ -40,16 +40,31 @@ def make_arm(world: SpringWorld, params: SimArmParams = EXACT_FT, seed: int = 0)
 
 
 class FakeControl:
-    """Records every call like a flight recorder; ``results`` sets what a method returns (True by default)."""
+    """Records every command like a flight recorder; ``results`` sets what a method returns (True by default).
+
+    It stays only where the controller twin cannot reach: exact argument order, and a client that raises or refuses
+    on cue. Queries (isProgramRunning, getAsyncOperationProgress, getTCPOffset) are answered, not recorded.
+    ``progress`` is the async progress word getAsyncOperationProgress returns (an asynchronous moveL shows as
+    running, 0, for ``move_periods`` reads, then -2).
+    """
 
     def __init__(self, **results: object) -> None:
         self.calls: list[tuple[str, tuple[object, ...]]] = []
         self.results = results
-        self.raise_on: dict[str, Exception] = {}
+        self.raise_on: dict[str, BaseException] = {}
         self.period_starts = 0
+        self.program_running = True
+        self.tcp_offset = [0.0, 0.0, 0.1, 0.0, 0.0, 0.0]
+        self.progress = -1
+        self.move_periods = 3
+        self._move_reads_left = 0
 
     def names(self) -> list[str]:
         return [name for name, _ in self.calls]
+
+    def commands(self) -> list[str]:
+        """Recorded names without the watchdog kicks and period waits."""
+        return [name for name in self.names() if name not in ("kickWatchdog", "waitPeriod")]
 
     def _record(self, name: str, *args: object) -> object:
         self.calls.append((name, args))
@@ -58,7 +73,22 @@ class FakeControl:
         return self.results.get(name, True)
 
     def moveL(self, pose: list[float], speed: float, acceleration: float, asynchronous: bool) -> object:
-        return self._record("moveL", pose, speed, acceleration, asynchronous)
+        result = self._record("moveL", pose, speed, acceleration, asynchronous)
+        if result is not False and asynchronous:
+            self._move_reads_left = self.move_periods
+        return result
+
+    def getAsyncOperationProgress(self) -> int:
+        if self._move_reads_left > 0:
+            self._move_reads_left -= 1
+            if self._move_reads_left == 0:
+                self.progress = -2 if self.progress == -1 else -1
+            return 0
+        return self.progress
+
+    def stopL(self, a: float, asynchronous: bool) -> object:
+        self._move_reads_left = 0
+        return self._record("stopL", a, asynchronous)
 
     def speedL(self, xd: list[float], acceleration: float, time: float) -> object:
         return self._record("speedL", xd, acceleration, time)
@@ -74,6 +104,18 @@ class FakeControl:
 
     def forceModeStop(self) -> object:
         return self._record("forceModeStop")
+
+    def setWatchdog(self, min_frequency: float) -> object:
+        return self._record("setWatchdog", min_frequency)
+
+    def kickWatchdog(self) -> object:
+        return self._record("kickWatchdog")
+
+    def isProgramRunning(self) -> bool:
+        return self.program_running
+
+    def getTCPOffset(self) -> list[float]:
+        return list(self.tcp_offset)
 
     def stopScript(self) -> None:
         self._record("stopScript")
@@ -100,6 +142,7 @@ class FakeReceive:
         self.emergency = False
         self.connected = True
         self.disconnects = 0
+        self.payload = 0.0
 
     def isConnected(self) -> bool:
         return self.connected
@@ -128,6 +171,9 @@ class FakeReceive:
 
     def isEmergencyStopped(self) -> bool:
         return self.emergency
+
+    def getPayload(self) -> float:
+        return self.payload
 
     def disconnect(self) -> None:
         self.disconnects += 1

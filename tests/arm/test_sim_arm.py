@@ -10,7 +10,7 @@ from arm_fakes import EXACT_FT, PRESS_DIR, START_POSE, SpringWorld, make_arm
 
 from drivers.arm import Arm
 from drivers.clock import VirtualClock
-from drivers.errors import ArmError, ProtectiveStop
+from drivers.errors import ArmError, ControlScriptStopped, ProtectiveStop
 from drivers.motion import guarded_move, press_force
 from unitac_rig.sim.arm import SimArm, SimArmParams
 from unitac_rig.sim.world import FreeSpace
@@ -113,16 +113,25 @@ def test_guarded_move_reports_a_protective_stop_and_leaves_the_arm_stopped() -> 
     arm.close()
 
 
-def test_fault_hook_blocks_commands_until_unlocked() -> None:
+def test_after_a_protective_stop_commands_are_refused_until_unlocked_and_the_program_reuploaded() -> None:
+    """As on a real controller (hardware-facts 3.8): the program stops with the protective stop, and unlocking the
+    stop alone does not start it again."""
     arm = make_arm(SpringWorld(1e4, 0.05))
     arm.trigger_protective_stop()
-    assert arm.read_state().protective_stop
+    state = arm.read_state()
+    assert state.protective_stop and not state.program_running
     with pytest.raises(ProtectiveStop):
         arm.zero_ft()
+    with pytest.raises(ProtectiveStop):
+        arm.reupload_script()  # not while the stop is still locked
     arm.unlock_protective_stop()
+    with pytest.raises(ControlScriptStopped):
+        arm.speed_linear(np.array([0.0, 0.01, 0.0, 0.0, 0.0, 0.0]), 0.5)
+    arm.reupload_script()
     arm.speed_linear(np.array([0.0, 0.01, 0.0, 0.0, 0.0, 0.0]), 0.5)
     arm.wait_period()
-    assert not arm.read_state().protective_stop
+    state = arm.read_state()
+    assert not state.protective_stop and state.program_running and state.tcp_speed[1] > 0
     arm.close()
 
 

@@ -1,7 +1,8 @@
-"""UR5eArm / UR5eReceiver: the real receive client against the simulated controller, a fake control object.
+"""UR5eArm / UR5eReceiver where the controller twin cannot reach: a recording fake in place of the control client.
 
-The control interface cannot be faked at the wire level (it uploads URScript), so a small recording class stands in
-for it; these tests show every exit path stops the arm and a refused command becomes the right error.
+The fake shows the exact ur_rtde calls and argument order, and lets a test make the client refuse, raise or be
+interrupted on cue: every exit path stops the arm, a refused command becomes the right error, nothing escapes
+unwrapped. (tests/arm/test_twin_*.py drive the real control client against the controller twin.)
 """
 
 from __future__ import annotations
@@ -16,8 +17,16 @@ from arm_fakes import FakeControl, FakeReceive
 
 from drivers.arm import Arm, ArmState
 from drivers.clock import VirtualClock
-from drivers.errors import ArmError, DeviceNotFound, DeviceTimeout, ProtectiveStop
-from drivers.ur5e import STALL_TIMEOUT_S, UR5eArm, UR5eReceiver
+from drivers.errors import (
+    ArmError,
+    ControlScriptStopped,
+    DeviceNotFound,
+    DeviceTimeout,
+    ProtectiveStop,
+    RobotStateLost,
+)
+from drivers.motion import move_to
+from drivers.ur5e import KEEP_ALIVE_KICK_S, STALL_TIMEOUT_S, UR5eArm, UR5eReceiver
 from unitac_rig.sim.rtde_server import SimURController, start_on_free_loopback
 
 POSE = np.array([-0.15, 0.6, 0.21, 0.0, 2.2214, -2.2214])
@@ -51,7 +60,7 @@ def test_real_receive_and_a_protective_stop_during_move_l(controller: tuple[SimU
     server, state = controller
 
     class StoppingControl(FakeControl):
-        """moveL that ends in a protective stop, as a blocking ur_rtde moveL returns False then."""
+        """moveL refused because a protective stop came in (ur_rtde returns False when it sees the safety bit)."""
 
         def moveL(self, pose: list[float], speed: float, acceleration: float, asynchronous: bool) -> object:
             self._record("moveL", pose, speed, acceleration, asynchronous)
@@ -67,10 +76,12 @@ def test_real_receive_and_a_protective_stop_during_move_l(controller: tuple[SimU
         first = arm.read_state()
         assert np.array_equal(first.tcp_pose, POSE)
         assert first.tcp_force[1] == 9.5 and first.robot_mode == 7 and not first.protective_stop
-        with pytest.raises(ProtectiveStop):
-            arm.move_linear(POSE + np.array([0, 0.01, 0, 0, 0, 0]), 0.05, 0.5)
+        target = POSE + np.array([0, 0.01, 0, 0, 0, 0])
+        with pytest.raises(ProtectiveStop) as excinfo:
+            arm.start_move_linear(target, 0.05, 0.5)
+        assert "teach pendant" in (excinfo.value.hint or "") and "same command" in (excinfo.value.hint or "")
         assert arm.read_state().protective_stop
-        assert control.calls[0] == ("moveL", (list(POSE + np.array([0, 0.01, 0, 0, 0, 0])), 0.05, 0.5, False))
+        assert ("moveL", (list(target), 0.05, 0.5, True)) in control.calls  # asynchronous: stoppable
         with pytest.raises(ProtectiveStop):  # refused up front while stopped: nothing reaches the controller
             arm.speed_linear(np.zeros(6), 0.5)
         assert "speedL" not in control.names()
@@ -103,13 +114,58 @@ def test_control_connection_failure_closes_the_receive_side() -> None:
     assert receive.disconnects == 1
 
 
+def test_connect_arms_the_watchdog_and_every_period_kicks_it() -> None:
+    control = FakeControl()
+    with UR5eArm("ur", control=control, receive=FakeReceive(), watchdog_hz=8.0) as arm:
+        assert control.calls[0] == ("setWatchdog", (8.0,))
+        arm.wait_period()
+        arm.wait_period()
+    kicks_and_waits = [n for n in control.names() if n in ("kickWatchdog", "waitPeriod")]
+    assert kicks_and_waits == ["kickWatchdog", "waitPeriod", "kickWatchdog", "waitPeriod"]
+
+
+def test_a_protective_stop_at_connect_is_refused_before_taking_control() -> None:
+    receive = FakeReceive()
+    receive.protective = True
+    control = FakeControl()
+    with pytest.raises(ProtectiveStop) as excinfo:
+        UR5eArm("ur", control=control, receive=receive)
+    assert "unlock the protective stop" in (excinfo.value.hint or "")
+    assert control.calls == [] and receive.disconnects == 1
+
+
+def test_a_different_tcp_offset_on_the_pendant_is_refused_with_one_line() -> None:
+    control = FakeControl()
+    control.tcp_offset = [0.0, 0.0, 0.12, 0.0, 0.0, 0.0]
+    receive = FakeReceive()
+    with pytest.raises(ArmError) as excinfo:
+        UR5eArm("ur", control=control, receive=receive, expected_tcp_offset=[0.0, 0.0, 0.1, 0.0, 0.0, 0.0])
+    line = excinfo.value.one_line()
+    assert "\n" not in line and "arm.tcp_offset" in line and "0.1200" in line and "teach pendant" in line
+    assert control.names()[-2:] == ["stopScript", "disconnect"] and receive.disconnects == 1
+    # within 1 mm and 0.01 rad it connects
+    control = FakeControl()
+    control.tcp_offset = [0.0, 0.0, 0.1005, 0.0, 0.0, 0.005]
+    UR5eArm("ur", control=control, receive=FakeReceive(), expected_tcp_offset=[0, 0, 0.1, 0, 0, 0]).close()
+
+
+def test_a_different_payload_is_refused() -> None:
+    receive = FakeReceive()
+    receive.payload = 0.9
+    with pytest.raises(ArmError, match=r"payload of 0\.900 kg .* arm\.payload_kg is 0\.350 kg"):
+        UR5eArm("ur", control=FakeControl(), receive=receive, expected_payload_kg=0.35)
+    receive = FakeReceive()
+    receive.payload = 0.37
+    UR5eArm("ur", control=FakeControl(), receive=receive, expected_payload_kg=0.35).close()
+
+
 def test_close_stops_everything_even_when_a_step_fails() -> None:
     control = FakeControl()
     control.raise_on["speedStop"] = RuntimeError("script not running")
     arm = UR5eArm("ur", control=control, receive=FakeReceive())
     arm.force_mode(np.zeros(6), np.array([0, 0, 1, 0, 0, 0]), np.array([0, 0, 5.0, 0, 0, 0]), np.full(6, 0.01))
     arm.close()
-    assert control.names() == ["forceMode", "forceModeStop", "speedStop", "stopScript", "disconnect"]
+    assert control.commands() == ["setWatchdog", "forceMode", "forceModeStop", "speedStop", "stopScript", "disconnect"]
     arm.close()  # idempotent
     assert control.names().count("disconnect") == 1
     arm.stop()  # a no-op on a closed arm
@@ -117,38 +173,86 @@ def test_close_stops_everything_even_when_a_step_fails() -> None:
         arm.speed_linear(np.zeros(6), 0.5)
 
 
+def test_a_second_ctrl_c_during_close_cannot_skip_the_stop() -> None:
+    control = FakeControl()
+    control.raise_on["forceModeStop"] = KeyboardInterrupt()
+    receive = FakeReceive()
+    arm = UR5eArm("ur", control=control, receive=receive)
+    arm.force_mode(np.zeros(6), np.array([0, 0, 1, 0, 0, 0]), np.array([0, 0, 5.0, 0, 0, 0]), np.full(6, 0.01))
+    with pytest.raises(KeyboardInterrupt):
+        arm.close()
+    assert control.commands()[-4:] == ["forceModeStop", "speedStop", "stopScript", "disconnect"]
+    assert receive.disconnects == 1
+
+
+def test_a_second_ctrl_c_during_stop_still_sends_every_stop() -> None:
+    control = FakeControl()
+    control.raise_on["forceModeStop"] = KeyboardInterrupt()
+    with UR5eArm("ur", control=control, receive=FakeReceive()) as arm:
+        arm.force_mode(np.zeros(6), np.array([0, 0, 1, 0, 0, 0]), np.array([0, 0, 5.0, 0, 0, 0]), np.full(6, 0.01))
+        with pytest.raises(KeyboardInterrupt):
+            arm.stop()
+        assert control.commands()[-2:] == ["forceModeStop", "speedStop"]
+
+
 def test_leaving_a_with_block_on_an_exception_stops_the_arm() -> None:
     control = FakeControl()
     with pytest.raises(KeyboardInterrupt), UR5eArm("ur", control=control, receive=FakeReceive()) as arm:
         arm.speed_linear(np.array([0, 0.005, 0, 0, 0, 0]), 0.5)
         raise KeyboardInterrupt
-    assert control.names() == ["speedL", "speedStop", "stopScript", "disconnect"]
+    assert control.commands() == ["setWatchdog", "speedL", "speedStop", "stopScript", "disconnect"]
 
 
 def test_false_without_a_safety_stop_is_an_arm_error() -> None:
     control = FakeControl(moveL=False, zeroFtSensor=False)
     with UR5eArm("ur", control=control, receive=FakeReceive()) as arm:
         with pytest.raises(ArmError) as excinfo:
-            arm.move_linear(POSE, 0.1, 1.0)
-        assert not isinstance(excinfo.value, ProtectiveStop)
+            arm.start_move_linear(POSE, 0.1, 1.0)
+        assert not isinstance(excinfo.value, ProtectiveStop | ControlScriptStopped)
         with pytest.raises(ArmError):
             arm.zero_ft()
 
 
-def test_ur_rtde_runtime_errors_are_wrapped() -> None:
+def test_a_stopped_program_refuses_commands_and_says_why() -> None:
+    control = FakeControl()
+    with UR5eArm("ur", control=control, receive=FakeReceive(), watchdog_hz=8.0) as arm:
+        control.program_running = False  # the watchdog tripped: the host sent nothing for 125 ms
+        assert not arm.read_state().program_running
+        with pytest.raises(ControlScriptStopped) as excinfo:
+            arm.speed_linear(np.zeros(6), 0.5)
+        assert "125 ms" in (excinfo.value.hint or "")
+        assert "speedL" not in control.names()
+        arm.stop()  # stopping a stopped controller is not an error
+
+
+def test_ur_rtde_runtime_and_value_errors_are_wrapped() -> None:
     control = FakeControl()
     control.raise_on["speedL"] = RuntimeError("RTDE control script is not running!")
+    control.raise_on["forceMode"] = ValueError("speed limit out of range")
     with UR5eArm("ur", control=control, receive=FakeReceive()) as arm:
         with pytest.raises(ArmError) as excinfo:
             arm.speed_linear(np.zeros(6), 0.5)
         assert isinstance(excinfo.value.__cause__, RuntimeError)
+        with pytest.raises(ArmError) as excinfo:
+            arm.force_mode(np.zeros(6), np.ones(6), np.zeros(6), np.full(6, 0.01))
+        assert isinstance(excinfo.value.__cause__, ValueError)
+
+
+def test_out_of_range_speeds_are_refused_before_reaching_ur_rtde() -> None:
+    control = FakeControl()
+    with UR5eArm("ur", control=control, receive=FakeReceive()) as arm:
+        with pytest.raises(ArmError, match=r"tool speed 5\.0 m/s"):
+            arm.start_move_linear(POSE, 5.0, 1.0)
+        with pytest.raises(ArmError, match="acceleration"):
+            arm.speed_linear(np.array([0, 0.01, 0, 0, 0, 0]), 0.0)
+    assert "moveL" not in control.names() and "speedL" not in control.names()
 
 
 def test_stop_during_a_protective_stop_is_not_an_error() -> None:
     receive = FakeReceive()
-    receive.protective = True
     control = FakeControl(speedStop=False)
     with UR5eArm("ur", control=control, receive=receive) as arm:
+        receive.protective = True
         arm.stop(5.0)
         assert control.calls[-1] == ("speedStop", (5.0,))
 
@@ -163,14 +267,45 @@ def test_commands_pass_through_with_ur_rtde_argument_order() -> None:
         arm.stop(10.0)
         arm.wait_period()
         arm.wait_period()
-    assert control.calls[0] == ("speedL", ([0.0, 0.005, 0.0, 0.0, 0.0, 0.0], 0.5, 0.0))
-    assert control.calls[1] == ("zeroFtSensor", ())
-    assert control.calls[2] == ("forceMode", (list(frame), [0, 0, 1, 0, 0, 0], [0, 0, 5.0, 0, 0, 0], 2, [0.02] * 6))
-    assert control.names()[3:5] == ["forceModeStop", "speedStop"]  # stop leaves force mode first
-    assert [args for name, args in control.calls if name == "waitPeriod"] == [(1,), (2,)]
+    calls = [c for c in control.calls if c[0] not in ("kickWatchdog", "setWatchdog")]
+    # speedL always carries a time limit of a few control periods (4 x 2 ms)
+    assert calls[0] == ("speedL", ([0.0, 0.005, 0.0, 0.0, 0.0, 0.0], 0.5, pytest.approx(0.008)))
+    assert calls[1] == ("zeroFtSensor", ())
+    assert calls[2] == ("forceMode", (list(frame), [0, 0, 1, 0, 0, 0], [0, 0, 5.0, 0, 0, 0], 2, [0.02] * 6))
+    assert [name for name, _ in calls[3:5]] == ["forceModeStop", "speedStop"]  # stop leaves force mode first
+    assert [args for name, args in calls if name == "waitPeriod"] == [(1,), (2,)]
 
 
-def test_a_stalled_stream_and_a_lost_connection_are_timeouts() -> None:
+def test_an_asynchronous_move_is_polled_and_stop_ends_it_with_stop_l() -> None:
+    control = FakeControl()
+    receive = FakeReceive()
+    with UR5eArm("ur", control=control, receive=receive) as arm:
+        receive.pose = list(POSE)
+        state = move_to(arm, POSE, 0.05, 0.5)  # the fake reports the arm on the target; progress 0, 0, 0 then -2
+        assert np.allclose(state.tcp_pose, POSE)
+        assert control.commands()[-1] == "moveL"
+        control.move_periods = 1000
+        arm.start_move_linear(POSE + np.array([0, 0, 0.05, 0, 0, 0]), 0.05, 0.5)
+        assert arm.move_running()
+        arm.stop()
+        assert control.commands()[-2:] == ["stopL", "speedStop"]
+        assert not arm.move_running()
+
+
+def test_keep_alive_kicks_from_a_thread_and_refuses_commands_inside() -> None:
+    control = FakeControl()
+    with UR5eArm("ur", control=control, receive=FakeReceive()) as arm:
+        before = control.names().count("kickWatchdog")
+        with arm.keep_alive():
+            time.sleep(6 * KEEP_ALIVE_KICK_S)
+            with pytest.raises(ArmError, match="keep_alive"):
+                arm.speed_linear(np.zeros(6), 0.5)
+            assert arm.read_state().tcp_pose is not None  # reading is fine
+        assert control.names().count("kickWatchdog") - before >= 3
+        assert not any(t.name == "ur5e-watchdog-kick" for t in threading.enumerate())
+
+
+def test_a_stalled_stream_and_a_lost_connection_are_robot_state_lost() -> None:
     receive = FakeReceive()
     clock = VirtualClock()
     receiver = UR5eReceiver("ur", receive=receive, clock=clock)
@@ -178,10 +313,11 @@ def test_a_stalled_stream_and_a_lost_connection_are_timeouts() -> None:
     receive.getTimestamp = lambda: 5.0  # type: ignore[method-assign]  # the controller clock stops
     receiver.read_state()
     clock.sleep(STALL_TIMEOUT_S + 0.01)
-    with pytest.raises(DeviceTimeout):
+    with pytest.raises(RobotStateLost) as excinfo:
         receiver.read_state()
+    assert isinstance(excinfo.value, DeviceTimeout) and isinstance(excinfo.value, ArmError)
     receive.connected = False
-    with pytest.raises(DeviceTimeout):
+    with pytest.raises(RobotStateLost):
         receiver.read_state()
     receiver.close()
     assert receive.disconnects == 1

@@ -9,6 +9,7 @@ import pytest
 from drivers.clock import VirtualClock
 from drivers.frames import TactileFrame
 from drivers.layouts import PAPILLARRAY
+from drivers.motion import move_to
 from unitac_rig.collection.press import (
     RAMP_MAX_LEAD_N,
     PressPlan,
@@ -42,7 +43,7 @@ def test_first_contact_is_declared_only_when_the_pad_touches(strategy: str) -> N
         sensor = rig.open_sensor("papillarray")
         try:
             rig.mount(obj, 0.0, "papillarray")
-            rig.arm.move_linear(plans[0].start_pose, 0.05, 0.5)
+            move_to(rig.arm, plans[0].start_pose, 0.05, 0.5)
             rig.arm.zero_ft()
             settle_frames(rig.arm, sensor, 0.2)
             for plan in plans:
@@ -71,7 +72,7 @@ def test_force_ramp_rises_at_about_the_asked_rate() -> None:
         sensor = rig.open_sensor("uskin")
         try:
             rig.mount(obj, 0.0, "uskin")
-            rig.arm.move_linear(plans[0].start_pose, 0.05, 0.5)
+            move_to(rig.arm, plans[0].start_pose, 0.05, 0.5)
             rig.arm.zero_ft()
             settle_frames(rig.arm, sensor, 0.2)
             for plan in plans:

@@ -7,9 +7,23 @@ Strategies (each press records which it used):
 * ``force-ramp``: fast until first contact, then force control whose set-point rises at a fixed rate (N/s), stopping
   when the measured force reaches the threshold (slow force rise = small force-matching error).
 
-Safety on every path: a hard force limit, a travel limit beyond first contact (a soft object that never reaches the
-threshold fails the press instead of crushing the object), a protective stop, or Ctrl-C all stop the arm
-(``drivers.motion.guarded_move`` and the ``finally`` blocks here), and whatever was recorded is kept.
+What bounds the force is on the controller, not in this loop (docs/real-rig.md, "Safety"): every approach from the
+stand-off runs in the controller's force mode, compliant along the press direction with the press speed as its speed
+limit and a force set-point just above the threshold (``press.setpoint_margin_n``). In free air that is a constant-
+speed approach; in contact the controller itself regulates the force toward the set-point, so a host that freezes
+mid-press (GC, a slow disk) cannot push past it, and a host that dies stops the program through the RTDE watchdog.
+The host ends the press when the mean of the last ``press.stop_samples`` wrist readings reaches the threshold.
+
+On top of that, this loop checks every period: |F| on all axes and |T| against the hard limits, travel beyond first
+contact (a soft object fails the press instead of being crushed), the travel budget (no contact at all: the object is
+missing or misplaced), protective stops, the tactile stream, and gaps in the controller clock (recorded as
+``host_stall`` events). Position moves never end closer to the object than the stand-off (``object.standoff_mm``,
+at least ``limits.min_standoff_mm``); every waypoint is checked against the workspace box and the arm's reach before
+the first one is sent; transit moves are asynchronous and stop when the wrist feels something. The wrist F/T is
+zeroed at the stand-off, at rest, after settling, after checking that nothing touches the pad.
+
+Every path out stops the arm (``drivers.motion`` and the ``finally`` blocks here), Ctrl-C included, and whatever
+was recorded is kept.
 """
 
 from __future__ import annotations
@@ -17,15 +31,23 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, cast
 
 import numpy as np
 
 from drivers.arm import Arm, ArmState
-from drivers.errors import DeviceError, DeviceTimeout, ProtectiveStop
+from drivers.errors import ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop, RobotStateLost
 from drivers.frames import TactileFrame
-from drivers.motion import guarded_move
+from drivers.motion import (
+    force_limits,
+    force_magnitude,
+    guarded_move,
+    move_to,
+    press_frame,
+    stop_arm,
+    wait_until_at_rest,
+)
 from drivers.sensor import TactileSensor
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.rig.config import LimitsConfig, PressConfig
@@ -35,6 +57,8 @@ from unitac_rig.storage.press_record import PressRecord, press_id
 log = logging.getLogger(__name__)
 
 UNLOADED_FORCE_N = 3.0  # mean wrist force (since the last zero) below which the pad counts as unloaded, N
+ZEROED_FORCE_N = 2.5  # mean |F| right after zeroing must be below this, else the zero did not take, N (a zero
+# taken from one filtered sample is off by its noise, ~0.5 N per axis on a UR; 2.5 N is ~4.5 sigma of that)
 # First contact is declared at max(contact_force_n, CONTACT_NOISE_SIGMAS x the press-force noise measured at the
 # stand-off). A UR's wrist F/T has ~0.5 N of noise per 500 Hz sample even after its filter, so a fixed 1 N trigger
 # fires on noise millimetres before the pad touches (every fast approach did on the simulated rig).
@@ -44,6 +68,14 @@ CONTACT_NOISE_SIGMAS = 4.5
 # admittance loop to its speed limit and the pad hits the object with the set-point already near the threshold.
 RAMP_MAX_LEAD_N = 3.0
 RAMP_MEAN_PERIODS = 10
+RETRACT_UNLOADED_N = 0.3  # the retract ends once the mean press force of the last RETRACT_HOLD_PERIODS is below this
+RETRACT_HOLD_PERIODS = 10  # ... (20 ms at 500 Hz) and none of them is above UNLOADED_FORCE_N, and 1 mm is gained
+TRANSIT_ACCEL_M_S2 = 0.5
+HOST_GAP_EVENT_S = 0.02  # controller-clock gaps between two reads longer than this are recorded (host stall)
+ON_PLANE_M = 0.001  # the arm counts as on the press plane within 1 mm of its height
+ON_RAY_DEG = 3.0  # ... and on a press ray within 3 degrees of it
+ARC_STEP_DEG = 30.0  # crossings at the clearance radius are split into steps of at most this (chords stay outside)
+SHOULDER_HEIGHT_M = 0.1625  # UR5e base-to-shoulder height: the reach sphere's centre is (0, 0, this) [UR5e datasheet]
 
 
 class ZeroedArm:
@@ -54,8 +86,6 @@ class ZeroedArm:
         self.offset = np.asarray(offset, dtype=np.float64)
 
     def read_state(self) -> ArmState:
-        from dataclasses import replace
-
         state = self._arm.read_state()
         return replace(state, tcp_force=np.asarray(state.tcp_force, dtype=np.float64) - self.offset)
 
@@ -69,7 +99,7 @@ class PressPlan:
 
     rotation_deg: float
     angle_deg: float
-    start_pose: np.ndarray  # (6,) stand-off pose
+    start_pose: np.ndarray  # (6,) stand-off pose: where position moves end and the wrist F/T is zeroed
     direction: np.ndarray  # (3,) unit press direction
     contact_distance_m: float  # expected travel from the stand-off to first contact
     center_xy_m: tuple[float, float] = (0.0, 0.0)  # the object axis the press aims at (base frame)
@@ -102,26 +132,87 @@ def make_plan(
     )
 
 
-def move_clear(arm: Arm, plan: PressPlan, clearance_m: float, speed_m_s: float) -> None:
-    """Move to ``plan.start_pose`` without sweeping the pad through the object.
+def clearance_waypoints(here: np.ndarray, plan: PressPlan, clearance_m: float) -> list[np.ndarray]:
+    """The poses (6,) to move through from ``here`` to ``plan.start_pose`` without sweeping the pad through the
+    object; the last one is the stand-off pose.
 
-    A straight line between two press rays far apart (the last angle of one sweep and the first of the next, or a
-    new object) would cut through the prism. So unless the arm is already on the plan's ray, it backs out radially to
-    ``clearance_m`` from the object axis, crosses at that radius, and comes in along the new ray.
+    Unless the arm is already on the plan's ray at the press height, it first backs out horizontally (at its own
+    height and orientation) to ``clearance_m`` from the object axis, crosses at that radius and the press height in
+    steps of at most ``ARC_STEP_DEG`` (a straight chord between two far-apart points on the circle would cut in
+    toward the object), and comes in along the new ray.
     """
-    here = np.asarray(arm.read_state().tcp_pose, dtype=np.float64)
+    here = np.asarray(here, dtype=np.float64)
     target = np.asarray(plan.start_pose, dtype=np.float64)
-    center = np.array([*plan.center_xy_m, target[2]])
-    outward = -np.asarray(plan.direction, dtype=np.float64)
-    offset = here[:3] - center
-    radial = float(np.linalg.norm(offset[:2]))
-    on_ray = radial > 1e-6 and float(np.dot(offset[:2] / radial, outward[:2])) > np.cos(np.radians(3.0))
-    if not on_ray:
-        if radial < clearance_m:
-            out_dir = offset / radial if radial > 1e-6 else outward
-            arm.move_linear(np.concatenate([center + out_dir * clearance_m, here[3:]]), speed_m_s, 0.5)
-        arm.move_linear(np.concatenate([center + outward * clearance_m, target[3:]]), speed_m_s, 0.5)
-    arm.move_linear(target, speed_m_s, 0.5)
+    center = np.asarray(plan.center_xy_m, dtype=np.float64)
+    outward = -np.asarray(plan.direction, dtype=np.float64)[:2]
+    outward /= np.linalg.norm(outward)
+    offset = here[:2] - center  # horizontal only: the height is not part of the distance from the axis
+    radial = float(np.linalg.norm(offset))
+    on_plane = abs(here[2] - target[2]) < ON_PLANE_M
+    on_ray = radial > 1e-6 and float(np.dot(offset / radial, outward)) > math.cos(math.radians(ON_RAY_DEG))
+    if on_plane and on_ray:
+        return [target]
+    waypoints = []
+    out_xy = offset / radial if radial > 1e-6 else outward
+    if radial < clearance_m:
+        waypoints.append(np.concatenate([center + out_xy * clearance_m, [here[2]], here[3:]]))
+    start_angle = math.atan2(out_xy[1], out_xy[0])
+    turn = math.remainder(math.atan2(outward[1], outward[0]) - start_angle, 2 * math.pi)
+    steps = max(1, math.ceil(abs(math.degrees(turn)) / ARC_STEP_DEG))
+    for k in range(1, steps + 1):
+        a = start_angle + turn * k / steps
+        xy = center + clearance_m * np.array([math.cos(a), math.sin(a)])
+        waypoints.append(np.concatenate([xy, [target[2]], target[3:]]))
+    waypoints.append(target)
+    return waypoints
+
+
+def check_waypoint(pose: np.ndarray, limits: LimitsConfig, what: str) -> None:
+    """Refuse a pose outside the workspace box or beyond the arm's reach (SafetyLimit naming the pose)."""
+    lo, hi = np.asarray(limits.workspace_min_m), np.asarray(limits.workspace_max_m)
+    p = np.asarray(pose[:3], dtype=np.float64)
+    if not np.all(np.isfinite(p)) or np.any(p < lo) or np.any(p > hi):
+        raise SafetyLimit(
+            f"{what} {np.round(p, 4).tolist()} m is outside the workspace box {lo.tolist()}..{hi.tolist()}",
+            hint="check [object] center_m / press_height_m and [limits] workspace in the rig file",
+        )
+    reach = float(np.linalg.norm(p - np.array([0.0, 0.0, SHOULDER_HEIGHT_M])))
+    if reach > limits.max_reach_m:
+        raise SafetyLimit(
+            f"{what} {np.round(p, 4).tolist()} m is {reach:.3f} m from the shoulder, beyond the reach "
+            f"limit {limits.max_reach_m} m",
+            hint="move the object closer to the robot ([object] center_m) or check limits.max_reach_m",
+        )
+
+
+def transit_guard(arm: Arm, limits: LimitsConfig) -> Callable[[ArmState], None]:
+    """An ``on_period`` for transit moves: stop with SafetyLimit when the wrist force or torque changes by more than
+    ``limits.move_force_n`` (N, or that over 10 cm in N*m) from where the move started: the pad hit something."""
+    start = np.asarray(arm.read_state().tcp_force, dtype=np.float64)
+
+    def guard(state: ArmState) -> None:
+        change = np.asarray(state.tcp_force, dtype=np.float64) - start
+        force, torque = float(np.linalg.norm(change[:3])), float(np.linalg.norm(change[3:]))
+        if force > limits.move_force_n or torque > 0.1 * limits.move_force_n:
+            raise SafetyLimit(
+                f"the wrist felt {force:.1f} N / {torque:.2f} N*m during a transit move at "
+                f"{np.round(np.asarray(state.tcp_pose[:3]), 4).tolist()} m: the pad touched something",
+                hint="check that nothing is in the way and that [object] center_m matches where the object stands",
+            )
+
+    return guard
+
+
+def move_clear(arm: Arm, plan: PressPlan, clearance_m: float, speed_m_s: float, limits: LimitsConfig) -> None:
+    """Move to ``plan.start_pose`` through :func:`clearance_waypoints`, each checked before the first is sent, each
+    move asynchronous and stopped if the wrist feels something (:func:`transit_guard`)."""
+    here = np.asarray(arm.read_state().tcp_pose, dtype=np.float64)
+    waypoints = clearance_waypoints(here, plan, clearance_m)
+    for k, pose in enumerate(waypoints):
+        what = "stand-off pose" if k == len(waypoints) - 1 else "clearance waypoint"
+        check_waypoint(pose, limits, f"{what} of press {plan.press_id}")
+    for pose in waypoints:
+        move_to(arm, pose, speed_m_s, TRANSIT_ACCEL_M_S2, on_period=transit_guard(arm, limits))
 
 
 @dataclass
@@ -150,6 +241,9 @@ class _Streams:
     stall_timeout_s: float
     on_tick: Callable[[TickInfo], None] | None
     contact_threshold_n: float  # press force that counts as first contact, N (above the F/T noise)
+    # The controller regulates force mode on its own zeroed F/T; the host reads that minus a host-side offset, so a
+    # press force P seen here is P - offset_along_press_n on the controller (set-points are sent corrected).
+    offset_along_press_n: float = 0.0
     robot_t: list[float] = field(default_factory=list)
     robot_force: list[np.ndarray] = field(default_factory=list)
     robot_pose: list[np.ndarray] = field(default_factory=list)
@@ -159,6 +253,8 @@ class _Streams:
     phase: str = "approach"
     contact_pose: np.ndarray | None = None
     last_frame_ns: int | None = None
+    last_controller_t_s: float | None = None
+    max_gap_s: float = 0.0
 
     def event(self, kind: str, detail: str = "") -> None:
         self.events.append((self.arm.clock.now_ns() / 1e9, kind, detail))
@@ -169,6 +265,12 @@ class _Streams:
         self.robot_force.append(np.asarray(state.tcp_force, dtype=np.float64))
         self.robot_pose.append(np.asarray(state.tcp_pose, dtype=np.float64))
         self.press_force.append(force)
+        if self.last_controller_t_s is not None:
+            gap = state.controller_t_s - self.last_controller_t_s
+            if gap > HOST_GAP_EVENT_S:
+                self.event("host_stall", f"{1000 * gap:.0f} ms between two reads of the controller state")
+            self.max_gap_s = max(self.max_gap_s, gap)
+        self.last_controller_t_s = state.controller_t_s
         new = self.sensor.poll()
         if new:
             self.frames.extend(new)
@@ -179,17 +281,21 @@ class _Streams:
         elif now - self.last_frame_ns > self.stall_timeout_s * 1e9:
             self.event("stall", f"no tactile frame for {(now - self.last_frame_ns) / 1e9:.3f} s")
             raise DeviceTimeout(f"{self.sensor.layout.name} stopped sending frames during press {self.plan.press_id}")
-        if self.contact_pose is None and force >= self.contact_threshold_n:
+        recent = self.press_force[-self.press.stop_samples :]
+        if self.contact_pose is None and float(np.mean(recent)) >= self.contact_threshold_n:
+            # filtered like the stop rule: one noise spike in the approach must not start the travel-after-contact
+            # budget millimetres before the pad touches
             self.contact_pose = np.asarray(state.tcp_pose, dtype=np.float64)
             self.event("contact", f"{force:.2f} N")
         if self.contact_pose is not None and self.phase in ("approach", "press"):
             travel_mm = 1000.0 * float(np.dot(state.tcp_pose[:3] - self.contact_pose[:3], self.plan.direction))
             if travel_mm > self.limits.max_travel_after_contact_mm:
                 raise _TravelLimit(f"{travel_mm:.1f} mm past first contact below {self.press.threshold_n} N")
-        if force >= self.limits.hard_force_n:
+        magnitude, torque = force_magnitude(state)
+        if magnitude >= self.limits.hard_force_n or torque >= self.limits.hard_torque_nm:
             raise SafetyLimit(
-                f"press force {force:.1f} N passed the hard limit {self.limits.hard_force_n} N "
-                f"during press {self.plan.press_id}"
+                f"wrist force |F| {magnitude:.1f} N (press {force:.1f} N), |T| {torque:.2f} N*m passed the hard limit "
+                f"{self.limits.hard_force_n} N / {self.limits.hard_torque_nm} N*m during press {self.plan.press_id}"
             )
         if self.on_tick is not None:
             self.on_tick(TickInfo(self.plan.press_id, self.phase, force, self.frames[-1] if self.frames else None))
@@ -221,6 +327,35 @@ def _settle_window(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[lis
     return frames, np.asarray(forces)
 
 
+def zero_wrist(
+    arm: Arm, sensor: TactileSensor, settle_s: float, where: str, *, check_unloaded: bool = True
+) -> tuple[list[TactileFrame], np.ndarray]:
+    """Zero the wrist F/T at rest after settling, refusing when the pad is loaded; -> (frames, wrenches (K, 6)) of a
+    window after the zero, whose mean is the host-side offset left over (a zero from one noisy sample is off).
+
+    The unloaded check uses the mean force since the previous zero (a UR's F/T drifts by well under
+    ``UNLOADED_FORCE_N`` between presses), so the session's first zero (``check_unloaded=False``) relies on the
+    stand-off being clear of the object by construction. After zeroing, the window's mean must be near zero.
+    """
+    wait_until_at_rest(arm)
+    _, mean_wrench = settle_frames(arm, sensor, settle_s)
+    mean_force = float(np.linalg.norm(mean_wrench[:3]))
+    if check_unloaded and mean_force > UNLOADED_FORCE_N:
+        raise SafetyLimit(
+            f"wrist reads {mean_force:.2f} N at {where}: the pad is touching something, refusing to zero the F/T",
+            hint="check the object's position (object.center_m) and the stand-off in the rig file",
+        )
+    arm.zero_ft()
+    frames, wrenches = _settle_window(arm, sensor, settle_s)
+    left = float(np.linalg.norm(wrenches[:, :3].mean(axis=0)))
+    if left > ZEROED_FORCE_N:
+        raise SafetyLimit(
+            f"wrist still reads {left:.2f} N after zeroing at {where}: the F/T zero did not take",
+            hint="check the wrist force with `unitac-rig probe ur5e` and the payload set on the teach pendant",
+        )
+    return frames, wrenches
+
+
 def run_press(
     arm: Arm,
     sensor: TactileSensor,
@@ -233,27 +368,16 @@ def run_press(
     settle_s: float = 0.2,
     clearance_m: float = 0.09,
 ) -> PressRecord:
-    """Do one press and return everything recorded (status complete, failed or aborted).
+    """Do one press and return everything recorded (status complete, failed or aborted); the arm ends at rest at the
+    stand-off.
 
-    Raises SafetyLimit (hard force limit), ProtectiveStop and KeyboardInterrupt *after* stopping the arm; the partial
-    record is attached to the exception as ``exc.press_record`` so the caller can keep it.
+    Raises SafetyLimit (hard force limit), ProtectiveStop, ControlScriptStopped, RobotStateLost and KeyboardInterrupt
+    *after* stopping the arm; the partial record is attached to the exception as ``exc.press_record`` so the caller
+    can keep it. A press that never touches anything ends ``aborted`` with reason ``no_contact`` (it is redone on
+    resume, once the object is where it should be).
     """
-    _check_workspace(plan.start_pose, limits)
-    move_clear(arm, plan, clearance_m, press.transit_speed_mm_s / 1000.0)
-
-    # Unloaded check, F/T zero and tare. The check uses the mean force since the previous zero (a UR's F/T drifts
-    # by well under UNLOADED_FORCE_N between presses); after zeroing, the mean over a second window is kept as a
-    # host-side offset, because a zero taken from one noisy sample is off by ~0.5 N.
-    _, mean_wrench = settle_frames(arm, sensor, settle_s)
-    mean_force = float(np.linalg.norm(mean_wrench[:3]))
-    if mean_force > UNLOADED_FORCE_N:
-        raise SafetyLimit(
-            f"wrist reads {mean_force:.2f} N at the stand-off pose of press {plan.press_id}: the pad is touching "
-            "something, refusing to tare",
-            hint="check the object's position in the rig file and the stand-off",
-        )
-    arm.zero_ft()
-    frames, wrenches = _settle_window(arm, sensor, settle_s)
+    move_clear(arm, plan, clearance_m, press.transit_speed_mm_s / 1000.0, limits)
+    frames, wrenches = zero_wrist(arm, sensor, settle_s, f"the stand-off of press {plan.press_id}")
     ft_offset = wrenches.mean(axis=0)
     arm = cast(Arm, ZeroedArm(arm, ft_offset))
     noise_n = float(np.std(-(wrenches[:, :3] @ plan.direction)))
@@ -266,7 +390,8 @@ def run_press(
     baseline = np.median(stack, axis=0)
     tare = {"method": "host-median", "n_frames": len(valid), "spread": float(stack.std(axis=0).max())}
 
-    streams = _Streams(arm, sensor, plan, press, limits, stall_timeout_s, on_tick, contact_threshold_n)
+    streams = _Streams(arm, sensor, plan, press, limits, stall_timeout_s, on_tick, contact_threshold_n,
+                       offset_along_press_n=float(np.dot(ft_offset[:3], plan.direction)))  # fmt: skip
     streams.event("start", f"strategy={press.strategy} speed={press.speed_mm_s} mm/s")
     streams.event("contact_threshold", f"{contact_threshold_n:.2f} N (press-force noise {noise_n:.3f} N rms)")
     streams.event("ft_zero", json_list(ft_offset))
@@ -275,7 +400,7 @@ def run_press(
     pending: BaseException | None = None
     try:
         reason = _press_strategy(arm, streams, plan, press, limits)
-        status = "complete" if reason == "force" else "failed"
+        status = "complete" if reason == "force" else ("aborted" if reason == "no_contact" else "failed")
         streams.event("stop", reason)
         streams.phase = "dwell"
         streams.hold(press.dwell_s)
@@ -284,25 +409,34 @@ def run_press(
     except _TravelLimit as exc:
         status, reason = "failed", "travel"
         streams.event("stop", f"travel limit: {exc}")
-        _safe_stop(arm)
+        stop_arm(arm)
         _retract_quietly(arm, streams, plan, press)
     except (SafetyLimit, ProtectiveStop, DeviceError, KeyboardInterrupt) as exc:
         status, reason, pending = "aborted", _abort_reason(exc), exc
         detail = "interrupted by the operator" if isinstance(exc, KeyboardInterrupt) else f"{reason}: {exc}"
         streams.event("abort", detail)
-        if not isinstance(exc, ProtectiveStop):  # the controller has already stopped the arm
-            _safe_stop(arm)
+        if not isinstance(exc, ProtectiveStop | ControlScriptStopped):  # the controller has already stopped the arm
+            stop_arm(arm)
     record = _to_record(streams, plan, press, status, reason, baseline, tare, ft_offset)
     if pending is not None:
         pending.press_record = record  # type: ignore[attr-defined]
         raise pending
+    try:  # back out to the stand-off, so the next transit starts clear of the object
+        move_to(arm, plan.start_pose, press.transit_speed_mm_s / 1000.0, TRANSIT_ACCEL_M_S2,
+                on_period=transit_guard(arm, limits))  # fmt: skip
+    except BaseException as exc:
+        exc.press_record = record  # type: ignore[attr-defined]
+        raise
     return record
 
 
-# Why a press was aborted, by exception type; the first match wins (DeviceTimeout is a DeviceError).
+# Why a press was aborted, by exception type; the first match wins (RobotStateLost and DeviceTimeout are
+# DeviceErrors, RobotStateLost is also a DeviceTimeout).
 _ABORT_REASONS: tuple[tuple[type[BaseException], str], ...] = (
     (SafetyLimit, "hard_limit"),
     (ProtectiveStop, "protective_stop"),
+    (ControlScriptStopped, "program_stopped"),
+    (RobotStateLost, "robot_state_lost"),
     (DeviceTimeout, "stall"),
     (DeviceError, "device_error"),
     (KeyboardInterrupt, "interrupted"),
@@ -318,88 +452,103 @@ def json_list(values: np.ndarray) -> str:
 
 
 def _press_strategy(arm: Arm, streams: _Streams, plan: PressPlan, press: PressConfig, limits: LimitsConfig) -> str:
-    """Run the configured strategy; returns the stop reason ("force", "travel")."""
+    """Run the configured strategy; returns the stop reason ("force", "travel", "no_contact")."""
     backstop_m = plan.contact_distance_m + (limits.max_travel_after_contact_mm + 5.0) / 1000.0
+    setpoint_n = press.threshold_n + press.setpoint_margin_n - streams.offset_along_press_n
+    bounds: dict[str, Any] = {
+        "hard_limit_n": limits.hard_force_n,
+        "hard_torque_nm": limits.hard_torque_nm,
+        "on_period": streams.tick,
+        "force_setpoint_n": setpoint_n,
+    }
     if press.strategy == "guarded":
         streams.phase = "press"
-        result = guarded_move(
-            arm, plan.direction, press.speed_mm_s / 1000.0, press.threshold_n,
-            max_travel_m=backstop_m, hard_limit_n=limits.hard_force_n, on_period=streams.tick,
-        )  # fmt: skip
-        return _reason(result.reason)
-    # two-phase and force-ramp: fast to first contact
+        result = guarded_move(arm, plan.direction, press.speed_mm_s / 1000.0, press.threshold_n,
+                              max_travel_m=backstop_m, stop_samples=press.stop_samples, **bounds)  # fmt: skip
+        return _reason(result.reason, streams)
+    # two-phase and force-ramp: fast to first contact (one reading over the contact threshold: a false alarm only
+    # makes the rest of the approach slow)
     streams.phase = "approach"
-    result = guarded_move(
-        arm, plan.direction, press.fast_speed_mm_s / 1000.0, streams.contact_threshold_n,
-        max_travel_m=backstop_m, hard_limit_n=limits.hard_force_n, on_period=streams.tick,
-    )  # fmt: skip
+    result = guarded_move(arm, plan.direction, press.fast_speed_mm_s / 1000.0, streams.contact_threshold_n,
+                          max_travel_m=backstop_m, **bounds)  # fmt: skip
     if result.reason != "force":
-        return _reason(result.reason)
+        return _reason(result.reason, streams)
     streams.phase = "press"
     if press.strategy == "two-phase":
-        result = guarded_move(
-            arm, plan.direction, press.speed_mm_s / 1000.0, press.threshold_n,
-            max_travel_m=(limits.max_travel_after_contact_mm + 1.0) / 1000.0,
-            hard_limit_n=limits.hard_force_n, on_period=streams.tick,
-        )  # fmt: skip
-        return _reason(result.reason)
+        # the rest of the travel budget (a false first-contact alarm far out must still reach the object)
+        budget_m = max(backstop_m - result.travel_m, (limits.max_travel_after_contact_mm + 1.0) / 1000.0)
+        result = guarded_move(arm, plan.direction, press.speed_mm_s / 1000.0, press.threshold_n,
+                              max_travel_m=budget_m, stop_samples=press.stop_samples, **bounds)  # fmt: skip
+        return _reason(result.reason, streams)
     return _force_ramp(arm, streams, plan, press)
 
 
-def _reason(guarded_reason: str) -> str:
+def _reason(guarded_reason: str, streams: _Streams) -> str:
     if guarded_reason == "hard_limit":
-        raise SafetyLimit("press force passed the hard limit")
+        raise SafetyLimit("the wrist force or torque passed the hard limit")
     if guarded_reason == "protective_stop":
         raise ProtectiveStop("the controller reported a protective stop")
+    if guarded_reason == "travel" and streams.contact_pose is None:
+        return "no_contact"
     return guarded_reason
 
 
 def _force_ramp(arm: Arm, streams: _Streams, plan: PressPlan, press: PressConfig) -> str:
     """Force control along the press with a set-point rising at ``ramp_rate_n_s`` until the threshold is measured.
 
-    The set-point is rate-limited from the force at the start and never leads the measured press force (mean of the
-    last ``RAMP_MEAN_PERIODS`` readings) by more than ``RAMP_MAX_LEAD_N``: while nothing pushes back (contact lost,
-    or the approach stopped short) the pad creeps at gain x lead instead of winding up to the speed limit.
+    The set-point is rate-limited from the force at the start, never leads the measured press force (mean of the
+    last ``RAMP_MEAN_PERIODS`` readings) by more than ``RAMP_MAX_LEAD_N`` (while nothing pushes back the pad creeps
+    at gain x lead instead of winding up to the speed limit), and never exceeds threshold + ``setpoint_margin_n``: the
+    force a stalled host leaves the controller regulating toward.
     """
-    task_frame = np.asarray(plan.start_pose, dtype=np.float64)
-    selection = np.array([0, 0, 1, 0, 0, 0], dtype=np.float64)  # compliant along tool z (the press direction)
-    limits = np.array([0.01, 0.01, press.speed_mm_s / 1000.0 * 4, 0.1, 0.1, 0.1])
+    task_frame = press_frame(np.asarray(streams.arm.read_state().tcp_pose[:3]), plan.direction)
+    selection = np.array([0, 0, 1, 0, 0, 0], dtype=np.float64)
+    limits = force_limits(press.speed_mm_s / 1000.0 * 4)
+    ceiling = press.threshold_n + press.setpoint_margin_n
     setpoint = streams.press_force[-1] if streams.press_force else press.contact_force_n
     step_n = press.ramp_rate_n_s * arm.control_period_s
     max_periods = math.ceil((press.threshold_n / press.ramp_rate_n_s + 5.0) / arm.control_period_s)
     try:
         for _ in range(max_periods):
             measured = float(np.mean(streams.press_force[-RAMP_MEAN_PERIODS:])) if streams.press_force else 0.0
-            setpoint = min(setpoint + step_n, measured + RAMP_MAX_LEAD_N, press.threshold_n * 1.2)
-            arm.force_mode(task_frame, selection, np.array([0, 0, setpoint, 0, 0, 0.0]), limits)
+            setpoint = min(setpoint + step_n, measured + RAMP_MAX_LEAD_N, ceiling)
+            target = setpoint - streams.offset_along_press_n  # in the controller's zero (see _Streams)
+            arm.force_mode(task_frame, selection, np.array([0, 0, target, 0, 0, 0.0]), limits)
             arm.wait_period()
             state = arm.read_state()
             streams.tick(state)
             if state.protective_stop:
                 raise ProtectiveStop("protective stop during force control")
-            if streams.press_force[-1] >= press.threshold_n:
+            if float(np.mean(streams.press_force[-press.stop_samples :])) >= press.threshold_n:
                 return "force"
         return "travel"
     finally:
-        arm.force_mode_stop()
-        arm.stop()
+        stop_arm(arm)
 
 
 def _retract(arm: Arm, streams: _Streams, plan: PressPlan, press: PressConfig) -> None:
-    """Back off along the ray, still recording, until unloaded and clear of the contact point; then stop recording."""
+    """Back off along the ray, still recording, until the pad is unloaded (a held, filtered condition: the mean of
+    the last ``RETRACT_HOLD_PERIODS`` readings, not one noisy sample) and 1 mm back; then stop recording."""
     speed = min(press.transit_speed_mm_s, 4 * press.speed_mm_s) / 1000.0
-    arm.speed_linear(np.concatenate([-plan.direction * speed, np.zeros(3)]), 0.5)
+    twist = np.concatenate([-plan.direction * speed, np.zeros(3)])
+    start = np.asarray(arm.read_state().tcp_pose[:3])
     try:
-        start = np.asarray(arm.read_state().tcp_pose[:3])
         for _ in range(round(5.0 / arm.control_period_s)):
+            arm.speed_linear(twist, 0.5)
             arm.wait_period()
             state = arm.read_state()
             streams.tick(state)
             back_mm = 1000.0 * float(np.dot(start - state.tcp_pose[:3], plan.direction))
-            if streams.press_force[-1] < 0.1 and back_mm > 1.0:
+            recent = streams.press_force[-RETRACT_HOLD_PERIODS:]
+            if (
+                back_mm > 1.0
+                and len(recent) == RETRACT_HOLD_PERIODS
+                and float(np.mean(recent)) < RETRACT_UNLOADED_N
+                and max(recent) < UNLOADED_FORCE_N
+            ):
                 break
     finally:
-        arm.stop()
+        stop_arm(arm)
     streams.hold(0.02)
 
 
@@ -408,24 +557,7 @@ def _retract_quietly(arm: Arm, streams: _Streams, plan: PressPlan, press: PressC
     try:
         _retract(arm, streams, plan, press)
     except (_TravelLimit, SafetyLimit, DeviceTimeout):
-        _safe_stop(arm)
-
-
-def _safe_stop(arm: Arm) -> None:
-    try:
-        arm.stop()
-    except Exception:  # the arm may already be stopped or in a protective stop; stopping is best effort here
-        log.exception("stopping the arm failed")
-
-
-def _check_workspace(pose: np.ndarray, limits: LimitsConfig) -> None:
-    lo, hi = np.asarray(limits.workspace_min_m), np.asarray(limits.workspace_max_m)
-    p = np.asarray(pose[:3])
-    if np.any(p < lo) or np.any(p > hi):
-        raise SafetyLimit(
-            f"start pose {np.round(p, 4).tolist()} m is outside the workspace box {lo.tolist()}..{hi.tolist()}",
-            hint="check [object] center_m / press_height_m and [limits] workspace in the rig file",
-        )
+        stop_arm(arm)
 
 
 def _to_record(
@@ -475,8 +607,12 @@ def _to_record(
             "fast_speed_mm_s": press.fast_speed_mm_s,
             "ramp_rate_n_s": press.ramp_rate_n_s,
             "threshold_n": press.threshold_n,
+            "force_setpoint_n": press.threshold_n + press.setpoint_margin_n,
+            "stop_samples": press.stop_samples,
+            "contact_threshold_n": streams.contact_threshold_n,
             "peak_force_n": peak,
             "overshoot_n": peak - press.threshold_n,
+            "max_host_gap_s": streams.max_gap_s,
             "duration_s": float(t[-1] - t[0]) if t.size else 0.0,
             "ft_zero_offset": ft_offset.tolist(),
             "tare": tare,

@@ -2,7 +2,15 @@
 
 The plan is 91 approach angles (-45..45 deg) per object rotation (four rotations for the irregular prism). Presses
 already finished in the session file (complete or failed) are skipped, so the same command resumes after a crash,
-a Ctrl-C or a protective stop. Library code: no printing; progress goes through callbacks the CLI renders.
+a Ctrl-C, a termination signal or a protective stop. Library code: no printing; progress goes through callbacks the
+CLI renders.
+
+When the session stops instead of carrying on blind: a protective stop (the operator must clear it on the pendant),
+the controller's program stopping (the watchdog after a host stall), a lost robot state stream, a hard force limit,
+and ``limits.max_presses_without_contact`` presses in a row that touch nothing (the object is missing or not where
+the rig file says). Only a sensor that stalls or drops off is reconnected and its press retried, once.
+While the host writes a press or waits for the operator, the arm is at rest and :meth:`Arm.keep_alive` feeds the
+controller's watchdog. :func:`dry_run` visits every stand-off and clearance waypoint without pressing.
 """
 
 from __future__ import annotations
@@ -16,9 +24,21 @@ from typing import Any
 
 import numpy as np
 
-from drivers.errors import ArmError, DeviceError, DeviceTimeout, ProtectiveStop
+from drivers.arm import Arm
+from drivers.errors import ArmError, ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop
+from drivers.motion import check_controller, move_to, settle
 from drivers.sensor import TactileSensor
-from unitac_rig.collection.press import PressPlan, TickInfo, make_plan, move_clear, run_press, settle_frames
+from unitac_rig.collection.press import (
+    TRANSIT_ACCEL_M_S2,
+    PressPlan,
+    TickInfo,
+    clearance_waypoints,
+    make_plan,
+    move_clear,
+    run_press,
+    transit_guard,
+    zero_wrist,
+)
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.provenance import git_commit, package_version
 from unitac_rig.rig.base import Rig
@@ -32,6 +52,11 @@ log = logging.getLogger(__name__)
 
 RECONNECT_WAIT_S = 3.0  # how long a lost sensor may take to come back (USB replug, controller reboot), s
 RECONNECT_POLL_S = 0.25  # pause between reconnect attempts, s
+DRY_RUN_HOLD_S = 0.2  # a dry run rests this long at each stand-off, s
+PROTECTIVE_STOP_HINT = (
+    "on the teach pendant: unlock the protective stop (if the pad still presses on something, move the arm clear in "
+    "freedrive first), then run the same command again to resume"
+)
 
 
 @dataclass
@@ -46,6 +71,7 @@ class SessionOutcome:
     aborted: int = 0
     stopped: str | None = None  # why the session ended early, if it did
     recovery_notes: list[str] = field(default_factory=list)
+    no_contact_streak: int = 0  # presses in a row so far that touched nothing
 
     @property
     def finished(self) -> bool:
@@ -140,16 +166,28 @@ def collect_session(
             writer.discard_if_unused()  # nor may an arm or sensor that fails before the first press
             raise
         current_rotation: float | None = None
+        limit = config.limits.max_presses_without_contact
         for index, plan in enumerate(todo):
             if plan.rotation_deg != current_rotation:
                 rig.mount(obj, plan.rotation_deg, sensor_name)
                 if ask_operator is not None and not rig.simulated and len(rotations) > 1:
-                    ask_operator(f"Turn {obj.id} to {plan.rotation_deg:g} deg on its mount, then press Enter.")
+                    with rig.arm.keep_alive():
+                        ask_operator(f"Turn {obj.id} to {plan.rotation_deg:g} deg on its mount, then press Enter.")
                 current_rotation = plan.rotation_deg
             record, stop = _one_press(rig, sensor, plan, writer, extraction, outcome, on_tick)
             if on_press is not None and record is not None:
                 matched = 0 if record.extraction is None else record.extraction.n_matched
-                on_press(PressDone(outcome.already_done + index + 1, outcome.planned, record, matched))
+                with rig.arm.keep_alive():
+                    on_press(PressDone(outcome.already_done + index + 1, outcome.planned, record, matched))
+            if record is not None:
+                outcome.no_contact_streak = outcome.no_contact_streak + 1 if record.reason == "no_contact" else 0
+            if outcome.no_contact_streak >= limit:
+                outcome.stopped = (
+                    f"{limit} presses in a row touched nothing (the last: {plan.press_id}): is {obj.id} mounted at "
+                    f"object.center_m = {list(config.object.center_m)}, press_height_m = "
+                    f"{config.object.press_height_m} in the rig file?"
+                )
+                break
             if stop:
                 break
     finally:
@@ -163,10 +201,12 @@ def _session_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> dict[str
     The stand-off is clear of the object by construction (the object's outline plus the stand-off gap), so this is
     the one moment the session can assume the pad is unloaded without a previous zero to check against.
     """
-    move_clear(rig.arm, first, rig.config.object.clearance_mm / 1000.0, rig.config.press.transit_speed_mm_s / 1000.0)
-    rig.arm.zero_ft()
-    frames, _ = settle_frames(rig.arm, sensor, 0.3)
-    record = sensor.tare(frames)
+    config = rig.config
+    move_clear(rig.arm, first, config.object.clearance_mm / 1000.0, config.press.transit_speed_mm_s / 1000.0,
+               config.limits)  # fmt: skip
+    frames, _ = zero_wrist(rig.arm, sensor, 0.3, f"the first stand-off ({first.press_id})", check_unloaded=False)
+    with rig.arm.keep_alive():  # a device bias waits for the sensor to settle; the arm rests meanwhile
+        record = sensor.tare(frames)
     sensor.poll()  # frames from during a device bias are not kept
     return {
         "method": record.method,
@@ -190,7 +230,8 @@ def _one_press(
 
     A sensor that stalls or drops off the bus/port mid-press aborts the press (kept, marked ``aborted``); the sensor
     is reconnected and the press retried once. A second failure, or a sensor that does not come back, stops the
-    session cleanly (the arm backed off to the stand-off). Safety stops and Ctrl-C are re-raised after saving.
+    session cleanly (the arm backed off to the stand-off). Safety stops, a stopped controller program, a lost robot
+    state stream and Ctrl-C are re-raised after saving; a protective stop with what to do on the pendant.
     """
     config = rig.config
     for attempt in (1, 2):
@@ -209,6 +250,10 @@ def _one_press(
             if isinstance(exc, SafetyLimit):
                 _back_off(rig, plan)
             outcome.stopped = f"{type(exc).__name__} at press {plan.press_id}: {exc}"
+            if isinstance(exc, ProtectiveStop):
+                stop = ProtectiveStop(f"protective stop at press {plan.press_id} ({exc})", hint=PROTECTIVE_STOP_HINT)
+                stop.press_record = partial  # type: ignore[attr-defined]
+                raise stop from exc
             raise
         except DeviceError as exc:  # the sensor stalled (DeviceTimeout) or its link failed (port/bus gone)
             partial = getattr(exc, "press_record", None)
@@ -219,7 +264,8 @@ def _one_press(
             if attempt == 1:
                 log.warning("%s; reconnecting the sensor and retrying the press once", exc)
                 try:
-                    _reconnect(rig, sensor)
+                    with rig.arm.keep_alive():
+                        _reconnect(rig, sensor)
                 except DeviceError as again:
                     outcome.stopped = f"sensor {what} at press {plan.press_id} and did not come back: {again}"
                     return partial, True
@@ -227,7 +273,8 @@ def _one_press(
                 continue
             outcome.stopped = f"sensor {what} twice at press {plan.press_id}: {exc}"
             return partial, True
-        _save(writer, sensor, record, extraction, outcome)
+        with rig.arm.keep_alive():
+            _save(writer, sensor, record, extraction, outcome)
         return record, False
     return None, True
 
@@ -252,10 +299,15 @@ def _reconnect(rig: Rig, sensor: TactileSensor) -> None:
 
 
 def _back_off(rig: Rig, plan: PressPlan) -> None:
-    """Move back to the press's stand-off after an abort, so a stopped session never leaves the pad loaded."""
+    """Move back along the ray to the press's stand-off after an abort, so a stopped session never leaves the pad
+    loaded. Not when the controller stopped on its own (protective stop, program stopped): the operator decides."""
+    arm = rig.arm
     try:
-        rig.arm.move_linear(plan.start_pose, rig.config.press.transit_speed_mm_s / 1000.0, 0.5)
-    except Exception:  # best effort: the arm may be in a protective stop; the next run starts with the same move
+        check_controller(arm.read_state(), "the back-off")
+        move_to(arm, plan.start_pose, rig.config.press.transit_speed_mm_s / 1000.0, TRANSIT_ACCEL_M_S2)
+    except (ProtectiveStop, ControlScriptStopped) as exc:
+        log.warning("not backing off after press %s: %s", plan.press_id, exc)
+    except Exception:  # best effort; the next run starts with a checked move to the stand-off anyway
         log.exception("backing off to the stand-off of press %s failed", plan.press_id)
 
 
@@ -280,3 +332,44 @@ def _save(
         outcome.failed += 1
     else:
         outcome.aborted += 1
+
+
+@dataclass
+class DryRunOutcome:
+    """What a dry run visited: stand-off poses and all waypoints (clearance ones included)."""
+
+    standoffs: int = 0
+    waypoints: int = 0
+    visited: list[str] = field(default_factory=list)  # press ids whose stand-off was reached
+
+
+def dry_run(
+    rig: Rig,
+    obj: ObjectSpec,
+    *,
+    rotations: Sequence[float] | None = None,
+    on_standoff: Callable[[PressPlan, int, int], None] | None = None,
+) -> DryRunOutcome:
+    """Move through every stand-off and clearance waypoint of the session's plan without pressing or recording.
+
+    For the first run on a new rig, with the object removed: every waypoint is checked against the workspace and the
+    arm's reach before it is sent, and every move is watched as in a real session (a touch stops it). Waits
+    ``DRY_RUN_HOLD_S`` at each stand-off. ``on_standoff(plan, index, total)`` after each.
+    """
+    config = rig.config
+    plans = plan_presses(obj, config, list(obj.rotations_deg if rotations is None else rotations))
+    arm: Arm = rig.arm
+    outcome = DryRunOutcome()
+    speed = config.press.transit_speed_mm_s / 1000.0
+    clearance = config.object.clearance_mm / 1000.0
+    for index, plan in enumerate(plans):
+        here = arm.read_state().tcp_pose
+        outcome.waypoints += len(clearance_waypoints(here, plan, clearance))
+        move_clear(arm, plan, clearance, speed, config.limits)
+        settle(arm, DRY_RUN_HOLD_S, on_period=transit_guard(arm, config.limits))
+        outcome.standoffs += 1
+        outcome.visited.append(plan.press_id)
+        if on_standoff is not None:
+            with arm.keep_alive():
+                on_standoff(plan, index + 1, len(plans))
+    return outcome

@@ -5,36 +5,51 @@ It implements :class:`drivers.arm.Arm`, so the press routine cannot tell it from
 What is modelled (numbers and sources in :class:`SimArmParams`):
 
 * kinematics only: the TCP follows commanded velocities under an acceleration limit (``speed_linear``), decelerates
-  over ``v^2 / 2a`` when stopped (``stop``), follows a trapezoidal straight line (``move_linear``, blocking), or obeys
-  an admittance law in force mode (``force_mode``: velocity along a compliant axis = gain x force error, clipped to
-  the axis' speed limit; non-compliant axes hold still);
+  over ``v^2 / 2a`` when stopped (``stop``), follows a trapezoidal straight line (``start_move_linear``, asynchronous
+  and stoppable like ``moveL(..., asynchronous=True)``; ``move_linear`` blocks until it ends), or obeys an admittance
+  law in force mode (``force_mode``: velocity along a compliant axis = gain x force error, clipped to the axis' speed
+  limit and reached under an acceleration limit; non-compliant axes hold still);
 * the wrist F/T: the world's wrench (:class:`unitac_rig.sim.world.ContactWorld`) delayed by a few ms, plus a bias
   that starts random and drifts slowly (so ``zero_ft`` matters), plus white noise, through a first-order low-pass
   filter, minus the offset captured by the last ``zero_ft``;
-* a protective stop when the true contact force exceeds ``protective_stop_n`` (or on
-  :meth:`SimArm.trigger_protective_stop`): the arm decelerates to rest and every command raises
-  :class:`~drivers.errors.ProtectiveStop` until :meth:`SimArm.unlock_protective_stop`.
+* the control program a real controller runs for ur_rtde, with the behaviour that matters for safety
+  (``hardware-facts`` 3.8 and ur_rtde's ``rtde_control.script``):
+
+  - the controller keeps executing the last command on its own: whenever the clock advances, by the host's
+    ``wait_period`` or by anyone else (a stalled host), the arm moves on. ``speed_linear`` keeps going even with a
+    time limit, because ur_rtde's speed thread repeats ``speedl(xd, a, t)`` in a loop; force mode keeps
+    regulating toward its last set-point;
+  - the RTDE watchdog (``set_watchdog``): if the host writes nothing (a command, ``kick_watchdog`` or
+    ``wait_period``) for longer than 1 / frequency, the program stops and the arm brakes to rest;
+  - a protective stop when the true contact force exceeds ``protective_stop_n`` (or on
+    :meth:`SimArm.trigger_protective_stop`): the arm brakes to rest, the program stops, and every command raises
+    (:class:`~drivers.errors.ProtectiveStop` while the stop lasts, then
+    :class:`~drivers.errors.ControlScriptStopped`) until the stop is unlocked *and* the program re-uploaded
+    (:meth:`unlock_protective_stop`, :meth:`reupload_script`), as with ``reuploadScript()`` on a real arm.
 
 Not modelled: joint space, singularities, reach, arm dynamics or compliance, the 5 s wait before a protective stop
-may be unlocked, payload/gravity compensation of the F/T.
+may be unlocked, payload/gravity compensation of the F/T, emergency and safeguard stops.
 
 Time only moves when someone advances the virtual clock: ``wait_period`` integrates one 2 ms control period and then
 advances the clock (which makes simulated sensors emit the samples that fall due, reading :meth:`true_tcp_pose`).
-If other code advances the clock directly, the arm integrates those periods too (it listens to the clock).
+If other code advances the clock directly (a host stall injected by a test or benchmark), the arm integrates those
+periods too (it listens to the clock), exactly as a controller goes on while its host is frozen.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
-from drivers.arm import ArmState
+from drivers.arm import DEFAULT_WATCHDOG_HZ, ArmState
 from drivers.clock import Clock, VirtualClock
-from drivers.errors import ArmError, ProtectiveStop
+from drivers.errors import ArmError, ControlScriptStopped, ProtectiveStop
 from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
 from unitac_rig.sim.world import ContactWorld
 
@@ -43,6 +58,8 @@ SAFETY_MODE_NORMAL = 1
 SAFETY_MODE_PROTECTIVE_STOP = 3
 
 DEFAULT_START_POSE = np.array([-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214])  # m, rad: pad facing base +y
+
+_UNLOCK_HINT = "unlock the protective stop, then re-upload the control program"
 
 
 @dataclass(frozen=True)
@@ -69,6 +86,8 @@ class SimArmParams:
     protective_stop_n: float = 150.0
     # Deceleration during a protective stop (a category-2 stop along the path) [I]: the stopL default, 10 m/s^2.
     protective_stop_decel_m_s2: float = 10.0
+    # Deceleration when the program stops (watchdog, stopScript) [I]: the same 10 m/s^2.
+    program_stop_decel_m_s2: float = 10.0
     # Argument checks ur_rtde applies (tool speed <= 3 m/s, tool accel <= 150 m/s^2) [S, hardware-facts 3.4].
     max_tool_speed_m_s: float = 3.0
     max_tool_accel_m_s2: float = 150.0
@@ -76,16 +95,35 @@ class SimArmParams:
     # contact stiffnesses up to ~250 N/mm; torque axes 0.05 rad/s per N*m.
     force_mode_gain_m_s_per_n: float = 0.002
     force_mode_gain_rad_s_per_nm: float = 0.05
+    # Force mode reaches the admittance velocity under an acceleration limit, not instantly [I]: a controller
+    # brakes a fast approach over a few ms when the contact force rises, which adds to the overshoot. 1 m/s^2
+    # (1 rad/s^2) brakes 15 mm/s in 15 ms over 0.11 mm.
+    force_mode_accel_m_s2: float = 1.0
 
 
 _Mode = Literal["idle", "speed", "stop", "force", "path"]
+
+
+@dataclass
+class _Path:
+    """An asynchronous straight-line move in progress (trapezoidal profile over the distance)."""
+
+    start_position: np.ndarray
+    start_rotation: np.ndarray
+    delta_position: np.ndarray
+    delta_rotvec: np.ndarray
+    goal: np.ndarray
+    profile: _Trapezoid
+    elapsed_s: float = 0.0
 
 
 class SimArm:
     """A simulated UR5e implementing :class:`drivers.arm.Arm` on a :class:`~drivers.clock.VirtualClock`.
 
     ``world`` gives the wrench on the tool at a pose; ``rng`` drives the F/T noise and bias (seed it for a
-    deterministic run); ``start_pose`` is (6,) [x, y, z (m), rx, ry, rz (rad)].
+    deterministic run); ``start_pose`` is (6,) [x, y, z (m), rx, ry, rz (rad)]. ``watchdog_hz``: the RTDE watchdog
+    frequency, armed with the first motion command (the fast twin's arm exists before the host first uses it, and
+    sensor detection advances the clock meanwhile); None leaves it off.
     """
 
     control_period_s: float = 0.002  # 500 Hz, a UR e-Series controller cycle [S]
@@ -98,6 +136,7 @@ class SimArm:
         rng: np.random.Generator,
         params: SimArmParams | None = None,
         start_pose: np.ndarray | None = None,
+        watchdog_hz: float | None = DEFAULT_WATCHDOG_HZ,
     ) -> None:
         self.world = world
         self.clock: Clock = clock  # typed as the Arm protocol's Clock; the arm itself drives the virtual one
@@ -115,11 +154,21 @@ class SimArm:
         self._target_twist = np.zeros(6)
         self._accel_m_s2 = 0.0
         self._force_command: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._path: _Path | None = None
         self._protective_stop = False
+        self._program_running = True
+        self._program_stop_reason: str | None = None
         self._closed = False
 
         self._period_ns = round(self.control_period_s * 1e9)
         self._integrated_ns = clock.now_ns()
+        if watchdog_hz is not None and not watchdog_hz > 0:
+            raise ArmError(f"watchdog frequency must be > 0 Hz, got {watchdog_hz}")
+        self._pending_watchdog_hz = watchdog_hz
+        self._watchdog_ns: int | None = None  # armed: longest allowed gap between host writes
+        self._last_write_ns = self._integrated_ns
+        self._kept_alive = False
+
         self._true_wrench = np.asarray(world.wrench_on_tool(self.true_tcp_pose()), dtype=np.float64)
         delay_periods = max(0, round(self.params.ft_latency_s / self.control_period_s))
         # Holds the last ``delay_periods`` true wrenches: append the new one, pop the one that is now due.
@@ -154,13 +203,13 @@ class SimArm:
 
     # ---- Arm: commands --------------------------------------------------------------------------------------
 
-    def move_linear(self, pose: np.ndarray, speed_m_s: float, accel_m_s2: float) -> None:
-        """Blocking straight line with a trapezoidal speed profile; the clock advances through the move.
+    def start_move_linear(self, pose: np.ndarray, speed_m_s: float, accel_m_s2: float) -> None:
+        """Start a straight line with a trapezoidal speed profile and return at once (``moveL`` asynchronous).
 
-        The orientation turns in proportion to the distance covered. Raises ProtectiveStop (arm at rest) if a
-        protective stop trips on the way.
+        The orientation turns in proportion to the distance covered. The move runs as the clock advances;
+        :meth:`move_running` says when it is over, :meth:`stop` ends it early.
         """
-        self._check_command()
+        self._command()
         goal = _as_vector(pose, 6, "pose")
         self._check_speed(speed_m_s, accel_m_s2)
         start_position, start_rotation = self._position.copy(), self._rotation.copy()
@@ -172,54 +221,63 @@ class SimArm:
             distance = float(np.linalg.norm(delta_rotvec))
         profile = _Trapezoid(distance, speed_m_s, accel_m_s2)
         self._mode, self._force_command = "path", None
-        elapsed_s = 0.0
-        try:
-            while elapsed_s < profile.duration_s:
-                elapsed_s = min(elapsed_s + self.control_period_s, profile.duration_s)
-                fraction, rate = profile.at(elapsed_s)
-                if fraction >= 1.0:  # land exactly on the commanded pose
-                    self._position = goal[:3].copy()
-                    self._set_rotation(rotvec_to_matrix(goal[3:]), goal[3:])
-                else:
-                    self._position = start_position + fraction * delta_position
-                    self._set_rotation(rotvec_to_matrix(fraction * delta_rotvec) @ start_rotation)
-                self._velocity = rate * delta_position
-                self._angular_velocity = rate * delta_rotvec
-                self._advance_one_period(integrate=False)
-                if self._protective_stop:
-                    self._settle_after_protective_stop()
-                    raise ProtectiveStop(
-                        "protective stop during a linear move",
-                        hint="move the arm clear, then unlock the protective stop",
-                    )
-        finally:
-            if self._mode == "path":
-                self._mode = "idle"
-                self._velocity[:] = 0.0
-                self._angular_velocity[:] = 0.0
+        self._path = _Path(start_position, start_rotation, delta_position, delta_rotvec, goal, profile)
 
-    def speed_linear(self, twist: np.ndarray, accel_m_s2: float) -> None:
-        """Velocity command (m/s, rad/s, base frame) reached under ``accel_m_s2``; lasts until the next command."""
-        self._check_command()
+    def move_running(self) -> bool:
+        """True while the move started by :meth:`start_move_linear` runs (``getAsyncOperationProgress() >= 0``)."""
+        return self._mode == "path"
+
+    def move_linear(self, pose: np.ndarray, speed_m_s: float, accel_m_s2: float) -> None:
+        """Blocking straight line: :meth:`start_move_linear`, then the clock advances (host-driven) until it ends.
+
+        Raises ProtectiveStop (arm at rest) if a protective stop trips on the way.
+        """
+        self.start_move_linear(pose, speed_m_s, accel_m_s2)
+        assert self._path is not None
+        if self._path.profile.duration_s <= 0:  # nothing to do: land exactly, spend no time
+            self._finish_path(self._path)
+            return
+        while self._mode == "path":
+            self.wait_period()
+        if self._protective_stop:
+            self._settle_after_protective_stop()
+            raise ProtectiveStop("protective stop during a linear move", hint=_UNLOCK_HINT)
+        if not self._program_running:
+            reason = self._program_stop_reason
+            raise ControlScriptStopped(f"the control program stopped during a linear move ({reason})")
+
+    def speed_linear(self, twist: np.ndarray, accel_m_s2: float, time_s: float = 0.0) -> None:
+        """Velocity command (m/s, rad/s, base frame) reached under ``accel_m_s2``; lasts until the next command.
+
+        ``time_s`` is accepted like ur_rtde's ``speedL(xd, a, t)`` and, as on a controller running ur_rtde's script,
+        does not end the motion: the script's speed thread calls ``speedl(xd, a, t)`` again and again.
+        """
+        self._command()
         target = _as_vector(twist, 6, "twist")
         self._check_speed(float(np.linalg.norm(target[:3])), accel_m_s2)
-        self._mode, self._force_command = "speed", None
+        if not time_s >= 0:
+            raise ArmError(f"speedL time must be >= 0 s, got {time_s}")
+        self._mode, self._force_command, self._path = "speed", None, None
         self._target_twist = target
         self._accel_m_s2 = accel_m_s2
 
     def stop(self, decel_m_s2: float = 10.0) -> None:
-        """Decelerate to rest at ``decel_m_s2`` (stopping distance v^2 / 2a). Never raises on a stopped arm."""
+        """Decelerate to rest at ``decel_m_s2`` (stopping distance v^2 / 2a), ending a move, a speed command or force
+        mode. Never raises on a stopped arm (closed, protective stop, program not running)."""
         if decel_m_s2 <= 0:
             raise ArmError(f"deceleration must be > 0 m/s^2, got {decel_m_s2}")
-        if self._closed:
-            return
-        if self._protective_stop:
-            return  # already braking at the protective-stop deceleration
+        if self._closed or self._protective_stop or not self._program_running:
+            return  # already braking (protective stop, program stop) or at rest
+        self._note_write()
         self._begin_stop(min(decel_m_s2, self.params.max_tool_accel_m_s2))
+
+    def stop_linear(self, decel_m_s2: float = 10.0) -> None:
+        """``stopL``: end an asynchronous move (same as :meth:`stop` here)."""
+        self.stop(decel_m_s2)
 
     def zero_ft(self) -> None:
         """Take the current (filtered) F/T reading as the new zero, like ``zeroFtSensor``."""
-        self._check_command()
+        self._command()
         self._zero_offset = self._filtered.copy()
         self._latest = self._snapshot()
 
@@ -235,25 +293,55 @@ class SimArm:
         ``wrench`` is what the robot should apply to the environment (N, N*m) in ``task_frame`` axes; ``limits``
         are the speed limits of compliant axes (m/s, rad/s). Non-compliant axes hold still.
         """
-        self._check_command()
+        self._command()
         frame = _as_vector(task_frame, 6, "task_frame")
         chosen = _as_vector(selection, 6, "selection") != 0
         target = _as_vector(wrench, 6, "wrench")
         speed_limits = np.abs(_as_vector(limits, 6, "limits"))
-        self._mode = "force"
+        self._mode, self._path = "force", None
         self._force_command = (rotvec_to_matrix(frame[3:]), chosen, target, speed_limits)
 
     def force_mode_stop(self) -> None:
         """Leave force mode and stop (the ur_rtde script does ``end_force_mode(); stopl(10)``)."""
         if self._mode == "force":
+            self._note_write()
             self._force_command = None
             if not self._protective_stop:
                 self._begin_stop(10.0)
 
+    def set_watchdog(self, min_frequency_hz: float) -> None:
+        """Arm the RTDE watchdog now: the program stops when the host writes nothing for 1 / ``min_frequency_hz``."""
+        self._command()
+        if not min_frequency_hz > 0:
+            raise ArmError(f"watchdog frequency must be > 0 Hz, got {min_frequency_hz}")
+        self._pending_watchdog_hz = min_frequency_hz
+        self._watchdog_ns = round(1e9 / min_frequency_hz)
+
+    def kick_watchdog(self) -> None:
+        """A host write that does nothing else (``kickWatchdog``)."""
+        self._note_write()
+
+    @contextlib.contextmanager
+    def keep_alive(self) -> Iterator[None]:
+        """Feed the watchdog while the host does non-motion work with the arm at rest (UR5eArm runs a kicker
+        thread); time advanced inside counts as kicked. Raises ArmError if the arm is commanded to move."""
+        if self._mode not in ("idle", "stop"):
+            raise ArmError(f"keep_alive needs the arm at rest, but it is in {self._mode} mode")
+        self._kept_alive = True
+        try:
+            yield
+        finally:
+            self._kept_alive = False
+            self._note_write()
+
     def wait_period(self) -> None:
-        """Integrate one control period, then advance the virtual clock by it (simulated sensors sample then)."""
+        """Integrate one control period, then advance the virtual clock by it (simulated sensors sample then).
+
+        Counts as a host write for the watchdog (``UR5eArm.wait_period`` kicks it).
+        """
         if self._closed:
             raise ArmError("the simulated arm is closed", hint="open a new rig")
+        self._note_write()
         self._advance_one_period(integrate=True)
 
     def close(self) -> None:
@@ -261,13 +349,13 @@ class SimArm:
         if self._closed:
             return
         self._closed = True
-        self._mode, self._force_command = "idle", None
+        self._mode, self._force_command, self._path = "idle", None, None
         self._velocity[:] = 0.0
         self._angular_velocity[:] = 0.0
         self._latest = self._snapshot()
         self.virtual_clock.remove_listener(self._on_clock_advance)
 
-    # ---- faults ---------------------------------------------------------------------------------------------
+    # ---- faults and recovery --------------------------------------------------------------------------------
 
     def trigger_protective_stop(self) -> None:
         """Fault hook: the controller enters a protective stop now (as if a safety limit tripped)."""
@@ -275,13 +363,45 @@ class SimArm:
         self._latest = self._snapshot()
 
     def unlock_protective_stop(self) -> None:
-        """Clear a protective stop (the dashboard's unlockProtectiveStop). It trips again if the force is still high."""
+        """Clear a protective stop (the dashboard's ``unlock protective stop``). It trips again if the force is still
+        high. The program stays stopped: commands are refused until :meth:`reupload_script`."""
         self._protective_stop = False
+        self._latest = self._snapshot()
+
+    def reupload_script(self) -> None:
+        """Start the control program again (``reuploadScript()``); the watchdog is off until set again.
+
+        Raises ProtectiveStop while a protective stop is not yet unlocked.
+        """
+        if self._closed:
+            raise ArmError("the simulated arm is closed", hint="open a new rig")
+        if self._protective_stop:
+            raise ProtectiveStop("cannot start the control program during a protective stop", hint=_UNLOCK_HINT)
+        self._program_running, self._program_stop_reason = True, None
+        self._watchdog_ns, self._pending_watchdog_hz = None, None
+        self._note_write()
+
+    def stop_program(self, reason: str = "stopped by the host") -> None:
+        """Stop the control program (``stopScript``, or the pendant's stop button): the arm brakes to rest."""
+        self._stop_program(reason)
         self._latest = self._snapshot()
 
     @property
     def protective_stopped(self) -> bool:
         return self._protective_stop
+
+    @property
+    def program_running(self) -> bool:
+        return self._program_running
+
+    @property
+    def program_stop_reason(self) -> str | None:
+        """Why the program last stopped ("watchdog", "protective stop", ...), None while it runs."""
+        return self._program_stop_reason
+
+    @property
+    def watchdog_armed(self) -> bool:
+        return self._watchdog_ns is not None
 
     # ---- internals ------------------------------------------------------------------------------------------
 
@@ -293,14 +413,23 @@ class SimArm:
         self._rotation = rotation
         self._rotvec = matrix_to_rotvec(rotation) if rotvec is None else np.array(rotvec, dtype=np.float64)
 
-    def _check_command(self) -> None:
+    def _command(self) -> None:
+        """Gate of every motion command: refuse it unless the program runs, count the write, arm the watchdog."""
         if self._closed:
             raise ArmError("the simulated arm is closed", hint="open a new rig")
         if self._protective_stop:
-            raise ProtectiveStop(
-                "the simulated arm is in a protective stop",
-                hint="move the arm clear, then unlock the protective stop",
+            raise ProtectiveStop("the simulated arm is in a protective stop", hint=_UNLOCK_HINT)
+        if not self._program_running:
+            raise ControlScriptStopped(
+                f"the control program is not running ({self._program_stop_reason})",
+                hint="re-upload the control program (a new connection does it)",
             )
+        self._note_write()
+        if self._watchdog_ns is None and self._pending_watchdog_hz is not None:
+            self._watchdog_ns = round(1e9 / self._pending_watchdog_hz)
+
+    def _note_write(self) -> None:
+        self._last_write_ns = max(self._last_write_ns, self.virtual_clock.now_ns())
 
     def _check_speed(self, speed_m_s: float, accel_m_s2: float) -> None:
         if not 0 <= speed_m_s <= self.params.max_tool_speed_m_s:
@@ -309,14 +438,21 @@ class SimArm:
             raise ArmError(f"tool acceleration {accel_m_s2} m/s^2 is outside (0, {self.params.max_tool_accel_m_s2}]")
 
     def _begin_stop(self, decel_m_s2: float) -> None:
-        self._mode, self._force_command = "stop", None
+        self._mode, self._force_command, self._path = "stop", None, None
         self._target_twist = np.zeros(6)
         self._accel_m_s2 = decel_m_s2
 
     def _enter_protective_stop(self) -> None:
         if not self._protective_stop:
             self._protective_stop = True
-            self._begin_stop(self.params.protective_stop_decel_m_s2)
+            self._stop_program("protective stop", decel_m_s2=self.params.protective_stop_decel_m_s2)
+
+    def _stop_program(self, reason: str, decel_m_s2: float | None = None) -> None:
+        if self._program_running:
+            self._program_running, self._program_stop_reason = False, reason
+            self._watchdog_ns = None
+        if self._mode != "idle" or np.any(self._velocity) or np.any(self._angular_velocity):
+            self._begin_stop(self.params.program_stop_decel_m_s2 if decel_m_s2 is None else decel_m_s2)
 
     def _settle_after_protective_stop(self) -> None:
         """Inside a blocking move: brake to rest before reporting the stop (moveL returns False after stopping)."""
@@ -338,34 +474,43 @@ class SimArm:
         self._integrated_ns += self._period_ns
         self.virtual_clock.advance_ns(self._period_ns)  # our listener takes the new snapshot
 
-    def _command_twist(self) -> np.ndarray | None:
-        """Velocity the controller wants this period, or None in speed/stop mode (accel-limited target)."""
-        if self._mode == "force" and self._force_command is not None:
-            rotation, chosen, target, speed_limits = self._force_command
-            measured = self._filtered - self._zero_offset
-            applied_task = -np.concatenate([rotation.T @ measured[:3], rotation.T @ measured[3:]])
-            gains = np.array(
-                [self.params.force_mode_gain_m_s_per_n] * 3 + [self.params.force_mode_gain_rad_s_per_nm] * 3
-            )
-            twist_task = np.where(chosen, np.clip(gains * (target - applied_task), -speed_limits, speed_limits), 0.0)
-            return np.concatenate([rotation @ twist_task[:3], rotation @ twist_task[3:]])
-        if self._mode == "idle":
-            return np.zeros(6)
-        return None
+    def _check_watchdog(self) -> None:
+        """Controller side, once per period: stop the program when the host has not written in time."""
+        if self._watchdog_ns is None or not self._program_running:
+            return
+        if self._kept_alive:
+            self._last_write_ns = self._integrated_ns
+        elif self._integrated_ns + self._period_ns - self._last_write_ns > self._watchdog_ns:
+            self._stop_program("watchdog: the host wrote nothing in time")
+
+    def _force_twist(self) -> np.ndarray:
+        """Velocity the force-mode admittance law asks for this period (base frame)."""
+        assert self._force_command is not None
+        rotation, chosen, target, speed_limits = self._force_command
+        measured = self._filtered - self._zero_offset
+        applied_task = -np.concatenate([rotation.T @ measured[:3], rotation.T @ measured[3:]])
+        gains = np.array([self.params.force_mode_gain_m_s_per_n] * 3 + [self.params.force_mode_gain_rad_s_per_nm] * 3)
+        twist_task = np.where(chosen, np.clip(gains * (target - applied_task), -speed_limits, speed_limits), 0.0)
+        return np.concatenate([rotation @ twist_task[:3], rotation @ twist_task[3:]])
 
     def _integrate_motion(self) -> None:
+        self._check_watchdog()
         dt = self.control_period_s
-        commanded = self._command_twist()
-        if commanded is not None:  # idle or force mode: the velocity is set, not ramped
-            step = 0.5 * (self._velocity + commanded[:3]) * dt
-            turn = 0.5 * (self._angular_velocity + commanded[3:]) * dt
-            self._velocity, self._angular_velocity = commanded[:3].copy(), commanded[3:].copy()
+        if self._mode == "path" and self._path is not None:
+            self._step_path(self._path, dt)
+            return
+        if self._mode == "idle":
+            step = 0.5 * self._velocity * dt
+            turn = 0.5 * self._angular_velocity * dt
+            self._velocity, self._angular_velocity = np.zeros(3), np.zeros(3)
         else:
-            self._velocity, step = _ramp(self._velocity, self._target_twist[:3], self._accel_m_s2, dt)
-            if np.any(self._angular_velocity) or np.any(self._target_twist[3:]):
-                self._angular_velocity, turn = _ramp(
-                    self._angular_velocity, self._target_twist[3:], self._accel_m_s2, dt
-                )
+            if self._mode == "force" and self._force_command is not None:
+                target, accel = self._force_twist(), self.params.force_mode_accel_m_s2
+            else:
+                target, accel = self._target_twist, self._accel_m_s2
+            self._velocity, step = _ramp(self._velocity, target[:3], accel, dt)
+            if np.any(self._angular_velocity) or np.any(target[3:]):
+                self._angular_velocity, turn = _ramp(self._angular_velocity, target[3:], accel, dt)
             else:
                 turn = np.zeros(3)
             if self._mode == "stop" and not np.any(self._velocity) and not np.any(self._angular_velocity):
@@ -373,6 +518,24 @@ class SimArm:
         self._position = self._position + step
         if np.any(turn):
             self._set_rotation(rotvec_to_matrix(turn) @ self._rotation)
+
+    def _step_path(self, path: _Path, dt: float) -> None:
+        path.elapsed_s = min(path.elapsed_s + dt, path.profile.duration_s)
+        fraction, rate = path.profile.at(path.elapsed_s)
+        if fraction >= 1.0:  # land exactly on the commanded pose
+            self._finish_path(path)
+            return
+        self._position = path.start_position + fraction * path.delta_position
+        self._set_rotation(rotvec_to_matrix(fraction * path.delta_rotvec) @ path.start_rotation)
+        self._velocity = rate * path.delta_position
+        self._angular_velocity = rate * path.delta_rotvec
+
+    def _finish_path(self, path: _Path) -> None:
+        self._position = path.goal[:3].copy()
+        self._set_rotation(rotvec_to_matrix(path.goal[3:]), path.goal[3:])
+        self._velocity, self._angular_velocity = np.zeros(3), np.zeros(3)
+        self._mode, self._path = "idle", None
+        self._latest = self._snapshot()
 
     def _update_sensor(self) -> None:
         """One F/T sample: true wrench -> latency -> + bias + noise -> low-pass; and the protective-stop check."""
@@ -403,6 +566,7 @@ class SimArm:
             safety_mode=SAFETY_MODE_PROTECTIVE_STOP if self._protective_stop else SAFETY_MODE_NORMAL,
             protective_stop=self._protective_stop,
             tcp_speed=np.concatenate([self._velocity, self._angular_velocity]),
+            program_running=self._program_running,
         )
 
 

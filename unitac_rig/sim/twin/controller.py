@@ -660,6 +660,8 @@ class Controller:
         op = request.get("op")
         if op == "reset_peak":
             self.peak_force_n = float(np.linalg.norm(self.arm.true_wrench()[:3]))
+        elif op == "reset_timing":
+            self.worst_lateness_s, self.late_cycles, self.skipped_cycles = 0.0, 0, 0
         elif op == "emergency_stop":
             self.emergency_stop()
         elif op == "release_emergency_stop":

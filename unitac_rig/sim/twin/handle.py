@@ -48,9 +48,10 @@ class ControllerTwin:
     controller answers and its safety limits. Raises :class:`AddressTaken` when a port on ``host`` is in use.
 
     Ground truth: :meth:`truth` (a :class:`TwinTruth` snapshot, read from shared memory without a round trip) and
-    :meth:`true_pad_pose`. Test hooks: :meth:`reset_peak`, :meth:`emergency_stop`, :meth:`release_emergency_stop`,
-    :meth:`trigger_protective_stop`, :meth:`set_placement_error`, :meth:`set_remote_control`,
-    :meth:`set_pendant_tcp`, :meth:`set_pendant_payload`; :meth:`status` for the program state and last error.
+    :meth:`true_pad_pose`. Test hooks: :meth:`reset_peak`, :meth:`reset_timing`, :meth:`emergency_stop`,
+    :meth:`release_emergency_stop`, :meth:`trigger_protective_stop`, :meth:`set_placement_error`,
+    :meth:`set_remote_control`, :meth:`set_pendant_tcp`, :meth:`set_pendant_payload`; :meth:`status` for the program
+    state and last error.
 
     Disconnect every ur_rtde client *before* :meth:`close`: a controller that vanishes under a connected control
     client makes its next blocking command wait 300 s.
@@ -163,6 +164,10 @@ class ControllerTwin:
     def reset_peak(self) -> None:
         """Start a new peak-force window (the peak becomes the force now)."""
         self._hook("reset_peak")
+
+    def reset_timing(self) -> None:
+        """Start a new window for the cycle-timing statistics (worst lateness, late and skipped cycles)."""
+        self._hook("reset_timing")
 
     def emergency_stop(self) -> None:
         """Press the emergency stop: the arm brakes, the program stops, the arm powers off once at rest."""

@@ -127,12 +127,12 @@ def sweep(control: Any, receive: Any, twin: Any, spec: SceneSpec, angles: list[f
 
 
 def draw(periods_ms: np.ndarray, round_trips_ms: np.ndarray, gaps_ms: np.ndarray, path: Path) -> Path:
-    fig = new_figure(11.0, 3.4)
+    fig = new_figure(12.0, 3.6)
     axes = fig.subplots(1, 3)
     panels = [
         (periods_ms, "host 500 Hz loop period (ms)", 2.0),
         (round_trips_ms, "zeroFtSensor round trip (ms)", None),
-        (gaps_ms, "controller timestamp gap seen by the host (ms)", 2.0),
+        (gaps_ms, "controller time step seen by the host (ms)", 2.0),
     ]
     for ax, (values, label, nominal) in zip(axes, panels, strict=True):
         ax.hist(values, bins=60, color="tab:blue")

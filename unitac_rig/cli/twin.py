@@ -5,6 +5,9 @@ object in front of the arm, serves the mounted sensor on loopback network transp
 rig file that points the hardware code path at it (stdout; ``--write-rig`` also saves it), and then reports what the
 controller does (program started or stopped, protective and emergency stops, watchdog trips) on stderr. In another
 terminal, ``unitac-rig collect --rig <that file> --object <same object>`` runs exactly as on the robot.
+
+Lines typed on its stdin act as the teach pendant: ``unlock`` (unlock a protective stop), ``estop`` (press the
+emergency stop), ``release`` (release it, power on and release the brakes), ``pstop`` (a protective stop), ``status``.
 """
 
 from __future__ import annotations
@@ -76,15 +79,53 @@ def twin(
             if not quiet:
                 typer.echo(
                     f"twin: {rig.object_id} at {rig.rotation_deg:g} deg, {rig.sensor} mounted, controller on "
-                    f"{host} (pid {rig.controller.pid}); Ctrl-C stops it",
+                    f"{host} (pid {rig.controller.pid}, {rig.controller.status()['scheduling']}); Ctrl-C stops it; "
+                    f"{PENDANT_HELP}",
                     err=True,
                 )
+            threading.Thread(target=_pendant, args=(rig, stop), name="twin-pendant", daemon=True).start()
             _watch(rig, stop, quiet)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     if not quiet:
         typer.echo("twin: stopped", err=True)
+
+
+PENDANT_HELP = "pendant commands: unlock, estop, release, pstop, status"
+
+
+def _pendant(rig: object, stop: threading.Event) -> None:
+    """Read pendant commands from stdin until it closes or the twin stops (a daemon thread; stdin may be a pipe)."""
+    from unitac_rig.sim.twin.rig import RigTwin
+
+    assert isinstance(rig, RigTwin)
+    controller = rig.controller
+    for line in sys.stdin:
+        if stop.is_set():
+            return
+        command = line.strip().lower()
+        try:
+            if command == "unlock":
+                reply = controller.unlock_protective_stop()
+            elif command == "estop":
+                controller.emergency_stop()
+                reply = "emergency stop pressed"
+            elif command == "release":
+                controller.release_emergency_stop()
+                reply = f"emergency stop released; power on: {controller.power_on()}"
+            elif command == "pstop":
+                controller.trigger_protective_stop("pendant")
+                reply = "protective stop"
+            elif command == "status":
+                reply = f"{_status_line(controller.truth())}; {controller.status().get('last_error') or 'no error'}"
+            elif command:
+                reply = PENDANT_HELP
+            else:
+                continue
+        except Exception as exc:  # the twin may be stopping; a pendant line must never kill the command
+            reply = f"failed: {exc}"
+        typer.echo(f"pendant: {reply}", err=True)
 
 
 def _watch(rig: object, stop: threading.Event, quiet: bool) -> None:

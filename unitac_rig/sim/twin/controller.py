@@ -189,6 +189,7 @@ class Controller:
         self.selector = selectors.DefaultSelector()
         self.listeners: dict[int, socket.socket] = {}
         self._stop = False
+        self.scheduling = "normal"
 
     @property
     def now_s(self) -> float:
@@ -662,6 +663,10 @@ class Controller:
             self.peak_force_n = float(np.linalg.norm(self.arm.true_wrench()[:3]))
         elif op == "reset_timing":
             self.worst_lateness_s, self.late_cycles, self.skipped_cycles = 0.0, 0, 0
+        elif op == "unlock_protective_stop":
+            return {"ok": True, "reply": self.unlock_protective_stop()}
+        elif op == "power_on":
+            return {"ok": True, "reply": "Brake releasing" if self.power_on() and self.brake_release() else "Failed"}
         elif op == "emergency_stop":
             self.emergency_stop()
         elif op == "release_emergency_stop":
@@ -684,6 +689,7 @@ class Controller:
             return {
                 "ok": True,
                 "program_state": self.program_state(),
+                "scheduling": self.scheduling,
                 "last_error": self.last_error,
                 "active_tcp": [float(v) for v in self.arm.active_tcp],
                 "payload_kg": self.payload_kg,
@@ -774,6 +780,21 @@ def _take_program(text: str) -> tuple[str | None, str]:
     return None, text
 
 
+def _raise_priority() -> str:
+    """Ask for real-time scheduling as a controller has it; say what was granted (never fails)."""
+    if hasattr(os, "sched_setscheduler"):
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+            return "SCHED_FIFO 10"
+        except (PermissionError, OSError):
+            pass
+    try:
+        os.nice(-10)
+        return "nice -10"
+    except (PermissionError, OSError):
+        return "normal (no permission for more)"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Process entry point: settings on the first stdin line, the truth block on ``--truth-fd``."""
     import argparse
@@ -795,7 +816,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     line, _, extra = first.partition(b"\n")
     settings = TwinSettings.from_json(line.decode())
     truth = TruthBlock(args.truth_fd)
+    scheduling = _raise_priority() if settings.params.realtime_priority else "normal (not asked)"
     controller = Controller(settings, truth, hooks_in=stdin_fd)
+    controller.scheduling = scheduling
     try:
         controller.bind()
     except OSError as exc:

@@ -177,6 +177,14 @@ class ControllerTwin:
         """Release the button; the arm stays powered off until the dashboard powers it on and releases the brakes."""
         self._hook("release_emergency_stop")
 
+    def unlock_protective_stop(self) -> str:
+        """What the pendant's "unlock" does (the dashboard's ``unlock protective stop``); returns PolyScope's reply."""
+        return str(self._hook("unlock_protective_stop")["reply"])
+
+    def power_on(self) -> str:
+        """Power the arm on and release the brakes (the pendant's "ON" then "START"); returns the reply."""
+        return str(self._hook("power_on")["reply"])
+
     def trigger_protective_stop(self, why: str = "test hook") -> None:
         """Inject a protective stop (as if a safety limit tripped)."""
         self._hook("protective_stop", why=why)

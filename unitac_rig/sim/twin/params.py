@@ -48,6 +48,9 @@ class ControllerParams:
     payload_cog_m: tuple[float, float, float] = (0.0, 0.0, 0.025)
     # A late cycle is caught up (integrated) up to this many periods at once; beyond, the twin's time skips [I].
     max_catch_up_cycles: int = 250
+    # A controller runs its cycle at real-time priority. The twin asks the OS for SCHED_FIFO (or failing that a
+    # higher nice level) and carries on without when it is not allowed (an ordinary user on Linux).
+    realtime_priority: bool = True
     # Which servers to start (tests leave one out to see the client's error).
     serve: tuple[str, ...] = ("dashboard", "script", "rtde")
 

@@ -10,7 +10,7 @@ import torch
 from learning_helpers import small_sets
 
 from unitac_rig.learning.data import PairedDataset, build_paired_dataset
-from unitac_rig.learning.run import checkpoint_path, load_checkpoint, save_checkpoint
+from unitac_rig.learning.run import checkpoint_path, load_checkpoint, safe_torch_load, save_checkpoint
 from unitac_rig.learning.train import TrainConfig, load_run, train
 
 TINY = TrainConfig(epochs=2, seeds=(0, 1), tsne_contacts=30, checkpoint_every=1)
@@ -57,7 +57,7 @@ def test_a_version_1_checkpoint_loads_and_resumes(pairs: PairedDataset, tmp_path
     )
     del payload["format"], payload["version"]
     save_checkpoint(run_dir, payload)
-    raw = torch.load(checkpoint_path(run_dir), weights_only=False)
+    raw = safe_torch_load(checkpoint_path(run_dir), what="checkpoint")  # numpy arrays: allowed, nothing else
     raw["version"] = 1
     torch.save(raw, checkpoint_path(run_dir))
 

@@ -4,12 +4,20 @@ in ``RUN/test_set.npz``, plus human-readable ``config.json``, ``metrics.json``, 
 The checkpoint holds the model configuration, every member's parameters, the optimizer state and random streams,
 the normalisation statistics, the split, the dataset's content hash, the per-epoch history, and provenance
 (package version, git commit, torch version). It is written atomically (temporary file, then rename).
+
+Every checkpoint is read with ``torch.load(..., weights_only=True)`` (:func:`safe_torch_load`): unpickling may only
+build tensors, plain Python containers and numbers, and plain numeric numpy arrays (version 1 stored a few), so a run
+directory from someone else cannot run code on the machine that opens it. A file that needs anything else is refused
+with a :class:`ModelError` naming what it holds, before any of it is built.
 """
 
 from __future__ import annotations
 
 import os
+import pickle
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -56,18 +64,90 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any]:
         raise UsageError(f"{run_dir} does not exist", hint="pass the --out folder of `unitac-rig train`")
     if not path.is_file():
         raise UsageError(f"{run_dir} is not a training run (no {CHECKPOINT_NAME})", hint="run `unitac-rig train` first")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as exc:  # torch raises several unrelated types for a damaged or foreign file
-        raise ModelError(f"{path} cannot be read ({exc})", hint="retrain, or restore the file from a backup") from exc
+    payload = safe_torch_load(path, what="checkpoint")
     if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
-        raise ModelError(f"{path} is not a unitac-rig UniTac-NV checkpoint")
-    if int(payload.get("version", -1)) > CHECKPOINT_VERSION:
         raise ModelError(
-            f"{path} was written by a newer unitac-rig (checkpoint version {payload['version']})",
-            hint="upgrade unitac-rig",
+            f"{path} is not a unitac-rig UniTac-NV checkpoint ({describe_foreign(payload)})",
+            hint="a run directory is what `unitac-rig train --out RUN` writes; to hand a model over, use "
+            "`unitac-rig export-model`",
+        )
+    version = payload.get("version")
+    if not isinstance(version, int) or version < 1:
+        raise ModelError(
+            f"{path} is a unitac-rig checkpoint of an unknown version ({version!r})",
+            hint="retrain with `unitac-rig train`",
+        )
+    if version > CHECKPOINT_VERSION:
+        raise ModelError(
+            f"{path} was written by a newer unitac-rig (checkpoint version {version})", hint="upgrade unitac-rig"
         )
     return payload
+
+
+def _numpy_array_globals() -> list[Any]:
+    """What unpickling a plain numeric/bool/str numpy array needs (numpy's documented reconstruct path). An object
+    array would still need its elements' classes, which stay forbidden."""
+    dtypes = [type(np.dtype(code)) for code in "?bBhHiIlLqQefdgFDGU"]
+    return [np._core.multiarray._reconstruct, np.ndarray, np.dtype, *dtypes]  # type: ignore[attr-defined]
+
+
+@contextmanager
+def _allow_numpy_arrays() -> Iterator[None]:
+    with torch.serialization.safe_globals(_numpy_array_globals()):
+        yield
+
+
+def safe_torch_load(path: Path, *, what: str) -> Any:
+    """``torch.load(path, weights_only=True)`` on the CPU, numeric numpy arrays allowed; a :class:`ModelError` that
+    says what the file is and what to do when it holds anything else, is damaged or is not a torch file at all.
+
+    ``what`` names the file in messages ("checkpoint", "geometry estimator").
+    """
+    path = Path(path)
+    try:
+        with _allow_numpy_arrays():
+            return torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as exc:
+        unsafe = _unsafe_globals(path)
+        if unsafe:
+            listed = ", ".join(unsafe[:4]) + (", ..." if len(unsafe) > 4 else "")
+            raise ModelError(
+                f"{path} was not loaded: this {what} holds pickled Python objects ({listed}), not only tensors and "
+                "plain values, and unpickling them could run code",
+                hint="it is an old unitac-rig file (from before checkpoint version 2) or not one of ours: retrain "
+                "with this unitac-rig, or ask its author for a fresh run",
+            ) from exc
+        raise ModelError(f"{path} cannot be read as a {what} ({_first_line(exc)})", hint="the file is damaged") from exc
+    except Exception as exc:  # torch raises many unrelated types (IndexError, RuntimeError...) for a damaged file
+        raise ModelError(
+            f"{path} cannot be read as a {what}: not a PyTorch file or damaged ({_first_line(exc)})",
+            hint="retrain, or restore the file from a backup",
+        ) from exc
+
+
+def _unsafe_globals(path: Path) -> list[str]:
+    """The classes and functions a file's pickle would import, read from its opcodes (nothing is executed)."""
+    try:
+        names = torch.serialization.get_unsafe_globals_in_checkpoint(path)
+    except Exception:  # a legacy (non-zip) or damaged file: no listing, the caller says so without it
+        return []
+    allowed = {f"{g.__module__}.{g.__qualname__}" for g in _numpy_array_globals()}
+    return sorted(n for n in names if n not in allowed)
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0][:200] if text else type(exc).__name__
+
+
+def describe_foreign(payload: Any) -> str:
+    """A few words on what a file that is not our checkpoint holds, for the error message."""
+    if isinstance(payload, dict):
+        if payload and all(isinstance(v, torch.Tensor) for v in payload.values()):
+            return f"a plain PyTorch state dict of {len(payload)} tensors"
+        keys = ", ".join(sorted(str(k) for k in payload)[:6])
+        return f"a dict with keys {keys}" if keys else "an empty dict"
+    return f"a {type(payload).__name__}"
 
 
 def provenance() -> dict[str, str]:

@@ -92,6 +92,8 @@ class ScriptHost(Protocol):
 
     def reachable(self, tcp_pose: np.ndarray) -> bool: ...
 
+    def prepare_move(self, tcp_pose: np.ndarray) -> None: ...
+
 
 class ScriptError(Exception):
     """A URScript runtime error: the controller stops the program (and says why in its log)."""
@@ -239,6 +241,7 @@ class ControlScript:
         if self._speed_thread or self._force_thread:
             logger.warning("movel while a speed or force thread runs: the twin ends the thread's motion")
             self._speed_thread = self._force_thread = False
+        self.host.prepare_move(pose)
         self.host.arm.movel(pose, speed, accel)
         if asynchronous:
             self._move_thread = True

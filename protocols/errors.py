@@ -4,8 +4,21 @@ Every error the project raises on purpose derives from :class:`UnitacError`, so 
 one clear line. It lives in ``protocols`` because that is the bottom layer every other layer may import.
 """
 
+from typing import Any
 
-class UnitacError(Exception):
+
+class CarriesPressRecord:
+    """An exception that hands its catcher what was recorded before it was raised.
+
+    The press routine stops the arm, then re-raises with the aborted press's record
+    (``unitac_rig.storage.press_record.PressRecord``) here, so the session can still save it. None when nothing was
+    recorded. Every :class:`UnitacError` has it; ``unitac_rig.errors.Interrupted`` is the Ctrl-C that does.
+    """
+
+    press_record: Any = None
+
+
+class UnitacError(CarriesPressRecord, Exception):
     """Base class for all errors raised by unitac-rig on purpose.
 
     ``hint`` is an optional short sentence telling the user what to do about it.

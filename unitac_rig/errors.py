@@ -1,21 +1,26 @@
 """The application's exception tree (rooted in :class:`protocols.errors.UnitacError`)."""
 
+from typing import Any
+
 from drivers.errors import ArmError, DeviceError, DeviceNotFound, DeviceTimeout, ProtectiveStop
-from protocols.errors import ProtocolError, UnitacError
+from protocols.errors import CarriesPressRecord, ProtocolError, UnitacError
 
 __all__ = [
     "ArmError",
+    "CarriesPressRecord",
     "ConfigError",
     "DataError",
     "DeviceError",
     "DeviceNotFound",
     "DeviceTimeout",
+    "Interrupted",
     "ModelError",
     "ProtectiveStop",
     "ProtocolError",
     "SafetyLimit",
     "UnitacError",
     "UsageError",
+    "with_press_record",
 ]
 
 
@@ -37,3 +42,22 @@ class SafetyLimit(UnitacError):
 
 class ModelError(UnitacError):
     """A trained model cannot do what was asked (unknown sensor, incompatible checkpoint)."""
+
+
+class Interrupted(CarriesPressRecord, KeyboardInterrupt):
+    """Ctrl-C during a press, re-raised once the arm stopped, with the press recorded so far (still a
+    KeyboardInterrupt: nothing that catches ``Exception`` swallows it)."""
+
+
+def with_press_record(exc: BaseException, record: Any) -> BaseException:
+    """``exc`` carrying ``record`` for its catcher: a project error keeps it in ``press_record``; a Ctrl-C becomes
+    :class:`Interrupted` (caused by the original); any other exception is returned unchanged (nobody keeps it)."""
+    if isinstance(exc, CarriesPressRecord):
+        exc.press_record = record
+        return exc
+    if isinstance(exc, KeyboardInterrupt):
+        interrupted = Interrupted(*exc.args)
+        interrupted.press_record = record
+        interrupted.__cause__ = exc
+        return interrupted
+    return exc

@@ -171,9 +171,8 @@ class Cell:
 def run_cell(cell: Cell) -> list[PressSample]:
     """Press every angle of ``cell`` on a fresh simulated rig; returns one sample per press."""
     from drivers.errors import DeviceTimeout, ProtectiveStop
-    from drivers.motion import move_to
-    from unitac_rig.collection.press import run_press, settle_frames
-    from unitac_rig.collection.session import plan_presses
+    from unitac_rig.collection.press import move_clear, run_press
+    from unitac_rig.collection.session import plan_presses, session_tare
     from unitac_rig.errors import SafetyLimit
     from unitac_rig.rig.config import parse_rig_config
     from unitac_rig.rig.objects import get_object
@@ -190,21 +189,21 @@ def run_cell(cell: Cell) -> list[PressSample]:
         sensor = rig.open_sensor(cell.sensor)
         try:
             rig.mount(obj, rotation, cell.sensor)
-            # session start, as collect_session does it: zero the wrist and tare the sensor at the first stand-off
-            move_to(rig.arm, plans[0].start_pose, config.press.transit_speed_mm_s / 1000.0, 0.5)
-            rig.arm.zero_ft()
-            frames, _ = settle_frames(rig.arm, sensor, 0.3)
-            sensor.tare(frames)
-            sensor.poll()
+            session_tare(rig, sensor, plans[0])  # the session's start: wrist zeroed, sensor tared at the stand-off
+            clearance_m = config.object.clearance_mm / 1000.0
             for plan in plans:
-                move_to(rig.arm, plan.start_pose, config.press.transit_speed_mm_s / 1000.0, 0.5)
+                # the session's transit to the stand-off, done before the clock starts: a cycle excludes transit
+                move_clear(rig.arm, plan, clearance_m, config.press.transit_speed_mm_s / 1000.0, config.limits)
                 truth = _TruthRecorder(rig, plan.direction)
                 began_ns, began_wall = rig.clock.now_ns(), time.perf_counter()
                 record: PressRecord | None
                 try:
-                    record = run_press(rig.arm, sensor, plan, config.press, config.limits, on_tick=truth.on_tick)
+                    record = run_press(
+                        rig.arm, sensor, plan, config.press, config.limits, on_tick=truth.on_tick,
+                        clearance_m=clearance_m,
+                    )  # fmt: skip
                 except (SafetyLimit, ProtectiveStop, DeviceTimeout) as exc:
-                    record = getattr(exc, "press_record", None)
+                    record = exc.press_record
                     if record is None:
                         raise
                     rig.sim_arm.unlock_protective_stop()

@@ -49,7 +49,7 @@ from drivers.motion import (
     wait_until_at_rest,
 )
 from drivers.sensor import TactileSensor
-from unitac_rig.errors import SafetyLimit
+from unitac_rig.errors import SafetyLimit, with_press_record
 from unitac_rig.rig.config import LimitsConfig, PressConfig
 from unitac_rig.rig.poses import approach_direction, pose_from, press_force_n, press_rotation
 from unitac_rig.storage.press_record import PressRecord, press_id
@@ -372,9 +372,10 @@ def run_press(
     stand-off.
 
     Raises SafetyLimit (hard force limit), ProtectiveStop, ControlScriptStopped, RobotStateLost and KeyboardInterrupt
-    *after* stopping the arm; the partial record is attached to the exception as ``exc.press_record`` so the caller
-    can keep it. A press that never touches anything ends ``aborted`` with reason ``no_contact`` (it is redone on
-    resume, once the object is where it should be).
+    *after* stopping the arm, carrying the partial record in ``exc.press_record`` so the caller can keep it (Ctrl-C
+    comes back as :class:`unitac_rig.errors.Interrupted`, a KeyboardInterrupt that carries it). A press that never
+    touches anything ends ``aborted`` with reason ``no_contact`` (it is redone on resume, once the object is where it
+    should be).
     """
     move_clear(arm, plan, clearance_m, press.transit_speed_mm_s / 1000.0, limits)
     frames, wrenches = zero_wrist(arm, sensor, settle_s, f"the stand-off of press {plan.press_id}")
@@ -419,14 +420,12 @@ def run_press(
             stop_arm(arm)
     record = _to_record(streams, plan, press, status, reason, baseline, tare, ft_offset)
     if pending is not None:
-        pending.press_record = record  # type: ignore[attr-defined]
-        raise pending
+        raise with_press_record(pending, record)
     try:  # back out to the stand-off, so the next transit starts clear of the object
         move_to(arm, plan.start_pose, press.transit_speed_mm_s / 1000.0, TRANSIT_ACCEL_M_S2,
                 on_period=transit_guard(arm, limits))  # fmt: skip
     except BaseException as exc:
-        exc.press_record = record  # type: ignore[attr-defined]
-        raise
+        raise with_press_record(exc, record)  # noqa: B904 - the same exception (or Ctrl-C as Interrupted, caused by it)
     return record
 
 

@@ -39,7 +39,7 @@ from unitac_rig.collection.press import (
     transit_guard,
     zero_wrist,
 )
-from unitac_rig.errors import SafetyLimit
+from unitac_rig.errors import CarriesPressRecord, SafetyLimit
 from unitac_rig.provenance import git_commit, package_version
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import RigConfig
@@ -161,7 +161,7 @@ def collect_session(
         try:
             writer.update_root_attrs({"sensor_identity": sensor.identity(), "layout": sensor.layout.name})
             rig.mount(obj, todo[0].rotation_deg, sensor_name)
-            writer.update_root_attrs({"session_tare": _session_tare(rig, sensor, todo[0])})
+            writer.update_root_attrs({"session_tare": session_tare(rig, sensor, todo[0])})
         except BaseException:
             writer.discard_if_unused()  # nor may an arm or sensor that fails before the first press
             raise
@@ -195,7 +195,7 @@ def collect_session(
     return outcome
 
 
-def _session_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> dict[str, Any]:
+def session_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> dict[str, Any]:
     """Zero the wrist F/T and tare the sensor (device bias where it has one) at the first stand-off pose.
 
     The stand-off is clear of the object by construction (the object's outline plus the stand-off gap), so this is
@@ -241,7 +241,7 @@ def _one_press(
                 clearance_m=config.object.clearance_mm / 1000.0,
             )  # fmt: skip
         except (SafetyLimit, ProtectiveStop, ArmError, KeyboardInterrupt) as exc:
-            partial = getattr(exc, "press_record", None)
+            partial = exc.press_record if isinstance(exc, CarriesPressRecord) else None
             if partial is not None:
                 _save(writer, sensor, partial, extraction, outcome)
             if isinstance(exc, KeyboardInterrupt):
@@ -252,11 +252,11 @@ def _one_press(
             outcome.stopped = f"{type(exc).__name__} at press {plan.press_id}: {exc}"
             if isinstance(exc, ProtectiveStop):
                 stop = ProtectiveStop(f"protective stop at press {plan.press_id} ({exc})", hint=PROTECTIVE_STOP_HINT)
-                stop.press_record = partial  # type: ignore[attr-defined]
+                stop.press_record = partial
                 raise stop from exc
             raise
         except DeviceError as exc:  # the sensor stalled (DeviceTimeout) or its link failed (port/bus gone)
-            partial = getattr(exc, "press_record", None)
+            partial = exc.press_record
             if partial is not None:
                 _save(writer, sensor, partial, extraction, outcome)
             what = "stalled" if isinstance(exc, DeviceTimeout) else "failed"

@@ -102,27 +102,13 @@ def _plot_corners(report: dict[str, Any], path: Path) -> Path:
         for i in failing:
             ax.axvspan(i - 0.45, i + 0.45, color="red", alpha=0.08, zorder=0)
     if failing:
-        axes[0, 0].annotate(
-            "paper: poor reconstructions at sharp edges\nwith a small contact area",
-            (failing[0], 1.0),
-            xycoords=("data", "axes fraction"),
-            xytext=(4, -4),
-            textcoords="offset points",
-            fontsize=7,
-            color="darkred",
-            va="top",
-        )
-        axes[-1, 0].annotate(
+        _paper_note(axes[0, 0], failing[0], "paper: poor reconstructions at sharp edges\nwith a small contact area")
+        _paper_note(
+            axes[-1, 0],
+            failing[0],
             "paper (Sec. IV-C): geometry estimation\nambiguous at the 80° corner"
             if geometry is not None
             else "paper: 80° corner",
-            (failing[0], 1.0),
-            xycoords=("data", "axes fraction"),
-            xytext=(4, -4),
-            textcoords="offset points",
-            fontsize=7,
-            color="darkred",
-            va="top",
         )
     seeds = len(report["seeds"])
     fig.suptitle(
@@ -131,6 +117,20 @@ def _plot_corners(report: dict[str, Any], path: Path) -> Path:
         fontsize=9,
     )
     return save_figure(fig, path)
+
+
+def _paper_note(ax: Axes, x: float, text: str) -> None:
+    """A dark-red remark at the top of the panel, beside bar ``x``."""
+    ax.annotate(
+        text,
+        (x, 1.0),
+        xycoords=("data", "axes fraction"),
+        xytext=(4, -4),
+        textcoords="offset points",
+        fontsize=7,
+        color="darkred",
+        va="top",
+    )
 
 
 def _plot_materials(report: dict[str, Any], path: Path) -> Path:

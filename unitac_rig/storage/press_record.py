@@ -136,27 +136,12 @@ def write_press_group(parent: h5py.Group, rec: PressRecord, name: str | None = N
     tac = g.create_group("tactile")
     tac.create_dataset("t_s", data=np.asarray(rec.tactile_t_s, np.float64))
     values = np.asarray(rec.tactile_values, np.float32)
-    tac.create_dataset(
-        "values",
-        data=values,
-        compression="gzip",
-        compression_opts=1,
-        shuffle=True,
-        chunks=True if values.size else None,
-    )
+    _frames_dataset(tac, "values", values)
     tac.create_dataset("seq", data=np.asarray(rec.tactile_seq, np.int64))
     tac.create_dataset("device_t_us", data=np.asarray(rec.tactile_device_t_us, np.int64))
     tac.create_dataset("valid", data=np.asarray(rec.tactile_valid, bool))
     if rec.tactile_displacement_mm is not None:
-        disp = np.asarray(rec.tactile_displacement_mm, np.float32)
-        tac.create_dataset(
-            "displacement_mm",
-            data=disp,
-            compression="gzip",
-            compression_opts=1,
-            shuffle=True,
-            chunks=True if disp.size else None,
-        )
+        _frames_dataset(tac, "displacement_mm", np.asarray(rec.tactile_displacement_mm, np.float32))
     g.create_dataset("tare_baseline", data=np.asarray(rec.tare_baseline, np.float64))
     ev_dtype = np.dtype([("t_s", np.float64), ("kind", h5py.string_dtype()), ("detail", h5py.string_dtype())])
     g.create_dataset("events", data=np.array([(t, k, d) for t, k, d in rec.events], dtype=ev_dtype))
@@ -164,6 +149,13 @@ def write_press_group(parent: h5py.Group, rec: PressRecord, name: str | None = N
         write_extraction(g, rec.extraction, values - np.asarray(rec.tare_baseline, np.float32)[None])
     g.attrs["write_complete"] = True
     return g
+
+
+def _frames_dataset(group: h5py.Group, name: str, frames: np.ndarray) -> None:
+    """A (M, n_taxels, 3) float32 stream, gzip level 1 with shuffle (chunked unless empty)."""
+    group.create_dataset(
+        name, data=frames, compression="gzip", compression_opts=1, shuffle=True, chunks=True if frames.size else None
+    )
 
 
 def read_press_group(g: h5py.Group) -> PressRecord:

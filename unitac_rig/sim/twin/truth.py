@@ -117,12 +117,16 @@ class TruthBlock:
                 return None
             time.sleep(0)
 
-    def read_pad_pose(self) -> np.ndarray | None:
-        """Just the physical tool's pose (what the sensors sample), without building a whole snapshot."""
+    def read_pad_pose(self, timeout_s: float = 0.5) -> np.ndarray | None:
+        """Just the physical tool's pose (what the sensors sample), without building a whole snapshot; None before
+        the first write or when the writer died mid-write."""
+        deadline = time.monotonic() + timeout_s
         while True:
             (before,) = _SEQ.unpack_from(self._map, 0)
             pose = struct.unpack_from("<6d", self._map, _SEQ.size + 16)
             (after,) = _SEQ.unpack_from(self._map, 0)
             if before == after and before % 2 == 0:
                 return None if before == 0 else np.array(pose)
+            if time.monotonic() > deadline:
+                return None
             time.sleep(0)

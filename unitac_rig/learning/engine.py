@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -79,6 +79,34 @@ class GroupSpec:
 
     name: str
     sensors: tuple[str, ...]
+    # The decoder's output layers, each for some of ``sensors`` (in order); () means one layer for all of them. A
+    # sensor added to a trained model gets its own output layer (its "head") beside the frozen original one.
+    heads: tuple[tuple[str, ...], ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.heads and tuple(s for head in self.heads for s in head) != tuple(self.sensors):
+            raise ModelError(f"group {self.name}: heads {self.heads} do not list its sensors {self.sensors} in order")
+
+    @property
+    def output_heads(self) -> tuple[tuple[str, ...], ...]:
+        return self.heads or (tuple(self.sensors),)
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"name": self.name, "sensors": list(self.sensors)}
+        if len(self.output_heads) > 1:
+            out["heads"] = [list(head) for head in self.heads]
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> GroupSpec:
+        heads = tuple(tuple(str(s) for s in head) for head in d.get("heads") or ())
+        return cls(str(d["name"]), tuple(str(s) for s in d["sensors"]), heads if len(heads) > 1 else ())
+
+
+def head_part(head: Sequence[str], index: int) -> str:
+    """Layer-key part of a decoder output layer: ``dec`` for the first (the original model's), ``head_<sensors>``
+    for a head added later, so a trained model's keys never change when a sensor is added."""
+    return "dec" if index == 0 else "head_" + "+".join(head)
 
 
 def baseline_name(sensor: str) -> str:
@@ -99,7 +127,7 @@ def _stream_seed(seed: int, stream: int) -> int:
 
 @dataclass(frozen=True)
 class _Layer:
-    key: str  # "<group>/<part>/<index>", part = "enc_<sensor>" or "dec"
+    key: str  # "<group>/<part>/<index>", part = "enc_<sensor>", "dec" or "head_<sensor>" (an added output layer)
     fan_in: int
     fan_out: int
 
@@ -115,7 +143,8 @@ class _Encoder:
 class _Group:
     spec: GroupSpec
     encoders: tuple[_Encoder, ...]
-    decoder: tuple[str, ...]  # layer keys, latent to output
+    trunk: tuple[str, ...]  # the decoder's hidden layer keys, latent onwards (ReLU and dropout after each)
+    heads: tuple[str, ...]  # its output layer keys, one per head; their outputs concatenated are the group's frames
 
 
 class StackedAutoencoders:
@@ -134,7 +163,10 @@ class StackedAutoencoders:
         device: torch.device | str = "cpu",
         *,
         initialise: bool = True,
+        frozen: Collection[str] = (),
     ) -> None:
+        """``frozen``: layer keys that are never trained (their tensors do not require gradients and the optimizer
+        does not hold them), as when a sensor is added to a trained model (:meth:`with_new_sensor`)."""
         if not seeds:
             raise ModelError("at least one seed is needed")
         if not 0.0 <= shape.dropout < 1.0:
@@ -157,7 +189,16 @@ class StackedAutoencoders:
             k: torch.zeros(m, n.fan_in, n.fan_out, device=dev, requires_grad=True) for k, n in self._layers.items()
         }
         self.biases = {k: torch.zeros(m, 1, n.fan_out, device=dev, requires_grad=True) for k, n in self._layers.items()}
+        unknown_frozen = sorted(set(frozen) - set(self._layers))
+        if unknown_frozen:
+            raise ModelError(f"cannot freeze unknown layer(s) {unknown_frozen}")
+        self.frozen = frozenset(frozen)
+        for key in self.frozen:
+            self.weights[key].requires_grad_(False)
+            self.biases[key].requires_grad_(False)
         self._plan = self._forward_plan()
+        self._trained_plan = [g for g in self._plan if self._trains(g)]
+        self._pair_masks = {g.spec.name: self._pair_mask(g) for g in self._plan}
         self._mask_plans: dict[int, tuple[int, int, dict[str, tuple[int, int, int]]]] = {}
         self._mask_buffers: dict[int, torch.Tensor] = {}
         self._loss_weight_cache: dict[tuple[str, int], torch.Tensor] = {}
@@ -188,12 +229,12 @@ class StackedAutoencoders:
                     _Layer(self._key(group.name, f"enc_{sensor}", i), widths[i], widths[i + 1])
                     for i in range(len(widths) - 1)
                 ]
-            widths = [
-                self.shape.latent_dim,
-                *self.shape.decoder_hidden,
-                sum(self.feature_dims[s] for s in group.sensors),
-            ]
+            widths = [self.shape.latent_dim, *self.shape.decoder_hidden]
             plan += [_Layer(self._key(group.name, "dec", i), widths[i], widths[i + 1]) for i in range(len(widths) - 1)]
+            out = len(widths) - 1
+            for h, head in enumerate(group.output_heads):
+                fan_out = sum(self.feature_dims[s] for s in head)
+                plan.append(_Layer(self._key(group.name, head_part(head, h), out), widths[-1], fan_out))
         return plan
 
     def _forward_plan(self) -> list[_Group]:
@@ -201,7 +242,7 @@ class StackedAutoencoders:
         for sensor in self.sensors:
             columns[sensor] = (start, start + self.feature_dims[sensor])
             start += self.feature_dims[sensor]
-        n_enc, n_dec = len(self.shape.encoder_hidden) + 1, len(self.shape.decoder_hidden) + 1
+        n_enc, n_hidden = len(self.shape.encoder_hidden) + 1, len(self.shape.decoder_hidden)
         return [
             _Group(
                 group,
@@ -209,26 +250,61 @@ class StackedAutoencoders:
                     _Encoder(s, tuple(self._key(group.name, f"enc_{s}", i) for i in range(n_enc)), columns[s])
                     for s in group.sensors
                 ),
-                tuple(self._key(group.name, "dec", i) for i in range(n_dec)),
+                tuple(self._key(group.name, "dec", i) for i in range(n_hidden)),
+                tuple(self._key(group.name, head_part(head, h), n_hidden) for h, head in enumerate(group.output_heads)),
             )
             for group in self.groups
         ]
 
+    def _trains(self, group: _Group) -> bool:
+        """Whether any layer of ``group`` is trained (a wholly frozen group is left out of the loss)."""
+        keys = [k for e in group.encoders for k in e.layers] + [*group.trunk, *group.heads]
+        return any(k not in self.frozen for k in keys)
+
+    def _pair_mask(self, group: _Group) -> torch.Tensor | None:
+        """(sources, targets) 1.0 where a (source, target) pair's loss reaches a trained layer (the source's
+        encoder, the decoder's hidden layers or the target's head), else 0.0; None when every pair does. A pair of
+        frozen layers only adds a constant to the loss, so it is left out (and the train loss reads as the loss of
+        what is trained)."""
+        trunk_trained = any(k not in self.frozen for k in group.trunk)
+        head_of = {s: key for key, head in zip(group.heads, group.spec.output_heads, strict=True) for s in head}
+        on = torch.tensor(
+            [
+                [
+                    float(
+                        trunk_trained
+                        or any(k not in self.frozen for k in encoder.layers)
+                        or head_of[target] not in self.frozen
+                    )
+                    for target in group.spec.sensors
+                ]
+                for encoder in group.encoders
+            ]
+        )
+        return None if bool(on.all()) else on.to(self.device)
+
     def parameters(self) -> list[torch.Tensor]:
-        """Every parameter tensor, in the fixed order (per layer: weight, bias) the optimizer state refers to."""
+        """Every parameter tensor, in the fixed order (per layer: weight, bias)."""
         return [p for key in self._layers for p in (self.weights[key], self.biases[key])]
+
+    def trainable_parameters(self) -> list[torch.Tensor]:
+        """The parameters that are not frozen, in :meth:`parameters`' order: what the optimizer state refers to."""
+        return [p for key in self._layers if key not in self.frozen for p in (self.weights[key], self.biases[key])]
 
     @property
     def theta(self) -> torch.Tensor:
         """All parameters as one flat copy (per layer: weight then bias, each member-major), for comparisons."""
         return torch.cat([p.detach().reshape(-1) for p in self.parameters()])
 
-    def _initialise(self) -> None:
-        """PyTorch's ``nn.Linear`` default: weights and biases uniform in +-1/sqrt(fan_in), per member."""
+    def _initialise(self, keys: Sequence[str] | None = None, stream: int | None = None) -> None:
+        """PyTorch's ``nn.Linear`` default: weights and biases uniform in +-1/sqrt(fan_in), per member, drawn from
+        the member's seed (or, for layers added later, its random stream ``stream``) in layer order."""
         with torch.no_grad():
             for member, seed in enumerate(self.seeds):
-                generator = torch.Generator().manual_seed(seed)
+                generator = torch.Generator().manual_seed(seed if stream is None else _stream_seed(seed, stream))
                 for key, layer in self._layers.items():
+                    if keys is not None and key not in keys:
+                        continue
                     bound = 1.0 / math.sqrt(layer.fan_in)
                     w = torch.empty(layer.fan_in, layer.fan_out).uniform_(-bound, bound, generator=generator)
                     b = torch.empty(1, layer.fan_out).uniform_(-bound, bound, generator=generator)
@@ -245,20 +321,21 @@ class StackedAutoencoders:
     def _mask_plan(self, rows: int) -> tuple[int, int, dict[str, tuple[int, int, int]]]:
         """Per-member mask buffer for a batch of ``rows``: total units, geometric draws, key -> (offset, rows, width).
 
-        A mask follows every layer except a decoder's output layer (so the latent is dropped out too).
+        A mask follows every layer except a decoder's output layer (so the latent is dropped out too); a wholly
+        frozen group is not run in training and gets none.
         """
         if rows in self._mask_plans:
             return self._mask_plans[rows]
         plan: dict[str, tuple[int, int, int]] = {}
         offset = 0
-        for group in self._plan:
+        for group in self._trained_plan:
             for encoder in group.encoders:
                 for key in encoder.layers:
                     width = self._layers[key].fan_out
                     plan[key] = (offset, rows, width)
                     offset += rows * width
             dec_rows = rows * len(group.encoders)
-            for key in group.decoder[:-1]:
+            for key in group.trunk:
                 width = self._layers[key].fan_out
                 plan[key] = (offset, dec_rows, width)
                 offset += dec_rows * width
@@ -289,9 +366,12 @@ class StackedAutoencoders:
         }
 
     # ---- forward / loss --------------------------------------------------------------------------------------
-    def _mlp(self, keys: Sequence[str], h: torch.Tensor, masks: Mapping[str, torch.Tensor] | None) -> torch.Tensor:
-        """ReLU between layers; each layer's output is multiplied by its dropout mask when there is one."""
-        last = len(keys) - 1
+    def _mlp(
+        self, keys: Sequence[str], h: torch.Tensor, masks: Mapping[str, torch.Tensor] | None, *, hidden: bool = False
+    ) -> torch.Tensor:
+        """ReLU between layers (and after the last one too when ``hidden``); each layer's output is multiplied by
+        its dropout mask when there is one."""
+        last = len(keys) if hidden else len(keys) - 1
         for k, key in enumerate(keys):
             h = torch.baddbmm(self.biases[key], h, self.weights[key])
             if k < last:
@@ -300,40 +380,87 @@ class StackedAutoencoders:
                 h = h * masks[key]
         return h
 
+    def _decode(self, group: _Group, z: torch.Tensor, masks: Mapping[str, torch.Tensor] | None) -> torch.Tensor:
+        """The group's decoder: hidden layers, then every output head (no ReLU, no dropout), concatenated."""
+        h = self._mlp(group.trunk, z, masks, hidden=True)
+        outs = [torch.baddbmm(self.biases[key], h, self.weights[key]) for key in group.heads]
+        return outs[0] if len(outs) == 1 else torch.cat(outs, dim=-1)
+
     def train_step(
         self,
         batch: torch.Tensor,
         optimizer: torch.optim.Optimizer,
         masks: Mapping[str, torch.Tensor] | None = None,
+        present: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """One optimisation step on ``batch`` (members, B, sum of feature dims), normalised, sensor order.
 
         Loss per group: sum over (source, target) sensor pairs of the MAE of target's frame reconstructed from the
-        source's latent. ``masks`` (from :meth:`draw_masks`) replaces this step's own draw. Returns the loss of
-        every (group, member) as a detached (groups, members) tensor; the gradients stay in the parameters' ``.grad``.
+        source's latent. ``masks`` (from :meth:`draw_masks`) replaces this step's own draw. ``present``
+        (members, B, sensors) is 1.0 where a row has that sensor's frame and 0.0 where the contact was not recorded
+        with it (the frame's columns must then hold finite filler, e.g. 0): each pair's MAE is then taken over the
+        rows that have both sensors (the masked loss). Pairs and groups whose layers are all frozen are left out.
+        Returns the loss of every (group, member) as a detached (groups, members) tensor (0 for a frozen group);
+        the gradients stay in the parameters' ``.grad``.
         """
         rows = batch.shape[1]
         if masks is None:
             masks = self.draw_masks(rows)
         optimizer.zero_grad(set_to_none=True)
+        zero = torch.zeros(self.members, device=self.device)
         with torch.enable_grad():
-            losses = torch.stack([self._group_loss(group, batch, masks) for group in self._plan])
+            losses = torch.stack(
+                [self._group_loss(g, batch, masks, present) if g in self._trained_plan else zero for g in self._plan]
+            )
             losses.sum().backward()
         optimizer.step()
         return losses.detach()
 
-    def _group_loss(self, group: _Group, batch: torch.Tensor, masks: Mapping[str, torch.Tensor] | None) -> torch.Tensor:
+    def _group_loss(
+        self,
+        group: _Group,
+        batch: torch.Tensor,
+        masks: Mapping[str, torch.Tensor] | None,
+        present: torch.Tensor | None = None,
+    ) -> torch.Tensor:
         """(members,) sum over the group's (source, target) pairs of the per-pair MAE."""
         members, rows, _ = batch.shape
         encoded = [self._mlp(e.layers, batch[..., e.columns[0] : e.columns[1]], masks) for e in group.encoders]
         latent = encoded[0] if len(encoded) == 1 else torch.cat(encoded, dim=1)
-        recon = self._mlp(group.decoder, latent, masks)
+        recon = self._decode(group, latent, masks)
         if len(group.encoders) == len(self.sensors):
             target = batch
         else:
             target = torch.cat([batch[..., e.columns[0] : e.columns[1]] for e in group.encoders], dim=-1)
         diff = recon.view(members, len(group.encoders), rows, -1) - target.unsqueeze(1)
-        return (diff.abs() * self._loss_weights(group.spec, rows)).sum(dim=(1, 2, 3))
+        pairs = self._pair_masks[group.spec.name]
+        if present is None and pairs is None:
+            loss = (diff.abs() * self._loss_weights(group.spec, rows)).sum(dim=(1, 2, 3))
+        else:
+            loss = (diff.abs() * self._masked_loss_weights(group, present, pairs, rows)).sum(dim=(1, 2, 3))
+        return loss
+
+    def _masked_loss_weights(
+        self, group: _Group, present: torch.Tensor | None, pairs: torch.Tensor | None, rows: int
+    ) -> torch.Tensor:
+        """(members, sources, rows, output columns): weight of each |error| so that the loss is the sum over the
+        pairs ``pairs`` selects of each pair's MAE over the rows where ``present`` has both sensors."""
+        sensors = [self.sensors.index(s) for s in group.spec.sensors]
+        if present is None:
+            p = torch.ones(self.members, rows, len(sensors), device=self.device)
+        else:
+            p = present[..., sensors].to(self.device, torch.float32)  # (members, rows, S)
+        both = torch.einsum("mrs,mrt->mst", p, p)  # rows that have source s and target t
+        per_pair = (pairs if pairs is not None else 1.0) / both.clamp(min=1.0)  # (members, S, S)
+        column_sensor = torch.cat(
+            [torch.full((self.feature_dims[s],), i, dtype=torch.long) for i, s in enumerate(group.spec.sensors)]
+        ).to(self.device)
+        inverse_features = torch.cat(
+            [torch.full((self.feature_dims[s],), 1.0 / self.feature_dims[s]) for s in group.spec.sensors]
+        ).to(self.device)
+        column_weight = per_pair[:, :, column_sensor] * inverse_features  # (members, S, F)
+        row_weight = p.transpose(1, 2).unsqueeze(-1) * p[:, :, column_sensor].unsqueeze(1)  # (members, S, rows, F)
+        return row_weight * column_weight.unsqueeze(2)
 
     def _loss_weights(self, group: GroupSpec, rows: int) -> torch.Tensor:
         """Weight of |error| per output column in the sum of per-pair MAEs: 1 / (rows * that sensor's features)."""
@@ -360,7 +487,7 @@ class StackedAutoencoders:
     def decode(self, group: str, z: torch.Tensor) -> dict[str, torch.Tensor]:
         """Every sensor's normalised frame (members, M, F_s) from latents (members, M, latent)."""
         spec = self._group_plan(group)
-        out = self._mlp(spec.decoder, self._broadcast(z), None)
+        out = self._decode(spec, self._broadcast(z), None)
         frames, start = {}, 0
         for sensor in spec.spec.sensors:
             stop = start + self.feature_dims[sensor]
@@ -382,19 +509,24 @@ class StackedAutoencoders:
 
     # ---- state -----------------------------------------------------------------------------------------------
     def make_optimizer(self, lr: float) -> torch.optim.Adam:
-        """One fused Adam over every parameter tensor (the ``foreach`` kernel where fused is not available)."""
+        """One fused Adam over every trainable parameter tensor (the ``foreach`` kernel where fused is not
+        available); frozen layers are not in it, so no step can move them."""
+        parameters = self.trainable_parameters()
+        if not parameters:
+            raise ModelError("every layer of this model is frozen: there is nothing to train")
         try:
-            return torch.optim.Adam(self.parameters(), lr=lr, fused=True)
+            return torch.optim.Adam(parameters, lr=lr, fused=True)
         except (RuntimeError, ValueError):  # pragma: no cover - builds without fused Adam on this device
-            return torch.optim.Adam(self.parameters(), lr=lr, foreach=True)
+            return torch.optim.Adam(parameters, lr=lr, foreach=True)
 
     def state(self) -> dict[str, Any]:
         """Structure, parameters and dropout streams as tensors and plain Python values (no pickled objects)."""
         return {
             "feature_dims": dict(self.feature_dims),
-            "groups": [{"name": g.name, "sensors": list(g.sensors)} for g in self.groups],
+            "groups": [g.to_dict() for g in self.groups],
             "seeds": list(self.seeds),
             "shape": self.shape.to_dict(),
+            "frozen": sorted(self.frozen),
             "parameters": {
                 key: {
                     "weight": self.weights[key].detach().cpu().clone(),
@@ -410,11 +542,12 @@ class StackedAutoencoders:
         """The engine a :meth:`state` describes; also reads the flat ``theta`` of checkpoint version 1."""
         engine = cls(
             state["feature_dims"],
-            [GroupSpec(g["name"], tuple(g["sensors"])) for g in state["groups"]],
+            [GroupSpec.from_dict(g) for g in state["groups"]],
             state["seeds"],
             ModelShape.from_dict(state["shape"]),
             device,
             initialise=False,
+            frozen=[str(k) for k in state.get("frozen", ())],
         )
         if "parameters" in state:
             tensors = []
@@ -455,14 +588,49 @@ class StackedAutoencoders:
     def member(self, index: int, groups: Sequence[str] | None = None) -> StackedAutoencoders:
         """A one-member copy of member ``index`` (optionally only some groups), e.g. for inference."""
         keep = [g for g in self.groups if groups is None or g.name in groups]
+        kept = {g.name for g in keep}
         single = StackedAutoencoders(
-            self.feature_dims, keep, [self.seeds[index]], self.shape, self.device, initialise=False
+            self.feature_dims,
+            keep,
+            [self.seeds[index]],
+            self.shape,
+            self.device,
+            initialise=False,
+            frozen=[k for k in self.frozen if k.split("/", 1)[0] in kept],
         )
         with torch.no_grad():
             for key in single._layers:
                 single.weights[key][0].copy_(self.weights[key][index])
                 single.biases[key][0].copy_(self.biases[key][index])
         return single
+
+    def with_new_sensor(self, sensor: str, feature_dim: int, group: str = UNITAC_GROUP) -> StackedAutoencoders:
+        """This engine with ``sensor`` added to ``group``: its own encoder and its own decoder output layer (head),
+        freshly initialised per member (from the member's seed); every existing layer copied and frozen. Training
+        the result moves only the new encoder and head against the frozen decoder trunk, so what the model already
+        does for its sensors stays bit-for-bit the same."""
+        if sensor in self.feature_dims:
+            raise ModelError(f"the model already has sensor {sensor!r}", hint="name the sensor to add")
+        spec = self.group(group)
+        grown_groups = [
+            GroupSpec(g.name, (*g.sensors, sensor), (*g.output_heads, (sensor,))) if g.name == spec.name else g
+            for g in self.groups
+        ]
+        grown = StackedAutoencoders(
+            {**self.feature_dims, sensor: int(feature_dim)},
+            grown_groups,
+            self.seeds,
+            self.shape,
+            self.device,
+            initialise=False,
+            frozen=set(self._layers) | self.frozen,
+        )
+        grown._initialise([k for k in grown._layers if k not in self._layers], stream=5)
+        with torch.no_grad():
+            for key in self._layers:
+                grown.weights[key].copy_(self.weights[key])
+                grown.biases[key].copy_(self.biases[key])
+        return grown
 
     def layer_parameters(self, group: str, member: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Weights (in, out) and biases (out,) of one member's layers, keyed ``enc_<sensor>/<i>`` / ``dec/<i>``."""

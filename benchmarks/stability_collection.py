@@ -239,15 +239,13 @@ def material_stats(sessions: dict[str, Any]) -> dict[str, Any]:
 
 
 def draw(result: dict[str, Any], out_dir: Path) -> list[Path]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from unitac_rig.plotting import new_figure, save_figure
 
     paths = []
     # A
     soft = result["soft"]
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig = new_figure(10, 3.8, layout="tight")
+    ax1, ax2 = fig.subplots(1, 2)
     for obj_id, curve in soft["curves"].items():
         ax1.plot(curve["travel_mm"], curve["force_n"], label=obj_id)
     for limit in soft["limits_mm"][:-1]:
@@ -265,17 +263,15 @@ def draw(result: dict[str, Any], out_dir: Path) -> list[Path]:
     ax2.set_xticks(soft["limits_mm"], [f"{v:g}" for v in soft["limits_mm"]])
     ax2.minorticks_off()
     ax2.legend(fontsize=7)
-    fig.tight_layout()
-    paths.append(out_dir / "stability_soft.png")
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    paths.append(save_figure(fig, out_dir / "stability_soft.png"))
 
     # B
     ramp = result["ramp"]
     rows = ramp["rows"]
     x = np.geomspace(0.002, 40.0, 200)
     tol = ramp["tolerance_n"]
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig = new_figure(10, 3.8, layout="tight")
+    ax1, ax2 = fig.subplots(1, 2)
     periods = sorted({r["frame_period_s"] for r in rows})
     for k, period in enumerate(periods):
         sel = [r for r in rows if r["frame_period_s"] == period and r["mean_abs_error_n"] is not None]
@@ -298,14 +294,12 @@ def draw(result: dict[str, Any], out_dir: Path) -> list[Path]:
     ax2.set(xscale="log", xlabel="r T (N per frame)", ylabel="fraction of the 25 targets",
             title="misses (o); matched but truly off > tol (x)")  # fmt: skip
     ax2.legend(fontsize=6)
-    fig.tight_layout()
-    paths.append(out_dir / "stability_ramp.png")
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    paths.append(save_figure(fig, out_dir / "stability_ramp.png"))
 
     # C
     sessions = result["materials"]["sessions"]
-    fig, axes = plt.subplots(1, 3, figsize=(11, 3.6))
+    fig = new_figure(11, 3.6, layout="tight")
+    axes = fig.subplots(1, 3)
     for ax, key, label in (
         (axes[0], "abs_error_n", "|matching error| (N)"),
         (axes[1], "overshoot_n", "overshoot past 10 N (N)"),
@@ -323,10 +317,7 @@ def draw(result: dict[str, Any], out_dir: Path) -> list[Path]:
         ax.set_xticks(range(1, len(names) + 1), names, fontsize=7)
         ax.set_ylabel(label)
     fig.suptitle("PLA against TPU, guarded presses at the default speed (simulated rig)")
-    fig.tight_layout()
-    paths.append(out_dir / "stability_material.png")
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
+    paths.append(save_figure(fig, out_dir / "stability_material.png"))
     return paths
 
 

@@ -65,6 +65,15 @@ def test_the_example_rig_file_is_the_one_the_twin_prints_and_points_at_it() -> N
     assert config.object == ObjectPlacement()  # the twin's scene stands where the file says
 
 
+def test_a_rehearsed_rig_file_keeps_its_object_press_and_limits() -> None:
+    """``unitac-rig twin --like FILE`` prints a twin rig file with that file's object placement, press and limits."""
+    mine = load_rig_config(REPO / "examples" / "rig.toml")
+    tables = {"press": mine.press.model_dump(mode="json"), "limits": mine.limits.model_dump(mode="json")}
+    twin_file = parse_rig_config(tomllib.loads(rig_file_text("127.0.0.9", mine.object, SensorPorts(), tables=tables)))
+    assert (twin_file.object, twin_file.press, twin_file.limits) == (mine.object, mine.press, mine.limits)
+    assert twin_file.arm is not None and twin_file.arm.host == "127.0.0.9"
+
+
 def test_the_mounted_sensor_feels_the_arm_the_controller_moves(papillarray_twin: RigTwin) -> None:
     rig = papillarray_twin
     config = parse_rig_config(tomllib.loads(rig.rig_file()))

@@ -12,6 +12,7 @@ emergency stop), ``release`` (release it, power on and release the brakes), ``ps
 
 from __future__ import annotations
 
+import dataclasses
 import signal
 import sys
 import threading
@@ -49,6 +50,9 @@ def twin(
     ),
     protective_stop_n: float = typer.Option(150.0, "--protective-stop-n", help="Controller force limit (N)."),
     unlock_delay_s: float = typer.Option(5.0, "--unlock-delay", help="Wait before a protective stop unlocks (s)."),
+    like: Path | None = typer.Option(
+        None, "--like", help="Rehearse this rig file: the object stands where it says; its TCP and payload are set."
+    ),
     write_rig: Path | None = typer.Option(None, "--write-rig", help="Also write the rig file here."),
     quiet: bool = typer.Option(False, "--quiet", help="Print the rig file only, no status lines."),
 ) -> None:
@@ -61,6 +65,18 @@ def twin(
     if not host.startswith("127."):
         raise UsageError(f"the twin serves on loopback only, not {host!r}", hint="use an address like 127.0.0.210")
     params = ControllerParams(protective_stop_n=protective_stop_n, unlock_delay_s=unlock_delay_s)
+    placement = None
+    tables: dict[str, dict[str, object]] | None = None
+    if like is not None:
+        from unitac_rig.rig.config import load_rig_config
+
+        config = load_rig_config(like)
+        placement = config.object
+        tables = {"press": config.press.model_dump(mode="json"), "limits": config.limits.model_dump(mode="json")}
+        if config.arm is not None and config.arm.tcp_offset is not None:  # the pad is where that TCP says
+            params = dataclasses.replace(params, tool_offset=tuple(config.arm.tcp_offset))
+        if config.arm is not None and config.arm.payload_kg is not None:
+            params = dataclasses.replace(params, payload_kg=config.arm.payload_kg)
 
     stop = threading.Event()
 
@@ -70,8 +86,10 @@ def twin(
     handled = [signal.SIGINT, signal.SIGTERM] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
     previous = {sig: signal.signal(sig, on_signal) for sig in handled}
     try:
-        with RigTwin(object_id, rotation_deg=rotation, sensor=sensor, host=host, seed=seed, params=params) as rig:
-            text = rig.rig_file(uskin_via)
+        with RigTwin(
+            object_id, rotation_deg=rotation, sensor=sensor, host=host, seed=seed, params=params, placement=placement
+        ) as rig:
+            text = rig.rig_file(uskin_via, tables)
             if write_rig is not None:
                 write_rig.write_text(text)
             typer.echo(text)

@@ -149,12 +149,12 @@ class RigTwin:
 
     # ---- the rig file ---------------------------------------------------------------------------------------
 
-    def rig_file(self, uskin_via: str = "xela-server") -> str:
-        """The rig file (TOML) that points the hardware code path at this twin."""
+    def rig_file(self, uskin_via: str = "xela-server", tables: dict[str, dict[str, Any]] | None = None) -> str:
+        """The rig file (TOML) that points the hardware code path at this twin (``tables``: see rig_file_text)."""
         if uskin_via not in USKIN_VIA:
             raise ValueError(f"uskin_via must be one of {USKIN_VIA}, got {uskin_via!r}")
         return rig_file_text(
-            self.host, self.placement, self.ports, uskin_via, self.papillarray_rate_hz, self.controller.params
+            self.host, self.placement, self.ports, uskin_via, self.papillarray_rate_hz, self.controller.params, tables
         )
 
     # ---- lifetime -------------------------------------------------------------------------------------------
@@ -187,11 +187,13 @@ def rig_file_text(
     uskin_via: str = "xela-server",
     papillarray_rate_hz: int = 100,
     params: ControllerParams | None = None,
+    tables: dict[str, dict[str, Any]] | None = None,
 ) -> str:
     """The rig file for a rig twin on ``host`` (both sensors listed: the twin serves only the mounted one).
 
     The uSkin entry uses ``uskin_via``; the other transport follows as a comment. The arm's TCP offset and payload
-    are what the twin's pendant is set to, so the driver's read-back check at connect passes.
+    are what the twin's pendant is set to, so the driver's read-back check at connect passes. ``tables`` (e.g. the
+    ``press`` and ``limits`` of a rig file being rehearsed) are written after ``[object]``.
     """
     params = params or ControllerParams()
     tcp = params.tool_offset if params.pendant_tcp is None else params.pendant_tcp
@@ -230,4 +232,23 @@ def rig_file_text(
         "[object]  # where the twin's scene puts the object\n"
         f"center_m = [{center}]\n"
         f"press_height_m = {float(placement.press_height_m)!r}\n"
+        + _toml_values(placement.model_dump(mode="json", exclude={"center_m", "press_height_m"}))
+        + "".join(f"\n[{name}]\n{_toml_values(values)}" for name, values in (tables or {}).items())
     )
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise ValueError(f"cannot write {value!r} into a rig file")
+
+
+def _toml_values(values: dict[str, Any]) -> str:
+    """``key = value`` lines of one flat table (numbers, strings, booleans and lists of them)."""
+    return "".join(f"{key} = {_toml_value(value)}\n" for key, value in values.items())

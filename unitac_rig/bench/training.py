@@ -346,13 +346,14 @@ def measure_budget(dataset: PairedDataset, epochs: int, eval_every: int) -> dict
         cpu_seconds = time.process_time() - began
     curve = []
     for record in outcome.history:
-        if "test" not in record:
+        scored = record.get("val") or record.get("test")  # validation curves; test only at epoch 1 and the end
+        if scored is None:
             continue
         entry: dict[str, Any] = {"epoch": record["epoch"], "seconds": record["seconds"]}
-        seen = record["test"].get("seen", {})
+        seen = scored.get("seen", {})
         for column, metrics in seen.items():
-            if column == "latent_l1":
-                entry["seen/latent_l1"] = metrics[0]
+            if not isinstance(metrics, dict):  # latent alignment entries: one value per member
+                entry[f"seen/{column}"] = metrics[0]
             else:
                 entry[f"seen/{column}/nmae"] = metrics["nmae"][0]
                 entry[f"seen/{column}/ssim"] = metrics["ssim"][0]
@@ -469,8 +470,10 @@ def plot_training_benchmark(doc: dict[str, Any], path: Path) -> Path:
     ax_rate.set_yscale("log")
     top = max(cell["steps_per_s"] for cells in doc["rates"].values() for cell in cells.values())
     ax_rate.set_ylim(top=top * 2.0)
-    ax_rate.set_ylabel("stack steps per CPU-second (batch 64; bars: median round, whiskers: range)")
-    ax_rate.set_title("every model of the stack one batch further, per second (1 CPU thread)", fontsize=9)
+    ax_rate.set_ylabel("stack steps per CPU-second")
+    ax_rate.set_title(
+        "every model of the stack one batch (64) further; 1 thread; bars: median round, whiskers: range", fontsize=9
+    )
     ax_rate.legend(fontsize=8)
     ax_rate.grid(axis="y", which="both", alpha=0.3)
 
@@ -509,6 +512,7 @@ def plot_training_benchmark(doc: dict[str, Any], path: Path) -> Path:
             ax.grid(alpha=0.3)
         ax_nmae.set_yscale("log")
         ax_nmae.legend(fontsize=7)
-    fig.suptitle(f"UniTac-NV training speed ({doc['data']}; {doc['machine']['cpus']} CPUs, load "
-                 f"{doc['machine']['load_average_1min']})", fontsize=10)  # fmt: skip
+    fig.suptitle(f"UniTac-NV training speed ({doc['data']}; {doc['machine']['cpus']} CPUs shared, load average "
+                 f"{doc['load_average_1min_at_start']} at start, {doc['machine']['load_average_1min']} at end)",
+                 fontsize=10)  # fmt: skip
     return save_figure(fig, path)

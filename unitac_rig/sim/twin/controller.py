@@ -560,12 +560,13 @@ class Controller:
     def _safe_cycle(self) -> None:
         """One cycle; a bug in the twin stops the program (clients see False) instead of killing the controller,
         which would leave a connected control client waiting 300 s."""
+        cycles = self.cycles
         try:
             self._cycle()
         except Exception as exc:
             self.last_error = f"controller twin internal error: {type(exc).__name__}: {exc}"
             logger.exception("controller twin cycle failed")
-            self.cycles += 1
+            self.cycles = cycles + 1  # the period passed all the same
             with contextlib.suppress(Exception):
                 self.stop_program("internal error")
 

@@ -9,6 +9,7 @@ import pytest
 
 from unitac_rig.cli import main
 from unitac_rig.rig.config import parse_rig_config
+from unitac_rig.storage.lease import LEASE_NAME
 
 FEW_ANGLES = {"press": {"angle_count": 3}}
 
@@ -43,11 +44,15 @@ def one_error_line(capsys: pytest.CaptureFixture[str]) -> str:
 
 
 def tree_hashes(root: Path) -> dict[str, str]:
-    """sha256 of every file under ``root`` (relative path -> digest): proves a failed command touched nothing."""
+    """sha256 of every recorded file under ``root`` (relative path -> digest): proves a failed command touched nothing.
+
+    The writer lease (``.journal/*/_writer.lock``) is skipped: it is a lock, not data, and any command that opens a
+    session for writing takes it (and notes its pid there) before it can fail.
+    """
     return {
         str(path.relative_to(root)): hashlib.sha256(path.read_bytes()).hexdigest()
         for path in sorted(root.rglob("*"))
-        if path.is_file()
+        if path.is_file() and path.name != LEASE_NAME
     }
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,10 +15,13 @@ from unitac_rig.sim.sensor_models import UskinModel
 from unitac_rig.sim.world import ContactWorld
 
 SWEEP_DEG = range(-45, 46, 5)
+# hand-worked geometry: the object placed and the pad mounted exactly (the seeded errors have their own tests in
+# test_scene_fidelity_terms.py)
+EXACT = SceneParams().exact()
 
 
 def scene(object_id: str, layout: SensorLayout, rotation_deg: float = 0.0) -> PressScene:
-    return PressScene(get_object(object_id), rotation_deg, layout)
+    return PressScene(get_object(object_id), rotation_deg, layout, params=EXACT)
 
 
 def grid_at_10n(object_id: str, layout: SensorLayout, angle_deg: float) -> np.ndarray:
@@ -126,9 +130,10 @@ def test_a_tilted_face_touches_first_at_its_corner() -> None:
 
 def test_shear_follows_the_tilt_of_the_face() -> None:
     # square at +20 deg: the PapillArray's left column meets the face tilted 20 deg, receding toward +x:
-    # the face pushes the pillars toward +x with shear/normal = tan 20 (below friction 0.8)
+    # the face pushes the pillars toward +x with shear/normal = tan 20 (below a friction of 0.8)
+    sticky = PressScene(get_object("square_pla"), 0.0, PAPILLARRAY, params=replace(EXACT, pillar_friction=0.8))
     for angle, sign in ((20, 1.0), (-20, -1.0)):
-        grid = grid_at_10n("square_pla", PAPILLARRAY, angle)
+        grid = PAPILLARRAY.to_grid(sticky.loads_at_force(angle, 10.0).forces_n)
         column = 0 if angle > 0 else 2
         loaded = grid[:, column, 2] > 0
         assert loaded.all()
@@ -139,11 +144,13 @@ def test_shear_follows_the_tilt_of_the_face() -> None:
 
 
 def test_friction_caps_shear() -> None:
-    params = SceneParams(shear_projection=5.0)
-    s = PressScene(get_object("square_pla"), 0.0, PAPILLARRAY, params=params)
-    grid = PAPILLARRAY.to_grid(s.loads_at_force(20, 10.0).forces_n)
-    mu = get_object("square_pla").material_params.friction * params.pillar_friction_scale
-    assert np.allclose(np.abs(grid[:, 0, 0]), mu * grid[:, 0, 2])
+    # the pillar tips' friction is one fitted coefficient for both printed materials
+    params = replace(EXACT, shear_projection=5.0)
+    for object_id in ("square_pla", "square_tpu"):
+        s = PressScene(get_object(object_id), 0.0, PAPILLARRAY, params=params)
+        grid = PAPILLARRAY.to_grid(s.loads_at_force(20, 10.0).forces_n)
+        assert np.allclose(np.abs(grid[:, 0, 0]), params.pillar_friction * grid[:, 0, 2])
+        assert grid[:, 0, 2].min() > 0.5  # a loaded column, not an empty test
 
 
 @pytest.mark.parametrize("layout", [USKIN, PAPILLARRAY], ids=lambda lay: lay.name)
@@ -181,13 +188,15 @@ def test_papillarray_peaks_and_displacements_match_the_recorded_ranges() -> None
         peaks[obj.id] = max(float(x.forces_n[:, 2].max()) for x in loads)
         displacements.append(max(float(np.abs(x.displacement_mm).max()) for x in loads))  # type: ignore[union-attr]
     assert all(4.0 <= p <= 5.3 for p in peaks.values()), peaks
-    assert 1.2 <= max(displacements) <= 2.0
+    # the fitted pillar friction (0.32) caps shear near the recorded hexagon/square minima of -1.1..-1.9 N, so the
+    # largest lateral displacement is ~1.2 mm; the square's recorded +1.8/+1.9 mm are not reached (docs/simulator.md)
+    assert 1.0 <= max(displacements) <= 2.0
     assert min(displacements) >= 0.6
 
 
 def test_uskin_excursions_are_1k_to_5k_counts_at_10_n() -> None:
     model = UskinModel(rng=np.random.default_rng(1))
-    model.gain_counts_per_n[:] = [3000.0, 3000.0, 2500.0]  # nominal gains: judge the scene, not the seed
+    model.gain_counts_per_n[:] = [5000.0, 5000.0, 1100.0]  # nominal gains: judge the scene, not the seed
     for obj in list_objects():
         s = PressScene(obj, 0.0, USKIN)
         peak = max(
@@ -199,8 +208,8 @@ def test_uskin_excursions_are_1k_to_5k_counts_at_10_n() -> None:
 
 def test_rotating_the_object_is_the_same_as_turning_the_approach() -> None:
     # the irregular prism turned +90 deg and pressed at +45 deg shows the pad the same side as unturned at -45 deg
-    turned = PressScene(get_object("irregular_pla"), 90.0, USKIN).loads_at_force(45, 10.0).forces_n
-    plain = PressScene(get_object("irregular_pla"), 0.0, USKIN).loads_at_force(-45, 10.0).forces_n
+    turned = scene("irregular_pla", USKIN, 90.0).loads_at_force(45, 10.0).forces_n
+    plain = scene("irregular_pla", USKIN).loads_at_force(-45, 10.0).forces_n
     assert np.allclose(turned, plain, atol=1e-6)
 
 

@@ -9,7 +9,11 @@ What it models (no more than the scene needs; parameters and sources in :class:`
   conserves load); **PapillArray** = nine separate pillar springs with hemispherical tips, the centre pillar proud;
 * the object in series: a global spring (mount + prism translating away; non-linear and corner-dependent for hollow
   TPU) and, for soft walls, a local wall foundation that lets the wall flatten under the pad;
-* shear from the local surface tilt (the contact normal), scaled by ``shear_projection`` and capped by friction;
+* shear from the local surface tilt (the contact normal), scaled by ``shear_projection`` and capped by one fitted
+  friction coefficient per pad; a pad pitched on its mount (seeded per scene) adds vertical shear tan(beta) * p;
+* on the uSkin, the skin's bulge: magnets move away from a contact as the incompressible skin is squeezed out from
+  under the pressure gradient, a lateral reading -kappa * dF/ds (x across the pad, y at its free top and bottom);
+* a seeded centring error of the object (the press still aims at the nominal centre);
 * uniform along the prism axis: rows differ only by their share of the pad (uSkin) or their recess (PapillArray).
 
 Speed: the arm asks for the wrench 500 times per simulated second and the sensors for taxel loads 100-1000 times.
@@ -28,7 +32,7 @@ import logging
 import math
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -49,9 +53,12 @@ class SceneParams:
     # ---- uSkin uSPa46 pad ----------------------------------------------------------------------------------
     skin_foundation_n_per_mm3: float = 1.2  # [I] Winkler K = E_eff/h: E 0.3-1 MPa x2-10 (bonded, incompressible),
     # h ~2.5 mm; gives ~0.5 mm skin indentation under a corner at 10 N
-    skin_spread_sigma_mm: float = 3.0  # [I] Gaussian load spreading of the continuous skin, 2-4 mm (0.3-0.55 pitch)
+    skin_spread_sigma_mm: float = 2.0  # [I] Gaussian load spreading of the continuous skin, 2-4 mm (0.3-0.55 pitch)
     skin_margin_x_mm: float = 4.55  # [S] first taxel 4.55 mm from the pad edge across the press (LeapXELA layout)
     skin_margin_y_mm: float = 4.43  # [S] same along the prism axis
+    skin_friction: float = 0.3  # [I] fitted: Coulomb coefficient of the skin on either printed material (caps skin
+    # shear at mu * p). The 0.6-1.0 of silicone on PLA/TPU would put the square's uSkin minima at ~1.7-2x the recorded
+    # -2.9k counts; one value serves both materials because the recorded extremes show no PLA/TPU order
     # ---- PapillArray pad -----------------------------------------------------------------------------------
     pillar_axial_n_per_mm: float = 6.0  # [D] 15 N / 2.5 mm range ratio; data: 4.9 N at 0.86 mm
     pillar_lateral_n_per_mm: float = 1.2  # [I] fitted: data pillar shear ~1.9 N with displacement ~1.5 mm
@@ -59,8 +66,10 @@ class SceneParams:
     pillar_tip_radius_mm: float = 3.0  # [S] pillars 6 mm diameter, hemispherical tips
     pillar_edge_recess_mm: float = 0.4  # [I] edge pillars below the centre one (spec: centre tallest), 0.3-0.5
     pillar_corner_recess_mm: float = 0.8  # [I] corner pillars, 0.6-1.0
-    pillar_friction_scale: float = 0.6  # [I] fitted: the material's friction x this caps pillar shear; recorded
-    # pillar shear stays within ~1.9 N (displacement ~1.5-1.9 mm) while a steep contact still loads ~4 N normal
+    pillar_friction: float = 0.32  # [I] fitted: Coulomb coefficient of the silicone pillar tips on either printed
+    # material (caps pillar shear at mu * normal). The recorded shear limits show no PLA/TPU order (pillar force minima
+    # hexagon -1.30 / -1.09 N, square -1.56 / -1.86 N, PLA / TPU), so one value serves both; 0.32 puts the simulated
+    # minima at -1.2..-1.6 N
     # ---- contact and object --------------------------------------------------------------------------------
     shear_projection: float = 1.0  # [I] c in q = c * p * tan(tilt); 1 = frictionless projection, capped at mu*p
     mount_stiffness_n_per_mm: float = 20.0  # [I] printed object adapter + sensor adapter + arm, fitted so that
@@ -68,7 +77,16 @@ class SceneParams:
     corner_decay_mm: float = 4.0  # [I] how far (along the outline) a corner stiffens a soft wall, ~1.5 walls
     corner_contact_depth_mm: float = 0.3  # [I] outline within this depth of first touch counts as the contact
     # when deciding whether the object's global spring is loaded at a corner
-    centring_error_mm: float = 0.0  # [I] std of the object's placement error (seeded); authors: precise breadboard
+    centring_error_mm: float = 0.75  # [I] std of the object's placement error per axis (seeded, per scene)
+    # ---- sensor mount --------------------------------------------------------------------------------------
+    pad_pitch_deg: float = 3.5  # [I] mean pitch beta of the pad about its x axis on its mount: the contact normal
+    # leans off the pad normal by beta, giving vertical (layout y) shear q_y = c * tan(beta) * p, capped by friction;
+    # beta > 0 pushes the taxels toward the pad's +y
+    pad_pitch_sd_deg: float = 0.5  # [I] seeded spread of beta from one mounting to the next (drawn per scene)
+    # ---- uSkin skin bulge ----------------------------------------------------------------------------------
+    skin_bulge_mm: float = 0.5  # [I] kappa: a taxel's lateral reading = -kappa * dF/ds, where F is the normal load
+    # its cell would read when shifted by s (x and y): the incompressible skin is squeezed out from under a pressure
+    # gradient, so magnets move away from the contact. In N of equivalent shear; sums to zero over the pad.
     # ---- fidelity (speed against accuracy: benchmarks/bench_simulator.py) -----------------------------------
     section_step_mm: float = 0.1  # sampling step of the pad section (uSkin)
     table_points: int = 200  # samples of the per-ray load table (quadratic spacing in depth)
@@ -82,6 +100,31 @@ class SceneParams:
                 "scene fidelity settings out of range",
                 hint="section_step_mm > 0, table_points >= 8, table_max_force_n > 0",
             )
+        if abs(self.pad_pitch_deg) >= 45.0:
+            raise ConfigError("pad pitch out of range", hint="|pad_pitch_deg| < 45")
+        if (
+            min(
+                self.centring_error_mm,
+                self.pad_pitch_sd_deg,
+                self.skin_bulge_mm,
+                self.skin_friction,
+                self.pillar_friction,
+            )
+            < 0
+        ):
+            raise ConfigError(
+                "scene error spreads, the skin bulge and friction cannot be negative",
+                hint="centring_error_mm, pad_pitch_sd_deg, skin_bulge_mm, skin_friction, pillar_friction >= 0",
+            )
+        if self.skin_bulge_mm > 0 and self.skin_spread_sigma_mm <= 0:
+            raise ConfigError(
+                "the skin bulge reads the spread pressure's gradient",
+                hint="skin_bulge_mm needs skin_spread_sigma_mm > 0",
+            )
+
+    def exact(self) -> SceneParams:
+        """The same scene with the object placed and the pad mounted exactly (hand-worked cases and figures)."""
+        return replace(self, centring_error_mm=0.0, pad_pitch_deg=0.0, pad_pitch_sd_deg=0.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -140,13 +183,20 @@ class PressScene:
         self.params = params or SceneParams()
         self.kind = pad_kind(layout)
         rng = rng if rng is not None else np.random.default_rng(0)
-        offset_mm = rng.normal(0.0, self.params.centring_error_mm, 2) if self.params.centring_error_mm > 0 else 0.0
+        p = self.params
+        # the seeded errors of this placement and mount, always drawn in this order so a seed means the same scene
+        # whichever of them are switched on
+        offset_mm = rng.standard_normal(2) * p.centring_error_mm
+        self.pad_pitch_deg = float(p.pad_pitch_deg + rng.standard_normal() * p.pad_pitch_sd_deg)
         self.nominal_center_m = (float(object_center_m[0]), float(object_center_m[1]))  # where presses aim
         self.center_mm = np.asarray(object_center_m, dtype=np.float64) * 1e3 + offset_mm  # where the object is
         # farthest any outline point reaches from the axis, plus room for pillar tips proud of the pad (mm)
         self._reach_mm = float(np.max(np.linalg.norm(np.asarray(obj.outer_mm), axis=1))) + 10.0
         self._outline = _Outline(obj, self.rotation_deg)
-        self._pad = _SkinPad(layout, self.params) if self.kind == "skin" else _PillarPad(layout, self.params)
+        pitch_tan = math.tan(math.radians(self.pad_pitch_deg))
+        self._pad: _SkinPad | _PillarPad = (
+            _SkinPad(layout, p, pitch_tan) if self.kind == "skin" else _PillarPad(layout, p, pitch_tan)
+        )
         self._rays: list[_RayTable] = []  # most recent first, a few kept so alternating rays stay cheap
         self._last_rotvec: tuple[float, float, float] | None = None
         self._frame: tuple[np.ndarray, float, float, float, float, float] | None = None
@@ -433,21 +483,36 @@ class _SkinPad:
 
     WEIGHT_LOOKUP_STEP_MM = 0.01
 
-    def __init__(self, layout: SensorLayout, params: SceneParams) -> None:
+    def __init__(self, layout: SensorLayout, params: SceneParams, pitch_tan: float = 0.0) -> None:
         self.layout = layout
         self.params = params
+        self.pitch_tan = pitch_tan
         pitch = layout.pitch_mm
         self.half_w = half_w = (layout.cols - 1) / 2 * pitch + params.skin_margin_x_mm
-        half_h = (layout.rows - 1) / 2 * pitch + params.skin_margin_y_mm
+        self.half_h = half_h = (layout.rows - 1) / 2 * pitch + params.skin_margin_y_mm
         n_steps = max(2, 2 * math.ceil(half_w / params.section_step_mm))
         self.grid = np.linspace(-half_w, half_w, n_steps + 1)  # symmetric about the pad centre
         self.height = 2 * half_h
+        sigma = params.skin_spread_sigma_mm
         self.lookup_s = np.linspace(-half_w, half_w, round(2 * half_w / self.WEIGHT_LOOKUP_STEP_MM) + 1)
-        self.lookup_w = _cell_weights(self.lookup_s, layout.cols, pitch, params.skin_spread_sigma_mm)  # (cols, n)
+        self.lookup_w = _cell_weights(self.lookup_s, layout.cols, pitch, sigma)  # (cols, n)
         y = np.linspace(-half_h, half_h, 401)
-        row_w = _cell_weights(-y, layout.rows, pitch, params.skin_spread_sigma_mm)  # row 0 on top (+y)
+        row_w = _cell_weights(-y, layout.rows, pitch, sigma)  # row 0 on top (+y)
         self.row_share = np.trapezoid(row_w, y, axis=1) / (2 * half_h)
         self.row_share /= self.row_share.sum()
+        # skin bulge: the inner cell edges (mm) across the pad (columns) and up it (rows, row 0 on top)
+        self.col_edges = (np.arange(1, layout.cols) - layout.cols / 2) * pitch
+        self.row_bulge = np.zeros(layout.rows)
+        if params.skin_bulge_mm > 0:
+            # uniform pressure over the pad's height, spread: its density up the pad at the inner row edges (1/mm);
+            # row r spans (edge below, edge above) and the outer rows reach to infinity, where the density is 0
+            edges = (np.arange(1, layout.rows) - layout.rows / 2) * pitch
+            z = np.array([(half_h - edges) / sigma, (-half_h - edges) / sigma])
+            density = np.concatenate([[0.0], 0.5 * (_erf(z[0] / math.sqrt(2)) - _erf(z[1] / math.sqrt(2))), [0.0]])
+            density /= self.height
+            top_down = density[::-1]
+            above, below = top_down[:-1], top_down[1:]  # row r (top first) lies between these two edges
+            self.row_bulge = -params.skin_bulge_mm * (above - below)  # per N of the taxel column's normal load
 
     def _nodes(self, section: _Section) -> np.ndarray:
         extra = (
@@ -482,9 +547,12 @@ class _SkinPad:
         else:
             k_wall = material.wall_foundation_n_per_mm3 * _near_corner(material, xi, p)
             k_eff = 1.0 / (1.0 / k_skin + 1.0 / k_wall)
-        # interface tilt: a soft wall takes part of the overlap, flattening the interface
-        tilt = slope * (k_eff / k_skin)
-        ratio = np.clip(p.shear_projection * tilt, -material.friction, material.friction)
+        # shear follows the outline's own slope, on soft walls too: the recorded TPU sessions show uSkin lateral
+        # readings as large as PLA's (minima -1.9k..-3.1k counts against -1.2k..-3.0k), which a wall flattening the
+        # interface (tilt x k_eff / k_skin, ~0.02 on TPU) would not give
+        ratio, ratio_y = _friction_capped(
+            p.shear_projection * slope, p.shear_projection * self.pitch_tan, p.skin_friction
+        )
         scale = k_eff * self.height * length  # N per mm of mean overlap over the segment
 
         def force(e: float) -> float:
@@ -497,17 +565,32 @@ class _SkinPad:
         d = depth[:, None]
         normal_seg = scale[near] * _mean_positive(d - gap_a[near], d - gap_b[near])  # (m, n_near) N
         shear_seg = normal_seg * ratio[near]
+        shear_y_seg = normal_seg * ratio_y[near]
         weights = np.stack([np.interp(mid[near], self.lookup_s, w) for w in self.lookup_w])  # (cols, n_near)
         col_n = normal_seg @ weights.T  # (m, cols)
         col_x = shear_seg @ weights.T
+        col_y = shear_y_seg @ weights.T
+        if p.skin_bulge_mm > 0:
+            # the spread line load (N/mm) at each inner column edge; a column's lateral reading is -kappa times the
+            # rate its normal load would change if the column moved toward +x (outer columns reach to infinity)
+            sigma = p.skin_spread_sigma_mm
+            dist = (self.col_edges[:, None] - mid[near][None, :]) / sigma
+            line = normal_seg @ (np.exp(-0.5 * dist**2) / (sigma * math.sqrt(2 * math.pi))).T  # (m, cols - 1)
+            padded = np.pad(line, ((0, 0), (1, 1)))
+            col_x = col_x - p.skin_bulge_mm * (padded[:, 1:] - padded[:, :-1])
         m = depth.size
         loads = np.zeros((m, layout.rows, layout.cols, 3))
         loads[..., 2] = col_n[:, None, :] * self.row_share[None, :, None]
         loads[..., 0] = col_x[:, None, :] * self.row_share[None, :, None]
+        loads[..., 1] = (
+            col_y[:, None, :] * self.row_share[None, :, None] + col_n[:, None, :] * self.row_bulge[None, :, None]
+        )
         wrench = np.zeros((m, 6))
-        wrench[:, 0] = shear_seg.sum(axis=1)
+        wrench[:, 0] = shear_seg.sum(axis=1)  # the bulge is internal to the skin: it sums to zero over the pad
+        wrench[:, 1] = shear_y_seg.sum(axis=1)
         wrench[:, 2] = -normal_seg.sum(axis=1)
         wrench[:, 4] = normal_seg @ mid[near] * 1e-3  # tau_y = sum s * p (contacts in the pad plane, y-symmetric)
+        wrench[:, 5] = shear_y_seg @ mid[near] * 1e-3  # tau_z = sum s * q_y
         contact = np.minimum(gap_a, gap_b) < p.corner_contact_depth_mm
         proximity = float(np.max(np.exp(-xi[contact] / p.corner_decay_mm))) if np.any(contact) else 0.0
         return _PadTable(
@@ -523,9 +606,10 @@ class _SkinPad:
 class _PillarPad:
     """PapillArray: nine pillar springs with hemispherical tips, the centre one proud; each pillar its own spring."""
 
-    def __init__(self, layout: SensorLayout, params: SceneParams) -> None:
+    def __init__(self, layout: SensorLayout, params: SceneParams, pitch_tan: float = 0.0) -> None:
         self.layout = layout
         self.params = params
+        self.pitch_tan = pitch_tan
         xy = layout.taxel_xy_mm()
         self.col_s = xy[: layout.cols, 0]
         rows, cols = np.divmod(np.arange(layout.n_taxels), layout.cols)
@@ -552,11 +636,13 @@ class _PillarPad:
         touch = float(np.max(pillar_cn))
         gap = touch - pillar_cn  # pad-side depth at which each pillar starts to load (inf: never)
         # contact force direction: tangential/normal = the tip's slope at the contact, capped by friction
-        mu = material.friction * p.pillar_friction_scale
-        ratio = np.clip(p.shear_projection * col_slope[self.cols], -mu, mu)
+        mu = p.pillar_friction
+        ratio, ratio_y = _friction_capped(
+            p.shear_projection * col_slope[self.cols], np.full(layout.n_taxels, p.shear_projection * self.pitch_tan), mu
+        )
         # an off-axis contact also bends the pillar sideways: with the tip's lateral spring in the load path the
-        # pillar is softer along the press, 1/k = 1/k_axial + ratio^2/k_lateral (compatibility along the normal)
-        k = 1.0 / (1.0 / p.pillar_axial_n_per_mm + ratio**2 / p.pillar_lateral_n_per_mm)
+        # pillar is softer along the press, 1/k = 1/k_axial + |ratio|^2/k_lateral (compatibility along the normal)
+        k = 1.0 / (1.0 / p.pillar_axial_n_per_mm + (ratio**2 + ratio_y**2) / p.pillar_lateral_n_per_mm)
         if material.wall_point_stiffness_n_per_mm is not None:
             k_wall = material.wall_point_stiffness_n_per_mm * _near_corner(material, col_xi[self.cols], p)
             k = 1.0 / (1.0 / k + 1.0 / k_wall)
@@ -566,24 +652,36 @@ class _PillarPad:
         depth = np.unique(np.concatenate([np.linspace(0.0, e_max, p.table_points), finite_gap]))
         normal = k[None, :] * np.maximum(0.0, depth[:, None] - gap[None, :])  # (m, 9) N; inf gap -> 0
         shear = normal * ratio[None, :]
+        shear_y = normal * ratio_y[None, :]
         m = depth.size
         loads = np.zeros((m, layout.n_taxels, 3))
         loads[..., 0] = shear
+        loads[..., 1] = shear_y
         loads[..., 2] = normal
         disp = np.zeros_like(loads)
         disp[..., 0] = shear / p.pillar_lateral_n_per_mm
+        disp[..., 1] = shear_y / p.pillar_lateral_n_per_mm
         disp[..., 2] = normal / p.pillar_axial_n_per_mm
         s_pos, y_pos = self.xy[:, 0], self.xy[:, 1]
         fz = -normal  # force on the pad along tool z
         wrench = np.zeros((m, 6))
         wrench[:, 0] = shear.sum(axis=1)
+        wrench[:, 1] = shear_y.sum(axis=1)
         wrench[:, 2] = fz.sum(axis=1)
         wrench[:, 3] = fz @ y_pos * 1e-3  # tau = r x f, r = (s, y, 0) mm -> m
         wrench[:, 4] = -(fz @ s_pos) * 1e-3
-        wrench[:, 5] = -(shear @ y_pos) * 1e-3
+        wrench[:, 5] = (shear_y @ s_pos - shear @ y_pos) * 1e-3
         contact = gap < p.corner_contact_depth_mm
         proximity = float(np.max(np.exp(-col_xi[self.cols][contact] / p.corner_decay_mm))) if np.any(contact) else 0.0
         return _PadTable(depth, loads, disp, wrench, touch, proximity)
+
+
+def _friction_capped(ratio_x: np.ndarray, ratio_y: np.ndarray | float, mu: float) -> tuple[np.ndarray, np.ndarray]:
+    """Shear/normal ratios (x, y) with their vector length capped at the friction coefficient ``mu``."""
+    ratio_x, ratio_y = np.broadcast_arrays(np.asarray(ratio_x, dtype=np.float64), np.asarray(ratio_y, dtype=np.float64))
+    length = np.hypot(ratio_x, ratio_y)
+    shrink = np.where(length > mu, mu / np.where(length > 0, length, 1.0), 1.0)
+    return ratio_x * shrink, ratio_y * shrink
 
 
 def _mean_positive(at_a: np.ndarray, at_b: np.ndarray) -> np.ndarray:

@@ -1,8 +1,9 @@
 """Sensor output models: from what each taxel feels (:class:`~unitac_rig.sim.scene.TaxelLoads`, N) to wire units.
 
 * uSkin uSPa46: raw 16-bit counts per taxel and axis = per-taxel baseline (~33 k +- a few k, seeded) + per-taxel
-  gain x (skin-spread load) + axis cross-talk + white noise, clipped to 0..65535. The sensor ships uncalibrated, so
-  gains are fitted to the recorded excursions (1-5 k counts per taxel-axis at 10 N), not taken from a datasheet.
+  gain x (skin-spread load; on x/y also the skin's bulge, see the scene) + axis cross-talk + white noise, clipped to
+  0..65535. The sensor ships uncalibrated, so gains are fitted to the recorded pooled extremes (issue 12,
+  benchmarks/fidelity.py), not taken from a datasheet.
 * PapillArray: per-pillar force (N) and tip displacement (mm) + an unbiased offset (removed by the hub's bias) +
   white noise, quantised to 1 mN and 1 um.
 
@@ -30,10 +31,12 @@ class UskinParams:
 
     baseline_mean_counts: float = 33_000.0  # [S] resting values ~32 000-36 000 (xela-server README examples)
     baseline_sd_counts: float = 2_000.0  # [S/I] differs per taxel/axis by thousands
-    gain_normal_counts_per_n: float = 2_500.0  # [I] fitted: sharpest contacts put ~2 N on a taxel at 10 N and the
-    # recorded per-file peaks reach 1.6-5.3 k counts
-    gain_shear_counts_per_n: float = 3_000.0  # [I] Hall lateral sensitivity ~1/2 of normal per mm of magnet motion,
-    # but the skin is 2-3x softer in shear than in (bonded, incompressible) compression
+    gain_normal_counts_per_n: float = 1_100.0  # [I] fitted to the recorded pooled maxima (issue 12): a circle at
+    # ~10.4 N puts ~1.3 N on each of two taxels (recorded max 1.6-1.8 k counts), a corner up to ~2.4 N on one
+    # (hexagon 3.9-4.2 k); the previous 2 500 gave 2.1-2.3x the circles' maxima
+    gain_shear_counts_per_n: float = 5_000.0  # [I] fitted with the skin bulge and skin friction to the recorded
+    # minima (-1.2 k..-3.1 k counts): Hall lateral sensitivity is ~1/2 of normal per mm of magnet motion, and a
+    # bonded, incompressible skin is ~10x softer in shear than in compression, so ~5x the normal gain per N
     gain_sd_fraction: float = 0.10  # [I] uncalibrated taxels differ in gain
     crosstalk_sd: float = 0.05  # [I] 3-axis cross-talk ~5-10 % (Tomo et al. 2016/2018, qualitative)
     noise_counts: float = 8.0  # [I] idle noise peaks ~25 counts on one taxel (tactile_UR5) -> ~8 RMS

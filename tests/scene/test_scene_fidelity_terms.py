@@ -1,0 +1,171 @@
+"""The physics added to close the gap to the recorded signals (issue 12), each on a case worked by hand.
+
+* the uSkin skin bulge: a lateral reading -kappa * dF/ds (the skin squeezed out from under a pressure gradient);
+* the pad pitch: vertical shear tan(beta) x normal, capped by friction together with the in-plane shear;
+* one fitted friction coefficient per pad (skin, pillars), the same on PLA and TPU, and shear that follows the
+  outline's slope on soft walls too;
+* the seeded object centring error and pad pitch, drawn per scene, and the simulated rig's seeding of them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
+from unitac_rig.errors import ConfigError
+from unitac_rig.rig.config import parse_rig_config
+from unitac_rig.rig.objects import get_object
+from unitac_rig.sim.fast_rig import SimRig
+from unitac_rig.sim.scene import PressScene, SceneParams
+
+EXACT = SceneParams().exact()  # object placed and pad mounted exactly: only the term under test differs
+
+
+def grid(object_id: str, layout: SensorLayout, angle_deg: float, params: SceneParams) -> np.ndarray:
+    s = PressScene(get_object(object_id), 0.0, layout, params=params)
+    return layout.to_grid(s.loads_at_force(angle_deg, 10.0).forces_n)
+
+
+def gaussian(s_mm: float, sigma_mm: float) -> float:
+    return math.exp(-0.5 * (s_mm / sigma_mm) ** 2) / (sigma_mm * math.sqrt(2.0 * math.pi))
+
+
+def test_a_line_contact_pushes_the_skin_apart_by_the_stated_gain() -> None:
+    # The square's corner at 45 deg is a line load F = 10 N on the boundary between columns 2 and 3 (s = 0). Spread
+    # by the Gaussian (sigma), the line density at s = 0 is F g(0) and at s = -7.25 mm F g(7.25), so column 2's
+    # lateral reading is -kappa (F g(0) - F g(7.25)), column 3's the opposite, and the outer columns get almost
+    # nothing. The bulge is internal to the skin: it sums to zero and leaves the wrench alone.
+    kappa, sigma = EXACT.skin_bulge_mm, EXACT.skin_spread_sigma_mm
+    on = grid("square_pla", USKIN, 45, EXACT)
+    off = grid("square_pla", USKIN, 45, replace(EXACT, skin_bulge_mm=0.0))
+    bulge = (on - off)[..., 0]
+    column = bulge.sum(axis=0)
+    expected = -kappa * 10.0 * (gaussian(0.0, sigma) - gaussian(7.25, sigma))
+    assert column[2] == pytest.approx(expected, rel=0.02)  # the contact is a hair wider than a line
+    assert np.allclose(bulge, -bulge[:, ::-1], atol=1e-9)  # a symmetric contact: antisymmetric readings
+    assert abs(column[1]) < 0.01 * abs(column[2])
+    assert bulge.sum() == pytest.approx(0.0, abs=1e-9)
+    assert np.allclose(bulge[:, 2] / column[2], on[:, 2, 2] / on[:, 2, 2].sum())  # rows share it like the load
+    s = PressScene(get_object("square_pla"), 0.0, USKIN, params=EXACT)
+    wrench = s.wrench_on_tool(s.pose_at_travel(45, s.travel_at_force_mm(45, 10.0)))
+    a = math.radians(45)
+    tool_x = np.array([math.cos(a), math.sin(a), 0.0])
+    assert on[..., 0].sum() == pytest.approx(wrench[:3] @ tool_x, abs=1e-9)
+
+
+def test_the_bulge_pushes_the_top_and_bottom_rows_out_of_the_pad() -> None:
+    # The prism is taller than the pad, so the pressure is uniform up the pad and drops to zero at its top and
+    # bottom edges (30.6 mm apart). With sigma well under the 7.25 mm from the outer rows' inner edge to the pad edge,
+    # the density at that edge is the column's load / pad height: the top row reads +kappa F_col / H (up, out of the
+    # pad), the bottom row the opposite, the middle rows nothing.
+    g = grid("circle_pla", USKIN, 0, EXACT)
+    height = 2 * (1.5 * USKIN.pitch_mm + EXACT.skin_margin_y_mm)
+    column_load = g[..., 2].sum(axis=0)
+    assert np.allclose(g[0, :, 1], EXACT.skin_bulge_mm * column_load / height, rtol=1e-3, atol=1e-9)
+    assert np.allclose(g[3, :, 1], -g[0, :, 1], atol=1e-9)
+    assert np.abs(g[1:3, :, 1]).max() < 1e-3 * g[0, :, 1].max()
+    # and a circle, pressed square on, now reads negative on the uSkin's x axis: the recorded sessions' minima
+    assert g[..., 0].min() < -0.1 * g[..., 2].max()
+
+
+def test_a_pitched_pad_gives_vertical_shear_tan_beta_times_the_normal_load() -> None:
+    # the square's face pressed square on: no in-plane tilt, so each pillar's vertical shear is tan(beta) x normal
+    pitched = replace(EXACT, pad_pitch_deg=3.0)
+    pillars = grid("square_pla", PAPILLARRAY, 0, pitched)
+    loaded = pillars[..., 2] > 0
+    assert loaded.sum() >= 4
+    assert np.allclose(pillars[..., 1][loaded], math.tan(math.radians(3.0)) * pillars[..., 2][loaded])
+    s = PressScene(get_object("square_pla"), 0.0, PAPILLARRAY, params=pitched)
+    loads = s.loads_at_force(0, 10.0)
+    assert loads.displacement_mm is not None
+    assert np.allclose(loads.displacement_mm[:, 1], loads.forces_n[:, 1] / EXACT.pillar_lateral_n_per_mm)
+    # the pad's vertical axis is the base's: the wrist feels the sum as a vertical force
+    wrench = s.wrench_on_tool(s.pose_at_travel(0, s.travel_at_force_mm(0, 10.0)))
+    assert wrench[2] == pytest.approx(loads.forces_n[:, 1].sum(), rel=1e-6)
+    assert wrench[2] == pytest.approx(math.tan(math.radians(3.0)) * 10.0, rel=1e-3)
+    # the uSkin: the traction adds tan(beta) x the total normal load up the pad (the bulge sums to zero)
+    skin = grid("square_pla", USKIN, 0, pitched)
+    assert skin[..., 1].sum() == pytest.approx(math.tan(math.radians(3.0)) * 10.0, rel=1e-6)
+    # beta < 0 pushes down
+    assert grid("square_pla", PAPILLARRAY, 0, replace(EXACT, pad_pitch_deg=-3.0))[1, 1, 1] < 0
+
+
+def test_pitch_shear_is_capped_by_friction_with_the_in_plane_shear() -> None:
+    mu = EXACT.pillar_friction
+    # alone: a 30 deg pitch (tan 0.58) is capped at mu
+    steep = grid("square_pla", PAPILLARRAY, 0, replace(EXACT, pad_pitch_deg=30.0))
+    loaded = steep[..., 2] > 0
+    assert np.allclose(steep[..., 1][loaded], mu * steep[..., 2][loaded])
+    # with the face tilted 20 deg under the left column (tan 0.36) and a 10 deg pitch (tan 0.18): the shear vector
+    # |(0.36, 0.18)| = 0.41 > mu is scaled back to mu along its own direction
+    both = grid("square_pla", PAPILLARRAY, 20, replace(EXACT, pad_pitch_deg=10.0))
+    column = both[:, 0]
+    assert np.all(column[:, 2] > 0.5)
+    assert np.allclose(np.hypot(column[:, 0], column[:, 1]), mu * column[:, 2])
+    assert np.allclose(column[:, 1] / column[:, 0], math.tan(math.radians(10)) / math.tan(math.radians(20)))
+
+
+def test_skin_shear_is_capped_by_the_skin_friction_on_pla_and_tpu_alike() -> None:
+    # A steep projection (c = 1000) caps every tilted segment at the skin's friction. With almost no spreading the
+    # circle's contact (centred on the boundary between columns 2 and 3) puts its left half in column 2, all pushed
+    # toward -x: column 2 reads -mu x its normal load. The same holds on TPU: a soft wall no longer flattens the
+    # interface's tilt away (the recorded TPU sessions' lateral readings are as large as PLA's).
+    params = replace(EXACT, shear_projection=1000.0, skin_spread_sigma_mm=0.01, skin_bulge_mm=0.0)
+    for object_id in ("circle_pla", "circle_tpu"):
+        g = grid(object_id, USKIN, 0, params)
+        assert np.allclose(g[:, 2, 0], -params.skin_friction * g[:, 2, 2], rtol=0.02)
+        assert np.allclose(g[:, 3, 0], params.skin_friction * g[:, 3, 2], rtol=0.02)
+
+
+def test_seeded_errors_are_drawn_per_scene_and_repeat_with_the_seed() -> None:
+    params = SceneParams(centring_error_mm=0.75, pad_pitch_deg=3.5, pad_pitch_sd_deg=0.5)
+    obj = get_object("hex_pla")
+
+    def draw(seed: int) -> tuple[float, float, float]:
+        s = PressScene(obj, 0.0, PAPILLARRAY, params=params, rng=np.random.default_rng(seed))
+        return (*s.center_mm.tolist(), s.pad_pitch_deg)
+
+    assert draw(3) == draw(3)
+    assert draw(3) != draw(4)
+    pitches = np.array([draw(seed)[2] for seed in range(200)])
+    assert pitches.mean() == pytest.approx(3.5, abs=0.15) and pitches.std() == pytest.approx(0.5, rel=0.2)
+    fixed = PressScene(obj, 0.0, PAPILLARRAY, params=replace(params, pad_pitch_sd_deg=0.0))
+    assert fixed.pad_pitch_deg == 3.5
+    exact = PressScene(obj, 0.0, PAPILLARRAY, params=params.exact(), rng=np.random.default_rng(3))
+    assert exact.pad_pitch_deg == 0.0 and np.allclose(exact.center_mm, [-150.0, 625.0])
+
+
+def test_simulated_rig_seeds_the_scene_from_what_is_mounted() -> None:
+    # the same seed, object and sensor give the same placement whatever ran before; another sensor is another mount
+    config = parse_rig_config({})
+
+    def mounted(seed: int, sensor: str) -> tuple[float, ...]:
+        with SimRig(config, seed=seed) as rig:
+            rig.mount(get_object("square_tpu"), 0.0, sensor)
+            scene = rig.world.scene
+            return (*scene.center_mm.tolist(), scene.pad_pitch_deg)
+
+    first = mounted(0, "papillarray")
+    mounted(0, "uskin")
+    assert mounted(0, "papillarray") == first
+    assert mounted(0, "uskin") != first
+    assert mounted(1, "papillarray") != first
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"pad_pitch_deg": 50.0},
+        {"centring_error_mm": -1.0},
+        {"skin_bulge_mm": -0.1},
+        {"pillar_friction": -0.2},
+        {"skin_bulge_mm": 0.5, "skin_spread_sigma_mm": 0.0},
+    ],
+)
+def test_out_of_range_fidelity_parameters_are_config_errors(bad: dict[str, float]) -> None:
+    with pytest.raises(ConfigError):
+        SceneParams(**bad)

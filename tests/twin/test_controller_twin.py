@@ -60,6 +60,17 @@ def test_a_controller_without_its_script_port_fails_the_constructor() -> None:
         twin.close()
 
 
+def test_a_controller_in_local_mode_refuses_a_control_client(rig: TwinClients) -> None:
+    """ur_rtde asks the dashboard before it takes control (PolyScope 5.6+, host not 127.0.0.1)."""
+    rig.twin.set_remote_control(False)
+    try:
+        with pytest.raises(RuntimeError, match="enable remote control"):
+            rtde_control.RTDEControlInterface(rig.twin.host, 500.0)
+    finally:
+        rig.twin.set_remote_control(True)
+    assert rig.twin.truth().program_running  # the refused client touched nothing
+
+
 def test_blocking_move_arrives_and_an_asynchronous_move_stops_on_stopl(rig: TwinClients) -> None:
     control, twin = rig.control, rig.twin
     goal = rig.home + np.array([0.0, 0.0, 0.02, 0.0, 0.0, 0.0])
@@ -167,11 +178,11 @@ def test_pressing_past_the_force_limit_is_a_protective_stop(rig: TwinClients) ->
     control, receive, twin = rig.control, rig.receive, rig.twin
     stops = twin.truth().protective_stops
     direction = press_direction(rig.home)
-    assert control.speedL([*(0.01 * direction), 0.0, 0.0, 0.0], 0.5, 0.0)  # into the object at 10 mm/s
-    assert wait_until(receive.isProtectiveStopped, 6.0)
+    assert control.speedL([*(0.01 * direction), 0.0, 0.0, 0.0], 0.5, 0.0), twin.status()  # at 10 mm/s
+    assert wait_until(receive.isProtectiveStopped, 6.0), (twin.truth(), twin.status())
     assert wait_until(lambda: twin.truth().at_rest)
     truth = twin.truth()
-    assert truth.protective_stops == stops + 1 and not truth.program_running
+    assert truth.protective_stops == stops + 1 and not truth.program_running, (truth, twin.status())
     assert truth.peak_force_n > twin.params.protective_stop_n
     assert control.speedL([0.0] * 6, 0.5, 0.0) is False
     twin.set_placement_error(0.0, 0.05)  # the operator frees the pad (here: pulls the object away)

@@ -11,8 +11,8 @@ import time
 import numpy as np
 import pytest
 import rtde_control
+from twin_helpers import TwinClients, open_twin, press_direction, wait_until
 
-from tests.twin.conftest import TwinClients, open_twin, press_direction, wait_until
 from unitac_rig.sim.twin import ControllerParams
 
 UP = [0.0, 0.0, 0.01, 0.0, 0.0, 0.0]  # 10 mm/s straight up: away from the object, nothing to touch
@@ -162,10 +162,10 @@ def test_protective_stop_refuses_commands_until_unlocked_and_reuploaded(rig: Twi
     control, receive, dashboard, twin = rig.control, rig.receive, rig.dashboard, rig.twin
     assert control.triggerProtectiveStop() is False  # the client sees the stop while waiting for "done"
     assert wait_until(receive.isProtectiveStopped)
-    assert receive.getSafetyMode() == 3 and not control.isProgramRunning()
-    assert control.moveL(list(rig.home), 0.05, 0.5) is False
     with pytest.raises(RuntimeError, match="Cannot unlock protective stop"):
         dashboard.unlockProtectiveStop()  # too soon after the stop
+    assert receive.getSafetyMode() == 3 and not control.isProgramRunning()
+    assert control.moveL(list(rig.home), 0.05, 0.5) is False
     time.sleep(twin.params.unlock_delay_s)
     dashboard.unlockProtectiveStop()
     assert wait_until(lambda: not receive.isProtectiveStopped())

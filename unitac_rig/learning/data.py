@@ -14,7 +14,7 @@ import zlib
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
@@ -50,14 +50,26 @@ class MatchedSetLike(Protocol):
     def error_n(self) -> np.ndarray: ...
 
 
-def load_sets(data_dir: Path) -> list[MatchedSetLike]:
-    """Every force-matched set under ``data_dir`` (one per session file), via the session reader."""
-    from unitac_rig.storage.reader import load_matched_sets
+def load_sets(data_dir: Path | Sequence[Path]) -> list[MatchedSetLike]:
+    """Every force-matched set under ``data_dir`` (one per session file), via the session reader.
 
-    data_dir = Path(data_dir)
-    if not data_dir.is_dir():
-        raise DataError(f"data directory {data_dir} does not exist", hint="pass the --data folder `collect` wrote")
-    return list(load_matched_sets(data_dir))
+    Several directories are pooled by :func:`unitac_rig.storage.pooling.pool_sessions` (the rule ``export`` uses): a
+    byte-identical copy of a session counts once, two different files for one (object, sensor) are a DataError.
+    """
+    from unitac_rig.storage.pooling import pool_sessions
+    from unitac_rig.storage.reader import load_matched_set, load_matched_sets
+
+    dirs = [Path(data_dir)] if isinstance(data_dir, str | Path) else [Path(d) for d in data_dir]
+    for directory in dirs:
+        if not directory.is_dir():
+            raise DataError(f"data directory {directory} does not exist", hint="pass the --data folder `collect` wrote")
+    if len(dirs) == 1:
+        return list(load_matched_sets(dirs[0]))
+    pooled = pool_sessions(dirs)
+    for item in pooled:
+        if item.also_in:
+            log.info("%s is also in %s (identical): pooled once", item.info.path, ", ".join(map(str, item.also_in)))
+    return [load_matched_set(item.info.path) for item in pooled]
 
 
 def sensor_order(names: Iterable[str]) -> tuple[str, ...]:
@@ -80,6 +92,8 @@ class PairedDataset:
 
     ``values[s]``: (M, n_taxels_s, 3) float32, tare-subtracted, sensor units (uSkin counts, PapillArray N).
     ``force_n[s]``: (M,) wrist force at sensor ``s``'s matched frame, N.
+    ``present[s]``: (M,) bool, whether sensor ``s`` recorded the contact (a partial join,
+    ``build_paired_dataset(..., partial=True)``); a missing frame is NaN. None: every sensor has every row.
     """
 
     sensors: tuple[str, ...]
@@ -91,9 +105,20 @@ class PairedDataset:
     force_n: dict[str, np.ndarray]
     simulated: bool
     dropped_per_sensor: dict[str, int] = field(default_factory=dict)
+    present: dict[str, np.ndarray] | None = None
 
     def __len__(self) -> int:
         return int(self.object_id.shape[0])
+
+    def has(self, sensor: str) -> np.ndarray:
+        """(M,) bool: the rows where ``sensor`` has a frame."""
+        if self.present is None:
+            return np.ones(len(self), dtype=bool)
+        return self.present[sensor]
+
+    def complete_rows(self) -> np.ndarray:
+        """(M,) bool: the rows every sensor recorded."""
+        return np.logical_and.reduce([self.has(s) for s in self.sensors]) if self.sensors else np.ones(0, bool)
 
     @property
     def objects(self) -> tuple[str, ...]:
@@ -113,6 +138,7 @@ class PairedDataset:
             values={s: v[mask] for s, v in self.values.items()},
             force_n={s: f[mask] for s, f in self.force_n.items()},
             simulated=self.simulated,
+            present=None if self.present is None else {s: p[mask] for s, p in self.present.items()},
         )
 
     def content_hash(self) -> str:
@@ -125,14 +151,20 @@ class PairedDataset:
         for sensor in self.sensors:
             digest.update(sensor.encode())
             digest.update(np.ascontiguousarray(self.values[sensor], dtype=np.float32).tobytes())
+            if self.present is not None:  # only for a partial join, so a complete dataset hashes as it always did
+                digest.update(np.ascontiguousarray(self.present[sensor], dtype=bool).tobytes())
         return digest.hexdigest()
 
 
-def build_paired_dataset(sets: Sequence[MatchedSetLike], sensors: Sequence[str] | None = None) -> PairedDataset:
-    """Join the sets on (object, rotation, angle, target). Keeps only keys that every sensor has.
+def build_paired_dataset(
+    sets: Sequence[MatchedSetLike], sensors: Sequence[str] | None = None, *, partial: bool = False
+) -> PairedDataset:
+    """Join the sets on (object, rotation, angle, target). Keeps only keys that every sensor has, or with
+    ``partial`` every key that at least two sensors have (the others' frames NaN, ``present`` says which).
 
     Where one sensor has the same key twice (two sessions of one object), the frame with the smaller matching error
-    wins. Raises :class:`DataError` when fewer than two sensors are present or no key is shared by all of them.
+    wins. Raises :class:`DataError` when fewer than two sensors are present or no key is shared by all of them (by
+    two of them, with ``partial``).
     """
     if not sets:
         raise DataError("no force-matched data found", hint="run `unitac-rig collect` (or `campaign`) first")
@@ -174,25 +206,42 @@ def build_paired_dataset(sets: Sequence[MatchedSetLike], sensors: Sequence[str] 
             if key not in table or candidate[0] < table[key][0]:
                 table[key] = candidate
 
-    shared = set.intersection(*(set(table) for table in best.values()))
+    if partial:
+        counts: dict[JoinKey, int] = {}
+        for table in best.values():
+            for key in table:
+                counts[key] = counts.get(key, 0) + 1
+        shared = {key for key, n in counts.items() if n >= 2}
+    else:
+        shared = set.intersection(*(set(table) for table in best.values()))
     if not shared:
         described = "; ".join(f"{s}: {', '.join(sorted({k[0] for k in best[s]})) or 'nothing'}" for s in chosen)
         raise DataError(
-            f"no joined pairs: no (object, rotation, angle, target) is present for every sensor ({described})",
+            f"no joined pairs: no (object, rotation, angle, target) is present for "
+            f"{'two sensors' if partial else 'every sensor'} ({described})",
             hint="record the same objects, angles and targets with each sensor",
         )
     keys = sorted(shared)
-    dropped = {s: len(best[s]) - len(keys) for s in chosen}
+    dropped = {s: len(set(best[s]) - shared) for s in chosen}
     for sensor, count in dropped.items():
         if count:
             log.info("%s: %d matched frames have no partner in every other sensor and are left out", sensor, count)
 
     values_out: dict[str, np.ndarray] = {}
     force_out: dict[str, np.ndarray] = {}
+    has_frame: dict[str, np.ndarray] | None = {} if partial else None
     for sensor in chosen:
-        rows = [best[sensor][k] for k in keys]
-        values_out[sensor] = np.stack([np.asarray(sets[i].values[r], dtype=np.float32) for _, i, r in rows])
-        force_out[sensor] = np.array([float(sets[i].force_n[r]) for _, i, r in rows], dtype=np.float64)
+        table = best[sensor]
+        has = np.array([k in table for k in keys], dtype=bool)
+        values = np.full((len(keys), n_taxels[sensor], 3), np.nan, dtype=np.float32)
+        force = np.full(len(keys), np.nan, dtype=np.float64)
+        for index in np.flatnonzero(has).tolist():
+            _, i, r = table[keys[index]]
+            values[index] = np.asarray(sets[i].values[r], dtype=np.float32)
+            force[index] = float(sets[i].force_n[r])
+        values_out[sensor], force_out[sensor] = values, force
+        if has_frame is not None:
+            has_frame[sensor] = has
     return PairedDataset(
         sensors=chosen,
         object_id=np.array([k[0] for k in keys], dtype=str),
@@ -203,6 +252,7 @@ def build_paired_dataset(sets: Sequence[MatchedSetLike], sensors: Sequence[str] 
         force_n=force_out,
         simulated=all(bool(s.simulated) for s in sets if s.sensor in chosen),
         dropped_per_sensor=dropped,
+        present=has_frame,
     )
 
 
@@ -228,18 +278,29 @@ def _catalogue_training_flag(object_id: str) -> bool | None:
 
 @dataclass(frozen=True)
 class Split:
-    """Which rows are test data. The unit of the split is an approach direction (object, rotation, angle), so all
-    forces of one press are on the same side and near-identical frames never cross."""
+    """Which rows are test data and which validation data. The unit of the split is an approach direction (object,
+    rotation, angle), so all forces of one press are on the same side and near-identical frames never cross.
+
+    Validation directions are drawn from the seen objects' directions that are not test data; per-epoch curves and
+    every choice (options, model size) are made on them, never on the test rows.
+    """
 
     test_mask: np.ndarray  # (M,) bool
     seed: int
     test_fraction: float
     unseen_objects: tuple[str, ...]
     test_directions: dict[str, list[tuple[int, int]]]  # object -> [(rotation_deg, angle_deg)] held out
+    val_mask: np.ndarray | None = None  # (M,) bool, disjoint from test_mask; None: no validation rows
+    val_fraction: float = 0.0
+    val_directions: dict[str, list[tuple[int, int]]] = field(default_factory=dict)
+
+    @property
+    def validation_mask(self) -> np.ndarray:
+        return np.zeros_like(self.test_mask) if self.val_mask is None else self.val_mask
 
     @property
     def train_mask(self) -> np.ndarray:
-        return ~self.test_mask
+        return ~self.test_mask & ~self.validation_mask
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -247,6 +308,8 @@ class Split:
             "test_fraction": self.test_fraction,
             "unseen_objects": list(self.unseen_objects),
             "test_directions": {k: [list(d) for d in v] for k, v in self.test_directions.items()},
+            "val_fraction": self.val_fraction,
+            "val_directions": {k: [list(d) for d in v] for k, v in self.val_directions.items()},
         }
 
 
@@ -262,21 +325,42 @@ def held_out_directions(directions: Sequence[tuple[int, int]], object_id: str, s
     return sorted(units[int(i)] for i in picked)
 
 
+def validation_directions(
+    directions: Sequence[tuple[int, int]], held: Collection[tuple[int, int]], object_id: str, seed: int, fraction: float
+) -> list:
+    """A seeded ``fraction`` of an object's directions (counted over all of them, at least one when ``fraction`` > 0)
+    from those not ``held`` out for test, always leaving one to train on; its own random stream, so the test
+    directions of a seed are the same with or without validation."""
+    units = sorted(set(directions) - set(held))
+    if fraction <= 0.0 or len(units) < 2:
+        return []
+    n_val = min(len(units) - 1, max(1, round(fraction * len(set(directions)))))
+    rng = np.random.default_rng([seed, zlib.crc32(object_id.encode()), 1])
+    picked = rng.choice(len(units), size=n_val, replace=False)
+    return sorted(units[int(i)] for i in picked)
+
+
 def split_by_direction(
     dataset: PairedDataset,
     seed: int,
     test_fraction: float = 0.1,
     unseen_objects: Collection[str] | None = None,
+    val_fraction: float = 0.0,
 ) -> Split:
     """The paper's split: per seen object ``test_fraction`` of its approach directions (seeded) with all their
-    forces; every row of an unseen object is test data."""
+    forces; every row of an unseen object is test data. With ``val_fraction`` > 0, a further seeded fraction of
+    each seen object's directions is validation data (so training keeps 1 - test - val of them)."""
     if not 0.0 < test_fraction < 1.0:
         raise DataError(f"test fraction must be between 0 and 1, got {test_fraction}")
+    if not 0.0 <= val_fraction < 1.0 - test_fraction:
+        raise DataError(f"validation fraction must be in [0, {1.0 - test_fraction:g}), got {val_fraction}")
     unseen = tuple(sorted(unseen_objects)) if unseen_objects is not None else default_unseen_objects(dataset.objects)
     rotation = np.round(dataset.rotation_deg).astype(int)
     angle = np.round(dataset.angle_deg).astype(int)
     test_mask = np.zeros(len(dataset), dtype=bool)
+    val_mask = np.zeros(len(dataset), dtype=bool)
     test_directions: dict[str, list[tuple[int, int]]] = {}
+    val_directions: dict[str, list[tuple[int, int]]] = {}
     for object_id in dataset.objects:
         rows = dataset.object_id == object_id
         if object_id in unseen:
@@ -288,40 +372,95 @@ def split_by_direction(
         held_set = set(held)
         in_test = np.array([d in held_set for d in directions], dtype=bool)
         test_mask[np.flatnonzero(rows)[in_test]] = True
+        if val_fraction > 0.0:
+            val_directions[object_id] = validation_directions(directions, held, object_id, seed, val_fraction)
+            val_set = set(val_directions[object_id])
+            in_val = np.array([d in val_set for d in directions], dtype=bool)
+            val_mask[np.flatnonzero(rows)[in_val]] = True
     if not (~test_mask).any():
         raise DataError(
             "every row is test data: no object is left to train on",
             hint="the data needs at least one object used for autoencoder training (not only the irregular prism)",
         )
-    return Split(test_mask, seed, test_fraction, unseen, test_directions)
+    return Split(
+        test_mask,
+        seed,
+        test_fraction,
+        unseen,
+        test_directions,
+        val_mask if val_fraction > 0.0 else None,
+        val_fraction,
+        val_directions,
+    )
+
+
+PREPROCESSING: tuple[str, ...] = ("channel_z", "sensor_minmax", "sensor_scale", "raw")
+Preprocessing = Literal["channel_z", "sensor_minmax", "sensor_scale", "raw"]
 
 
 @dataclass(frozen=True)
 class Normaliser:
-    """Per sensor and force channel (x, y, z): ``(value - mean) / std``, statistics over all training frames and
-    taxels, in sensor units. ``data_range`` (max - min over the same values) is the NMAE/SSIM normaliser.
+    """What the network sees of a frame: per sensor and force channel (x, y, z), ``(value - mean) / std``, where
+    ``mean`` and ``std`` are the offset and scale of the preprocessing ``mode`` (statistics over all training
+    frames and taxels, in sensor units):
 
-    A per-channel (not per-taxel) scale keeps the taxels' relative magnitudes, which is what carries contact shape,
-    and puts uSkin counts and PapillArray newtons on the same footing in the summed loss.
+    * ``channel_z``: each channel's own mean and standard deviation (a per-channel z-score). It scales a channel that
+      holds only noise up to unit variance, so that noise weighs as much in the loss as the normal force;
+    * ``sensor_minmax``: one offset and scale per sensor, the minimum and range of all its values pooled over taxels
+      and axes, so values fall in [0, 1] and the channels keep their recorded proportions (the authors publish
+      exactly these pooled min/max statistics per session);
+    * ``sensor_scale``: no offset, one scale per sensor (the pooled standard deviation): raw readings up to a
+      constant, which only balances the two sensors' units in the summed loss;
+    * ``raw``: no offset, no scale (uSkin counts and PapillArray newtons as recorded).
+
+    Also kept, for the metrics' normalisers: ``data_range`` (each channel's training range), ``channel_std`` and
+    ``sensor_range`` (the whole sensor's training range).
     """
 
-    mean: dict[str, np.ndarray]  # (3,)
-    std: dict[str, np.ndarray]  # (3,)
-    data_range: dict[str, np.ndarray]  # (3,)
+    mean: dict[str, np.ndarray]  # (3,) offset
+    std: dict[str, np.ndarray]  # (3,) scale
+    data_range: dict[str, np.ndarray]  # (3,) each channel's training range
+    mode: str = "channel_z"
+    channel_std: dict[str, np.ndarray] = field(default_factory=dict)  # (3,)
+    sensor_range: dict[str, float] = field(default_factory=dict)
 
     @classmethod
-    def fit(cls, dataset: PairedDataset, rows: np.ndarray) -> Normaliser:
-        mean, std, data_range = {}, {}, {}
+    def fit(cls, dataset: PairedDataset, rows: np.ndarray, mode: str = "channel_z") -> Normaliser:
+        if mode not in PREPROCESSING:
+            raise DataError(f"unknown preprocessing {mode!r}", hint=f"use one of {', '.join(PREPROCESSING)}")
+        mean, std, data_range, channel_std, sensor_range = {}, {}, {}, {}, {}
         for sensor in dataset.sensors:
             channels = dataset.values[sensor][rows].reshape(-1, 3).astype(np.float64)
             if channels.shape[0] == 0:
                 raise DataError("no training rows to fit the normalisation on")
-            mean[sensor] = channels.mean(axis=0)
             spread = channels.std(axis=0)
-            std[sensor] = np.where(spread > 1e-9, spread, 1.0)
+            channel_std[sensor] = np.where(spread > 1e-9, spread, 1.0)
             extent = channels.max(axis=0) - channels.min(axis=0)
             data_range[sensor] = np.where(extent > 1e-9, extent, 1.0)
-        return cls(mean, std, data_range)
+            lowest, whole = float(channels.min()), float(channels.max() - channels.min())
+            sensor_range[sensor] = whole if whole > 1e-9 else 1.0
+            pooled = float(channels.std())
+            if mode == "channel_z":
+                mean[sensor], std[sensor] = channels.mean(axis=0), channel_std[sensor]
+            elif mode == "sensor_minmax":
+                mean[sensor], std[sensor] = np.full(3, lowest), np.full(3, sensor_range[sensor])
+            elif mode == "sensor_scale":
+                mean[sensor], std[sensor] = np.zeros(3), np.full(3, pooled if pooled > 1e-9 else 1.0)
+            else:  # raw
+                mean[sensor], std[sensor] = np.zeros(3), np.ones(3)
+        return cls(mean, std, data_range, mode, channel_std, sensor_range)
+
+    def metric_stats(self, sensor: str) -> dict[str, np.ndarray]:
+        """The training statistics the metrics' normalisers use (``unitac_rig.learning.metrics.nmae_scale``):
+        ``channel_range`` always, ``channel_std`` and ``sensor_range`` where stored (runs from before the metric
+        options lack the sensor range)."""
+        self._check(sensor)
+        stats = {"channel_range": np.asarray(self.data_range[sensor], dtype=np.float64)}
+        if sensor in self.channel_std:
+            stats["channel_std"] = np.asarray(self.channel_std[sensor], dtype=np.float64)
+        if sensor in self.sensor_range:
+            stats["sensor_range"] = np.asarray(self.sensor_range[sensor], dtype=np.float64)
+        return stats
 
     def normalise(self, sensor: str, frames: np.ndarray) -> np.ndarray:
         """(..., n_taxels, 3) sensor units -> (..., n_taxels * 3) float32, taxel-major."""
@@ -343,18 +482,42 @@ class Normaliser:
 
             raise ModelError(f"no normalisation for sensor {sensor!r}", hint=f"known: {', '.join(self.mean)}")
 
-    def to_dict(self) -> dict[str, dict[str, list[float]]]:
-        return {
-            s: {"mean": self.mean[s].tolist(), "std": self.std[s].tolist(), "data_range": self.data_range[s].tolist()}
-            for s in self.mean
-        }
+    def to_dict(self) -> dict[str, dict[str, Any]]:
+        out: dict[str, dict[str, Any]] = {}
+        for s in self.mean:
+            entry: dict[str, Any] = {
+                "mean": self.mean[s].tolist(),
+                "std": self.std[s].tolist(),
+                "data_range": self.data_range[s].tolist(),
+                "mode": self.mode,
+            }
+            if s in self.channel_std:
+                entry["channel_std"] = self.channel_std[s].tolist()
+            if s in self.sensor_range:
+                entry["sensor_range"] = float(self.sensor_range[s])
+            out[s] = entry
+        return out
 
     @classmethod
-    def from_dict(cls, d: dict[str, dict[str, list[float]]]) -> Normaliser:
+    def from_dict(cls, d: dict[str, dict[str, Any]]) -> Normaliser:
+        """Also reads the dicts of runs from before the preprocessing options (per-channel z-score, no sensor range:
+        their ``std`` is the channel standard deviation)."""
+        modes = {str(v.get("mode", "channel_z")) for v in d.values()}
+        if len(modes) > 1:
+            raise DataError(f"a normaliser mixes preprocessing modes {sorted(modes)}")
+        mode = modes.pop() if modes else "channel_z"
+        channel_std = {
+            s: np.asarray(v["channel_std"] if "channel_std" in v else v["std"], dtype=np.float64)
+            for s, v in d.items()
+            if "channel_std" in v or mode == "channel_z"
+        }
         return cls(
             {s: np.asarray(v["mean"], dtype=np.float64) for s, v in d.items()},
             {s: np.asarray(v["std"], dtype=np.float64) for s, v in d.items()},
             {s: np.asarray(v["data_range"], dtype=np.float64) for s, v in d.items()},
+            mode,
+            channel_std,
+            {s: float(v["sensor_range"]) for s, v in d.items() if "sensor_range" in v},
         )
 
 

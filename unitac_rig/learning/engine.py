@@ -56,6 +56,8 @@ class ModelShape:
     latent_dim: int = 16
     decoder_hidden: tuple[int, ...] = (64, 96)
     dropout: float = 0.007
+    # beyond the paper: weight of a scale-free alignment term (matched / shifted-partner latent L1) in the loss
+    align_weight: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -67,6 +69,7 @@ class ModelShape:
             latent_dim=int(d["latent_dim"]),
             decoder_hidden=tuple(int(x) for x in d["decoder_hidden"]),
             dropout=float(d["dropout"]),
+            align_weight=float(d.get("align_weight", 0.0)),
         )
 
 
@@ -145,6 +148,18 @@ class _Group:
     encoders: tuple[_Encoder, ...]
     trunk: tuple[str, ...]  # the decoder's hidden layer keys, latent onwards (ReLU and dropout after each)
     heads: tuple[str, ...]  # its output layer keys, one per head; their outputs concatenated are the group's frames
+
+
+def _alignment_term(latents: Sequence[torch.Tensor]) -> torch.Tensor:
+    """(members,) mean over sensor pairs of (mean matched latent L1) / (mean L1 to the partner of the next row in
+    the batch): scale-free, so the encoders cannot lower it by shrinking their latents (beyond the paper)."""
+    terms = []
+    for i in range(len(latents)):
+        for j in range(i + 1, len(latents)):
+            matched = (latents[i] - latents[j]).abs().sum(dim=-1).mean(dim=-1)
+            unmatched = (latents[i] - latents[j].roll(1, dims=1)).abs().sum(dim=-1).mean(dim=-1)
+            terms.append(matched / (unmatched + 1e-6))
+    return torch.stack(terms).mean(dim=0)
 
 
 class StackedAutoencoders:
@@ -438,6 +453,8 @@ class StackedAutoencoders:
             loss = (diff.abs() * self._loss_weights(group.spec, rows)).sum(dim=(1, 2, 3))
         else:
             loss = (diff.abs() * self._masked_loss_weights(group, present, pairs, rows)).sum(dim=(1, 2, 3))
+        if self.shape.align_weight > 0.0 and len(encoded) > 1:
+            loss = loss + self.shape.align_weight * _alignment_term(encoded)
         return loss
 
     def _masked_loss_weights(
@@ -626,6 +643,9 @@ class StackedAutoencoders:
             frozen=set(self._layers) | self.frozen,
         )
         grown._initialise([k for k in grown._layers if k not in self._layers], stream=5)
+        grown._dropout_generators = [  # its own dropout stream, not a replay of the trained run's first epochs
+            torch.Generator(device=self.device).manual_seed(_stream_seed(seed, 6)) for seed in self.seeds
+        ]
         with torch.no_grad():
             for key in self._layers:
                 grown.weights[key].copy_(self.weights[key])

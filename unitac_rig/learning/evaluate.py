@@ -1,5 +1,6 @@
 """Table I for a trained run: NMAE and SSIM per test row group (each object, all seen objects' held-out angles,
-each unseen object) for every baseline and every UniTac-NV direction; latent alignment; ``RUN/metrics.json``.
+each unseen object) for every baseline and every UniTac-NV direction, under the run's metric options; latent
+alignment (raw, scale-free and sensor mixing, after epoch 1 and at the end); ``RUN/metrics.json``.
 
 With several members (seeds) the table holds the mean over members, ``table1_std`` the standard deviation and
 ``table1_members`` each member's values.
@@ -15,6 +16,7 @@ import numpy as np
 import torch
 
 from unitac_rig.learning.data import PairedDataset
+from unitac_rig.learning.metrics import MIXING_K
 from unitac_rig.learning.paper import TABLE1_ROWS
 from unitac_rig.learning.train import Evaluator, LoadedRun, load_run, load_test_set
 
@@ -34,9 +36,44 @@ def table_rows(test: PairedDataset, unseen: tuple[str, ...]) -> list[tuple[str, 
     return rows
 
 
+def metric_description(nmae_normaliser: str, ssim_range: str) -> dict[str, str]:
+    """One sentence per option choice, for metrics.json, report.md and the terminal."""
+    return {
+        "nmae_normaliser": nmae_normaliser,
+        "ssim_range": ssim_range,
+        "nmae": NMAE_TEXT[nmae_normaliser],
+        "ssim": f"global grid statistics per channel, C1 = (0.01 L)^2, C2 = (0.03 L)^2, averaged over x, y, z; "
+        f"L = {SSIM_TEXT[ssim_range]}",
+    }
+
+
+NMAE_TEXT = {
+    "channel_range": "mean |error| per channel divided by that sensor channel's training range (max - min)",
+    "sensor_range": "mean |error| per channel divided by the whole sensor's training range (all taxels and axes)",
+    "channel_std": "mean |error| per channel divided by that sensor channel's training standard deviation",
+    "frame_range": "mean |error| per channel divided by the true frame's own range (max - min, all axes)",
+}
+SSIM_TEXT = {
+    "channel_range": "each sensor channel's training range",
+    "sensor_range": "the whole sensor's training range (all taxels and axes)",
+    "z_range": "the sensor's normal (z) channel training range, for all three channels",
+}
+PREPROCESSING_TEXT = {
+    "channel_z": "per-channel z-score (each sensor channel's training mean and standard deviation)",
+    "sensor_minmax": "per-sensor min-max scaling (one training min and range per sensor, pooled over taxels and axes)",
+    "sensor_scale": "per-sensor scale (one pooled training standard deviation per sensor, no shift)",
+    "raw": "raw readings (sensor units, no scaling)",
+}
+
+
+def _mean_over_members(values: Any) -> float | None:
+    return None if values is None else float(np.mean(values))
+
+
 def evaluate_run(run: LoadedRun, test: PairedDataset) -> dict[str, Any]:
     """The metrics.json content (without writing it)."""
-    evaluator = Evaluator(test, run.normaliser, run.unseen_objects, torch.device("cpu"))
+    config = run.config
+    evaluator = Evaluator.for_run(run, test)
     scores, distance = evaluator.per_frame(run.engine)
     members = run.engine.members
     table: dict[str, dict[str, dict[str, float]]] = {}
@@ -54,8 +91,19 @@ def evaluate_run(run: LoadedRun, test: PairedDataset) -> dict[str, Any]:
             table_members[row][column] = {name: v.tolist() for name, v in per_member.items()}
 
     history = run.history
-    first = history[0].get("test", {}).get("all", {}).get("latent_l1") if history else None
+    first_test = history[0].get("test", {}) if history else {}
+    first = first_test.get("all", {}).get("latent_l1")
     final = distance.mean(dim=1).numpy() if distance is not None else None
+    alignment: dict[str, Any] = {}
+    for subset, subset_mask in evaluator.subsets.items():
+        if not bool(subset_mask.any()) or distance is None:
+            continue
+        now = evaluator.alignment(run.engine, subset_mask)
+        then = first_test.get(subset, {})
+        alignment[subset] = {
+            key: {"first_epoch": then.get(key), "final": now[key]}
+            for key in ("latent_l1", "latent_ratio", "mixing", "mixing_expected")
+        }
     result: dict[str, Any] = {
         "table1": table,
         "latent_l1": {
@@ -65,17 +113,38 @@ def evaluate_run(run: LoadedRun, test: PairedDataset) -> dict[str, Any]:
             "definition": "mean over test contacts of the Manhattan distance between matched UniTac-NV latents "
             "(averaged over sensor pairs)",
         },
+        "alignment": {
+            "per_subset": alignment,
+            "definition": {
+                "latent_l1": "mean Manhattan distance between the two sensors' latents of the same test contact "
+                "(the paper's alignment measure; it also changes with the latents' scale)",
+                "latent_ratio": "mean matched L1 / mean L1 between one sensor's latent of contact i and the other's "
+                "of contact j != i (scale-free: 1 = no closer than any other contact, 0 = identical)",
+                "mixing": f"fraction of each latent's {MIXING_K} nearest neighbours (Euclidean, both sensors pooled) "
+                "that come from the other sensor, averaged over latents",
+                "mixing_expected": "the same fraction with the sensor labels shuffled (perfect mixing)",
+            },
+            "note": "first_epoch values are the test rows scored once after epoch 1 (per member); they are never "
+            "used for a choice",
+        },
         "epochs": int(run.payload["epoch"]),
         "train_seconds": float(run.payload["train_seconds"]),
         "seed": run.engine.seeds[0],
         "seeds": list(run.engine.seeds),
+        "split_seed": int(config.split_seed),
         "sensors": list(run.sensors),
         "test_rows": counts,
         "simulated": bool(test.simulated),
         "dataset_hash": run.payload["dataset_hash"],
         "provenance": run.payload.get("provenance", {}),
-        "normaliser": "NMAE and SSIM use each sensor channel's training-set range (max - min, sensor units)",
+        "preprocessing": {"scaling": config.preprocessing, "text": PREPROCESSING_TEXT[config.preprocessing]},
+        "metrics": metric_description(config.nmae_normaliser, config.ssim_range),
+        "normaliser": NMAE_TEXT[config.nmae_normaliser],
+        "config": config.to_dict(),
     }
+    variants = next((h["val_metric_variants"] for h in reversed(history) if "val_metric_variants" in h), None)
+    if variants:
+        result["validation_metric_variants"] = variants
     if members > 1:
         result["table1_std"] = table_std
         result["table1_members"] = table_members

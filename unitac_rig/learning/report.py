@@ -16,7 +16,8 @@ from unitac_rig.errors import UnitacError
 from unitac_rig.learning.contact_geometry import GEOMETRY_JSON
 from unitac_rig.learning.data import PairedDataset, object_shape_material
 from unitac_rig.learning.engine import UNITAC_GROUP, baseline_name
-from unitac_rig.learning.evaluate import METRICS_JSON, write_metrics
+from unitac_rig.learning.evaluate import METRICS_JSON, PREPROCESSING_TEXT, metric_description, write_metrics
+from unitac_rig.learning.metrics import latent_mixing
 from unitac_rig.learning.paper import PAPER_TABLE1
 from unitac_rig.learning.train import Evaluator, LoadedRun, direction_name, load_run, load_test_set
 from unitac_rig.plotting import draw_taxel_map, new_figure, save_figure
@@ -36,38 +37,90 @@ def table_columns(sensors: tuple[str, ...], trained: set[str]) -> list[str]:
     return columns
 
 
+def _evaluated(history: list[dict[str, Any]]) -> tuple[str, list[dict[str, Any]]]:
+    """("val", records with validation scores), or ("test", ...) for runs from before the validation split."""
+    validated = [h for h in history if "val" in h]
+    if validated:
+        return "val", validated
+    return "test", [h for h in history if "test" in h]
+
+
+def _member_mean(values: Any) -> float:
+    return float(np.mean(values))
+
+
 def plot_curves(history: list[dict[str, Any]], sensors: tuple[str, ...], path: Path) -> Path:
-    """Test NMAE per direction (seen objects' held-out angles, unseen objects) and latent L1 against epoch."""
-    evaluated = [h for h in history if "test" in h]
-    subsets = [s for s in ("seen", "unseen") if any(s in h["test"] for h in evaluated)]
-    fig = new_figure(5.2 * (len(subsets) + 1), 4.0, layout="tight")
-    axes = fig.subplots(1, len(subsets) + 1, squeeze=False)
-    for ax, subset in zip(axes[0], subsets, strict=False):
-        points = [h for h in evaluated if subset in h["test"]]
+    """Per-epoch validation curves: NMAE per direction and baseline (seen objects' validation angles), the raw
+    matched-latent L1 (the paper's), the scale-free matched/unmatched ratio and the sensor mixing."""
+    key, evaluated = _evaluated(history)
+    subsets = [s for s in ("seen", "unseen") if any(s in h[key] for h in evaluated)]
+    fig = new_figure(4.6 * (len(subsets) + 3), 4.0, layout="tight")
+    axes = fig.subplots(1, len(subsets) + 3, squeeze=False)[0]
+    where = "validation" if key == "val" else "test"
+    for ax, subset in zip(axes, subsets, strict=False):
+        points = [h for h in evaluated if subset in h[key]]
         epochs = [h["epoch"] for h in points]
-        for column in points[-1]["test"][subset]:
-            if column == "latent_l1":
+        for column, value in points[-1][key][subset].items():
+            if not isinstance(value, dict):
                 continue
-            values = [float(np.mean(h["test"][subset][column]["nmae"])) for h in points]
+            values = [_member_mean(h[key][subset][column]["nmae"]) for h in points]
             style = "--" if column.startswith("ae_") else "-"
             ax.plot(epochs, values, style, label=column.replace("_to_", " → "), lw=1.2)
         ax.set_yscale("log")
         ax.set_xlabel("epoch")
-        ax.set_ylabel("test NMAE")
-        ax.set_title(f"reconstruction, {subset} objects")
+        ax.set_ylabel(f"{where} NMAE")
+        ax.set_title(f"reconstruction, {subset} objects ({where})")
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3)
-    ax = axes[0][-1]
-    points = [h for h in evaluated if "latent_l1" in h["test"].get("all", {})]
-    if points:
-        ax.plot(
-            [h["epoch"] for h in points], [float(np.mean(h["test"]["all"]["latent_l1"])) for h in points], color="black"
-        )
-    ax.set_xlabel("epoch")
-    ax.set_ylabel("mean L1 distance")
-    ax.set_title("latent distance between matched contacts")
-    ax.grid(alpha=0.3)
+    subset = "all" if any("all" in h[key] for h in evaluated) else (subsets[0] if subsets else "all")
+    panels = (
+        ("latent_l1", "mean L1 distance", "matched-latent L1 (raw, the paper's)"),
+        ("latent_ratio", "matched / unmatched L1", "scale-free alignment (1 = chance, 0 = identical)"),
+        ("mixing", "other-sensor share of 10 NN", "sensor mixing of the latents"),
+    )
+    for ax, (name, ylabel, title) in zip(axes[len(subsets) :], panels, strict=True):
+        points = [h for h in evaluated if name in h[key].get(subset, {})]
+        if points:
+            epochs = [h["epoch"] for h in points]
+            per_member = np.array([h[key][subset][name] for h in points], dtype=float)  # (points, members)
+            for m in range(per_member.shape[1]):
+                ax.plot(epochs, per_member[:, m], color="black", alpha=0.25, lw=0.8)
+            ax.plot(epochs, per_member.mean(axis=1), color="black", lw=1.6, label="mean over seeds")
+            if name == "mixing":
+                expected = [_member_mean(h[key][subset]["mixing_expected"]) for h in points]
+                ax.plot(epochs, expected, "--", color="tab:green", label="perfect mixing")
+            if name == "latent_ratio":
+                ax.axhline(1.0, ls="--", color="tab:red", lw=1.0, label="chance")
+            ax.legend(fontsize=7)
+        else:
+            ax.text(0.5, 0.5, "not measured in this run", ha="center", va="center", transform=ax.transAxes)
+        ax.set_xlabel("epoch")
+        ax.set_ylabel(ylabel)
+        ax.set_title(f"{title}\n({where} contacts)", fontsize=9)
+        ax.grid(alpha=0.3)
     return save_figure(fig, path)
+
+
+def tsne_embeddings(
+    first: dict[str, np.ndarray], last: dict[str, np.ndarray], sensors: list[str], seed: int = 0
+) -> dict[str, np.ndarray]:
+    """2-D t-SNE (sklearn, PCA init) of the latents after the first and the last epoch; rows: each sensor's
+    contacts in ``sensors`` order."""
+    from sklearn.manifold import TSNE
+
+    out = {}
+    for label, latents in (("first", first), ("last", last)):
+        stacked = np.concatenate([latents[s] for s in sensors], axis=0)
+        perplexity = float(min(30.0, max(2.0, (len(stacked) - 1) / 3.0)))
+        out[label] = TSNE(n_components=2, perplexity=perplexity, init="pca", random_state=seed).fit_transform(stacked)
+    return out
+
+
+def embedding_mixing(embedded: np.ndarray, n_sensors: int) -> dict[str, float]:
+    """Nearest-neighbour sensor mixing of an embedding whose rows are ``n_sensors`` equal blocks, one per sensor."""
+    blocks = np.split(np.asarray(embedded, dtype=np.float64), n_sensors)
+    observed, expected = latent_mixing(blocks)
+    return {"mixing": observed, "mixing_expected": expected, "mixing_ratio": observed / expected}
 
 
 def plot_tsne(
@@ -77,12 +130,12 @@ def plot_tsne(
     rows: np.ndarray,
     path: Path,
     seed: int = 0,
+    embeddings: dict[str, np.ndarray] | None = None,
 ) -> Path:
     """t-SNE of the UniTac-NV latents of the same test contacts after the first and the last epoch, coloured by
-    sensor, by shape and by material."""
-    from sklearn.manifold import TSNE
-
+    sensor, by shape and by material; each row's title gives its nearest-neighbour sensor mixing."""
     sensors = [s for s in test.sensors if s in first and s in last]
+    embeddings = embeddings or tsne_embeddings(first, last, sensors, seed)
     labels_shape, labels_material = zip(*(object_shape_material(o) for o in test.object_id[rows]), strict=True)
     colourings = {
         "sensor": np.repeat(np.array(sensors), len(rows)),
@@ -91,16 +144,19 @@ def plot_tsne(
     }
     fig = new_figure(14, 9, layout="tight")
     axes = fig.subplots(2, 3)
-    for r, (label, latents) in enumerate((("after epoch 1", first), ("after the last epoch", last))):
-        stacked = np.concatenate([latents[s] for s in sensors], axis=0)
-        perplexity = float(min(30.0, max(2.0, (len(stacked) - 1) / 3.0)))
-        embedded = TSNE(n_components=2, perplexity=perplexity, init="pca", random_state=seed).fit_transform(stacked)
+    for r, (label, key) in enumerate((("after epoch 1", "first"), ("after the last epoch", "last"))):
+        embedded = embeddings[key]
+        mixing = embedding_mixing(embedded, len(sensors))
         for c, (name, values) in enumerate(colourings.items()):
             ax = axes[r][c]
             for category in sorted(set(values.tolist())):
                 pick = values == category
                 ax.scatter(embedded[pick, 0], embedded[pick, 1], s=4, alpha=0.6, label=str(category))
-            ax.set_title(f"{label}, by {name}", fontsize=10)
+            title = f"{label}, by {name}"
+            if name == "sensor":
+                share, perfect = mixing["mixing"], mixing["mixing_expected"]
+                title += f"\nother-sensor share of 10 NN {share:.2f} (perfect {perfect:.2f})"
+            ax.set_title(title, fontsize=10)
             ax.set_xticks([])
             ax.set_yticks([])
             ax.legend(fontsize=7, markerscale=3)
@@ -181,9 +237,53 @@ def _paper_cell(row: str, column: str) -> str:
     return "–" if pair is None else f"{pair[0]:.3f} / {pair[1]:.3f}"
 
 
+def _fmt(value: Any) -> str:
+    return "–" if value is None else f"{float(np.mean(value)):.3f}"
+
+
+def alignment_lines(metrics: dict[str, Any]) -> list[str]:
+    """The latent alignment section: raw L1, scale-free ratio and sensor mixing on the test contacts after epoch 1
+    and at the end, and the t-SNE's mixing when the figures were drawn."""
+    per_subset = metrics.get("alignment", {}).get("per_subset", {})
+    if not per_subset:
+        latent = metrics.get("latent_l1", {})
+        if latent.get("final") is None:
+            return []
+        return [
+            "",
+            "## Latent alignment",
+            "",
+            f"Mean Manhattan distance between matched test latents: {_fmt(latent['first_epoch'])} after epoch 1, "
+            f"{_fmt(latent['final'])} after epoch {metrics['epochs']}.",
+        ]
+    lines = [
+        "",
+        "## Latent alignment (test contacts, after epoch 1 -> at the end, mean over seeds)",
+        "",
+        "| contacts | matched L1 (paper's) | matched / unmatched L1 | sensor mixing (10 NN) | perfect mixing |",
+        "|---|---|---|---|---|",
+    ]
+    for subset, entry in per_subset.items():
+        cells = [
+            f"{_fmt(entry[k]['first_epoch'])} → {_fmt(entry[k]['final'])}"
+            for k in ("latent_l1", "latent_ratio", "mixing")
+        ]
+        lines.append(f"| {subset} | " + " | ".join(cells) + f" | {_fmt(entry['mixing_expected']['final'])} |")
+    tsne = metrics.get("tsne_mixing")
+    if tsne:
+        lines += [
+            "",
+            f"t-SNE of {tsne['contacts']} test contacts per sensor: other-sensor share of each point's 10 nearest "
+            f"neighbours {tsne['first_epoch']['mixing']:.3f} after epoch 1 and {tsne['last_epoch']['mixing']:.3f} at "
+            f"the end (perfect mixing {tsne['last_epoch']['mixing_expected']:.3f}).",
+        ]
+    return lines
+
+
 def render_markdown(metrics: dict[str, Any], run: LoadedRun, figures: dict[str, str], geometry: dict | None) -> str:
     sensors = tuple(metrics["sensors"])
     table = metrics["table1"]
+    described = metrics.get("metrics") or metric_description(run.config.nmae_normaliser, run.config.ssim_range)
     trained = {column for row in table.values() for column in row}
     columns = table_columns(sensors, trained)
     summary = run.payload.get("dataset_summary", {})
@@ -195,15 +295,19 @@ def render_markdown(metrics: dict[str, Any], run: LoadedRun, figures: dict[str, 
         f"{summary.get('test_rows', '?')} test), sensors {', '.join(sensors)}, "
         f"{'simulated' if metrics.get('simulated') else 'recorded'}; dataset hash `{metrics['dataset_hash'][:16]}`",
         f"- training: {metrics['epochs']} epochs, {metrics['train_seconds']:.1f} s, seeds {metrics['seeds']}, "
-        f"batch {run.config.batch_size}, Adam lr {run.config.learning_rate}, dropout {run.config.shape.dropout}",
+        f"split seed {run.config.split_seed} ({summary.get('val_rows', 0)} validation rows), "
+        f"batch {run.config.batch_size}, Adam lr {run.config.learning_rate}, dropout {run.config.shape.dropout}, "
+        f"widths {list(run.config.shape.encoder_hidden)} / {run.config.shape.latent_dim} / "
+        f"{list(run.config.shape.decoder_hidden)}"
+        + (f", alignment term {run.config.shape.align_weight}" if run.config.shape.align_weight else ""),
+        f"- preprocessing: {PREPROCESSING_TEXT[run.config.preprocessing]} (`{run.config.preprocessing}`)",
         f"- unitac-rig {prov.get('package_version', '?')}, commit `{str(prov.get('git_commit', '?'))[:12]}`, "
         f"torch {prov.get('torch_version', '?')}",
         "",
         "## Table I: NMAE / SSIM on the test set (ours, then the paper's)",
         "",
-        "NMAE normaliser: each sensor channel's range (max - min) over the training frames; SSIM with global grid "
-        "statistics per channel, C1 = (0.01 R)^2, C2 = (0.03 R)^2, averaged over x, y, z. "
-        + ("Values are means over the run's seeds." if len(metrics["seeds"]) > 1 else ""),
+        f"NMAE (`{described['nmae_normaliser']}`): {described['nmae']}. SSIM (`{described['ssim_range']}`): "
+        f"{described['ssim']}. " + ("Values are means over the run's seeds." if len(metrics["seeds"]) > 1 else ""),
         "",
         "| row | contacts | " + " | ".join(c.replace("_to_", " → ") for c in columns) + " |",
         "|---|---:|" + "---|" * len(columns),
@@ -213,15 +317,7 @@ def render_markdown(metrics: dict[str, Any], run: LoadedRun, figures: dict[str, 
         lines.append(f"| {row} | {metrics['test_rows'][row]} | {ours} |")
         if row in PAPER_TABLE1:
             lines.append("| *paper* | | " + " | ".join(_paper_cell(row, c) for c in columns) + " |")
-    latent = metrics["latent_l1"]
-    if latent["final"] is not None:
-        lines += [
-            "",
-            "## Latent alignment",
-            "",
-            f"Mean Manhattan distance between matched test latents: {latent['first_epoch']:.3f} after epoch 1, "
-            f"{latent['final']:.3f} after epoch {metrics['epochs']}.",
-        ]
+    lines += alignment_lines(metrics)
     if geometry:
         lines += [
             "",
@@ -247,19 +343,35 @@ def write_report(
     run_dir = Path(run_dir)
     run = run or load_run(run_dir)
     test = test or load_test_set(run_dir)
+    previous = run_dir / METRICS_JSON
+    kept = json.loads(previous.read_text(encoding="utf-8")).get("tsne_mixing") if previous.exists() else None
     metrics = write_metrics(run_dir, run, test)
+    if kept and not figures:  # the t-SNE is only recomputed with the figures
+        metrics["tsne_mixing"] = kept
+        previous.write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
     drawn: dict[str, str] = {}
     if figures:
         fig_dir = run_dir / FIGURES
         drawn["training curves"] = _rel(plot_curves(run.history, run.sensors, fig_dir / "curves.png"), run_dir)
-        evaluator = Evaluator(test, run.normaliser, run.unseen_objects, torch.device("cpu"))
+        evaluator = Evaluator.for_run(run, test)
         first = run.payload.get("latents_first_epoch")
         rows = np.asarray(run.payload.get("tsne_rows", []), dtype=int)
         if first is not None and rows.size >= 10:
             latents = evaluator.latents(run.engine)
             last = {s: z[0, rows].numpy() for s, z in latents.items()}
-            path = plot_tsne(first, last, test, rows, fig_dir / "tsne.png", seed=run.config.split_seed)
+            sensors = [s for s in test.sensors if s in first and s in last]
+            embeddings = tsne_embeddings(first, last, sensors, seed=run.config.split_seed)
+            path = plot_tsne(
+                first, last, test, rows, fig_dir / "tsne.png", seed=run.config.split_seed, embeddings=embeddings
+            )
             drawn["t-SNE of the latents"] = _rel(path, run_dir)
+            metrics["tsne_mixing"] = {
+                "contacts": int(rows.size),
+                "member": 0,
+                "first_epoch": embedding_mixing(embeddings["first"], len(sensors)),
+                "last_epoch": embedding_mixing(embeddings["last"], len(sensors)),
+            }
+            (run_dir / METRICS_JSON).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
         scores, _ = evaluator.per_frame(run.engine.member(0, groups=[UNITAC_GROUP]))
         cross = [direction_name(a, b) for a in run.sensors for b in run.sensors if a != b]
         cross_nmae = torch.stack([scores[c]["nmae"][0] for c in cross]).mean(dim=0).numpy()

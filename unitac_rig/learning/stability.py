@@ -208,7 +208,7 @@ def stability_report(
         )
     run = load_run(Path(run_dir))
     test = load_test_set(Path(run_dir))
-    evaluator = Evaluator(test, run.normaliser, run.unseen_objects, torch.device("cpu"))
+    evaluator = Evaluator.for_run(run, test)  # scored under the run's metric options, as its Table I
     scores, latent_distance = evaluator.per_frame(run.engine)
     columns = [c for c in table_columns(run.sensors, set(scores)) if c in scores]
 

@@ -20,31 +20,58 @@ import numpy as np
 import torch
 
 from unitac_rig.errors import DataError, ModelError, UsageError
-from unitac_rig.learning.data import Normaliser, PairedDataset, Split, split_by_direction
+from unitac_rig.learning.config import CONFIG_TOML, to_toml
+from unitac_rig.learning.data import PREPROCESSING, Normaliser, PairedDataset, Split, split_by_direction
 from unitac_rig.learning.engine import UNITAC_GROUP, ModelShape, StackedAutoencoders, baseline_name, default_groups
-from unitac_rig.learning.metrics import latent_l1_per_pair, nmae_per_frame, ssim_per_frame
+from unitac_rig.learning.metrics import (
+    NMAE_NORMALISERS,
+    SSIM_RANGES,
+    alignment_ratio,
+    latent_l1_per_pair,
+    nmae_per_frame,
+    nmae_scale,
+    sensor_mixing,
+    ssim_per_frame,
+    ssim_scale,
+)
 from unitac_rig.learning.run import checkpoint_path, load_checkpoint, provenance, save_checkpoint, save_test_set
 from unitac_rig.learning.run import load_test_set as load_test_set  # where reports and geometry look for it
 
 log = logging.getLogger(__name__)
 
 
+# What runs from before the validation split and the preprocessing / metric options did (their checkpoints lack
+# these keys).
+_LEGACY_DEFAULTS: dict[str, Any] = {
+    "val_fraction": 0.0,
+    "preprocessing": "channel_z",
+    "nmae_normaliser": "channel_range",
+    "ssim_range": "channel_range",
+}
+
+
 @dataclass(frozen=True)
 class TrainConfig:
-    """What a run trains; the defaults are the paper's (Adam 5e-4, batch 64, 1000 epochs, dropout 0.007)."""
+    """What a run trains; the defaults are the paper's (Adam 5e-4, batch 64, 1000 epochs, dropout 0.007) where the
+    paper gives a value. Where it is silent (validation split, preprocessing constants, metric normalisers) the
+    choice and its reason are in docs/learning.md. Files: :mod:`unitac_rig.learning.config`."""
 
     epochs: int = 1000
     batch_size: int = 64
     learning_rate: float = 5e-4
     seeds: tuple[int, ...] = (0,)
-    split_seed: int = 0
+    split_seed: int = 0  # which directions are test / validation data; apart from the model seeds
     test_fraction: float = 0.1
+    val_fraction: float = 0.1  # of each seen object's directions, taken from the training side (paper: none)
     baselines: bool = True
     shape: ModelShape = field(default_factory=ModelShape)
-    eval_every: int = 1  # epochs between test-set evaluations (the last epoch is always evaluated)
+    eval_every: int = 1  # epochs between validation evaluations (epoch 1 and the last epoch are always evaluated)
     checkpoint_every: int = 50  # epochs between checkpoints (the last epoch is always saved)
     unseen_objects: tuple[str, ...] | None = None  # None: the object catalogue decides (irregular prism)
     tsne_contacts: int = 600  # test contacts whose latents are kept for the t-SNE figures
+    preprocessing: str = "sensor_scale"  # data.PREPROCESSING
+    nmae_normaliser: str = "sensor_range"  # metrics.NMAE_NORMALISERS
+    ssim_range: str = "sensor_range"  # metrics.SSIM_RANGES
 
     def __post_init__(self) -> None:
         if self.epochs < 1 or self.batch_size < 1 or self.eval_every < 1 or self.checkpoint_every < 1:
@@ -53,6 +80,19 @@ class TrainConfig:
             raise UsageError("give at least one seed")
         if len(set(self.seeds)) != len(self.seeds):
             raise UsageError(f"seeds must differ, got {list(self.seeds)}")
+        if not self.learning_rate > 0.0:
+            raise UsageError(f"the learning rate must be positive, got {self.learning_rate}")
+        for name, value, known in (
+            ("preprocessing", self.preprocessing, PREPROCESSING),
+            ("NMAE normaliser", self.nmae_normaliser, NMAE_NORMALISERS),
+            ("SSIM range", self.ssim_range, SSIM_RANGES),
+        ):
+            if value not in known:
+                raise UsageError(f"unknown {name} {value!r}", hint=f"use one of {', '.join(known)}")
+        if not 0.0 <= self.val_fraction < 1.0 - self.test_fraction:
+            raise UsageError(
+                f"the validation fraction must be in [0, {1.0 - self.test_fraction:g}), got {self.val_fraction}"
+            )
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -63,12 +103,30 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> TrainConfig:
-        kwargs = dict(d)
+        """A stored config; keys a run from before the tuning options lacks take what that run did."""
+        kwargs = {**_LEGACY_DEFAULTS, **d}
         kwargs["seeds"] = tuple(int(s) for s in kwargs["seeds"])
         kwargs["shape"] = ModelShape.from_dict(kwargs["shape"])
         if kwargs.get("unseen_objects") is not None:
             kwargs["unseen_objects"] = tuple(kwargs["unseen_objects"])
         return cls(**kwargs)
+
+    def updated(self, flat: Mapping[str, Any]) -> TrainConfig:
+        """A copy with ``flat`` applied: ``TrainConfig`` field names, ``shape.<field>`` for the model's (what
+        :func:`unitac_rig.learning.config.parse_config` returns, or CLI options)."""
+        shape = {k[6:]: v for k, v in flat.items() if k.startswith("shape.")}
+        top = {k: v for k, v in flat.items() if not k.startswith("shape.")}
+        unknown = set(top) - set(self.to_dict()) | set(shape) - set(self.shape.to_dict())
+        if unknown:
+            raise UsageError(f"unknown training option(s) {', '.join(sorted(unknown))}")
+        if "seeds" in top:
+            top["seeds"] = tuple(int(s) for s in top["seeds"])
+        if top.get("unseen_objects") is not None:
+            top["unseen_objects"] = tuple(top["unseen_objects"])
+        for key in ("encoder_hidden", "decoder_hidden"):
+            if key in shape:
+                shape[key] = tuple(int(w) for w in shape[key])
+        return replace(self, **top, shape=replace(self.shape, **shape))
 
 
 def resolve_device(name: str) -> torch.device:
@@ -93,14 +151,36 @@ def direction_name(source: str, target: str) -> str:
 
 
 class Evaluator:
-    """Test-set metrics for every model and member: NMAE and SSIM per frame (in sensor units), latent distances."""
+    """Metrics of every model and member on one set of rows (validation or test): NMAE and SSIM per frame in sensor
+    units under the given metric options (:meth:`for_run`: the run's), and the latent alignment (raw L1, scale-free
+    ratio, sensor mixing)."""
+
+    @classmethod
+    def for_run(cls, run: LoadedRun, rows: PairedDataset, device: torch.device | None = None) -> Evaluator:
+        """An evaluator of ``rows`` scored under the metric options the run was configured with."""
+        return cls(
+            rows,
+            run.normaliser,
+            run.unseen_objects,
+            device or torch.device("cpu"),
+            nmae_normaliser=run.config.nmae_normaliser,
+            ssim_range=run.config.ssim_range,
+        )
 
     def __init__(
-        self, test: PairedDataset, normaliser: Normaliser, unseen_objects: Sequence[str], device: torch.device
+        self,
+        test: PairedDataset,
+        normaliser: Normaliser,
+        unseen_objects: Sequence[str],
+        device: torch.device,
+        nmae_normaliser: str = "channel_range",
+        ssim_range: str = "channel_range",
     ):
         self.dataset = test
         self.sensors = test.sensors
         self.device = device
+        self.nmae_normaliser = nmae_normaliser
+        self.ssim_range = ssim_range
         self.inputs = {s: torch.from_numpy(normaliser.normalise(s, test.values[s])).to(device) for s in self.sensors}
         self.targets = {s: torch.from_numpy(test.values[s]).to(device, torch.float32) for s in self.sensors}
         self.mean = {s: torch.tensor(normaliser.mean[s], dtype=torch.float32, device=device) for s in self.sensors}
@@ -108,6 +188,7 @@ class Evaluator:
         self.range = {
             s: torch.tensor(normaliser.data_range[s], dtype=torch.float32, device=device) for s in self.sensors
         }
+        self._normaliser = normaliser
         unseen = np.isin(test.object_id, list(unseen_objects))
         self.subsets = {
             "all": torch.ones(len(test), dtype=torch.bool, device=device),
@@ -115,14 +196,38 @@ class Evaluator:
             "unseen": torch.from_numpy(unseen).to(device),
         }
 
+    def stats(self, sensor: str) -> dict[str, torch.Tensor]:
+        """The training statistics behind the metric options, as tensors on the device (channel range always;
+        channel std and sensor range where the run stored them)."""
+        raw = self._normaliser.metric_stats(sensor)
+        return {k: torch.as_tensor(v, dtype=torch.float32, device=self.device) for k, v in raw.items()}
+
     def to_frames(self, sensor: str, flat: torch.Tensor) -> torch.Tensor:
         """Normalised (..., F) -> (..., n_taxels, 3) in sensor units."""
         return flat.reshape(*flat.shape[:-1], -1, 3) * self.std[sensor] + self.mean[sensor]
 
     @torch.no_grad()
     def latents(self, engine: StackedAutoencoders) -> dict[str, torch.Tensor]:
-        """UniTac-NV latents of every test contact, per sensor: (members, M, latent)."""
+        """UniTac-NV latents of every row, per sensor: (members, M, latent)."""
         return {s: engine.encode(UNITAC_GROUP, s, self.inputs[s]) for s in self.sensors}
+
+    @torch.no_grad()
+    def reconstructions(self, engine: StackedAutoencoders) -> dict[str, tuple[str, torch.Tensor]]:
+        """{column: (target sensor, frames (members, M, n_taxels, 3) in sensor units)} for every UniTac-NV direction
+        ``<src>_to_<dst>`` and every baseline ``ae_<sensor>`` the run trained."""
+        out: dict[str, tuple[str, torch.Tensor]] = {}
+        latents = self.latents(engine)
+        for source in self.sensors:
+            decoded = engine.decode(UNITAC_GROUP, latents[source])
+            for target in self.sensors:
+                out[direction_name(source, target)] = (target, self.to_frames(target, decoded[target]))
+        names = {g.name for g in engine.groups}
+        for sensor in self.sensors:
+            if baseline_name(sensor) in names:
+                z = engine.encode(baseline_name(sensor), sensor, self.inputs[sensor])
+                frames = self.to_frames(sensor, engine.decode(baseline_name(sensor), z)[sensor])
+                out[baseline_name(sensor)] = (sensor, frames)
+        return out
 
     @torch.no_grad()
     def per_frame(self, engine: StackedAutoencoders) -> tuple[dict[str, dict[str, torch.Tensor]], torch.Tensor | None]:
@@ -130,34 +235,67 @@ class Evaluator:
 
         Columns: ``<src>_to_<dst>`` for UniTac-NV, ``ae_<sensor>`` for baselines the run trained.
         """
-        out: dict[str, dict[str, torch.Tensor]] = {}
+        out = {
+            column: self._scores(target, frames, self.nmae_normaliser, self.ssim_range)
+            for column, (target, frames) in self.reconstructions(engine).items()
+        }
         latents = self.latents(engine)
-        for source in self.sensors:
-            decoded = engine.decode(UNITAC_GROUP, latents[source])
-            for target in self.sensors:
-                out[direction_name(source, target)] = self._scores(target, decoded[target])
-        names = {g.name for g in engine.groups}
-        for sensor in self.sensors:
-            if baseline_name(sensor) in names:
-                z = engine.encode(baseline_name(sensor), sensor, self.inputs[sensor])
-                out[baseline_name(sensor)] = self._scores(sensor, engine.decode(baseline_name(sensor), z)[sensor])
-        pairs = [(a, b) for i, a in enumerate(self.sensors) for b in self.sensors[i + 1 :]]
+        pairs = self.sensor_pairs()
         distance = None
         if pairs:
             distance = torch.stack([latent_l1_per_pair(latents[a], latents[b]) for a, b in pairs]).mean(dim=0)
         return out, distance
 
-    def _scores(self, sensor: str, flat: torch.Tensor) -> dict[str, torch.Tensor]:
-        estimate = self.to_frames(sensor, flat)
+    def sensor_pairs(self) -> list[tuple[str, str]]:
+        return [(a, b) for i, a in enumerate(self.sensors) for b in self.sensors[i + 1 :]]
+
+    def _scores(
+        self, sensor: str, estimate: torch.Tensor, nmae_option: str, ssim_option: str
+    ) -> dict[str, torch.Tensor]:
         target = self.targets[sensor]
+        stats = self.stats(sensor)
+        try:
+            nmae_range, ssim_range = nmae_scale(nmae_option, stats, target), ssim_scale(ssim_option, stats)
+        except KeyError as exc:
+            raise ModelError(
+                f"this run stored no {exc.args[0]} for {sensor} (it predates the metric options)",
+                hint="score it with the channel_range options, or retrain",
+            ) from exc
         return {
-            "nmae": nmae_per_frame(target, estimate, self.range[sensor]),
-            "ssim": ssim_per_frame(target, estimate, self.range[sensor]),
+            "nmae": nmae_per_frame(target, estimate, nmae_range),
+            "ssim": ssim_per_frame(target, estimate, ssim_range),
+        }
+
+    @torch.no_grad()
+    def alignment(self, engine: StackedAutoencoders, mask: torch.Tensor | None = None) -> dict[str, Any]:
+        """Per member, over the rows ``mask`` selects (all by default): ``latent_l1`` (the paper's raw distance),
+        ``latent_ratio`` (matched / unmatched L1) and ``mixing`` / ``mixing_expected`` (nearest-neighbour sensor
+        mixing and its value for shuffled labels), each averaged over sensor pairs. Empty for one sensor."""
+        pairs = self.sensor_pairs()
+        if not pairs:
+            return {}
+        latents = self.latents(engine)
+        if mask is not None:
+            latents = {s: z[:, mask] for s, z in latents.items()}
+        members = next(iter(latents.values())).shape[0]
+        l1 = torch.stack([latent_l1_per_pair(latents[a], latents[b]).mean(dim=-1) for a, b in pairs]).mean(dim=0)
+        ratio = torch.stack([alignment_ratio(latents[a].cpu(), latents[b].cpu()) for a, b in pairs]).mean(dim=0)
+        mixing, expected = [], []
+        for m in range(members):
+            per_pair = [sensor_mixing([latents[a][m].cpu(), latents[b][m].cpu()]) for a, b in pairs]
+            mixing.append(float(np.mean([p[0] for p in per_pair])))
+            expected.append(float(np.mean([p[1] for p in per_pair])))
+        return {
+            "latent_l1": l1.tolist(),
+            "latent_ratio": ratio.tolist(),
+            "mixing": mixing,
+            "mixing_expected": expected,
         }
 
     def summary(self, engine: StackedAutoencoders) -> dict[str, Any]:
-        """Means over the test subsets ("all", "seen" objects' held-out angles, "unseen" objects), per member."""
-        scores, distance = self.per_frame(engine)
+        """Means over the subsets ("all", "seen" objects' held-out angles, "unseen" objects), per member, with the
+        latent alignment of each subset."""
+        scores, _ = self.per_frame(engine)
         summary: dict[str, Any] = {}
         for subset, mask in self.subsets.items():
             if not bool(mask.any()):
@@ -166,10 +304,42 @@ class Evaluator:
                 column: {metric: values[:, mask].mean(dim=1).tolist() for metric, values in metrics.items()}
                 for column, metrics in scores.items()
             }
-            if distance is not None:
-                entry["latent_l1"] = distance[:, mask].mean(dim=1).tolist()
+            entry.update(self.alignment(engine, mask))
             summary[subset] = entry
         return summary
+
+    @torch.no_grad()
+    def metric_variants(self, engine: StackedAutoencoders, subset: str = "seen") -> dict[str, Any]:
+        """Each column's mean NMAE under every NMAE normaliser and SSIM under every SSIM range, per member, on one
+        subset: the numbers behind the choice of the metric reading (docs/learning.md)."""
+        mask = self.subsets[subset]
+        if not bool(mask.any()):
+            return {}
+        out: dict[str, Any] = {"subset": subset, "nmae": {}, "ssim": {}}
+        reconstructions = self.reconstructions(engine)
+        for option in NMAE_NORMALISERS:
+            try:
+                out["nmae"][option] = {
+                    column: nmae_per_frame(self.targets[t], frames, nmae_scale(option, self.stats(t), self.targets[t]))[
+                        :, mask
+                    ]
+                    .mean(dim=1)
+                    .tolist()
+                    for column, (t, frames) in reconstructions.items()
+                }
+            except KeyError:  # a statistic this (older) run did not store
+                continue
+        for option in SSIM_RANGES:
+            try:
+                out["ssim"][option] = {
+                    column: ssim_per_frame(self.targets[t], frames, ssim_scale(option, self.stats(t)))[:, mask]
+                    .mean(dim=1)
+                    .tolist()
+                    for column, (t, frames) in reconstructions.items()
+                }
+            except KeyError:
+                continue
+        return out
 
 
 @dataclass
@@ -239,6 +409,7 @@ class _Run:
             "normaliser": self.normaliser.to_dict(),
             "split": self.split.to_dict(),
             "test_mask": torch.from_numpy(self.split.test_mask.copy()),
+            "val_mask": torch.from_numpy(self.split.validation_mask.copy()),
             "dataset_hash": self.dataset_hash,
             "dataset_summary": self.dataset_summary,
             "epoch": self.epoch,
@@ -267,14 +438,23 @@ def _train(
         else _start_run(dataset, run_dir, config, epochs, device)
     )
     train_rows, test_rows = _split_rows(dataset, run.split)
+    val_rows = dataset.subset(run.split.validation_mask)
     train_x = torch.from_numpy(
         np.concatenate([run.normaliser.normalise(s, train_rows.values[s]) for s in dataset.sensors], axis=1)
     ).to(device)
-    evaluator = Evaluator(test_rows, run.normaliser, run.split.unseen_objects, device)
+    options = {"nmae_normaliser": run.config.nmae_normaliser, "ssim_range": run.config.ssim_range}
+    evaluator = Evaluator(test_rows, run.normaliser, run.split.unseen_objects, device, **options)
+    validator = Evaluator(val_rows, run.normaliser, (), device, **options) if len(val_rows) else None
     while run.epoch < run.config.epochs:
         record = _train_epoch(run, train_x)
         done, last = run.epoch, run.epoch == run.config.epochs
-        if done % run.config.eval_every == 0 or last or done == 1:
+        # per-epoch curves (and any choice made from them) use validation rows; the test rows are scored only
+        # after epoch 1 and after the last epoch, for the report's "from epoch 1 to the end" comparisons
+        if validator is not None and (done % run.config.eval_every == 0 or last or done == 1):
+            record["val"] = validator.summary(run.engine)
+            if last:
+                record["val_metric_variants"] = validator.metric_variants(run.engine)
+        if last or done == 1:
             record["test"] = evaluator.summary(run.engine)
         if done == 1 and run.first_latents is None:
             run.first_latents = {s: z[0, run.tsne_rows].cpu().numpy() for s, z in evaluator.latents(run.engine).items()}
@@ -324,7 +504,9 @@ def _start_run(
     config = config or TrainConfig()
     if epochs is not None:
         config = replace(config, epochs=epochs)
-    split = split_by_direction(dataset, config.split_seed, config.test_fraction, config.unseen_objects)
+    split = split_by_direction(
+        dataset, config.split_seed, config.test_fraction, config.unseen_objects, val_fraction=config.val_fraction
+    )
     train_rows, test_rows = _split_rows(dataset, split)
     feature_dims = {s: dataset.n_taxels(s) * 3 for s in dataset.sensors}
     groups = default_groups(dataset.sensors, config.baselines)
@@ -338,11 +520,12 @@ def _start_run(
             "objects": list(dataset.objects),
             "rows": len(dataset),
             "train_rows": len(train_rows),
+            "val_rows": int(split.validation_mask.sum()),
             "test_rows": len(test_rows),
             "simulated": dataset.simulated,
         },
         split=split,
-        normaliser=Normaliser.fit(dataset, split.train_mask),
+        normaliser=Normaliser.fit(dataset, split.train_mask, config.preprocessing),
         engine=engine,
         optimizer=engine.make_optimizer(config.learning_rate),
         shuffle_rngs=[np.random.default_rng([seed, 1]) for seed in config.seeds],
@@ -358,6 +541,7 @@ def _start_run(
         "provenance": provenance(),
     }
     (run_dir / "config.json").write_text(json.dumps(readable, indent=2) + "\n", encoding="utf-8")
+    (run_dir / CONFIG_TOML).write_text(to_toml(config.to_dict()), encoding="utf-8")
     return run
 
 
@@ -412,12 +596,16 @@ def _restored_rng(state: Mapping[str, Any]) -> np.random.Generator:
 
 def _stored_split(payload: Mapping[str, Any]) -> Split:
     info = payload["split"]
+    val_mask = payload.get("val_mask")
     return Split(
         np.asarray(payload["test_mask"], dtype=bool),
         int(info["seed"]),
         float(info["test_fraction"]),
         tuple(info["unseen_objects"]),
         {k: [tuple(d) for d in v] for k, v in info["test_directions"].items()},
+        None if val_mask is None else np.asarray(val_mask, dtype=bool),
+        float(info.get("val_fraction", 0.0)),
+        {k: [tuple(d) for d in v] for k, v in info.get("val_directions", {}).items()},
     )
 
 
@@ -425,6 +613,8 @@ def _readable(payload: dict[str, Any]) -> dict[str, Any]:
     """The checkpoint with its arrays as numpy, whether stored as tensors (version 2) or as numpy (version 1)."""
     out = dict(payload)
     out["test_mask"] = _numpy(payload["test_mask"])
+    if payload.get("val_mask") is not None:
+        out["val_mask"] = _numpy(payload["val_mask"])
     out["tsne_rows"] = _numpy(payload.get("tsne_rows", np.zeros(0, dtype=np.int64)))
     first = payload.get("latents_first_epoch")
     out["latents_first_epoch"] = None if first is None else {s: _numpy(z) for s, z in first.items()}

@@ -1,0 +1,386 @@
+"""A new sensor on a trained model: train only its encoder and its own decoder output layer (head) against the
+frozen decoder trunk, on the contacts it shares with any trained sensor (the HTT recipe for a new taxel sensor).
+
+What stays fixed: every layer of the trained run (encoders, decoder trunk and output layer, baselines) is copied and
+frozen (:meth:`unitac_rig.learning.engine.StackedAutoencoders.with_new_sensor`), and so are the trained sensors'
+normalisation statistics. What is learned, per member (seed) of the run: the new sensor's encoder
+``n_taxels*3 -> ... -> latent`` and head ``decoder's last hidden width -> n_taxels*3``. The loss is the model's own
+(sum over (source, target) pairs of the MAE), restricted to the pairs that touch the new sensor (new -> trained,
+trained -> new, new -> new) and masked per contact: a contact recorded by the new sensor and only some trained
+sensors teaches the pairs it has (``train_step(present=...)``).
+
+The split keeps the trained run's promise: for an object the run knew, the test contacts are its held-out approach
+directions (never seen in training, by either model); objects the run kept unseen stay all test; a new object gets
+its own seeded held-out directions. Evaluation: NMAE and SSIM (each channel's training range, as the paper's table)
+of every direction involving the new sensor, on the test contacts that have both sensors, for the untrained new
+layers (the baseline any learning must beat) and the trained ones.
+
+The result is a new run directory (the trained run is never modified): a checkpoint the translator, ``export-model``
+and ``geometry`` read like any other, ``extension.json`` with the above, and a ``test_set.npz`` of the test contacts
+that every sensor recorded (so ``report`` works when there are any).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from unitac_rig.errors import DataError, ModelError, UsageError
+from unitac_rig.learning.data import (
+    MatchedSetLike,
+    Normaliser,
+    PairedDataset,
+    build_paired_dataset,
+    held_out_directions,
+)
+from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
+from unitac_rig.learning.metrics import nmae_per_frame, ssim_per_frame
+from unitac_rig.learning.run import checkpoint_path, provenance, save_checkpoint, save_test_set
+from unitac_rig.learning.train import LoadedRun, default_threads, load_run, resolve_device
+
+log = logging.getLogger(__name__)
+
+EXTENSION_JSON = "extension.json"
+ProgressCallback = Callable[[dict[str, Any]], None]
+
+
+@dataclass(frozen=True)
+class ExtendConfig:
+    """Training of the new sensor's layers; ``None`` takes the trained run's own setting."""
+
+    epochs: int | None = None
+    batch_size: int | None = None
+    learning_rate: float | None = None
+
+    def resolved(self, run: LoadedRun) -> dict[str, Any]:
+        config = run.payload["config"]
+        out = {
+            "epochs": int(self.epochs if self.epochs is not None else config["epochs"]),
+            "batch_size": int(self.batch_size if self.batch_size is not None else config["batch_size"]),
+            "learning_rate": float(self.learning_rate if self.learning_rate is not None else config["learning_rate"]),
+        }
+        if out["epochs"] < 1 or out["batch_size"] < 1 or out["learning_rate"] <= 0:
+            raise UsageError(f"epochs and batch size must be at least 1 and the learning rate positive, got {out}")
+        return out
+
+
+@dataclass
+class ExtendOutcome:
+    run_dir: Path
+    engine: StackedAutoencoders
+    normaliser: Normaliser
+    summary: dict[str, Any]  # what extension.json holds
+    complete_test_rows: int  # test contacts every sensor recorded (what `report` evaluates)
+    history: list[dict[str, Any]] = field(default_factory=list)
+
+
+def extension_dataset(sets: Sequence[MatchedSetLike], trained: Sequence[str], new_sensor: str) -> PairedDataset:
+    """The contacts the new sensor shares with at least one trained sensor (partial join; sensors neither trained
+    nor new are ignored)."""
+    present = {s.sensor for s in sets}
+    if new_sensor not in present:
+        raise DataError(
+            f"the data holds no frames of the new sensor {new_sensor!r}",
+            hint=f"it holds {', '.join(sorted(present))}; record the new sensor on some of the trained objects",
+        )
+    shared = [s for s in trained if s in present]
+    if not shared:
+        raise DataError(
+            f"the data holds no frames of a trained sensor ({', '.join(trained)}) to pair {new_sensor} with",
+            hint="pass the --data of the trained run too (repeat --data to pool directories)",
+        )
+    dataset = build_paired_dataset(sets, [*shared, new_sensor], partial=True)
+    rows = dataset.has(new_sensor) & np.logical_or.reduce([dataset.has(s) for s in shared])
+    if not rows.any():
+        raise DataError(
+            f"no contact of {new_sensor} is shared with a trained sensor (same object, rotation, angle, target)",
+            hint="press the same objects, angles and targets with the new sensor",
+        )
+    return dataset.subset(rows)
+
+
+def _test_mask(dataset: PairedDataset, split: dict[str, Any]) -> np.ndarray:
+    """Test rows: the trained run's held-out directions for the objects it knew, all rows of its unseen objects,
+    and a seeded share of a new object's directions."""
+    unseen = set(split["unseen_objects"])
+    held = {obj: {tuple(int(v) for v in d) for d in dirs} for obj, dirs in split["test_directions"].items()}
+    seed, fraction = int(split["seed"]), float(split["test_fraction"])
+    rotation = np.round(dataset.rotation_deg).astype(int)
+    angle = np.round(dataset.angle_deg).astype(int)
+    mask = np.zeros(len(dataset), dtype=bool)
+    for object_id in dataset.objects:
+        rows = np.flatnonzero(dataset.object_id == object_id)
+        if object_id in unseen:
+            mask[rows] = True
+            continue
+        directions = list(zip(rotation[rows].tolist(), angle[rows].tolist(), strict=True))
+        chosen = held.get(object_id)
+        if chosen is None:
+            chosen = set(held_out_directions(directions, object_id, seed, fraction))
+        mask[rows] = [d in chosen for d in directions]
+    return mask
+
+
+def _fit_new_sensor(run: LoadedRun, dataset: PairedDataset, sensor: str, rows: np.ndarray) -> Normaliser:
+    """The run's normaliser plus the new sensor's statistics, fitted on its training frames with the run's
+    preprocessing (runs from before the preprocessing options have no ``mode``: the per-channel z-score)."""
+    only = PairedDataset(
+        sensors=(sensor,),
+        object_id=dataset.object_id[rows],
+        rotation_deg=dataset.rotation_deg[rows],
+        angle_deg=dataset.angle_deg[rows],
+        target_n=dataset.target_n[rows],
+        values={sensor: dataset.values[sensor][rows]},
+        force_n={sensor: dataset.force_n[sensor][rows]},
+        simulated=dataset.simulated,
+    )
+    mode = getattr(run.normaliser, "mode", None)
+    everything = np.ones(len(only), dtype=bool)
+    fitted = Normaliser.fit(only, everything) if mode is None else Normaliser.fit(only, everything, mode=mode)
+    return Normaliser.from_dict({**run.normaliser.to_dict(), **fitted.to_dict()})
+
+
+def _inputs(
+    dataset: PairedDataset, feature_dims: dict[str, int], normaliser: Normaliser
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(M, sum of features) normalised rows in the engine's sensor order, missing frames as 0 (the masked loss
+    ignores them), and (M, sensors) presence."""
+    blocks, present = [], []
+    for sensor, width in feature_dims.items():
+        block = np.zeros((len(dataset), width), dtype=np.float32)
+        has = dataset.has(sensor) if sensor in dataset.values else np.zeros(len(dataset), dtype=bool)
+        if has.any():
+            block[has] = normaliser.normalise(sensor, dataset.values[sensor][has])
+        blocks.append(block)
+        present.append(has)
+    presence = np.stack(present, axis=1).astype(np.float32)
+    return torch.from_numpy(np.concatenate(blocks, axis=1)), torch.from_numpy(presence)
+
+
+def evaluate_new_sensor(
+    engine: StackedAutoencoders, normaliser: Normaliser, test: PairedDataset, new_sensor: str
+) -> dict[str, dict[str, Any]]:
+    """``<src>_to_<dst>`` for every direction involving ``new_sensor``: per-member mean NMAE and SSIM (each
+    channel's training range) over the test contacts that have both sensors, and how many there are."""
+    out: dict[str, dict[str, Any]] = {}
+    sensors = [s for s in engine.sensors if s in test.values]
+    with torch.no_grad():
+        for source in sensors:
+            for target in sensors:
+                if new_sensor not in (source, target):
+                    continue
+                rows = test.has(source) & test.has(target)
+                if not rows.any():
+                    continue
+                x = torch.from_numpy(normaliser.normalise(source, test.values[source][rows]))
+                decoded = engine.decode(UNITAC_GROUP, engine.encode(UNITAC_GROUP, source, x))[target]
+                estimate = torch.from_numpy(normaliser.denormalise(target, decoded.cpu().numpy()))
+                truth = torch.from_numpy(test.values[target][rows]).to(torch.float32)
+                data_range = torch.as_tensor(normaliser.data_range[target], dtype=torch.float32)
+                out[f"{source}_to_{target}"] = {
+                    "nmae": nmae_per_frame(truth, estimate, data_range).mean(dim=-1).tolist(),
+                    "ssim": ssim_per_frame(truth, estimate, data_range).mean(dim=-1).tolist(),
+                    "contacts": int(rows.sum()),
+                }
+    return out
+
+
+def add_sensor(
+    base_run: Path,
+    sets: Sequence[MatchedSetLike],
+    new_sensor: str,
+    out: Path,
+    config: ExtendConfig | None = None,
+    *,
+    device: str = "auto",
+    threads: int | None = None,
+    progress: ProgressCallback | None = None,
+) -> ExtendOutcome:
+    """Train ``new_sensor`` into the run ``base_run`` (read only) and write the extended run to ``out``."""
+    base_run, out = Path(base_run), Path(out)
+    if out.resolve() == base_run.resolve():
+        raise UsageError(
+            "--out must be a new directory: the trained run is never modified", hint="choose another --out"
+        )
+    if checkpoint_path(out).exists():
+        raise UsageError(f"{out} already holds a run", hint="choose another --out")
+    torch_device = resolve_device(device)
+    previous_threads = torch.get_num_threads()
+    if torch_device.type == "cpu":
+        torch.set_num_threads(threads or default_threads())
+    try:
+        return _add_sensor(base_run, sets, new_sensor, out, config or ExtendConfig(), torch_device, progress)
+    finally:
+        torch.set_num_threads(previous_threads)
+
+
+def _add_sensor(
+    base_run: Path,
+    sets: Sequence[MatchedSetLike],
+    new_sensor: str,
+    out: Path,
+    config: ExtendConfig,
+    device: torch.device,
+    progress: ProgressCallback | None,
+) -> ExtendOutcome:
+    run = load_run(base_run, device.type)
+    if new_sensor in run.sensors:
+        raise ModelError(
+            f"the run in {base_run} already has sensor {new_sensor!r}", hint=f"it has {', '.join(run.sensors)}"
+        )
+    settings = config.resolved(run)
+    dataset = extension_dataset(sets, run.sensors, new_sensor)
+    for sensor in run.sensors:
+        if sensor in dataset.values and dataset.n_taxels(sensor) * 3 != run.engine.feature_dims[sensor]:
+            raise DataError(
+                f"{sensor} frames have {dataset.n_taxels(sensor)} taxels, the run was trained on "
+                f"{run.engine.feature_dims[sensor] // 3}",
+                hint="one sensor id must always mean one layout",
+            )
+    test_mask = _test_mask(dataset, run.payload["split"])
+    train_rows, test_rows = dataset.subset(~test_mask), dataset.subset(test_mask)
+    if len(train_rows) == 0:
+        raise DataError("every shared contact is test data: nothing left to train the new sensor on")
+    if len(test_rows) == 0:
+        log.warning("no shared contact falls in the run's test directions: the new sensor is not evaluated")
+
+    normaliser = _fit_new_sensor(run, dataset, new_sensor, ~test_mask & dataset.has(new_sensor))
+    engine = run.engine.with_new_sensor(new_sensor, dataset.n_taxels(new_sensor) * 3)
+    before = evaluate_new_sensor(engine, normaliser, test_rows, new_sensor)
+
+    x, present = _inputs(train_rows, engine.feature_dims, normaliser)
+    x, present = x.to(device), present.to(device)
+    optimizer = engine.make_optimizer(settings["learning_rate"])
+    salt = zlib.crc32(new_sensor.encode())
+    shuffles = [np.random.default_rng([seed, 1, salt]) for seed in engine.seeds]
+    history: list[dict[str, Any]] = []
+    seconds = 0.0
+    unitac = [g.name for g in engine.groups].index(UNITAC_GROUP)
+    for epoch in range(1, settings["epochs"] + 1):
+        began = time.perf_counter()
+        n = x.shape[0]
+        order = torch.from_numpy(np.stack([rng.permutation(n) for rng in shuffles])).to(device)
+        xs, ps = x[order], present[order]
+        loss_sum = torch.zeros(engine.members, device=device)
+        for start in range(0, n, settings["batch_size"]):
+            chunk = slice(start, start + settings["batch_size"])
+            losses = engine.train_step(xs[:, chunk], optimizer, present=ps[:, chunk])
+            loss_sum += losses[unitac] * xs[:, chunk].shape[1]
+        seconds += time.perf_counter() - began
+        record = {
+            "epoch": epoch,
+            "epochs": settings["epochs"],
+            "seconds": seconds,
+            "train_loss": (loss_sum / n).cpu().tolist(),
+        }
+        history.append(record)
+        if progress is not None:
+            progress(record)
+    after = evaluate_new_sensor(engine, normaliser, test_rows, new_sensor)
+
+    summary = {
+        "new_sensor": new_sensor,
+        "trained_sensors": list(run.sensors),
+        "from_run": str(base_run),
+        "from_dataset_hash": run.payload["dataset_hash"],
+        "from_epoch": int(run.payload["epoch"]),
+        "frozen_layers": sorted(engine.frozen),
+        "trained_layers": sorted(k for k in engine.weights if k not in engine.frozen),
+        "settings": settings,
+        "contacts": {
+            "train": len(train_rows),
+            "test": len(test_rows),
+            "train_shared_with": {s: int(train_rows.has(s).sum()) for s in run.sensors if s in train_rows.values},
+            "test_shared_with": {s: int(test_rows.has(s).sum()) for s in run.sensors if s in test_rows.values},
+        },
+        "metric": "NMAE and SSIM with each channel's training range, on test contacts that have both sensors",
+        "untrained": before,
+        "trained": after,
+        "train_seconds": seconds,
+        "dataset_hash": dataset.content_hash(),
+        "provenance": provenance(),
+    }
+    complete = _write_run(run, out, engine, normaliser, dataset, test_mask, summary, history, optimizer)
+    return ExtendOutcome(out, engine, normaliser, summary, complete, history)
+
+
+def _write_run(
+    run: LoadedRun,
+    out: Path,
+    engine: StackedAutoencoders,
+    normaliser: Normaliser,
+    dataset: PairedDataset,
+    test_mask: np.ndarray,
+    summary: dict[str, Any],
+    history: list[dict[str, Any]],
+    optimizer: torch.optim.Optimizer,
+) -> int:
+    """The extended run: checkpoint (the trained run's config, split and history, the grown engine, the merged
+    normaliser, ``extension``), extension.json, config.json and the complete test contacts."""
+    from unitac_rig.learning.train import _tsne_rows
+
+    sensors = engine.sensors
+    complete = dataset.subset(test_mask & dataset.complete_rows())
+    ordered = PairedDataset(
+        sensors=sensors,
+        object_id=complete.object_id,
+        rotation_deg=complete.rotation_deg,
+        angle_deg=complete.angle_deg,
+        target_n=complete.target_n,
+        values={s: complete.values[s] for s in sensors if s in complete.values},
+        force_n={s: complete.force_n[s] for s in sensors if s in complete.force_n},
+        simulated=complete.simulated,
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    base = run.payload
+    tsne_contacts = int(base["config"].get("tsne_contacts", 600))
+    if len(ordered.values) == len(sensors):
+        save_test_set(out, ordered)
+    else:
+        log.warning("the new data does not hold every trained sensor: no complete test contacts for `report`")
+    payload = {
+        "config": base["config"],
+        "engine": engine.state(),
+        "optimizer": optimizer.state_dict(),
+        "shuffle_rng": base["shuffle_rng"],
+        "normaliser": normaliser.to_dict(),
+        "split": base["split"],
+        "test_mask": torch.from_numpy(test_mask.copy()),  # over the extension's contacts
+        "dataset_hash": summary["dataset_hash"],
+        "dataset_summary": {
+            "sensors": list(sensors),
+            "objects": list(dataset.objects),
+            "rows": len(dataset),
+            "test_rows": int(test_mask.sum()),
+            "complete_test_rows": len(ordered),
+            "simulated": dataset.simulated,
+        },
+        "epoch": int(base["epoch"]),
+        "history": base["history"],
+        "train_seconds": float(base["train_seconds"]),
+        "tsne_rows": torch.from_numpy(_tsne_rows(ordered.object_id, tsne_contacts, int(base["split"]["seed"]))),
+        "latents_first_epoch": None,
+        "provenance": provenance(),
+        "extension": {**summary, "history": history},
+    }
+    save_checkpoint(out, payload)
+    (out / EXTENSION_JSON).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    readable = {
+        "config": base["config"],
+        "split": base["split"],
+        "sensors": list(sensors),
+        "dataset_hash": summary["dataset_hash"],
+        "extension": {k: v for k, v in summary.items() if k not in ("untrained", "trained")},
+        "provenance": summary["provenance"],
+    }
+    (out / "config.json").write_text(json.dumps(readable, indent=2) + "\n", encoding="utf-8")
+    return len(ordered)

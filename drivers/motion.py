@@ -35,7 +35,7 @@ from drivers.rotations import angle_between, matrix_to_rotvec
 
 logger = logging.getLogger(__name__)
 
-StopReason = Literal["force", "travel", "hard_limit", "protective_stop"]
+StopReason = Literal["force", "travel", "timeout", "hard_limit", "protective_stop"]
 
 REST_SPEED_M_S = 0.0005  # below 0.5 mm/s the TCP counts as at rest
 DEFAULT_SETTLE_S = 0.05  # after rest: covers F/T latency (<= 20 ms) + 3 time constants of an 8 ms filter
@@ -44,6 +44,7 @@ MOVE_GRACE_S = 2.0  # a watched move may take this much longer than its trapezoi
 MOVE_TOLERANCE_M = 2e-4  # a finished move must end within 0.2 mm ...
 MOVE_TOLERANCE_RAD = 2e-3  # ... and 2 mrad of its target
 ARRIVED_PERIODS = 5  # at rest on the target this many periods = arrived, even if the controller's progress word lags
+CATCH_UP_S = 0.2  # after the progress word says finished, the pose may take this long to show it (two RTDE streams)
 # Force mode: largest deviation the controller allows on the non-compliant axes (URScript force_mode ``limits``
 # for those axes), m and rad.
 FORCE_MODE_DEVIATION_M = 0.005
@@ -113,10 +114,14 @@ def move_to(
             if on_period is not None:
                 on_period(state)
             check_controller(state, "a move")
-            if not arm.move_running():
-                break
+            finished = not arm.move_running()
             arrived = arrived + 1 if _on_target(state, target) and _resting(state) else 0
-            if arrived >= ARRIVED_PERIODS:
+            if arrived >= ARRIVED_PERIODS or (finished and _on_target(state, target)):
+                break
+            if finished:
+                # The progress word comes with the control client's RTDE stream, the pose with the receive client's:
+                # the first can be a few periods ahead. Read on until the pose has caught up (or time runs out).
+                state = _catch_up(arm, target, on_period)
                 break
         else:
             raise ArmError(f"a move to {np.round(target[:3], 4).tolist()} m did not finish within {budget_s:.1f} s")
@@ -144,6 +149,7 @@ def guarded_move(
     force_setpoint_n: float | None = None,
     stop_samples: int = 1,
     hard_torque_nm: float | None = None,
+    max_duration_s: float | None = None,
 ) -> GuardedMoveResult:
     """Move along ``direction`` at ``speed_m_s`` until the press force reaches ``force_threshold_n``.
 
@@ -151,6 +157,8 @@ def guarded_move(
     (N, a little above the threshold, as the controller measures it) and ``speed_m_s`` as the speed limit (see the
     module docstring); None: ``speedL``.
     ``stop_samples``: the threshold applies to the mean of the last this-many press-force readings.
+    ``max_duration_s``: give up after this long (reason "timeout"): in force mode a set-point that the filtered
+    force never quite reaches would otherwise hold the pad there for good, travelling nowhere.
     Also stops when the travel along the direction exceeds ``max_travel_m`` (reason "travel"), any single reading
     has |F| >= ``hard_limit_n`` or |T| >= ``hard_torque_nm`` ("hard_limit") or the controller reports a protective
     stop ("protective_stop"); the caller decides what each reason means. ``on_period`` sees every state read, the
@@ -188,7 +196,8 @@ def guarded_move(
             trigger = start_state
         else:
             reason, trigger, peak = _approach(arm, command, unit, start_position, max_travel_m, force_threshold_n,
-                                             hard_limit_n, hard_torque_nm, stop_samples, on_period, peak)  # fmt: skip
+                                             hard_limit_n, hard_torque_nm, stop_samples, max_duration_s, on_period,
+                                             peak)  # fmt: skip
         arm.stop(stop_decel_m_s2)
         stop_sent = True
         final, peak = _ride_out_stop(arm, unit, speed_m_s, stop_decel_m_s2, settle_s, on_period, peak)
@@ -241,12 +250,15 @@ def _approach(
     hard_limit_n: float,
     hard_torque_nm: float | None,
     stop_samples: int,
+    max_duration_s: float | None,
     on_period: Callable[[ArmState], None] | None,
     peak: float,
 ) -> tuple[StopReason, ArmState, float]:
     """Command the motion every period until a stop condition; -> (reason, state that triggered it, peak)."""
     recent: deque[float] = deque(maxlen=stop_samples)
+    periods_left = math.inf if max_duration_s is None else max_duration_s / arm.control_period_s
     while True:
+        periods_left -= 1
         try:
             command()
         except ProtectiveStop:
@@ -268,6 +280,8 @@ def _approach(
             return "force", state, peak
         if float(np.dot(np.asarray(state.tcp_pose[:3]) - start_position, unit)) > max_travel_m:
             return "travel", state, peak
+        if periods_left <= 0:
+            return "timeout", state, peak
 
 
 def _ride_out_stop(
@@ -299,6 +313,21 @@ def _ride_out_stop(
             return state, peak
     logger.warning("the arm was still moving %.2f s after the stop command", max_stop_periods * period)
     return state, peak
+
+
+def _catch_up(arm: Arm, target: np.ndarray, on_period: Callable[[ArmState], None] | None) -> ArmState:
+    """After the controller reported a move finished: read until the state shows the arm on the target and at rest,
+    at most ``CATCH_UP_S``; -> the last state."""
+    state = arm.read_state()
+    for _ in range(max(1, round(CATCH_UP_S / arm.control_period_s))):
+        if _on_target(state, target) and _resting(state):
+            break
+        arm.wait_period()
+        state = arm.read_state()
+        if on_period is not None:
+            on_period(state)
+        check_controller(state, "a move")
+    return state
 
 
 def _at_rest(state: ArmState, position: np.ndarray, previous: np.ndarray, period_s: float) -> bool:

@@ -3,14 +3,24 @@
 from __future__ import annotations
 
 import json
+import threading
+import time
 
+import numpy as np
 import pytest
 import typer
 from typer.testing import CliRunner
 
+from drivers.arm import ArmState
+from drivers.clock import VirtualClock
 from drivers.errors import DeviceNotFound
 from unitac_rig.cli import main
-from unitac_rig.cli.probe_ur5e import register_ur5e
+from unitac_rig.cli.probe_ur5e import register_ur5e, run_sign_check, sign_check_verdict
+from unitac_rig.errors import UsageError
+from unitac_rig.rig.poses import tool_z
+from unitac_rig.sim.rtde_server import start_on_free_loopback
+
+STILL_POSE = np.array([-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214])  # pad facing base +y: tool z = +y
 
 
 def probe_app() -> typer.Typer:
@@ -62,3 +72,70 @@ def test_missing_host_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> No
         main(["probe", "ur5e"])
     assert excinfo.value.code == 2
     assert "--host" in capsys.readouterr().err
+
+
+class PadPushedByHand:
+    """Still arm; once ``push`` is set, someone pushes the pad face with ``push_n`` along ``direction_sign`` x tool z
+    (-1: back toward the flange, as the object will; +1: the wrong way, what a reversed sign looks like)."""
+
+    def __init__(self, push_n: float, direction_sign: float) -> None:
+        self.push = threading.Event()
+        self.force = np.zeros(6)
+        self.force[:3] = direction_sign * push_n * tool_z(STILL_POSE)
+
+    def __call__(self) -> ArmState:
+        return ArmState(
+            host_t_ns=0, controller_t_s=time.monotonic(), tcp_pose=STILL_POSE,
+            tcp_force=self.force if self.push.is_set() else np.zeros(6), robot_mode=7, safety_mode=1,
+            protective_stop=False,
+        )  # fmt: skip
+
+
+@pytest.mark.parametrize(("sign", "ok"), [(-1.0, True), (1.0, False)])
+def test_sign_check_passes_a_push_toward_the_flange_and_refuses_a_reversed_sign(
+    sign: float, ok: bool, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    pad = PadPushedByHand(12.0, sign)
+    echo = typer.echo
+
+    def operator_reads_and_pushes(message: object = None, *args: object, **kwargs: object) -> None:
+        echo(message, *args, **kwargs)  # type: ignore[arg-type]
+        if "push the pad face" in str(message):
+            pad.push.set()
+
+    monkeypatch.setattr(typer, "echo", operator_reads_and_pushes)
+    with start_on_free_loopback(pad, first=60) as server:
+        code = _exit_code(["probe", "ur5e", "--host", server.host, "--sign-check", "--push-timeout", "10"])
+    out, err = capfd.readouterr()
+    assert "push the pad face back toward the flange" in out
+    if ok:
+        assert code == 0 and "+12.0 N along the press direction" in out and "sign OK" in out
+    else:
+        assert code == 1 and err.count("\n") == 1
+        assert err.startswith("error: wrist-force sign check failed") and "reversed" in err
+
+
+def test_sign_check_without_a_push_says_so() -> None:
+    states = iter(range(10**9))
+
+    def still() -> ArmState:
+        return ArmState(host_t_ns=next(states) * 2_000_000, controller_t_s=0.0, tcp_pose=STILL_POSE,
+                        tcp_force=np.zeros(6), robot_mode=7, safety_mode=1, protective_stop=False)  # fmt: skip
+
+    with pytest.raises(UsageError, match="no push on the pad within 2 s"):
+        run_sign_check(still, echo=lambda _: None, timeout_s=2.0, clock=VirtualClock())
+
+
+def test_sideways_push_is_not_taken_for_a_good_sign() -> None:
+    sideways = np.zeros(6)
+    sideways[:3] = 12.0 * np.array([0.0, 0.0, 1.0])  # straight down: across the horizontal press direction
+    ok, line = sign_check_verdict(np.zeros(6), sideways, STILL_POSE)
+    assert not ok and "sideways" in line
+
+
+def _exit_code(args: list[str]) -> int:
+    try:
+        main(args)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    return 0

@@ -7,13 +7,16 @@ Errors from the project's exception tree become one clear line and exit code 1 (
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import logging
+import signal
 import sys
 
 import typer
 
 from protocols.errors import UnitacError
+from unitac_rig.cli.signals import termination_signal
 from unitac_rig.errors import UsageError
 
 app = typer.Typer(
@@ -57,7 +60,8 @@ for _module in COMMAND_MODULES:
 def main(argv: list[str] | None = None) -> None:
     """Console entry point: run the app, mapping every error to one line and a non-zero exit.
 
-    Usage errors (unknown command or option, missing or bad value) exit 2, other project errors 1, Ctrl-C 130.
+    Usage errors (unknown command or option, missing or bad value) exit 2, other project errors 1, Ctrl-C 130,
+    SIGTERM / SIGHUP during a collection 143 / 129 (after the same clean stop as Ctrl-C).
     Only names typer itself exports are used here: typer 0.29 dropped its click dependency, so importing click
     (which is not declared) broke this very path on a fresh install.
     """
@@ -72,9 +76,11 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(2 if isinstance(exc, UsageError) else 1)
     except typer.Exit as exc:
         sys.exit(exc.exit_code)
-    except (KeyboardInterrupt, typer.Abort):
-        typer.secho("interrupted", err=True)
-        sys.exit(130)
+    except (KeyboardInterrupt, typer.Abort) as exc:
+        number = termination_signal(exc)  # SIGTERM / SIGHUP inside collect: the Ctrl-C path, its own exit code
+        with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone
+            typer.secho(f"terminated ({signal.Signals(number).name})" if number else "interrupted", err=True)
+        sys.exit(128 + number if number else 130)
     except typer.TyperException as exc:  # typer's usage errors: unknown command/option, bad or missing value
         if debug:
             raise

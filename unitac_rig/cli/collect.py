@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
 from pathlib import Path
 
@@ -13,9 +14,10 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 from rich.text import Text
 
-from unitac_rig.collection.press import TickInfo
+from unitac_rig.cli.signals import termination_as_interrupt
+from unitac_rig.collection.press import PressPlan, TickInfo
 from unitac_rig.collection.sensor_choice import choose_sensor, collection_order, session_complete
-from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session
+from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session, dry_run
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.backends import open_rig
 from unitac_rig.rig.base import Rig
@@ -140,7 +142,8 @@ def _run_session(
         )  # fmt: skip
     finally:
         if panel is not None:
-            panel.live.stop()
+            with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone; stopping the arm matters
+                panel.live.stop()
     for note in outcome.recovery_notes:
         console.print(f"[yellow]recovered:[/] {note}")
     done_now = outcome.complete + outcome.failed + outcome.aborted
@@ -164,8 +167,17 @@ def collect(
     angles: int | None = typer.Option(None, "--angles", help="Number of approach angles (default 91)."),
     max_presses: int | None = typer.Option(None, "--max-presses", help="Stop after this many presses (resume later)."),
     live: bool = typer.Option(True, "--live/--no-live", help="Show the live panel."),
+    dry_run_only: bool = typer.Option(
+        False,
+        "--dry-run",
+        help="Move through every stand-off and clearance waypoint without pressing or recording (first run on a "
+        "new rig, object removed).",
+    ),
 ) -> None:
-    """Press one object over the arc with the mounted sensor and record the session (resumes if interrupted)."""
+    """Press one object over the arc with the mounted sensor and record the session (resumes if interrupted).
+
+    SIGTERM and SIGHUP stop the arm and keep what was recorded, like Ctrl-C.
+    """
     config = _configure(rig_file, strategy, speed, angles, None)
     obj = get_object(object_id, extra_files=config.object.objects_files)
     if rotation is not None and rotation not in obj.rotations_deg:
@@ -177,16 +189,29 @@ def collect(
         console.print(
             "[bold yellow]SIMULATED RIG[/] (no rig file given): every device is simulated, no hardware moves."
         )
-    with open_rig(config, seed=seed) as rig:
+    rotations = [rotation] if rotation is not None else None
+    if dry_run_only:
+        with termination_as_interrupt(), open_rig(config, seed=seed) as rig:
+            visited = dry_run(rig, obj, rotations=rotations, on_standoff=_show_standoff)
+        console.print(
+            f"dry run: {visited.standoffs} stand-offs and {visited.waypoints} waypoints visited, nothing pressed"
+        )
+        return
+    with termination_as_interrupt(), open_rig(config, seed=seed) as rig:
         choice = choose_sensor(rig, obj.id, sensor, data)
         if choice.how == "detected":
             console.print(f"detected mounted sensor: [bold]{choice.name}[/]")
         elif choice.how == "next-incomplete":
             console.print(f"simulated rig: mounting [bold]{choice.name}[/] (no complete data yet for {obj.id})")
         chosen = choice.name
-        outcome = _run_session(rig, obj, chosen, data, [rotation] if rotation is not None else None, live, max_presses)
+        outcome = _run_session(rig, obj, chosen, data, rotations, live, max_presses)
     if outcome.stopped:
         raise UsageError(f"session stopped early: {outcome.stopped}", hint="rerun the same command to resume")
+
+
+def _show_standoff(plan: PressPlan, index: int, total: int) -> None:
+    x, y, z = (1000 * plan.start_pose[:3]).tolist()
+    console.print(f"stand-off {index}/{total}: {plan.press_id} at ({x:.1f}, {y:.1f}, {z:.1f}) mm")
 
 
 def campaign(
@@ -206,7 +231,7 @@ def campaign(
     if config.simulated:
         console.print("[bold yellow]SIMULATED RIG[/]: running the whole campaign unattended.")
     started = time.monotonic()
-    with open_rig(config, seed=seed) as rig:
+    with termination_as_interrupt(), open_rig(config, seed=seed) as rig:
         for sensor in collection_order(rig):
             if not rig.simulated:
                 typer.prompt(f"Mount the {sensor} on the arm, then press Enter", default="", show_default=False)

@@ -68,6 +68,7 @@ CONTACT_NOISE_SIGMAS = 4.5
 # admittance loop to its speed limit and the pad hits the object with the set-point already near the threshold.
 RAMP_MAX_LEAD_N = 3.0
 RAMP_MEAN_PERIODS = 10
+PRESS_EXTRA_S = 5.0  # a press phase may last its travel budget at its speed plus this long, then it fails (timeout)
 RETRACT_UNLOADED_N = 0.3  # the retract ends once the mean press force of the last RETRACT_HOLD_PERIODS is below this
 RETRACT_HOLD_PERIODS = 10  # ... (20 ms at 500 Hz) and none of them is above UNLOADED_FORCE_N, and 1 mm is gained
 TRANSIT_ACCEL_M_S2 = 0.5
@@ -281,12 +282,19 @@ class _Streams:
         elif now - self.last_frame_ns > self.stall_timeout_s * 1e9:
             self.event("stall", f"no tactile frame for {(now - self.last_frame_ns) / 1e9:.3f} s")
             raise DeviceTimeout(f"{self.sensor.layout.name} stopped sending frames during press {self.plan.press_id}")
-        recent = self.press_force[-self.press.stop_samples :]
-        if self.contact_pose is None and float(np.mean(recent)) >= self.contact_threshold_n:
+        filtered = float(np.mean(self.press_force[-self.press.stop_samples :]))
+        if self.contact_pose is None and filtered >= self.contact_threshold_n:
             # filtered like the stop rule: one noise spike in the approach must not start the travel-after-contact
             # budget millimetres before the pad touches
             self.contact_pose = np.asarray(state.tcp_pose, dtype=np.float64)
             self.event("contact", f"{force:.2f} N")
+        elif (
+            self.contact_pose is not None
+            and self.phase in ("approach", "press")
+            and filtered < 0.5 * self.contact_threshold_n
+        ):
+            self.contact_pose = None  # it was noise after all: nothing pushes back
+            self.event("contact_lost", f"{filtered:.2f} N")
         if self.contact_pose is not None and self.phase in ("approach", "press"):
             travel_mm = 1000.0 * float(np.dot(state.tcp_pose[:3] - self.contact_pose[:3], self.plan.direction))
             if travel_mm > self.limits.max_travel_after_contact_mm:
@@ -463,13 +471,17 @@ def _press_strategy(arm: Arm, streams: _Streams, plan: PressPlan, press: PressCo
     if press.strategy == "guarded":
         streams.phase = "press"
         result = guarded_move(arm, plan.direction, press.speed_mm_s / 1000.0, press.threshold_n,
-                              max_travel_m=backstop_m, stop_samples=press.stop_samples, **bounds)  # fmt: skip
+                              max_travel_m=backstop_m, stop_samples=press.stop_samples,
+                              max_duration_s=backstop_m / (press.speed_mm_s / 1000.0) + PRESS_EXTRA_S,
+                              **bounds)  # fmt: skip
         return _reason(result.reason, streams)
     # two-phase and force-ramp: fast to first contact (one reading over the contact threshold: a false alarm only
     # makes the rest of the approach slow)
     streams.phase = "approach"
     result = guarded_move(arm, plan.direction, press.fast_speed_mm_s / 1000.0, streams.contact_threshold_n,
-                          max_travel_m=backstop_m, **bounds)  # fmt: skip
+                          max_travel_m=backstop_m,
+                          max_duration_s=backstop_m / (press.fast_speed_mm_s / 1000.0) + PRESS_EXTRA_S,
+                          **bounds)  # fmt: skip
     if result.reason != "force":
         return _reason(result.reason, streams)
     streams.phase = "press"
@@ -477,7 +489,9 @@ def _press_strategy(arm: Arm, streams: _Streams, plan: PressPlan, press: PressCo
         # the rest of the travel budget (a false first-contact alarm far out must still reach the object)
         budget_m = max(backstop_m - result.travel_m, (limits.max_travel_after_contact_mm + 1.0) / 1000.0)
         result = guarded_move(arm, plan.direction, press.speed_mm_s / 1000.0, press.threshold_n,
-                              max_travel_m=budget_m, stop_samples=press.stop_samples, **bounds)  # fmt: skip
+                              max_travel_m=budget_m, stop_samples=press.stop_samples,
+                              max_duration_s=budget_m / (press.speed_mm_s / 1000.0) + PRESS_EXTRA_S,
+                              **bounds)  # fmt: skip
         return _reason(result.reason, streams)
     return _force_ramp(arm, streams, plan, press)
 

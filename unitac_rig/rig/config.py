@@ -71,10 +71,10 @@ class PressConfig(_Strict):
     dwell_s: float = Field(0.2, ge=0, description="hold at the stop before retracting, s")
     transit_speed_mm_s: float = Field(50.0, gt=0, description="speed between presses, mm/s")
     setpoint_margin_n: float = Field(
-        0.5, gt=0, description="the controller's force set-point during contact is threshold + this, N"
+        0.2, gt=0, description="the controller's force set-point during contact is threshold + this, N"
     )
     stop_samples: int = Field(
-        5, ge=1, le=50, description="the press stops when the mean of this many wrist readings reaches the threshold"
+        15, ge=1, le=50, description="the press stops when the mean of this many wrist readings reaches the threshold"
     )
     angle_min_deg: float = -45.0
     angle_max_deg: float = 45.0

@@ -1,0 +1,57 @@
+"""Termination signals handled like Ctrl-C while a command moves the arm.
+
+Python turns SIGINT into KeyboardInterrupt, so every ``finally`` runs and the arm is stopped, but SIGTERM (``kill``,
+a service manager, a batch system) and SIGHUP (the SSH session or terminal closed) end the process at once by default:
+no ``finally``, no stop command, the partial press lost. Only the controller's watchdog would stop the arm then.
+Inside :func:`termination_as_interrupt` both raise :class:`Terminated`, a KeyboardInterrupt, where the main thread is,
+so they take exactly the Ctrl-C path: the arm is stopped, what was recorded is kept, the same command resumes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+from collections.abc import Iterator
+from types import FrameType
+
+TERMINATION_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP arrived; ``signal_number`` says which (the CLI exits with 128 + it)."""
+
+    def __init__(self, signal_number: int) -> None:
+        super().__init__(f"terminated by {signal.Signals(signal_number).name}")
+        self.signal_number = signal_number
+
+
+def _raise_terminated(signal_number: int, frame: FrameType | None) -> None:
+    raise Terminated(signal_number)
+
+
+@contextlib.contextmanager
+def termination_as_interrupt() -> Iterator[None]:
+    """Turn SIGTERM and SIGHUP into :class:`Terminated` for the duration (main thread only; elsewhere a no-op)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {sig: signal.signal(sig, _raise_terminated) for sig in TERMINATION_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def termination_signal(exc: BaseException) -> int | None:
+    """The signal number behind an interrupt (also when it was re-raised wrapped, as its cause), else None."""
+    seen: BaseException | None = exc
+    for _ in range(8):
+        if seen is None:
+            return None
+        number = getattr(seen, "signal_number", None)
+        if isinstance(number, int):
+            return number
+        seen = seen.__cause__ or seen.__context__
+    return None

@@ -1,4 +1,4 @@
-"""Learning commands: ``train``, ``report``, ``translate`` and ``geometry``."""
+"""Learning commands: ``train``, ``report``, ``translate``, ``geometry`` and ``export-model``."""
 
 from __future__ import annotations
 
@@ -440,9 +440,32 @@ def geometry_command(
     console.print(f"{json_path}\n{png_path}")
 
 
+def export_model_command(
+    run: Path = typer.Argument(..., help="Run directory."),
+    fmt: str = typer.Option(..., "--format", help="torchscript, onnx or state-dict."),
+    out: Path = typer.Option(..., "--out", help="New directory for the networks, model.json and README.md."),
+    member: int = typer.Option(0, "--member", help="Which seed of a multi-seed run (index)."),
+) -> None:
+    """Write each sensor's encoder and decoder (normaliser folded in: sensor units in and out) with a model card."""
+    from rich.console import Console
+
+    from unitac_rig.learning.export import CARD_NAME, MODEL_JSON, export_model
+
+    document = export_model(run, out, fmt, member)
+    console = Console()
+    console.print(f"exported {run} (member {member}, seed {document['seed']}) as {fmt} -> {out}")
+    for sensor, entry in document["sensors"].items():
+        console.print(
+            f"  {sensor}: ({entry['n_taxels']}, 3) {entry['units']} <-> latent {document['latent_dim']}: "
+            f"{entry['encoder']}, {entry['decoder']}"
+        )
+    console.print(f"  {MODEL_JSON}, {CARD_NAME} (model card: data hash, metrics, intended use, limits, loading)")
+
+
 def register(app: typer.Typer) -> None:
     """Add this area's commands to the root app."""
     app.command("train")(train_command)
     app.command("report")(report_command)
     app.command("translate")(translate_command)
     app.command("geometry")(geometry_command)
+    app.command("export-model")(export_model_command)

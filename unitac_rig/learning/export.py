@@ -1,0 +1,446 @@
+"""``unitac-rig export-model``: a trained run as plain PyTorch/ONNX networks that need nothing of unitac-rig.
+
+For every sensor of the run's UniTac-NV model, one member (seed):
+
+* ``encoder_<sensor>``: frames ``(B, n_taxels, 3)`` in the sensor's own units -> latent ``(B, latent_dim)``;
+* ``decoder_<sensor>``: latent ``(B, latent_dim)`` -> frames ``(B, n_taxels, 3)`` in that sensor's units: the shared
+  decoder's hidden layers followed by that sensor's slice of its output layer.
+
+Translation is ``decoder_<target>(encoder_<source>(frames))``. The normaliser is folded into the weights (the
+encoder's first layer absorbs ``(x - mean) / std``, the decoder's last layer ``y * std + mean``, computed in float64),
+so each file is an ordinary ``Flatten -> Linear/ReLU... -> Linear`` (``-> Unflatten`` for a decoder): no
+preprocessing outside it, no dropout (inference). Formats:
+
+* ``torchscript``: ``<part>_<sensor>.torchscript.pt`` for ``torch.jit.load`` (PyTorch itself marks TorchScript as
+  deprecated in favour of ``torch.export``; the files still load with plain torch);
+* ``onnx``: ``<part>_<sensor>.onnx`` (opset of torch's exporter, dynamic batch axis; needs the ``onnx`` extra:
+  ``pip install "unitac-rig[onnx]"``);
+* ``state-dict``: ``<part>_<sensor>.state_dict.pt``, the ``nn.Sequential``'s tensors only, for
+  ``torch.load(..., weights_only=True)`` into the Sequential that ``model.json``'s layer widths describe.
+
+Beside them: ``model.json`` (sensors, shapes, units, layer widths, files and their SHA-256, the folded normaliser,
+training data hash, member and seed, provenance) and ``README.md``, the model card (data, metrics from the run's
+``metrics.json``, intended use, limits, how to load).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import logging
+import os
+import shutil
+import tempfile
+import warnings
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from unitac_rig.errors import ModelError, UsageError
+from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders, head_part
+from unitac_rig.learning.run import provenance
+from unitac_rig.learning.train import LoadedRun, load_run
+
+log = logging.getLogger(__name__)
+
+FORMATS = ("torchscript", "onnx", "state-dict")
+SUFFIX = {"torchscript": ".torchscript.pt", "onnx": ".onnx", "state-dict": ".state_dict.pt"}
+MODEL_JSON = "model.json"
+CARD_NAME = "README.md"
+EXPORT_FORMAT = "unitac-rig/unitac-nv-export"
+EXPORT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class _Linear:
+    weight: np.ndarray  # (in, out) float64, the engine's orientation
+    bias: np.ndarray  # (out,)
+
+
+def _member_layers(engine: StackedAutoencoders, member: int) -> dict[str, _Linear]:
+    """The UniTac-NV group's layers of one member, keyed ``enc_<sensor>/<i>``, ``dec/<i>``, ``head_<s>/<i>``."""
+    return {
+        key: _Linear(w.astype(np.float64), b.astype(np.float64))
+        for key, (w, b) in engine.layer_parameters(UNITAC_GROUP, member).items()
+    }
+
+
+def _sequential(layers: Sequence[_Linear], flatten: bool, unflatten_taxels: int | None) -> nn.Sequential:
+    modules: list[nn.Module] = [nn.Flatten(1)] if flatten else []
+    for index, layer in enumerate(layers):
+        linear = nn.Linear(*layer.weight.shape)
+        with torch.no_grad():
+            linear.weight.copy_(torch.from_numpy(layer.weight.T.copy()))
+            linear.bias.copy_(torch.from_numpy(layer.bias.copy()))
+        modules.append(linear)
+        if index < len(layers) - 1:
+            modules.append(nn.ReLU())
+    if unflatten_taxels is not None:
+        modules.append(nn.Unflatten(1, (unflatten_taxels, 3)))
+    return nn.Sequential(*modules).eval()
+
+
+def encoder_module(
+    engine: StackedAutoencoders, mean: np.ndarray, std: np.ndarray, sensor: str, member: int = 0
+) -> nn.Sequential:
+    """``nn.Sequential``: frames (B, n_taxels, 3) in sensor units -> latent (B, latent_dim), normaliser folded in."""
+    layers = _member_layers(engine, member)
+    keys = sorted((k for k in layers if k.startswith(f"enc_{sensor}/")), key=lambda k: int(k.rsplit("/", 1)[1]))
+    if not keys:
+        raise ModelError(f"the model has no encoder for {sensor!r}", hint=f"it has {', '.join(engine.sensors)}")
+    first = layers[keys[0]]
+    scale = np.tile(1.0 / np.asarray(std, dtype=np.float64), first.weight.shape[0] // 3)  # per input column
+    shift = np.tile(np.asarray(mean, dtype=np.float64), first.weight.shape[0] // 3)
+    # W' x + b' = W ((x - mean) / std) + b
+    folded = _Linear(first.weight * scale[:, None], first.bias - (shift * scale) @ first.weight)
+    return _sequential([folded, *(layers[k] for k in keys[1:])], flatten=True, unflatten_taxels=None)
+
+
+def decoder_module(
+    engine: StackedAutoencoders, mean: np.ndarray, std: np.ndarray, sensor: str, member: int = 0
+) -> nn.Sequential:
+    """``nn.Sequential``: latent (B, latent_dim) -> frames (B, n_taxels, 3) in ``sensor``'s units: the shared
+    hidden layers, then the sensor's columns of the output layer with the de-normalisation folded in."""
+    layers = _member_layers(engine, member)
+    spec = engine.group(UNITAC_GROUP)
+    if sensor not in spec.sensors:
+        raise ModelError(f"the model has no decoder output for {sensor!r}", hint=f"it has {', '.join(spec.sensors)}")
+    n_hidden = len(engine.shape.decoder_hidden)
+    trunk = [layers[f"dec/{i}"] for i in range(n_hidden)]
+    h, head = next((h, head) for h, head in enumerate(spec.output_heads) if sensor in head)
+    out_layer = layers[f"{head_part(head, h)}/{n_hidden}"]
+    start = sum(engine.feature_dims[s] for s in head[: head.index(sensor)])
+    width = engine.feature_dims[sensor]
+    columns = slice(start, start + width)
+    scale = np.tile(np.asarray(std, dtype=np.float64), width // 3)
+    shift = np.tile(np.asarray(mean, dtype=np.float64), width // 3)
+    # (W z + b) * std + mean
+    folded = _Linear(out_layer.weight[:, columns] * scale[None, :], out_layer.bias[columns] * scale + shift)
+    return _sequential([*trunk, folded], flatten=False, unflatten_taxels=width // 3)
+
+
+@contextlib.contextmanager
+def _quiet_exporters() -> Iterator[None]:
+    """TorchScript's deprecation warning and torch.onnx's registry chatter (torchvision ops it skips) are not
+    the user's business here; anything else still surfaces."""
+    names = ("torch.onnx._internal.exporter._registration", "torch.onnx")
+    loggers = [logging.getLogger(n) for n in names]
+    levels = [lg.level for lg in loggers]
+    try:
+        for lg in loggers:
+            lg.setLevel(logging.ERROR)
+        with warnings.catch_warnings():
+            warnings.filterwarnings(
+                "ignore", message=r".*torch\.jit\.(script|trace).* deprecated", category=DeprecationWarning
+            )
+            warnings.filterwarnings("ignore", message=r".*training mode", category=UserWarning)
+            warnings.filterwarnings("ignore", message=r".*treespec.*", category=Warning)
+            yield
+    finally:
+        for lg, level in zip(loggers, levels, strict=True):
+            lg.setLevel(level)
+
+
+def _write(module: nn.Module, example: torch.Tensor, path: Path, fmt: str, names: tuple[str, str]) -> None:
+    if fmt == "torchscript":
+        with _quiet_exporters():
+            scripted = torch.jit.script(module)
+        scripted.save(str(path))
+    elif fmt == "state-dict":
+        torch.save({k: v.detach().clone() for k, v in module.state_dict().items()}, path)
+    else:
+        try:
+            import onnx  # noqa: F401  (torch.onnx needs it and onnxscript; fail with the fix, not deep inside)
+            import onnxscript  # noqa: F401
+        except ImportError as exc:
+            raise UsageError(
+                f"ONNX export needs the onnx and onnxscript packages ({exc.name} is missing)",
+                hint='pip install "unitac-rig[onnx]"',
+            ) from exc
+        with _quiet_exporters():
+            torch.onnx.export(
+                module,
+                (example,),
+                str(path),
+                dynamo=True,
+                external_data=False,
+                verbose=False,
+                input_names=[names[0]],
+                output_names=[names[1]],
+                dynamic_shapes=({0: torch.export.Dim("batch", min=1)},),
+            )
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _units(sensor: str) -> str:
+    from unitac_rig.rig.sensors import SENSORS
+
+    spec = SENSORS.get(sensor)
+    return spec.layout.units if spec is not None else "as recorded (not a registered sensor)"
+
+
+def _layout(sensor: str) -> dict[str, Any] | None:
+    from unitac_rig.rig.sensors import SENSORS
+
+    spec = SENSORS.get(sensor)
+    if spec is None:
+        return None
+    layout = spec.layout
+    return {"rows": layout.rows, "cols": layout.cols, "pitch_mm": layout.pitch_mm, "units": layout.units}
+
+
+def export_model(run_dir: Path, out: Path, fmt: str, member: int = 0) -> dict[str, Any]:
+    """Write the run's encoders and decoders in ``fmt`` with ``model.json`` and the model card into ``out`` (built
+    beside it and renamed into place, so ``out`` is complete or absent); returns the model.json content."""
+    if fmt not in FORMATS:
+        raise UsageError(f"unknown export format {fmt!r}", hint=f"use one of {', '.join(FORMATS)}")
+    out = Path(out)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise UsageError(f"{out} exists and is not empty", hint="export into a new directory")
+    run = load_run(Path(run_dir))
+    if not 0 <= member < run.engine.members:
+        raise UsageError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
+    engine = run.engine
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))
+    try:
+        document = _export_into(run, engine, staging, fmt, member)
+        if out.exists():
+            out.rmdir()
+        os.replace(staging, out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return document
+
+
+def _export_into(run: LoadedRun, engine: StackedAutoencoders, staging: Path, fmt: str, member: int) -> dict[str, Any]:
+    sensors = engine.group(UNITAC_GROUP).sensors
+    latent = engine.shape.latent_dim
+    files: dict[str, str] = {}
+    entries: dict[str, Any] = {}
+    for sensor in sensors:
+        n_taxels = engine.feature_dims[sensor] // 3
+        mean, std = run.normaliser.mean[sensor], run.normaliser.std[sensor]
+        encoder = encoder_module(engine, mean, std, sensor, member)
+        decoder = decoder_module(engine, mean, std, sensor, member)
+        names = {"encoder": f"encoder_{sensor}{SUFFIX[fmt]}", "decoder": f"decoder_{sensor}{SUFFIX[fmt]}"}
+        _write(encoder, torch.zeros(2, n_taxels, 3), staging / names["encoder"], fmt, ("frames", "latent"))
+        _write(decoder, torch.zeros(2, latent), staging / names["decoder"], fmt, ("latent", "frames"))
+        for name in names.values():
+            files[name] = _sha256(staging / name)
+        entries[sensor] = {
+            "n_taxels": n_taxels,
+            "frame_shape": [n_taxels, 3],
+            "units": _units(sensor),
+            "layout": _layout(sensor),
+            "encoder": names["encoder"],
+            "decoder": names["decoder"],
+            "encoder_widths": [n_taxels * 3, *engine.shape.encoder_hidden, latent],
+            "decoder_widths": [latent, *engine.shape.decoder_hidden, n_taxels * 3],
+            "normaliser_folded_in": {
+                "mean": np.asarray(mean, dtype=float).tolist(),
+                "std": np.asarray(std, dtype=float).tolist(),
+                "mode": getattr(run.normaliser, "mode", "channel_z"),
+            },
+        }
+    payload = run.payload
+    metrics_path = run.run_dir / "metrics.json"
+    metrics = json.loads(metrics_path.read_text(encoding="utf-8")) if metrics_path.is_file() else None
+    document: dict[str, Any] = {
+        "format": EXPORT_FORMAT,
+        "version": EXPORT_VERSION,
+        "export_format": fmt,
+        "model": "UniTac-NV (Hou et al., IROS 2025): one encoder per sensor, one shared decoder",
+        "latent_dim": latent,
+        "sensors": entries,
+        "frame": "(B, n_taxels, 3) float32; taxel i at (row, col) = divmod(i, cols); channels x, y, z",
+        "translate": "decoder_<target>(encoder_<source>(frames))",
+        "member": member,
+        "seed": engine.seeds[member],
+        "epochs": int(payload["epoch"]),
+        "dataset_hash": payload["dataset_hash"],
+        "dataset_summary": payload.get("dataset_summary", {}),
+        "extension": (
+            {k: payload["extension"][k] for k in ("new_sensor", "trained_sensors", "from_dataset_hash")}
+            if payload.get("extension")
+            else None
+        ),
+        "run_provenance": payload.get("provenance", {}),
+        "exported_by": provenance(),
+        "files": files,
+    }
+    (staging / MODEL_JSON).write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+    (staging / CARD_NAME).write_text(render_card(document, metrics), encoding="utf-8")
+    return document
+
+
+def _metrics_lines(metrics: dict[str, Any] | None) -> list[str]:
+    if metrics is None:
+        return ["The run had no `metrics.json` when it was exported (run `unitac-rig report RUN` first to include it)."]
+    table = metrics.get("table1", {})
+    if not table:
+        return ["`metrics.json` holds no test table."]
+    columns = list(next(iter(table.values())).keys())
+    lines = [
+        "Test set of the run (held-out approach directions of the training objects, and objects kept out of training);"
+        " each cell NMAE / SSIM, mean over the run's seeds:",
+        "",
+        "| row | " + " | ".join(c.replace("_to_", " → ") for c in columns) + " |",
+        "|---|" + "---|" * len(columns),
+    ]
+    for row, cells in table.items():
+        values = [cells.get(c) for c in columns]
+        rendered = ["–" if v is None else f"{v['nmae']:.3f} / {v['ssim']:.3f}" for v in values]
+        lines.append(f"| {row} | " + " | ".join(rendered) + " |")
+    options = [f"{k}: {metrics[k]}" for k in ("nmae_normaliser", "ssim_range", "preprocessing") if k in metrics]
+    lines += ["", "NMAE is the mean absolute error over a training range (docs/learning.md, Metrics)."]
+    if options:
+        lines.append("Metric settings: " + "; ".join(options) + ".")
+    latent = metrics.get("latent_l1", {}).get("final")
+    if latent is not None:
+        lines.append(f"Mean L1 distance between two sensors' latents of the same contact: {latent:.3f}.")
+    return lines
+
+
+def render_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str:
+    """The model card: what the files are, the data it learned from, its test metrics, intended use, limits, and
+    how to load it with plain torch (or onnxruntime)."""
+    sensors = document["sensors"]
+    names = list(sensors)
+    fmt = document["export_format"]
+    summary = document.get("dataset_summary") or {}
+    source, target = (names[0], names[1]) if len(names) > 1 else (names[0], names[0])
+    src, dst = sensors[source], sensors[target]
+    rows = [
+        f"| {s} | {e['n_taxels']} | ({e['n_taxels']}, 3) | {e['units']} | `{e['encoder']}` | `{e['decoder']}` |"
+        for s, e in sensors.items()
+    ]
+    simulated = summary.get("simulated")
+    data_kind = "simulated rig (unitac-rig's twin)" if simulated else "recorded" if simulated is False else "unknown"
+    extension = document.get("extension")
+    lines = [
+        "# UniTac-NV tactile translation model",
+        "",
+        f"Exported by unitac-rig {document['exported_by'].get('package_version', '?')} as **{fmt}**. "
+        "One encoder per sensor and the shared decoder's output for each sensor, as separate networks:",
+        f"translate a frame with `{document['translate']}`. The normalisation the model was trained with is folded "
+        "into the weights: inputs and outputs are tare-subtracted frames in each sensor's own units.",
+        "",
+        "| sensor | taxels | frame | units | encoder | decoder |",
+        "|---|---|---|---|---|---|",
+        *rows,
+        "",
+        f"Latent: {document['latent_dim']} numbers. Frames: {document['frame']}. Batch axis first, any size.",
+        "",
+        "## Training data",
+        "",
+        f"- dataset content hash (SHA-256 of the paired frames and keys): `{document['dataset_hash']}`",
+        f"- sensors {', '.join(summary.get('sensors', names))}; objects {', '.join(summary.get('objects', []))}; "
+        f"{summary.get('rows', '?')} paired contacts; data: {data_kind}",
+        f"- member {document['member']} (seed {document['seed']}) of the run, after {document['epochs']} epochs",
+    ]
+    if extension:
+        lines.append(
+            f"- `{extension['new_sensor']}` was added later to the model trained on "
+            f"{', '.join(extension['trained_sensors'])}: only its encoder and output layer were trained, against the "
+            f"frozen model (`unitac-rig train --from RUN --new-sensor`); the other sensors' networks are unchanged"
+        )
+    lines += ["", "## Metrics", "", *_metrics_lines(metrics), ""]
+    lines += [
+        "## Intended use",
+        "",
+        "- Translating tactile frames between the sensors above (and encoding them into a shared latent for "
+        "downstream tasks, e.g. contact geometry), for sensors mounted as on the training rig and presses like the "
+        "training ones: a flat pad pressed onto prism-shaped objects, normal forces in the trained range (the paper's "
+        "protocol: 4 to 10 N), approach angles within ±45°.",
+        "- Research and prototyping; comparing with the paper (Hou et al., UniTac-NV, IROS 2025).",
+        "",
+        "## Limits",
+        "",
+        "- Frames must be tare-subtracted, in the units above and in the taxel order above; a different firmware "
+        "scaling, mounting orientation or taxel order gives wrong outputs without any error.",
+        "- Contacts unlike the training ones (other shapes, materials, forces, sliding or dynamic contact) are "
+        "outside what was tested; the table's unseen-object rows show how much error grows on a new shape.",
+        "- No uncertainty estimate; deterministic (no dropout at inference).",
+        "- Trained on simulated data: expect a gap on a real sensor until it is trained on recorded data."
+        if simulated
+        else "- Trained on one rig's recordings; other units of the same sensor model may differ.",
+        "",
+        "## How to load",
+        "",
+    ]
+    lines += _loading_snippet(fmt, source, target, src, dst)
+    lines += [
+        "",
+        f"`{MODEL_JSON}` lists every sensor's shape, units, layer widths, file names and their SHA-256 "
+        "(check a copy with `sha256sum`).",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _loading_snippet(fmt: str, source: str, target: str, src: dict[str, Any], dst: dict[str, Any]) -> list[str]:
+    n_src = src["n_taxels"]
+    if fmt == "torchscript":
+        code = [
+            "import torch",
+            "",
+            f'encoder = torch.jit.load("{src["encoder"]}")',
+            f'decoder = torch.jit.load("{dst["decoder"]}")',
+            f"frames = torch.zeros(1, {n_src}, 3)  # {source} frames, {src['units']}",
+            "with torch.no_grad():",
+            f"    translated = decoder(encoder(frames))  # (1, {dst['n_taxels']}, 3) {target} frames, {dst['units']}",
+        ]
+    elif fmt == "onnx":
+        code = [
+            "import numpy as np",
+            "import onnxruntime as ort",
+            "",
+            f'encoder = ort.InferenceSession("{src["encoder"]}")',
+            f'decoder = ort.InferenceSession("{dst["decoder"]}")',
+            f"frames = np.zeros((1, {n_src}, 3), dtype=np.float32)  # {source} frames, {src['units']}",
+            '(latent,) = encoder.run(None, {"frames": frames})',
+            f'(translated,) = decoder.run(None, {{"latent": latent}})  # {target} frames, {dst["units"]}',
+        ]
+    else:
+        code = [
+            "import json",
+            "import torch",
+            "from torch import nn",
+            "",
+            "",
+            "def mlp(widths, flatten=False, taxels=None):",
+            "    layers = [nn.Flatten(1)] if flatten else []",
+            "    for i in range(len(widths) - 1):",
+            "        layers.append(nn.Linear(widths[i], widths[i + 1]))",
+            "        if i < len(widths) - 2:",
+            "            layers.append(nn.ReLU())",
+            "    if taxels is not None:",
+            "        layers.append(nn.Unflatten(1, (taxels, 3)))",
+            "    return nn.Sequential(*layers).eval()",
+            "",
+            "",
+            'card = json.load(open("model.json"))',
+            f'src, dst = card["sensors"]["{source}"], card["sensors"]["{target}"]',
+            'encoder = mlp(src["encoder_widths"], flatten=True)',
+            'encoder.load_state_dict(torch.load(src["encoder"], weights_only=True))',
+            'decoder = mlp(dst["decoder_widths"], taxels=dst["n_taxels"])',
+            'decoder.load_state_dict(torch.load(dst["decoder"], weights_only=True))',
+            "with torch.no_grad():",
+            f"    translated = decoder(encoder(torch.zeros(1, {n_src}, 3)))  # {target} frames, {dst['units']}",
+        ]
+    return ["```python", *code, "```"]

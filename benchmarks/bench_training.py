@@ -3,7 +3,7 @@ the plain eager loop, at 1, 3 and 15 stacked models; the 5-seed paper run's wall
 Measuring code: unitac_rig/bench/training.py.
 
     nice -n 10 python benchmarks/bench_training.py [--data DIR] [--quick] [--out docs/figures]
-        [--rounds 8] [--seconds-per-cell 0.6] [--paper-run-epochs 3] [--budget-epochs 100]
+        [--rounds 8] [--seconds-per-cell 0.6] [--paper-run-epochs 5] [--budget-epochs 100]
 
 Data: ``--data DIR`` (session files), else synthetic contacts of the paper's size (7 objects x 91 angles x 25
 targets, irregular prism x 4 rotations = 22,750 pairs, 12,300 training pairs; unitac_rig.learning.synthetic_data).

@@ -258,6 +258,8 @@ class UR5eReceiver:
             self._receive.disconnect()
         except (RuntimeError, ValueError) as exc:
             logger.warning("RTDE receive disconnect from %s failed: %s", self.host, exc)
+        finally:
+            self._receive = None  # its destructor blocks: let it run now, not during a later connection
 
     def __enter__(self) -> UR5eReceiver:
         return self
@@ -501,6 +503,10 @@ class UR5eArm:
         finally:
             self._in_force_mode = self._speeding = False
             self._move = None
+            # Let ur_rtde's objects go now: their destructors block (a 0.5 s sleep each) holding the GIL, and run
+            # later, when garbage collection gets to them, they freeze whatever this process does then (a second
+            # connection's watchdog tripped that way on the twin).
+            self._control = None
 
     def __enter__(self) -> UR5eArm:
         return self

@@ -418,15 +418,41 @@ def geometry_command(
     object_id: str = typer.Option(None, "--object", help="Object to estimate (default: the run's unseen object)."),
     member: int = typer.Option(0, "--member", help="Which seed of a multi-seed run (index)."),
     epochs: int = typer.Option(80, "--epochs", help="MLP training epochs (the paper: 80)."),
+    predict: Path = typer.Option(
+        None, "--predict", help="Apply the saved estimator to these frames (.npy/.npz or a session .h5) instead."
+    ),
+    sensor: str = typer.Option(None, "--sensor", help="With --predict: the sensor that recorded the frames."),
+    trained_on: str = typer.Option(
+        None, "--trained-on", help="With --predict: use the MLP trained on this sensor's latents (default: --sensor)."
+    ),
+    out: Path = typer.Option(None, "--out", help="With --predict: output .npz (default: FRAMES_geometry.npz)."),
 ) -> None:
-    """Downstream contact geometry on the unseen object: N x N train/test-sensor scenarios, RUN/geometry.json."""
+    """Downstream contact geometry on the unseen object: N x N train/test-sensor scenarios, RUN/geometry.json and
+    the saved estimator; with --predict, the estimator's profiles for new frames."""
     from rich.console import Console
     from rich.table import Table
 
-    from unitac_rig.learning.contact_geometry import GeometryConfig, geometry_for_run
+    from unitac_rig.learning.contact_geometry import ESTIMATOR_PT, GeometryConfig, geometry_for_run, predict_file
     from unitac_rig.learning.report import write_report
 
     console = Console()
+    if predict is not None:
+        if not sensor:
+            raise UsageError("--predict needs --sensor (the sensor that recorded the frames)")
+        prediction, path = predict_file(run, predict, sensor, trained_on, out)
+        profiles = prediction.profiles_mm
+        title = f"Predicted depth under the pad (mm), {sensor} frames, MLP trained on {prediction.trained_on} latents"
+        table = Table(title=title, box=None)
+        table.add_column("x mm", justify="right")
+        shown = min(5, len(profiles))
+        for i in range(shown):
+            table.add_column(f"#{i}", justify="right")
+        for k, x in enumerate(prediction.offsets_mm):
+            table.add_row(f"{x:+.1f}", *(f"{profiles[i, k]:.2f}" for i in range(shown)))
+        console.print(table)
+        more = f" (first {shown} shown)" if len(profiles) > shown else ""
+        console.print(f"{len(profiles)} profiles{more} -> {path}")
+        return
     console.print("training the profile MLPs...")
     result, json_path, png_path = geometry_for_run(run, object_id, member=member, config=GeometryConfig(epochs=epochs))
     table = Table(title=f"Contact geometry on {result.object_id}: mean profile error (mm)")
@@ -437,7 +463,7 @@ def geometry_command(
         table.add_row(s["train_sensor"], s["test_sensor"], f"{s['mae_mm']:.3f}", paper)
     console.print(table)
     write_report(run, figures=False)
-    console.print(f"{json_path}\n{png_path}")
+    console.print(f"{json_path}\n{png_path}\n{Path(run) / ESTIMATOR_PT} (apply it: --predict FRAMES --sensor S)")
 
 
 def export_model_command(

@@ -13,13 +13,19 @@ Ground truth, cut from the object's outline (CAD frame, mm) as the paper describ
 Model: MLP 16 -> 64 -> 128 -> 64 -> 32 -> 11, ReLU and dropout (0.2 for uSkin latents, 0.3 for PapillArray, 0.2 for
 other sensors) between layers, Adam lr 5e-5, weight decay 1e-3, L1 loss (mm), 80 epochs, batch 64. Split: a seeded
 10% of the object's approach directions (rotation, angle) go to test with all their forces.
+
+The trained MLPs are kept in the run (``geometry_estimator.pt``: tensors and plain metadata, read with
+``weights_only=True``; ``geometry_estimator.json`` for people) and applied to new frames by :func:`predict_geometry`
+(``unitac-rig geometry RUN --predict FRAMES --sensor S``).
 """
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import json
 import logging
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -29,10 +35,11 @@ import numpy as np
 import torch
 from torch import nn
 
-from unitac_rig.errors import DataError, ModelError
+from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.data import PairedDataset, held_out_directions
 from unitac_rig.learning.engine import UNITAC_GROUP
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM
+from unitac_rig.learning.run import safe_torch_load
 from unitac_rig.learning.train import LoadedRun, load_run, load_test_set
 
 log = logging.getLogger(__name__)
@@ -228,6 +235,8 @@ class GeometryResult:
     angle_deg: np.ndarray  # (T,)
     rotation_deg: np.ndarray  # (T,)
     config: GeometryConfig
+    model: StackedProfileMLP | None = None  # the trained MLPs, one per training sensor (``sensors`` order)
+    sensors: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -352,6 +361,8 @@ def run_geometry(
         angle_deg=subset.angle_deg[is_test],
         rotation_deg=subset.rotation_deg[is_test],
         config=config,
+        model=model,
+        sensors=tuple(sensors),
     )
 
 
@@ -402,7 +413,8 @@ def geometry_for_run(
     config: GeometryConfig | None = None,
     outline: OutlineGeometry | None = None,
 ) -> tuple[GeometryResult, Path, Path]:
-    """Run the downstream task for a trained run; writes ``RUN/geometry.json`` and ``RUN/figures/geometry.png``."""
+    """Run the downstream task for a trained run; writes ``RUN/geometry.json``, ``RUN/figures/geometry.png`` and
+    the trained estimator (``RUN/geometry_estimator.pt`` and ``.json``, for ``geometry --predict``)."""
     run = load_run(run_dir)
     test_set = load_test_set(run_dir)
     result = run_geometry(run, test_set, object_id, member=member, config=config, outline=outline)
@@ -410,4 +422,163 @@ def geometry_for_run(
     json_path = Path(run_dir) / GEOMETRY_JSON
     json_path.write_text(json.dumps(result.to_json(), indent=2) + "\n", encoding="utf-8")
     png_path = plot_geometry(result, outline, run.sensors, Path(run_dir) / "figures" / GEOMETRY_PNG)
+    save_estimator(run, result)
     return result, json_path, png_path
+
+
+# ---- the saved estimator -------------------------------------------------------------------------------------
+ESTIMATOR_PT = "geometry_estimator.pt"
+ESTIMATOR_JSON = "geometry_estimator.json"
+ESTIMATOR_FORMAT = "unitac-rig/geometry-estimator"
+ESTIMATOR_VERSION = 1
+
+
+def encoder_fingerprint(run: LoadedRun, member: int) -> str:
+    """SHA-256 of one member's UniTac-NV encoder weights: the estimator reads their latents, so a run trained on
+    (resumed) or replaced after the estimator was fitted is caught at prediction time."""
+    digest = hashlib.sha256()
+    for key, (weight, bias) in sorted(run.engine.layer_parameters(UNITAC_GROUP, member).items()):
+        if key.startswith("enc_"):
+            digest.update(key.encode())
+            digest.update(np.ascontiguousarray(weight, dtype=np.float32).tobytes())
+            digest.update(np.ascontiguousarray(bias, dtype=np.float32).tobytes())
+    return digest.hexdigest()
+
+
+def save_estimator(run: LoadedRun, result: GeometryResult) -> tuple[Path, Path]:
+    """``RUN/geometry_estimator.pt`` (the MLPs' tensors and plain metadata; loads with ``weights_only=True``) and
+    the same metadata as ``RUN/geometry_estimator.json`` for people."""
+    if result.model is None:
+        raise ModelError("this geometry result carries no trained estimator")
+    meta = {
+        "object": result.object_id,
+        "member": result.member,
+        "seed": result.seed,
+        "train_sensors": list(result.sensors),
+        "latent_dim": int(result.model.weights[0].shape[1]),
+        "hidden": list(result.config.hidden),
+        "offsets_mm": result.offsets_mm.tolist(),
+        "points": result.config.points,
+        "span_mm": result.config.span_mm,
+        "epochs": result.config.epochs,
+        "dropout": {s: result.config.dropout_for(s) for s in result.sensors},
+        "test_mae_mm": {name: scenario["mae_mm"] for name, scenario in result.scenarios.items()},
+        "run_epoch": int(run.payload["epoch"]),
+        "encoder_sha256": encoder_fingerprint(run, result.member),
+        "profile": "depth (mm, >= 0 below the contact origin) of the surface under the pad at offsets_mm across it",
+    }
+    payload = {
+        "format": ESTIMATOR_FORMAT,
+        "version": ESTIMATOR_VERSION,
+        "weights": [w.detach().cpu().clone() for w in result.model.weights],
+        "biases": [b.detach().cpu().clone() for b in result.model.biases],
+        "meta": meta,
+    }
+    pt_path, json_path = run.run_dir / ESTIMATOR_PT, run.run_dir / ESTIMATOR_JSON
+    tmp = pt_path.with_suffix(".pt.tmp")
+    torch.save(payload, tmp)
+    os.replace(tmp, pt_path)
+    json_path.write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
+    return pt_path, json_path
+
+
+@dataclass(frozen=True)
+class GeometryEstimator:
+    """A saved estimator: one MLP per training sensor, read back without unpickling anything but tensors."""
+
+    weights: list[torch.Tensor]  # (train sensors, in, out) per layer
+    biases: list[torch.Tensor]  # (train sensors, 1, out)
+    meta: dict[str, Any]
+
+    @classmethod
+    def load(cls, run_dir: Path) -> GeometryEstimator:
+        path = Path(run_dir) / ESTIMATOR_PT
+        if not path.is_file():
+            raise UsageError(
+                f"{run_dir} has no saved geometry estimator ({ESTIMATOR_PT})",
+                hint=f"train it first: unitac-rig geometry {run_dir}",
+            )
+        payload = safe_torch_load(path, what="geometry estimator")
+        if not isinstance(payload, dict) or payload.get("format") != ESTIMATOR_FORMAT:
+            raise ModelError(f"{path} is not a unitac-rig geometry estimator", hint="rerun `unitac-rig geometry RUN`")
+        if int(payload.get("version", -1)) > ESTIMATOR_VERSION:
+            raise ModelError(f"{path} was written by a newer unitac-rig", hint="upgrade unitac-rig")
+        try:
+            return cls(list(payload["weights"]), list(payload["biases"]), dict(payload["meta"]))
+        except (KeyError, TypeError) as exc:
+            raise ModelError(f"{path} is incomplete ({exc})", hint="rerun `unitac-rig geometry RUN`") from exc
+
+    @property
+    def train_sensors(self) -> tuple[str, ...]:
+        return tuple(self.meta["train_sensors"])
+
+    def predict(self, latents: np.ndarray, trained_on: str) -> np.ndarray:
+        """(M, latent) -> (M, points) profile depths in mm, with the MLP trained on ``trained_on``'s latents."""
+        if trained_on not in self.train_sensors:
+            raise UsageError(
+                f"no geometry MLP was trained on {trained_on!r}", hint=f"choose one of {', '.join(self.train_sensors)}"
+            )
+        k = self.train_sensors.index(trained_on)
+        h = torch.as_tensor(np.asarray(latents, dtype=np.float32))
+        with torch.no_grad():
+            for index, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
+                h = torch.addmm(bias[k, 0], h, weight[k])
+                if index < len(self.weights) - 1:
+                    h = torch.relu(h)
+        return h.numpy()
+
+
+@dataclass
+class GeometryPrediction:
+    profiles_mm: np.ndarray  # (M, points)
+    offsets_mm: np.ndarray  # (points,)
+    sensor: str  # whose frames
+    trained_on: str  # whose latents the MLP was trained on
+    meta: dict[str, Any]
+
+
+def predict_geometry(
+    run_dir: Path, frames: np.ndarray, sensor: str, trained_on: str | None = None
+) -> GeometryPrediction:
+    """Local surface profiles under the pad for ``frames`` (M, n_taxels, 3) of ``sensor`` (sensor units): encoded
+    by the run member the estimator was trained with, then its MLP for ``trained_on`` (default: ``sensor`` itself
+    when an MLP was trained on it, the paper's within-sensor case; else the first training sensor)."""
+    from unitac_rig.learning.translate import Translator
+
+    estimator = GeometryEstimator.load(run_dir)
+    member = int(estimator.meta["member"])
+    translator = Translator.load(run_dir, member=member)
+    run = load_run(run_dir)
+    if encoder_fingerprint(run, member) != estimator.meta["encoder_sha256"]:
+        raise ModelError(
+            f"the geometry estimator in {run_dir} was fitted to other encoder weights (the run was trained on or "
+            f"replaced since, epoch {estimator.meta['run_epoch']} then, {run.payload['epoch']} now)",
+            hint=f"refit it: unitac-rig geometry {run_dir}",
+        )
+    chosen = trained_on or (sensor if sensor in estimator.train_sensors else estimator.train_sensors[0])
+    latents = translator.encode(np.asarray(frames, dtype=np.float32).reshape(-1, *np.shape(frames)[-2:]), sensor)
+    profiles = estimator.predict(latents, chosen)
+    return GeometryPrediction(
+        profiles, np.asarray(estimator.meta["offsets_mm"], dtype=np.float64), sensor, chosen, estimator.meta
+    )
+
+
+def predict_file(
+    run_dir: Path, input_path: Path, sensor: str, trained_on: str | None = None, output_path: Path | None = None
+) -> tuple[GeometryPrediction, Path]:
+    """Profiles for the frames in ``input_path`` (as ``translate`` reads them); writes ``<input>_geometry.npz``
+    (``profiles_mm``, ``offsets_mm``, sensors, and the input's keys) or ``output_path``."""
+    from unitac_rig.learning.translate import read_frames
+
+    data = read_frames(Path(input_path), sensor)
+    prediction = predict_geometry(run_dir, data.frames, sensor, trained_on)
+    out = Path(output_path) if output_path else Path(input_path).with_name(f"{Path(input_path).stem}_geometry.npz")
+    arrays = {
+        "profiles_mm": prediction.profiles_mm,
+        "offsets_mm": prediction.offsets_mm,
+        "sensor": np.array(sensor),
+        "trained_on": np.array(prediction.trained_on),
+        **data.keys,
+    }
+    np.savez_compressed(out, **arrays)  # type: ignore[arg-type]
+    return prediction, out

@@ -97,6 +97,12 @@ def train_command(
     checkpoint_every: int = typer.Option(None, "--checkpoint-every", help="Epochs between checkpoints (50)."),
     tsne_contacts: int = typer.Option(None, "--tsne-contacts", help="Test contacts kept for the t-SNE (600)."),
     report: bool = typer.Option(True, "--report/--no-report", help="Write metrics.json, report.md and figures."),
+    partial: bool = typer.Option(
+        False,
+        "--partial/--complete-only",
+        help="Also train on contacts only some sensors recorded (at least two; masked loss). Test and validation "
+        "use contacts every sensor recorded.",
+    ),
 ) -> None:
     """Train UniTac-NV (and the baselines) on paired data; writes RUN/checkpoint.pt, config.toml, metrics.json,
     report.md."""
@@ -146,7 +152,12 @@ def train_command(
             flat["epochs"] = epochs
         config = TrainConfig().updated(flat)
     console = Console()
-    dataset = build_paired_dataset(load_sets(data))
+    if resume and not partial:  # a run trained on a partial join resumes on one
+        from unitac_rig.learning.run import checkpoint_path, load_checkpoint
+
+        if checkpoint_path(out).is_file():
+            partial = int(load_checkpoint(out).get("dataset_summary", {}).get("partial_train_rows", 0)) > 0
+    dataset = build_paired_dataset(load_sets(data), partial=partial)
     console.print(
         f"paired dataset: {len(dataset)} contacts, sensors {', '.join(dataset.sensors)}, "
         f"objects {', '.join(dataset.objects)}"

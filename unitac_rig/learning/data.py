@@ -242,6 +242,8 @@ def build_paired_dataset(
         values_out[sensor], force_out[sensor] = values, force
         if has_frame is not None:
             has_frame[sensor] = has
+    if has_frame is not None and all(bool(h.all()) for h in has_frame.values()):
+        has_frame = None  # nothing missing: the very dataset (and content hash) of the complete join
     return PairedDataset(
         sensors=chosen,
         object_id=np.array([k[0] for k in keys], dtype=str),
@@ -431,6 +433,7 @@ class Normaliser:
         mean, std, data_range, channel_std, sensor_range = {}, {}, {}, {}, {}
         for sensor in dataset.sensors:
             channels = dataset.values[sensor][rows].reshape(-1, 3).astype(np.float64)
+            channels = channels[~np.isnan(channels).any(axis=1)]  # a partial join's missing frames are NaN
             if channels.shape[0] == 0:
                 raise DataError("no training rows to fit the normalisation on")
             spread = channels.std(axis=0)

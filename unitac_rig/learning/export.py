@@ -330,7 +330,13 @@ def render_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str
         for s, e in sensors.items()
     ]
     simulated = summary.get("simulated")
-    data_kind = "simulated rig (unitac-rig's twin)" if simulated else "recorded" if simulated is False else "unknown"
+    data_kind = (
+        "simulated (sessions marked simulated: the rig's twin or synthetic contacts)"
+        if simulated
+        else "recorded on a rig"
+        if simulated is False
+        else "not stated"
+    )
     extension = document.get("extension")
     lines = [
         "# UniTac-NV tactile translation model",

@@ -438,15 +438,13 @@ def _train(
         else _start_run(dataset, run_dir, config, epochs, device)
     )
     train_rows, test_rows = _split_rows(dataset, run.split)
-    val_rows = dataset.subset(run.split.validation_mask)
-    train_x = torch.from_numpy(
-        np.concatenate([run.normaliser.normalise(s, train_rows.values[s]) for s in dataset.sensors], axis=1)
-    ).to(device)
+    val_rows = dataset.subset(run.split.validation_mask & dataset.complete_rows())
+    train_x, train_present = _training_inputs(train_rows, run.normaliser, device)
     options = {"nmae_normaliser": run.config.nmae_normaliser, "ssim_range": run.config.ssim_range}
     evaluator = Evaluator(test_rows, run.normaliser, run.split.unseen_objects, device, **options)
     validator = Evaluator(val_rows, run.normaliser, (), device, **options) if len(val_rows) else None
     while run.epoch < run.config.epochs:
-        record = _train_epoch(run, train_x)
+        record = _train_epoch(run, train_x, train_present)
         done, last = run.epoch, run.epoch == run.config.epochs
         # per-epoch curves (and any choice made from them) use validation rows; the test rows are scored only
         # after epoch 1 and after the last epoch, for the report's "from epoch 1 to the end" comparisons
@@ -468,16 +466,37 @@ def _train(
     )
 
 
-def _train_epoch(run: _Run, train_x: torch.Tensor) -> dict[str, Any]:
-    """One pass over the training rows for every member (its own order: one gather), batches are slices."""
+def _training_inputs(
+    rows: PairedDataset, normaliser: Normaliser, device: torch.device
+) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """The normalised training rows (M, sum of features) in sensor order on the device, and for a partial join the
+    (M, sensors) presence the masked loss needs (missing frames are zeros there, never seen by the loss)."""
+    if rows.present is None:
+        x = np.concatenate([normaliser.normalise(s, rows.values[s]) for s in rows.sensors], axis=1)
+        return torch.from_numpy(x).to(device), None
+    blocks = []
+    for sensor in rows.sensors:
+        block = np.zeros((len(rows), rows.n_taxels(sensor) * 3), dtype=np.float32)
+        has = rows.has(sensor)
+        block[has] = normaliser.normalise(sensor, rows.values[sensor][has])
+        blocks.append(block)
+    present = np.stack([rows.has(s) for s in rows.sensors], axis=1).astype(np.float32)
+    return torch.from_numpy(np.concatenate(blocks, axis=1)).to(device), torch.from_numpy(present).to(device)
+
+
+def _train_epoch(run: _Run, train_x: torch.Tensor, present: torch.Tensor | None = None) -> dict[str, Any]:
+    """One pass over the training rows for every member (its own order: one gather), batches are slices;
+    ``present`` (rows, sensors) masks the loss of contacts some sensors did not record."""
     began = time.perf_counter()
     engine, n_train, batch = run.engine, train_x.shape[0], run.config.batch_size
     order = torch.from_numpy(np.stack([rng.permutation(n_train) for rng in run.shuffle_rngs])).to(train_x.device)
     shuffled = train_x[order]  # (members, n_train, features)
+    shuffled_present = None if present is None else present[order]
     loss_sum = torch.zeros(len(engine.groups), engine.members, device=train_x.device)
     for start in range(0, n_train, batch):
         chunk = shuffled[:, start : start + batch]
-        loss_sum += engine.train_step(chunk, run.optimizer) * chunk.shape[1]
+        mask = None if shuffled_present is None else shuffled_present[:, start : start + batch]
+        loss_sum += engine.train_step(chunk, run.optimizer, present=mask) * chunk.shape[1]
     train_loss = (loss_sum / n_train).cpu()
     run.seconds += time.perf_counter() - began
     run.epoch += 1
@@ -489,7 +508,9 @@ def _train_epoch(run: _Run, train_x: torch.Tensor) -> dict[str, Any]:
 
 
 def _split_rows(dataset: PairedDataset, split: Split) -> tuple[PairedDataset, PairedDataset]:
-    test_rows = dataset.subset(split.test_mask)
+    """(training rows, test rows); a partial join's contacts that some sensor lacks train (masked loss) but are
+    not scored: every test (and validation) contact has every sensor's frame."""
+    test_rows = dataset.subset(split.test_mask & dataset.complete_rows())
     if len(test_rows) == 0:
         raise DataError("the split left no test rows", hint="use more approach angles per object")
     return dataset.subset(split.train_mask), test_rows
@@ -522,6 +543,7 @@ def _start_run(
             "train_rows": len(train_rows),
             "val_rows": int(split.validation_mask.sum()),
             "test_rows": len(test_rows),
+            "partial_train_rows": int((~train_rows.complete_rows()).sum()),
             "simulated": dataset.simulated,
         },
         split=split,
@@ -548,6 +570,11 @@ def _start_run(
 def _resume_run(dataset: PairedDataset, run_dir: Path, epochs: int | None, device: torch.device) -> _Run:
     """The run in ``run_dir`` as its last checkpoint left it; ``epochs`` extends (never shortens) its budget."""
     payload = _readable(load_checkpoint(run_dir))
+    if payload.get("extension"):
+        raise UsageError(
+            f"{run_dir} added a sensor to a trained run: it is trained in one go and cannot be resumed",
+            hint="run `unitac-rig train --from RUN --new-sensor NAME` again with more --epochs",
+        )
     dataset_hash = dataset.content_hash()
     if payload["dataset_hash"] != dataset_hash:
         raise DataError(

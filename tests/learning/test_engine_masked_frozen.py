@@ -103,3 +103,20 @@ def test_a_new_sensor_trains_only_its_encoder_and_head_and_keeps_old_outputs_bit
     assert single.frozen == {k for k in grown.frozen if k.startswith("unitac/")}
     alone = single.decode(UNITAC_GROUP, single.encode(UNITAC_GROUP, "a", x))["a"]
     torch.testing.assert_close(alone, after["a"][1:2])  # one member alone: the same up to the batched kernel's rounding
+
+
+def test_the_alignment_term_ignores_missing_frames_too() -> None:
+    generator = torch.Generator().manual_seed(3)
+    engine = StackedAutoencoders(
+        DIMS, default_groups(list(DIMS), False), [1], ModelShape(dropout=0.0, align_weight=1.0)
+    )
+    batch = _batch(1, generator)
+    present = torch.ones(1, ROWS, 3)
+    present[:, ::3, 2] = 0.0
+    column_present = torch.cat([present[..., i : i + 1].expand(-1, -1, d) for i, d in enumerate(DIMS.values())], -1)
+    losses = []
+    for filler in (0.0, 1e3):
+        copy = StackedAutoencoders.from_state(engine.state())
+        filled = torch.where(column_present.bool(), batch, torch.full((), filler))
+        losses.append(copy.train_step(filled, torch.optim.SGD(copy.trainable_parameters(), lr=0.0), present=present))
+    assert torch.equal(losses[0], losses[1])

@@ -150,14 +150,25 @@ class _Group:
     heads: tuple[str, ...]  # its output layer keys, one per head; their outputs concatenated are the group's frames
 
 
-def _alignment_term(latents: Sequence[torch.Tensor]) -> torch.Tensor:
+def _alignment_term(latents: Sequence[torch.Tensor], present: torch.Tensor | None = None) -> torch.Tensor:
     """(members,) mean over sensor pairs of (mean matched latent L1) / (mean L1 to the partner of the next row in
-    the batch): scale-free, so the encoders cannot lower it by shrinking their latents (beyond the paper)."""
+    the batch): scale-free, so the encoders cannot lower it by shrinking their latents (beyond the paper).
+    ``present`` (members, rows, sensors of ``latents``): means over the rows that have both sensors' frames."""
+
+    def mean(values: torch.Tensor, weight: torch.Tensor | None) -> torch.Tensor:
+        if weight is None:
+            return values.mean(dim=-1)
+        return (values * weight).sum(dim=-1) / weight.sum(dim=-1).clamp(min=1.0)
+
     terms = []
     for i in range(len(latents)):
         for j in range(i + 1, len(latents)):
-            matched = (latents[i] - latents[j]).abs().sum(dim=-1).mean(dim=-1)
-            unmatched = (latents[i] - latents[j].roll(1, dims=1)).abs().sum(dim=-1).mean(dim=-1)
+            both = shifted = None
+            if present is not None:
+                both = present[..., i] * present[..., j]
+                shifted = present[..., i] * present[..., j].roll(1, dims=1)
+            matched = mean((latents[i] - latents[j]).abs().sum(dim=-1), both)
+            unmatched = mean((latents[i] - latents[j].roll(1, dims=1)).abs().sum(dim=-1), shifted)
             terms.append(matched / (unmatched + 1e-6))
     return torch.stack(terms).mean(dim=0)
 
@@ -454,7 +465,10 @@ class StackedAutoencoders:
         else:
             loss = (diff.abs() * self._masked_loss_weights(group, present, pairs, rows)).sum(dim=(1, 2, 3))
         if self.shape.align_weight > 0.0 and len(encoded) > 1:
-            loss = loss + self.shape.align_weight * _alignment_term(encoded)
+            group_present = None
+            if present is not None:
+                group_present = present[..., [self.sensors.index(s) for s in group.spec.sensors]].to(torch.float32)
+            loss = loss + self.shape.align_weight * _alignment_term(encoded, group_present)
         return loss
 
     def _masked_loss_weights(

@@ -15,7 +15,7 @@ text between ``<!-- generated:start -->`` and ``<!-- generated:end -->`` is the 
 (hand-written comparison) is kept.
 
     python benchmarks/run_results.py --data DATA [--out runs/results] [--seeds 5] [--splits 3] [--epochs 1000]
-        [--eval-every 10] [--config FILE.toml] [--report-only]
+        [--eval-every 10] [--config FILE.toml] [--only-split K] [--report-only]
 """
 
 from __future__ import annotations
@@ -57,6 +57,14 @@ def main() -> None:
     parser.add_argument("--eval-every", type=int, default=10, help="epochs between validation evaluations")
     parser.add_argument("--config", type=Path, default=None, help="TOML training config (docs/learning.md)")
     parser.add_argument("--report-only", action="store_true", help="only re-render from finished runs")
+    parser.add_argument(
+        "--only-split",
+        type=int,
+        action="append",
+        default=None,
+        help="train only this split seed (repeatable; "
+        "several processes can share --out); the page is written once every split has finished",
+    )
     parser.add_argument("--docs", type=Path, default=ROOT / "docs")
     args = parser.parse_args()
 
@@ -67,12 +75,14 @@ def main() -> None:
     dataset = None if args.report_only else build_paired_dataset(load_sets(args.data))
     if dataset is not None:
         print(f"{len(dataset)} pairs, sensors {dataset.sensors}, objects {dataset.objects}", flush=True)
-    splits = []
     for split_seed in range(args.splits):
-        run_dir = args.out / f"split-{split_seed}"
-        if dataset is not None:
-            run_split(dataset, run_dir, base.updated({"split_seed": split_seed}))
-        splits.append(collect_split(run_dir))
+        if dataset is not None and (args.only_split is None or split_seed in args.only_split):
+            run_split(dataset, args.out / f"split-{split_seed}", base.updated({"split_seed": split_seed}))
+    unfinished = [k for k in range(args.splits) if not (args.out / f"split-{k}" / GEOMETRY_MEMBERS).exists()]
+    if unfinished:
+        print(f"splits {unfinished} not finished yet: results.md not written")
+        return
+    splits = [collect_split(args.out / f"split-{k}") for k in range(args.splits)]
     figures = draw_figures(splits, args.out, args.docs / "figures")
     text = render(splits, figures, args, base)
     write_results(args.docs / "results.md", text)

@@ -31,7 +31,7 @@ import json
 import logging
 import os
 import shutil
-import tempfile
+import uuid
 import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -215,7 +215,8 @@ def export_model(run_dir: Path, out: Path, fmt: str, member: int = 0) -> dict[st
         raise UsageError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
     engine = run.engine
     out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))
+    staging = out.parent / f".{out.name}.export-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    staging.mkdir()  # not tempfile.mkdtemp: that is private (0700), and the export is meant to be shared
     try:
         document = _export_into(run, engine, staging, fmt, member)
         if out.exists():

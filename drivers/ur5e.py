@@ -457,13 +457,13 @@ class UR5eArm:
     def keep_alive(self) -> Iterator[None]:
         """Kick the watchdog from a thread at 50 Hz while the host does non-motion work with the arm at rest.
 
-        Raises ArmError if a motion is still commanded (stop it first). Inside, this object refuses every command
-        (ur_rtde's client must not be used from two threads). If the process dies, the thread dies with it and the
-        watchdog stops the program as usual.
+        A motion still commanded is stopped first. Inside, this object refuses every command (ur_rtde's client must
+        not be used from two threads). If the process dies, the thread dies with it and the watchdog stops the
+        program as usual.
         """
         self._check_open()
         if self._in_force_mode or self._speeding or self._move is not None:
-            raise ArmError("keep_alive needs the arm at rest: stop the motion first")
+            self.stop()
         if self._watchdog_hz is None or self._kicker is not None:
             yield
             return

@@ -308,3 +308,17 @@ def test_collect_dry_run_through_the_cli(capsys: pytest.CaptureFixture[str], tmp
     assert code == 0
     assert out.count("stand-off ") == 3 and "dry run: 3 stand-offs" in out and "nothing pressed" in out
     assert not list(tmp_path.iterdir())
+
+
+def test_a_transit_move_that_runs_into_the_object_stops_at_once(tmp_path: Path) -> None:
+    """A clearance radius smaller than the object: the crossing between two press rays cuts into it."""
+    config = few(3, object={"clearance_mm": 12.0})
+    with SimRig(config, seed=0) as rig:
+        truth = TrueForce(rig)
+        with pytest.raises(SafetyLimit, match="touched something"):
+            collect_session(rig, get_object("square_pla"), "uskin", tmp_path)
+        rig.clock.sleep(0.05)
+        assert np.linalg.norm(rig.sim_arm.read_state().tcp_speed[:3]) < 1e-9
+    # 50 mm/s into stiff PLA: the wrist's ~12 ms lag is 0.6 mm of travel, ~18 N; below the hard limit, and the reason
+    # transit moves end at the stand-off and the pendant's force limit stays on (docs/real-rig.md)
+    assert truth.peak_n < config.limits.hard_force_n

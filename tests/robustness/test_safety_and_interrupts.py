@@ -92,6 +92,7 @@ def test_sigint_at_random_moments_exits_130_and_the_same_command_finishes(tmp_pa
     cmd = [sys.executable, "-m", "unitac_rig", "collect", "--object", "circle_pla", "--sensor", "uskin",
            "--data", str(tmp_path), "--angles", "6", "--no-live"]  # fmt: skip
     header = tmp_path / ".journal" / "circle_pla__uskin" / "_session.json"
+    interrupted = 0
     for _ in range(3):
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         try:
@@ -109,8 +110,40 @@ def test_sigint_at_random_moments_exits_130_and_the_same_command_finishes(tmp_pa
             break  # the session finished before the signal landed
         assert proc.returncode == 130, err
         assert err.strip().splitlines() == ["interrupted"], err
+        interrupted += 1
+    assert interrupted > 0, "no signal landed mid-session (typer once turned Ctrl-C into exit status 0)"
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     with h5py.File(session_path(tmp_path, "circle_pla", "uskin"), "r") as f:
         statuses = [f["presses"][pid].attrs["status"] for pid in f["presses"]]
     assert statuses == ["complete"] * 6
+
+
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGTERM, 143), (signal.SIGHUP, 129)])
+def test_sigterm_and_sighup_take_the_ctrl_c_path(tmp_path: Path, sig: signal.Signals, code: int) -> None:
+    """kill (SIGTERM) or a closed SSH session (SIGHUP) mid-session: the arm stopped, the press kept as interrupted,
+    one line, 128 + the signal; the same command finishes the session. (Against the real-time twin, with the arm's
+    true motion: tests/robustness/test_twin_host_death.py.)"""
+    cmd = [sys.executable, "-m", "unitac_rig", "collect", "--object", "circle_pla", "--sensor", "uskin",
+           "--data", str(tmp_path), "--angles", "4", "--no-live"]  # fmt: skip
+    journal = tmp_path / ".journal" / "circle_pla__uskin"
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not list(journal.glob("*.h5")) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)  # one press done: the next one is under way
+        time.sleep(0.3)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == code, err
+    assert err.strip().splitlines() == [f"terminated ({sig.name})"], err
+    kept = {(p.status, p.reason) for p in read_presses(session_path(tmp_path, "circle_pla", "uskin"))}
+    assert kept <= {("complete", "force"), ("aborted", "interrupted")}  # between presses nothing was under way
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    with h5py.File(session_path(tmp_path, "circle_pla", "uskin"), "r") as f:
+        assert sorted(str(f["presses"][pid].attrs["status"]) for pid in f["presses"]) == ["complete"] * 4

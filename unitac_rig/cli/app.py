@@ -16,7 +16,7 @@ import sys
 import typer
 
 from protocols.errors import UnitacError
-from unitac_rig.cli.signals import termination_signal
+from unitac_rig.cli.signals import last_termination_signal, termination_signal
 from unitac_rig.errors import UsageError
 
 app = typer.Typer(
@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else argv
     debug = "--debug" in args
     try:
-        app(args=args, standalone_mode=False)
+        result = app(args=args, standalone_mode=False)
     except UnitacError as exc:
         if debug:
             raise
@@ -77,10 +77,7 @@ def main(argv: list[str] | None = None) -> None:
     except typer.Exit as exc:
         sys.exit(exc.exit_code)
     except (KeyboardInterrupt, typer.Abort) as exc:
-        number = termination_signal(exc)  # SIGTERM / SIGHUP inside collect: the Ctrl-C path, its own exit code
-        with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone
-            typer.secho(f"terminated ({signal.Signals(number).name})" if number else "interrupted", err=True)
-        sys.exit(128 + number if number else 130)
+        _interrupted(termination_signal(exc))
     except typer.TyperException as exc:  # typer's usage errors: unknown command/option, bad or missing value
         if debug:
             raise
@@ -95,6 +92,19 @@ def main(argv: list[str] | None = None) -> None:
             fg=typer.colors.RED,
         )
         sys.exit(1)
+    # Without standalone mode typer *returns* an exit code instead of raising: typer.Exit(n) from a command, and
+    # 130 for a KeyboardInterrupt (Ctrl-C, or SIGTERM/SIGHUP during collect), which it catches itself.
+    if isinstance(result, int) and result != 0:
+        if result == 130:
+            _interrupted(last_termination_signal())
+        sys.exit(result)
+
+
+def _interrupted(number: int | None) -> None:
+    """One line and the exit status of an interrupt: 130 for Ctrl-C, 128 + the signal for SIGTERM / SIGHUP."""
+    with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone
+        typer.secho(f"terminated ({signal.Signals(number).name})" if number else "interrupted", err=True)
+    sys.exit(128 + number if number else 130)
 
 
 def _usage_line(exc: Exception) -> str:

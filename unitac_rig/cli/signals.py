@@ -26,8 +26,17 @@ class Terminated(KeyboardInterrupt):
         self.signal_number = signal_number
 
 
+_received: list[int] = []  # termination signals this process received (typer hides the exception: see app.main)
+
+
 def _raise_terminated(signal_number: int, frame: FrameType | None) -> None:
+    _received.append(signal_number)
     raise Terminated(signal_number)
+
+
+def last_termination_signal() -> int | None:
+    """The last SIGTERM / SIGHUP received inside :func:`termination_as_interrupt`, if any."""
+    return _received[-1] if _received else None
 
 
 @contextlib.contextmanager

@@ -187,14 +187,19 @@ def check_waypoint(pose: np.ndarray, limits: LimitsConfig, what: str) -> None:
 
 
 def transit_guard(arm: Arm, limits: LimitsConfig) -> Callable[[ArmState], None]:
-    """An ``on_period`` for transit moves: stop with SafetyLimit when the wrist force or torque changes by more than
-    ``limits.move_force_n`` (N, or that over 10 cm in N*m) from where the move started: the pad hit something."""
+    """An ``on_period`` for transit moves: stop with SafetyLimit when the wrist force grows by more than
+    ``limits.move_force_n`` (N; the torque by that over 10 cm, N*m) over where the move started: the pad hit something.
+
+    Growth, not any change: a move that starts with the pad still loaded (a session resumed after Ctrl-C stopped it
+    mid-press) unloads on its way out, and that must not read as a collision.
+    """
     start = np.asarray(arm.read_state().tcp_force, dtype=np.float64)
+    start_force, start_torque = float(np.linalg.norm(start[:3])), float(np.linalg.norm(start[3:]))
 
     def guard(state: ArmState) -> None:
-        change = np.asarray(state.tcp_force, dtype=np.float64) - start
-        force, torque = float(np.linalg.norm(change[:3])), float(np.linalg.norm(change[3:]))
-        if force > limits.move_force_n or torque > 0.1 * limits.move_force_n:
+        wrench = np.asarray(state.tcp_force, dtype=np.float64)
+        force, torque = float(np.linalg.norm(wrench[:3])), float(np.linalg.norm(wrench[3:]))
+        if force - start_force > limits.move_force_n or torque - start_torque > 0.1 * limits.move_force_n:
             raise SafetyLimit(
                 f"the wrist felt {force:.1f} N / {torque:.2f} N*m during a transit move at "
                 f"{np.round(np.asarray(state.tcp_pose[:3]), 4).tolist()} m: the pad touched something",

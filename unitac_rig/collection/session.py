@@ -15,9 +15,10 @@ controller's watchdog. :func:`dry_run` visits every stand-off and clearance wayp
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -243,7 +244,8 @@ def _one_press(
         except (SafetyLimit, ProtectiveStop, ArmError, KeyboardInterrupt) as exc:
             partial = exc.press_record if isinstance(exc, CarriesPressRecord) else None
             if partial is not None:
-                _save(writer, sensor, partial, extraction, outcome)
+                with _kept_alive(rig.arm):  # the arm is stopped; writing may take longer than the watchdog allows
+                    _save(writer, sensor, partial, extraction, outcome)
             if isinstance(exc, KeyboardInterrupt):
                 outcome.stopped = f"interrupted at press {plan.press_id}"
                 raise
@@ -258,7 +260,8 @@ def _one_press(
         except DeviceError as exc:  # the sensor stalled (DeviceTimeout) or its link failed (port/bus gone)
             partial = exc.press_record
             if partial is not None:
-                _save(writer, sensor, partial, extraction, outcome)
+                with _kept_alive(rig.arm):  # the arm is stopped; writing may take longer than the watchdog allows
+                    _save(writer, sensor, partial, extraction, outcome)
             what = "stalled" if isinstance(exc, DeviceTimeout) else "failed"
             _back_off(rig, plan)
             if attempt == 1:
@@ -277,6 +280,18 @@ def _one_press(
             _save(writer, sensor, record, extraction, outcome)
         return record, False
     return None, True
+
+
+@contextlib.contextmanager
+def _kept_alive(arm: Arm) -> Iterator[None]:
+    """``arm.keep_alive()`` around non-motion work on an error path; if the arm cannot (closed, controller gone),
+    the work still runs: keeping the press matters more than the watchdog of an arm that is stopped anyway."""
+    with contextlib.ExitStack() as stack:
+        try:
+            stack.enter_context(arm.keep_alive())
+        except DeviceError as exc:
+            log.info("no watchdog keep-alive while saving: %s", exc)
+        yield
 
 
 def _reconnect(rig: Rig, sensor: TactileSensor) -> None:

@@ -327,9 +327,9 @@ class SimArm:
     @contextlib.contextmanager
     def keep_alive(self) -> Iterator[None]:
         """Feed the watchdog while the host does non-motion work with the arm at rest (UR5eArm runs a kicker
-        thread); time advanced inside counts as kicked. Raises ArmError if the arm is commanded to move."""
+        thread); time advanced inside counts as kicked. A motion still commanded is stopped first."""
         if self._mode not in ("idle", "stop"):
-            raise ArmError(f"keep_alive needs the arm at rest, but it is in {self._mode} mode")
+            self.stop()
         self._kept_alive = True
         try:
             yield

@@ -111,10 +111,10 @@ def test_a_third_sensor_learns_to_translate_both_ways_and_the_trained_model_stay
     ]:
         total_after, taxel_after = _errors(trained_translator, test, source, target)
         total_before, taxel_before = _errors(untrained, test, source, target)
-        assert total_after < 0.5 * total_before, (source, target, total_after, total_before)  # measured 0.2-0.3
+        assert total_after < 0.5 * total_before, (source, target, total_after, total_before)  # measured 0.04-0.3
         # measured: the 2x2 pad places the 3x3 PapillArray's load no better than its mean frame does (its total is
         # right to a 0.99 correlation), so that direction is held to the total only; the others' per-taxel error
-        # measured 0.25-0.63 of the untrained one (the ratio depends on the preprocessing: an untrained head's
+        # measured 0.1-0.63 of the untrained one (the ratio depends on the preprocessing: an untrained head's
         # output is near the mean frame under a per-channel z-score)
         if (source, target) != ("fakepad", "papillarray"):
             assert taxel_after < 0.75 * taxel_before, (source, target, taxel_after, taxel_before)

@@ -244,8 +244,10 @@ def draw(doc: dict[str, Any], path: Path) -> Path:
     from unitac_rig.plotting import new_figure, save_figure  # matplotlib loads slowly: only when drawing
 
     colours = {"guarded": "tab:blue", "two-phase": "tab:orange", "force-ramp": "tab:green"}
-    fig = new_figure(13, 5)
-    left, right = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.4, 1]})
+    twin = doc.get("twin")
+    fig = new_figure(18 if twin else 13, 5)
+    axes = fig.subplots(1, 3 if twin else 2, gridspec_kw={"width_ratios": [1.4, 1, 1] if twin else [1.4, 1]})
+    left, right = axes[0], axes[1]
     labels: list[str] = []
     for name, style in (("before", "--"), ("after", "-")):
         version = doc["versions"].get(name)
@@ -285,4 +287,178 @@ def draw(doc: dict[str, Any], path: Path) -> Path:
     right.set_title("Overshoot over 10 N and matching error, per strategy")
     right.legend(fontsize=8)
     right.grid(alpha=0.3, axis="y")
+    if twin:
+        _draw_twin_deaths(axes[2], twin, colours)
     return save_figure(fig, path)
+
+
+def _draw_twin_deaths(ax: Any, twin: dict[str, Any], colours: dict[str, str]) -> None:
+    """kill -9 mid-press on the real-time twin: true peak |F| over the next 3 s, before and after, per strategy."""
+    deaths = twin["deaths"]
+    strategies = list(dict.fromkeys(d["strategy"] for d in deaths))
+    x = np.arange(len(strategies))
+    for k, name in enumerate(("before", "after")):
+        rows = {d["strategy"]: d for d in deaths if d["version"] == name}
+        values = [rows[s]["peak_abs_n"] if s in rows else 0.0 for s in strategies]
+        bars = ax.bar(x + (k - 0.5) * 0.38, values, 0.38, color=[colours.get(s, "grey") for s in strategies],
+                      alpha=0.45 if name == "before" else 0.95, label=name)  # fmt: skip
+        for bar, s in zip(bars, strategies, strict=True):
+            row = rows.get(s)
+            if row is None:
+                continue
+            rest = row["rest_after_last_write_s"]
+            note = "moving\nafter 3 s" if rest is None else f"rest\n{1000 * rest:.0f} ms"
+            ax.annotate(note, (bar.get_x() + bar.get_width() / 2, bar.get_height()), ha="center", va="bottom",
+                        fontsize=7)  # fmt: skip
+    ax.axhline(HARD_LIMIT_N, color="red", lw=1)
+    ax.set_yscale("log")
+    ax.set_xticks(x, strategies)
+    ax.set_ylabel("true peak |F| within 3 s of the kill, N")
+    ax.set_title("kill -9 mid-press, real-time twin (real ur_rtde)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, which="both", axis="y")
+
+
+# ---- the real-time twin: the hardware path (real ur_rtde clients) against the controller twin -------------------
+
+TWIN_FIRST, TWIN_LAST = 160, 179  # loopback addresses this benchmark may take
+TWIN_PRESSING_N = 5.0  # the signal lands when the true force passes this (mid-press)
+_TWIN_RUNNER = (
+    "import sys, runpy; "
+    "sys.meta_path[:] = [f for f in sys.meta_path if not getattr(f, '__module__', '').startswith('__editable__')]; "
+    "runpy.run_module('unitac_rig', run_name='__main__', alter_sys=True)"
+)
+
+
+def _twin_rig_file(host: str, strategy: str) -> str:
+    """A rig file both versions accept (the old one knows none of the new fields), pointing at the twin."""
+    return (
+        f'name = "twin"\n[arm]\nhost = "{host}"\nfrequency_hz = 500.0\n'
+        f'[sensors.uskin]\ntype = "uskin-xela-server"\nurl = "ws://{host}:5000"\n'
+        f"[object]\ncenter_m = [-0.15, 0.625]\npress_height_m = 0.2\n"
+        f'[press]\nstrategy = "{strategy}"\n'
+    )
+
+
+def _collect(checkout: Checkout, rig_file: Path, data: Path, angles: int) -> subprocess.Popen[str]:
+    env = {**os.environ, "PYTHONPATH": str(checkout.path or REPO), "PYTHONUNBUFFERED": "1"}
+    cmd = [sys.executable, "-c", _TWIN_RUNNER, "collect", "--rig", str(rig_file), "--object", "circle_pla",
+           "--sensor", "uskin", "--angles", str(angles), "--data", str(data), "--no-live"]  # fmt: skip
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                            cwd=tempfile.gettempdir())  # fmt: skip
+
+
+def twin_host_death(checkout: Checkout, strategy: str, watch_s: float = 3.0) -> dict[str, Any]:
+    """kill -9 of a collecting process the moment the true force passes ``TWIN_PRESSING_N``; what the controller
+    twin's ground truth saw over the next ``watch_s``: peak |F|, rest time after the last write, who stopped it."""
+    import time
+
+    from unitac_rig.sim.twin import ControllerParams
+    from unitac_rig.sim.twin.handle import address_free
+    from unitac_rig.sim.twin.rig import RigTwin
+
+    host = next(f"127.0.0.{o}" for o in range(TWIN_FIRST, TWIN_LAST + 1) if address_free(f"127.0.0.{o}"))
+    with tempfile.TemporaryDirectory() as tmp, RigTwin("circle_pla", host=host, seed=1,
+                                                       params=ControllerParams(unlock_delay_s=0.5)) as rig:  # fmt: skip
+        rig_file = Path(tmp) / "twin.toml"
+        rig_file.write_text(_twin_rig_file(host, strategy))
+        proc = _collect(checkout, rig_file, Path(tmp) / "data", angles=3)
+        try:
+            deadline = time.monotonic() + 120
+            while rig.controller.truth().force_n < TWIN_PRESSING_N:
+                if proc.poll() is not None or time.monotonic() > deadline:
+                    _, err = proc.communicate()
+                    raise RuntimeError(f"collect ({checkout.name}) never pressed: {err[-1500:]}")
+                time.sleep(0.001)
+            rig.controller.reset_peak()
+            proc.kill()
+            seen = []
+            end = time.monotonic() + watch_s
+            while time.monotonic() < end:
+                seen.append(rig.controller.truth())
+                time.sleep(0.002)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+            proc.communicate()
+        last = seen[-1]
+        moving = [t.controller_t_s for t in seen if not t.at_rest]
+        rest = (max(moving) if moving else seen[0].controller_t_s) - last.last_input_t_s if last.at_rest else None
+        return {
+            "version": checkout.name, "strategy": strategy, "peak_abs_n": last.peak_force_n,
+            "rest_after_last_write_s": rest, "still_moving_after_s": None if last.at_rest else watch_s,
+            "watchdog_trips": last.watchdog_trips, "protective_stops": last.protective_stops,
+        }  # fmt: skip
+
+
+def twin_session(strategy: str, angles: int = 5) -> dict[str, Any]:
+    """A short session of ``strategy`` through the hardware path against the twin (this checkout): recorded peaks
+    and matching errors from the session file, and each press's true peak from the twin's ground truth."""
+    import threading
+    import time
+
+    from unitac_rig.sim.twin import ControllerParams
+    from unitac_rig.sim.twin.handle import address_free
+    from unitac_rig.sim.twin.rig import RigTwin
+    from unitac_rig.storage.reader import read_presses
+    from unitac_rig.storage.recorder import session_path
+
+    host = next(f"127.0.0.{o}" for o in range(TWIN_FIRST, TWIN_LAST + 1) if address_free(f"127.0.0.{o}"))
+    with tempfile.TemporaryDirectory() as tmp, RigTwin("circle_pla", host=host, seed=1,
+                                                       params=ControllerParams(unlock_delay_s=0.5)) as rig:  # fmt: skip
+        rig_file = Path(tmp) / "twin.toml"
+        rig_file.write_text(_twin_rig_file(host, strategy))
+        peaks: list[float] = []
+        stop = threading.Event()
+
+        def follow() -> None:  # one true peak per contact: presses are separated by stretches of no force
+            current = 0.0
+            while not stop.is_set():
+                force = rig.controller.truth().force_n
+                if force > 0.5:
+                    current = max(current, force)
+                elif current > 0.0:
+                    peaks.append(current)
+                    current = 0.0
+                time.sleep(0.002)
+
+        thread = threading.Thread(target=follow, name="bench-truth", daemon=True)
+        thread.start()
+        began = time.monotonic()
+        try:
+            proc = _collect(Checkout("after", None), rig_file, Path(tmp) / "data", angles)
+            _, err = proc.communicate(timeout=600)
+        finally:
+            stop.set()
+            thread.join()
+        if proc.returncode != 0:
+            raise RuntimeError(f"twin session ({strategy}) failed: {err[-1500:]}")
+        presses = read_presses(session_path(Path(tmp) / "data", "circle_pla", "uskin"))
+        errors = [abs(float(e)) for p in presses if p.extraction is not None
+                  for e, m in zip(p.extraction.error_n, p.extraction.miss, strict=True) if not m]  # fmt: skip
+        return {
+            "strategy": strategy, "presses": len(presses), "complete": sum(p.status == "complete" for p in presses),
+            "wall_s": time.monotonic() - began,
+            "recorded_overshoot_median_n": _median([float(p.attrs["peak_force_n"]) - 10.0 for p in presses]),
+            "true_overshoot_median_n": _median([p - 10.0 for p in peaks]),
+            "true_overshoot_max_n": max((p - 10.0 for p in peaks), default=None),
+            "match_error_median_n": _median(errors),
+            "misses": sum(int(np.sum(p.extraction.miss)) for p in presses if p.extraction is not None),
+            "targets": 25 * len(presses),
+        }  # fmt: skip
+
+
+def run_twin(plan: SafetyPlan, before_commit: str = BEFORE_COMMIT) -> dict[str, Any]:
+    """The real-time twin part: host death (kill -9) per strategy and version, and a short session per strategy."""
+    out: dict[str, Any] = {"deaths": [], "sessions": {}}
+    for name in plan.versions:
+        checkout = before_checkout(before_commit) if name == "before" else Checkout("after", None)
+        try:
+            for strategy in plan.strategies:
+                out["deaths"].append(twin_host_death(checkout, strategy))
+        finally:
+            if checkout._tmp is not None:
+                checkout._tmp.cleanup()
+    for strategy in plan.strategies:
+        out["sessions"][strategy] = twin_session(strategy)
+    return out

@@ -209,6 +209,13 @@ def collect(
         raise UsageError(f"session stopped early: {outcome.stopped}", hint="rerun the same command to resume")
 
 
+def _ask_operator(rig: Rig, message: str) -> None:
+    """Wait for the operator with the arm at rest and the controller's watchdog fed meanwhile (the wait may last
+    minutes; without the feeding the controller would stop the program, as after a dead host)."""
+    with rig.arm.keep_alive():
+        typer.prompt(message, default="", show_default=False)
+
+
 def _show_standoff(plan: PressPlan, index: int, total: int) -> None:
     x, y, z = (1000 * plan.start_pose[:3]).tolist()
     console.print(f"stand-off {index}/{total}: {plan.press_id} at ({x:.1f}, {y:.1f}, {z:.1f}) mm")
@@ -234,13 +241,13 @@ def campaign(
     with termination_as_interrupt(), open_rig(config, seed=seed) as rig:
         for sensor in collection_order(rig):
             if not rig.simulated:
-                typer.prompt(f"Mount the {sensor} on the arm, then press Enter", default="", show_default=False)
+                _ask_operator(rig, f"Mount the {sensor} on the arm, then press Enter")
             for obj in catalogue:
                 if session_complete(data, obj.id, sensor):
                     console.print(f"{obj.id} / {sensor}: already complete")
                     continue
                 if not rig.simulated:
-                    typer.prompt(f"Mount {obj.id} at rotation 0, then press Enter", default="", show_default=False)
+                    _ask_operator(rig, f"Mount {obj.id} at rotation 0, then press Enter")
                 outcome = _run_session(rig, obj, sensor, data, None, live, None)
                 if outcome.stopped:
                     raise UsageError(f"campaign stopped: {outcome.stopped}", hint="rerun the same command to resume")

@@ -65,6 +65,8 @@ def main() -> None:
         help="train only this split seed (repeatable; "
         "several processes can share --out); the page is written once every split has finished",
     )
+    parser.add_argument("--nmae-normaliser", default=None, help="score every run under this NMAE normaliser")
+    parser.add_argument("--ssim-range", default=None, help="score every run under this SSIM range")
     parser.add_argument("--docs", type=Path, default=ROOT / "docs")
     args = parser.parse_args()
 
@@ -82,7 +84,15 @@ def main() -> None:
     if unfinished:
         print(f"splits {unfinished} not finished yet: results.md not written")
         return
-    splits = [collect_split(args.out / f"split-{k}") for k in range(args.splits)]
+    if args.nmae_normaliser or args.ssim_range:  # re-score the finished runs (no weight changes)
+        for k in range(args.splits):
+            write_report(
+                args.out / f"split-{k}",
+                figures=False,
+                nmae_normaliser=args.nmae_normaliser,
+                ssim_range=args.ssim_range,
+            )
+    splits = [collect_split(args.out / f"split-{k}", args.nmae_normaliser, args.ssim_range) for k in range(args.splits)]
     figures = draw_figures(splits, args.out, args.docs / "figures")
     text = render(splits, figures, args, base)
     write_results(args.docs / "results.md", text)
@@ -137,11 +147,11 @@ def _progress(run_dir: Path) -> Any:
     return report
 
 
-def collect_split(run_dir: Path) -> dict[str, Any]:
-    """What the results page needs from one finished split run."""
+def collect_split(run_dir: Path, nmae_normaliser: str | None = None, ssim_range: str | None = None) -> dict[str, Any]:
+    """What the results page needs from one finished split run (scored under the given metric options)."""
     metrics = json.loads((run_dir / "metrics.json").read_text(encoding="utf-8"))
     geometry = json.loads((run_dir / GEOMETRY_MEMBERS).read_text(encoding="utf-8"))
-    run = load_run(run_dir)
+    run = load_run(run_dir).scored_under(nmae_normaliser, ssim_range)
     return {
         "dir": run_dir,
         "metrics": metrics,

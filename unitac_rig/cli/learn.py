@@ -299,6 +299,10 @@ def _train_new_sensor(
 def report_command(
     run: Path = typer.Argument(..., help="Run directory."),
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Redraw the figures too."),
+    nmae_normaliser: str = typer.Option(
+        None, "--nmae-normaliser", help="Score under another NMAE normaliser (default: the run's)."
+    ),
+    ssim_range: str = typer.Option(None, "--ssim-range", help="Score under another SSIM range (default: the run's)."),
 ) -> None:
     """Recompute RUN/metrics.json and rewrite RUN/report.md (and its figures)."""
     from rich.console import Console
@@ -306,7 +310,7 @@ def report_command(
     from unitac_rig.learning.report import write_report
 
     console = Console()
-    path = write_report(run, figures=figures)
+    path = write_report(run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range)
     _print_table(console, run)
     console.print(f"report: {path}")
 

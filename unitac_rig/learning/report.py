@@ -337,11 +337,18 @@ def render_markdown(metrics: dict[str, Any], run: LoadedRun, figures: dict[str, 
 
 
 def write_report(
-    run_dir: Path, *, run: LoadedRun | None = None, test: PairedDataset | None = None, figures: bool = True
+    run_dir: Path,
+    *,
+    run: LoadedRun | None = None,
+    test: PairedDataset | None = None,
+    figures: bool = True,
+    nmae_normaliser: str | None = None,
+    ssim_range: str | None = None,
 ) -> Path:
-    """metrics.json (recomputed), the figures and report.md for a run directory."""
+    """metrics.json (recomputed), the figures and report.md for a run directory; the metric options default to the
+    run's own."""
     run_dir = Path(run_dir)
-    run = run or load_run(run_dir)
+    run = (run or load_run(run_dir)).scored_under(nmae_normaliser, ssim_range)
     test = test or load_test_set(run_dir)
     previous = run_dir / METRICS_JSON
     kept = json.loads(previous.read_text(encoding="utf-8")).get("tsne_mixing") if previous.exists() else None

@@ -687,6 +687,18 @@ class LoadedRun:
     def unseen_objects(self) -> tuple[str, ...]:
         return tuple(self.payload["split"]["unseen_objects"])
 
+    def scored_under(self, nmae_normaliser: str | None = None, ssim_range: str | None = None) -> LoadedRun:
+        """This run with other metric options (they change no weight, only how reports score it); ``None`` keeps
+        the run's own."""
+        if nmae_normaliser is None and ssim_range is None:
+            return self
+        config = replace(
+            self.config,
+            nmae_normaliser=nmae_normaliser or self.config.nmae_normaliser,
+            ssim_range=ssim_range or self.config.ssim_range,
+        )
+        return replace(self, config=config)
+
 
 def load_run(run_dir: Path, device: str = "cpu") -> LoadedRun:
     """A run read back for evaluation, reports and translation (its arrays as numpy)."""

@@ -68,7 +68,9 @@ def test_an_old_checkpoint_with_pickled_objects_says_what_it_is(tmp_path: Path) 
     _write(tmp_path / "run", {"format": CHECKPOINT_FORMAT, "version": 1, "config": TrainConfig(epochs=2)})
     with pytest.raises(ModelError) as caught:
         load_checkpoint(tmp_path / "run")
-    assert re.search(r"ModelShape, unitac_rig\.learning\.train\.TrainConfig\).*old unitac-rig file", caught.value.one_line())
+    assert re.search(
+        r"ModelShape, unitac_rig\.learning\.train\.TrainConfig\).*old unitac-rig file", caught.value.one_line()
+    )
 
 
 def test_foreign_damaged_and_newer_files_are_one_clear_model_error(tmp_path: Path) -> None:

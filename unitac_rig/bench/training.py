@@ -204,7 +204,8 @@ def plain_step(x: torch.Tensor, dims: dict[str, int], seeds: list[int], baseline
 
 
 class _PlainModel:
-    """One model of the textbook loop (``unitac_rig.learning.reference.train_plain``), a step at a time."""
+    """One model of the textbook loop, a step at a time: the next batch of a shuffling ``DataLoader`` over a
+    ``TensorDataset``, the module's loss, ``zero_grad``, ``backward``, ``torch.optim.Adam`` with its defaults."""
 
     def __init__(self, module: UniTacModule, loader: DataLoader) -> None:
         self.module = module.train()

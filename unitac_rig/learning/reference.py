@@ -1,7 +1,8 @@
-"""The same UniTac-NV model written the ordinary way (``nn.Module``, autograd, ``DataLoader``, standard Adam).
+"""The same UniTac-NV model written the ordinary way (``nn.Module``, autograd).
 
-It is the yardstick for the stacked engine: benchmarks time it against :class:`StackedAutoencoders` on the same data
-and batch size, and tests check that both compute the same function and the same gradients, dropout included. It
+It is the yardstick for the stacked engine: ``unitac_rig/bench/training.py`` trains it in the textbook loop
+(``DataLoader``, standard Adam, one model at a time) against :class:`StackedAutoencoders` on the same data and batch
+size, and tests check that both compute the same function and the same gradients, dropout included. It
 shares no code with the engine's forward pass: one module per model and seed, ``nn.Linear`` layers, ``nn.Dropout``
 (or explicit keep masks that it rescales itself) and one ``l1_loss`` per (source, target) pair. A per-sensor baseline
 autoencoder is a ``UniTacModule`` of that one sensor.
@@ -13,7 +14,6 @@ from collections.abc import Mapping, Sequence
 
 import torch
 from torch import nn
-from torch.utils.data import DataLoader, TensorDataset
 
 from unitac_rig.learning.engine import UNITAC_GROUP, ModelShape, StackedAutoencoders
 
@@ -102,31 +102,3 @@ class UniTacModule(nn.Module):
                 weight, bias = params[f"dec/{i}"]
                 linear.weight.copy_(torch.from_numpy(weight.T))
                 linear.bias.copy_(torch.from_numpy(bias))
-
-
-def train_plain(
-    model: UniTacModule,
-    inputs: Sequence[torch.Tensor],
-    epochs: int,
-    batch_size: int = 64,
-    lr: float = 5e-4,
-    seed: int = 0,
-) -> list[float]:
-    """The textbook loop: DataLoader over a TensorDataset, shuffled batches, ``torch.optim.Adam``. Mean train loss
-    per epoch."""
-    torch.manual_seed(seed)
-    loader = DataLoader(TensorDataset(*inputs), batch_size=batch_size, shuffle=True)
-    optimizer = torch.optim.Adam(model.parameters(), lr=lr)
-    history = []
-    model.train()
-    for _ in range(epochs):
-        total, batches = 0.0, 0
-        for batch in loader:
-            loss = model.loss(batch)
-            optimizer.zero_grad()
-            loss.backward()
-            optimizer.step()
-            total += float(loss.detach())
-            batches += 1
-        history.append(total / max(batches, 1))
-    return history

@@ -285,7 +285,7 @@ def draw(doc: dict[str, Any], path: Path) -> Path:
     right.set_xticks(x, strategies)
     right.set_ylabel("N")
     right.set_title("Overshoot over 10 N and matching error, per strategy")
-    right.legend(fontsize=8)
+    right.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.08), ncol=2)
     right.grid(alpha=0.3, axis="y")
     if twin:
         _draw_twin_deaths(axes[2], twin, colours)

@@ -11,6 +11,7 @@ Loopback addresses 127.0.0.180-199 belong to these tests.
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -133,3 +134,32 @@ def test_sigterm_and_sighup_stop_the_arm_keep_the_press_and_the_same_command_res
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
         assert done.returncode == 0, done.stderr
         assert "2/2 presses finished" in done.stdout
+
+
+@pytest.mark.slow
+def test_a_cut_connection_to_the_controller_stops_the_session_with_the_arm_at_rest(
+    rig_twin: tuple[RigTwin, Path], tmp_path: Path
+) -> None:
+    """Every TCP connection between the collecting process and the controller killed mid-press (``ss -K``, as a
+    network fault does): the session stops on the lost state stream instead of carrying on blind; the arm ends at
+    rest with the force bounded. (ur_rtde reconnects by itself, so this is a dropped link, not a pulled cable; the
+    frozen-host case above is what a pulled cable looks like to the controller.)"""
+    if shutil.which("ss") is None:
+        pytest.skip("needs iproute2's ss to kill the sockets")
+    rig, rig_file = rig_twin
+    proc = start_and_wait_for_a_press(rig, collect_cmd(rig_file, tmp_path / "data"))
+    try:
+        cut = subprocess.run(["ss", "-K", "dst", rig.host], capture_output=True, text=True)
+        if cut.returncode != 0:
+            pytest.skip(f"ss -K cannot kill sockets here: {cut.stderr.strip()}")
+        seen = watch(rig, 1.0)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 1
+    assert err.strip().splitlines()[-1].startswith("error: lost the RTDE connection")  # not a tactile stall
+    assert seen[-1].at_rest and rig.controller.truth().peak_force_n < HARD_LIMIT_N
+    presses = read_presses(session_path(tmp_path / "data", "circle_pla", "papillarray"))
+    assert [p.reason for p in presses if p.status == "aborted"] in ([], ["robot_state_lost"])  # no blind retry

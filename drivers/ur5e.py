@@ -29,6 +29,9 @@ Safety (what a real controller does when the host misbehaves, ``hardware-facts``
 Gotchas: ur_rtde's Python constructors hold the GIL until the handshake finishes (a Python RTDE server in the same
 process would deadlock, hence the twins' server processes); the C++ library prints to file descriptor 2 itself
 (e.g. ``connect: Connection refused``), so the constructors run with fd 2 routed to the log.
+
+Why one module of ~680 lines: every ur_rtde call the project makes goes through the same error mapping and safety
+checks here (watchdog, stops, TCP/payload read-back); the read-only receiver shares its state decoding.
 """
 
 from __future__ import annotations

@@ -1,4 +1,8 @@
-"""Learning commands: ``train``, ``report``, ``translate``, ``geometry`` and ``export-model``."""
+"""Learning commands: ``train``, ``report``, ``translate``, ``geometry`` and ``export-model``.
+
+Why one module of ~510 lines: the train command carries one option per hyper-parameter of the model and training
+(issue 14) beside report, translate, geometry and export-model.
+"""
 
 from __future__ import annotations
 

@@ -24,6 +24,9 @@ zeroed at the stand-off, at rest, after settling, after checking that nothing to
 
 Every path out stops the arm (``drivers.motion`` and the ``finally`` blocks here), Ctrl-C included, and whatever
 was recorded is kept.
+
+Why one module of ~640 lines: one press's phases (transit, zero, tare, approach, contact, dwell, retract) share one
+stream record, and keeping them together keeps every exit path next to the stop it must call.
 """
 
 from __future__ import annotations

@@ -17,6 +17,9 @@ other sensors) between layers, Adam lr 5e-5, weight decay 1e-3, L1 loss (mm), 80
 The trained MLPs are kept in the run (``geometry_estimator.pt``: tensors and plain metadata, read with
 ``weights_only=True``; ``geometry_estimator.json`` for people) and applied to new frames by :func:`predict_geometry`
 (``unitac-rig geometry RUN --predict FRAMES --sensor S``).
+
+Why one module of ~580 lines: ground-truth profiles, the estimator's training, its saved form and prediction share
+the profile layout.
 """
 
 from __future__ import annotations

@@ -4,6 +4,9 @@ Also the paper's leakage-safe split (per object, a seeded 10% of approach direct
 forces; objects kept out of autoencoder training are all test) and the per-sensor normalisation the model sees.
 
 Nothing here assumes two sensors: a key is kept when *every* sensor of the dataset has it.
+
+Why one module of ~540 lines: the join (complete, partial, pooled), the split and the normaliser are the dataset's
+one definition; splitting join and split into two modules is the next tidy-up.
 """
 
 from __future__ import annotations

@@ -23,6 +23,9 @@ derived from its own seed, so a seed trains the same whether it runs alone or st
 Layout of a frame in the model: the sensor's (n_taxels, 3) frame flattened taxel-major, normalised per channel
 (:class:`unitac_rig.learning.data.Normaliser`); the decoder of a group outputs the concatenation of its sensors'
 frames in the group's sensor order.
+
+Why one module of ~700 lines: the stacked layers, the dropout masks, the masked loss, frozen layers and the
+checkpoint state all index one (member, layer) layout; apart, each piece would have to re-explain that layout.
 """
 
 from __future__ import annotations

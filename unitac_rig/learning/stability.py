@@ -24,6 +24,9 @@ contacts. All members (seeds) and training sensors of a fold are trained togethe
 
 Standard deviations are population ones (``ddof=0``), as ``metrics.json``'s ``table1_std``. The figures are drawn by
 :mod:`unitac_rig.learning.stability_figures`.
+
+Why one module of ~510 lines: the analysis only (figures are in stability_figures.py); its three reports share the
+cross-validated fold machinery.
 """
 
 from __future__ import annotations

@@ -4,6 +4,9 @@ atomic checkpoints and resume.
 The loop has no per-sample Python: the training rows sit on the device as one tensor, each member gets its own
 shuffled index per epoch (one gather), and batches are slices of it; see :mod:`unitac_rig.learning.engine` for the
 step itself.
+
+Why one module of ~710 lines: one run's life (start, resume, epoch, evaluation, checkpoint) shares the ``_Run``
+record; the per-epoch evaluator is the piece to move out next.
 """
 
 from __future__ import annotations

@@ -34,6 +34,9 @@ Time only moves when someone advances the virtual clock: ``wait_period`` integra
 advances the clock (which makes simulated sensors emit the samples that fall due, reading :meth:`true_tcp_pose`).
 If other code advances the clock directly (a host stall injected by a test or benchmark), the arm integrates those
 periods too (it listens to the clock), exactly as a controller goes on while its host is frozen.
+
+Why one module of ~620 lines: the kinematics, the F/T model and the controller-program model (watchdog, protective
+stop) all act on one state per control period.
 """
 
 from __future__ import annotations

@@ -23,6 +23,9 @@ rebuilds only when the pose leaves the ray.
 
 Frames: see ``unitac_rig.rig.objects`` (rig geometry). ``wrench_on_tool`` is in base axes about the TCP and is the force
 the object exerts on the tool; taxel loads are in the sensor frame (x, y shear; z normal, pushing = +), newtons.
+
+Why one module of ~800 lines: the 2-D section, both pad models and the per-ray tables share one parameter set and
+the same geometry helpers, and the physics is easiest to check read top to bottom.
 """
 
 from __future__ import annotations

@@ -21,6 +21,9 @@ is unlocked only through the dashboard, not before ``unlock_delay_s``, and the p
 An emergency stop (test hook) brakes the arm, stops the program, raises bits 6, 7 and 10 and powers the arm off once
 at rest; after its release the dashboard must power on and release the brakes. Nothing the clients do (or fail to do:
 a dropped connection) changes what the program is executing, except through the watchdog the program armed.
+
+Why one module of ~890 lines: it is one real-time loop emulating the control script command by command; the command
+table reads best in one place (dashboard, motion, script text and ground truth live in sibling modules).
 """
 
 from __future__ import annotations

@@ -137,6 +137,7 @@ def test_sigterm_and_sighup_stop_the_arm_keep_the_press_and_the_same_command_res
 
 
 @pytest.mark.slow
+@pytest.mark.network_fault
 def test_a_cut_connection_to_the_controller_stops_the_session_with_the_arm_at_rest(
     rig_twin: tuple[RigTwin, Path], tmp_path: Path
 ) -> None:

@@ -34,4 +34,3 @@ def test_the_pooled_head_is_scored_on_each_sensor_over_the_paper_heads_test_cont
     # the same 10% of directions held out: 4 of the 44 (rotation, angle) directions with their 5 forces
     assert len(paper.test_rows) == 4 * 5
     assert pooled["seconds"] > 0
-

@@ -157,8 +157,10 @@ def test_a_protective_stop_refuses_everything_until_unlocked_then_the_same_comma
         stop_arm(arm)  # stopping a stopped arm is not an error
     with pytest.raises(ProtectiveStop):  # rerunning before the operator acted: refused at connect
         connect(twin)
-    time.sleep(0.4)  # the twin's unlock delay
-    assert "releasing" in twin.unlock_protective_stop().lower()  # the operator, on the pendant
+    deadline = time.monotonic() + 5.0  # the twin refuses an unlock for its unlock delay, as PolyScope does
+    while "releasing" not in twin.unlock_protective_stop().lower():  # the operator, on the pendant
+        assert time.monotonic() < deadline, "the protective stop could not be unlocked"
+        time.sleep(0.1)
     with connect(twin) as arm:  # the same command, again
         home(arm)
         assert twin.truth().program_running

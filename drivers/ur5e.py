@@ -46,7 +46,7 @@ import threading
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from types import TracebackType
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -84,6 +84,7 @@ MAX_TOOL_ACCEL_M_S2 = 150.0  # ... and larger tool accelerations
 TCP_TOLERANCE_M = 0.001  # read-back TCP offset must match the rig file within 1 mm ...
 TCP_TOLERANCE_RAD = 0.01  # ... and 0.01 rad
 PAYLOAD_TOLERANCE_KG = 0.05  # read-back payload must match within 50 g
+SAFETY_CATCH_UP_STATES = 5  # a stopped program: read up to this many new states (~10 ms) for the safety bits
 
 _RECEIVE_HINT = (
     "check the cable/network (can you ping it?), that the robot is powered on, and that nothing blocks TCP port 30004"
@@ -594,10 +595,27 @@ class UR5eArm:
             kind = "an emergency" if state.emergency_stop else "a protective"
             raise ProtectiveStop(f"{what}: the UR at {self.host} is in {kind} stop", hint=STOPPED_HINT)
         if not self._call("isProgramRunning", self._control.isProgramRunning):
-            raise ControlScriptStopped(
-                f"{what}: the control program on the UR at {self.host} is not running",
-                hint=_program_stopped_hint(self._watchdog_hz),
-            )
+            self._raise_stopped(what, "is not running")
+
+    def _raise_stopped(self, what: str, how: str) -> NoReturn:
+        """The program is not running: say why. A protective or emergency stop stops the program too, and the
+        control client may see the program stop a few periods before the receive stream shows the safety bits,
+        so wait briefly for fresher state before calling it a plain program stop."""
+        try:
+            state = self._receiver.read_state()
+            for _ in range(SAFETY_CATCH_UP_STATES):
+                if state.protective_stop or state.emergency_stop:
+                    break
+                state = self._receiver.wait_for_new_state(timeout_s=0.05)
+        except DeviceError:
+            state = None
+        if state is not None and (state.protective_stop or state.emergency_stop):
+            kind = "an emergency" if state.emergency_stop else "a protective"
+            raise ProtectiveStop(f"{what}: the UR at {self.host} is in {kind} stop", hint=STOPPED_HINT)
+        raise ControlScriptStopped(
+            f"{what}: the control program on the UR at {self.host} {how}",
+            hint=_program_stopped_hint(self._watchdog_hz),
+        )
 
     def _async_progress(self) -> int:
         return int(self._call("getAsyncOperationProgress", self._control.getAsyncOperationProgress))
@@ -626,10 +644,7 @@ class UR5eArm:
         except (RuntimeError, ValueError):
             running = True
         if not running:
-            raise ControlScriptStopped(
-                f"{what}: the control program on the UR at {self.host} stopped",
-                hint=_program_stopped_hint(self._watchdog_hz),
-            )
+            self._raise_stopped(what, "stopped")
         raise ArmError(
             f"{what} was not completed by the UR at {self.host}",
             hint="look at the teach pendant's log; the rtde_control script may have stopped",

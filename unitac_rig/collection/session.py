@@ -252,6 +252,9 @@ def _one_press(
             if isinstance(exc, SafetyLimit):
                 _back_off(rig, plan)
             outcome.stopped = f"{type(exc).__name__} at press {plan.press_id}: {exc}"
+            if isinstance(exc, ControlScriptStopped) and _safety_stopped(rig.arm):
+                # a safety stop stops the program too, and the program's state can arrive before the safety bits
+                exc = ProtectiveStop(f"the program stopped in a safety stop ({exc})")
             if isinstance(exc, ProtectiveStop):
                 stop = ProtectiveStop(f"protective stop at press {plan.press_id} ({exc})", hint=PROTECTIVE_STOP_HINT)
                 stop.press_record = partial
@@ -280,6 +283,15 @@ def _one_press(
             _save(writer, sensor, record, extraction, outcome)
         return record, False
     return None, True
+
+
+def _safety_stopped(arm: Arm) -> bool:
+    """Whether the controller is in a protective or emergency stop now (False when it cannot be read)."""
+    try:
+        state = arm.read_state()
+    except DeviceError:
+        return False
+    return state.protective_stop or state.emergency_stop
 
 
 @contextlib.contextmanager

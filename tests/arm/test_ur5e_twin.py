@@ -24,7 +24,10 @@ CENTER = (-0.15, 0.625)
 TOOL = (0.0, 0.0, 0.05, 0.0, 0.0, 0.0)  # the twin's physical pad vs flange, as set on its pendant
 START = press_pose(0.0, 33.0, object_center_m=CENTER, height_m=0.20)  # 8 mm clear of circle_pla (radius 25 mm)
 PRESS_DIR = np.array([0.0, 1.0, 0.0])  # approach angle 0 presses along base +y
-WATCHDOG_HZ = 6.0
+WATCHDOG_HZ = 6.0  # the default, for the test that times the watchdog
+# The other tests are not about the watchdog's timing: 2 Hz keeps a test process starved for 170 ms on a loaded
+# shared box from tripping it mid-test (what a lab PC should never see), and still trips within 0.5 s.
+TOLERANT_WATCHDOG_HZ = 2.0
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +43,9 @@ def twin() -> Iterator[ControllerTwin]:
 
 
 def connect(twin: ControllerTwin, **kwargs: object) -> UR5eArm:
-    options: dict[str, object] = {"watchdog_hz": WATCHDOG_HZ, "expected_tcp_offset": TOOL, "expected_payload_kg": 0.3}
+    options: dict[str, object] = {
+        "watchdog_hz": TOLERANT_WATCHDOG_HZ, "expected_tcp_offset": TOOL, "expected_payload_kg": 0.3,
+    }  # fmt: skip
     options.update(kwargs)
     return UR5eArm(twin.host, **options)  # type: ignore[arg-type]
 
@@ -95,7 +100,7 @@ def test_a_force_mode_press_stops_at_the_threshold_and_a_host_stall_cannot_push_
         assert 9.0 < twin.truth().peak_force_n < 11.5
         home(arm)
         # the same press, the host frozen for 1 s when the wrist reads 8 N: the controller holds its set-point, then
-        # its watchdog (6 Hz) stops the program; the force never gets near the hard limit
+        # its watchdog stops the program; the force never gets near the hard limit
         arm.zero_ft()
         twin.reset_peak()
         frozen: list[float] = []
@@ -110,13 +115,15 @@ def test_a_force_mode_press_stops_at_the_threshold_and_a_host_stall_cannot_push_
                          stop_samples=15, on_period=freeze)  # fmt: skip
         truth = twin.truth()
         assert frozen and truth.watchdog_trips >= 1 and not truth.program_running
-        assert truth.peak_force_n < 11.0  # the set-point (10.2 N); a speedL press reached 13 N before the watchdog
+        # the set-point (10.2 N) and its regulation noise over the 0.5 s the 2 Hz watchdog allows; a speedL press
+        # frozen the same way reached 13 N within the 167 ms of a 6 Hz watchdog (2 mm/s into the object)
+        assert truth.peak_force_n < 12.0
     with connect(twin) as arm:  # a new connection re-uploads the program: the same command resumes
         home(arm)
 
 
 def test_the_watchdog_stops_a_speed_command_when_the_host_stops_writing(twin: ControllerTwin) -> None:
-    with connect(twin) as arm:
+    with connect(twin, watchdog_hz=WATCHDOG_HZ) as arm:
         home(arm)
         trips = twin.truth().watchdog_trips
         arm.speed_linear(np.array([0.0, -0.01, 0.0, 0, 0, 0]), 0.5)  # away from the object, 10 mm/s

@@ -88,7 +88,7 @@ def train_command(
         None, "--preprocessing", help="channel_z, sensor_minmax, sensor_scale (default) or raw."
     ),
     nmae_normaliser: str = typer.Option(
-        None, "--nmae-normaliser", help="channel_range, sensor_range (default), channel_std or frame_range."
+        None, "--nmae-normaliser", help="channel_range (default), sensor_range, channel_std or frame_range."
     ),
     ssim_range: str = typer.Option(
         None, "--ssim-range", help="SSIM data range: channel_range, sensor_range (default) or z_range."

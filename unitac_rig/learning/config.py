@@ -33,7 +33,7 @@ The file has sections; every key is optional and a missing key keeps the default
     scaling = "sensor_scale"      # channel_z | sensor_minmax | sensor_scale | raw
 
     [metrics]
-    nmae_normaliser = "sensor_range"   # channel_range | sensor_range | channel_std | frame_range
+    nmae_normaliser = "channel_range"  # channel_range | sensor_range | channel_std | frame_range
     ssim_range = "sensor_range"        # channel_range | sensor_range | z_range
 
 This module only validates and translates between the sectioned file and the flat keyword arguments of

@@ -73,7 +73,7 @@ class TrainConfig:
     unseen_objects: tuple[str, ...] | None = None  # None: the object catalogue decides (irregular prism)
     tsne_contacts: int = 600  # test contacts whose latents are kept for the t-SNE figures
     preprocessing: str = "sensor_scale"  # data.PREPROCESSING
-    nmae_normaliser: str = "sensor_range"  # metrics.NMAE_NORMALISERS
+    nmae_normaliser: str = "channel_range"  # metrics.NMAE_NORMALISERS; why this default: docs/learning.md
     ssim_range: str = "sensor_range"  # metrics.SSIM_RANGES
 
     def __post_init__(self) -> None:

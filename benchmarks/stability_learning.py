@@ -95,6 +95,8 @@ def main() -> None:
     parser.add_argument("--folds", type=int, default=DEFAULT_GEOMETRY_FOLDS, help="geometry folds (0: skip)")
     parser.add_argument("--face-mm", type=float, default=FACE_DISTANCE_MM, help="corner radius of a feature (mm)")
     parser.add_argument("--geometry-epochs", type=int, default=GeometryConfig().epochs)
+    parser.add_argument("--nmae-normaliser", default=None, help="NMAE normaliser (default: the run's)")
+    parser.add_argument("--ssim-range", default=None, help="SSIM range (default: the run's)")
     args = parser.parse_args()
 
     began = time.perf_counter()
@@ -105,6 +107,8 @@ def main() -> None:
         geometry_folds=args.folds,
         geometry_config=GeometryConfig(epochs=args.geometry_epochs),
         figures_dir=args.out,
+        nmae_normaliser=args.nmae_normaliser,
+        ssim_range=args.ssim_range,
     )
     report["wall_seconds"] = time.perf_counter() - began
     args.out.mkdir(parents=True, exist_ok=True)

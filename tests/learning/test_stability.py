@@ -15,7 +15,7 @@ from learning_helpers import small_sets
 from unitac_rig.errors import DataError, UsageError
 from unitac_rig.learning.contact_geometry import GeometryConfig
 from unitac_rig.learning.data import build_paired_dataset
-from unitac_rig.learning.evaluate import write_metrics
+from unitac_rig.learning.evaluate import evaluate_run, write_metrics
 from unitac_rig.learning.paper import PAPER_TABLE1
 from unitac_rig.learning.stability import (
     _direction_folds,
@@ -25,7 +25,7 @@ from unitac_rig.learning.stability import (
     stability_report,
 )
 from unitac_rig.learning.stability_figures import CORNERS_PNG, MATERIALS_PNG, SEEDS_PNG
-from unitac_rig.learning.train import TrainConfig, train
+from unitac_rig.learning.train import TrainConfig, load_run, load_test_set, train
 from unitac_rig.rig.objects import get_object
 
 IRREGULAR = get_object("irregular_pla")
@@ -233,3 +233,17 @@ def test_an_object_without_corners_is_all_face(run_dir: Path) -> None:
     assert report["features"][0]["max_corner_distance_mm"] is None  # no corner to be near
     assert report["geometry"] is None
     json.dumps(report, allow_nan=False)
+
+
+def test_other_metric_options_rescore_the_same_models_like_the_report_does(run_dir: Path) -> None:
+    """``--nmae-normaliser`` on the benchmark gives the numbers ``unitac-rig report --nmae-normaliser`` puts in
+    metrics.json: the whole-object row equals that re-scored Table I row, and differs from the run's own."""
+    own = stability_report(run_dir, geometry_folds=0)
+    other = stability_report(run_dir, geometry_folds=0, nmae_normaliser="channel_std")
+    rescored = evaluate_run(load_run(run_dir).scored_under("channel_std"), load_test_set(run_dir))
+    column = "uskin_to_uskin"
+    whole_own = own["reconstruction"]["whole object"][column]
+    whole_other = other["reconstruction"]["whole object"][column]
+    assert whole_other["nmae"]["mean"] == pytest.approx(rescored["table1"]["irregular_pla"][column]["nmae"], rel=1e-5)
+    assert whole_other["nmae"]["mean"] > whole_own["nmae"]["mean"]  # MAE / std > MAE / range
+    assert whole_other["ssim"]["mean"] == pytest.approx(whole_own["ssim"]["mean"])  # SSIM range unchanged

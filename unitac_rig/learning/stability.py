@@ -201,17 +201,20 @@ def stability_report(
     geometry_folds: int = DEFAULT_GEOMETRY_FOLDS,
     geometry_config: GeometryConfig | None = None,
     figures_dir: Path | str | None = None,
+    nmae_normaliser: str | None = None,
+    ssim_range: str | None = None,
 ) -> dict[str, Any]:
     """Per-feature errors on ``object_id`` (default: the run's unseen object), PLA vs TPU and the seed spread, as a
     JSON-ready dict. ``geometry_folds`` = 0 skips the (slowest) contact-geometry part. With ``figures_dir`` the three
-    figures are drawn there and their file names listed under ``"figures"``."""
+    figures are drawn there and their file names listed under ``"figures"``. The metric options default to the
+    run's own; others re-score the same models (no retraining)."""
     if geometry_folds < 0 or geometry_folds == 1:
         raise UsageError(
             f"geometry folds must be 0 (skip) or at least 2, got {geometry_folds}", hint="the default is 10"
         )
-    run = load_run(Path(run_dir))
+    run = load_run(Path(run_dir)).scored_under(nmae_normaliser, ssim_range)
     test = load_test_set(Path(run_dir))
-    evaluator = Evaluator.for_run(run, test)  # scored under the run's metric options, as its Table I
+    evaluator = Evaluator.for_run(run, test)  # scored under the given (default: the run's) metric options
     scores, latent_distance = evaluator.per_frame(run.engine)
     columns = [c for c in table_columns(run.sensors, set(scores)) if c in scores]
 

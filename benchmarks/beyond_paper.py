@@ -208,6 +208,7 @@ def summarise(results: dict[str, dict[str, Any]], args: argparse.Namespace) -> d
         chosen = min(kept, key=lambda n: variants[n]["parameters"]) if kept else None
     return {
         "epochs": args.epochs,
+        "metrics": {k: next(iter(results.values()))["config"].get(k) for k in ("nmae_normaliser", "ssim_range")},
         "seeds": args.seeds,
         "split": args.split,
         "variants": variants,
@@ -320,7 +321,8 @@ def render_section(doc: dict[str, Any]) -> list[str]:
         f"Every variant: UniTac-NV alone, {doc['seeds']} seeds, split {doc['split']}, {doc['epochs']} epochs (fewer "
         "than the paper's 1000 so that all variants fit the shared 2-core box; the paper-size model at the same "
         "budget is the reference). Costs are process CPU seconds of training (one thread). Made by "
-        "`python benchmarks/beyond_paper.py`.",
+        "`python benchmarks/beyond_paper.py`. Reconstruction scores under the variants' own metric reading "
+        f"(NMAE `{doc.get('metrics', {}).get('nmae_normaliser')}`, SSIM `{doc.get('metrics', {}).get('ssim_range')}`).",
         "",
         "### (a) Cross-sensor contact geometry",
         "",

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +18,9 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
+from unitac_rig.cli.signals import termination_as_interrupt
 from unitac_rig.errors import DataError, UsageError
+from unitac_rig.interrupts import raise_if_interrupted
 
 console = Console()
 
@@ -87,21 +90,28 @@ def _watch(data: Path, interval: float, as_json: bool) -> None:
         return Group(head, inspect_tables(report, data))
 
     try:
-        if as_json or not console.is_terminal:  # a pipe or a log: one refresh after the other (JSON: one per line)
-            while True:
-                rendered = frame()
-                if as_json:
-                    typer.echo(rendered.plain if isinstance(rendered, Text) else "")
-                else:
-                    console.print(rendered)
-                    console.print()
-                time.sleep(interval)
-        with Live(frame(), console=console, auto_refresh=False) as live:
-            while True:
-                time.sleep(interval)
-                live.update(frame(), refresh=True)
+        with termination_as_interrupt():
+            _refresh_until_interrupted(frame, interval, as_json)
     except KeyboardInterrupt:
         return
+
+
+def _refresh_until_interrupted(frame: Callable[[], RenderableType], interval: float, as_json: bool) -> None:
+    if as_json or not console.is_terminal:  # a pipe or a log: one refresh after the other (JSON: one per line)
+        while True:
+            raise_if_interrupted()  # a Ctrl-C swallowed inside an HDF5 read ends the watch all the same
+            rendered = frame()
+            if as_json:
+                typer.echo(rendered.plain if isinstance(rendered, Text) else "")
+            else:
+                console.print(rendered)
+                console.print()
+            time.sleep(interval)
+    with Live(frame(), console=console, auto_refresh=False) as live:
+        while True:
+            time.sleep(interval)
+            raise_if_interrupted()
+            live.update(frame(), refresh=True)
 
 
 def inspect(

@@ -15,23 +15,22 @@ import threading
 from collections.abc import Iterator
 from types import FrameType
 
+from unitac_rig.interrupts import Terminated, forget_interrupts, note_interrupt
+
 TERMINATION_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM or SIGHUP arrived; ``signal_number`` says which (the CLI exits with 128 + it)."""
-
-    def __init__(self, signal_number: int) -> None:
-        super().__init__(f"terminated by {signal.Signals(signal_number).name}")
-        self.signal_number = signal_number
-
 
 _received: list[int] = []  # termination signals this process received (typer hides the exception: see app.main)
 
 
 def _raise_terminated(signal_number: int, frame: FrameType | None) -> None:
     _received.append(signal_number)
+    note_interrupt(signal_number)
     raise Terminated(signal_number)
+
+
+def _raise_keyboard_interrupt(signal_number: int, frame: FrameType | None) -> None:
+    note_interrupt(signal_number)  # Python's own handler, plus a note in case the exception gets swallowed
+    raise KeyboardInterrupt
 
 
 def last_termination_signal() -> int | None:
@@ -41,16 +40,20 @@ def last_termination_signal() -> int | None:
 
 @contextlib.contextmanager
 def termination_as_interrupt() -> Iterator[None]:
-    """Turn SIGTERM and SIGHUP into :class:`Terminated` for the duration (main thread only; elsewhere a no-op)."""
+    """Turn SIGTERM and SIGHUP into :class:`Terminated` for the duration, and note SIGINT as well as raising it, so
+    :func:`unitac_rig.interrupts.raise_if_interrupted` can raise an interrupt that compiled code swallowed (main
+    thread only; elsewhere a no-op)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     previous = {sig: signal.signal(sig, _raise_terminated) for sig in TERMINATION_SIGNALS}
+    previous[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
     try:
         yield
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+        forget_interrupts()  # the interrupt (if any) has propagated; nothing after the scope may see it again
 
 
 def termination_signal(exc: BaseException) -> int | None:

@@ -53,6 +53,7 @@ from drivers.motion import (
 )
 from drivers.sensor import TactileSensor
 from unitac_rig.errors import SafetyLimit, with_press_record
+from unitac_rig.interrupts import raise_if_interrupted
 from unitac_rig.rig.config import LimitsConfig, PressConfig
 from unitac_rig.rig.poses import approach_direction, pose_from, press_force_n, press_rotation
 from unitac_rig.storage.press_record import PressRecord, press_id
@@ -200,6 +201,7 @@ def transit_guard(arm: Arm, limits: LimitsConfig) -> Callable[[ArmState], None]:
     start_force, start_torque = float(np.linalg.norm(start[:3])), float(np.linalg.norm(start[3:]))
 
     def guard(state: ArmState) -> None:
+        raise_if_interrupted()
         wrench = np.asarray(state.tcp_force, dtype=np.float64)
         force, torque = float(np.linalg.norm(wrench[:3])), float(np.linalg.norm(wrench[3:]))
         if force - start_force > limits.move_force_n or torque - start_torque > 0.1 * limits.move_force_n:
@@ -269,6 +271,7 @@ class _Streams:
         self.events.append((self.arm.clock.now_ns() / 1e9, kind, detail))
 
     def tick(self, state: ArmState) -> None:
+        raise_if_interrupted()  # a Ctrl-C that compiled code swallowed is raised here, within one control period
         force = press_force_n(state.tcp_force, self.plan.direction)
         self.robot_t.append(state.host_t_ns / 1e9)
         self.robot_force.append(np.asarray(state.tcp_force, dtype=np.float64))

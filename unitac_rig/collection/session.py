@@ -41,6 +41,7 @@ from unitac_rig.collection.press import (
     zero_wrist,
 )
 from unitac_rig.errors import CarriesPressRecord, SafetyLimit
+from unitac_rig.interrupts import raise_if_interrupted
 from unitac_rig.provenance import git_commit, package_version
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import RigConfig
@@ -169,6 +170,7 @@ def collect_session(
         current_rotation: float | None = None
         limit = config.limits.max_presses_without_contact
         for index, plan in enumerate(todo):
+            raise_if_interrupted()
             if plan.rotation_deg != current_rotation:
                 rig.mount(obj, plan.rotation_deg, sensor_name)
                 if ask_operator is not None and not rig.simulated and len(rotations) > 1:

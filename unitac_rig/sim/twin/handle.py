@@ -100,6 +100,7 @@ class ControllerTwin:
             line = self._process.stdout.readline()
         word, _, rest = line.decode("utf-8", "replace").strip().partition(" ")
         if word == "ready":
+            self._await_first_truth()
             return
         if word == "error":
             code, _, why = rest.partition(" ")
@@ -113,6 +114,18 @@ class ControllerTwin:
             f"the controller twin's process did not start ({why})",
             hint="see its error output above; is unitac-rig installed in this Python environment?",
         )
+
+    def _await_first_truth(self) -> None:
+        """The controller says "ready" when it listens; its first cycle publishes the truth a moment later (on a
+        loaded box, later than a caller's first :meth:`truth`). Wait for it, so a started twin always has a state."""
+        deadline = time.monotonic() + _START_TIMEOUT_S
+        while self._truth.read() is None:
+            if self._process.poll() is not None or time.monotonic() > deadline:
+                raise DeviceError(
+                    f"the controller twin listens but published no state within {_START_TIMEOUT_S} s",
+                    hint="is the machine overloaded?",
+                )
+            time.sleep(0.005)
 
     # ---- ground truth ---------------------------------------------------------------------------------------
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from unitac_rig.sim.twin import ControllerParams, TwinTruth, address_free
+from unitac_rig.sim.twin import ControllerParams, TwinTruth, first_free_loopback
 from unitac_rig.sim.twin.rig import RigTwin
 from unitac_rig.storage.reader import read_presses
 from unitac_rig.storage.recorder import session_path
@@ -33,11 +33,7 @@ PRESSING_N = 5.0
 
 
 def free_host() -> str:
-    for octet in range(180, 200):
-        host = f"127.0.0.{octet}"
-        if address_free(host):
-            return host
-    raise RuntimeError("no free loopback address in 127.0.0.180-199")
+    return first_free_loopback(180, 199)
 
 
 @pytest.fixture

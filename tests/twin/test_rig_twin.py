@@ -24,7 +24,7 @@ from drivers.frames import TactileFrame
 from drivers.sensor import TactileSensor
 from unitac_rig.rig.config import ObjectPlacement, load_rig_config, parse_rig_config
 from unitac_rig.rig.hardware import HardwareRig
-from unitac_rig.sim.twin import address_free
+from unitac_rig.sim.twin import first_free_loopback
 from unitac_rig.sim.twin.controller import build_scene
 from unitac_rig.sim.twin.rig import DEFAULT_HOST, RigTwin, SensorPorts, rig_file_text
 from unitac_rig.storage.reader import press_summaries
@@ -33,11 +33,7 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def free_host() -> str:
-    for octet in range(130, 140):
-        host = f"127.0.0.{octet}"
-        if address_free(host):
-            return host
-    raise RuntimeError("no free loopback address in 127.0.0.130-139")
+    return first_free_loopback(130, 139)
 
 
 @pytest.fixture

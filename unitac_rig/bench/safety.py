@@ -354,10 +354,10 @@ def twin_host_death(checkout: Checkout, strategy: str, watch_s: float = 3.0) -> 
     import time
 
     from unitac_rig.sim.twin import ControllerParams
-    from unitac_rig.sim.twin.handle import address_free
+    from unitac_rig.sim.twin.handle import first_free_loopback
     from unitac_rig.sim.twin.rig import RigTwin
 
-    host = next(f"127.0.0.{o}" for o in range(TWIN_FIRST, TWIN_LAST + 1) if address_free(f"127.0.0.{o}"))
+    host = first_free_loopback(TWIN_FIRST, TWIN_LAST)
     with tempfile.TemporaryDirectory() as tmp, RigTwin("circle_pla", host=host, seed=1,
                                                        params=ControllerParams(unlock_delay_s=0.5)) as rig:  # fmt: skip
         rig_file = Path(tmp) / "twin.toml"
@@ -398,12 +398,12 @@ def twin_session(strategy: str, angles: int = 5) -> dict[str, Any]:
     import time
 
     from unitac_rig.sim.twin import ControllerParams
-    from unitac_rig.sim.twin.handle import address_free
+    from unitac_rig.sim.twin.handle import first_free_loopback
     from unitac_rig.sim.twin.rig import RigTwin
     from unitac_rig.storage.reader import read_presses
     from unitac_rig.storage.recorder import session_path
 
-    host = next(f"127.0.0.{o}" for o in range(TWIN_FIRST, TWIN_LAST + 1) if address_free(f"127.0.0.{o}"))
+    host = first_free_loopback(TWIN_FIRST, TWIN_LAST)
     with tempfile.TemporaryDirectory() as tmp, RigTwin("circle_pla", host=host, seed=1,
                                                        params=ControllerParams(unlock_delay_s=0.5)) as rig:  # fmt: skip
         rig_file = Path(tmp) / "twin.toml"

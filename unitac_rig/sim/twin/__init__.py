@@ -9,7 +9,13 @@
 See docs/simulator.md, "Real-time twin".
 """
 
-from unitac_rig.sim.twin.handle import AddressTaken, ControllerTwin, address_free, start_twin_on_free_loopback
+from unitac_rig.sim.twin.handle import (
+    AddressTaken,
+    ControllerTwin,
+    address_free,
+    first_free_loopback,
+    start_twin_on_free_loopback,
+)
 from unitac_rig.sim.twin.params import ControllerParams, SceneSpec
 from unitac_rig.sim.twin.truth import TwinTruth
 
@@ -20,5 +26,6 @@ __all__ = [
     "SceneSpec",
     "TwinTruth",
     "address_free",
+    "first_free_loopback",
     "start_twin_on_free_loopback",
 ]

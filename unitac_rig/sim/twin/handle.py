@@ -273,6 +273,18 @@ def address_free(host: str) -> bool:
     return True
 
 
+def first_free_loopback(first: int, last: int = 254) -> str:
+    """The first 127.0.0.x (``first`` <= x <= ``last``) where no controller port is bound, for a twin to take."""
+    for octet in range(first, last + 1):
+        host = f"127.0.0.{octet}"
+        if address_free(host):
+            return host
+    raise DeviceError(
+        f"no free loopback address for a controller twin in 127.0.0.{first}-{last}",
+        hint="close other controller twins or URSim instances",
+    )
+
+
 def start_twin_on_free_loopback(first: int, last: int = 254, **kwargs: Any) -> ControllerTwin:
     """A :class:`ControllerTwin` on the first 127.0.0.x (``first`` <= x <= ``last``) whose ports are all free."""
     for octet in range(first, last + 1):

@@ -558,7 +558,7 @@ def _variants_lines(splits: list[dict[str, Any]], columns: list[str]) -> list[st
     ]
     for metric, index in (("nmae", 0), ("ssim", 1)):
         for option in variants[0][metric]:
-            values = [float(np.mean([v for s in variants for v in s[metric][option][c]])) for c in columns]
+            values = [_variant_mean(variants, metric, option, c) for c in columns]
             # NMAE: ours / paper's; SSIM: (1 - ours) / (1 - paper's), the dissimilarities (SSIM may be negative)
             ratios = [
                 v / paper[c][0] if metric == "nmae" else (1.0 - v) / (1.0 - paper[c][1])
@@ -578,6 +578,11 @@ def _variants_lines(splits: list[dict[str, Any]], columns: list[str]) -> list[st
     return lines
 
 
+def _variant_mean(variants: list[Any], metric: str, option: str, column: str) -> float:
+    """One validation metric under one reading, averaged over every member of every split."""
+    return float(np.mean([v for split in variants for v in split[metric][option][column]]))
+
+
 def _consistency_lines(splits: list[dict[str, Any]], columns: list[str]) -> list[str]:
     """How much SSIM a unit of NMAE costs, (1 - SSIM) / NMAE (geometric mean over the columns), under every pair of
     readings, beside the paper's own pairs. Independent of how large the errors are (the simulated contacts are
@@ -588,9 +593,6 @@ def _consistency_lines(splits: list[dict[str, Any]], columns: list[str]) -> list
     paper = PAPER_TABLE1["all_seen"]
     shared = [c for c in columns if c in paper]
     paper_slope = float(np.exp(np.mean([np.log((1.0 - paper[c][1]) / paper[c][0]) for c in shared])))
-
-    def mean(metric: str, option: str, column: str) -> float:
-        return float(np.mean([v for s in variants for v in s[metric][option][column]]))
 
     ssim_options = list(variants[0]["ssim"])
     lines = [
@@ -606,7 +608,11 @@ def _consistency_lines(splits: list[dict[str, Any]], columns: list[str]) -> list
         cells = []
         for ssim_option in ssim_options:
             slopes = [
-                np.log(max(1.0 - mean("ssim", ssim_option, c), 1e-6) / mean("nmae", nmae_option, c)) for c in shared
+                np.log(
+                    max(1.0 - _variant_mean(variants, "ssim", ssim_option, c), 1e-6)
+                    / _variant_mean(variants, "nmae", nmae_option, c)
+                )
+                for c in shared
             ]
             cells.append(f"{float(np.exp(np.mean(slopes))) / paper_slope:.2f}")
         lines.append(f"| `{nmae_option}` | " + " | ".join(cells) + " |")

@@ -8,8 +8,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from unitac_rig.bench.fidelity import RECORDED, collect_object, compare, summarise
+from unitac_rig.bench.fidelity import (
+    RECORDED,
+    collect_object,
+    compare,
+    fit_cost,
+    refit,
+    scene_extremes,
+    summarise,
+    target_errors,
+)
+from unitac_rig.errors import ConfigError
 from unitac_rig.rig.config import parse_rig_config
+from unitac_rig.sim.scene import SceneParams
+from unitac_rig.sim.sensor_models import UskinParams
 
 
 def _uskin(lo: float, hi: float, peak: float = 10.8) -> dict[str, float]:
@@ -63,3 +75,47 @@ def test_a_short_session_reads_back_the_bulge_and_the_pitch_through_the_drivers(
     assert 3.0 < pillars["max"] < 6.5 and pillars["disp_max"] > 0.5
     assert 10.0 < uskin["peak_force_rows_n"] <= uskin["peak_force_500hz_n"] + 1e-9
     assert set(RECORDED) >= {"hex_pla"} and np.isfinite(pillars["disp_min"])
+
+
+def test_target_errors_and_cost_on_a_hand_worked_row() -> None:
+    # one object, simulated at +10 % / -30 % of the recorded uSkin extremes and exact elsewhere; |min|/max 0.5 met
+    row = {
+        "uskin_min": -2663 * 1.1,
+        "uskin_max": 3944 * 0.7,
+        "papillarray_n_min": -1.30,
+        "papillarray_n_max": 5.31,
+        "papillarray_mm_min": -1.03,
+        "papillarray_mm_max": 1.13,
+        "uskin_abs_min_over_max": 1.06,
+        "face_y_std_n": 0.045,
+    }
+    errors = target_errors({"hex_pla": row})
+    assert errors["hex_pla uskin_min"] == pytest.approx(0.1)
+    assert errors["hex_pla uskin_max"] == pytest.approx(-0.3)
+    assert errors["hex_pla uskin_abs_min_over_max"] == 0.0
+    assert errors["hex_pla face_y_std_n"] == pytest.approx(0.045 / 0.06 - 1)  # -0.25: a shortfall counts
+    # cost: the worst |error| 0.3, plus (0.3 - 0.12)^2 and (0.25 - 0.12)^2; the 0.1 is within the slack
+    assert fit_cost(errors) == pytest.approx(0.3 + 0.18**2 + 0.13**2)
+    # the circles' PapillArray minima are noise on the rig, not the scene's: left out
+    circle = dict(row, papillarray_n_min=-0.01, papillarray_mm_min=-0.001, face_y_std_n=float("nan"))
+    assert not any("papillarray_n_min" in k or "face" in k for k in target_errors({"circle_pla": circle}))
+
+
+def test_refit_recovers_a_gain_from_statistics_it_made() -> None:
+    # "recorded" statistics made by the scene itself with a normal gain of 1300 counts/N: fitting that gain from
+    # the default 1100 must land near 1300, and the fit must lower the cost
+    truth = scene_extremes(SceneParams(), UskinParams(gain_normal_counts_per_n=1300.0), angles=7)
+    recorded = {
+        obj: {
+            "uskin": (row["uskin_min"], row["uskin_max"]),
+            "papillarray_n": (row["papillarray_n_min"], row["papillarray_n_max"]),
+            "papillarray_mm": (row["papillarray_mm_min"], row["papillarray_mm_max"]),
+        }
+        for obj, row in truth.items()
+    }
+    doc = refit(["gain_normal_counts_per_n"], rounds=10, angles=7, recorded=recorded)
+    assert doc["start"]["values"]["gain_normal_counts_per_n"] == 1100.0
+    assert doc["end"]["values"]["gain_normal_counts_per_n"] == pytest.approx(1300.0, rel=0.03)
+    assert doc["end"]["cost"] < 0.5 * doc["start"]["cost"]
+    with pytest.raises(ConfigError):
+        refit(["not_a_parameter"], rounds=1)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import tempfile
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +23,7 @@ import numpy as np
 
 from unitac_rig.bench import machine_info
 from unitac_rig.collection.session import collect_session
+from unitac_rig.errors import ConfigError
 from unitac_rig.rig.config import RigConfig, parse_rig_config
 from unitac_rig.rig.objects import get_object
 from unitac_rig.rig.sensors import sensor_layout
@@ -439,3 +440,110 @@ def plot_fidelity(doc: dict[str, Any], path: Path) -> Path:
         fontsize=10,
     )
     return save_figure(fig, path)
+
+
+# ---- refitting the existing terms ---------------------------------------------------------------------------------
+
+# The parameters a refit may move: name -> (which dataclass, lower bound, upper bound). Bounds are what each
+# parameter's source allows (docs/simulator.md, "Parameters and their sources"), widened to see where a fit runs.
+FIT_PARAMETERS: dict[str, tuple[str, float, float]] = {
+    "skin_foundation_n_per_mm3": ("scene", 0.1, 3.0),
+    "skin_spread_sigma_mm": ("scene", 0.5, 4.0),
+    "skin_bulge_mm": ("scene", 0.1, 1.5),
+    "skin_friction": ("scene", 0.15, 1.0),
+    "shear_projection": ("scene", 0.3, 1.0),
+    "pillar_friction": ("scene", 0.2, 1.0),
+    "pad_pitch_deg": ("scene", 0.5, 10.0),
+    "gain_normal_counts_per_n": ("uskin", 600.0, 2500.0),
+    "gain_shear_counts_per_n": ("uskin", 1500.0, 10_000.0),
+}
+FIT_SLACK = 0.12  # errors under this cost nothing beyond the worst one: the full rig's noise moves extremes ~5 %
+
+
+def target_errors(
+    extremes: dict[str, dict[str, float]], recorded: dict[str, dict[str, tuple[float, float]]] = RECORDED
+) -> dict[str, float]:
+    """Relative error (simulated / recorded - 1) of every per-object min and max, plus the shortfalls of the uSkin
+    |min|/max and face y-std targets (0 when met), keyed ``"object stat"``. The circles' PapillArray minima are left
+    out: on the rig they are set by noise and tare offsets the scene alone does not have."""
+    errors: dict[str, float] = {}
+    for object_id, row in extremes.items():
+        for key, (low, high) in recorded[object_id].items():
+            for suffix, value in (("min", low), ("max", high)):
+                if object_id.startswith("circle") and key != "uskin" and suffix == "min":
+                    continue
+                errors[f"{object_id} {key}_{suffix}"] = row[f"{key}_{suffix}"] / value - 1.0
+        errors[f"{object_id} uskin_abs_min_over_max"] = min(
+            0.0, row["uskin_abs_min_over_max"] / USKIN_MIN_MAX_RATIO - 1
+        )
+        if not np.isnan(row["face_y_std_n"]):
+            errors[f"{object_id} face_y_std_n"] = min(0.0, row["face_y_std_n"] / FACE_Y_STD_N - 1.0)
+    return errors
+
+
+def fit_cost(errors: dict[str, float]) -> float:
+    """The largest |error|, plus the squares of every error beyond :data:`FIT_SLACK` (so the rest also improve)."""
+    values = np.abs(np.array(list(errors.values())))
+    return float(values.max() + np.sum(np.maximum(0.0, values - FIT_SLACK) ** 2))
+
+
+def refit(
+    names: Sequence[str],
+    *,
+    rounds: int = 25,
+    angles: int = 31,
+    seed: int = 0,
+    recorded: dict[str, dict[str, tuple[float, float]]] = RECORDED,
+    start: dict[str, float] | None = None,
+    on_round: Callable[[int, float, dict[str, float]], None] | None = None,
+) -> dict[str, Any]:
+    """Fit the named :data:`FIT_PARAMETERS` to ``recorded`` on the scene alone, by coordinate descent.
+
+    Each round tries every parameter times and divided by exp(step) (within its bounds) and keeps the first move
+    that lowers :func:`fit_cost`; a round that moves nothing halves the step (from 0.25). Starts from ``start``
+    (the defaults where not given). Returns the start and end values, their cost and errors. Deterministic for a seed.
+    """
+    unknown = [name for name in names if name not in FIT_PARAMETERS]
+    if unknown:
+        raise ConfigError(f"cannot fit {', '.join(unknown)}", hint=f"choose from {', '.join(FIT_PARAMETERS)}")
+
+    def cost_of(values: dict[str, float]) -> tuple[float, dict[str, float]]:
+        scene: dict[str, Any] = {k: v for k, v in values.items() if FIT_PARAMETERS[k][0] == "scene"}
+        uskin: dict[str, Any] = {k: v for k, v in values.items() if FIT_PARAMETERS[k][0] == "uskin"}
+        extremes = scene_extremes(
+            replace(SceneParams(), **scene), replace(UskinParams(), **uskin), seed=seed, angles=angles
+        )
+        errors = target_errors(extremes, recorded)
+        return fit_cost(errors), errors
+
+    defaults = {**asdict(SceneParams()), **asdict(UskinParams())}
+    start = {name: float((start or {}).get(name, defaults[name])) for name in names}
+    values = dict(start)
+    cost, errors = cost_of(values)
+    start_cost, start_errors = cost, errors
+    step = 0.25
+    for round_index in range(rounds):
+        moved = False
+        for name in names:
+            _, low, high = FIT_PARAMETERS[name]
+            for sign in (1.0, -1.0):
+                trial = dict(values)
+                trial[name] = min(high, max(low, values[name] * float(np.exp(sign * step))))
+                if trial[name] == values[name]:
+                    continue
+                trial_cost, trial_errors = cost_of(trial)
+                if trial_cost < cost - 1e-6:
+                    values, cost, errors, moved = trial, trial_cost, trial_errors, True
+                    break
+        if not moved:
+            step /= 2.0
+        if on_round is not None:
+            on_round(round_index, cost, values)
+    return {
+        "fitted": list(names),
+        "angles": angles,
+        "seed": seed,
+        "rounds": rounds,
+        "start": {"values": start, "cost": start_cost, "errors": start_errors},
+        "end": {"values": values, "cost": cost, "errors": errors},
+    }

@@ -14,7 +14,7 @@ import argparse
 from pathlib import Path
 
 from unitac_rig.bench import default_out_dir, write_json
-from unitac_rig.bench.fidelity import FIT_PARAMETERS, REL_TOLERANCE, refit
+from unitac_rig.bench.fidelity import FIT_PARAMETERS, REL_TOLERANCE, fit_evaluation, refit
 
 
 def main() -> None:
@@ -35,10 +35,10 @@ def main() -> None:
             f"round {i}: cost {cost:.3f} " + " ".join(f"{k}={v:.3g}" for k, v in values.items()), flush=True
         ),
     )
-    check = refit(names, rounds=0, angles=91, seed=args.seed)  # the defaults at 91 angles
-    final = refit(names, rounds=0, angles=91, seed=args.seed, start=doc["end"]["values"])
-    doc["at_91_angles"] = {"defaults": check["start"], "fitted": final["start"]}
-    for label, part in (("defaults", check["start"]), ("fitted", final["start"])):
+    doc["at_91_angles"] = {}
+    for label, values in (("defaults", doc["start"]["values"]), ("fitted", doc["end"]["values"])):
+        cost, errors = fit_evaluation(values, angles=91, seed=args.seed)
+        part = doc["at_91_angles"][label] = {"values": values, "cost": cost, "errors": errors}
         off = {k: v for k, v in part["errors"].items() if abs(v) > REL_TOLERANCE}
         print(f"{label} (91 angles): cost {part['cost']:.3f}, {len(off)} targets off by more than 25 %")
         for key, err in off.items():

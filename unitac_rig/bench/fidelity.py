@@ -487,6 +487,31 @@ def fit_cost(errors: dict[str, float]) -> float:
     return float(values.max() + np.sum(np.maximum(0.0, values - FIT_SLACK) ** 2))
 
 
+def _check_fit_names(names: Sequence[str]) -> None:
+    unknown = [name for name in names if name not in FIT_PARAMETERS]
+    if unknown:
+        raise ConfigError(f"cannot fit {', '.join(unknown)}", hint=f"choose from {', '.join(FIT_PARAMETERS)}")
+
+
+def fit_evaluation(
+    values: dict[str, float],
+    *,
+    angles: int = 91,
+    seed: int = 0,
+    recorded: dict[str, dict[str, tuple[float, float]]] = RECORDED,
+) -> tuple[float, dict[str, float]]:
+    """(:func:`fit_cost`, :func:`target_errors`) of the scene alone with ``values`` (:data:`FIT_PARAMETERS` names)
+    in place of the defaults."""
+    _check_fit_names(list(values))
+    scene: dict[str, Any] = {k: v for k, v in values.items() if FIT_PARAMETERS[k][0] == "scene"}
+    uskin: dict[str, Any] = {k: v for k, v in values.items() if FIT_PARAMETERS[k][0] == "uskin"}
+    extremes = scene_extremes(
+        replace(SceneParams(), **scene), replace(UskinParams(), **uskin), seed=seed, angles=angles
+    )
+    errors = target_errors(extremes, recorded)
+    return fit_cost(errors), errors
+
+
 def refit(
     names: Sequence[str],
     *,
@@ -494,30 +519,21 @@ def refit(
     angles: int = 31,
     seed: int = 0,
     recorded: dict[str, dict[str, tuple[float, float]]] = RECORDED,
-    start: dict[str, float] | None = None,
     on_round: Callable[[int, float, dict[str, float]], None] | None = None,
 ) -> dict[str, Any]:
     """Fit the named :data:`FIT_PARAMETERS` to ``recorded`` on the scene alone, by coordinate descent.
 
     Each round tries every parameter times and divided by exp(step) (within its bounds) and keeps the first move
-    that lowers :func:`fit_cost`; a round that moves nothing halves the step (from 0.25). Starts from ``start``
-    (the defaults where not given). Returns the start and end values, their cost and errors. Deterministic for a seed.
+    that lowers :func:`fit_cost`; a round that moves nothing halves the step (from 0.25). Starts from the
+    defaults. Returns the start and end values, their cost and errors. Deterministic for a seed.
     """
-    unknown = [name for name in names if name not in FIT_PARAMETERS]
-    if unknown:
-        raise ConfigError(f"cannot fit {', '.join(unknown)}", hint=f"choose from {', '.join(FIT_PARAMETERS)}")
+    _check_fit_names(names)
 
     def cost_of(values: dict[str, float]) -> tuple[float, dict[str, float]]:
-        scene: dict[str, Any] = {k: v for k, v in values.items() if FIT_PARAMETERS[k][0] == "scene"}
-        uskin: dict[str, Any] = {k: v for k, v in values.items() if FIT_PARAMETERS[k][0] == "uskin"}
-        extremes = scene_extremes(
-            replace(SceneParams(), **scene), replace(UskinParams(), **uskin), seed=seed, angles=angles
-        )
-        errors = target_errors(extremes, recorded)
-        return fit_cost(errors), errors
+        return fit_evaluation(values, angles=angles, seed=seed, recorded=recorded)
 
     defaults = {**asdict(SceneParams()), **asdict(UskinParams())}
-    start = {name: float((start or {}).get(name, defaults[name])) for name in names}
+    start = {name: float(defaults[name]) for name in names}
     values = dict(start)
     cost, errors = cost_of(values)
     start_cost, start_errors = cost, errors

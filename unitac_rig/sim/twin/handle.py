@@ -14,7 +14,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -273,29 +273,33 @@ def address_free(host: str) -> bool:
     return True
 
 
-def first_free_loopback(first: int, last: int = 254) -> str:
-    """The first 127.0.0.x (``first`` <= x <= ``last``) where no controller port is bound, for a twin to take."""
+def _free_loopbacks(first: int, last: int) -> Iterator[str]:
+    """Each 127.0.0.x (``first`` <= x <= ``last``) where no controller port is bound, checked as it is reached."""
     for octet in range(first, last + 1):
         host = f"127.0.0.{octet}"
         if address_free(host):
-            return host
-    raise DeviceError(
+            yield host
+
+
+def _no_free_loopback(first: int, last: int) -> DeviceError:
+    return DeviceError(
         f"no free loopback address for a controller twin in 127.0.0.{first}-{last}",
         hint="close other controller twins or URSim instances",
     )
+
+
+def first_free_loopback(first: int, last: int = 254) -> str:
+    """The first 127.0.0.x (``first`` <= x <= ``last``) where no controller port is bound, for a twin to take."""
+    for host in _free_loopbacks(first, last):
+        return host
+    raise _no_free_loopback(first, last)
 
 
 def start_twin_on_free_loopback(first: int, last: int = 254, **kwargs: Any) -> ControllerTwin:
     """A :class:`ControllerTwin` on the first 127.0.0.x (``first`` <= x <= ``last``) whose ports are all free."""
-    for octet in range(first, last + 1):
-        host = f"127.0.0.{octet}"
-        if not address_free(host):
-            continue
+    for host in _free_loopbacks(first, last):
         try:
             return ControllerTwin(host, **kwargs)
         except AddressTaken:
             continue  # taken between the check and the start
-    raise DeviceError(
-        f"no free loopback address for a controller twin in 127.0.0.{first}-{last}",
-        hint="close other controller twins or URSim instances",
-    )
+    raise _no_free_loopback(first, last)

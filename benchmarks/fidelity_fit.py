@@ -26,6 +26,9 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=default_out_dir(), help="folder for the JSON")
     args = parser.parse_args()
     names = [n.strip() for n in args.params.split(",") if n.strip()]
+    unknown = [n for n in names if n not in FIT_PARAMETERS]
+    if unknown:
+        parser.error(f"cannot fit {', '.join(unknown)}; choose from {', '.join(FIT_PARAMETERS)}")
     doc = refit(
         names,
         rounds=args.rounds,

@@ -40,7 +40,9 @@ def test_passing_the_hard_limit_aborts_backs_off_and_stops(tmp_path: Path) -> No
         assert np.linalg.norm(state.tcp_force[:3]) < 3.0  # backed off to the stand-off, not left pressing at 11 N
     (press,) = read_presses(session_path(tmp_path, "square_pla", "uskin"))
     assert (press.status, press.reason) == ("aborted", "hard_limit")
-    assert press.attrs["peak_force_n"] >= 11.0
+    # the limit is on the wrist |F| (press force plus shear), the record keeps what tripped it
+    assert np.linalg.norm(press.robot_force[:, :3], axis=1).max() >= 11.0
+    assert press.attrs["peak_force_n"] > 10.5  # well past the 10 N threshold along the press
     assert press.robot_t_s.size > 50  # the streams up to the stop were kept
     # with the cause fixed (a slower press), the same session resumes and redoes the aborted press
     with SimRig(few_angles(3), seed=0) as rig:

@@ -1,6 +1,7 @@
 """The physics added to close the gap to the recorded signals (issue 12), each on a case worked by hand.
 
-* the uSkin skin bulge: a lateral reading -kappa * dF/ds (the skin squeezed out from under a pressure gradient);
+* the uSkin skin bulge: a lateral reading -kappa * dF/ds (the skin squeezed out from under a pressure gradient),
+  and a soft wall's surface drag, the same form across the pad;
 * the pad pitch: vertical shear tan(beta) x normal, capped by friction together with the in-plane shear;
 * one fitted friction coefficient per pad (skin, pillars), the same on PLA and TPU, and shear that follows the
   outline's slope on soft walls too;
@@ -18,7 +19,7 @@ import pytest
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.config import parse_rig_config
-from unitac_rig.rig.objects import get_object
+from unitac_rig.rig.objects import ObjectSpec, get_object
 from unitac_rig.sim.fast_rig import SimRig
 from unitac_rig.sim.scene import PressScene, SceneParams
 
@@ -57,6 +58,38 @@ def test_a_line_contact_pushes_the_skin_apart_by_the_stated_gain() -> None:
     assert on[..., 0].sum() == pytest.approx(wrench[:3] @ tool_x, abs=1e-9)
 
 
+def with_drag(object_id: str, drag_mm: float) -> ObjectSpec:
+    obj = get_object(object_id)
+    return replace(obj, material_params=replace(obj.material_params, skin_drag_mm=drag_mm))
+
+
+def test_a_soft_wall_drags_the_skin_apart_like_a_larger_bulge_across_the_pad_only() -> None:
+    # A stretching wall surface drags the skin outward from the contact with the same -drag * dF/ds form as the
+    # bulge, across the pad only (the prism is uniform along its axis, so nothing stretches up the pad). On the
+    # square's corner (a rigid wall, so the loads are the same with and without it): drag 0.7 mm and no bulge read
+    # the same x as a bulge of 0.7 mm; the y readings (the bulge at the pad's top and bottom) are untouched, and
+    # the drag, internal to the pad like the bulge, leaves the wrench alone.
+    def loads(obj: ObjectSpec, params: SceneParams) -> tuple[np.ndarray, np.ndarray]:
+        s = PressScene(obj, 0.0, USKIN, params=params)
+        pose = s.pose_at_travel(45, s.travel_at_force_mm(45, 10.0))
+        return USKIN.to_grid(s.taxel_loads(pose).forces_n), s.wrench_on_tool(pose)
+
+    dragged, wrench = loads(with_drag("square_pla", 0.7), EXACT)
+    plain, plain_wrench = loads(get_object("square_pla"), EXACT)
+    as_bulge, _ = loads(get_object("square_pla"), replace(EXACT, skin_bulge_mm=EXACT.skin_bulge_mm + 0.7))
+    assert np.abs(dragged[..., 0] - plain[..., 0]).max() > 0.1  # it moves the readings (N of shear)
+    assert np.allclose(dragged[..., 0], as_bulge[..., 0], atol=1e-9)
+    assert np.allclose(dragged[..., 1:], plain[..., 1:], atol=1e-9)
+    assert np.allclose(wrench, plain_wrench, atol=1e-9)
+
+
+@pytest.mark.parametrize(("drag_mm", "sigma_mm"), [(-0.1, 2.0), (0.5, 0.0)])
+def test_a_negative_drag_or_one_without_spreading_is_a_config_error(drag_mm: float, sigma_mm: float) -> None:
+    params = replace(EXACT, skin_bulge_mm=0.0, skin_spread_sigma_mm=sigma_mm)
+    with pytest.raises(ConfigError):
+        PressScene(with_drag("circle_tpu", drag_mm), 0.0, USKIN, params=params)
+
+
 def test_the_bulge_pushes_the_top_and_bottom_rows_out_of_the_pad() -> None:
     # The prism is taller than the pad, so the pressure is uniform up the pad and drops to zero at its top and
     # bottom edges (30.6 mm apart). With sigma well under the 7.25 mm from the outer rows' inner edge to the pad edge,
@@ -73,12 +106,14 @@ def test_the_bulge_pushes_the_top_and_bottom_rows_out_of_the_pad() -> None:
 
 
 def test_a_pitched_pad_gives_vertical_shear_tan_beta_times_the_normal_load() -> None:
-    # the square's face pressed square on: no in-plane tilt, so each pillar's vertical shear is tan(beta) x normal
+    # the square's face pressed square on: no in-plane tilt, so each pillar's vertical shear is c tan(beta) x normal
+    # (c = the shear projection, under the friction cap here)
     pitched = replace(EXACT, pad_pitch_deg=3.0)
+    ratio = EXACT.shear_projection * math.tan(math.radians(3.0))
     pillars = grid("square_pla", PAPILLARRAY, 0, pitched)
     loaded = pillars[..., 2] > 0
     assert loaded.sum() >= 4
-    assert np.allclose(pillars[..., 1][loaded], math.tan(math.radians(3.0)) * pillars[..., 2][loaded])
+    assert np.allclose(pillars[..., 1][loaded], ratio * pillars[..., 2][loaded])
     s = PressScene(get_object("square_pla"), 0.0, PAPILLARRAY, params=pitched)
     loads = s.loads_at_force(0, 10.0)
     assert loads.displacement_mm is not None
@@ -86,23 +121,24 @@ def test_a_pitched_pad_gives_vertical_shear_tan_beta_times_the_normal_load() -> 
     # the pad's vertical axis is the base's: the wrist feels the sum as a vertical force
     wrench = s.wrench_on_tool(s.pose_at_travel(0, s.travel_at_force_mm(0, 10.0)))
     assert wrench[2] == pytest.approx(loads.forces_n[:, 1].sum(), rel=1e-6)
-    assert wrench[2] == pytest.approx(math.tan(math.radians(3.0)) * 10.0, rel=1e-3)
-    # the uSkin: the traction adds tan(beta) x the total normal load up the pad (the bulge sums to zero)
+    assert wrench[2] == pytest.approx(ratio * 10.0, rel=1e-3)
+    # the uSkin: the traction adds c tan(beta) x the total normal load up the pad (the bulge sums to zero)
     skin = grid("square_pla", USKIN, 0, pitched)
-    assert skin[..., 1].sum() == pytest.approx(math.tan(math.radians(3.0)) * 10.0, rel=1e-6)
+    assert skin[..., 1].sum() == pytest.approx(ratio * 10.0, rel=1e-6)
     # beta < 0 pushes down
     assert grid("square_pla", PAPILLARRAY, 0, replace(EXACT, pad_pitch_deg=-3.0))[1, 1, 1] < 0
 
 
 def test_pitch_shear_is_capped_by_friction_with_the_in_plane_shear() -> None:
-    mu = EXACT.pillar_friction
+    frictionless = replace(EXACT, shear_projection=1.0, pillar_friction=0.32)  # the shear is the full tilt, capped
+    mu = frictionless.pillar_friction
     # alone: a 30 deg pitch (tan 0.58) is capped at mu
-    steep = grid("square_pla", PAPILLARRAY, 0, replace(EXACT, pad_pitch_deg=30.0))
+    steep = grid("square_pla", PAPILLARRAY, 0, replace(frictionless, pad_pitch_deg=30.0))
     loaded = steep[..., 2] > 0
     assert np.allclose(steep[..., 1][loaded], mu * steep[..., 2][loaded])
     # with the face tilted 20 deg under the left column (tan 0.36) and a 10 deg pitch (tan 0.18): the shear vector
     # |(0.36, 0.18)| = 0.41 > mu is scaled back to mu along its own direction
-    both = grid("square_pla", PAPILLARRAY, 20, replace(EXACT, pad_pitch_deg=10.0))
+    both = grid("square_pla", PAPILLARRAY, 20, replace(frictionless, pad_pitch_deg=10.0))
     column = both[:, 0]
     assert np.all(column[:, 2] > 0.5)
     assert np.allclose(np.hypot(column[:, 0], column[:, 1]), mu * column[:, 2])
@@ -112,11 +148,12 @@ def test_pitch_shear_is_capped_by_friction_with_the_in_plane_shear() -> None:
 def test_skin_shear_is_capped_by_the_skin_friction_on_pla_and_tpu_alike() -> None:
     # A steep projection (c = 1000) caps every tilted segment at the skin's friction. With almost no spreading the
     # circle's contact (centred on the boundary between columns 2 and 3) puts its left half in column 2, all pushed
-    # toward -x: column 2 reads -mu x its normal load. The same holds on TPU: a soft wall no longer flattens the
-    # interface's tilt away (the recorded TPU sessions' lateral readings are as large as PLA's).
+    # toward -x: column 2 reads -mu x its normal load. The same holds on TPU (its wall's drag switched off here): a
+    # soft wall does not flatten the interface's tilt away (the recorded TPU sessions' lateral readings are as large
+    # as PLA's).
     params = replace(EXACT, shear_projection=1000.0, skin_spread_sigma_mm=0.01, skin_bulge_mm=0.0)
-    for object_id in ("circle_pla", "circle_tpu"):
-        g = grid(object_id, USKIN, 0, params)
+    for obj in (get_object("circle_pla"), with_drag("circle_tpu", 0.0)):
+        g = USKIN.to_grid(PressScene(obj, 0.0, USKIN, params=params).loads_at_force(0, 10.0).forces_n)
         assert np.allclose(g[:, 2, 0], -params.skin_friction * g[:, 2, 2], rtol=0.02)
         assert np.allclose(g[:, 3, 0], params.skin_friction * g[:, 3, 2], rtol=0.02)
 

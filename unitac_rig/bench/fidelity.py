@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import tempfile
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +25,7 @@ from unitac_rig.bench import machine_info
 from unitac_rig.collection.session import collect_session
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.config import RigConfig, parse_rig_config
-from unitac_rig.rig.objects import get_object
+from unitac_rig.rig.objects import MATERIALS, MaterialSpec, get_object
 from unitac_rig.rig.sensors import sensor_layout
 from unitac_rig.sim.fast_rig import SimRig, scene_seed
 from unitac_rig.sim.scene import PressScene, SceneParams
@@ -235,17 +235,24 @@ def run_fidelity(
     }
 
 
-# Each addition of issue 12 set back to what the scene had before it (scene parameters, uSkin output parameters).
-ABLATIONS: dict[str, tuple[dict[str, Any], dict[str, Any]]] = {
-    "without the skin bulge (kappa 0)": ({"skin_bulge_mm": 0.0}, {}),
+# Each addition of issue 12 set back to what the scene had before it: (scene parameters, uSkin output parameters,
+# material fields by material name).
+ABLATIONS: dict[str, tuple[dict[str, Any], dict[str, Any], dict[str, dict[str, Any]]]] = {
+    "without the skin bulge (kappa 0)": ({"skin_bulge_mm": 0.0}, {}, {}),
+    "without the TPU wall's drag on the skin (0)": ({}, {}, {"TPU": {"skin_drag_mm": 0.0}}),
     "old uSkin gains and spreading (2500/3000 counts/N, sigma 3 mm)": (
         {"skin_spread_sigma_mm": 3.0},
         {"gain_normal_counts_per_n": 2500.0, "gain_shear_counts_per_n": 3000.0},
+        {},
     ),
-    "old skin friction (0.8)": ({"skin_friction": 0.8}, {}),
-    "without the pad pitch (beta 0)": ({"pad_pitch_deg": 0.0, "pad_pitch_sd_deg": 0.0}, {}),
-    "old pillar friction (0.48, PLA)": ({"pillar_friction": 0.48}, {}),
-    "without the centring error": ({"centring_error_mm": 0.0}, {}),
+    "old skin friction (0.8)": ({"skin_friction": 0.8}, {}, {}),
+    "without the pad pitch (beta 0)": ({"pad_pitch_deg": 0.0, "pad_pitch_sd_deg": 0.0}, {}, {}),
+    "full-slip shear as before (c 1, pillar friction 0.32, pitch 3.5 deg)": (
+        {"shear_projection": 1.0, "pillar_friction": 0.32, "pad_pitch_deg": 3.5},
+        {},
+        {},
+    ),
+    "without the centring error": ({"centring_error_mm": 0.0}, {}, {}),
 }
 # Pooled extremes of the noise-free scene: press forces at which the loads are taken (N), per material; about the
 # simulated rig's largest true press force per session.
@@ -253,16 +260,24 @@ ABLATION_FORCE_N = {"PLA": 10.4, "TPU": 10.2}
 
 
 def scene_extremes(
-    scene_params: SceneParams, uskin_params: UskinParams, *, seed: int = 0, angles: int = 91
+    scene_params: SceneParams,
+    uskin_params: UskinParams,
+    *,
+    seed: int = 0,
+    angles: int = 91,
+    materials: dict[str, MaterialSpec] | None = None,
 ) -> dict[str, dict[str, float]]:
     """The pooled statistics of the scene alone (no arm, no noise): loads at the press force and at half of it over
     the angle sweep, through the uSkin's seeded gains and cross-talk; placement and mount errors seeded as the
-    simulated rig seeds them. Cheap enough to switch each addition off in turn (:data:`ABLATIONS`)."""
+    simulated rig seeds them. Cheap enough to switch each addition off in turn (:data:`ABLATIONS`). ``materials``
+    replaces the catalogue's material parameters by name (a refit moves them)."""
     sweep = np.linspace(-45.0, 45.0, angles)
     out: dict[str, dict[str, float]] = {}
     uskin = UskinModel(uskin_params, np.random.default_rng([seed, 2]))
     for object_id in RECORDED:
         obj = get_object(object_id)
+        if materials and obj.material in materials:
+            obj = replace(obj, material_params=materials[obj.material])
         force = ABLATION_FORCE_N.get(obj.material, 10.4)
         row: dict[str, float] = {}
         for sensor in SENSORS:
@@ -294,8 +309,14 @@ def run_ablation(*, seed: int = 0, angles: int = 91) -> dict[str, Any]:
     and of the model with each addition set back (:data:`ABLATIONS`)."""
     final = scene_extremes(SceneParams(), UskinParams(), seed=seed, angles=angles)
     variants = {
-        name: scene_extremes(replace(SceneParams(), **scene), replace(UskinParams(), **uskin), seed=seed, angles=angles)
-        for name, (scene, uskin) in ABLATIONS.items()
+        name: scene_extremes(
+            replace(SceneParams(), **scene),
+            replace(UskinParams(), **uskin),
+            seed=seed,
+            angles=angles,
+            materials={material: replace(MATERIALS[material], **fields) for material, fields in materials.items()},
+        )
+        for name, (scene, uskin, materials) in ABLATIONS.items()
     }
     return {"forces_n": ABLATION_FORCE_N, "angles": angles, "seed": seed, "final": final, "variants": variants}
 
@@ -456,6 +477,9 @@ FIT_PARAMETERS: dict[str, tuple[str, float, float]] = {
     "pad_pitch_deg": ("scene", 0.5, 10.0),
     "gain_normal_counts_per_n": ("uskin", 600.0, 2500.0),
     "gain_shear_counts_per_n": ("uskin", 1500.0, 10_000.0),
+    "TPU.skin_drag_mm": ("material", 0.0, 3.0),
+    "TPU.wall_point_stiffness_n_per_mm": ("material", 3.0, 100.0),
+    "TPU.wall_foundation_n_per_mm3": ("material", 0.01, 1.0),
 }
 FIT_SLACK = 0.12  # errors under this cost nothing beyond the worst one: the full rig's noise moves extremes ~5 %
 
@@ -506,10 +530,33 @@ def fit_evaluation(
     scene: dict[str, Any] = {k: v for k, v in values.items() if FIT_PARAMETERS[k][0] == "scene"}
     uskin: dict[str, Any] = {k: v for k, v in values.items() if FIT_PARAMETERS[k][0] == "uskin"}
     extremes = scene_extremes(
-        replace(SceneParams(), **scene), replace(UskinParams(), **uskin), seed=seed, angles=angles
+        replace(SceneParams(), **scene),
+        replace(UskinParams(), **uskin),
+        seed=seed,
+        angles=angles,
+        materials=_fitted_materials(values),
     )
     errors = target_errors(extremes, recorded)
     return fit_cost(errors), errors
+
+
+def _fitted_materials(values: dict[str, float]) -> dict[str, MaterialSpec]:
+    """The catalogue materials with the ``"MATERIAL.field"`` entries of ``values`` in place."""
+    changes: dict[str, dict[str, Any]] = {}
+    for key, value in values.items():
+        if FIT_PARAMETERS[key][0] == "material":
+            material, field_name = key.split(".", 1)
+            changes.setdefault(material, {})[field_name] = value
+    return {name: replace(MATERIALS[name], **fields) for name, fields in changes.items()}
+
+
+def _default_value(name: str) -> float:
+    """The value a :data:`FIT_PARAMETERS` entry has in the code as it stands."""
+    kind = FIT_PARAMETERS[name][0]
+    if kind == "material":
+        material, field_name = name.split(".", 1)
+        return float(getattr(MATERIALS[material], field_name))
+    return float(getattr(SceneParams() if kind == "scene" else UskinParams(), name))
 
 
 def refit(
@@ -532,8 +579,7 @@ def refit(
     def cost_of(values: dict[str, float]) -> tuple[float, dict[str, float]]:
         return fit_evaluation(values, angles=angles, seed=seed, recorded=recorded)
 
-    defaults = {**asdict(SceneParams()), **asdict(UskinParams())}
-    start = {name: float(defaults[name]) for name in names}
+    start = {name: _default_value(name) for name in names}
     values = dict(start)
     cost, errors = cost_of(values)
     start_cost, start_errors = cost, errors

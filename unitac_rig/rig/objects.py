@@ -63,6 +63,9 @@ class MaterialSpec:
     corner_stiffness_factor: float  # k0 (and local wall stiffness) multiplier when the contact is at a corner
     wall_foundation_n_per_mm3: float | None  # local flattening under a line contact, per area; None = rigid wall
     wall_point_stiffness_n_per_mm: float | None  # local dimpling under one pillar tip; None = rigid wall
+    skin_drag_mm: float = 0.0  # a soft wall flattening under the uSkin stretches its surface outward from the
+    # contact and, stuck to the skin, drags the magnets with it: an extra lateral (x) reading -drag * dF/ds on top of
+    # the skin's own bulge (same form, see the scene); 0 for a wall too stiff to stretch
     source: str = ""
 
 
@@ -89,8 +92,10 @@ MATERIALS: dict[str, MaterialSpec] = {
         wall_foundation_n_per_mm3=0.03,  # [I] fitted: at 10 N the TPU circle flattens to a ~15 mm wide contact
         # (ring flattening starts at pi*E*I/R^2 ~ 0.19 N/mm < 0.33 N/mm) and halves the uSkin's peak taxel, as the
         # low end of the recorded per-file peaks (1.6k vs 5.3k counts) suggests
-        wall_point_stiffness_n_per_mm=10.0,  # [D/I] shell dimple ~ E t^2 / R = 6.5 N/mm (x1.5): the PapillArray
-        # centre pillar still peaks above 4 N on TPU (data: 4.2-5.3 N in every file, TPU included)
+        wall_point_stiffness_n_per_mm=4.7,  # [D/I] shell dimple ~ E t^2 / R = 6.5 N/mm; refitted to 0.7x that: the
+        # PapillArray centre pillar still peaks above 4 N on TPU (data: 4.2-5.3 N in every file, TPU included)
+        skin_drag_mm=0.5,  # [I] fitted to the TPU sessions' uSkin lateral readings, larger than PLA's (circle minimum
+        # -1.9k against -1.2k counts, hexagon -3.1k against -2.7k): the flattening wall stretches under the skin
         source="Shore 95A TPU; thin-ring/beam formulas in scene-facts section 4",
     ),
 }

@@ -13,6 +13,7 @@ from unitac_rig.bench.fidelity import (
     collect_object,
     compare,
     fit_cost,
+    fit_evaluation,
     refit,
     scene_extremes,
     summarise,
@@ -104,7 +105,7 @@ def test_target_errors_and_cost_on_a_hand_worked_row() -> None:
 def test_refit_recovers_a_gain_from_statistics_it_made() -> None:
     # "recorded" statistics made by the scene itself with a normal gain of 1300 counts/N: fitting that gain from
     # the default 1100 must land near 1300, and the fit must lower the cost
-    truth = scene_extremes(SceneParams(), UskinParams(gain_normal_counts_per_n=1300.0), angles=7)
+    truth = scene_extremes(SceneParams(), UskinParams(gain_normal_counts_per_n=1300.0), angles=9)
     recorded = {
         obj: {
             "uskin": (row["uskin_min"], row["uskin_max"]),
@@ -113,9 +114,21 @@ def test_refit_recovers_a_gain_from_statistics_it_made() -> None:
         }
         for obj, row in truth.items()
     }
-    doc = refit(["gain_normal_counts_per_n"], rounds=10, angles=7, recorded=recorded)
+    doc = refit(["gain_normal_counts_per_n"], rounds=10, angles=9, recorded=recorded)
     assert doc["start"]["values"]["gain_normal_counts_per_n"] == 1100.0
     assert doc["end"]["values"]["gain_normal_counts_per_n"] == pytest.approx(1300.0, rel=0.03)
     assert doc["end"]["cost"] < 0.5 * doc["start"]["cost"]
     with pytest.raises(ConfigError):
         refit(["not_a_parameter"], rounds=1)
+
+
+def test_a_refit_material_parameter_moves_only_that_materials_objects() -> None:
+    # "TPU.skin_drag_mm" reaches the TPU prisms through the catalogue material, not the scene parameters: switched
+    # off, the TPU uSkin minima shrink (the drag pushes the skin apart) and no PLA number moves
+    _, with_drag = fit_evaluation({}, angles=5)
+    _, without = fit_evaluation({"TPU.skin_drag_mm": 0.0}, angles=5)
+    for key, error in with_drag.items():
+        if key.startswith(("circle_pla", "hex_pla", "square_pla")) or "papillarray" in key:
+            assert without[key] == error, key
+    for obj in ("circle_tpu", "hex_tpu", "square_tpu"):
+        assert without[f"{obj} uskin_min"] < with_drag[f"{obj} uskin_min"], obj  # -1 + |sim| / |recorded| falls

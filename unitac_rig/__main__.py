@@ -1,5 +1,5 @@
 """``python -m unitac_rig`` runs the CLI."""
 
-from unitac_rig.cli import main
+from unitac_rig.launch import main
 
 main()

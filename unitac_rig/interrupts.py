@@ -1,20 +1,29 @@
-"""Interrupts that cannot be lost.
+"""Interrupts that cannot be lost, and that never land inside someone else's lock.
 
-Python raises KeyboardInterrupt at the next bytecode after SIGINT arrives. When that bytecode belongs to code that
-clears exceptions (h5py's compiled object clean-up is one: measured, a Ctrl-C during a tight HDF5 read loop was
-dropped in 8 of 60 tries), the interrupt is lost and a collection carries on as if nobody had pressed Ctrl-C.
+Python raises KeyboardInterrupt at the next bytecode after SIGINT arrives. That bytecode may belong to any code:
 
-So the CLI's signal handlers also *note* every interrupt here, and the loops that run for long (each control period
-of a press or a transit move, each press of a session, each refresh of ``inspect --watch``) call
-:func:`raise_if_interrupted`: an interrupt that was swallowed is raised again within one control period. This module
-imports nothing from the project, so every layer may call it.
+* code that clears exceptions (h5py's compiled object clean-up is one: measured, a Ctrl-C during a tight HDF5 read
+  loop was dropped in 8 of 60 tries), so the interrupt is lost and a collection carries on;
+* a library between taking a lock and entering the block that releases it (``queue.Queue`` under python-can's
+  virtual bus is one: measured, 1 of 24 Ctrl-Cs at random moments left its lock held, and the arm-stop path then
+  waited on it forever, so the process hung instead of exiting).
+
+So while a command moves the arm the CLI's handlers *defer*: they note the interrupt here and return, and the loops
+that run for long (each control period of a press or a transit move, each press of a session, each reconnection
+poll) call :func:`raise_if_interrupted`, which raises it at a point of our own, within one control period. Two
+exceptions make it raise at once: inside :func:`immediate_interrupts` (a blocking prompt, which polls nothing), and
+on a second signal while the first is still noted (something between two polls is stuck: the operator's second
+Ctrl-C always gets through). This module imports nothing from the project, so every layer may call it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import signal
+from collections.abc import Iterator
 
 _noted: list[int] = []
+_immediate_depth = [0]  # how many immediate_interrupts() scopes are open (a list: mutable without `global`)
 
 
 class Terminated(KeyboardInterrupt):
@@ -49,3 +58,21 @@ def raise_if_interrupted() -> None:
 def forget_interrupts() -> None:
     """Clear the noted interrupts (tests, and a handler scope that ends without one)."""
     _noted.clear()
+
+
+def raise_at_once() -> bool:
+    """Whether a handler should raise the interrupt it just noted rather than defer it: inside
+    :func:`immediate_interrupts`, or when an earlier interrupt is still noted (a repeated Ctrl-C)."""
+    return _immediate_depth[0] > 0 or len(_noted) > 1
+
+
+@contextlib.contextmanager
+def immediate_interrupts() -> Iterator[None]:
+    """Interrupts raise the moment they arrive for the duration (a prompt waiting for the operator polls nothing);
+    one noted before entry is raised on entry."""
+    raise_if_interrupted()
+    _immediate_depth[0] += 1
+    try:
+        yield
+    finally:
+        _immediate_depth[0] -= 1

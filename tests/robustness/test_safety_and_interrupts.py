@@ -121,6 +121,34 @@ def test_sigint_at_random_moments_exits_130_and_the_same_command_finishes(tmp_pa
     assert statuses == ["complete"] * 6
 
 
+def _loaded(pid: int, library: str) -> bool:
+    try:
+        return library in Path(f"/proc/{pid}/maps").read_text()
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/maps").exists(), reason="needs /proc to see how far start-up has got")
+def test_ctrl_c_during_start_up_is_one_line_and_exit_130(tmp_path: Path) -> None:
+    """Caught while the application is still being imported (numpy's core loaded, most of the rest not): no
+    traceback, and not the -2 (killed by SIGINT) that a KeyboardInterrupt inside an importing extension left even
+    after the CLI printed its line."""
+    cmd = [sys.executable, "-m", "unitac_rig", "collect", "--object", "circle_pla", "--sensor", "uskin",
+           "--data", str(tmp_path), "--angles", "2", "--no-live"]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not _loaded(proc.pid, "_multiarray_umath") and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.001)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert (proc.returncode, err.strip().splitlines()) == (130, ["interrupted"]), err
+
+
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGTERM, 143), (signal.SIGHUP, 129)])
 def test_sigterm_and_sighup_take_the_ctrl_c_path(tmp_path: Path, sig: signal.Signals, code: int) -> None:
     """kill (SIGTERM) or a closed SSH session (SIGHUP) mid-session: the arm stopped, the press kept as interrupted,

@@ -19,6 +19,7 @@ from unitac_rig.collection.press import PressPlan, TickInfo
 from unitac_rig.collection.sensor_choice import choose_sensor, collection_order, session_complete
 from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session, dry_run
 from unitac_rig.errors import UsageError
+from unitac_rig.interrupts import immediate_interrupts
 from unitac_rig.rig.backends import open_rig
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import STRATEGIES, RigConfig, load_rig_config, parse_rig_config
@@ -127,7 +128,8 @@ def _run_session(
     def ask(message: str) -> None:
         if panel is not None:
             panel.live.stop()
-        typer.prompt(message, default="", show_default=False)
+        with immediate_interrupts():  # a prompt polls nothing: Ctrl-C must end it at once
+            typer.prompt(message, default="", show_default=False)
         if panel is not None:
             panel.live.start()
 
@@ -212,7 +214,7 @@ def collect(
 def _ask_operator(rig: Rig, message: str) -> None:
     """Wait for the operator with the arm at rest and the controller's watchdog fed meanwhile (the wait may last
     minutes; without the feeding the controller would stop the program, as after a dead host)."""
-    with rig.arm.keep_alive():
+    with rig.arm.keep_alive(), immediate_interrupts():  # a prompt polls nothing: Ctrl-C must end it at once
         typer.prompt(message, default="", show_default=False)
 
 

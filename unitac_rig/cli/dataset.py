@@ -90,7 +90,7 @@ def _watch(data: Path, interval: float, as_json: bool) -> None:
         return Group(head, inspect_tables(report, data))
 
     try:
-        with termination_as_interrupt():
+        with termination_as_interrupt(defer=False):  # read-only: raising at once harms nothing
             _refresh_until_interrupted(frame, interval, as_json)
     except KeyboardInterrupt:
         return

@@ -3,8 +3,12 @@
 Python turns SIGINT into KeyboardInterrupt, so every ``finally`` runs and the arm is stopped, but SIGTERM (``kill``,
 a service manager, a batch system) and SIGHUP (the SSH session or terminal closed) end the process at once by default:
 no ``finally``, no stop command, the partial press lost. Only the controller's watchdog would stop the arm then.
-Inside :func:`termination_as_interrupt` both raise :class:`Terminated`, a KeyboardInterrupt, where the main thread is,
-so they take exactly the Ctrl-C path: the arm is stopped, what was recorded is kept, the same command resumes.
+Inside :func:`termination_as_interrupt` both become :class:`Terminated`, a KeyboardInterrupt in the main thread, so
+they take exactly the Ctrl-C path: the arm is stopped, what was recorded is kept, the same command resumes.
+
+While a command moves the arm the interrupt is deferred to the next poll of the control loop rather than raised
+wherever the main thread happens to be (see :mod:`unitac_rig.interrupts`: an exception raised inside a library's
+lock can hang the stop path); a second signal, or one during a prompt, raises at once.
 """
 
 from __future__ import annotations
@@ -15,22 +19,27 @@ import threading
 from collections.abc import Iterator
 from types import FrameType
 
-from unitac_rig.interrupts import Terminated, forget_interrupts, note_interrupt
+from unitac_rig.interrupts import (
+    forget_interrupts,
+    interrupt_for,
+    note_interrupt,
+    raise_at_once,
+    raise_if_interrupted,
+)
 
 TERMINATION_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 
 _received: list[int] = []  # termination signals this process received (typer hides the exception: see app.main)
+_deferring = [False]  # whether the open termination_as_interrupt scope defers (a list: mutable without `global`)
 
 
-def _raise_terminated(signal_number: int, frame: FrameType | None) -> None:
-    _received.append(signal_number)
-    note_interrupt(signal_number)
-    raise Terminated(signal_number)
-
-
-def _raise_keyboard_interrupt(signal_number: int, frame: FrameType | None) -> None:
-    note_interrupt(signal_number)  # Python's own handler, plus a note in case the exception gets swallowed
-    raise KeyboardInterrupt
+def _on_signal(signal_number: int, frame: FrameType | None) -> None:
+    """Note the interrupt; raise it here only when not deferring, inside a prompt, or on a repeated signal."""
+    if signal_number != signal.SIGINT:
+        _received.append(signal_number)
+    note_interrupt(signal_number)  # also when raised: in case the exception gets swallowed
+    if not _deferring[0] or raise_at_once():
+        raise interrupt_for(signal_number)
 
 
 def last_termination_signal() -> int | None:
@@ -39,20 +48,23 @@ def last_termination_signal() -> int | None:
 
 
 @contextlib.contextmanager
-def termination_as_interrupt() -> Iterator[None]:
-    """Turn SIGTERM and SIGHUP into :class:`Terminated` for the duration, and note SIGINT as well as raising it, so
-    :func:`unitac_rig.interrupts.raise_if_interrupted` can raise an interrupt that compiled code swallowed (main
-    thread only; elsewhere a no-op)."""
+def termination_as_interrupt(*, defer: bool = True) -> Iterator[None]:
+    """Turn SIGTERM and SIGHUP into :class:`Terminated` for the duration, and note SIGINT, so
+    :func:`unitac_rig.interrupts.raise_if_interrupted` raises them at the control loop's next poll (``defer``; a
+    command that moves the arm) or so it can raise one that compiled code swallowed (not ``defer``: raised at once,
+    as Python does). Main thread only; elsewhere a no-op."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {sig: signal.signal(sig, _raise_terminated) for sig in TERMINATION_SIGNALS}
-    previous[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
+    previous = {sig: signal.signal(sig, _on_signal) for sig in (*TERMINATION_SIGNALS, signal.SIGINT)}
+    was_deferring, _deferring[0] = _deferring[0], defer
     try:
         yield
+        raise_if_interrupted()  # one that arrived after the last poll still ends the command as interrupted
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+        _deferring[0] = was_deferring
         forget_interrupts()  # the interrupt (if any) has propagated; nothing after the scope may see it again
 
 

@@ -324,6 +324,7 @@ def _reconnect(rig: Rig, sensor: TactileSensor) -> None:
             if rig.clock.now_ns() >= deadline_ns:
                 raise
             log.info("sensor not back yet (%s); retrying in %.2f s", exc, RECONNECT_POLL_S)
+            raise_if_interrupted()  # a deferred Ctrl-C ends the wait (cli/signals.py)
             rig.clock.sleep(RECONNECT_POLL_S)
 
 

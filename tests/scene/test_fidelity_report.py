@@ -103,9 +103,12 @@ def test_target_errors_and_cost_on_a_hand_worked_row() -> None:
 
 
 def test_refit_recovers_a_gain_from_statistics_it_made() -> None:
-    # "recorded" statistics made by the scene itself with a normal gain of 1300 counts/N: fitting that gain from
-    # the default 1100 must land near 1300, and the fit must lower the cost
-    truth = scene_extremes(SceneParams(), UskinParams(gain_normal_counts_per_n=1300.0), angles=9)
+    # "recorded" statistics made by the scene itself with a normal gain of 950 counts/N: fitting that gain from
+    # the default 1100 must land near 950, and the fit must lower the cost. (A lower gain than the default keeps
+    # every object's uSkin |min|/max above the 0.5 target, so the truth costs nothing; with a higher one the
+    # circle's ratio at 9 angles falls under it and the fit rightly trades the gain against that target.)
+    truth = scene_extremes(SceneParams(), UskinParams(gain_normal_counts_per_n=950.0), angles=9)
+    assert all(row["uskin_abs_min_over_max"] >= 0.5 for row in truth.values())
     recorded = {
         obj: {
             "uskin": (row["uskin_min"], row["uskin_max"]),
@@ -116,7 +119,7 @@ def test_refit_recovers_a_gain_from_statistics_it_made() -> None:
     }
     doc = refit(["gain_normal_counts_per_n"], rounds=10, angles=9, recorded=recorded)
     assert doc["start"]["values"]["gain_normal_counts_per_n"] == 1100.0
-    assert doc["end"]["values"]["gain_normal_counts_per_n"] == pytest.approx(1300.0, rel=0.03)
+    assert doc["end"]["values"]["gain_normal_counts_per_n"] == pytest.approx(950.0, rel=0.03)
     assert doc["end"]["cost"] < 0.5 * doc["start"]["cost"]
     with pytest.raises(ConfigError):
         refit(["not_a_parameter"], rounds=1)

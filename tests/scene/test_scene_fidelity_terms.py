@@ -177,20 +177,43 @@ def test_seeded_errors_are_drawn_per_scene_and_repeat_with_the_seed() -> None:
 
 
 def test_simulated_rig_seeds_the_scene_from_what_is_mounted() -> None:
-    # the same seed, object and sensor give the same placement whatever ran before; another sensor is another mount
+    # the same seed, object and sensor give the same scene whatever ran before. Swapping the sensor keeps the object
+    # where it stands (the paper's procedure), so both sensors see one placement error; the pad pitch is the
+    # sensor mount's own
     config = parse_rig_config({})
 
-    def mounted(seed: int, sensor: str) -> tuple[float, ...]:
+    def mounted(seed: int, sensor: str, object_id: str = "square_tpu") -> tuple[tuple[float, ...], float]:
         with SimRig(config, seed=seed) as rig:
-            rig.mount(get_object("square_tpu"), 0.0, sensor)
+            rig.mount(get_object(object_id), 0.0, sensor)
             scene = rig.world.scene
-            return (*scene.center_mm.tolist(), scene.pad_pitch_deg)
+            return tuple(scene.center_mm.tolist()), scene.pad_pitch_deg
 
     first = mounted(0, "papillarray")
     mounted(0, "uskin")
     assert mounted(0, "papillarray") == first
-    assert mounted(0, "uskin") != first
-    assert mounted(1, "papillarray") != first
+    uskin = mounted(0, "uskin")
+    assert uskin[0] == first[0]  # one placement of the object for both sensors
+    assert uskin[1] != first[1]  # two sensor mounts
+    assert np.linalg.norm(np.array(first[0]) - [-150.0, 625.0]) > 0.0
+    assert mounted(1, "papillarray")[0] != first[0]
+    assert mounted(0, "papillarray", "square_pla")[0] != first[0]
+
+
+def test_a_shared_placement_gives_both_pads_the_same_centring_error() -> None:
+    params = SceneParams(centring_error_mm=1.0, pad_pitch_sd_deg=0.5)
+    obj = get_object("hex_pla")
+    a = PressScene(obj, 0.0, USKIN, params=params, rng=np.random.default_rng(1), placement_rng=np.random.default_rng(9))
+    b = PressScene(
+        obj, 0.0, PAPILLARRAY, params=params, rng=np.random.default_rng(2), placement_rng=np.random.default_rng(9)
+    )
+    alone = PressScene(obj, 0.0, PAPILLARRAY, params=params, rng=np.random.default_rng(2))
+    expected = np.array([-150.0, 625.0]) + np.random.default_rng(9).standard_normal(2) * 1.0
+    assert np.allclose(a.center_mm, expected) and np.allclose(b.center_mm, expected)
+    assert a.pad_pitch_deg != b.pad_pitch_deg
+    # without a placement generator the scene draws both from its own, centring first (the order a seed has meant)
+    own = np.random.default_rng(2)
+    assert np.allclose(alone.center_mm, np.array([-150.0, 625.0]) + own.standard_normal(2) * 1.0)
+    assert alone.pad_pitch_deg == pytest.approx(params.pad_pitch_deg + own.standard_normal() * 0.5)
 
 
 @pytest.mark.parametrize(

@@ -27,7 +27,7 @@ from unitac_rig.errors import ConfigError
 from unitac_rig.rig.config import RigConfig, parse_rig_config
 from unitac_rig.rig.objects import MATERIALS, MaterialSpec, get_object
 from unitac_rig.rig.sensors import sensor_layout
-from unitac_rig.sim.fast_rig import SimRig, scene_seed
+from unitac_rig.sim.fast_rig import SimRig, placement_seed, scene_seed
 from unitac_rig.sim.scene import PressScene, SceneParams
 from unitac_rig.sim.sensor_models import UskinModel, UskinParams
 from unitac_rig.storage.reader import read_presses, read_session_info
@@ -282,7 +282,8 @@ def scene_extremes(
         row: dict[str, float] = {}
         for sensor in SENSORS:
             rng = np.random.default_rng(scene_seed(seed, object_id, sensor, 0.0))
-            scene = PressScene(obj, 0.0, sensor_layout(sensor), params=scene_params, rng=rng)
+            placement = np.random.default_rng(placement_seed(seed, object_id, 0.0))
+            scene = PressScene(obj, 0.0, sensor_layout(sensor), params=scene_params, rng=rng, placement_rng=placement)
             loads = [scene.loads_at_force(float(a), f) for a in sweep for f in (0.5 * force, force)]
             forces = np.stack([x.forces_n for x in loads])
             if sensor == "uskin":

@@ -76,8 +76,15 @@ def _simulated_sensor(spec: SensorSpec) -> SimulatedSensor:
 
 
 def scene_seed(seed: int, object_id: str, sensor: str, rotation_deg: float) -> list[int]:
-    """Seed of the scene's placement and mount errors: what is mounted, not how many rigs ran before."""
+    """Seed of the sensor mount's errors (pad pitch) in one session: what is mounted, not how many rigs ran before."""
     return [seed, 4, zlib.crc32(object_id.encode()), zlib.crc32(sensor.encode()), round(rotation_deg * 1000) % 2**32]
+
+
+def placement_seed(seed: int, object_id: str, rotation_deg: float) -> list[int]:
+    """Seed of the object's centring error: one per placement of the object, whichever sensor presses it. The paper's
+    procedure mounts the object, collects with one sensor, swaps the sensor and collects again, so both sessions of
+    an object see the same placement; drawing it per session made the sensors' lateral readings disagree."""
+    return [seed, 5, zlib.crc32(object_id.encode()), round(rotation_deg * 1000) % 2**32]
 
 
 class _SceneSwitch:
@@ -178,6 +185,7 @@ class SimRig(Rig):
             sensor_layout(sensor_name),
             object_center_m=self.config.object.center_m,
             rng=np.random.default_rng(scene_seed(self.seed, obj.id, sensor_name, rotation_deg)),
+            placement_rng=np.random.default_rng(placement_seed(self.seed, obj.id, rotation_deg)),
         )
 
     def open_sensor(self, name: str) -> TactileSensor:

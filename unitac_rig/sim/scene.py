@@ -13,7 +13,8 @@ What it models (no more than the scene needs; parameters and sources in :class:`
   friction coefficient per pad; a pad pitched on its mount (seeded per scene) adds vertical shear tan(beta) * p;
 * on the uSkin, the skin's bulge: magnets move away from a contact as the incompressible skin is squeezed out from
   under the pressure gradient, a lateral reading -kappa * dF/ds (x across the pad, y at its free top and bottom);
-* a seeded centring error of the object (the press still aims at the nominal centre);
+* a seeded centring error of the object (the press still aims at the nominal centre), drawn per placement of the
+  object so that both sensors' sessions of one object see the same one (the paper swaps the sensor, not the object);
 * uniform along the prism axis: rows differ only by their share of the pad (uSkin) or their recess (PapillArray).
 
 Speed: the arm asks for the wrench 500 times per simulated second and the sensors for taxel loads 100-1000 times.
@@ -186,7 +187,11 @@ class PressScene:
         object_center_m: tuple[float, float] = DEFAULT_OBJECT_CENTER_M,
         params: SceneParams | None = None,
         rng: np.random.Generator | None = None,
+        placement_rng: np.random.Generator | None = None,
     ) -> None:
+        """``rng`` draws the sensor mount's errors (the pad pitch); ``placement_rng`` the object's centring error,
+        so that two scenes of one object placement with different sensors can share it. Without ``placement_rng``
+        both come from ``rng`` (centring first), for a scene on its own."""
         self.obj = obj
         self.rotation_deg = float(rotation_deg)
         self.layout = layout
@@ -202,7 +207,7 @@ class PressScene:
         p = self.params
         # the seeded errors of this placement and mount, always drawn in this order so a seed means the same scene
         # whichever of them are switched on
-        offset_mm = rng.standard_normal(2) * p.centring_error_mm
+        offset_mm = (placement_rng or rng).standard_normal(2) * p.centring_error_mm
         self.pad_pitch_deg = float(p.pad_pitch_deg + rng.standard_normal() * p.pad_pitch_sd_deg)
         self.nominal_center_m = (float(object_center_m[0]), float(object_center_m[1]))  # where presses aim
         self.center_mm = np.asarray(object_center_m, dtype=np.float64) * 1e3 + offset_mm  # where the object is

@@ -12,6 +12,7 @@ from unitac_rig.bench.fidelity import (
     RECORDED,
     collect_object,
     compare,
+    draw_spread,
     fit_cost,
     fit_evaluation,
     refit,
@@ -135,3 +136,16 @@ def test_a_refit_material_parameter_moves_only_that_materials_objects() -> None:
             assert without[key] == error, key
     for obj in ("circle_tpu", "hex_tpu", "square_tpu"):
         assert without[f"{obj} uskin_min"] < with_drag[f"{obj} uskin_min"], obj  # -1 + |sim| / |recorded| falls
+
+
+def test_draw_spread_summarises_each_target_over_the_draws() -> None:
+    # three draws at 5 angles: each target's median / range / misses are those of the three draws' own errors
+    doc = draw_spread([0, 1, 2], angles=5)
+    draws = [fit_evaluation({}, angles=5, seed=s)[1] for s in (0, 1, 2)]
+    assert doc["targets_per_draw"] == len(doc["targets"]) > 20
+    assert "circle_pla uskin_abs_min_over_max" not in doc["targets"]
+    for key, row in doc["targets"].items():
+        errors = sorted(d[key] for d in draws)
+        assert (row["min"], row["median"], row["max"]) == (errors[0], errors[1], errors[2])
+        assert row["missed_in"] == sum(abs(e) > 0.25 for e in errors)
+    assert doc["met_per_draw"] == [sum(abs(d[k]) <= 0.25 for k in doc["targets"]) for d in draws]

@@ -194,23 +194,29 @@ def run_cross_predictability(
 
 
 def plot_cross_predictability(doc: dict[str, Any], path: Any) -> Any:
-    """Grouped bars: per direction, each variant's R^2 on x, y and z."""
+    """Grouped bars: per direction, each variant's R^2 on x, y and z ("n/a" where the target channel is constant)."""
     from unitac_rig.plotting import new_figure, save_figure
 
     names = list(doc["variants"])
-    fig = new_figure(12.0, 4.4)
+    floor = 0.8
+    fig = new_figure(12.0, 4.8)
     axes = fig.subplots(1, 2, sharey=True)
     width = 0.8 / len(names)
     for ax, (source, target) in zip(axes, DIRECTIONS, strict=True):
         direction = f"{source}_to_{target}"
         for i, name in enumerate(names):
-            values = [doc["variants"][name]["mean"][direction][c] for c in CHANNELS]
-            ax.bar(np.arange(3) + (i - (len(names) - 1) / 2) * width, np.nan_to_num(values), width, label=name)
+            cells = [doc["variants"][name]["mean"][direction][c] for c in CHANNELS]  # NaN is null once in JSON
+            values = np.array([np.nan if v is None else v for v in cells], dtype=float)
+            x = np.arange(3) + (i - (len(names) - 1) / 2) * width
+            ax.bar(x, np.nan_to_num(values, nan=floor), width, label=name if ax is axes[0] else None)
+            for xi, v in zip(x, values, strict=True):
+                if np.isnan(v):
+                    ax.text(xi, floor + 0.005, "n/a", rotation=90, ha="center", va="bottom", fontsize=7)
         ax.set_xticks(np.arange(3), [f"{c} channel" for c in CHANNELS])
         ax.set_title(f"{source} frame -> {target} frame (held-out angles)", fontsize=10)
-        ax.set_ylim(0.5, 1.0)
+        ax.set_ylim(floor, 1.0)
         ax.grid(axis="y", alpha=0.3)
     axes[0].set_ylabel("R^2 (fraction of the channel's variance)")
-    axes[1].legend(fontsize=7, loc="lower right")
-    fig.suptitle("What one sensor's frame determines of the other's, noise-free scene (bars below 0.5 not shown)")
+    fig.legend(loc="outside lower center", ncol=len(names), fontsize=8, frameon=False)
+    fig.suptitle(f"What one sensor's frame determines of the other's, noise-free scene (axis from {floor})")
     return save_figure(fig, path)

@@ -81,9 +81,11 @@ def scene_seed(seed: int, object_id: str, sensor: str, rotation_deg: float) -> l
 
 
 def placement_seed(seed: int, object_id: str, rotation_deg: float) -> list[int]:
-    """Seed of the object's centring error: one per placement of the object, whichever sensor presses it. The paper's
-    procedure mounts the object, collects with one sensor, swaps the sensor and collects again, so both sessions of
-    an object see the same placement; drawing it per session made the sensors' lateral readings disagree."""
+    """Seed of the object's centring error: one per placement of the object, whichever sensor presses it. The paper
+    fixes each object at a known position through a mounting adapter on the breadboard and swaps the sensor, not the
+    adapter, so both sensors' sessions of an object press it where the adapter puts it (even if the object is taken
+    out between them, as `unitac-rig campaign` asks); drawing it per session made the sensors' lateral readings
+    disagree."""
     return [seed, 5, zlib.crc32(object_id.encode()), round(rotation_deg * 1000) % 2**32]
 
 

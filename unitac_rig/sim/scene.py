@@ -14,7 +14,7 @@ What it models (no more than the scene needs; parameters and sources in :class:`
 * on the uSkin, the skin's bulge: magnets move away from a contact as the incompressible skin is squeezed out from
   under the pressure gradient, a lateral reading -kappa * dF/ds (x across the pad, y at its free top and bottom);
 * a seeded centring error of the object (the press still aims at the nominal centre), drawn per placement of the
-  object so that both sensors' sessions of one object see the same one (the paper swaps the sensor, not the object);
+  object so that both sensors' sessions of one object see the same one (the adapter that places it stays);
 * uniform along the prism axis: rows differ only by their share of the pad (uSkin) or their recess (PapillArray).
 
 Speed: the arm asks for the wrench 500 times per simulated second and the sensors for taxel loads 100-1000 times.

@@ -207,7 +207,8 @@ class PressScene:
         p = self.params
         # the seeded errors of this placement and mount, always drawn in this order so a seed means the same scene
         # whichever of them are switched on
-        offset_mm = (placement_rng or rng).standard_normal(2) * p.centring_error_mm
+        placement = placement_rng if placement_rng is not None else rng
+        offset_mm = placement.standard_normal(2) * p.centring_error_mm
         self.pad_pitch_deg = float(p.pad_pitch_deg + rng.standard_normal() * p.pad_pitch_sd_deg)
         self.nominal_center_m = (float(object_center_m[0]), float(object_center_m[1]))  # where presses aim
         self.center_mm = np.asarray(object_center_m, dtype=np.float64) * 1e3 + offset_mm  # where the object is

@@ -22,9 +22,8 @@ import numpy as np
 
 from unitac_rig.bench import machine_info
 from unitac_rig.rig.objects import MATERIALS, get_object
-from unitac_rig.rig.sensors import sensor_layout
-from unitac_rig.sim.fast_rig import placement_seed, scene_seed
-from unitac_rig.sim.scene import PressScene, SceneParams
+from unitac_rig.sim.fast_rig import seeded_scene
+from unitac_rig.sim.scene import SceneParams
 from unitac_rig.sim.sensor_models import UskinModel, UskinParams
 
 SEEN_OBJECTS = ("circle_pla", "square_pla", "hex_pla", "circle_tpu", "square_tpu", "hex_tpu")
@@ -64,21 +63,11 @@ def paired_scene_frames(
         if materials and obj.material in materials:
             obj = replace(obj, material_params=replace(MATERIALS[obj.material], **materials[obj.material]))
         for sensor in frames:
-            placement = np.random.default_rng(placement_seed(seed, object_id, 0.0)) if shared_placement else None
-            scene = PressScene(
-                obj,
-                0.0,
-                sensor_layout(sensor),
-                params=scene_params,
-                rng=np.random.default_rng(scene_seed(seed, object_id, sensor, 0.0)),
-                placement_rng=placement,
-            )
+            scene = seeded_scene(obj, 0.0, sensor, seed=seed, params=scene_params, shared_placement=shared_placement)
             loads = np.stack(
                 [scene.loads_at_force(float(a), float(f)).forces_n for a in sweep for f in TARGET_FORCES_N]
             )
-            if sensor == "uskin":
-                loads = np.einsum("nij,knj->kni", uskin.crosstalk, uskin.gain_counts_per_n * loads)
-            frames[sensor].append(loads)
+            frames[sensor].append(uskin.signal_counts(loads) if sensor == "uskin" else loads)
     angle_index = np.tile(np.repeat(np.arange(angles), len(TARGET_FORCES_N)), len(objects))
     return {sensor: np.concatenate(parts) for sensor, parts in frames.items()}, angle_index
 

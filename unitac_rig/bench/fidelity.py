@@ -26,9 +26,8 @@ from unitac_rig.collection.session import collect_session
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.config import RigConfig, parse_rig_config
 from unitac_rig.rig.objects import MATERIALS, MaterialSpec, get_object
-from unitac_rig.rig.sensors import sensor_layout
-from unitac_rig.sim.fast_rig import SimRig, placement_seed, scene_seed
-from unitac_rig.sim.scene import PressScene, SceneParams
+from unitac_rig.sim.fast_rig import SimRig, seeded_scene
+from unitac_rig.sim.scene import SceneParams
 from unitac_rig.sim.sensor_models import UskinModel, UskinParams
 from unitac_rig.storage.reader import read_presses, read_session_info
 from unitac_rig.storage.recorder import session_path
@@ -281,13 +280,11 @@ def scene_extremes(
         force = ABLATION_FORCE_N.get(obj.material, 10.4)
         row: dict[str, float] = {}
         for sensor in SENSORS:
-            rng = np.random.default_rng(scene_seed(seed, object_id, sensor, 0.0))
-            placement = np.random.default_rng(placement_seed(seed, object_id, 0.0))
-            scene = PressScene(obj, 0.0, sensor_layout(sensor), params=scene_params, rng=rng, placement_rng=placement)
+            scene = seeded_scene(obj, 0.0, sensor, seed=seed, params=scene_params)
             loads = [scene.loads_at_force(float(a), f) for a in sweep for f in (0.5 * force, force)]
             forces = np.stack([x.forces_n for x in loads])
             if sensor == "uskin":
-                counts = np.einsum("nij,knj->kni", uskin.crosstalk, uskin.gain_counts_per_n * forces)
+                counts = uskin.signal_counts(forces)
                 row |= {"uskin_min": float(counts.min()), "uskin_max": float(counts.max())}
                 continue
             disp = np.stack([x.displacement_mm for x in loads if x.displacement_mm is not None])

@@ -24,11 +24,11 @@ from drivers.sensor import TactileSensor
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import RigConfig
-from unitac_rig.rig.objects import ObjectSpec
+from unitac_rig.rig.objects import DEFAULT_OBJECT_CENTER_M, ObjectSpec
 from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation
 from unitac_rig.rig.sensors import SENSORS, SensorSpec, sensor_layout
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
-from unitac_rig.sim.scene import TaxelLoads
+from unitac_rig.sim.scene import PressScene, SceneParams, TaxelLoads
 from unitac_rig.sim.signals import SensorSample, SignalSource
 
 log = logging.getLogger(__name__)
@@ -87,6 +87,31 @@ def placement_seed(seed: int, object_id: str, rotation_deg: float) -> list[int]:
     out between them, as `unitac-rig campaign` asks); drawing it per session made the sensors' lateral readings
     disagree."""
     return [seed, 5, zlib.crc32(object_id.encode()), round(rotation_deg * 1000) % 2**32]
+
+
+def seeded_scene(
+    obj: ObjectSpec,
+    rotation_deg: float,
+    sensor: str,
+    *,
+    seed: int,
+    params: SceneParams | None = None,
+    object_center_m: tuple[float, float] = DEFAULT_OBJECT_CENTER_M,
+    shared_placement: bool = True,
+) -> PressScene:
+    """The scene the simulated rig presses for this object, rotation and sensor, its errors seeded as
+    :func:`placement_seed` and :func:`scene_seed` say. ``shared_placement`` False draws the centring error from the
+    session's own generator (the rig before the placement was shared; benchmarks compare the two)."""
+    placement = np.random.default_rng(placement_seed(seed, obj.id, rotation_deg)) if shared_placement else None
+    return PressScene(
+        obj,
+        rotation_deg,
+        sensor_layout(sensor),
+        object_center_m=object_center_m,
+        params=params,
+        rng=np.random.default_rng(scene_seed(seed, obj.id, sensor, rotation_deg)),
+        placement_rng=placement,
+    )
 
 
 class _SceneSwitch:
@@ -177,17 +202,10 @@ class SimRig(Rig):
         return list(self._simulated)
 
     def mount(self, obj: ObjectSpec, rotation_deg: float, sensor_name: str) -> None:
-        from unitac_rig.sim.scene import PressScene
-
         self._object, self._rotation = obj, rotation_deg
         self.mounted_sensor = sensor_name
-        self.world.scene = PressScene(
-            obj,
-            rotation_deg,
-            sensor_layout(sensor_name),
-            object_center_m=self.config.object.center_m,
-            rng=np.random.default_rng(scene_seed(self.seed, obj.id, sensor_name, rotation_deg)),
-            placement_rng=np.random.default_rng(placement_seed(self.seed, obj.id, rotation_deg)),
+        self.world.scene = seeded_scene(
+            obj, rotation_deg, sensor_name, seed=self.seed, object_center_m=self.config.object.center_m
         )
 
     def open_sensor(self, name: str) -> TactileSensor:

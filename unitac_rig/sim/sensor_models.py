@@ -73,10 +73,13 @@ class UskinModel:
         mix[:, np.arange(3), np.arange(3)] = 1.0
         self.crosstalk = mix  # (n, out axis, in axis)
 
+    def signal_counts(self, forces_n: np.ndarray) -> np.ndarray:
+        """Noise-free counts above the baseline for taxel forces (..., n, 3) N: per-taxel gain, then cross-talk."""
+        return np.einsum("nij,...nj->...ni", self.crosstalk, self.gain_counts_per_n * np.asarray(forces_n))
+
     def expected_counts(self, loads: TaxelLoads) -> np.ndarray:
         """Noise-free counts (n, 3) for these loads, before clipping."""
-        signal = self.gain_counts_per_n * np.asarray(loads.forces_n)
-        return self.baseline_counts + np.einsum("nij,nj->ni", self.crosstalk, signal)
+        return self.baseline_counts + self.signal_counts(loads.forces_n)
 
     def sample(self, loads: TaxelLoads) -> SensorSample:
         counts = self.expected_counts(loads) + self.rng.normal(0.0, self.params.noise_counts, self.layout.frame_shape)

@@ -15,6 +15,7 @@ from unitac_rig.bench.fidelity import (
     draw_spread,
     fit_cost,
     fit_evaluation,
+    model_settings,
     refit,
     scene_extremes,
     summarise,
@@ -149,3 +150,27 @@ def test_draw_spread_summarises_each_target_over_the_draws() -> None:
         assert (row["min"], row["median"], row["max"]) == (errors[0], errors[1], errors[2])
         assert row["missed_in"] == sum(abs(e) > 0.25 for e in errors)
     assert doc["met_per_draw"] == [sum(abs(d[k]) <= 0.25 for k in doc["targets"]) for d in draws]
+
+
+def test_model_settings_route_each_name_to_its_part_of_the_model() -> None:
+    scene, uskin, materials = model_settings(
+        {"bending_lever_mm": 90.0, "gain_normal_counts_per_n": 900.0, "TPU.skin_drag_mm": 0.2}
+    )
+    assert scene.bending_lever_mm == 90.0 and scene.skin_bulge_mm == SceneParams().skin_bulge_mm
+    assert uskin.gain_normal_counts_per_n == 900.0
+    assert set(materials) == {"TPU"} and materials["TPU"].skin_drag_mm == 0.2
+    for bad in ("no_such_parameter", "TPU.no_such_field", "WOOD.skin_drag_mm"):
+        with pytest.raises(ConfigError):
+            model_settings({bad: 1.0})
+
+
+def test_a_what_if_draw_changes_only_what_its_setting_reaches() -> None:
+    # bending barely reaches PLA (135x stiffer than TPU: ~1 % on the shallow circle) and a TPU prism's uSkin rows a
+    # lot: the what-if run must carry the setting into the scene, not just label the output
+    base = draw_spread([0], angles=5)
+    bent = draw_spread([0], angles=5, settings={"bending_lever_mm": 90.0})
+    assert bent["settings"] == {"bending_lever_mm": 90.0}
+    for key, row in base["targets"].items():
+        if key.startswith(("circle_pla", "hex_pla", "square_pla")):
+            assert bent["targets"][key]["median"] == pytest.approx(row["median"], abs=0.02), key
+    assert bent["targets"]["square_tpu uskin_max"]["median"] > base["targets"]["square_tpu uskin_max"]["median"] + 0.02

@@ -5,7 +5,9 @@
 * the pad pitch: vertical shear tan(beta) x normal, capped by friction together with the in-plane shear;
 * one fitted friction coefficient per pad (skin, pillars), the same on PLA and TPU, and shear that follows the
   outline's slope on soft walls too;
-* the seeded object centring error and pad pitch, drawn per scene, and the simulated rig's seeding of them.
+* the seeded object centring error and pad pitch, drawn per scene, and the simulated rig's seeding of them;
+* two terms the default scene leaves off (measured, docs/simulator.md): the prism bending as a cantilever (the
+  contact deeper toward its base) and a seeded rotation of the object on its adapter.
 """
 
 from __future__ import annotations
@@ -20,8 +22,9 @@ from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.config import parse_rig_config
 from unitac_rig.rig.objects import ObjectSpec, get_object
+from unitac_rig.rig.poses import rotvec_to_matrix
 from unitac_rig.sim.fast_rig import SimRig
-from unitac_rig.sim.scene import PressScene, SceneParams
+from unitac_rig.sim.scene import PressScene, SceneParams, _PillarPad, _tilted_profile, bending_tilt_rad_per_n
 
 EXACT = SceneParams().exact()  # object placed and pad mounted exactly: only the term under test differs
 
@@ -216,10 +219,102 @@ def test_a_shared_placement_gives_both_pads_the_same_centring_error() -> None:
     assert alone.pad_pitch_deg == pytest.approx(params.pad_pitch_deg + own.standard_normal() * 0.5)
 
 
+def test_a_prism_tilts_as_a_cantilever_of_its_hollow_section() -> None:
+    # theta / P = L^2 / (2 E I). Square tube, outer side a = 35.355 mm, inner b = 30.355 mm: I = (a^4 - b^4) / 12
+    # = 59,453 mm^4; TPU E = 26 MPa, L = 70 mm: 4900 / (2 * 26 * 59,453) = 1.585e-3 rad/N (0.91 deg at 10 N).
+    # Circle tube 25 / 22.5 mm: I = pi / 4 (25^4 - 22.5^4) = 105,507 mm^4 (the catalogue's polygon within 0.1 %).
+    square, circle = get_object("square_tpu"), get_object("circle_tpu")
+    a, b = 2 * 17.6777, 2 * 15.1777
+    assert bending_tilt_rad_per_n(square, 70.0) == pytest.approx(70.0**2 / (2 * 26.0 * (a**4 - b**4) / 12), rel=1e-4)
+    i_circle = math.pi / 4 * (25.0**4 - 22.5**4)
+    assert bending_tilt_rad_per_n(circle, 70.0) == pytest.approx(70.0**2 / (2 * 26.0 * i_circle), rel=1e-3)
+    # PLA is 135 times stiffer, and no lever is no bending
+    assert bending_tilt_rad_per_n(get_object("square_pla"), 70.0) == pytest.approx(
+        bending_tilt_rad_per_n(square, 70.0) * 26.0 / 3500.0
+    )
+    assert bending_tilt_rad_per_n(square, 0.0) == 0.0
+
+
+def test_a_tilting_prism_presses_the_pillars_nearer_its_base_harder() -> None:
+    # Nine pillars, all touching at once (gap 0), 1 N/mm each, pushed 1 mm: P = sum k (d - theta y) = 9 N because
+    # the rows' heights (+7, 0, -7 mm) cancel, so theta = 0.01 rad/N * 9 N = 0.09 rad, and the top row carries
+    # 1 - 0.09 * 7 = 0.37 N per pillar, the middle 1 N, the bottom 1.63 N.
+    pad = _PillarPad(PAPILLARRAY, EXACT, tilt_rad_per_n=0.01)
+    normal = pad._normal_loads(np.array([1.0]), np.zeros(9), np.ones(9)).reshape(3, 3)
+    assert np.allclose(normal, [[0.37] * 3, [1.0] * 3, [1.63] * 3])
+    assert normal.sum() == pytest.approx(9.0)
+    # without the tilt the rows are equal
+    flat = _PillarPad(PAPILLARRAY, EXACT)._normal_loads(np.array([1.0]), np.zeros(9), np.ones(9))
+    assert np.allclose(flat, 1.0)
+
+
+def test_the_tilt_shifts_a_skin_line_load_toward_the_base_and_keeps_its_total() -> None:
+    # A line load 2 N/mm per mm of depth (2e) up a pad from y = -10 to +10 mm, pushed 0.5 mm: with the tilt the
+    # depth at height y is 0.5 - theta y, P = 2 * 0.5 * 20 = 20 N (the heights cancel), theta = 0.002 * 20 = 0.04 rad,
+    # so the load at y is 2 (0.5 - 0.04 y): 1.8 N/mm at y = +5, 2.2 at y = -5.
+    depth = np.array([0.0, 0.25, 0.5, 1.0])
+    line = np.stack([2.0 * depth, 3.0 * depth], axis=1)  # a second channel follows the same depth
+    edges = np.linspace(-10.0, 10.0, 41)
+    y, width = 0.5 * (edges[:-1] + edges[1:]), np.diff(edges)
+    profile = _tilted_profile(depth, line, y, width, 0.002, normal=0)
+    at = profile[2]  # depth 0.5 mm
+    assert np.allclose(at[:, 0], 2.0 * (0.5 - 0.04 * y))
+    assert np.allclose(at[:, 1], 1.5 * at[:, 0])
+    assert float(at[:, 0] @ width) == pytest.approx(20.0)
+    # no tilt: the same load at every height
+    assert np.allclose(_tilted_profile(depth, line, y, width, 0.0, normal=0)[2, :, 0], 1.0)
+
+
+def test_a_bending_tpu_prism_loads_the_skin_rows_nearer_its_base() -> None:
+    # Off (the default) the rows carry equal shares top and bottom; on, the bottom row (3) carries more than the top
+    # (0), the total stays the press force, and the pad feels a moment about its x axis (more load below: tau_x > 0).
+    obj = get_object("square_tpu")
+    flat = PressScene(obj, 0.0, USKIN, params=EXACT)
+    bent = PressScene(obj, 0.0, USKIN, params=replace(EXACT, bending_lever_mm=90.0))
+    f_flat = USKIN.to_grid(flat.loads_at_force(0.0, 10.0).forces_n)[..., 2].sum(axis=1)
+    f_bent = USKIN.to_grid(bent.loads_at_force(0.0, 10.0).forces_n)[..., 2].sum(axis=1)
+    assert f_flat[0] == pytest.approx(f_flat[3], rel=1e-9)
+    assert f_bent[3] > 1.2 * f_bent[0]
+    assert f_bent.sum() == pytest.approx(10.0, rel=1e-3)
+    for scene, moment in ((flat, 0.0), (bent, None)):
+        pose = scene.pose_at_travel(0.0, scene.travel_at_force_mm(0.0, 10.0))
+        torque_tool = rotvec_to_matrix(pose[3:]).T @ scene.wrench_on_tool(pose)[3:]
+        if moment is not None:
+            assert abs(torque_tool[0]) < 1e-9
+        else:
+            assert torque_tool[0] > 0.01  # N*m: ~10 N shifted a few mm below the pad centre
+
+
+def test_a_rotation_error_turns_the_object_and_leaves_the_centring_draw_alone() -> None:
+    obj = get_object("square_pla")
+    params = SceneParams(centring_error_mm=1.0, rotation_error_deg=2.0)
+    turned = PressScene(
+        obj, 0.0, USKIN, params=params, rng=np.random.default_rng(1), placement_rng=np.random.default_rng(9)
+    )
+    plain = PressScene(
+        obj,
+        0.0,
+        USKIN,
+        params=replace(params, rotation_error_deg=0.0),
+        rng=np.random.default_rng(1),
+        placement_rng=np.random.default_rng(9),
+    )
+    draws = np.random.default_rng(9).standard_normal(3)
+    assert np.allclose(turned.center_mm, plain.center_mm)  # centring first, rotation after
+    assert turned.rotation_error_deg == pytest.approx(2.0 * draws[2])
+    assert plain.rotation_error_deg == 0.0 and plain.pad_pitch_deg == turned.pad_pitch_deg
+    # the square's face turns with it: pressed square-on, the contact tilt is now the drawn angle, so the skin shear
+    # no longer cancels across the pad
+    shear = USKIN.to_grid(turned.loads_at_force(0.0, 10.0).forces_n)[..., 0].sum()
+    assert abs(shear) > 0.05
+
+
 @pytest.mark.parametrize(
     "bad",
     [
         {"pad_pitch_deg": 50.0},
+        {"rotation_error_deg": -1.0},
+        {"bending_lever_mm": -5.0},
         {"centring_error_mm": -1.0},
         {"skin_bulge_mm": -0.1},
         {"pillar_friction": -0.2},

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import tempfile
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -609,13 +609,42 @@ def refit(
     }
 
 
-def draw_spread(seeds: Sequence[int], *, angles: int = 91) -> dict[str, Any]:
+def model_settings(values: dict[str, float]) -> tuple[SceneParams, UskinParams, dict[str, MaterialSpec]]:
+    """The defaults with ``values`` in place: any :class:`SceneParams` or :class:`UskinParams` field by its name, a
+    material's field as ``"MATERIAL.field"`` (``"TPU.skin_drag_mm"``). What-if runs of the scene (a term switched on,
+    a parameter moved) without editing the code; an unknown name is a :class:`ConfigError`."""
+    scene_names = {f.name for f in fields(SceneParams)}
+    uskin_names = {f.name for f in fields(UskinParams)}
+    scene: dict[str, Any] = {}
+    uskin: dict[str, Any] = {}
+    materials: dict[str, dict[str, Any]] = {}
+    for name, value in values.items():
+        material, _, field_name = name.partition(".")
+        if name in scene_names:
+            scene[name] = value
+        elif name in uskin_names:
+            uskin[name] = value
+        elif field_name and material in MATERIALS and hasattr(MATERIALS[material], field_name):
+            materials.setdefault(material, {})[field_name] = value
+        else:
+            raise ConfigError(
+                f"no model parameter called {name!r}",
+                hint="a SceneParams or UskinParams field, or MATERIAL.field such as TPU.skin_drag_mm",
+            )
+    mats = {name: replace(MATERIALS[name], **changes) for name, changes in materials.items()}
+    return replace(SceneParams(), **scene), replace(UskinParams(), **uskin), mats
+
+
+def draw_spread(seeds: Sequence[int], *, angles: int = 91, settings: dict[str, float] | None = None) -> dict[str, Any]:
     """How much the placement and mount draws move each min/max target, on the scene alone: per target (the keys of
     :func:`target_errors`, without the |min|/max and face-std shortfalls), the median, lowest and highest relative
     error over ``seeds`` and in how many draws it is more than :data:`REL_TOLERANCE` off. A target missed in most
-    draws is the model's; one missed in a few is the draw's."""
+    draws is the model's; one missed in a few is the draw's. ``settings`` (:func:`model_settings`) changes the
+    model for a what-if run."""
+    scene_params, uskin_params, materials = model_settings(settings or {})
     per_seed = {
-        seed: target_errors(scene_extremes(SceneParams(), UskinParams(), seed=seed, angles=angles)) for seed in seeds
+        seed: target_errors(scene_extremes(scene_params, uskin_params, seed=seed, angles=angles, materials=materials))
+        for seed in seeds
     }
     keys = [k for k in next(iter(per_seed.values())) if k.endswith(("_min", "_max")) and "over" not in k]
     targets = {}
@@ -631,6 +660,7 @@ def draw_spread(seeds: Sequence[int], *, angles: int = 91) -> dict[str, Any]:
     return {
         "seeds": list(seeds),
         "angles": angles,
+        "settings": dict(settings or {}),
         "targets_per_draw": len(keys),
         "met_per_draw": met_per_draw,
         "targets": targets,

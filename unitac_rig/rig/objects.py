@@ -56,7 +56,7 @@ class MaterialSpec:
     """
 
     name: str
-    youngs_modulus_mpa: float  # documentation; the springs below are what the scene uses
+    youngs_modulus_mpa: float  # the springs below are what the scene uses; E itself only for the optional bending
     friction: float  # Coulomb coefficient against the sensors' silicone skins, caps shear at mu * normal
     global_stiffness_n_per_mm: float  # k0, mid-wall
     global_cubic_n_per_mm3: float  # k3, geometric stiffening as the hollow wall flattens

@@ -13,9 +13,13 @@ What it models (no more than the scene needs; parameters and sources in :class:`
   friction coefficient per pad; a pad pitched on its mount (seeded per scene) adds vertical shear tan(beta) * p;
 * on the uSkin, the skin's bulge: magnets move away from a contact as the incompressible skin is squeezed out from
   under the pressure gradient, a lateral reading -kappa * dF/ds (x across the pad, y at its free top and bottom);
+* optionally (off by default, ``bending_lever_mm``), the object bending as a cantilever on its base: the contact
+  is deeper toward the base by the prism's tilt P * L^2 / (2 E I), so on soft TPU the rows nearer the base carry
+  more; and a seeded rotation of the object on its adapter (``rotation_error_deg``);
 * a seeded centring error of the object (the press still aims at the nominal centre), drawn per placement of the
   object so that both sensors' sessions of one object see the same one (the adapter that places it stays);
-* uniform along the prism axis: rows differ only by their share of the pad (uSkin) or their recess (PapillArray).
+* otherwise uniform along the prism axis: rows differ only by their share of the pad (uSkin) or their recess
+  (PapillArray), and by the bending tilt when it is on.
 
 Speed: the arm asks for the wrench 500 times per simulated second and the sensors for taxel loads 100-1000 times.
 Along one press ray (fixed pad orientation and lateral offset) everything depends only on the travel past first
@@ -88,12 +92,21 @@ class SceneParams:
     corner_contact_depth_mm: float = 0.3  # [I] outline within this depth of first touch counts as the contact
     # when deciding whether the object's global spring is loaded at a corner
     centring_error_mm: float = 0.75  # [I] std of the object's placement error per axis (seeded, per scene)
+    rotation_error_deg: float = 0.0  # [I] std of the object's rotation on its adapter about the prism axis (seeded
+    # per placement, after the centring error); 0 by default: 2 deg moves no fidelity target (docs/simulator.md)
     # ---- sensor mount --------------------------------------------------------------------------------------
     pad_pitch_deg: float = 7.0  # [I] mean pitch beta of the pad about its x axis on its mount: the contact normal
     # leans off the pad normal by beta, giving vertical (layout y) shear q_y = c * tan(beta) * p, capped by friction;
     # beta > 0 pushes the taxels toward the pad's +y. The data fix c * tan(beta) (~6.7 % of normal: the 0.06 N face
     # y-std target), not beta alone: with c = 0.55 that is 7 deg (3.5 deg when c was 1)
     pad_pitch_sd_deg: float = 0.5  # [I] seeded spread of beta from one mounting to the next (drawn per scene)
+    # ---- object bending ----------------------------------------------------------------------------------
+    bending_lever_mm: float = 0.0  # [I] height of the press above the object's clamped collar, 55-95 mm (CAD:
+    # flat walls 40-110 mm up; the pad, ~31 mm tall, presses on them); 0 = a prism that does not bend. A press of P
+    # newtons tilts a cantilevered prism at the contact by P * L^2 / (2 E I), deeper toward the base: on TPU
+    # (E 26 MPa) at 70 mm ~0.9 deg at 10 N on the square (I 5.9e4 mm^4), ~0.5 mm across the pad, so the rows nearer
+    # the base carry more; on PLA 135x less. Off by default: measured over 10 placement draws it trades the TPU uSkin
+    # misses rather than closing them (docs/simulator.md, "Considered and left out")
     # ---- uSkin skin bulge ----------------------------------------------------------------------------------
     skin_bulge_mm: float = 0.5  # [I] kappa: a taxel's lateral reading = -kappa * dF/ds, where F is the normal load
     # its cell would read when shifted by s (x and y): the incompressible skin is squeezed out from under a pressure
@@ -116,6 +129,7 @@ class SceneParams:
         if (
             min(
                 self.centring_error_mm,
+                self.rotation_error_deg,
                 self.pad_pitch_sd_deg,
                 self.skin_bulge_mm,
                 self.skin_friction,
@@ -125,8 +139,11 @@ class SceneParams:
         ):
             raise ConfigError(
                 "scene error spreads, the skin bulge and friction cannot be negative",
-                hint="centring_error_mm, pad_pitch_sd_deg, skin_bulge_mm, skin_friction, pillar_friction >= 0",
+                hint="centring_error_mm, rotation_error_deg, pad_pitch_sd_deg, skin_bulge_mm, skin_friction,"
+                " pillar_friction >= 0",
             )
+        if self.bending_lever_mm < 0:
+            raise ConfigError("the bending lever cannot be negative", hint="bending_lever_mm >= 0 (0: no bending)")
         if self.skin_bulge_mm > 0 and self.skin_spread_sigma_mm <= 0:
             raise ConfigError(
                 "the skin bulge reads the spread pressure's gradient",
@@ -135,7 +152,7 @@ class SceneParams:
 
     def exact(self) -> SceneParams:
         """The same scene with the object placed and the pad mounted exactly (hand-worked cases and figures)."""
-        return replace(self, centring_error_mm=0.0, pad_pitch_deg=0.0, pad_pitch_sd_deg=0.0)
+        return replace(self, centring_error_mm=0.0, rotation_error_deg=0.0, pad_pitch_deg=0.0, pad_pitch_sd_deg=0.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -210,14 +227,21 @@ class PressScene:
         placement = placement_rng if placement_rng is not None else rng
         offset_mm = placement.standard_normal(2) * p.centring_error_mm
         self.pad_pitch_deg = float(p.pad_pitch_deg + rng.standard_normal() * p.pad_pitch_sd_deg)
+        # drawn only when asked for, so that a scene without it keeps the draws it always had
+        self.rotation_error_deg = (
+            float(placement.standard_normal() * p.rotation_error_deg) if p.rotation_error_deg > 0 else 0.0
+        )
         self.nominal_center_m = (float(object_center_m[0]), float(object_center_m[1]))  # where presses aim
         self.center_mm = np.asarray(object_center_m, dtype=np.float64) * 1e3 + offset_mm  # where the object is
         # farthest any outline point reaches from the axis, plus room for pillar tips proud of the pad (mm)
         self._reach_mm = float(np.max(np.linalg.norm(np.asarray(obj.outer_mm), axis=1))) + 10.0
-        self._outline = _Outline(obj, self.rotation_deg)
+        self._outline = _Outline(obj, self.rotation_deg + self.rotation_error_deg)
         pitch_tan = math.tan(math.radians(self.pad_pitch_deg))
+        self.tilt_rad_per_n = bending_tilt_rad_per_n(obj, p.bending_lever_mm)
         self._pad: _SkinPad | _PillarPad = (
-            _SkinPad(layout, p, pitch_tan) if self.kind == "skin" else _PillarPad(layout, p, pitch_tan)
+            _SkinPad(layout, p, pitch_tan, self.tilt_rad_per_n)
+            if self.kind == "skin"
+            else _PillarPad(layout, p, pitch_tan, self.tilt_rad_per_n)
         )
         self._rays: list[_RayTable] = []  # most recent first, a few kept so alternating rays stay cheap
         self._last_rotvec: tuple[float, float, float] | None = None
@@ -504,11 +528,15 @@ class _SkinPad:
     """
 
     WEIGHT_LOOKUP_STEP_MM = 0.01
+    HEIGHT_BINS = 200  # bins up the pad for the bending tilt's load profile (0.15 mm)
 
-    def __init__(self, layout: SensorLayout, params: SceneParams, pitch_tan: float = 0.0) -> None:
+    def __init__(
+        self, layout: SensorLayout, params: SceneParams, pitch_tan: float = 0.0, tilt_rad_per_n: float = 0.0
+    ) -> None:
         self.layout = layout
         self.params = params
         self.pitch_tan = pitch_tan
+        self.tilt_rad_per_n = tilt_rad_per_n
         pitch = layout.pitch_mm
         self.half_w = half_w = (layout.cols - 1) / 2 * pitch + params.skin_margin_x_mm
         self.half_h = half_h = (layout.rows - 1) / 2 * pitch + params.skin_margin_y_mm
@@ -518,23 +546,31 @@ class _SkinPad:
         sigma = params.skin_spread_sigma_mm
         self.lookup_s = np.linspace(-half_w, half_w, round(2 * half_w / self.WEIGHT_LOOKUP_STEP_MM) + 1)
         self.lookup_w = _cell_weights(self.lookup_s, layout.cols, pitch, sigma)  # (cols, n)
-        y = np.linspace(-half_h, half_h, 401)
-        row_w = _cell_weights(-y, layout.rows, pitch, sigma)  # row 0 on top (+y)
-        self.row_share = np.trapezoid(row_w, y, axis=1) / (2 * half_h)
-        self.row_share /= self.row_share.sum()
+        # the pad's height in bins (y up, mm): what share of a line load at each height each row reads, and how the
+        # skin spreads it onto the inner row edges (both exact for a load constant within a bin)
+        y_edges = np.linspace(-half_h, half_h, self.HEIGHT_BINS + 1)
+        self.y_mid = 0.5 * (y_edges[:-1] + y_edges[1:])
+        self.y_width = np.diff(y_edges)
+        self.row_bin_w = (
+            _cell_weights(-self.y_mid, layout.rows, pitch, sigma) * self.y_width
+        )  # (rows, bins), row 0 on top
+        self.row_share = self.row_bin_w.sum(axis=1) / (2 * half_h)
         # skin bulge: the inner cell edges (mm) across the pad (columns) and up it (rows, row 0 on top)
         self.col_edges = (np.arange(1, layout.cols) - layout.cols / 2) * pitch
-        self.row_bulge = np.zeros(layout.rows)
+        # skin bulge up the pad: row r (top first) reads -kappa * (spread line load at its upper inner edge - at its
+        # lower one); the outer rows reach to infinity, where the spread load is 0. ``edge_spread`` (rows + 1, bins)
+        # takes the line load in each bin (N per mm of height) to the spread load at those edges (N/mm), top first
+        self.edge_spread = np.zeros((layout.rows + 1, self.HEIGHT_BINS))
         if params.skin_bulge_mm > 0:
-            # uniform pressure over the pad's height, spread: its density up the pad at the inner row edges (1/mm);
-            # row r spans (edge below, edge above) and the outer rows reach to infinity, where the density is 0
-            edges = (np.arange(1, layout.rows) - layout.rows / 2) * pitch
-            z = np.array([(half_h - edges) / sigma, (-half_h - edges) / sigma])
-            density = np.concatenate([[0.0], 0.5 * (_erf(z[0] / math.sqrt(2)) - _erf(z[1] / math.sqrt(2))), [0.0]])
-            density /= self.height
-            top_down = density[::-1]
-            above, below = top_down[:-1], top_down[1:]  # row r (top first) lies between these two edges
-            self.row_bulge = -params.skin_bulge_mm * (above - below)  # per N of the taxel column's normal load
+            edges = (np.arange(1, layout.rows) - layout.rows / 2) * pitch  # inner edges, bottom first
+
+            def cdf(z: np.ndarray) -> np.ndarray:
+                return 0.5 * (1.0 + _erf(z / math.sqrt(2)))
+
+            inner = cdf((edges[:, None] - y_edges[None, :-1]) / sigma) - cdf(
+                (edges[:, None] - y_edges[None, 1:]) / sigma
+            )
+            self.edge_spread[1:-1] = inner[::-1]
 
     def _nodes(self, section: _Section) -> np.ndarray:
         extra = (
@@ -602,18 +638,42 @@ class _SkinPad:
             padded = np.pad(line, ((0, 0), (1, 1)))
             col_x = col_x - kappa_x * (padded[:, 1:] - padded[:, :-1])
         m = depth.size
-        loads = np.zeros((m, layout.rows, layout.cols, 3))
-        loads[..., 2] = col_n[:, None, :] * self.row_share[None, :, None]
-        loads[..., 0] = col_x[:, None, :] * self.row_share[None, :, None]
-        loads[..., 1] = (
-            col_y[:, None, :] * self.row_share[None, :, None] + col_n[:, None, :] * self.row_bulge[None, :, None]
+        cols = layout.cols
+        # everything per mm of pad height at a uniform depth; the bending tilt then makes the depth vary up the pad
+        sums = np.stack(
+            [
+                shear_seg.sum(axis=1),  # the bulge is internal to the skin: it sums to zero over the pad
+                shear_y_seg.sum(axis=1),
+                normal_seg.sum(axis=1),
+                normal_seg @ mid[near] * 1e-3,  # tau_y = sum s * p (N*m)
+                shear_y_seg @ mid[near] * 1e-3,  # tau_z = sum s * q_y
+            ],
+            axis=1,
         )
+        line = np.concatenate([col_n, col_x, col_y, sums], axis=1) / self.height  # (m, 3 * cols + 5)
+        if self.tilt_rad_per_n > 0.0:
+            profile = _tilted_profile(depth, line, self.y_mid, self.y_width, self.tilt_rad_per_n, 3 * cols + 2)
+            row_w, edge_w, width, y = self.row_bin_w, self.edge_spread, self.y_width, self.y_mid
+        else:  # the same load at every height: the pad as one bin (a third faster, and the default)
+            profile = line[:, None, :]
+            row_w, edge_w = self.row_bin_w.sum(axis=1, keepdims=True), self.edge_spread.sum(axis=1, keepdims=True)
+            width, y = np.array([self.height]), np.zeros(1)
+        rows = np.einsum("rb,mbc->mrc", row_w, profile)  # (m, rows, channels)
+        total = np.einsum("b,mbc->mc", width, profile)
+        # the skin's bulge up the pad, from the normal load's profile up each column
+        spread = np.einsum("eb,mbc->mec", edge_w, profile[:, :, :cols])  # (m, rows + 1, cols)
+        bulge_y = -p.skin_bulge_mm * (spread[:, :-1] - spread[:, 1:])
+        loads = np.zeros((m, layout.rows, cols, 3))
+        loads[..., 2] = rows[:, :, :cols]
+        loads[..., 0] = rows[:, :, cols : 2 * cols]
+        loads[..., 1] = rows[:, :, 2 * cols : 3 * cols] + bulge_y
         wrench = np.zeros((m, 6))
-        wrench[:, 0] = shear_seg.sum(axis=1)  # the bulge is internal to the skin: it sums to zero over the pad
-        wrench[:, 1] = shear_y_seg.sum(axis=1)
-        wrench[:, 2] = -normal_seg.sum(axis=1)
-        wrench[:, 4] = normal_seg @ mid[near] * 1e-3  # tau_y = sum s * p (contacts in the pad plane, y-symmetric)
-        wrench[:, 5] = shear_y_seg @ mid[near] * 1e-3  # tau_z = sum s * q_y
+        wrench[:, 0] = total[:, 3 * cols]
+        wrench[:, 1] = total[:, 3 * cols + 1]
+        wrench[:, 2] = -total[:, 3 * cols + 2]
+        wrench[:, 3] = -(profile[:, :, 3 * cols + 2] @ (y * width)) * 1e-3  # tau_x = sum y * fz (N*m)
+        wrench[:, 4] = total[:, 3 * cols + 3]
+        wrench[:, 5] = total[:, 3 * cols + 4]
         contact = np.minimum(gap_a, gap_b) < p.corner_contact_depth_mm
         proximity = float(np.max(np.exp(-xi[contact] / p.corner_decay_mm))) if np.any(contact) else 0.0
         return _PadTable(
@@ -629,10 +689,13 @@ class _SkinPad:
 class _PillarPad:
     """PapillArray: nine pillar springs with hemispherical tips, the centre one proud; each pillar its own spring."""
 
-    def __init__(self, layout: SensorLayout, params: SceneParams, pitch_tan: float = 0.0) -> None:
+    def __init__(
+        self, layout: SensorLayout, params: SceneParams, pitch_tan: float = 0.0, tilt_rad_per_n: float = 0.0
+    ) -> None:
         self.layout = layout
         self.params = params
         self.pitch_tan = pitch_tan
+        self.tilt_rad_per_n = tilt_rad_per_n
         xy = layout.taxel_xy_mm()
         self.col_s = xy[: layout.cols, 0]
         rows, cols = np.divmod(np.arange(layout.n_taxels), layout.cols)
@@ -645,6 +708,23 @@ class _PillarPad:
         self.recess = recess * np.maximum(ring, 1)  # larger arrays: recess grows ring by ring
         self.rows, self.cols = rows, cols
         self.xy = xy
+
+    def _normal_loads(self, depth: np.ndarray, gap: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """Pillar normal loads (m, n) N at each pad-side depth: k * (depth - gap), where the object's bending tilt
+        theta = tilt * P (P the pillars' total) adds -theta * y to a pillar's depth (y up, mm). Fixed point as in
+        :func:`_tilted_profile`; inf gaps (pillars that never touch) carry nothing."""
+        y = self.xy[:, 1]
+        theta = np.zeros(depth.size)
+        normal = np.zeros((depth.size, gap.size))
+        for _ in range(50):
+            normal = k[None, :] * np.maximum(0.0, depth[:, None] - gap[None, :] - theta[:, None] * y[None, :])
+            if self.tilt_rad_per_n <= 0.0:
+                break
+            new_theta = self.tilt_rad_per_n * normal.sum(axis=1)
+            if np.max(np.abs(new_theta - theta)) < 1e-9:
+                break
+            theta = new_theta
+        return normal
 
     def table(self, section: _Section, material: MaterialSpec) -> _PadTable:
         p = self.params
@@ -673,7 +753,7 @@ class _PillarPad:
         finite_gap = gap[np.isfinite(gap)]
         e_max = float(np.max(finite_gap)) + p.table_max_force_n / k_sum
         depth = np.unique(np.concatenate([np.linspace(0.0, e_max, p.table_points), finite_gap]))
-        normal = k[None, :] * np.maximum(0.0, depth[:, None] - gap[None, :])  # (m, 9) N; inf gap -> 0
+        normal = self._normal_loads(depth, gap, k)
         shear = normal * ratio[None, :]
         shear_y = normal * ratio_y[None, :]
         m = depth.size
@@ -733,6 +813,67 @@ def _cell_weights(pos: np.ndarray, n_cells: int, pitch: float, sigma: float) -> 
         return 0.5 * (1.0 + _erf(np.clip(z, -40.0, 40.0)))
 
     return cdf(hi) - cdf(lo)
+
+
+def _tilted_profile(
+    depth: np.ndarray, line: np.ndarray, y: np.ndarray, width: np.ndarray, tilt_rad_per_n: float, normal: int
+) -> np.ndarray:
+    """Line quantities up the pad (m, bins, channels) when the object tilts under the press.
+
+    ``line`` (m, channels) holds what one mm of pad height carries at each uniform contact ``depth`` (mm, increasing
+    from 0); channel ``normal`` is the normal line load (N/mm). Pressing with P newtons tilts the prism by
+    ``theta = tilt_rad_per_n * P`` about the pad's x axis, so at height ``y`` (mm, up) the contact is
+    ``depth - theta * y`` deep (deeper toward the base, below). P depends on theta and theta on P: a fixed-point
+    iteration, which contracts while theta * pad height is below the contact depth's scale (within 1e-9 rad in a
+    few steps on TPU). Depths past the table extrapolate its last segment; a depth <= 0 carries nothing.
+    """
+    m, bins = depth.size, y.size
+    if tilt_rad_per_n <= 0.0:
+        return np.broadcast_to(line[:, None, :], (m, bins, line.shape[1]))
+    theta = tilt_rad_per_n * (line[:, normal] * float(width.sum()))
+    profile = line[:, None, :]
+    for _ in range(50):
+        local = depth[:, None] - theta[:, None] * y[None, :]
+        i = np.clip(np.searchsorted(depth, local, side="right"), 1, m - 1)
+        lo, hi = depth[i - 1], depth[i]
+        frac = ((local - lo) / np.where(hi > lo, hi - lo, 1.0))[..., None]
+        profile = np.where((local > 0.0)[..., None], line[i - 1] + frac * (line[i] - line[i - 1]), 0.0)
+        new_theta = tilt_rad_per_n * (profile[:, :, normal] @ width)
+        if np.max(np.abs(new_theta - theta)) < 1e-9:
+            break
+        theta = new_theta
+    return profile
+
+
+def bending_tilt_rad_per_n(obj: ObjectSpec, lever_mm: float) -> float:
+    """Tilt of the prism at the press (rad per N of press force): a cantilever of the hollow section clamped at its
+    base, loaded ``lever_mm`` above it, turns by P * L^2 / (2 E I) there. I is the mean of the wall section's two
+    principal second moments (exact for the circle, square and hexagon, whose I is the same about every axis)."""
+    if lever_mm <= 0.0:
+        return 0.0
+    e_mpa = obj.material_params.youngs_modulus_mpa
+    i_mm4 = _ring_second_moment_mm4(np.asarray(obj.outer_mm), np.asarray(obj.inner_mm))
+    return lever_mm**2 / (2.0 * e_mpa * i_mm4)
+
+
+def _ring_second_moment_mm4(outer: np.ndarray, inner: np.ndarray) -> float:
+    """Mean principal second moment of area (mm^4) of the wall between two counter-clockwise polygons, about the
+    wall's centroid (shoelace sums)."""
+
+    def moments(poly: np.ndarray) -> np.ndarray:
+        x, y = poly[:, 0], poly[:, 1]
+        xn, yn = np.roll(x, -1), np.roll(y, -1)
+        cross = x * yn - xn * y
+        area = cross.sum() / 2.0
+        sx = ((x + xn) * cross).sum() / 6.0  # first moments: area * centroid
+        sy = ((y + yn) * cross).sum() / 6.0
+        ixx = ((y * y + y * yn + yn * yn) * cross).sum() / 12.0  # about the origin: integral of y^2
+        iyy = ((x * x + x * xn + xn * xn) * cross).sum() / 12.0
+        return np.array([area, sx, sy, ixx, iyy])
+
+    area, sx, sy, ixx, iyy = moments(outer) - moments(inner)
+    cx, cy = sx / area, sy / area
+    return float(0.5 * ((ixx - area * cy * cy) + (iyy - area * cx * cx)))
 
 
 def _depth_for_force(force: Callable[[float], float], target_n: float) -> float:

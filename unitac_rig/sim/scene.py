@@ -552,10 +552,10 @@ class _SkinPad:
         y_edges = np.linspace(-half_h, half_h, self.HEIGHT_BINS + 1)
         self.y_mid = 0.5 * (y_edges[:-1] + y_edges[1:])
         self.y_width = np.diff(y_edges)
-        self.row_bin_w = (
-            _cell_weights(-self.y_mid, layout.rows, pitch, sigma) * self.y_width
-        )  # (rows, bins), row 0 on top
-        self.row_share = self.row_bin_w.sum(axis=1) / (2 * half_h)
+        # (rows, bins), row 0 on top; ``row_load_share`` the same for a load the same at every height (rows sum to 1)
+        self.row_bin_w = _cell_weights(-self.y_mid, layout.rows, pitch, sigma) * self.y_width
+        self.row_load_share = self.row_bin_w.sum(axis=1, keepdims=True)
+        self.row_load_share /= float(self.row_load_share.sum())
         # skin bulge: the inner cell edges (mm) across the pad (columns) and up it (rows, row 0 on top)
         self.col_edges = (np.arange(1, layout.cols) - layout.cols / 2) * pitch
         # skin bulge up the pad: row r (top first) reads -kappa * (spread line load at its upper inner edge - at its
@@ -657,7 +657,7 @@ class _SkinPad:
             row_w, edge_w, width, y = self.row_bin_w, self.edge_spread, self.y_width, self.y_mid
         else:  # the same load at every height: the pad as one bin (a third faster, and the default)
             profile = line[:, None, :]
-            row_w, edge_w = self.row_bin_w.sum(axis=1, keepdims=True), self.edge_spread.sum(axis=1, keepdims=True)
+            row_w, edge_w = self.row_load_share * self.height, self.edge_spread.sum(axis=1, keepdims=True)
             width, y = np.array([self.height]), np.zeros(1)
         rows = np.einsum("rb,mbc->mrc", row_w, profile)  # (m, rows, channels)
         total = np.einsum("b,mbc->mc", width, profile)

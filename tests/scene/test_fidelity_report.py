@@ -174,3 +174,12 @@ def test_a_what_if_draw_changes_only_what_its_setting_reaches() -> None:
         if key.startswith(("circle_pla", "hex_pla", "square_pla")):
             assert bent["targets"][key]["median"] == pytest.approx(row["median"], abs=0.02), key
     assert bent["targets"]["square_tpu uskin_max"]["median"] > base["targets"]["square_tpu uskin_max"]["median"] + 0.02
+
+
+def test_a_fit_over_draws_scores_each_targets_median() -> None:
+    # three draws: every target's error is the median of the three draws' own errors (fails with mean or one draw)
+    _, over = fit_evaluation({}, angles=5, draws=3)
+    draws = [fit_evaluation({}, angles=5, seed=s)[1] for s in (0, 1, 2)]
+    for key, error in over.items():
+        assert error == pytest.approx(sorted(d[key] for d in draws)[1], abs=1e-12), key
+    assert fit_cost(over) == fit_evaluation({}, angles=5, draws=3)[0]

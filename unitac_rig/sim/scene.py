@@ -834,20 +834,28 @@ def _tilted_profile(
     m, bins = depth.size, y.size
     if tilt_rad_per_n <= 0.0:
         return np.broadcast_to(line[:, None, :], (m, bins, line.shape[1]))
-    theta = tilt_rad_per_n * (line[:, normal] * float(width.sum()))
-    profile = line[:, None, :]
-    for _ in range(TILT_ITERATIONS):
+
+    def at(theta: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """``values`` (m, ...) interpolated at each height's local depth: (m, bins, ...)."""
         local = depth[:, None] - theta[:, None] * y[None, :]
         i = np.clip(np.searchsorted(depth, local, side="right"), 1, m - 1)
         lo, hi = depth[i - 1], depth[i]
-        frac = ((local - lo) / np.where(hi > lo, hi - lo, 1.0))[..., None]
-        profile = np.where((local > 0.0)[..., None], line[i - 1] + frac * (line[i] - line[i - 1]), 0.0)
-        new_theta = tilt_rad_per_n * (profile[:, :, normal] @ width)
+        frac = (local - lo) / np.where(hi > lo, hi - lo, 1.0)
+        frac = frac.reshape(frac.shape + (1,) * (values.ndim - 1))
+        inside = (local > 0.0).reshape(frac.shape)
+        return np.where(inside, values[i - 1] + frac * (values[i] - values[i - 1]), 0.0)
+
+    # the tilt from the normal channel alone, then every channel once at the settled tilt
+    theta = tilt_rad_per_n * (line[:, normal] * float(width.sum()))
+    for _ in range(TILT_ITERATIONS):
+        new_theta = tilt_rad_per_n * (at(theta, line[:, normal]) @ width)
         if np.max(np.abs(new_theta - theta)) < 1e-9:
+            theta = new_theta
             break
         theta = new_theta
     else:
         log.warning("the object's bending tilt did not settle in %d steps; the lever is too long", TILT_ITERATIONS)
+    profile = at(theta, line)
     return profile
 
 

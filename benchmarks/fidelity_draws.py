@@ -6,11 +6,11 @@ The simulated rig draws one centring error per object placement and one pad pitc
 the fidelity report (benchmarks/fidelity.py, one seed) sees one draw; a circle's extremes in particular move with
 where the contact lands on the pad. This repeats the scene-alone statistics (no arm, no noise, as the ablation) for
 seeds 0..N-1 and prints, per target still missed in any draw, the median and range of its relative error and in how
-many draws it misses. Writes OUT/fidelity_draws.json. About 2 s per draw on one core.
+many draws it misses. Writes OUT/fidelity_draws.json. About 2 s per draw on one core (~15 s with the bending on).
 
 ``--set`` runs the same count with the model changed (a term the scene leaves off switched on, a parameter moved:
 any SceneParams or UskinParams field, or MATERIAL.field) and writes OUT/fidelity_draws_<settings>.json instead, e.g.
-``--set bending_lever_mm=90`` or ``--set rotation_error_deg=2``; how docs/simulator.md's "Considered and left out"
+``--set bending_lever_mm=90`` or ``--set rotation_error_deg=2``; how docs/simulator.md's "What is left out"
 rows were measured.
 """
 

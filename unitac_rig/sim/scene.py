@@ -107,7 +107,7 @@ class SceneParams:
     # newtons tilts a cantilevered prism at the contact by P * L^2 / (2 E I), deeper toward the base: on TPU
     # (E 26 MPa) at 70 mm ~0.9 deg at 10 N on the square (I 5.9e4 mm^4), ~0.5 mm across the pad, so the rows nearer
     # the base carry more; on PLA 135x less. Off by default: measured over 10 placement draws it trades the TPU uSkin
-    # misses rather than closing them (docs/simulator.md, "Considered and left out")
+    # misses rather than closing them (docs/simulator.md, "What is left out")
     # ---- uSkin skin bulge ----------------------------------------------------------------------------------
     skin_bulge_mm: float = 0.5  # [I] kappa: a taxel's lateral reading = -kappa * dF/ds, where F is the normal load
     # its cell would read when shifted by s (x and y): the incompressible skin is squeezed out from under a pressure

@@ -35,12 +35,10 @@ def main() -> None:
     args = parser.parse_args()
     settings: dict[str, float] = {}
     for item in args.settings:
-        name, sep, value = item.partition("=")
+        name, _, value = item.partition("=")
         try:
-            settings[name.strip()] = float(value)
+            settings[name.strip()] = float(value)  # no "=" leaves value empty: not a number either
         except ValueError:
-            parser.error(f"--set wants NAME=NUMBER, got {item!r}")
-        if not sep:
             parser.error(f"--set wants NAME=NUMBER, got {item!r}")
     try:
         model_settings(settings)

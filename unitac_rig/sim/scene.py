@@ -831,9 +831,7 @@ def _tilted_profile(
     9 / 16 / 38 steps at a 70 / 90 / 110 mm lever on the TPU square (a warning if it has not settled in
     :data:`TILT_ITERATIONS`). Depths past the table extrapolate its last segment; a depth <= 0 carries nothing.
     """
-    m, bins = depth.size, y.size
-    if tilt_rad_per_n <= 0.0:
-        return np.broadcast_to(line[:, None, :], (m, bins, line.shape[1]))
+    m = depth.size
 
     def at(theta: np.ndarray, values: np.ndarray) -> np.ndarray:
         """``values`` (m, ...) interpolated at each height's local depth: (m, bins, ...)."""

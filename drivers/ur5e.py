@@ -10,8 +10,12 @@ Safety (what a real controller does when the host misbehaves, ``hardware-facts``
 * the controller executes the last command until told otherwise: ur_rtde's speed and force threads run forever,
   even after the host dies. The one thing that stops them is the **RTDE watchdog**, armed at connect
   (``setWatchdog``): the program stops when the host writes nothing for 1 / ``watchdog_hz``. Every control period
-  (``wait_period``) kicks it; while the host does non-motion work at rest, :meth:`UR5eArm.keep_alive` kicks it from
+  (``wait_period``) feeds it; while the host does non-motion work at rest, :meth:`UR5eArm.keep_alive` kicks it from
   a thread;
+* a period that sent speedL or forceMode is **not** also kicked: ur_rtde sends those without waiting, and
+  ``kickWatchdog`` writes 0 to the same command register, which the script reads once per 2 ms cycle. Sent right
+  after, the kick can land in the same cycle and the script never sees the command (the last write wins). The
+  command's own write of that register feeds the watchdog just the same;
 * ``speedL`` is always sent with a time limit of a few control periods. ur_rtde's script repeats ``speedl`` in its
   speed thread, so on a real controller this does *not* stop the arm (the watchdog does); it bounds each ``speedl``
   call and costs nothing;
@@ -316,6 +320,7 @@ class UR5eArm:
         self._closed = False
         self._in_force_mode = False
         self._speeding = False
+        self._command_this_period = False  # speedL/forceMode wrote the command register since the last wait_period
         self._move: _AsyncMove | None = None
         self._period_start: Any = None
         self._kicker: tuple[threading.Thread, threading.Event] | None = None
@@ -389,7 +394,7 @@ class UR5eArm:
         self._require_ready("speedL")
         time_s = SPEED_TIME_LIMIT_PERIODS * self.control_period_s
         ok = self._call("speedL", self._control.speedL, xd, float(accel_m_s2), time_s)
-        self._speeding = True
+        self._speeding = self._command_this_period = True
         self._expect_ok("speedL", ok)
 
     def stop(self, decel_m_s2: float = 10.0) -> None:
@@ -436,7 +441,7 @@ class UR5eArm:
         speed_limits = _as_list(limits, 6, "limits")
         self._require_ready("forceMode")
         ok = self._call("forceMode", self._control.forceMode, frame, chosen, target, FORCE_MODE_TYPE, speed_limits)
-        self._in_force_mode = True
+        self._in_force_mode = self._command_this_period = True
         self._expect_ok("forceMode", ok)
 
     def force_mode_stop(self) -> None:
@@ -447,11 +452,16 @@ class UR5eArm:
             raise ArmError(f"the UR at {self.host} refused forceModeStop", hint=STOPPED_HINT)
 
     def wait_period(self) -> None:
-        """Kick the watchdog, then pace the loop at the RTDE frequency with ur_rtde's initPeriod/waitPeriod."""
+        """Feed the watchdog, then pace the loop at the RTDE frequency with ur_rtde's initPeriod/waitPeriod.
+
+        The kick is skipped when speedL or forceMode was sent this period: it would overwrite that command in the
+        script's register before the script read it (see the module docstring), and the command fed the watchdog.
+        """
         self._check_open()
         self._refuse_while_kept_alive("wait_period")
-        if self._watchdog_hz is not None:
+        if self._watchdog_hz is not None and not self._command_this_period:
             self._call("kickWatchdog", self._control.kickWatchdog)
+        self._command_this_period = False
         if self._period_start is None:
             self._period_start = self._control.initPeriod()
         self._control.waitPeriod(self._period_start)

@@ -124,6 +124,20 @@ def test_connect_arms_the_watchdog_and_every_period_kicks_it() -> None:
     assert kicks_and_waits == ["kickWatchdog", "waitPeriod", "kickWatchdog", "waitPeriod"]
 
 
+def test_a_period_that_sent_a_realtime_command_is_not_kicked_so_the_kick_cannot_overwrite_it() -> None:
+    """speedL/forceMode go out without waiting; a kick right after writes 0 to the same command register and, landing
+    in the same controller cycle, would erase the command before ur_rtde's script read it."""
+    control = FakeControl()
+    with UR5eArm("ur", control=control, receive=FakeReceive(), watchdog_hz=8.0) as arm:
+        arm.speed_linear(np.array([0, 0, 0.005, 0, 0, 0]), 0.5)
+        arm.wait_period()
+        arm.force_mode(np.zeros(6), np.array([0, 0, 1, 0, 0, 0]), np.array([0, 0, 5.0, 0, 0, 0]), np.full(6, 0.02))
+        arm.wait_period()
+        arm.wait_period()  # nothing sent this period: the kick keeps the watchdog fed
+    names = [n for n in control.names() if n in ("speedL", "forceMode", "kickWatchdog", "waitPeriod")]
+    assert names == ["speedL", "waitPeriod", "forceMode", "waitPeriod", "kickWatchdog", "waitPeriod"]
+
+
 def test_a_protective_stop_at_connect_is_refused_before_taking_control() -> None:
     receive = FakeReceive()
     receive.protective = True

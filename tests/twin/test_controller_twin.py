@@ -140,6 +140,10 @@ def test_watchdog_expiry_stops_the_arm_and_the_program(rig: TwinClients) -> None
     trips = twin.truth().watchdog_trips
     assert control.setWatchdog(5.0)  # 200 ms without a write stops the program
     assert control.speedL(UP, 0.5, 0.0)
+    # speedL returns without waiting for the script; a kick (0 in the same register) sent within the same 2 ms
+    # cycle would erase it, as on a real controller, so the host lets the script take it first (UR5eArm does not
+    # kick in a period that sent a command)
+    assert wait_until(lambda: twin.truth().speed_m_s > 0.0)
     deadline = time.monotonic() + 0.5
     while time.monotonic() < deadline:  # the host is alive: it keeps writing
         period = control.initPeriod()
@@ -164,7 +168,7 @@ def test_protective_stop_refuses_commands_until_unlocked_and_reuploaded(rig: Twi
     assert wait_until(receive.isProtectiveStopped)
     with pytest.raises(RuntimeError, match="Cannot unlock protective stop"):
         dashboard.unlockProtectiveStop()  # too soon after the stop
-    assert receive.getSafetyMode() == 3 and not control.isProgramRunning()
+    assert receive.getSafetyMode() == 3 and wait_until(lambda: not control.isProgramRunning())
     assert control.moveL(list(rig.home), 0.05, 0.5) is False
     time.sleep(twin.params.unlock_delay_s)
     dashboard.unlockProtectiveStop()
@@ -184,6 +188,8 @@ def test_pressing_past_the_force_limit_is_a_protective_stop(rig: TwinClients) ->
     truth = twin.truth()
     assert truth.protective_stops == stops + 1 and not truth.program_running, (truth, twin.status())
     assert truth.peak_force_n > twin.params.protective_stop_n
+    # the control client decides from its own RTDE stream, which may trail the receive client's by a few cycles
+    assert wait_until(lambda: not control.isProgramRunning())
     assert control.speedL([0.0] * 6, 0.5, 0.0) is False
     twin.set_placement_error(0.0, 0.05)  # the operator frees the pad (here: pulls the object away)
     assert wait_until(lambda: twin.truth().force_n == 0.0)

@@ -165,6 +165,12 @@ class PapillArrayDriver(PumpedSensor):
                 logger.warning("papillarray: packet %d has no slot %d", packet.counter, self.slot)
                 continue
             sensor = packet.sensors[self.slot]
+            if len(sensor.forces_n) != PAPILLARRAY.n_taxels:
+                raise DeviceError(
+                    f"PapillArray slot {self.slot} reports {len(sensor.forces_n)} pillars; this project reads the "
+                    f"{PAPILLARRAY.n_taxels}-pillar (3x3) array",
+                    hint="plug the 3x3 PapillArray into this slot, or choose its slot in the rig file",
+                )
             frames.append(
                 TactileFrame(
                     sensor=PAPILLARRAY.name,

@@ -16,6 +16,7 @@ from drivers.clock import VirtualClock
 from drivers.errors import DeviceError, DeviceNotFound
 from drivers.frames import TactileFrame
 from drivers.papillarray import PapillArrayDriver
+from protocols.papillarray import PapillArrayPacket, PillarSensorData, encode_packet
 from unitac_rig.sim.devices import SimPapillArrayHub
 from unitac_rig.sim.faults import FaultPlan
 from unitac_rig.sim.signals import SensorSample, SignalSource
@@ -190,3 +191,16 @@ def test_missing_port_unknown_scheme_and_bad_settings_are_reported() -> None:
         PapillArrayDriver("simpapill://x", rate_hz=300)
     with pytest.raises(DeviceError, match="slot"):
         PapillArrayDriver("simpapill://x", slot=2)
+
+
+def test_a_slot_with_another_pillar_count_is_one_clear_device_error() -> None:
+    """The stream allows up to 25 pillars per sensor; a 2x2 array in the slot must not reach the 3x3 pipeline."""
+    driver = PapillArrayDriver("loop://", clock=VirtualClock())
+    driver.connect()  # loop:// echoes the driver's own commands: garbage the parser skips
+    try:
+        packet = PapillArrayPacket(counter=1, timestamp_us=0, sensors=[PillarSensorData.unloaded(4)])
+        driver._port.write(encode_packet(packet))  # type: ignore[union-attr]
+        with pytest.raises(DeviceError, match="reports 4 pillars"):
+            driver.poll()
+    finally:
+        driver.disconnect()

@@ -45,7 +45,12 @@ MAX_MESSAGES_PER_PUMP = 50_000  # bound one poll() on a bus that never goes quie
 # ... and bound it in time: a reader only slightly faster than the bus (python-can's slcan reads one byte per call,
 # ~4,000 messages/s on a 2-core box against the uSkin's 2,400) would otherwise hold every frame for seconds
 PUMP_BUDGET_S = 0.02
-STALE_AFTER_S = 0.05  # a taxel value older than this (host clock) is flagged stale
+# A taxel value older than this (host clock) when its frame closes is flagged stale. A controller may spread its 24
+# messages over the cycle (about 2.5 ms per read is all that is published: a 60 ms cycle at one message per read),
+# so this allows cycles down to 4 Hz; the driver reports a stall after stall_timeout_s (0.5 s).
+STALE_AFTER_S = 0.25
+SLCAN_TTY_BAUDRATE = 3_000_000  # the FTDI USB-CAN adapter of a uSPa46 kit: slcand -S 3000000 ...
+SLCAN_RTSCTS = True  # ... -t hw (hardware flow control)
 
 
 def uskin_saturated(values: np.ndarray) -> np.ndarray:
@@ -86,8 +91,14 @@ _CAN_HINTS = {
 def open_can_bus(interface: str, channel: str, bitrate: int = 1_000_000, **options: Any) -> can.BusABC:
     """Open a python-can bus for the uSkin (1 Mbit/s), turning python-can's errors into DeviceNotFound with a hint.
 
-    ``options`` go to ``can.Bus`` unchanged (e.g. ``sleep_after_open=0`` for a simulated SLCAN adapter).
+    ``options`` go to ``can.Bus`` (e.g. ``sleep_after_open=0`` for a simulated SLCAN adapter). For ``slcan`` the
+    serial side defaults to the uSPa46 kit's adapter settings (``slcand -S 3000000 -t hw``: 3 Mbaud, RTS/CTS), not
+    python-can's 115200 baud without flow control; a ``channel`` ending in ``@BAUD`` or explicit ``tty_baudrate`` /
+    ``rtscts`` options override them.
     """
+    if interface == "slcan" and "@" not in channel:
+        options.setdefault("tty_baudrate", SLCAN_TTY_BAUDRATE)
+        options.setdefault("rtscts", SLCAN_RTSCTS)
     hint = _CAN_HINTS.get(
         interface,
         "check the --can-interface name and channel; python-can lists interfaces in can.interfaces.VALID_INTERFACES",

@@ -13,8 +13,11 @@ Wire format (1 Mbit/s CAN, standard 11-bit arbitration ids, classic frames of up
   Either way the taxel is flagged, never used as a reading.
 * Taxel ids: ``0x1RC`` with R = row 0..3 and C = column (chip) 0..3 on the 4x4 uSPa44 and 0..5 on the 4x6 uSPa46.
   XELA's own map file numbers the 4x6 taxels in *reverse*: s1 = 0x135, s2 = 0x134 ... s6 = 0x130, s7 = 0x125 ...
-  s24 = 0x100. Other firmware uses other ids (one used 0x710 + taxel index), so id maps are plain data
-  (:class:`TaxelIdMap`). This project's taxel index is row-major, ``index = row * cols + col`` (drivers/layouts.py).
+  s24 = 0x100, and xela_server lists taxels "from top left, line by line": so on the uSPa46 taxel 0 (top left) is
+  s1 = 0x135 and taxel 23 is 0x100, the same frame through CAN as through xela_server (:data:`USPA46_ID_MAP`). The
+  controller still sends each cycle in id order (0x100 first). Other firmware uses other ids (one used 0x710 + taxel
+  index), so id maps are plain data (:class:`TaxelIdMap`). This project's taxel index is row-major,
+  ``index = row * cols + col`` (drivers/layouts.py).
 * There is **no frame counter** on the wire: a frame is the latest message of every taxel id. The
   :class:`FrameAssembler` closes a frame as soon as every taxel has reported once since the previous frame; when a
   taxel reports a second time first (a cycle lost a message), the frame is closed early with the missing taxels
@@ -94,7 +97,7 @@ class TaxelIdMap:
 
     ``ids[i]`` is the arbitration id of taxel ``i``. Firmware differs in its ids, so maps are data: build one with
     :meth:`from_ids` (ids in layout order) or :meth:`from_xela_ini_order` (ids as listed s1, s2, ... in XELA's
-    map file, which numbers taxels in reverse).
+    map file, which is the layout order).
     """
 
     ids: tuple[int, ...]
@@ -134,12 +137,13 @@ class TaxelIdMap:
 
     @classmethod
     def from_xela_ini_order(cls, ini_ids: Sequence[int], name: str = "") -> TaxelIdMap:
-        """Map from ids listed as in XELA's map file (s1 first), which numbers taxels in reverse layout order.
+        """Map from ids listed as in XELA's map file (s1 first): the ini order is the layout order.
 
-        XELA's 4x6 map gives s1 = 0x135 ... s24 = 0x100, i.e. s1 is the last taxel of this project's row-major
-        layout (row 3, col 5) and s24 the first; so the layout order is the ini order reversed.
+        XELA's 4x6 map numbers the taxels s1 = 0x135 ... s6 = 0x130, s7 = 0x125 ... s24 = 0x100, and xela_server
+        lists a sensor's taxels "from top left, line by line", in that numbering [inferred]: so s1 (0x135) is taxel 0
+        (row 0, col 0) here too, and a frame reads the same through CAN and through xela_server.
         """
-        return cls(tuple(reversed(tuple(ini_ids))), name=name)
+        return cls(tuple(ini_ids), name=name)
 
     @classmethod
     def from_row_col_ids(cls, rows: int, cols: int, base: int = 0x100, name: str = "") -> TaxelIdMap:
@@ -149,7 +153,10 @@ class TaxelIdMap:
         return cls(tuple(base + 0x10 * row + col for row in range(rows) for col in range(cols)), name=name)
 
 
-USPA46_ID_MAP = TaxelIdMap.from_row_col_ids(4, 6, name="uSPa46 0x1RC (4x6)")
+# uSPa46: XELA's 4x6 map, s1 = 0x135 first (0x1RC ids numbered in reverse); layout taxel 0 = s1 = 0x135.
+USPA46_ID_MAP = TaxelIdMap.from_xela_ini_order(
+    tuple(reversed(TaxelIdMap.from_row_col_ids(4, 6).ids)), name="uSPa46 XELA map (s1 = 0x135 first)"
+)
 USPA44_ID_MAP = TaxelIdMap.from_row_col_ids(4, 4, name="uSPa44 0x1RC (4x4)")
 
 
@@ -236,11 +243,11 @@ class FrameAssembler:
     def __init__(
         self,
         id_map: TaxelIdMap = USPA46_ID_MAP,
-        stale_after_ns: int = 50_000_000,
+        stale_after_ns: int = 250_000_000,
         cycle_start_id: int | None = -1,
     ) -> None:
         if stale_after_ns <= 0:
-            raise ProtocolError(f"stale_after_ns must be > 0, got {stale_after_ns}", hint="e.g. 50_000_000 (50 ms)")
+            raise ProtocolError(f"stale_after_ns must be > 0, got {stale_after_ns}", hint="e.g. 250_000_000 (250 ms)")
         self.id_map = id_map
         self.stale_after_ns = stale_after_ns
         n = id_map.n_taxels

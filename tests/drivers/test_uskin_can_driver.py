@@ -257,3 +257,24 @@ def test_collect_helper_on_reader_mode_matches_poll_after_stop() -> None:
         driver.stop_reader()
         rest = driver.poll()
         assert len(first) + len(rest) == 10
+
+
+def test_slcan_serial_side_defaults_to_the_kits_3_mbaud_with_rts_cts_unless_the_channel_names_a_speed() -> None:
+    """slcand -S 3000000 -t hw: python-can's own defaults (115200 baud, no flow control) cannot carry the stream."""
+    clock = VirtualClock()
+    adapter = SimSlcanAdapter(f"uskin-driver-test-{next(_channels)}", clock=clock)
+    try:
+        bus = open_can_bus("slcan", adapter.url, sleep_after_open=0)
+        try:
+            port = bus.serialPortOrig  # type: ignore[attr-defined]
+            assert (port.baudrate, port.rtscts) == (3_000_000, True)
+        finally:
+            bus.shutdown()
+        bus = open_can_bus("slcan", f"{adapter.url}@115200", sleep_after_open=0)
+        try:
+            port = bus.serialPortOrig  # type: ignore[attr-defined]
+            assert (port.baudrate, port.rtscts) == (115_200, False)
+        finally:
+            bus.shutdown()
+    finally:
+        adapter.close()

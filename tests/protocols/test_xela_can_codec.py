@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from drivers.uskin import STALE_AFTER_S
 from protocols.errors import ProtocolError
 from protocols.xela_can import (
     START_STREAM_PAYLOAD,
@@ -114,15 +115,16 @@ def test_any_payload_decodes_or_raises_protocol_error(arbitration_id: int, data:
 
 def test_uspa46_ids_follow_row_and_column() -> None:
     assert USPA46_ID_MAP.n_taxels == 24
-    assert USPA46_ID_MAP.index_of(0x100) == 0  # row 0, col 0
-    assert USPA46_ID_MAP.index_of(0x105) == 5  # row 0, col 5
-    assert USPA46_ID_MAP.index_of(0x110) == 6  # row 1, col 0
-    assert USPA46_ID_MAP.index_of(0x135) == 23  # row 3, col 5
+    # XELA's 4x6 map: s1 = 0x135 ... s6 = 0x130, s7 = 0x125 ... s24 = 0x100, s1 the top-left taxel (row 0, col 0)
+    assert USPA46_ID_MAP.index_of(0x135) == 0  # s1: row 0, col 0
+    assert USPA46_ID_MAP.index_of(0x130) == 5  # s6: row 0, col 5
+    assert USPA46_ID_MAP.index_of(0x125) == 6  # s7: row 1, col 0
+    assert USPA46_ID_MAP.index_of(0x100) == 23  # s24: row 3, col 5
     assert USPA46_ID_MAP.index_of(0x106) is None
     assert USPA46_ID_MAP.index_of(0x201) is None
 
 
-def test_xela_ini_order_is_the_layout_order_reversed() -> None:
+def test_xela_ini_order_is_the_layout_order() -> None:
     # XELA's 4x6 map file lists s1 = 0x135, s2 = 0x134 ... s6 = 0x130, s7 = 0x125 ... s24 = 0x100.
     ini = [0x135, 0x134, 0x133, 0x132, 0x131, 0x130, 0x125, 0x124, 0x123, 0x122, 0x121, 0x120]
     ini += [0x115, 0x114, 0x113, 0x112, 0x111, 0x110, 0x105, 0x104, 0x103, 0x102, 0x101, 0x100]
@@ -151,6 +153,11 @@ def _counts(cycle: int, index: int) -> tuple[int, int, int]:
     return 10_000 + 100 * cycle + index, 20_000 + index, 30_000 + cycle
 
 
+# The assembler's tests feed taxels in id order by index: a 4x6 map listed in id order (0x100 first) makes index
+# and send position the same. USPA46_ID_MAP lists the same ids in XELA's order (0x135 first); see the test below.
+ID_ORDER_46 = TaxelIdMap.from_row_col_ids(4, 6)
+
+
 def _send_cycle(
     assembler: FrameAssembler,
     cycle: int,
@@ -177,7 +184,7 @@ def _send_cycle(
 
 
 def test_frame_closes_when_every_taxel_has_reported_in_any_order() -> None:
-    assembler = FrameAssembler(cycle_start_id=None)  # firmware whose send order is not by id
+    assembler = FrameAssembler(ID_ORDER_46, cycle_start_id=None)  # firmware whose send order is not by id
     order = [23, 0, 5, 12, *[i for i in range(24) if i not in (23, 0, 5, 12)]]
     frames = _send_cycle(assembler, cycle=0, t0_ns=0, order=order)
     assert len(frames) == 1
@@ -191,7 +198,7 @@ def test_frame_closes_when_every_taxel_has_reported_in_any_order() -> None:
 
 
 def test_lost_message_closes_the_frame_early_and_flags_only_that_taxel() -> None:
-    assembler = FrameAssembler()
+    assembler = FrameAssembler(ID_ORDER_46)
     first = _send_cycle(assembler, cycle=0, t0_ns=0)
     assert len(first) == 1
     assert _send_cycle(assembler, cycle=1, t0_ns=10 * MS, skip=frozenset({7})) == []  # cannot know yet
@@ -208,7 +215,7 @@ def test_lost_message_closes_the_frame_early_and_flags_only_that_taxel() -> None
 
 
 def test_taxel_never_seen_reads_zero_and_is_flagged() -> None:
-    assembler = FrameAssembler()
+    assembler = FrameAssembler(ID_ORDER_46)
     _send_cycle(assembler, cycle=0, t0_ns=0, skip=frozenset({22, 23}))
     frames = _send_cycle(assembler, cycle=1, t0_ns=10 * MS)
     first = frames[0]
@@ -218,7 +225,7 @@ def test_taxel_never_seen_reads_zero_and_is_flagged() -> None:
 
 def test_lost_leading_taxel_is_flagged_and_the_next_cycle_stays_whole() -> None:
     """The cycle's first id opens a new frame, so losing it flags one frame instead of shifting every later one."""
-    assembler = FrameAssembler()
+    assembler = FrameAssembler(ID_ORDER_46)
     _send_cycle(assembler, cycle=0, t0_ns=0)
     assert _send_cycle(assembler, cycle=1, t0_ns=10 * MS, skip=frozenset({0})) == []
     lossy, whole = _send_cycle(assembler, cycle=2, t0_ns=20 * MS)
@@ -231,7 +238,7 @@ def test_lost_leading_taxel_is_flagged_and_the_next_cycle_stays_whole() -> None:
 
 
 def test_sentinel_flags_the_taxel_and_keeps_its_last_good_value() -> None:
-    assembler = FrameAssembler()
+    assembler = FrameAssembler(ID_ORDER_46)
     _send_cycle(assembler, cycle=0, t0_ns=0)
     (frame,) = _send_cycle(assembler, cycle=1, t0_ns=10 * MS, sentinel=frozenset({4}))
     assert list(np.flatnonzero(frame.stale_mask)) == [4]
@@ -242,7 +249,7 @@ def test_sentinel_flags_the_taxel_and_keeps_its_last_good_value() -> None:
 
 
 def test_value_older_than_stale_after_is_flagged_even_in_a_complete_frame() -> None:
-    assembler = FrameAssembler(stale_after_ns=50 * MS)
+    assembler = FrameAssembler(ID_ORDER_46, stale_after_ns=50 * MS)
     ids = assembler.id_map.ids
     assembler.add(ids[0], encode_taxel_message(ids[0], 1, 2, 3), 0)
     frame = None
@@ -253,8 +260,38 @@ def test_value_older_than_stale_after_is_flagged_even_in_a_complete_frame() -> N
     assert not frame.valid
 
 
+def test_a_cycle_spread_over_60_ms_is_valid_with_the_drivers_stale_limit() -> None:
+    """Only ~2.5 ms per read is published: a controller sending one message per read spreads a cycle over 60 ms."""
+    assembler = FrameAssembler(ID_ORDER_46, stale_after_ns=round(STALE_AFTER_S * 1e9))
+    ids = assembler.id_map.ids
+    frames = []
+    for cycle in range(3):
+        for index in range(24):
+            t_ns = (cycle * 24 + index) * 2_500_000
+            frame = assembler.add(ids[index], encode_taxel_message(ids[index], 1, 2, 3), t_ns)
+            if frame is not None:
+                frames.append(frame)
+    assert len(frames) == 3 and all(frame.valid for frame in frames)
+
+
+def test_uspa46_cycle_in_id_order_puts_s1_0x135_at_the_top_left_taxel() -> None:
+    """The controller sends 0x100 first; the frame is in XELA's numbering (s1 = 0x135 = taxel 0, s24 = 0x100 = 23)."""
+    assembler = FrameAssembler(USPA46_ID_MAP)
+    frames = []
+    for cycle in range(2):
+        for step, arbitration_id in enumerate(sorted(USPA46_ID_MAP.ids)):
+            payload = encode_taxel_message(arbitration_id, 1000 + arbitration_id, 2000 + cycle, 3000)
+            frame = assembler.add(arbitration_id, payload, cycle * 10 * MS + step * 100_000)
+            if frame is not None:
+                frames.append(frame)
+    assert len(frames) == 2 and all(frame.valid for frame in frames)
+    assert tuple(frames[1].values[0]) == (1000 + 0x135, 2001, 3000)
+    assert tuple(frames[1].values[6]) == (1000 + 0x125, 2001, 3000)  # s7: row 1, col 0
+    assert tuple(frames[1].values[23]) == (1000 + 0x100, 2001, 3000)
+
+
 def test_unknown_ids_and_short_payloads_are_counted_not_raised() -> None:
-    assembler = FrameAssembler()
+    assembler = FrameAssembler(ID_ORDER_46)
     assert assembler.add(0x700, bytes(8), 0) is None
     assert assembler.add(0x100, b"\x00\x01", 1) is None  # known id, too short: an invalid report
     assert (assembler.messages, assembler.unknown_ids, assembler.invalid_messages) == (2, 1, 1)
@@ -269,7 +306,7 @@ def test_unknown_ids_and_short_payloads_are_counted_not_raised() -> None:
 )
 def test_each_frame_flags_exactly_the_taxels_its_cycle_lost(drops: list[frozenset[int]], uspa44: bool) -> None:
     """Model check on a bus that sends taxels in id order (taxel 0 never lost): frame k == cycle k."""
-    id_map = USPA44_ID_MAP if uspa44 else USPA46_ID_MAP
+    id_map = USPA44_ID_MAP if uspa44 else ID_ORDER_46
     assembler = FrameAssembler(id_map)
     n = id_map.n_taxels
     frames = []

@@ -104,7 +104,7 @@ class SimXelaController:
             return
         counts = counts_from_sample(self.source.sample(t_ns).values)
         release_ns = self.faults.release_t_ns(t_ns)
-        for index, arbitration_id in enumerate(self.id_map.ids):
+        for index, arbitration_id in sorted(enumerate(self.id_map.ids), key=lambda item: item[1]):  # in id order
             if index in self.missing_taxels:
                 continue
             x, y, z = (int(v) for v in counts[index])

@@ -138,3 +138,21 @@ def test_rig_config_reaches_the_press(tmp_path: Path) -> None:
     presses = read_presses(session_path(tmp_path, "circle_tpu", "papillarray"))
     assert {p.attrs["strategy"] for p in presses} == {"two-phase"}
     assert all(p.tactile_displacement_mm is not None for p in presses)
+
+
+def test_a_slow_sensor_open_after_the_arm_is_connected_does_not_trip_the_watchdog(tmp_path: Path) -> None:
+    """In a campaign the arm is connected (watchdog armed) before each session opens its sensor; python-can's slcan
+    alone waits 2 s after opening the port. The session keeps the watchdog fed through it."""
+    config = parse_rig_config(FEW_ANGLES)
+    with SimRig(config, seed=3) as rig:
+        rig.arm.zero_ft()  # the arm is in use: from here on, 1 / watchdog_hz without a write stops the program
+        open_sensor = rig.open_sensor
+
+        def slow_open(name: str):  # type: ignore[no-untyped-def]
+            rig.clock.sleep(2.0)
+            return open_sensor(name)
+
+        rig.open_sensor = slow_open  # type: ignore[method-assign]
+        outcome = collect_session(rig, get_object("hex_pla"), "uskin", tmp_path)
+        assert rig.sim_arm.program_stop_reason is None
+    assert outcome.complete == 3

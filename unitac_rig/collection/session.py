@@ -154,16 +154,23 @@ def collect_session(
     if not todo:
         return outcome
 
+    # Once the arm is connected its watchdog must be fed: the slow steps before the first press (opening a port,
+    # rewriting the session file on resume) run kept alive, or the controller stops the program under them.
     try:
-        sensor = rig.open_sensor(sensor_name)
+        arm = rig.arm
+        with _kept_alive(arm):  # python-can's slcan alone waits 2 s after opening the port
+            sensor = rig.open_sensor(sensor_name)
     except BaseException:
         writer.discard_if_unused()  # a missing port must not leave an empty session file behind
         raise
     try:
         try:
-            writer.update_root_attrs({"sensor_identity": sensor.identity(), "layout": sensor.layout.name})
+            with _kept_alive(arm):
+                writer.update_root_attrs({"sensor_identity": sensor.identity(), "layout": sensor.layout.name})
             rig.mount(obj, todo[0].rotation_deg, sensor_name)
-            writer.update_root_attrs({"session_tare": session_tare(rig, sensor, todo[0])})
+            tare = session_tare(rig, sensor, todo[0])
+            with _kept_alive(arm):  # copies the whole session file: seconds on a long resumed session
+                writer.update_root_attrs({"session_tare": tare})
         except BaseException:
             writer.discard_if_unused()  # nor may an arm or sensor that fails before the first press
             raise
@@ -298,8 +305,9 @@ def _safety_stopped(arm: Arm) -> bool:
 
 @contextlib.contextmanager
 def _kept_alive(arm: Arm) -> Iterator[None]:
-    """``arm.keep_alive()`` around non-motion work on an error path; if the arm cannot (closed, controller gone),
-    the work still runs: keeping the press matters more than the watchdog of an arm that is stopped anyway."""
+    """``arm.keep_alive()`` around non-motion work while the arm rests (opening a port, writing the file); if the arm
+    cannot (closed, controller gone), the work still runs: keeping the press matters more than the watchdog of an
+    arm that is stopped anyway."""
     with contextlib.ExitStack() as stack:
         try:
             stack.enter_context(arm.keep_alive())

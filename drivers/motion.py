@@ -125,12 +125,12 @@ def move_to(
                 break
         else:
             raise ArmError(f"a move to {np.round(target[:3], 4).tolist()} m did not finish within {budget_s:.1f} s")
+        if not _on_target(state, target):  # whatever ended it, nothing may go on moving
+            off_mm = 1000 * float(np.linalg.norm(np.asarray(state.tcp_pose[:3]) - target[:3]))
+            raise ArmError(f"a move ended {off_mm:.1f} mm from its target {np.round(target[:3], 4).tolist()} m")
     except BaseException:
         stop_arm(arm)
         raise
-    if not _on_target(state, target):
-        off_mm = 1000 * float(np.linalg.norm(np.asarray(state.tcp_pose[:3]) - target[:3]))
-        raise ArmError(f"a move ended {off_mm:.1f} mm from its target {np.round(target[:3], 4).tolist()} m")
     return state
 
 

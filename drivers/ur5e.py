@@ -28,7 +28,8 @@ Safety (what a real controller does when the host misbehaves, ``hardware-facts``
   :class:`~drivers.errors.ProtectiveStop` (what to do on the pendant in the hint), and a program that stopped (the
   watchdog, the pendant) gives :class:`~drivers.errors.ControlScriptStopped`;
 * at connect, the TCP offset (``getTCPOffset``) and payload (RTDE ``payload``) are read back and compared with what
-  the rig file expects; ur_rtde's ``RuntimeError`` and ``ValueError`` are wrapped at this boundary.
+  the rig file expects, when it names them; ur_rtde's ``RuntimeError`` and ``ValueError`` are wrapped at this
+  boundary.
 
 Gotchas: ur_rtde's Python constructors hold the GIL until the handshake finishes (a Python RTDE server in the same
 process would deadlock, hence the twins' server processes); the C++ library prints to file descriptor 2 itself
@@ -280,10 +281,10 @@ class UR5eReceiver:
 
 @dataclass
 class _AsyncMove:
-    """An asynchronous moveL in flight: the progress word before it started, and whether it was seen running."""
+    """An asynchronous moveL in flight: the async operation id before it started (bits 24-30 of the progress word,
+    incremented by the script at every start)."""
 
-    progress_before: int
-    seen_running: bool = False
+    operation_before: int
 
 
 class UR5eArm:
@@ -341,8 +342,7 @@ class UR5eArm:
             raise
         try:
             self._check_setup(expected_tcp_offset, expected_payload_kg)
-            if watchdog_hz is not None:
-                self._expect_ok("setWatchdog", self._call("setWatchdog", self._control.setWatchdog, float(watchdog_hz)))
+            self._rearm_watchdog()
         except BaseException:
             self.close()
             raise
@@ -364,34 +364,36 @@ class UR5eArm:
         target = _as_list(pose, 6, "pose")
         _check_motion(speed_m_s, accel_m_s2)
         self._require_ready("moveL")
-        before = self._async_progress()
+        self._rearm_watchdog()
+        before, _ = self._async_status()
         ok = self._call("moveL", self._control.moveL, target, float(speed_m_s), float(accel_m_s2), True)
         self._expect_ok("moveL", ok)
         self._move = _AsyncMove(before)
 
     def move_running(self) -> bool:
-        """True while the asynchronous move runs, from ur_rtde's async progress word (``getAsyncOperationProgress``):
-        >= 0 while it runs; < 0 and different from before the move (the value toggles between -1 and -2) once over.
+        """True while the asynchronous move runs, from ur_rtde's async progress word
+        (``getAsyncOperationProgressEx``): the move is this one once the operation id differs from the one before
+        it started, and over once that operation no longer runs. A finish signalled by an *earlier* move (its
+        thread ending just as this one starts) has the old id and cannot end this one.
 
         Until the controller shows the move as started it counts as running: callers bound the wait.
         """
         move = self._move
         if move is None:
             return False
-        progress = self._async_progress()
-        if progress >= 0:
-            move.seen_running = True
+        operation, running = self._async_status()
+        if operation == move.operation_before or running:
             return True
-        if move.seen_running or progress != move.progress_before:
-            self._move = None
-            return False
-        return True
+        self._move = None
+        return False
 
     def speed_linear(self, twist: np.ndarray, accel_m_s2: float) -> None:
         """speedL with a time limit of ``SPEED_TIME_LIMIT_PERIODS`` control periods; send it every period."""
         xd = _as_list(twist, 6, "twist")
         _check_motion(float(np.linalg.norm(xd[:3])), accel_m_s2, allow_zero_speed=True)
         self._require_ready("speedL")
+        if not self._speeding:
+            self._rearm_watchdog()
         time_s = SPEED_TIME_LIMIT_PERIODS * self.control_period_s
         ok = self._call("speedL", self._control.speedL, xd, float(accel_m_s2), time_s)
         self._speeding = self._command_this_period = True
@@ -408,6 +410,14 @@ class UR5eArm:
         if not decel_m_s2 > 0:
             raise ArmError(f"deceleration must be > 0 m/s^2, got {decel_m_s2}")
         self._end_keep_alive()  # stopping always wins; the kicker must not share the client with us
+        if self._controller_lost():
+            self._in_force_mode = self._speeding = False
+            self._move = None
+            raise RobotStateLost(
+                f"the RTDE stream from the UR at {self.host} is lost: no stop command was sent (each would wait "
+                "ur_rtde's 300 s for an answer)",
+                hint=self._lost_hint(),
+            )
         decel = float(min(decel_m_s2, MAX_TOOL_ACCEL_M_S2))
         steps: list[tuple[str, Callable[[], object]]] = []
         if self._in_force_mode:
@@ -440,6 +450,8 @@ class UR5eArm:
         target = _as_list(wrench, 6, "wrench")
         speed_limits = _as_list(limits, 6, "limits")
         self._require_ready("forceMode")
+        if not self._in_force_mode:
+            self._rearm_watchdog()
         ok = self._call("forceMode", self._control.forceMode, frame, chosen, target, FORCE_MODE_TYPE, speed_limits)
         self._in_force_mode = self._command_this_period = True
         self._expect_ok("forceMode", ok)
@@ -501,7 +513,15 @@ class UR5eArm:
         self._closed = True
         control = getattr(self, "_control", None)
         steps: list[tuple[str, Callable[[], object]]] = [("keep_alive", self._end_keep_alive)]
-        if control is not None:
+        if control is not None and self._controller_lost():
+            # nothing would answer: stop commands would each block ~300 s; the watchdog stops the program
+            logger.warning(
+                "UR close: the RTDE stream from %s is lost; sending no stop commands. %s",
+                self.host,
+                self._lost_hint(),
+            )
+            steps.append(("disconnect", control.disconnect))
+        elif control is not None:
             if self._in_force_mode:
                 steps.append(("forceModeStop", control.forceModeStop))
             if self._move is not None:
@@ -533,10 +553,17 @@ class UR5eArm:
     # ---- internals ------------------------------------------------------------------------------------------
 
     def _check_setup(self, expected_tcp: Sequence[float] | None, expected_payload_kg: float | None) -> None:
-        """Read the TCP offset and payload back and refuse to go on if the rig file expects something else."""
-        actual = np.asarray(self._call("getTCPOffset", self._control.getTCPOffset), dtype=np.float64).reshape(-1)
-        self.tcp_offset = actual
-        if expected_tcp is not None:
+        """Read the TCP offset and payload back and refuse to go on if the rig file expects something else.
+
+        ``getTCPOffset`` is a script command (40) that waits for the script's answer, so it is only sent when there
+        is a TCP to check it against.
+        """
+        if expected_tcp is None:
+            logger.warning("arm.tcp_offset is not set in the rig file: the UR at %s runs with an unchecked TCP",
+                           self.host)  # fmt: skip
+        else:
+            actual = np.asarray(self._call("getTCPOffset", self._control.getTCPOffset), dtype=np.float64).reshape(-1)
+            self.tcp_offset = actual
             expected = np.asarray(_as_list(np.asarray(expected_tcp), 6, "expected TCP offset"))
             off_m = float(np.linalg.norm(actual[:3] - expected[:3])) if actual.shape == (6,) else math.inf
             off_rad = angle_between(actual[3:], expected[3:]) if actual.shape == (6,) else math.inf
@@ -546,12 +573,6 @@ class UR5eArm:
                     f"{_fmt(expected)} (m, rad)",
                     hint="set the TCP on the teach pendant (Installation > General > TCP) or correct arm.tcp_offset",
                 )
-        elif actual.shape == (6,):
-            logger.warning(
-                "the UR at %s uses TCP offset %s; add arm.tcp_offset to the rig file so a changed TCP is caught",
-                self.host,
-                _fmt(actual),
-            )
         self.payload_kg = self._receiver.payload_kg() if expected_payload_kg is not None else None
         if expected_payload_kg is not None:
             if self.payload_kg is None:
@@ -627,8 +648,37 @@ class UR5eArm:
             hint=_program_stopped_hint(self._watchdog_hz),
         )
 
-    def _async_progress(self) -> int:
-        return int(self._call("getAsyncOperationProgress", self._control.getAsyncOperationProgress))
+    def _rearm_watchdog(self) -> None:
+        """Arm the watchdog again as a motion starts (one ~5 ms round trip). ur_rtde reconnects by itself after a
+        network error and uploads its script again, and a fresh script has no watchdog; this bounds how long a
+        motion can run unguarded after such a reconnect to none."""
+        if self._watchdog_hz is not None:
+            ok = self._call("setWatchdog", self._control.setWatchdog, float(self._watchdog_hz))
+            self._expect_ok("setWatchdog", ok)
+
+    def _lost_hint(self) -> str:
+        if self._watchdog_hz is None:
+            return "no RTDE watchdog is armed: stop the arm on the teach pendant now, then check the network cable"
+        return (
+            f"the controller's RTDE watchdog ({self._watchdog_hz:g} Hz) stops the program once this host's writes "
+            "stop; check the network cable and the teach pendant, and that the arm is at rest, before connecting again"
+        )
+
+    def _controller_lost(self) -> bool:
+        """Whether the receive side says the controller is gone (connection dropped, or no new state for
+        ``STALL_TIMEOUT_S``). Blocking commands to a vanished controller return False only after ~301 s."""
+        try:
+            self._receiver.read_state()
+        except RobotStateLost:
+            return True
+        except DeviceError:
+            return False
+        return False
+
+    def _async_status(self) -> tuple[int, bool]:
+        """(operation id, running) from the async progress word (output_int_register_2)."""
+        status = self._call("getAsyncOperationProgressEx", self._control.getAsyncOperationProgressEx)
+        return int(status.operationId()), bool(status.isAsyncOperationRunning())
 
     def _call(self, what: str, method: Callable[..., Any], *args: Any) -> Any:
         try:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import rtde_control
 
 from drivers.clock import VirtualClock
 from unitac_rig.sim.arm import SimArm, SimArmParams
@@ -43,9 +44,8 @@ class FakeControl:
     """Records every command like a flight recorder; ``results`` sets what a method returns (True by default).
 
     It stays only where the controller twin cannot reach: exact argument order, and a client that raises or refuses
-    on cue. Queries (isProgramRunning, getAsyncOperationProgress, getTCPOffset) are answered, not recorded.
-    ``progress`` is the async progress word getAsyncOperationProgress returns (an asynchronous moveL shows as
-    running, 0, for ``move_periods`` reads, then -2).
+    on cue. Queries (isProgramRunning, getAsyncOperationProgressEx, getTCPOffset) are answered, not recorded.
+    An asynchronous moveL shows as running for ``move_periods`` reads of the progress word, then as finished.
     """
 
     def __init__(self, **results: object) -> None:
@@ -55,7 +55,8 @@ class FakeControl:
         self.period_starts = 0
         self.program_running = True
         self.tcp_offset = [0.0, 0.0, 0.1, 0.0, 0.0, 0.0]
-        self.progress = -1
+        self.operation = 0  # the async operation id of the progress word
+        self.stale_words: list[int] = []  # progress words returned first, before the current state
         self.move_periods = 3
         self._move_reads_left = 0
 
@@ -75,16 +76,22 @@ class FakeControl:
     def moveL(self, pose: list[float], speed: float, acceleration: float, asynchronous: bool) -> object:
         result = self._record("moveL", pose, speed, acceleration, asynchronous)
         if result is not False and asynchronous:
+            self.operation = (self.operation + 1) % 128
             self._move_reads_left = self.move_periods
         return result
 
-    def getAsyncOperationProgress(self) -> int:
-        if self._move_reads_left > 0:
+    def getAsyncOperationProgressEx(self) -> rtde_control.AsyncOperationStatus:
+        """The script's word: operation id in bits 24-30 (one more at each asynchronous start), bit 15 running."""
+        if self.stale_words:  # what the control client's stream still showed from before
+            return rtde_control.AsyncOperationStatus(self.stale_words.pop(0))
+        running = self._move_reads_left > 0
+        if running:
             self._move_reads_left -= 1
-            if self._move_reads_left == 0:
-                self.progress = -2 if self.progress == -1 else -1
-            return 0
-        return self.progress
+        return rtde_control.AsyncOperationStatus((self.operation << 24) | (0x8000 if running else 0))
+
+    def stop_moves(self) -> None:
+        """The controller's move thread ends (test hook)."""
+        self._move_reads_left = 0
 
     def stopL(self, a: float, asynchronous: bool) -> object:
         self._move_reads_left = 0

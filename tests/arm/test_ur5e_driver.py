@@ -179,7 +179,15 @@ def test_close_stops_everything_even_when_a_step_fails() -> None:
     arm = UR5eArm("ur", control=control, receive=FakeReceive())
     arm.force_mode(np.zeros(6), np.array([0, 0, 1, 0, 0, 0]), np.array([0, 0, 5.0, 0, 0, 0]), np.full(6, 0.01))
     arm.close()
-    assert control.commands() == ["setWatchdog", "forceMode", "forceModeStop", "speedStop", "stopScript", "disconnect"]
+    assert control.commands() == [
+        "setWatchdog",  # at connect
+        "setWatchdog",  # again as the motion starts (a fresh script after a silent reconnect has none)
+        "forceMode",
+        "forceModeStop",
+        "speedStop",
+        "stopScript",
+        "disconnect",
+    ]
     arm.close()  # idempotent
     assert control.names().count("disconnect") == 1
     arm.stop()  # a no-op on a closed arm
@@ -214,7 +222,7 @@ def test_leaving_a_with_block_on_an_exception_stops_the_arm() -> None:
     with pytest.raises(KeyboardInterrupt), UR5eArm("ur", control=control, receive=FakeReceive()) as arm:
         arm.speed_linear(np.array([0, 0.005, 0, 0, 0, 0]), 0.5)
         raise KeyboardInterrupt
-    assert control.commands() == ["setWatchdog", "speedL", "speedStop", "stopScript", "disconnect"]
+    assert control.commands() == ["setWatchdog", "setWatchdog", "speedL", "speedStop", "stopScript", "disconnect"]
 
 
 def test_false_without_a_safety_stop_is_an_arm_error() -> None:
@@ -356,3 +364,56 @@ def test_a_move_reported_finished_before_the_pose_stream_shows_it_is_not_an_erro
     with UR5eArm("ur", control=control, receive=LaggingReceive()) as arm:
         state = move_to(arm, POSE, 0.05, 0.5)
     assert np.allclose(state.tcp_pose, POSE)
+
+
+def test_a_vanished_controller_gets_no_blocking_stop_commands_and_the_watchdog_is_named() -> None:
+    """ur_rtde's blocking commands to a controller that vanished return False only after ~301 s each: stop and close
+    must not send them when the receive side has lost the stream (the controller's watchdog stops the program)."""
+    control, receive = FakeControl(), FakeReceive()
+    arm = UR5eArm("ur", control=control, receive=receive, watchdog_hz=8.0)
+    arm.speed_linear(np.array([0, 0, 0.005, 0, 0, 0]), 0.5)
+    receive.connected = False  # the cable is pulled
+    sent_before = len(control.calls)
+    with pytest.raises(RobotStateLost) as excinfo:
+        arm.stop(5.0)
+    assert "watchdog (8 Hz)" in (excinfo.value.hint or "")
+    arm.close()
+    assert [name for name, _ in control.calls[sent_before:]] == ["disconnect"]
+    assert receive.disconnects == 1
+
+
+def test_the_watchdog_is_armed_again_as_each_motion_starts_but_not_every_period() -> None:
+    """ur_rtde reconnects on its own after a network error and uploads a fresh script, which has no watchdog."""
+    control = FakeControl()
+    with UR5eArm("ur", control=control, receive=FakeReceive(), watchdog_hz=8.0) as arm:
+        for _ in range(3):
+            arm.speed_linear(np.array([0, 0, 0.005, 0, 0, 0]), 0.5)
+            arm.wait_period()
+        arm.stop()
+        arm.force_mode(np.zeros(6), np.array([0, 0, 1, 0, 0, 0]), np.array([0, 0, 5.0, 0, 0, 0]), np.full(6, 0.02))
+        arm.force_mode(np.zeros(6), np.array([0, 0, 1, 0, 0, 0]), np.array([0, 0, 5.0, 0, 0, 0]), np.full(6, 0.02))
+        arm.stop()
+        arm.start_move_linear(np.array([0.1, 0.2, 0.3, 0, 0, 0]), 0.05, 0.5)
+    names = [n for n in control.commands() if n in ("setWatchdog", "speedL", "forceMode", "moveL")]
+    assert names == [
+        "setWatchdog",
+        "setWatchdog", "speedL", "speedL", "speedL",
+        "setWatchdog", "forceMode", "forceMode",
+        "setWatchdog", "moveL",
+    ]  # fmt: skip
+
+
+def test_an_earlier_moves_finish_signal_cannot_end_the_next_move() -> None:
+    """move_to may end a move on arrival while its thread still runs; if the next move starts and the stream then
+    shows the earlier operation finishing, only the operation id tells the two apart."""
+    control = FakeControl()
+    control.move_periods = 1000
+    with UR5eArm("ur", control=control, receive=FakeReceive()) as arm:
+        arm.start_move_linear(np.array([0.1, 0.2, 0.3, 0, 0, 0]), 0.05, 0.5)
+        assert arm.move_running()
+        arm.start_move_linear(np.array([0.1, 0.25, 0.3, 0, 0, 0]), 0.05, 0.5)  # the first one's thread still ran
+        control.stale_words = [1 << 24]  # operation 1 (the first move) finished: seen after the second started
+        assert arm.move_running()
+        control.move_periods = 0
+        control.stop_moves()
+        assert not arm.move_running()  # operation 2 finished

@@ -23,7 +23,11 @@ Safety (what a real controller does when the host misbehaves, ``hardware-facts``
   end them and the watchdog stays fed: a blocking ``moveL`` longer than 1 / ``watchdog_hz`` would trip it and
   cannot be stopped from the host;
 * ``stop`` and ``close`` run every step (forceModeStop, stopL, speedStop; then stopScript and disconnect) on its own,
-  and a second Ctrl-C during them is held until they are done;
+  and a second Ctrl-C during them is held until they are done. When the receive side has lost the controller (no
+  new state for ``STALL_TIMEOUT_S``) they send none of them: ur_rtde's blocking commands to a vanished controller
+  return only after ~301 s each, and the watchdog stops the program anyway;
+* the watchdog is armed again as each motion starts: ur_rtde reconnects by itself after a network error and
+  uploads its script again, and a fresh script has no watchdog;
 * after a protective or emergency stop the controller refuses everything: commands are refused up front with
   :class:`~drivers.errors.ProtectiveStop` (what to do on the pendant in the hint), and a program that stopped (the
   watchdog, the pendant) gives :class:`~drivers.errors.ControlScriptStopped`;

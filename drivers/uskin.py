@@ -32,6 +32,7 @@ from protocols.xela_can import (
     TaxelIdMap,
     decode_stream_command,
     encode_stream_command,
+    invalid_taxels,
 )
 from protocols.xela_ws import XelaDataMessage, XelaWelcome, decode_message
 
@@ -406,6 +407,7 @@ class UskinXelaServerDriver(PumpedSensor):
                 hint="pick the uSPa46's sensor number (--sensor-number) or fix the model in xServ.ini",
             )
         self.model = sensor.model
+        invalid = invalid_taxels(sensor.values)  # e.g. FA00 placeholders while the server has no data yet
         return TactileFrame(
             sensor=USKIN.name,
             host_t_ns=self.clock.now_ns(),
@@ -413,6 +415,8 @@ class UskinXelaServerDriver(PumpedSensor):
             seq=message.seq,
             device_t_us=round(message.server_time_s * 1e6),
             calibrated_n=sensor.calibrated,
+            valid=not invalid.any(),
+            stale_mask=invalid if invalid.any() else None,
         )
 
     def tare(self, frames: list[TactileFrame]) -> TareRecord:

@@ -160,6 +160,13 @@ USPA46_ID_MAP = TaxelIdMap.from_xela_ini_order(
 USPA44_ID_MAP = TaxelIdMap.from_row_col_ids(4, 4, name="uSPa44 0x1RC (4x4)")
 
 
+def invalid_taxels(values: np.ndarray) -> np.ndarray:
+    """(n_taxels,) bool: taxels whose (n_taxels, 3) counts are the "no data" sentinel (X >= 0xFA00) or all zero,
+    the same rule as a CAN message; for frames that arrive whole (xela_server's ``data``)."""
+    counts = np.asarray(values)
+    return (counts[:, 0] >= INVALID_X_MSB << 8) | ~counts.any(axis=1)
+
+
 @dataclass(frozen=True, slots=True)
 class TaxelMessage:
     """One taxel's three raw counts from one CAN message; ``valid`` is False for the 0xFA sentinel or all-zero axes."""

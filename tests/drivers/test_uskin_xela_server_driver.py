@@ -16,6 +16,7 @@ from drivers.uskin import UskinXelaServerDriver
 from unitac_rig.sim.devices import counts_from_sample
 from unitac_rig.sim.devices.xela_server import SimXelaServer
 from unitac_rig.sim.faults import FaultPlan
+from unitac_rig.sim.signals import SensorSample
 from unitac_rig.sim.synthetic_sources import RecordingSource, UskinPressSource
 
 RATE_HZ = 500  # fast, to keep the real-time tests short
@@ -115,3 +116,20 @@ def test_tare_over_the_server_frames() -> None:
         record = driver.tare(frames)
     np.testing.assert_allclose(record.baseline, np.mean([f.values for f in frames], axis=0))
     assert record.method == "host-mean"
+
+
+class _Placeholders:
+    """Server data with XELA's "no data" placeholders: FA00 on taxel 3's x, all-zero taxel 5."""
+
+    def sample(self, t_ns: int) -> SensorSample:
+        values = np.full((24, 3), 20_000.0)
+        values[3, 0] = 0xFA00
+        values[5] = 0.0
+        return SensorSample(values=values, displacement_mm=None)
+
+
+def test_placeholder_taxels_from_the_server_are_flagged_like_on_can() -> None:
+    with server_rig(RecordingSource(_Placeholders())) as (driver, _):
+        frames = driver.wait_frames(3, timeout_s=5.0)
+    assert frames and all(not f.valid for f in frames)
+    assert all(f.stale_mask is not None and list(np.flatnonzero(f.stale_mask)) == [3, 5] for f in frames)

@@ -22,6 +22,7 @@ from protocols.xela_can import (
     encode_invalid_taxel_message,
     encode_stream_command,
     encode_taxel_message,
+    invalid_taxels,
 )
 
 MS = 1_000_000  # ns
@@ -344,3 +345,8 @@ def test_taxel_message_round_trip(x: int, y: int, z: int, byte0: int) -> None:
     message = decode_taxel_message(0x100, encode_taxel_message(0x100, x, y, z, byte0=byte0))
     assert (message.x, message.y, message.z) == (x, y, z)
     assert message.valid == (x < 0xFA00 and (x, y, z) != (0, 0, 0))
+
+
+def test_invalid_taxels_of_a_whole_frame_follow_the_message_rule() -> None:
+    values = np.array([[0xF9FF, 0, 0], [0xFA00, 5, 5], [0, 0, 0], [0, 0, 1], [0xFFFF, 0xFFFF, 0xFFFF]])
+    assert invalid_taxels(values).tolist() == [False, True, True, False, True]

@@ -654,8 +654,8 @@ class UR5eArm:
 
     def _rearm_watchdog(self) -> None:
         """Arm the watchdog again as a motion starts (one ~5 ms round trip). ur_rtde reconnects by itself after a
-        network error and uploads its script again, and a fresh script has no watchdog; this bounds how long a
-        motion can run unguarded after such a reconnect to none."""
+        network error and uploads its script again, and a fresh script has no watchdog: so no motion starts
+        unguarded after such a reconnect."""
         if self._watchdog_hz is not None:
             ok = self._call("setWatchdog", self._control.setWatchdog, float(self._watchdog_hz))
             self._expect_ok("setWatchdog", ok)

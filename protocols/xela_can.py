@@ -32,7 +32,7 @@ start), aturganbayev/tactile_UR5 (``cansend can0 203#07.00``), as summarised in 
 from __future__ import annotations
 
 import struct
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -96,8 +96,8 @@ class TaxelIdMap:
     """Which CAN arbitration id carries which taxel, in layout order (``index = row * cols + col``).
 
     ``ids[i]`` is the arbitration id of taxel ``i``. Firmware differs in its ids, so maps are data: build one with
-    :meth:`from_ids` (ids in layout order) or :meth:`from_xela_ini_order` (ids as listed s1, s2, ... in XELA's
-    map file, which is the layout order).
+    :meth:`from_ids` (ids in layout order; XELA's map file lists s1, s2, ... in that order) or
+    :meth:`from_row_col_ids`.
     """
 
     ids: tuple[int, ...]
@@ -132,18 +132,14 @@ class TaxelIdMap:
 
     @classmethod
     def from_ids(cls, ids: Iterable[int], name: str = "") -> TaxelIdMap:
-        """Map from CAN ids listed in layout order (taxel 0 first)."""
-        return cls(tuple(ids), name=name)
+        """Map from CAN ids listed in layout order (taxel 0 first).
 
-    @classmethod
-    def from_xela_ini_order(cls, ini_ids: Sequence[int], name: str = "") -> TaxelIdMap:
-        """Map from ids listed as in XELA's map file (s1 first): the ini order is the layout order.
-
-        XELA's 4x6 map numbers the taxels s1 = 0x135 ... s6 = 0x130, s7 = 0x125 ... s24 = 0x100, and xela_server
-        lists a sensor's taxels "from top left, line by line", in that numbering [inferred]: so s1 (0x135) is taxel 0
-        (row 0, col 0) here too, and a frame reads the same through CAN and through xela_server.
+        XELA's map file is in that order: its 4x6 map numbers the taxels s1 = 0x135 ... s6 = 0x130, s7 = 0x125 ...
+        s24 = 0x100, and xela_server lists a sensor's taxels "from top left, line by line" in that numbering
+        [inferred]; so s1 (0x135) is taxel 0 (row 0, col 0) here too, and a frame reads the same through CAN and
+        through xela_server.
         """
-        return cls(tuple(ini_ids), name=name)
+        return cls(tuple(ids), name=name)
 
     @classmethod
     def from_row_col_ids(cls, rows: int, cols: int, base: int = 0x100, name: str = "") -> TaxelIdMap:
@@ -154,8 +150,8 @@ class TaxelIdMap:
 
 
 # uSPa46: XELA's 4x6 map, s1 = 0x135 first (0x1RC ids numbered in reverse); layout taxel 0 = s1 = 0x135.
-USPA46_ID_MAP = TaxelIdMap.from_xela_ini_order(
-    tuple(reversed(TaxelIdMap.from_row_col_ids(4, 6).ids)), name="uSPa46 XELA map (s1 = 0x135 first)"
+USPA46_ID_MAP = TaxelIdMap.from_ids(
+    reversed(TaxelIdMap.from_row_col_ids(4, 6).ids), name="uSPa46 XELA map (s1 = 0x135 first)"
 )
 USPA44_ID_MAP = TaxelIdMap.from_row_col_ids(4, 4, name="uSPa44 0x1RC (4x4)")
 

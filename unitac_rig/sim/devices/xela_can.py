@@ -60,6 +60,8 @@ class SimXelaController:
         self.controller_id = controller_id
         self.source = source
         self.id_map = id_map
+        # (taxel index, id) in the order a controller sends each cycle: by id, 0x100 first
+        self._send_order = sorted(enumerate(id_map.ids), key=lambda item: item[1])
         self.faults = FaultInjector(faults)
         self.missing_taxels = frozenset(missing_taxels)
         self.byte0 = byte0
@@ -104,7 +106,7 @@ class SimXelaController:
             return
         counts = counts_from_sample(self.source.sample(t_ns).values)
         release_ns = self.faults.release_t_ns(t_ns)
-        for index, arbitration_id in sorted(enumerate(self.id_map.ids), key=lambda item: item[1]):  # in id order
+        for index, arbitration_id in self._send_order:
             if index in self.missing_taxels:
                 continue
             x, y, z = (int(v) for v in counts[index])

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from unitac_rig.bench import default_out_dir, write_json
-from unitac_rig.bench.fidelity import ABLATION_FORCE_N, RECORDED, REL_TOLERANCE, model_settings, seeded_scene
+from unitac_rig.bench.fidelity import RECORDED, REL_TOLERANCE, model_settings, sweep_loads
 from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.sensor_models import UskinModel
 
@@ -41,11 +41,7 @@ def sweep_counts(seed: int) -> dict[str, np.ndarray]:
     uskin = UskinModel(uskin_params, np.random.default_rng([seed, 2]))
     out = {}
     for object_id in RECORDED:
-        obj = get_object(object_id)
-        force = ABLATION_FORCE_N.get(obj.material, 10.4)
-        scene = seeded_scene(obj, 0.0, "uskin", seed=seed, params=scene_params)
-        sweep = np.linspace(-45.0, 45.0, ANGLES)
-        loads = [scene.loads_at_force(float(a), f) for a in sweep for f in (0.5 * force, force)]
+        loads = sweep_loads(get_object(object_id), "uskin", scene_params, seed=seed, angles=ANGLES)
         out[object_id] = uskin.signal_counts(np.stack([x.forces_n for x in loads])).astype(np.float64)
     return out
 

@@ -25,9 +25,9 @@ from unitac_rig.bench import machine_info
 from unitac_rig.collection.session import collect_session
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.config import RigConfig, parse_rig_config
-from unitac_rig.rig.objects import MATERIALS, MaterialSpec, get_object
+from unitac_rig.rig.objects import MATERIALS, MaterialSpec, ObjectSpec, get_object
 from unitac_rig.sim.fast_rig import SimRig, seeded_scene
-from unitac_rig.sim.scene import SceneParams
+from unitac_rig.sim.scene import SceneParams, TaxelLoads
 from unitac_rig.sim.sensor_models import UskinModel, UskinParams
 from unitac_rig.storage.reader import read_presses, read_session_info
 from unitac_rig.storage.recorder import session_path
@@ -258,6 +258,17 @@ ABLATIONS: dict[str, tuple[dict[str, Any], dict[str, Any], dict[str, dict[str, A
 ABLATION_FORCE_N = {"PLA": 10.4, "TPU": 10.2}
 
 
+def sweep_loads(
+    obj: ObjectSpec, sensor: str, scene_params: SceneParams, *, seed: int = 0, angles: int = 91
+) -> list[TaxelLoads]:
+    """The scene alone over the -45..+45 deg sweep (the recorded sessions' press order): loads at half the
+    material's ablation press force and at the full force, alternating, for ``sensor`` mounted as the simulated rig
+    seeds it (placement and mount drawn from ``seed``)."""
+    force = ABLATION_FORCE_N.get(obj.material, 10.4)
+    scene = seeded_scene(obj, 0.0, sensor, seed=seed, params=scene_params)
+    return [scene.loads_at_force(float(a), f) for a in np.linspace(-45.0, 45.0, angles) for f in (0.5 * force, force)]
+
+
 def scene_extremes(
     scene_params: SceneParams,
     uskin_params: UskinParams,
@@ -270,18 +281,15 @@ def scene_extremes(
     the angle sweep, through the uSkin's seeded gains and cross-talk; placement and mount errors seeded as the
     simulated rig seeds them. Cheap enough to switch each addition off in turn (:data:`ABLATIONS`). ``materials``
     replaces the catalogue's material parameters by name (a refit moves them)."""
-    sweep = np.linspace(-45.0, 45.0, angles)
     out: dict[str, dict[str, float]] = {}
     uskin = UskinModel(uskin_params, np.random.default_rng([seed, 2]))
     for object_id in RECORDED:
         obj = get_object(object_id)
         if materials and obj.material in materials:
             obj = replace(obj, material_params=materials[obj.material])
-        force = ABLATION_FORCE_N.get(obj.material, 10.4)
         row: dict[str, float] = {}
         for sensor in SENSORS:
-            scene = seeded_scene(obj, 0.0, sensor, seed=seed, params=scene_params)
-            loads = [scene.loads_at_force(float(a), f) for a in sweep for f in (0.5 * force, force)]
+            loads = sweep_loads(obj, sensor, scene_params, seed=seed, angles=angles)
             forces = np.stack([x.forces_n for x in loads])
             if sensor == "uskin":
                 counts = uskin.signal_counts(forces)

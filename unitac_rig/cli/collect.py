@@ -123,7 +123,9 @@ def _run_session(
 ) -> SessionOutcome:
     rot = rotations if rotations is not None else list(obj.rotations_deg)
     planned = len(rot) * rig.config.press.angle_count
-    panel = LivePanel(f"{obj.id} / {sensor}", planned, 0, sensor, rig.config.press.threshold_n) if live else None
+    # Only a terminal can redraw the panel; piped into a file it was one last frame glued to the summary line.
+    show = live and console.is_terminal
+    panel = LivePanel(f"{obj.id} / {sensor}", planned, 0, sensor, rig.config.press.threshold_n) if show else None
 
     def ask(message: str) -> None:
         if panel is not None:

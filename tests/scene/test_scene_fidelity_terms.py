@@ -6,6 +6,7 @@
 * one fitted friction coefficient per pad (skin, pillars), the same on PLA and TPU, and shear that follows the
   outline's slope on soft walls too;
 * the seeded object centring error and pad pitch, drawn per scene, and the simulated rig's seeding of them;
+* a sensor pad mounted off the tool axis: a cylinder met off its crest, and the torque moved to the TCP;
 * two terms the default scene leaves off (measured, docs/simulator.md): the prism bending as a cantilever (the
   contact deeper toward its base) and a seeded rotation of the object on its adapter.
 """
@@ -217,6 +218,48 @@ def test_a_shared_placement_gives_both_pads_the_same_centring_error() -> None:
     own = np.random.default_rng(2)
     assert np.allclose(alone.center_mm, np.array([-150.0, 625.0]) + own.standard_normal(2) * 1.0)
     assert alone.pad_pitch_deg == pytest.approx(params.pad_pitch_deg + own.standard_normal() * 0.5)
+
+
+def test_a_pillar_pad_mounted_off_the_tool_axis_meets_a_cylinder_off_its_crest() -> None:
+    # Pad centre m = -1.3 mm along its x from the TCP, press aimed at the cylinder's axis: the centre column's tips
+    # (radius 3 mm) meet the circle (radius 25 mm) 1.3 mm off its crest, where the line between the centres leans
+    # by m / sqrt(28^2 - m^2) = -0.04648; the shear follows that lean part-way: x / z = c * -0.04648 = -0.02556
+    # (under the 0.45 friction cap). Centred, the cylinder gives no lateral load at all.
+    m = -1.3
+    params = replace(EXACT, pillar_pad_offset_mm=m)
+    circle = get_object("circle_pla")
+    loads = PAPILLARRAY.to_grid(PressScene(circle, 0.0, PAPILLARRAY, params=params).loads_at_force(0.0, 10.0).forces_n)
+    centre = loads[:, 1]  # the middle column, every row
+    assert np.all(centre[:, 2] > 0.5)
+    lean = m / math.sqrt(28.0**2 - m**2)
+    assert np.allclose(centre[:, 0] / centre[:, 2], params.shear_projection * lean, rtol=1e-3)
+    centred = PAPILLARRAY.to_grid(PressScene(circle, 0.0, PAPILLARRAY, params=EXACT).loads_at_force(0.0, 10.0).forces_n)
+    assert np.allclose(centred[..., 0], 0.0, atol=1e-9)
+    # the offset is the PapillArray's mount: the uSkin scene reads its own (skin_pad_offset_mm), here 0
+    skin = PressScene(circle, 0.0, USKIN, params=params).loads_at_force(0.0, 10.0).forces_n
+    assert np.allclose(skin, PressScene(circle, 0.0, USKIN, params=EXACT).loads_at_force(0.0, 10.0).forces_n)
+
+
+@pytest.mark.parametrize("layout", [PAPILLARRAY, USKIN], ids=["papillarray", "uskin"])
+def test_an_offset_pad_reads_as_the_object_moved_and_its_torque_is_taken_about_the_tcp(layout: SensorLayout) -> None:
+    # A pad m mm along the tool's x from the TCP sees what a centred pad sees with the object m mm the other way;
+    # the force is the same, and the torque about the TCP gains r x F with r = (m, 0, 0) mm.
+    m = 2.0
+    key = "pillar_pad_offset_mm" if layout is PAPILLARRAY else "skin_pad_offset_mm"
+    obj = get_object("hex_pla")
+    offset = PressScene(obj, 0.0, layout, params=replace(EXACT, **{key: m}))
+    moved = PressScene(obj, 0.0, layout, params=EXACT)
+    pose = offset.pose_at_travel(10.0, 0.8)
+    rot = rotvec_to_matrix(pose[3:])
+    moved.center_mm = moved.center_mm - m * rot[:2, 0]  # the tool's x in the base plane
+    assert offset.touch_distance_mm(10.0) == pytest.approx(moved.touch_distance_mm(10.0))
+    assert np.allclose(offset.taxel_loads(pose).forces_n, moved.taxel_loads(pose).forces_n)
+    w_offset, w_moved = offset.wrench_on_tool(pose), moved.wrench_on_tool(pose)
+    force = rot.T @ w_moved[:3]
+    assert np.allclose(rot.T @ w_offset[:3], force)
+    assert abs(force[0]) > 0.1 and force[2] < -2.0  # a tilted face: shear as well as the press
+    expected = rot.T @ w_moved[3:] + np.cross([m * 1e-3, 0.0, 0.0], force)
+    assert np.allclose(rot.T @ w_offset[3:], expected, atol=1e-9)
 
 
 def test_a_prism_tilts_as_a_cantilever_of_its_hollow_section() -> None:

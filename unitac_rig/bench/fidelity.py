@@ -252,6 +252,11 @@ ABLATIONS: dict[str, tuple[dict[str, Any], dict[str, Any], dict[str, dict[str, A
         {},
     ),
     "without the centring error": ({"centring_error_mm": 0.0}, {}, {}),
+    "centring error as before, no PapillArray pad offset (sigma 0.75, 0)": (
+        {"centring_error_mm": 0.75, "pillar_pad_offset_mm": 0.0},
+        {},
+        {},
+    ),
 }
 # Pooled extremes of the noise-free scene: press forces at which the loads are taken (N), per material; about the
 # simulated rig's largest true press force per session.

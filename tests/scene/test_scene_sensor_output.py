@@ -56,30 +56,37 @@ def test_uskin_counts_clip_to_16_bits() -> None:
 
 
 def test_papillarray_readings_are_quantised_and_carry_displacement() -> None:
-    model = PapillArrayModel(PapillArrayParams(offset_sd_n=0.0, offset_sd_mm=0.0), np.random.default_rng(0))
-    loads = TaxelLoads(np.tile([0.3, 0.0, 2.0], (9, 1)), np.tile([0.25, 0.0, 0.33], (9, 1)))
+    model = PapillArrayModel(PapillArrayParams(offset_sd_mm=0.0), np.random.default_rng(0))
+    # loads as the scene gives them: force = k * displacement, k = 1.2 N/mm lateral, 6 N/mm axial
+    loads = TaxelLoads(np.tile([0.3, 0.0, 2.0], (9, 1)), np.tile([0.25, 0.0, 2.0 / 6.0], (9, 1)))
     samples = [model.sample(loads) for _ in range(300)]
     values = np.stack([s.values for s in samples])
     disp = np.stack([s.displacement_mm for s in samples if s.displacement_mm is not None])
     assert np.allclose(values * 1000, np.round(values * 1000), atol=1e-6)  # 1 mN steps
     assert np.allclose(disp * 1000, np.round(disp * 1000), atol=1e-6)  # 1 um steps
     assert values[..., 2].mean() == pytest.approx(2.0, abs=0.005)
-    assert values[..., 2].std() == pytest.approx(0.02, rel=0.15)
-    assert disp[..., 2].mean() == pytest.approx(0.33, abs=0.002)
+    assert disp[..., 2].mean() == pytest.approx(0.333, abs=0.002)
+    # the force is computed from the measured displacement: one noise, 0.005 mm on the tip, 6 x 0.005 = 0.03 N on z
+    # and 1.2 x 0.005 = 0.006 N across; each reading's force is its displacement through the calibration
+    assert disp[..., 2].std() == pytest.approx(0.005, rel=0.15)
+    assert values[..., 2].std() == pytest.approx(0.03, rel=0.15)
+    assert values[..., 0].std() == pytest.approx(0.006, rel=0.15)
+    assert np.allclose(values, disp * [1.2, 1.2, 6.0], atol=0.005)
 
 
-def test_unbiased_papillarray_shows_seeded_offsets() -> None:
+def test_unbiased_papillarray_shows_seeded_offsets_in_force_and_displacement_alike() -> None:
     model = PapillArrayModel(rng=np.random.default_rng(9))
-    idle = np.mean([model.sample(_loads(9)).values for _ in range(100)], axis=0)
-    assert np.allclose(idle, model.offset_n, atol=0.01)
-    assert 0.03 < np.abs(model.offset_n).mean() < 0.2
+    samples = [model.sample(TaxelLoads(np.zeros((9, 3)), np.zeros((9, 3)))) for _ in range(100)]
+    idle = np.mean([s.values for s in samples], axis=0)
+    idle_mm = np.mean([s.displacement_mm for s in samples if s.displacement_mm is not None], axis=0)
+    assert np.allclose(idle, model.offset_n, atol=0.01) and np.allclose(idle_mm, model.offset_mm, atol=0.002)
+    assert np.allclose(model.offset_n, model.offset_mm * [1.2, 1.2, 6.0])
+    assert 0.05 < np.abs(model.offset_n[:, 2]).mean() < 0.2  # ~0.1 N on z until the hub's bias command
 
 
 def test_scene_source_reads_the_pose_it_is_given() -> None:
     scene = PressScene(get_object("circle_pla"), 0.0, PAPILLARRAY, params=SceneParams().exact())
-    model = PapillArrayModel(
-        PapillArrayParams(offset_sd_n=0.0, offset_sd_mm=0.0, noise_n=0.0, noise_mm=0.0), np.random.default_rng(0)
-    )
+    model = PapillArrayModel(PapillArrayParams(offset_sd_mm=0.0, noise_mm=0.0), np.random.default_rng(0))
     poses = iter([scene.pose_at_travel(0, -1.0), scene.pose_at_travel(0, scene.travel_at_force_mm(0, 10.0))])
     source = SceneSensorSource(scene, model, lambda: next(poses))
     before, pressed = source.sample(0), source.sample(10_000_000)

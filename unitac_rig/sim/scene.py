@@ -374,8 +374,8 @@ class PressScene:
         section = self._outline.section(np.array(x_axis), np.array(z_axis), c_s)
         table = self._pad.table(section, self.obj.material_params)
         if self.pad_offset_mm:
-            # the pad computes its torques about its own centre; the tool's are about the TCP, m mm behind it along x:
-            # tau += r x F with r = (m, 0, 0)
+            # the pad computes its torques about its own centre; the tool's are about the TCP, and the pad's centre is
+            # at r = (m, 0, 0) mm from it: tau += r x F
             table.wrench_tool[:, 4] -= self.pad_offset_mm * 1e-3 * table.wrench_tool[:, 2]
             table.wrench_tool[:, 5] += self.pad_offset_mm * 1e-3 * table.wrench_tool[:, 1]
         ray = _RayTable(table, self.obj.material_params, self.params, rot, psi, c_s)

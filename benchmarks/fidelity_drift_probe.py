@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from unitac_rig.bench import default_out_dir, write_json
-from unitac_rig.bench.fidelity import RECORDED, REL_TOLERANCE, model_settings, sweep_loads
+from unitac_rig.bench.fidelity import RECORDED, REL_TOLERANCE, USKIN_MIN_MAX_RATIO, model_settings, sweep_loads
 from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.sensor_models import UskinModel
 
@@ -32,7 +32,6 @@ SESSION_S = {
     "square_tpu": 1141.8,
 }
 ANGLES = 91
-MIN_OVER_MAX = 0.5  # the issue's |min|/max target
 
 
 def sweep_counts(seed: int) -> dict[str, np.ndarray]:
@@ -57,7 +56,7 @@ def targets_met(counts: dict[str, np.ndarray], rate: float) -> tuple[int, dict[s
         rec_low, rec_high = RECORDED[object_id]["uskin"]
         met += abs(low / rec_low - 1) <= REL_TOLERANCE
         met += abs(high / rec_high - 1) <= REL_TOLERANCE
-        met += abs(low) / high >= MIN_OVER_MAX
+        met += abs(low) / high >= USKIN_MIN_MAX_RATIO
         extremes[object_id] = (low, high)
     return met, extremes
 

@@ -12,14 +12,11 @@ from __future__ import annotations
 import mmap
 import struct
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TypeVar
 
 import numpy as np
 
 _SEQ = struct.Struct("<Q")
-_T = TypeVar("_T")
 # controller time, cycles, pad pose, reported TCP pose, true wrench, reported wrench, TCP speed, |F| true, |F| peak,
 # robot mode, safety mode, safety bits, robot status bits, runtime state, program running, watchdog armed,
 # watchdog trips, protective stops, emergency stops, program starts, script uploads, RTDE clients,
@@ -28,6 +25,7 @@ _T = TypeVar("_T")
 _BODY = struct.Struct("<dQ6d6d6d6d6ddd iiIII BB IIIIII d d QQ d Q")
 _SLOT = _SEQ.size + _BODY.size
 _SIZE = 2 * _SLOT
+_POSE = struct.Struct("<6d")
 _POSE_AT = _SEQ.size + 16  # the pad pose within a slot: after controller time (d) and cycles (Q)
 
 
@@ -117,19 +115,20 @@ class TruthBlock:
         _BODY.pack_into(self._map, at + _SEQ.size, *_pack(truth))
         _SEQ.pack_into(self._map, at, 2 * self._generation)
 
-    def _latest(self, unpack: Callable[[int], _T], timeout_s: float) -> _T | None:
-        """``unpack(slot offset)`` of the newest complete snapshot; None before the first write, or when no slot holds
-        a complete snapshot for ``timeout_s`` (the writer died mid-write before any other was complete)."""
+    def _latest(self, fmt: struct.Struct, offset: int, timeout_s: float) -> tuple[float | int, ...] | None:
+        """The raw fields ``fmt`` reads at ``offset`` within the slot of the newest complete snapshot; None before
+        the first write, or when no slot holds a complete snapshot for ``timeout_s`` (the writer died in its first
+        write). Only raw tuples are read here, so the caller builds one result, not one per slot."""
         deadline = time.monotonic() + timeout_s
         while True:
-            best: tuple[int, _T] | None = None
+            best: tuple[int, tuple[float | int, ...]] | None = None
             for slot in (0, 1):
                 at = slot * _SLOT
                 before = self._slot_seq(slot)
-                value = unpack(at)
+                fields = fmt.unpack_from(self._map, at + offset)
                 after = self._slot_seq(slot)
                 if before == after and before % 2 == 0 and before > 0 and (best is None or before > best[0]):
-                    best = (before, value)
+                    best = (before, fields)
             if best is not None:
                 return best[1]
             if self._slot_seq(0) == 0 and self._slot_seq(1) == 0:
@@ -140,9 +139,11 @@ class TruthBlock:
 
     def read(self, timeout_s: float = 0.5) -> TwinTruth | None:
         """The latest complete snapshot; None before the first write."""
-        return self._latest(lambda at: _unpack(_BODY.unpack_from(self._map, at + _SEQ.size)), timeout_s)
+        fields = self._latest(_BODY, _SEQ.size, timeout_s)
+        return None if fields is None else _unpack(fields)
 
     def read_pad_pose(self, timeout_s: float = 0.5) -> np.ndarray | None:
         """Just the physical tool's pose (what the sensors sample), without building a whole snapshot; None before
         the first write."""
-        return self._latest(lambda at: np.array(struct.unpack_from("<6d", self._map, at + _POSE_AT)), timeout_s)
+        fields = self._latest(_POSE, _POSE_AT, timeout_s)
+        return None if fields is None else np.array(fields)

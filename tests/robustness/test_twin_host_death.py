@@ -60,7 +60,11 @@ def start_and_wait_for_a_press(rig: RigTwin, cmd: list[str]) -> subprocess.Popen
         time.sleep(0.002)
     proc.kill()
     out, err = proc.communicate()
-    raise AssertionError(f"the collect never pressed (exit {proc.returncode}): {out[-500:]} {err[-1000:]}")
+    truth = rig.controller.truth()
+    raise AssertionError(
+        f"the collect never pressed (exit {proc.returncode}): {out[-500:]} {err[-1000:]}; the twin's last error: "
+        f"{rig.controller.status().get('last_error')!r}, worst lateness {truth.worst_lateness_s:.3f} s"
+    )
 
 
 def watch(rig: RigTwin, seconds: float) -> list[TwinTruth]:

@@ -6,6 +6,8 @@ margins for a loaded machine; never exact timing. Ground truth comes from the tw
 
 from __future__ import annotations
 
+import os
+import signal
 import time
 
 import numpy as np
@@ -160,6 +162,38 @@ def test_watchdog_expiry_stops_the_arm_and_the_program(rig: TwinClients) -> None
     assert control.zeroFtSensor() is False  # every command fails until the script is uploaded again
     assert control.reuploadScript() and wait_until(control.isProgramRunning)
     assert control.zeroFtSensor()
+
+
+def _kick_for(control: rtde_control.RTDEControlInterface, seconds: float) -> None:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:  # a live host: one write per 2 ms period
+        period = control.initPeriod()
+        control.kickWatchdog()
+        control.waitPeriod(period)
+
+
+def test_a_twin_descheduled_for_longer_than_the_watchdog_window_keeps_a_live_hosts_program(rig: TwinClients) -> None:
+    """The twin's process stops for 0.5 s (a loaded machine) while the host keeps writing: a real controller would
+    have read those writes on time, so the program runs on; once the host stops writing, the watchdog trips."""
+    control, twin = rig.control, rig.twin
+    trips = twin.truth().watchdog_trips
+    assert control.setWatchdog(5.0)  # 200 ms without a write stops the program
+    assert control.speedL(UP, 0.5, 0.0)
+    assert wait_until(lambda: twin.truth().speed_m_s > 0.0)
+    _kick_for(control, 0.2)
+    os.kill(twin.pid, signal.SIGSTOP)
+    try:
+        _kick_for(control, 0.5)  # the writes wait in the twin's socket
+    finally:
+        os.kill(twin.pid, signal.SIGCONT)
+    _kick_for(control, 0.3)
+    truth = twin.truth()
+    assert truth.worst_lateness_s > 0.4  # the stall happened and was caught up
+    assert truth.program_running and truth.watchdog_trips == trips
+    assert wait_until(lambda: not twin.truth().program_running, 3.0)  # the host stops writing
+    assert twin.truth().watchdog_trips == trips + 1
+    assert wait_until(lambda: twin.truth().at_rest)
+    assert control.reuploadScript() and wait_until(control.isProgramRunning)
 
 
 def test_protective_stop_refuses_commands_until_unlocked_and_reuploaded(rig: TwinClients) -> None:

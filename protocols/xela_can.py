@@ -14,14 +14,16 @@ Wire format (1 Mbit/s CAN, standard 11-bit arbitration ids, classic frames of up
 * Taxel ids: ``0x1RC`` with R = row 0..3 and C = column (chip) 0..3 on the 4x4 uSPa44 and 0..5 on the 4x6 uSPa46.
   XELA's own map file numbers the 4x6 taxels in *reverse*: s1 = 0x135, s2 = 0x134 ... s6 = 0x130, s7 = 0x125 ...
   s24 = 0x100, and xela_server lists taxels "from top left, line by line": so on the uSPa46 taxel 0 (top left) is
-  s1 = 0x135 and taxel 23 is 0x100, the same frame through CAN as through xela_server (:data:`USPA46_ID_MAP`). The
-  controller still sends each cycle in id order (0x100 first). Other firmware uses other ids (one used 0x710 + taxel
-  index), so id maps are plain data (:class:`TaxelIdMap`). This project's taxel index is row-major,
-  ``index = row * cols + col`` (drivers/layouts.py).
+  s1 = 0x135 and taxel 23 is 0x100, the same frame through CAN as through xela_server (:data:`USPA46_ID_MAP`). No
+  source states the order in which a controller sends a cycle's messages, so the assembler does not assume one.
+  Other firmware uses other ids (one used 0x710 + taxel index), so id maps are plain data (:class:`TaxelIdMap`).
+  This project's taxel index is row-major, ``index = row * cols + col`` (drivers/layouts.py).
 * There is **no frame counter** on the wire: a frame is the latest message of every taxel id. The
   :class:`FrameAssembler` closes a frame as soon as every taxel has reported once since the previous frame; when a
   taxel reports a second time first (a cycle lost a message), the frame is closed early with the missing taxels
-  flagged in ``stale_mask``.
+  flagged in ``stale_mask``. Where the controller sends each cycle as a burst, the assembler learns the pause
+  between bursts, so a cycle that loses its first message, or a stream joined mid-cycle, does not shift later
+  frames.
 
 Sources: XELA-Robotics/CAN-USB README and sensor-server/server.py, ROS/4x6.ini (reverse numbering), the XELA ROS
 manual v0.0.9b and manual v1.4.0 (sentinel example), the AIST o2as_xela_sensor driver and demo (0xFA rule, 1-byte
@@ -31,7 +33,9 @@ start), aturganbayev/tactile_UR5 (``cansend can0 203#07.00``), as summarised in 
 
 from __future__ import annotations
 
+import math
 import struct
+from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -49,6 +53,11 @@ MAX_COUNT = 0xFFFF  # counts are unsigned 16-bit
 INVALID_X_MSB = 0xFA  # payload byte 1 (X MSB) at or above this marks a "no data" sentinel
 TAXEL_PAYLOAD_LEN = 8
 MIN_TAXEL_PAYLOAD_LEN = 7  # byte 0 + three big-endian uint16 axes
+# Learning where a cycle starts: one gap this many times any other in each of this many windows of one cycle's worth
+# of messages in a row. A burst of 24 messages at 1 Mbit/s takes ~3 ms; at 100 frames/s the pause before the next
+# burst is ~7 ms, ~60x the ~0.11 ms between messages.
+BURST_GAP_RATIO = 3
+LEARN_CYCLES = 3
 
 _AXES = struct.Struct(">HHH")  # X, Y, Z counts at payload offset 1
 
@@ -233,21 +242,31 @@ class AssembledFrame:
 class FrameAssembler:
     """Turns the per-taxel CAN message stream into frames (there is no frame counter on the wire).
 
-    A frame closes when every taxel has reported once since the previous frame. If a taxel reports a second time
-    before that (its cycle lost a message), the frame closes early, flagging the taxels that did not report, and
-    the repeating message opens the next frame. The controller sends each cycle in id order, so the message of
-    ``cycle_start_id`` (default: the lowest id of the map) also closes a partial frame: without that, a cycle that
-    lost its *first* message would be completed by the next cycle's first message, and every later frame would mix
-    two cycles until another loss. Pass ``cycle_start_id=None`` for firmware with another send order. Unknown ids are
-    counted and ignored; payloads too short to decode or carrying the sentinel count as invalid reports and flag
-    their taxel. ``stale_after_ns`` bounds how old a value in an emitted frame can be.
+    A frame closes when every taxel has reported once since the previous frame, in whatever order they came. If a
+    taxel reports a second time before that (its cycle lost a message), the frame closes early, flagging the taxels
+    that did not report, and the repeating message opens the next frame.
+
+    That alone cannot tell where a cycle starts: a cycle that lost its *first* message would be completed by the next
+    cycle's first message, and later frames would mix two cycles (so would a stream joined mid-cycle). Two things
+    mark a cycle's start. Learned (default): a controller that sends each cycle as a burst leaves one pause per cycle;
+    once :data:`LEARN_CYCLES` windows of one cycle's worth of messages in a row each held one gap at least
+    :data:`BURST_GAP_RATIO` times every other, a gap longer than the geometric mean of the pauses and the other gaps
+    closes a partial frame. Evenly spaced messages teach nothing, and frames close on completeness alone. Two frames
+    closed early by a pause with no complete frame between them (the timing changed, or the host's receive times do
+    not follow the device's bursts) switch the rule off for the life of the assembler. Fixed:
+    ``cycle_start_id``, for firmware known to send a given id first, closes a partial frame when that id arrives.
+
+    Unknown ids are counted and ignored; payloads too short to decode or carrying the sentinel count as invalid
+    reports and flag their taxel. ``stale_after_ns`` bounds how old a value in an emitted frame can be.
     """
 
     def __init__(
         self,
         id_map: TaxelIdMap = USPA46_ID_MAP,
         stale_after_ns: int = 250_000_000,
-        cycle_start_id: int | None = -1,
+        cycle_start_id: int | None = None,
+        *,
+        learn_pauses: bool = True,
     ) -> None:
         if stale_after_ns <= 0:
             raise ProtocolError(f"stale_after_ns must be > 0, got {stale_after_ns}", hint="e.g. 250_000_000 (250 ms)")
@@ -255,8 +274,17 @@ class FrameAssembler:
         self.stale_after_ns = stale_after_ns
         n = id_map.n_taxels
         self._index = id_map._index
-        start_id = min(id_map.ids) if cycle_start_id == -1 else cycle_start_id
-        self._cycle_start_index = None if start_id is None else self._index.get(start_id)
+        if cycle_start_id is not None and cycle_start_id not in self._index:
+            raise ProtocolError(
+                f"cycle_start_id 0x{cycle_start_id:X} is not a taxel id of the map", hint="use one of its ids, or None"
+            )
+        self._cycle_start_index = None if cycle_start_id is None else self._index[cycle_start_id]
+        self._learn_pauses = learn_pauses
+        self._prev_t_ns: int | None = None  # time of the previous known-id message
+        self._window: list[int] = []  # gaps (ns) of the last < n messages
+        self._pauses: deque[tuple[int, int]] = deque(maxlen=LEARN_CYCLES)  # (pause, next longest gap) per window
+        self.pause_threshold_ns: int | None = None  # a gap this long starts a cycle (learned; None: not known)
+        self._pause_closes = 0  # frames closed early by a pause since the last complete frame
         self._values: list[list[int]] = [[0, 0, 0] for _ in range(n)]  # last good counts per taxel
         self._good_t_ns: list[int | None] = [None] * n  # time of each taxel's last good value
         self._bad_this_cycle: list[bool] = [False] * n  # reported, but invalid
@@ -281,9 +309,19 @@ class FrameAssembler:
         if index is None:
             self.unknown_ids += 1
             return None
+        gap = None if self._prev_t_ns is None else t_ns - self._prev_t_ns
+        self._prev_t_ns = t_ns
+        after_pause = gap is not None and self.pause_threshold_ns is not None and gap >= self.pause_threshold_ns
         emitted: AssembledFrame | None = None
-        if self._seen[index] or (index == self._cycle_start_index and self._n_seen > 0):
+        if self._n_seen > 0 and (self._seen[index] or index == self._cycle_start_index or after_pause):
             emitted = self._emit(incomplete=True)
+            if after_pause and not self._seen[index]:
+                self._pause_closes += 1
+                if self._pause_closes >= 2:  # pauses do not mark cycles on this stream: stop using them for good
+                    self.pause_threshold_ns = None
+                    self._learn_pauses = False
+        if gap is not None and self._learn_pauses:
+            self._learn(gap)
         self._seen[index] = True
         self._n_seen += 1
         self._last_t_ns = t_ns
@@ -302,8 +340,25 @@ class FrameAssembler:
         if self._n_seen == len(self._seen):
             # Cannot coincide with an early close: that leaves exactly one taxel seen, and a 1-taxel map never
             # closes early.
+            self._pause_closes = 0
             return self._emit(incomplete=False)
         return emitted
+
+    def _learn(self, gap: int) -> None:
+        """Collect one cycle's worth of gaps; a window with one clear pause counts toward learning the threshold."""
+        self._window.append(gap)
+        if len(self._window) < self.n_taxels or self.n_taxels < 2:
+            return
+        longest, runner_up = sorted(self._window)[-1:-3:-1]
+        self._window = []
+        if longest <= 0 or longest < BURST_GAP_RATIO * runner_up:
+            self._pauses.clear()
+            return
+        self._pauses.append((longest, runner_up))
+        if self.pause_threshold_ns is None and len(self._pauses) == LEARN_CYCLES:
+            shortest_pause = min(p for p, _ in self._pauses)
+            longest_other = max(r for _, r in self._pauses)
+            self.pause_threshold_ns = max(1, round(math.sqrt(shortest_pause * max(longest_other, 1))))
 
     def _emit(self, *, incomplete: bool) -> AssembledFrame:
         t_ns = self._last_t_ns

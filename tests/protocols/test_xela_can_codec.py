@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from drivers.uskin import STALE_AFTER_S
 from protocols.errors import ProtocolError
 from protocols.xela_can import (
+    LEARN_CYCLES,
     START_STREAM_PAYLOAD,
     STOP_STREAM_PAYLOAD,
     USPA44_ID_MAP,
@@ -26,6 +27,7 @@ from protocols.xela_can import (
 )
 
 MS = 1_000_000  # ns
+WARM_UP = LEARN_CYCLES + 1  # cycles before the pause is known: the first one has no pause before it
 
 
 # --------------------------------------------------------------------------------------------- stream commands
@@ -185,7 +187,7 @@ def _send_cycle(
 
 
 def test_frame_closes_when_every_taxel_has_reported_in_any_order() -> None:
-    assembler = FrameAssembler(ID_ORDER_46, cycle_start_id=None)  # firmware whose send order is not by id
+    assembler = FrameAssembler(ID_ORDER_46)
     order = [23, 0, 5, 12, *[i for i in range(24) if i not in (23, 0, 5, 12)]]
     frames = _send_cycle(assembler, cycle=0, t0_ns=0, order=order)
     assert len(frames) == 1
@@ -225,17 +227,126 @@ def test_taxel_never_seen_reads_zero_and_is_flagged() -> None:
 
 
 def test_lost_leading_taxel_is_flagged_and_the_next_cycle_stays_whole() -> None:
-    """The cycle's first id opens a new frame, so losing it flags one frame instead of shifting every later one."""
+    """Once the pauses between bursts are known, losing a cycle's first message flags one frame instead of shifting
+    every later one."""
     assembler = FrameAssembler(ID_ORDER_46)
+    for cycle in range(WARM_UP):
+        assert len(_send_cycle(assembler, cycle=cycle, t0_ns=cycle * 10 * MS)) == 1
+    assert assembler.pause_threshold_ns is not None
+    c = WARM_UP
+    assert _send_cycle(assembler, cycle=c, t0_ns=c * 10 * MS, skip=frozenset({0})) == []
+    lossy, whole = _send_cycle(assembler, cycle=c + 1, t0_ns=(c + 1) * 10 * MS)
+    assert list(np.flatnonzero(lossy.stale_mask)) == [0]
+    assert tuple(lossy.values[1]) == _counts(c, 1)
+    assert whole.valid
+    assert tuple(whole.values[0]) == _counts(c + 1, 0) and tuple(whole.values[23]) == _counts(c + 1, 23)
+    (after,) = _send_cycle(assembler, cycle=c + 2, t0_ns=(c + 2) * 10 * MS)
+    assert after.valid and tuple(after.values[0]) == _counts(c + 2, 0)
+
+
+def test_a_fixed_cycle_start_needs_no_learning() -> None:
+    assembler = FrameAssembler(ID_ORDER_46, cycle_start_id=0x100)
     _send_cycle(assembler, cycle=0, t0_ns=0)
     assert _send_cycle(assembler, cycle=1, t0_ns=10 * MS, skip=frozenset({0})) == []
     lossy, whole = _send_cycle(assembler, cycle=2, t0_ns=20 * MS)
-    assert list(np.flatnonzero(lossy.stale_mask)) == [0]
-    assert tuple(lossy.values[1]) == _counts(1, 1)
-    assert whole.valid
-    assert tuple(whole.values[0]) == _counts(2, 0) and tuple(whole.values[23]) == _counts(2, 23)
-    (after,) = _send_cycle(assembler, cycle=3, t0_ns=30 * MS)
-    assert after.valid and tuple(after.values[0]) == _counts(3, 0)
+    assert list(np.flatnonzero(lossy.stale_mask)) == [0] and whole.valid
+
+
+def test_a_cycle_start_outside_the_map_is_refused() -> None:
+    with pytest.raises(ProtocolError, match="not a taxel id"):
+        FrameAssembler(USPA46_ID_MAP, cycle_start_id=0x700)
+
+
+def _send_ids(assembler: FrameAssembler, cycle: int, ids: list[int], t0_ns: int) -> list:
+    """Feed one burst of ``ids`` (0.1 ms apart), counts marked with ``cycle``; return the frames that came out."""
+    frames = []
+    for step, arbitration_id in enumerate(ids):
+        index = assembler.id_map.ids.index(arbitration_id)
+        frame = assembler.add(arbitration_id, encode_taxel_message(arbitration_id, *_counts(cycle, index)),
+                              t0_ns + step * 100_000)  # fmt: skip
+        if frame is not None:
+            frames.append(frame)
+    return frames
+
+
+def _cycles_in(frame) -> set[int]:  # type: ignore[no-untyped-def]
+    """Which cycles a frame's values came from (the x count carries the cycle)."""
+    return {int((x - 10_000) // 100) for x in frame.values[:, 0]}
+
+
+XELA_ORDER = list(USPA46_ID_MAP.ids)  # s1 = 0x135 first, the order of XELA's own map
+
+
+def test_one_cycle_sent_in_xelas_order_is_one_valid_frame() -> None:
+    """No source says which id a controller sends first; a whole cycle is a whole frame in any order."""
+    assembler = FrameAssembler(USPA46_ID_MAP)
+    (frame,) = _send_ids(assembler, 0, XELA_ORDER, t0_ns=0)
+    assert frame.valid and _cycles_in(frame) == {0}
+    assert tuple(frame.values[0]) == _counts(0, 0)  # taxel 0 = s1 = 0x135, sent first
+
+
+def test_bursts_in_xelas_order_learn_the_pause_and_a_lost_first_message_flags_one_frame() -> None:
+    assembler = FrameAssembler(USPA46_ID_MAP)
+    frames = []
+    for cycle in range(WARM_UP):
+        frames += _send_ids(assembler, cycle, XELA_ORDER, t0_ns=cycle * 10 * MS)
+    assert assembler.pause_threshold_ns is not None
+    c = WARM_UP
+    frames += _send_ids(assembler, c, XELA_ORDER[1:], t0_ns=c * 10 * MS)  # 0x135 lost
+    for cycle in range(c + 1, c + 4):
+        frames += _send_ids(assembler, cycle, XELA_ORDER, t0_ns=cycle * 10 * MS)
+    assert len(frames) == c + 4
+    lossy = frames[c]
+    assert list(np.flatnonzero(lossy.stale_mask)) == [0] and _cycles_in(lossy) == {c - 1, c}  # 0: its last good value
+    for cycle, frame in enumerate(frames[c + 1 :], start=c + 1):
+        assert frame.valid and _cycles_in(frame) == {cycle}  # every later frame is exactly one cycle
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.randoms(use_true_random=False))
+def test_a_new_order_every_cycle_is_one_cycle_per_frame(rnd) -> None:  # type: ignore[no-untyped-def]
+    assembler = FrameAssembler(USPA46_ID_MAP)
+    frames = []
+    for cycle in range(12):
+        order = list(XELA_ORDER)
+        rnd.shuffle(order)
+        frames += _send_ids(assembler, cycle, order, t0_ns=cycle * 10 * MS)
+    assert len(frames) == 12
+    assert all(frame.valid and _cycles_in(frame) == {cycle} for cycle, frame in enumerate(frames))
+
+
+def test_a_stream_joined_mid_cycle_in_a_new_order_every_cycle_is_one_cycle_per_frame_once_learned() -> None:
+    assembler = FrameAssembler(USPA46_ID_MAP)
+    rng = np.random.default_rng(7)
+    frames = []
+    for cycle in range(20):
+        order = [XELA_ORDER[i] for i in rng.permutation(24)]
+        frames += _send_ids(assembler, cycle, order[9:] if cycle == 0 else order, t0_ns=cycle * 10 * MS)
+    assert assembler.pause_threshold_ns is not None
+    assert 0.1 * MS < assembler.pause_threshold_ns < 7.7 * MS  # between the gaps in a burst and the pause
+    last = frames[-10:]
+    assert all(frame.valid and _cycles_in(frame) == {cycle} for cycle, frame in zip(range(10, 20), last, strict=True))
+
+
+def test_a_learned_pause_is_dropped_when_the_messages_become_evenly_spaced() -> None:
+    """A controller that stops sending bursts (every message 4 ms apart, each gap longer than the learned pause
+    threshold) costs at most two broken frames, then frames close on completeness again."""
+    assembler = FrameAssembler(USPA46_ID_MAP)
+    for cycle in range(WARM_UP):
+        _send_ids(assembler, cycle, XELA_ORDER, t0_ns=cycle * 10 * MS)
+    assert assembler.pause_threshold_ns is not None
+    frames = []
+    t_ns = WARM_UP * 10 * MS
+    for cycle in range(WARM_UP, WARM_UP + 6):
+        for arbitration_id in XELA_ORDER:
+            index = assembler.id_map.ids.index(arbitration_id)
+            frame = assembler.add(arbitration_id, encode_taxel_message(arbitration_id, *_counts(cycle, index)), t_ns)
+            t_ns += 4 * MS
+            if frame is not None:
+                frames.append(frame)
+    assert assembler.pause_threshold_ns is None
+    assert sum(not frame.valid for frame in frames) <= 2
+    assert all(frame.valid for frame in frames[-4:])
 
 
 def test_sentinel_flags_the_taxel_and_keeps_its_last_good_value() -> None:
@@ -273,10 +384,11 @@ def test_a_cycle_spread_over_60_ms_is_valid_with_the_drivers_stale_limit() -> No
             if frame is not None:
                 frames.append(frame)
     assert len(frames) == 3 and all(frame.valid for frame in frames)
+    assert assembler.pause_threshold_ns is None  # evenly spaced messages show no pause to learn from
 
 
 def test_uspa46_cycle_in_id_order_puts_s1_0x135_at_the_top_left_taxel() -> None:
-    """The controller sends 0x100 first; the frame is in XELA's numbering (s1 = 0x135 = taxel 0, s24 = 0x100 = 23)."""
+    """A controller sending 0x100 first; the frame is in XELA's numbering (s1 = 0x135 = taxel 0, s24 = 0x100 = 23)."""
     assembler = FrameAssembler(USPA46_ID_MAP)
     frames = []
     for cycle in range(2):

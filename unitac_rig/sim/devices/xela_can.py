@@ -15,7 +15,7 @@ from __future__ import annotations
 import collections
 import logging
 from types import TracebackType
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import can
 import numpy as np
@@ -56,12 +56,19 @@ class SimXelaController:
         faults: FaultPlan | None = None,
         missing_taxels: tuple[int, ...] = (),
         byte0: int = 0,
+        send_order: Literal["id", "map", "shuffled"] = "id",
+        order_seed: int = 0,
     ) -> None:
         self.controller_id = controller_id
         self.source = source
         self.id_map = id_map
-        # (taxel index, id) in the order a controller sends each cycle: by id, 0x100 first
-        self._send_order = sorted(enumerate(id_map.ids), key=lambda item: item[1])
+        # (taxel index, id) in the order the board sends each cycle. No source states it: "id" (0x100 first) is what
+        # CAN arbitration gives a board that queues a whole cycle at once, "map" the order of XELA's map file (s1 =
+        # 0x135 first), "shuffled" a new order every cycle (the host must not depend on one)
+        self.send_order = send_order
+        self._order_rng = np.random.default_rng(order_seed)
+        by_id = sorted(enumerate(id_map.ids), key=lambda item: item[1])
+        self._send_order = list(enumerate(id_map.ids)) if send_order == "map" else by_id
         self.faults = FaultInjector(faults)
         self.missing_taxels = frozenset(missing_taxels)
         self.byte0 = byte0
@@ -106,7 +113,10 @@ class SimXelaController:
             return
         counts = counts_from_sample(self.source.sample(t_ns).values)
         release_ns = self.faults.release_t_ns(t_ns)
-        for index, arbitration_id in self._send_order:
+        order = self._send_order
+        if self.send_order == "shuffled":
+            order = [order[i] for i in self._order_rng.permutation(len(order))]
+        for index, arbitration_id in order:
             if index in self.missing_taxels:
                 continue
             x, y, z = (int(v) for v in counts[index])

@@ -8,7 +8,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from conftest import PERIOD_NS, run_mode, step
+from driver_helpers import PERIOD_NS, run_mode, step
 from hypothesis import given, settings
 from hypothesis import strategies as st
 

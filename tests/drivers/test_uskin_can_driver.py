@@ -10,7 +10,7 @@ from typing import Literal
 
 import numpy as np
 import pytest
-from conftest import PERIOD_NS, collect, run_mode, step
+from driver_helpers import PERIOD_NS, collect, run_mode, step
 
 from drivers.clock import VirtualClock
 from drivers.errors import DeviceError, DeviceNotFound

@@ -9,7 +9,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from conftest import collect
+from driver_helpers import collect
 
 from drivers.errors import DeviceError, DeviceNotFound
 from drivers.uskin import UskinXelaServerDriver

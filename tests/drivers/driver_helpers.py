@@ -1,4 +1,5 @@
-"""Helpers for the driver tests: lockstep stepping on a virtual clock and collecting reader-thread frames."""
+"""Helpers for the driver tests (imported by name, not a conftest, so test folders can run together): lockstep
+stepping on a virtual clock and collecting reader-thread frames."""
 
 from __future__ import annotations
 

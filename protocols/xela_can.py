@@ -313,9 +313,10 @@ class FrameAssembler:
         self._prev_t_ns = t_ns
         after_pause = gap is not None and self.pause_threshold_ns is not None and gap >= self.pause_threshold_ns
         emitted: AssembledFrame | None = None
-        if self._n_seen > 0 and (self._seen[index] or index == self._cycle_start_index or after_pause):
+        repeated = self._seen[index]
+        if self._n_seen > 0 and (repeated or index == self._cycle_start_index or after_pause):
             emitted = self._emit(incomplete=True)
-            if after_pause and not self._seen[index]:
+            if after_pause and not repeated:  # only the pause closed it
                 self._pause_closes += 1
                 if self._pause_closes >= 2:  # pauses do not mark cycles on this stream: stop using them for good
                     self.pause_threshold_ns = None
@@ -346,8 +347,10 @@ class FrameAssembler:
 
     def _learn(self, gap: int) -> None:
         """Collect one cycle's worth of gaps; a window with one clear pause counts toward learning the threshold."""
+        if self.n_taxels < 2:
+            return  # one message per cycle: every gap is a pause
         self._window.append(gap)
-        if len(self._window) < self.n_taxels or self.n_taxels < 2:
+        if len(self._window) < self.n_taxels:
             return
         longest, runner_up = sorted(self._window)[-1:-3:-1]
         self._window = []

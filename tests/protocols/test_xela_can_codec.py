@@ -244,6 +244,19 @@ def test_lost_leading_taxel_is_flagged_and_the_next_cycle_stays_whole() -> None:
     assert after.valid and tuple(after.values[0]) == _counts(c + 2, 0)
 
 
+def test_lossy_cycles_closed_by_a_repeat_keep_the_learned_pause() -> None:
+    """A cycle that lost a middle message is closed by the next cycle's first message, a repeat: that is the old
+    rule at work, not evidence against the pause, so two such cycles in a row do not switch pause-learning off."""
+    assembler = FrameAssembler(ID_ORDER_46)
+    for cycle in range(WARM_UP):
+        _send_cycle(assembler, cycle=cycle, t0_ns=cycle * 10 * MS)
+    threshold = assembler.pause_threshold_ns
+    assert threshold is not None
+    for cycle in range(WARM_UP, WARM_UP + 3):
+        _send_cycle(assembler, cycle=cycle, t0_ns=cycle * 10 * MS, skip=frozenset({5}))
+    assert assembler.pause_threshold_ns == threshold
+
+
 def test_a_fixed_cycle_start_needs_no_learning() -> None:
     assembler = FrameAssembler(ID_ORDER_46, cycle_start_id=0x100)
     _send_cycle(assembler, cycle=0, t0_ns=0)

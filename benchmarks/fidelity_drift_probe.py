@@ -18,8 +18,13 @@ from pathlib import Path
 import numpy as np
 
 from unitac_rig.bench import default_out_dir, write_json
-from unitac_rig.bench.fidelity import RECORDED, REL_TOLERANCE, USKIN_MIN_MAX_RATIO, model_settings, sweep_loads
-from unitac_rig.rig.objects import get_object
+from unitac_rig.bench.fidelity import (
+    RECORDED,
+    REL_TOLERANCE,
+    USKIN_MIN_MAX_RATIO,
+    model_settings,
+    uskin_sweep_forces,
+)
 from unitac_rig.sim.sensor_models import UskinModel
 
 # Each recorded uSkin session's length, s (the last of its "times", dataset_info.json of the authors' repository).
@@ -38,11 +43,8 @@ def sweep_counts(seed: int) -> dict[str, np.ndarray]:
     """Per object, the uSkin counts (2 x angles, taxels, 3) at half and full press force, in session order."""
     scene_params, uskin_params, _ = model_settings({})
     uskin = UskinModel(uskin_params, np.random.default_rng([seed, 2]))
-    out = {}
-    for object_id in RECORDED:
-        loads = sweep_loads(get_object(object_id), "uskin", scene_params, seed=seed, angles=ANGLES)
-        out[object_id] = uskin.signal_counts(np.stack([x.forces_n for x in loads])).astype(np.float64)
-    return out
+    forces = uskin_sweep_forces(scene_params, seed=seed, angles=ANGLES)
+    return {object_id: uskin.signal_counts(f).astype(np.float64) for object_id, f in forces.items()}
 
 
 def targets_met(counts: dict[str, np.ndarray], rate: float) -> tuple[int, dict[str, tuple[float, float]]]:

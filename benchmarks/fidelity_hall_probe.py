@@ -25,12 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from unitac_rig.bench import default_out_dir, write_json
-from unitac_rig.bench.fidelity import RECORDED, REL_TOLERANCE, model_settings, sweep_loads
-from unitac_rig.rig.objects import get_object
-from unitac_rig.sim.sensor_models import UskinModel
-
-GAINS_NORMAL = np.arange(600.0, 1301.0, 50.0)  # counts/N at small loads
-GAINS_SHEAR = np.arange(3500.0, 5501.0, 250.0)
+from unitac_rig.bench.fidelity import REL_TOLERANCE, best_uskin_gains, model_settings, uskin_sweep_forces
 
 
 def hall_factor(normal_n: np.ndarray, strain_per_n: float) -> np.ndarray:
@@ -43,10 +38,7 @@ def hall_factor(normal_n: np.ndarray, strain_per_n: float) -> np.ndarray:
 def sweep_forces(seed: int, bending_lever_mm: float = 0.0) -> dict[str, np.ndarray]:
     """Per object, the uSkin taxel forces (2 x angles, taxels, 3) N of the scene-alone sweep."""
     scene_params, _, _ = model_settings({"bending_lever_mm": bending_lever_mm} if bending_lever_mm else {})
-    return {
-        object_id: np.stack([x.forces_n for x in sweep_loads(get_object(object_id), "uskin", scene_params, seed=seed)])
-        for object_id in RECORDED
-    }
+    return uskin_sweep_forces(scene_params, seed=seed)
 
 
 def with_hall(forces: dict[str, np.ndarray], strain: float) -> dict[str, np.ndarray]:
@@ -56,19 +48,6 @@ def with_hall(forces: dict[str, np.ndarray], strain: float) -> dict[str, np.ndar
         bent = f.copy()
         bent[..., 2] *= hall_factor(f[..., 2], strain)
         out[object_id] = bent
-    return out
-
-
-def errors(forces: dict[str, np.ndarray], gain_n: float, gain_s: float, seed: int) -> dict[str, float]:
-    """Relative error of every uSkin min and max for one draw (``forces`` already through :func:`with_hall`)."""
-    _, uskin_params, _ = model_settings({"gain_normal_counts_per_n": gain_n, "gain_shear_counts_per_n": gain_s})
-    uskin = UskinModel(uskin_params, np.random.default_rng([seed, 2]))
-    out = {}
-    for object_id, f in forces.items():
-        counts = uskin.signal_counts(f)
-        low, high = RECORDED[object_id]["uskin"]
-        out[f"{object_id} uskin_min"] = float(counts.min()) / low - 1.0
-        out[f"{object_id} uskin_max"] = float(counts.max()) / high - 1.0
     return out
 
 
@@ -84,17 +63,7 @@ def main() -> None:
     rows = []
     for strain in strains:
         bent_draws = [with_hall(f, strain) for f in draws]  # the same for every gain pair
-        best: dict | None = None
-        for gain_n in GAINS_NORMAL:
-            for gain_s in GAINS_SHEAR:
-                per_draw = [errors(f, gain_n, gain_s, seed) for seed, f in enumerate(bent_draws)]
-                median = {k: float(np.median([d[k] for d in per_draw])) for k in per_draw[0]}
-                worst = max(abs(v) for v in median.values())
-                if best is None or worst < best["worst"]:
-                    best = {"strain_per_n": strain, "gain_normal": float(gain_n), "gain_shear": float(gain_s),
-                            "worst": worst, "median_errors": median}  # fmt: skip
-        assert best is not None
-        best["met"] = sum(abs(v) <= REL_TOLERANCE for v in best["median_errors"].values())
+        best = {"strain_per_n": strain} | best_uskin_gains(bent_draws)
         rows.append(best)
         misses = {k: round(v, 2) for k, v in best["median_errors"].items() if abs(v) > REL_TOLERANCE}
         print(f"strain {strain:g}/N: gains {best['gain_normal']:.0f} / {best['gain_shear']:.0f}, "

@@ -78,11 +78,13 @@ RECEIVE_VARIABLES = (
     "timestamp",
     "actual_TCP_pose",
     "actual_TCP_force",
-    "actual_TCP_speed",
     "robot_mode",
     "safety_mode",
     "safety_status_bits",
 )
+# Subscribed too where the controller offers them; one answered NOT_FOUND fails the whole recipe, so the receiver
+# then connects with RECEIVE_VARIABLES alone.
+SPEED_VARIABLE = "actual_TCP_speed"  # m/s, rad/s; without it motion.py tells rest from the pose's change
 PAYLOAD_VARIABLE = "payload"  # kg; subscribed only when the rig file gives a payload to check
 FORCE_MODE_TYPE = 2  # URScript force_mode type 2: the task frame is used as given
 STALL_TIMEOUT_S = 0.5  # no new controller timestamp for this long = the RTDE stream stalled
@@ -164,8 +166,10 @@ class UR5eReceiver:
     """Read-only view of a UR controller over RTDE; never moves the arm (used by ``probe ur5e``).
 
     ``receive``: an object with RTDEReceiveInterface's methods (injected in tests); connected to ``host`` if None.
-    ``read_payload``: also subscribe to the payload (kg); if the controller does not offer it, the receiver connects
-    without it and :meth:`payload_kg` returns None. Raises DeviceNotFound when nothing answers at ``host``.
+    ``read_payload``: also subscribe to the payload (kg). The TCP speed is subscribed too; if the controller does not
+    offer one of these (ur_rtde then refuses the whole recipe), the receiver connects with :data:`RECEIVE_VARIABLES`
+    alone, ``tcp_speed`` reads None and :meth:`payload_kg` returns None. Raises DeviceNotFound when nothing answers
+    at ``host``.
     """
 
     def __init__(
@@ -180,17 +184,17 @@ class UR5eReceiver:
         self.host = host
         self.clock: Clock = clock or MonotonicClock()
         self._has_payload = read_payload
+        self._has_speed = True
         if receive is not None:
             self._receive = receive
-        elif read_payload:
-            try:
-                self._receive = _connect_receive(host, frequency_hz, (*RECEIVE_VARIABLES, PAYLOAD_VARIABLE))
-            except DeviceNotFound as exc:  # an older controller has no "payload" output; connect without it
-                logger.info("RTDE without %r (%s); retrying without it", PAYLOAD_VARIABLE, exc)
-                self._has_payload = False
-                self._receive = _connect_receive(host, frequency_hz, RECEIVE_VARIABLES)
         else:
-            self._receive = _connect_receive(host, frequency_hz, RECEIVE_VARIABLES)
+            optional = (SPEED_VARIABLE, PAYLOAD_VARIABLE) if read_payload else (SPEED_VARIABLE,)
+            try:
+                self._receive = _connect_receive(host, frequency_hz, (*RECEIVE_VARIABLES, *optional))
+            except DeviceNotFound as exc:  # e.g. an older controller has no "payload" output; connect without them
+                logger.info("RTDE refused %s (%s); retrying without them", ", ".join(optional), exc)
+                self._has_payload = self._has_speed = False
+                self._receive = _connect_receive(host, frequency_hz, RECEIVE_VARIABLES)
         self._closed = False
         self._last_controller_t_s: float | None = None
         self._last_change_ns = self.clock.now_ns()
@@ -210,7 +214,7 @@ class UR5eReceiver:
             controller_t_s = float(receive.getTimestamp())
             pose = np.asarray(receive.getActualTCPPose(), dtype=np.float64)
             force = np.asarray(receive.getActualTCPForce(), dtype=np.float64)
-            speed = np.asarray(receive.getActualTCPSpeed(), dtype=np.float64)
+            speed = np.asarray(receive.getActualTCPSpeed(), dtype=np.float64) if self._has_speed else None
             robot_mode = int(receive.getRobotMode())
             safety_mode = int(receive.getSafetyMode())
             protective = bool(receive.isProtectiveStopped())
@@ -286,9 +290,11 @@ class UR5eReceiver:
 @dataclass
 class _AsyncMove:
     """An asynchronous moveL in flight: the async operation id before it started (bits 24-30 of the progress word,
-    incremented by the script at every start)."""
+    incremented by the script at every start; None where the client's status object has no ``operationId``), and
+    whether this move has been seen running (what ends it when there is no id to tell moves apart)."""
 
-    operation_before: int
+    operation_before: int | None
+    seen_running: bool = False
 
 
 class UR5eArm:
@@ -380,13 +386,19 @@ class UR5eArm:
         it started, and over once that operation no longer runs. A finish signalled by an *earlier* move (its
         thread ending just as this one starts) has the old id and cannot end this one.
 
-        Until the controller shows the move as started it counts as running: callers bound the wait.
+        A status object without ``operationId`` (hardware-facts names only ``isAsyncOperationRunning`` and
+        ``progress``) is read by the running flag alone: the move is over once it has been seen running and then
+        not. Until the controller shows the move as started it counts as running: callers bound the wait.
         """
         move = self._move
         if move is None:
             return False
         operation, running = self._async_status()
-        if operation == move.operation_before or running:
+        if operation is None:
+            move.seen_running = move.seen_running or running
+            if running or not move.seen_running:
+                return True
+        elif operation == move.operation_before or running:
             return True
         self._move = None
         return False
@@ -679,10 +691,13 @@ class UR5eArm:
             return False
         return False
 
-    def _async_status(self) -> tuple[int, bool]:
-        """(operation id, running) from the async progress word (output_int_register_2)."""
+    def _async_status(self) -> tuple[int | None, bool]:
+        """(operation id, running) from the async progress word (output_int_register_2); the id is None where the
+        status object has no ``operationId`` (a control client written from the documented API only)."""
         status = self._call("getAsyncOperationProgressEx", self._control.getAsyncOperationProgressEx)
-        return int(status.operationId()), bool(status.isAsyncOperationRunning())
+        running = bool(status.isAsyncOperationRunning())
+        operation_id = getattr(status, "operationId", None)
+        return (None if operation_id is None else int(operation_id())), running
 
     def _call(self, what: str, method: Callable[..., Any], *args: Any) -> Any:
         try:

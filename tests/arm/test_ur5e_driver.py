@@ -88,6 +88,20 @@ def test_real_receive_and_a_protective_stop_during_move_l(controller: tuple[SimU
     assert control.names()[-3:] == ["speedStop", "stopScript", "disconnect"]
 
 
+def test_a_controller_without_the_tcp_speed_output_is_read_without_it() -> None:
+    """A controller (or a fake written from the RTDE facts) that answers NOT_FOUND for actual_TCP_speed makes ur_rtde
+    refuse the whole output recipe; the receiver must connect without it rather than report no controller."""
+    state = SwitchableState()
+    with (
+        start_on_free_loopback(state, first=40, outputs_not_found=frozenset({"actual_TCP_speed"})) as server,
+        UR5eReceiver(server.host) as receiver,
+    ):
+        read = receiver.wait_for_new_state()
+        assert np.array_equal(read.tcp_pose, POSE) and read.tcp_force[1] == 9.5
+        assert read.tcp_speed is None
+        assert receiver.payload_kg() is None
+
+
 def test_probe_receiver_reads_new_states_without_a_control_object(
     controller: tuple[SimURController, SwitchableState],
 ) -> None:
@@ -311,6 +325,40 @@ def test_an_asynchronous_move_is_polled_and_stop_ends_it_with_stop_l() -> None:
         assert arm.move_running()
         arm.stop()
         assert control.commands()[-2:] == ["stopL", "speedStop"]
+        assert not arm.move_running()
+
+
+class DocumentedStatus:
+    """A progress status with only the methods hardware-facts documents (isAsyncOperationRunning, progress)."""
+
+    def __init__(self, running: bool) -> None:
+        self.running = running
+
+    def isAsyncOperationRunning(self) -> bool:
+        return self.running
+
+    def progress(self) -> int:
+        return 0 if self.running else -2
+
+
+def test_a_move_is_followed_by_the_running_flag_alone_when_the_status_has_no_operation_id() -> None:
+    """A control client written from the documented API gives no operation id: the move must still be polled to
+    its end, and a 'not running' read before the controller shows the move started must not end it."""
+
+    class DocumentedControl(FakeControl):
+        def __init__(self) -> None:
+            super().__init__()
+            self.words: list[bool] = []
+
+        def getAsyncOperationProgressEx(self) -> DocumentedStatus:  # type: ignore[override]
+            return DocumentedStatus(self.words.pop(0) if self.words else False)
+
+    control = DocumentedControl()
+    with UR5eArm("ur", control=control, receive=FakeReceive()) as arm:
+        control.words = [False]  # read as the move starts: nothing running
+        arm.start_move_linear(POSE, 0.05, 0.5)
+        control.words = [False, False, True, True, False]  # not yet started, started, running, done
+        assert [arm.move_running() for _ in range(5)] == [True, True, True, True, False]
         assert not arm.move_running()
 
 

@@ -270,11 +270,13 @@ class RtdeSession:
         controller_version: ControllerVersion,
         max_frequency_hz: float,
         registers_in_use: frozenset[str] = frozenset(),
+        outputs_not_found: frozenset[str] = frozenset(),
     ) -> None:
         self.peer = peer
         self.controller_version = controller_version
         self.max_frequency_hz = max_frequency_hz
         self.registers_in_use = registers_in_use
+        self.outputs_not_found = outputs_not_found  # output names answered NOT_FOUND (a controller without them)
         self.output_names: tuple[str, ...] = ()
         self.output_types: tuple[str, ...] = ()
         self.output_recipe_id = 0
@@ -341,7 +343,10 @@ class RtdeSession:
 
     def _setup_outputs(self, payload: bytes) -> bytes:
         frequency_hz, names = rtde.decode_setup_outputs(payload)
-        types = tuple(rtde.variable_type(name) or rtde.NOT_FOUND for name in names)
+        types = tuple(
+            rtde.NOT_FOUND if name in self.outputs_not_found else rtde.variable_type(name) or rtde.NOT_FOUND
+            for name in names
+        )
         recipe_id = 0
         if names and rtde.NOT_FOUND not in types:
             limit_hz = self.max_frequency_hz
@@ -385,6 +390,7 @@ class _ServerSettings:
     max_frequency_hz: float
     controller_version: ControllerVersion
     registers_in_use: frozenset[str]
+    outputs_not_found: frozenset[str]
 
 
 class _RtdeServerLoop:
@@ -438,6 +444,7 @@ class _RtdeServerLoop:
             controller_version=self.settings.controller_version,
             max_frequency_hz=self.settings.max_frequency_hz,
             registers_in_use=self.settings.registers_in_use,
+            outputs_not_found=self.settings.outputs_not_found,
         )
         client = _Client(sock=sock, session=session)
         self._clients.append(client)
@@ -503,11 +510,17 @@ def _server_main(argv: Sequence[str]) -> int:
     parser.add_argument("--max-frequency-hz", type=float, required=True)
     parser.add_argument("--controller-version", required=True, help="major.minor.bugfix.build")
     parser.add_argument("--registers-in-use", default="", help="comma-joined input names to answer IN_USE")
+    parser.add_argument("--outputs-not-found", default="", help="comma-joined output names to answer NOT_FOUND")
     parser.add_argument("--shared-fd", type=int, required=True)
     args = parser.parse_args(argv)
     version = ControllerVersion(*(int(part) for part in args.controller_version.split(".")))
     settings = _ServerSettings(
-        args.host, args.port, args.max_frequency_hz, version, frozenset(filter(None, args.registers_in_use.split(",")))
+        args.host,
+        args.port,
+        args.max_frequency_hz,
+        version,
+        frozenset(filter(None, args.registers_in_use.split(","))),
+        frozenset(filter(None, args.outputs_not_found.split(","))),
     )
     listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
     try:
@@ -546,7 +559,8 @@ class SimURController:
     safe (return an immutable snapshot, e.g. ``SimArm.latest_state``); without one the arm stands still at
     :data:`DEFAULT_STILL_POSE` with zero force and the timestamp counts seconds since the server started.
     ``frequency_hz`` is also the highest stream rate (500 Hz on e-Series); a client asking for more gets this rate.
-    Names in ``registers_in_use`` are answered ``IN_USE`` in input recipes (like a running fieldbus adapter).
+    Names in ``registers_in_use`` are answered ``IN_USE`` in input recipes (like a running fieldbus adapter), names
+    in ``outputs_not_found`` ``NOT_FOUND`` in output recipes (a controller, or a fake, that does not offer them).
     Raises DeviceError if the address is taken. POSIX only (the shared block is passed as a file descriptor).
     """
 
@@ -559,6 +573,7 @@ class SimURController:
         port: int = rtde.RTDE_PORT,
         controller_version: ControllerVersion = ControllerVersion(5, 11, 0, 0),
         registers_in_use: frozenset[str] = frozenset(),
+        outputs_not_found: frozenset[str] = frozenset(),
     ) -> None:
         if frequency_hz <= 0:
             raise ValueError("frequency_hz must be > 0")
@@ -578,6 +593,7 @@ class SimURController:
             "--host", host, "--port", str(port), "--max-frequency-hz", repr(frequency_hz),
             "--controller-version", f"{v.major}.{v.minor}.{v.bugfix}.{v.build}",
             "--registers-in-use", ",".join(sorted(registers_in_use)),
+            "--outputs-not-found", ",".join(sorted(outputs_not_found)),
             "--shared-fd", str(self._file.fileno()),
         ]  # fmt: skip
         environment = dict(os.environ)  # the child imports this very package, wherever the caller found it
@@ -694,7 +710,11 @@ class SimURController:
 
 
 def start_on_free_loopback(
-    state_provider: Callable[[], ArmState] | None = None, *, frequency_hz: float = 500.0, first: int = 2
+    state_provider: Callable[[], ArmState] | None = None,
+    *,
+    frequency_hz: float = 500.0,
+    first: int = 2,
+    outputs_not_found: frozenset[str] = frozenset(),
 ) -> SimURController:
     """A :class:`SimURController` on the first 127.0.0.x (x >= ``first``) whose port 30004 is free (Linux loopback)."""
     for last_octet in range(first, 255):
@@ -708,7 +728,9 @@ def start_on_free_loopback(
         finally:
             probe.close()
         try:
-            return SimURController(host, state_provider=state_provider, frequency_hz=frequency_hz)
+            return SimURController(
+                host, state_provider=state_provider, frequency_hz=frequency_hz, outputs_not_found=outputs_not_found
+            )
         except _AddressTaken:
             continue  # taken between the check and the start
     raise DeviceError(

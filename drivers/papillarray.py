@@ -156,7 +156,7 @@ class PapillArrayDriver(PumpedSensor):
         frames: list[TactileFrame] = []
         now_ns = self.clock.now_ns()
         for packet in packets:
-            if self._last_counter is not None:
+            if self._last_counter is not None and packet.counter is not None:  # no hub block: no counter
                 gap = (packet.counter - self._last_counter - 1) & 0xFFFF_FFFF
                 if 0 < gap < 0x8000_0000:
                     self._count(sequence_gaps=gap)

@@ -21,6 +21,9 @@ entries; offsets count from body byte 0 and the table ends where the first block
   force (N, -1 when none).
 * 7 and others: not defined by the v2.0 SDK; kept as raw bytes.
 
+Only the pillar block is required: no public source says the others always come. A packet without a hub block
+decodes with ``counter`` and ``timestamp_us`` None, one without a global block with NaN global force and torque.
+
 The controller always reports two sensor slots (SEN0/SEN1). The public sources do not say what the offsets inside
 the sensor and pillar offset tables count from; this decoder reads every block sequentially (as the third-party
 parser checked against the vendor SDK does), so it does not depend on them, and the encoder writes them relative to
@@ -44,7 +47,7 @@ each half would have to expose the other's internals.
 from __future__ import annotations
 
 import struct
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -89,10 +92,10 @@ class PillarSensorData:
 
     Per pillar (row-major 3x3, pillar 4 is the centre): ``forces_n`` (n, 3) N, ``displacements_mm`` (n, 3) mm,
     ``slip_states`` (n,) int (-2 ineligible, -1 lost contact, 1 contact at start, 2 tangential loading, 3 slipped),
-    ``pillar_friction`` (n,). Per sensor: ``global_force_n`` (3,) N, ``global_torque_nmm`` (3,) N*mm,
-    ``slip_active`` (0 off, non-zero on, 2 reference pillar loaded), ``friction_estimate`` and
-    ``target_grip_force_n`` (-1 = no estimate). Slip fields default to the device's "nothing" values, which is
-    also what the decoder reports when a packet carries no slip blocks.
+    ``pillar_friction`` (n,). Per sensor: ``global_force_n`` (3,) N, ``global_torque_nmm`` (3,) N*mm (NaN where the
+    packet has no global block), ``slip_active`` (0 off, non-zero on, 2 reference pillar loaded),
+    ``friction_estimate`` and ``target_grip_force_n`` (-1 = no estimate). Slip fields default to the device's
+    "nothing" values, which is also what the decoder reports when a packet carries no slip blocks.
     """
 
     forces_n: np.ndarray
@@ -126,11 +129,12 @@ class PillarSensorData:
 class PapillArrayPacket:
     """One stream packet: controller packet counter, controller timestamp (us) and every sensor slot.
 
+    ``counter`` and ``timestamp_us`` are None for a packet without a hub block (the encoder then writes none).
     ``unknown_blocks`` holds the raw bytes of block types the v2.0 SDK does not define (e.g. 7), by type.
     """
 
-    counter: int
-    timestamp_us: int
+    counter: int | None
+    timestamp_us: int | None
     sensors: list[PillarSensorData]
     unknown_blocks: dict[int, bytes] = field(default_factory=dict)
 
@@ -262,21 +266,28 @@ def _encode_sensor_slip_block(writer: _BodyWriter, sensors: list[PillarSensorDat
         )
 
 
-def encode_body(packet: PapillArrayPacket, index_size: int = 2, include_slip: bool = True) -> bytes:
-    """The packet body (no markers, no checksum): ISZ, index table, then hub, pillar, global [, slip] blocks."""
+def encode_body(
+    packet: PapillArrayPacket, index_size: int = 2, include_slip: bool = True, include_global: bool = True
+) -> bytes:
+    """The packet body (no markers, no checksum): ISZ, index table, then [hub,] pillar[, global][, slip] blocks.
+    The hub block is left out when the packet's ``counter`` is None."""
     if not 1 <= index_size <= 4:
         raise ProtocolError(f"index_size {index_size} not in 1..4", hint="the controller uses small offsets; use 2")
-    if not 0 <= packet.counter < 1 << 32:
-        raise ProtocolError(f"counter {packet.counter} is not a u32", hint="wrap the counter modulo 2**32")
-    if not 0 <= packet.timestamp_us < 1 << 64:
-        raise ProtocolError(f"timestamp_us {packet.timestamp_us} is not a u64", hint="use a non-negative int")
+    counter, timestamp_us = packet.counter, packet.timestamp_us
+    if (counter is None) != (timestamp_us is None):
+        raise ProtocolError("counter and timestamp_us come together in the hub block", hint="give both or neither")
+    if counter is not None and not 0 <= counter < 1 << 32:
+        raise ProtocolError(f"counter {counter} is not a u32", hint="wrap the counter modulo 2**32")
+    if timestamp_us is not None and not 0 <= timestamp_us < 1 << 64:
+        raise ProtocolError(f"timestamp_us {timestamp_us} is not a u64", hint="use a non-negative int")
     if not packet.sensors or len(packet.sensors) > 0xFFFF:
         raise ProtocolError("a packet needs at least one sensor slot", hint="the controller reports 2 slots")
-    blocks = [
-        (BLOCK_HUB, lambda w: w.put(_HUB.pack(packet.counter, packet.timestamp_us))),
-        (BLOCK_PILLAR, lambda w: _encode_pillar_block(w, packet.sensors)),
-        (BLOCK_GLOBAL, lambda w: _encode_global_block(w, packet.sensors)),
-    ]
+    blocks: list[tuple[int, Callable[[_BodyWriter], None]]] = []
+    if counter is not None:
+        blocks.append((BLOCK_HUB, lambda w: w.put(_HUB.pack(counter, timestamp_us))))
+    blocks.append((BLOCK_PILLAR, lambda w: _encode_pillar_block(w, packet.sensors)))
+    if include_global:
+        blocks.append((BLOCK_GLOBAL, lambda w: _encode_global_block(w, packet.sensors)))
     if include_slip:
         blocks.append((BLOCK_PILLAR_SLIP, lambda w: _encode_pillar_slip_block(w, packet.sensors)))
         blocks.append((BLOCK_SENSOR_SLIP, lambda w: _encode_sensor_slip_block(w, packet.sensors)))
@@ -300,9 +311,13 @@ def frame_body(body: bytes) -> bytes:
     return START_MARKER + body + _U16.pack(checksum(body)) + END_MARKER
 
 
-def encode_packet(packet: PapillArrayPacket, index_size: int = 2, include_slip: bool = True) -> bytes:
+def encode_packet(
+    packet: PapillArrayPacket, index_size: int = 2, include_slip: bool = True, include_global: bool = True
+) -> bytes:
     """One whole framed packet, as the controller sends it (blocks 1, 3, 4, 5, 6 and any unknown raw blocks)."""
-    return frame_body(encode_body(packet, index_size=index_size, include_slip=include_slip))
+    return frame_body(
+        encode_body(packet, index_size=index_size, include_slip=include_slip, include_global=include_global)
+    )
 
 
 # ----------------------------------------------------------------------------------------------------- decoding
@@ -376,9 +391,8 @@ class _Layout:
         self._isz = isz
         self._struct_ranges.append((0, index_end))
         types = [block_type for block_type, _ in entries]
-        for required in (BLOCK_HUB, BLOCK_PILLAR, BLOCK_GLOBAL):
-            if required not in types:
-                raise _bad(f"no block of type {required} (hub 1, pillar 3, global 4 are required)")
+        if BLOCK_PILLAR not in types:
+            raise _bad(f"no block of type {BLOCK_PILLAR} (pillar data)")
         pillar_counts: list[int] = []
         globals_at: list[int] = []
         pillar_slip: list[tuple[int, int, int]] | None = None  # (n_pillars, state_at, friction_at)
@@ -425,7 +439,7 @@ class _Layout:
             if block_end == len(body) and self._pos != block_end:
                 raise _bad(f"{block_end - self._pos} stray bytes after the last block")
         n_sensors = len(pillar_counts)
-        if len(globals_at) != n_sensors:
+        if BLOCK_GLOBAL in types and len(globals_at) != n_sensors:
             raise _bad(f"pillar block has {n_sensors} sensors but global block has {len(globals_at)}")
         if pillar_slip is not None and len(pillar_slip) != n_sensors:
             raise _bad(f"pillar block has {n_sensors} sensors but pillar slip block has {len(pillar_slip)}")
@@ -433,7 +447,8 @@ class _Layout:
             raise _bad(f"pillar block has {n_sensors} sensors but sensor slip block has {len(sensor_slip)}")
         self.sensors: list[_SensorLayout] = []
         for index, n_pillars in enumerate(pillar_counts):
-            slot = _SensorLayout(n_pillars, pillar_at=pillar_at[index], global_at=globals_at[index])
+            global_at = globals_at[index] if globals_at else -1
+            slot = _SensorLayout(n_pillars, pillar_at=pillar_at[index], global_at=global_at)
             if pillar_slip is not None:
                 slip_pillars, slot.state_at, slot.friction_at = pillar_slip[index]
                 if slip_pillars != n_pillars:
@@ -485,7 +500,7 @@ class _Layout:
     def extract(self, body: bytes, u8: np.ndarray) -> PapillArrayPacket:
         floats = u8[self.float_bytes].view("<f4").astype(np.float64)
         states = u8[self.state_pos].view(np.int8).astype(np.int64)
-        counter, timestamp_us = _HUB.unpack_from(body, self.hub_pos)
+        counter, timestamp_us = _HUB.unpack_from(body, self.hub_pos) if self.hub_pos >= 0 else (None, None)
         sensors = []
         for layout in self.sensors:
             n = layout.n_pillars
@@ -496,11 +511,15 @@ class _Layout:
             else:
                 slip_states = np.zeros(n, dtype=np.int64)
                 pillar_friction = np.full(n, NO_FRICTION_ESTIMATE)
+            if layout.global_at >= 0:
+                global_values = floats[layout.global_at : layout.global_at + 6]
+            else:
+                global_values = np.full(6, np.nan)  # no global block in this packet
             sensor = PillarSensorData(
                 forces_n=pillar_values[:, :3],
                 displacements_mm=pillar_values[:, 3:],
-                global_force_n=floats[layout.global_at : layout.global_at + 3],
-                global_torque_nmm=floats[layout.global_at + 3 : layout.global_at + 6],
+                global_force_n=global_values[:3],
+                global_torque_nmm=global_values[3:],
                 slip_states=slip_states,
                 pillar_friction=pillar_friction,
             )

@@ -204,3 +204,30 @@ def test_a_slot_with_another_pillar_count_is_one_clear_device_error() -> None:
             driver.poll()
     finally:
         driver.disconnect()
+
+
+def test_a_stream_without_hub_or_global_blocks_still_gives_frames() -> None:
+    """A controller (or a fake written from the packet facts) that sends pillar data alone: frames carry the pillar
+    forces and displacements, with no device counter or time, and no counter gaps are invented."""
+    driver = PapillArrayDriver("loop://", clock=VirtualClock())
+    driver.connect()
+    try:
+        sensor = PillarSensorData.unloaded()
+        sensor.forces_n[4] = [0.25, -0.5, 3.0]  # the centre pillar pressed
+        sensor.displacements_mm[4] = [0.0, 0.0, 0.75]
+        packet = PapillArrayPacket(counter=None, timestamp_us=None, sensors=[sensor, PillarSensorData.unloaded()])
+        for _ in range(3):
+            driver._port.write(encode_packet(packet, include_slip=False, include_global=False))  # type: ignore[union-attr]
+        frames = driver.poll()
+        assert len(frames) == 3
+        assert all(f.seq is None and f.device_t_us is None for f in frames)
+        assert frames[-1].values[4].tolist() == [0.25, -0.5, 3.0]
+        assert frames[-1].displacement_mm is not None and frames[-1].displacement_mm[4].tolist() == [0.0, 0.0, 0.75]
+        assert driver.health().sequence_gaps == 0
+        for counter in (5, None, 6):  # a hub block now and then: nothing to compare against in between
+            mixed = PapillArrayPacket(counter, None if counter is None else 0, packet.sensors)
+            driver._port.write(encode_packet(mixed))  # type: ignore[union-attr]
+        assert [f.seq for f in driver.poll()] == [5, None, 6]
+        assert driver.health().sequence_gaps == 0
+    finally:
+        driver.disconnect()

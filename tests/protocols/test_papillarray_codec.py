@@ -18,6 +18,7 @@ from protocols.papillarray import (
     PapillArrayPacket,
     PillarSensorData,
     decode_packet,
+    encode_body,
     encode_packet,
 )
 from protocols.papillarray_commands import VALID_RATES_HZ, Command, CommandParser, HubCommand, encode_command
@@ -164,6 +165,36 @@ def test_unknown_block_type_7_is_kept_as_raw_bytes() -> None:
     assert_same_packet(decoded, packet)
 
 
+def test_a_packet_without_a_hub_block_decodes_without_counter_or_time() -> None:
+    """No public source says the hub block always comes; the golden packet with its hub entry retyped as an undefined
+    block still gives its pillar values, and the 12 hub bytes are kept raw."""
+    packet = decode_packet(_with_body_byte(GOLDEN_1, 1, 7))
+    assert (packet.counter, packet.timestamp_us) == (None, None)
+    assert packet.sensors[0].forces_n.tolist() == [[0.5, -1.0, 2.0]]
+    assert packet.unknown_blocks[7] == (0x01020304).to_bytes(4, "little") + (1_000_000).to_bytes(8, "little")
+
+
+@pytest.mark.parametrize("index_size", [1, 2])
+def test_pillar_data_alone_round_trips_with_nan_globals(index_size: int) -> None:
+    rng = np.random.default_rng(7)
+    sensors = [random_sensor(rng, n_pillars=2) for _ in range(2)]
+    packet = PapillArrayPacket(counter=None, timestamp_us=None, sensors=sensors)
+    body = encode_body(packet, index_size=index_size, include_slip=False, include_global=False)
+    assert body[0] == index_size and body[1:3] == (3).to_bytes(2, "little")  # one index entry: pillar data
+    decoded = decode_packet(encode_packet(packet, index_size=index_size, include_slip=False, include_global=False))
+    assert (decoded.counter, decoded.timestamp_us) == (None, None)
+    for sent, got in zip(sensors, decoded.sensors, strict=True):
+        np.testing.assert_array_equal(got.forces_n, sent.forces_n)
+        np.testing.assert_array_equal(got.displacements_mm, sent.displacements_mm)
+        assert np.isnan(got.global_force_n).all() and np.isnan(got.global_torque_nmm).all()
+
+
+def test_a_counter_without_a_time_is_refused_by_the_encoder() -> None:
+    packet = PapillArrayPacket(counter=1, timestamp_us=None, sensors=[PillarSensorData.unloaded()])
+    with pytest.raises(ProtocolError, match="come together"):
+        encode_body(packet)
+
+
 def test_index_size_1_cannot_address_a_full_packet() -> None:
     with pytest.raises(ProtocolError, match="does not fit in index_size=1"):
         encode_packet(random_packet(np.random.default_rng(0), counter=1), index_size=1)
@@ -188,7 +219,7 @@ def _with_body_byte(frame: bytes, index: int, value: int) -> bytes:
         (_with_body_byte(GOLDEN_1, 28, 3), "type 3, expected 2"),  # pillar entry type
         (_with_body_byte(GOLDEN_1, 25, 0x40), "runs past"),  # sensor 0 claims 64 pillars
         (_with_body_byte(GOLDEN_1, 4, 4), "listed twice"),  # pillar entry retyped as global
-        (_with_body_byte(GOLDEN_1, 1, 7), "no block of type 1"),  # hub entry retyped as 7
+        (_with_body_byte(GOLDEN_1, 4, 7), "no block of type 3"),  # pillar entry retyped as 7: no pillar data
         (START_MARKER + GOLDEN_1[4:-6] + b"\x00" + (0x066A).to_bytes(2, "little") + END_MARKER, "stray bytes"),
     ],
 )

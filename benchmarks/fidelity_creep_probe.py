@@ -35,9 +35,9 @@ from unitac_rig.bench.fidelity import (
     best_uskin_gains,
     model_settings,
     uskin_sweep_forces,
+    uskin_with_gains,
     with_creep,
 )
-from unitac_rig.sim.sensor_models import UskinModel
 
 
 def reversed_presses(forces: np.ndarray) -> np.ndarray:
@@ -48,10 +48,9 @@ def reversed_presses(forces: np.ndarray) -> np.ndarray:
 
 def square_tpu_ratio(draws: list[dict[str, np.ndarray]], gain_n: float, gain_s: float) -> float:
     """Median over the draws of the square TPU session's max / |min| in counts at these gains (recorded 1.85)."""
-    _, uskin_params, _ = model_settings({"gain_normal_counts_per_n": gain_n, "gain_shear_counts_per_n": gain_s})
     ratios = []
     for seed, forces in enumerate(draws):
-        counts = UskinModel(uskin_params, np.random.default_rng([seed, 2])).signal_counts(forces["square_tpu"])
+        counts = uskin_with_gains(gain_n, gain_s, seed).signal_counts(forces["square_tpu"])
         ratios.append(float(counts.max()) / abs(float(counts.min())))
     return float(np.median(ratios))
 

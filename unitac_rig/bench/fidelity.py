@@ -290,11 +290,17 @@ PROBE_GAINS_NORMAL = tuple(float(g) for g in np.arange(600.0, 1301.0, 50.0))
 PROBE_GAINS_SHEAR = tuple(float(g) for g in np.arange(3500.0, 5501.0, 250.0))
 
 
+def uskin_with_gains(gain_n: float, gain_s: float, seed: int) -> UskinModel:
+    """The uSkin model with these normal and shear gains (counts/N) and draw ``seed``'s cross-talk, as the
+    probes read a reshaped sweep through it."""
+    _, uskin_params, _ = model_settings({"gain_normal_counts_per_n": gain_n, "gain_shear_counts_per_n": gain_s})
+    return UskinModel(uskin_params, np.random.default_rng([seed, 2]))
+
+
 def uskin_target_errors(forces: dict[str, np.ndarray], gain_n: float, gain_s: float, seed: int) -> dict[str, float]:
     """Relative error of every recorded uSkin min and max for one placement draw, read through the uSkin model with
     these gains (counts/N) and the draw's seeded cross-talk."""
-    _, uskin_params, _ = model_settings({"gain_normal_counts_per_n": gain_n, "gain_shear_counts_per_n": gain_s})
-    uskin = UskinModel(uskin_params, np.random.default_rng([seed, 2]))
+    uskin = uskin_with_gains(gain_n, gain_s, seed)
     out = {}
     for object_id, f in forces.items():
         counts = uskin.signal_counts(f)

@@ -100,6 +100,12 @@ class Arm(Protocol):
 
     def force_mode_stop(self) -> None: ...
 
+    def set_force_mode_parameters(self, damping: float, gain_scaling: float) -> None:
+        """Force mode's damping (0..1) and gain scaling (0..2) (URScript ``force_mode_set_damping`` /
+        ``force_mode_set_gain_scaling``), applied from the next entry into force mode on; set explicitly, so no
+        earlier program's or installation's values carry over into a press."""
+        ...
+
     def wait_period(self) -> None:
         """Block until the next control period (2 ms at 500 Hz) and feed the watchdog.
 

@@ -35,7 +35,7 @@ from drivers.rotations import angle_between, matrix_to_rotvec
 
 logger = logging.getLogger(__name__)
 
-StopReason = Literal["force", "travel", "timeout", "hard_limit", "protective_stop"]
+StopReason = Literal["force", "travel", "timeout", "hard_limit", "protective_stop", "settled"]
 
 REST_SPEED_M_S = 0.0005  # below 0.5 mm/s the TCP counts as at rest
 DEFAULT_SETTLE_S = 0.05  # after rest: covers F/T latency (<= 20 ms) + 3 time constants of an 8 ms filter
@@ -49,6 +49,15 @@ CATCH_UP_S = 0.2  # after the progress word says finished, the pose may take thi
 # for those axes), m and rad.
 FORCE_MODE_DEVIATION_M = 0.005
 FORCE_MODE_DEVIATION_RAD = 0.05
+# A force-mode press whose force stops rising below the threshold ("settled": the controller's regulated reading and
+# the host's differ by more than the set-point margin) is noticed within PLATEAU_S: the pad moved less than
+# PLATEAU_TRAVEL_M along the press and the mean press force of the window's second half is within PLATEAU_RISE_N of
+# its first half, with the force above half the threshold (in contact). The set-point then rises by
+# PLATEAU_STEP_N, up to the ceiling the caller allows; at the ceiling the move ends with reason "settled".
+PLATEAU_S = 0.3
+PLATEAU_TRAVEL_M = 5e-5
+PLATEAU_RISE_N = 0.1
+PLATEAU_STEP_N = 0.5
 
 
 @dataclass(frozen=True)
@@ -111,9 +120,9 @@ def move_to(
         for _ in range(max(1, math.ceil(budget_s / arm.control_period_s))):
             arm.wait_period()
             state = arm.read_state()
+            check_controller(state, "a move")  # first: after a host freeze, a stopped program explains the rest
             if on_period is not None:
                 on_period(state)
-            check_controller(state, "a move")
             finished = not arm.move_running()
             arrived = arrived + 1 if _on_target(state, target) and _resting(state) else 0
             if arrived >= ARRIVED_PERIODS or (finished and _on_target(state, target)):
@@ -150,12 +159,16 @@ def guarded_move(
     stop_samples: int = 1,
     hard_torque_nm: float | None = None,
     max_duration_s: float | None = None,
+    setpoint_ceiling_n: float | None = None,
 ) -> GuardedMoveResult:
     """Move along ``direction`` at ``speed_m_s`` until the press force reaches ``force_threshold_n``.
 
     ``force_setpoint_n``: run in controller-side force mode, compliant along ``direction`` with this force set-point
     (N, a little above the threshold, as the controller measures it) and ``speed_m_s`` as the speed limit (see the
     module docstring); None: ``speedL``.
+    ``setpoint_ceiling_n``: in force mode, how far the set-point may be raised when the force settles below the
+    threshold (see ``PLATEAU_S``); at the ceiling such a move ends with reason "settled" instead of waiting for
+    ``max_duration_s``. None: the set-point is never raised (a plateau still ends the move, "settled").
     ``stop_samples``: the threshold applies to the mean of the last this-many press-force readings.
     ``max_duration_s``: give up after this long (reason "timeout"): in force mode a set-point that the filtered
     force never quite reaches would otherwise hold the pad there for good, travelling nowhere.
@@ -176,6 +189,9 @@ def guarded_move(
         )
     if force_setpoint_n is not None and not 0 < force_setpoint_n < hard_limit_n:
         raise ArmError(f"guarded move force set-point {force_setpoint_n} N must be within (0, {hard_limit_n}) N")
+    ceiling_n = force_setpoint_n if setpoint_ceiling_n is None else setpoint_ceiling_n
+    if force_setpoint_n is not None and ceiling_n is not None and not force_setpoint_n <= ceiling_n < hard_limit_n:
+        raise ArmError(f"guarded move set-point ceiling {ceiling_n} N must be within [set-point, {hard_limit_n}) N")
     if not max_travel_m > 0:
         raise ArmError(f"guarded move travel limit must be > 0 m, got {max_travel_m}")
     if not (accel_m_s2 > 0 and stop_decel_m_s2 > 0):
@@ -185,9 +201,9 @@ def guarded_move(
 
     start_state = arm.read_state()
     start_position = np.asarray(start_state.tcp_pose[:3], dtype=np.float64)
-    command = _speed_command(arm, unit, speed_m_s, accel_m_s2)
+    command: _SpeedCommand | _ForceCommand = _SpeedCommand(arm, unit, speed_m_s, accel_m_s2)
     if force_setpoint_n is not None:
-        command = _force_command(arm, unit, start_position, speed_m_s, force_setpoint_n)
+        command = _ForceCommand(arm, unit, start_position, speed_m_s, force_setpoint_n, ceiling_n or force_setpoint_n)
     peak = press_force(start_state, unit)
     stop_sent = False
     try:
@@ -225,24 +241,74 @@ def force_limits(speed_m_s: float) -> np.ndarray:
     return np.array([d, d, speed_m_s, r, r, r])
 
 
-def _speed_command(arm: Arm, unit: np.ndarray, speed_m_s: float, accel_m_s2: float) -> Callable[[], None]:
-    twist = np.concatenate([unit * speed_m_s, np.zeros(3)])
-    return lambda: arm.speed_linear(twist, accel_m_s2)
+class _SpeedCommand:
+    """speedL along the direction, sent every period (moves where nothing can be crushed)."""
+
+    def __init__(self, arm: Arm, unit: np.ndarray, speed_m_s: float, accel_m_s2: float) -> None:
+        self._arm, self._accel = arm, accel_m_s2
+        self._twist = np.concatenate([unit * speed_m_s, np.zeros(3)])
+
+    def __call__(self) -> None:
+        self._arm.speed_linear(self._twist, self._accel)
+
+    def raise_setpoint(self) -> bool:
+        return False
 
 
-def _force_command(
-    arm: Arm, unit: np.ndarray, position: np.ndarray, speed_m_s: float, setpoint_n: float
-) -> Callable[[], None]:
-    frame = press_frame(position, unit)
-    selection = np.array([0, 0, 1, 0, 0, 0], dtype=np.float64)
-    wrench = np.array([0.0, 0.0, setpoint_n, 0.0, 0.0, 0.0])
-    limits = force_limits(speed_m_s)
-    return lambda: arm.force_mode(frame, selection, wrench, limits)
+class _ForceCommand:
+    """forceMode along the direction with a set-point the host may raise (up to ``ceiling_n``) when the force
+    settles below the threshold; the controller regulates toward whatever was sent last, host stalled or not."""
+
+    def __init__(
+        self, arm: Arm, unit: np.ndarray, position: np.ndarray, speed_m_s: float, setpoint_n: float, ceiling_n: float
+    ) -> None:
+        self._arm = arm
+        self._frame = press_frame(position, unit)
+        self._selection = np.array([0, 0, 1, 0, 0, 0], dtype=np.float64)
+        self._limits = force_limits(speed_m_s)
+        self.setpoint_n, self.ceiling_n = setpoint_n, ceiling_n
+
+    def __call__(self) -> None:
+        wrench = np.array([0.0, 0.0, self.setpoint_n, 0.0, 0.0, 0.0])
+        self._arm.force_mode(self._frame, self._selection, wrench, self._limits)
+
+    def raise_setpoint(self) -> bool:
+        """Raise the set-point one step toward the ceiling; False when it is already there."""
+        if self.setpoint_n >= self.ceiling_n - 1e-9:
+            return False
+        self.setpoint_n = min(self.setpoint_n + PLATEAU_STEP_N, self.ceiling_n)
+        logger.info("press force settled below the threshold: force set-point raised to %.2f N", self.setpoint_n)
+        return True
+
+
+class _Plateau:
+    """Tells a force that has stopped rising below the threshold (see ``PLATEAU_S``) from one still loading."""
+
+    def __init__(self, period_s: float, threshold_n: float) -> None:
+        self._size = max(4, round(PLATEAU_S / period_s))
+        self._forces: deque[float] = deque(maxlen=self._size)
+        self._travel: deque[float] = deque(maxlen=self._size)
+        self._floor_n = 0.5 * threshold_n
+
+    def reset(self) -> None:
+        self._forces.clear()
+        self._travel.clear()
+
+    def settled(self, force_n: float, travel_m: float) -> bool:
+        self._forces.append(force_n)
+        self._travel.append(travel_m)
+        if len(self._forces) < self._size:
+            return False
+        forces = np.asarray(self._forces)
+        half = self._size // 2
+        rise = float(forces[half:].mean() - forces[:half].mean())
+        moved = abs(self._travel[-1] - self._travel[0])
+        return bool(forces.mean() > self._floor_n and rise < PLATEAU_RISE_N and moved < PLATEAU_TRAVEL_M)
 
 
 def _approach(
     arm: Arm,
-    command: Callable[[], None],
+    command: _SpeedCommand | _ForceCommand,
     unit: np.ndarray,
     start_position: np.ndarray,
     max_travel_m: float,
@@ -257,6 +323,7 @@ def _approach(
     """Command the motion every period until a stop condition; -> (reason, state that triggered it, peak)."""
     recent: deque[float] = deque(maxlen=stop_samples)
     periods_left = math.inf if max_duration_s is None else max_duration_s / arm.control_period_s
+    plateau = _Plateau(arm.control_period_s, force_threshold_n) if isinstance(command, _ForceCommand) else None
     while True:
         periods_left -= 1
         try:
@@ -278,8 +345,13 @@ def _approach(
             return "hard_limit", state, peak
         if len(recent) == stop_samples and sum(recent) / stop_samples >= force_threshold_n:
             return "force", state, peak
-        if float(np.dot(np.asarray(state.tcp_pose[:3]) - start_position, unit)) > max_travel_m:
+        travel = float(np.dot(np.asarray(state.tcp_pose[:3]) - start_position, unit))
+        if travel > max_travel_m:
             return "travel", state, peak
+        if plateau is not None and plateau.settled(sum(recent) / len(recent), travel):
+            if not command.raise_setpoint():
+                return "settled", state, peak
+            plateau.reset()
         if periods_left <= 0:
             return "timeout", state, peak
 

@@ -197,7 +197,7 @@ class UR5eReceiver:
                 self._receive = _connect_receive(host, frequency_hz, RECEIVE_VARIABLES)
         self._closed = False
         self._last_controller_t_s: float | None = None
-        self._last_change_ns = self.clock.now_ns()
+        self._stale_since_ns: int | None = None  # host time of the first read that saw the timestamp unchanged
 
     def read_state(self) -> ArmState:
         """The latest state the RTDE client holds, stamped with the host clock (ns).
@@ -222,12 +222,17 @@ class UR5eReceiver:
         except (RuntimeError, ValueError) as exc:
             raise DeviceError(f"reading the UR state from {self.host} failed: {exc}", hint=_RECEIVE_HINT) from exc
         now_ns = self.clock.now_ns()
+        # Stale = unchanged over STALL_TIMEOUT_S of *reads*, counted from the first read that saw it unchanged: a
+        # host that was itself frozen (SIGSTOP, a long GC) sees an old timestamp on its first read after waking, and
+        # that says nothing about the controller (it would call a live controller lost and send it no stop).
         if controller_t_s != self._last_controller_t_s:
             self._last_controller_t_s = controller_t_s
-            self._last_change_ns = now_ns
-        elif now_ns - self._last_change_ns > STALL_TIMEOUT_S * 1e9:
+            self._stale_since_ns = None
+        elif self._stale_since_ns is None:
+            self._stale_since_ns = now_ns
+        elif now_ns - self._stale_since_ns > STALL_TIMEOUT_S * 1e9:
             raise RobotStateLost(
-                f"the UR at {self.host} sent no new state for {(now_ns - self._last_change_ns) / 1e9:.2f} s",
+                f"the UR at {self.host} sent no new state for {(now_ns - self._stale_since_ns) / 1e9:.2f} s",
                 hint=_RECEIVE_HINT,
             )
         return ArmState(
@@ -335,6 +340,7 @@ class UR5eArm:
         self._move: _AsyncMove | None = None
         self._period_start: Any = None
         self._kicker: tuple[threading.Thread, threading.Event] | None = None
+        self._force_mode_parameters: tuple[float, float] | None = None  # (damping, gain scaling), set on entry
         self.tcp_offset: np.ndarray | None = None  # as read back at connect
         self.payload_kg: float | None = None
         self._receiver = UR5eReceiver(
@@ -468,9 +474,27 @@ class UR5eArm:
         self._require_ready("forceMode")
         if not self._in_force_mode:
             self._rearm_watchdog()
+            self._apply_force_mode_parameters()
         ok = self._call("forceMode", self._control.forceMode, frame, chosen, target, FORCE_MODE_TYPE, speed_limits)
         self._in_force_mode = self._command_this_period = True
         self._expect_ok("forceMode", ok)
+
+    def set_force_mode_parameters(self, damping: float, gain_scaling: float) -> None:
+        """Damping (0..1) and gain scaling (0..2), sent before each entry into force mode (ur_rtde: "call before
+        entering force mode"; a script uploaded again after a reconnect starts from its defaults)."""
+        if not (0.0 <= damping <= 1.0 and 0.0 <= gain_scaling <= 2.0):
+            raise ArmError(f"force mode damping must be in [0, 1] and gain scaling in [0, 2], got {damping}, "
+                           f"{gain_scaling}")  # fmt: skip
+        self._force_mode_parameters = (float(damping), float(gain_scaling))
+
+    def _apply_force_mode_parameters(self) -> None:
+        if self._force_mode_parameters is None:
+            return
+        damping, scaling = self._force_mode_parameters
+        control = self._control
+        self._expect_ok("forceModeSetDamping", self._call("forceModeSetDamping", control.forceModeSetDamping, damping))
+        ok = self._call("forceModeSetGainScaling", control.forceModeSetGainScaling, scaling)
+        self._expect_ok("forceModeSetGainScaling", ok)
 
     def force_mode_stop(self) -> None:
         self._check_open()

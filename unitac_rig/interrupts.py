@@ -23,6 +23,7 @@ import signal
 from collections.abc import Iterator
 
 _noted: list[int] = []
+_acknowledged = [0]  # how many of the noted interrupts are being handled (see acknowledged_interrupts)
 _immediate_depth = [0]  # how many immediate_interrupts() scopes are open (a list: mutable without `global`)
 
 
@@ -50,14 +51,32 @@ def interrupt_for(signal_number: int) -> KeyboardInterrupt:
 
 
 def raise_if_interrupted() -> None:
-    """Raise the noted interrupt again (a process that was interrupted stays interrupted); else do nothing."""
-    if _noted:
+    """Raise the noted interrupt again (a process that was interrupted stays interrupted); else do nothing.
+
+    Inside :func:`acknowledged_interrupts` only an interrupt noted after entry raises."""
+    if len(_noted) > _acknowledged[0]:
         raise interrupt_for(_noted[-1])
+
+
+@contextlib.contextmanager
+def acknowledged_interrupts() -> Iterator[None]:
+    """The interrupts noted so far are being handled for the duration: polls do not raise them again.
+
+    For the clean-up an interrupt asks for (the arm pulling the pad off the object before the process exits): its
+    moves poll :func:`raise_if_interrupted` like any other, and a *new* interrupt (the operator's second Ctrl-C)
+    still raises, at once (:func:`raise_at_once`), and ends the clean-up with the arm stopped."""
+    saved = _acknowledged[0]
+    _acknowledged[0] = len(_noted)
+    try:
+        yield
+    finally:
+        _acknowledged[0] = saved
 
 
 def forget_interrupts() -> None:
     """Clear the noted interrupts (tests, and a handler scope that ends without one)."""
     _noted.clear()
+    _acknowledged[0] = 0
 
 
 def raise_at_once() -> bool:

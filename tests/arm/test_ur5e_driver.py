@@ -383,6 +383,8 @@ def test_a_stalled_stream_and_a_lost_connection_are_robot_state_lost() -> None:
     receive.getTimestamp = lambda: 5.0  # type: ignore[method-assign]  # the controller clock stops
     receiver.read_state()
     clock.sleep(STALL_TIMEOUT_S + 0.01)
+    receiver.read_state()  # the first read that sees it unchanged: the host may have been frozen, not the stream
+    clock.sleep(STALL_TIMEOUT_S + 0.01)
     with pytest.raises(RobotStateLost) as excinfo:
         receiver.read_state()
     assert isinstance(excinfo.value, DeviceTimeout) and isinstance(excinfo.value, ArmError)
@@ -391,6 +393,22 @@ def test_a_stalled_stream_and_a_lost_connection_are_robot_state_lost() -> None:
         receiver.read_state()
     receiver.close()
     assert receive.disconnects == 1
+
+
+def test_a_host_that_was_frozen_does_not_call_a_live_controller_lost() -> None:
+    """SIGSTOP for 2 s: the first read after waking sees the timestamp of before the freeze (ur_rtde's own receive
+    thread was frozen too). That is no evidence against the controller; the next state it sends settles it. (Calling
+    it lost made stop() send nothing after a host freeze.)"""
+    receive = FakeReceive()
+    clock = VirtualClock()
+    receiver = UR5eReceiver("ur", receive=receive, clock=clock)
+    receive.getTimestamp = lambda: 5.0  # type: ignore[method-assign]
+    receiver.read_state()
+    clock.sleep(2.0)  # the host is frozen
+    receiver.read_state()  # awake: still the old timestamp
+    receive.getTimestamp = lambda: 7.0  # type: ignore[method-assign]  # the controller's state of now arrives
+    assert receiver.read_state().controller_t_s == 7.0
+    receiver.close()
 
 
 def test_a_move_reported_finished_before_the_pose_stream_shows_it_is_not_an_error() -> None:

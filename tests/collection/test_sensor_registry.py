@@ -41,6 +41,9 @@ FAKE = SensorLayout(
 )
 PERIOD_NS = 10_000_000  # 100 Hz
 
+# a real arm needs its TCP and payload in the rig file (what the pendant says)
+ARM = {"host": "10.0.0.2", "tcp_offset": [0.0, 0.0, 0.1, 0.0, 0.0, 0.0], "payload_kg": 0.3}
+
 
 class FakeUsbConfig(SensorConfigBase):
     type: Literal["fakeskin-usb"] = "fakeskin-usb"
@@ -130,7 +133,7 @@ def fakeskin(monkeypatch: pytest.MonkeyPatch) -> Iterator[SensorSpec]:
 
 
 def test_the_rig_file_accepts_its_table_only_once_registered(fakeskin: SensorSpec) -> None:
-    data = {"arm": {"host": "10.0.0.2"}, "sensors": {"fakeskin": {"type": "fakeskin-usb", "port": "/dev/fake0"}}}
+    data = {"arm": ARM, "sensors": {"fakeskin": {"type": "fakeskin-usb", "port": "/dev/fake0"}}}
     config = parse_rig_config(data)
     assert isinstance(config.sensors["fakeskin"], FakeUsbConfig)
     assert parse_rig_config(config.model_dump(mode="json")) == config  # the table's own fields survive a dump
@@ -144,9 +147,7 @@ def test_the_rig_file_accepts_its_table_only_once_registered(fakeskin: SensorSpe
 
 
 def test_the_hardware_rig_opens_it_with_the_registered_driver_factory(fakeskin: SensorSpec) -> None:
-    config = parse_rig_config(
-        {"arm": {"host": "10.0.0.2"}, "sensors": {"fakeskin": {"type": "fakeskin-usb", "port": "/dev/fake0"}}}
-    )
+    config = parse_rig_config({"arm": ARM, "sensors": {"fakeskin": {"type": "fakeskin-usb", "port": "/dev/fake0"}}})
     rig = HardwareRig(config)
     sensor = rig.open_sensor("fakeskin")
     try:

@@ -43,6 +43,7 @@ from drivers.arm import Arm, ArmState
 from drivers.errors import ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop, RobotStateLost
 from drivers.frames import TactileFrame
 from drivers.motion import (
+    check_controller,
     force_limits,
     force_magnitude,
     guarded_move,
@@ -55,7 +56,7 @@ from drivers.sensor import TactileSensor
 from unitac_rig.errors import SafetyLimit, with_press_record
 from unitac_rig.interrupts import raise_if_interrupted
 from unitac_rig.rig.config import LimitsConfig, PressConfig
-from unitac_rig.rig.poses import approach_direction, pose_from, press_force_n, press_rotation
+from unitac_rig.rig.poses import approach_direction, pose_from, press_force_n, press_rotation, tool_z
 from unitac_rig.storage.press_record import PressRecord, press_id
 
 log = logging.getLogger(__name__)
@@ -214,16 +215,166 @@ def transit_guard(arm: Arm, limits: LimitsConfig) -> Callable[[ArmState], None]:
     return guard
 
 
+def standoff_radius_m(plan: PressPlan) -> float:
+    """Horizontal distance (m) of the plan's stand-off pose from the object's axis."""
+    return float(np.linalg.norm(np.asarray(plan.start_pose[:2]) - np.asarray(plan.center_xy_m)))
+
+
+def approach_legs(
+    here: np.ndarray, waypoints: list[np.ndarray], plan: PressPlan, limits: LimitsConfig, transit_speed_m_s: float
+) -> list[tuple[np.ndarray, float]]:
+    """Each waypoint with the speed (m/s) to reach it: ``limits.near_speed_mm_s`` for any stretch that comes closer to
+    the object's axis inside the near zone (the stand-off radius plus ``limits.near_zone_mm``, where a misplaced
+    object may stand), the transit speed elsewhere. A segment that enters the zone is split where it enters.
+
+    Why: a position move is bounded on the controller only by the RTDE watchdog. If the host freezes the moment
+    the pad meets an object that is not where the rig file says, the move runs on for one watchdog period; at the
+    near speed that is at most ``near_speed x (1 / watchdog_hz)`` of travel into it (docs/real-rig.md has the
+    numbers). Moves away from the object keep the transit speed: they cannot drive into it.
+    """
+    center = np.asarray(plan.center_xy_m, dtype=np.float64)
+    near_radius = standoff_radius_m(plan) + limits.near_zone_mm / 1000.0
+    near_speed = min(transit_speed_m_s, limits.near_speed_mm_s / 1000.0)
+    legs: list[tuple[np.ndarray, float]] = []
+    start = np.asarray(here, dtype=np.float64)
+    for pose in waypoints:
+        end = np.asarray(pose, dtype=np.float64)
+        a, d = start[:2] - center, end[:2] - start[:2]
+        dd = float(d @ d)
+        t_min = float(np.clip(-(a @ d) / dd, 0.0, 1.0)) if dd > 1e-18 else 0.0
+        r_start, r_min = float(np.linalg.norm(a)), float(np.linalg.norm(a + t_min * d))
+        if r_min >= r_start - 1e-9 or r_min >= near_radius:
+            legs.append((end, transit_speed_m_s))  # receding, or never inside the zone
+        elif r_start <= near_radius:
+            legs.append((end, near_speed))
+        else:  # enters the zone on the way: split where |a + t d| = near_radius (the root before t_min)
+            b, c = float(a @ d), float(a @ a) - near_radius**2
+            t_in = (-b - math.sqrt(max(b * b - dd * c, 0.0))) / dd
+            entry = np.concatenate([start[:3] + t_in * (end[:3] - start[:3]), end[3:]])
+            legs += [(entry, transit_speed_m_s), (end, near_speed)]
+        start = end
+    return legs
+
+
 def move_clear(arm: Arm, plan: PressPlan, clearance_m: float, speed_m_s: float, limits: LimitsConfig) -> None:
     """Move to ``plan.start_pose`` through :func:`clearance_waypoints`, each checked before the first is sent, each
-    move asynchronous and stopped if the wrist feels something (:func:`transit_guard`)."""
+    move asynchronous, at the speeds of :func:`approach_legs`, and stopped if the wrist feels something
+    (:func:`transit_guard`)."""
     here = np.asarray(arm.read_state().tcp_pose, dtype=np.float64)
     waypoints = clearance_waypoints(here, plan, clearance_m)
     for k, pose in enumerate(waypoints):
         what = "stand-off pose" if k == len(waypoints) - 1 else "clearance waypoint"
         check_waypoint(pose, limits, f"{what} of press {plan.press_id}")
-    for pose in waypoints:
-        move_to(arm, pose, speed_m_s, TRANSIT_ACCEL_M_S2, on_period=transit_guard(arm, limits))
+    for pose, speed in approach_legs(here, waypoints, plan, limits, speed_m_s):
+        move_to(arm, pose, speed, TRANSIT_ACCEL_M_S2, on_period=transit_guard(arm, limits))
+
+
+def retract_waypoint(plan: PressPlan, clearance_m: float) -> np.ndarray:
+    """Where a retract after an abort on the plan's ray ends: the ray at the clearance radius, stand-off height."""
+    outward = -np.asarray(plan.direction, dtype=np.float64)
+    position = np.array([*plan.center_xy_m, plan.start_pose[2]]) + outward * clearance_m
+    return np.concatenate([position, np.asarray(plan.start_pose[3:], dtype=np.float64)])
+
+
+def check_session_plan(here: np.ndarray, plans: list[PressPlan], clearance_m: float, limits: LimitsConfig) -> int:
+    """Check every waypoint of a whole session before its first motion: the first move from ``here``, every
+    clearance waypoint and stand-off of every press and rotation, and where each press's retract would end.
+    Straight moves between checked points stay inside (the workspace box and the reach sphere are convex).
+    Raises SafetyLimit naming the first waypoint outside; -> the number of waypoints checked."""
+    pose, checked = np.asarray(here, dtype=np.float64), 0
+    for index, plan in enumerate(plans):
+        waypoints = clearance_waypoints(pose, plan, clearance_m)
+        named = [("clearance waypoint", p) for p in waypoints[:-1]] + [("stand-off pose", waypoints[-1])]
+        named.append(("retract waypoint", retract_waypoint(plan, clearance_m)))
+        for what, waypoint in named:
+            check_waypoint(waypoint, limits, f"session plan (press {index + 1} of {len(plans)}): the {what} of press "
+                                             f"{plan.press_id}")  # fmt: skip
+            checked += 1
+        pose = plan.start_pose
+    return checked
+
+
+def retract_from_object(
+    arm: Arm,
+    plan: PressPlan,
+    limits: LimitsConfig,
+    *,
+    standoff_m: float,
+    clearance_m: float,
+    transit_speed_m_s: float,
+    to_clearance: bool = True,
+) -> list[np.ndarray]:
+    """After an abort: pull the pad off whatever it touches, from wherever the arm IS, never toward a pose that was
+    not reached; -> the poses moved to.
+
+    1. Back along the pad's own axis (away from what it presses) to the plan's stand-off radius, and at least
+       ``standoff_m`` when the wrist reads loaded (an object closer than the rig file says), at the near speed;
+    2. (``to_clearance``) out horizontally, radially from the object's axis, to ``clearance_m`` at the transit speed.
+
+    Both legs are force-guarded (:func:`transit_guard`: the force may fall, not grow) and clipped to the workspace
+    box and reach (a leg that would leave them ends at their edge). The next press then starts with a fresh,
+    checked move (:func:`move_clear`). Raises what the moves raise (SafetyLimit when the guard trips, the arm
+    stopped).
+    """
+    state = arm.read_state()
+    here = np.asarray(state.tcp_pose, dtype=np.float64)
+    center = np.asarray(plan.center_xy_m, dtype=np.float64)
+    radius = float(np.linalg.norm(here[:2] - center))
+    loaded = float(np.linalg.norm(np.asarray(state.tcp_force, dtype=np.float64)[:3])) > UNLOADED_FORCE_N
+    back_m = max(standoff_radius_m(plan) - radius, 0.0)
+    if loaded:
+        back_m = max(back_m, standoff_m)
+    moved: list[np.ndarray] = []
+    near_speed = min(transit_speed_m_s, limits.near_speed_mm_s / 1000.0)
+    if back_m > 2e-4:
+        target = np.concatenate([here[:3] - tool_z(here) * back_m, here[3:]])
+        here = _move_within_limits(arm, here, target, near_speed, limits, moved)
+    radius = float(np.linalg.norm(here[:2] - center))
+    if to_clearance and radius < clearance_m - 2e-4:
+        outward = (here[:2] - center) / radius if radius > 1e-6 else -np.asarray(plan.direction)[:2]
+        target = np.concatenate([center + outward * clearance_m, here[2:]])
+        _move_within_limits(arm, here, target, transit_speed_m_s, limits, moved)
+    return moved
+
+
+def _move_within_limits(
+    arm: Arm, here: np.ndarray, target: np.ndarray, speed_m_s: float, limits: LimitsConfig, moved: list[np.ndarray]
+) -> np.ndarray:
+    """A guarded move toward ``target``, shortened to the last point inside the workspace and reach; -> the end."""
+    fraction = _inside_fraction(here, target, limits)
+    end = np.concatenate([here[:3] + fraction * (target[:3] - here[:3]), target[3:]])
+    if float(np.linalg.norm(end[:3] - here[:3])) < 2e-4:
+        log.warning("a retract toward %s would leave the workspace at once: not moving", np.round(target[:3], 4))
+        return here
+    if fraction < 1.0:
+        log.warning("a retract is shortened to %.0f %% to stay inside the workspace", 100 * fraction)
+    move_to(arm, end, speed_m_s, TRANSIT_ACCEL_M_S2, on_period=transit_guard(arm, limits))
+    moved.append(end)
+    return end
+
+
+def _inside_fraction(start: np.ndarray, end: np.ndarray, limits: LimitsConfig, steps: int = 64) -> float:
+    """The largest fraction t of the segment start -> end (positions) whose points are all inside the workspace box
+    and reach (both convex, so the inside part of the segment is one interval starting at ``start`` if ``start`` is
+    inside); 0 when ``start`` itself is outside."""
+
+    def inside(t: float) -> bool:
+        p = start[:3] + t * (end[:3] - start[:3])
+        try:
+            check_waypoint(np.concatenate([p, end[3:]]), limits, "retract")
+        except SafetyLimit:
+            return False
+        return True
+
+    if inside(1.0):
+        return 1.0
+    if not inside(0.0):
+        return 0.0
+    lo, hi = 0.0, 1.0
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if inside(mid) else (lo, mid)
+    return lo
 
 
 @dataclass
@@ -272,6 +423,9 @@ class _Streams:
 
     def tick(self, state: ArmState) -> None:
         raise_if_interrupted()  # a Ctrl-C that compiled code swallowed is raised here, within one control period
+        # A stopped controller first: after a host freeze the tactile stream looks stalled too, but what happened is
+        # that the watchdog stopped the program (no sensor reconnect and retry for that).
+        check_controller(state, f"press {self.plan.press_id}")
         force = press_force_n(state.tcp_force, self.plan.direction)
         self.robot_t.append(state.host_t_ns / 1e9)
         self.robot_force.append(np.asarray(state.tcp_force, dtype=np.float64))
@@ -294,6 +448,15 @@ class _Streams:
             self.event("stall", f"no tactile frame for {(now - self.last_frame_ns) / 1e9:.3f} s")
             raise DeviceTimeout(f"{self.sensor.layout.name} stopped sending frames during press {self.plan.press_id}")
         filtered = float(np.mean(self.press_force[-self.press.stop_samples :]))
+        if self.phase in ("approach", "press") and filtered <= -self.contact_threshold_n:
+            # Pressing into something must read as a positive press force. A negative one of contact size means the
+            # wrist force's sign or frame is wrong: force mode would then push on, so stop at once.
+            raise SafetyLimit(
+                f"the wrist force points the wrong way: moving into the object reads a press force of {filtered:.1f} N "
+                f"during press {self.plan.press_id} (it must rise against the motion)",
+                hint="check the F/T sign convention and the TCP on the teach pendant (unitac-rig probe ur5e "
+                "--sign-check) before pressing again",
+            )
         if self.contact_pose is None and filtered >= self.contact_threshold_n:
             # filtered like the stop rule: one noise spike in the approach must not start the travel-after-contact
             # budget millimetres before the pad touches
@@ -441,8 +604,9 @@ def run_press(
     if pending is not None:
         raise with_press_record(pending, record)
     try:  # back out to the stand-off, so the next transit starts clear of the object
-        move_to(arm, plan.start_pose, press.transit_speed_mm_s / 1000.0, TRANSIT_ACCEL_M_S2,
-                on_period=transit_guard(arm, limits))  # fmt: skip
+        here = np.asarray(arm.read_state().tcp_pose, dtype=np.float64)
+        for pose, speed in approach_legs(here, [plan.start_pose], plan, limits, press.transit_speed_mm_s / 1000.0):
+            move_to(arm, pose, speed, TRANSIT_ACCEL_M_S2, on_period=transit_guard(arm, limits))
     except BaseException as exc:
         raise with_press_record(exc, record)  # noqa: B904 - the same exception (or Ctrl-C as Interrupted, caused by it)
     return record
@@ -473,11 +637,14 @@ def _press_strategy(arm: Arm, streams: _Streams, plan: PressPlan, press: PressCo
     """Run the configured strategy; returns the stop reason ("force", "travel", "no_contact")."""
     backstop_m = plan.contact_distance_m + (limits.max_travel_after_contact_mm + 5.0) / 1000.0
     setpoint_n = press.threshold_n + press.setpoint_margin_n - streams.offset_along_press_n
+    ceiling_n = press.threshold_n + press.setpoint_ceiling_margin_n - streams.offset_along_press_n
+    arm.set_force_mode_parameters(press.force_mode_damping, press.force_mode_gain_scaling)
     bounds: dict[str, Any] = {
         "hard_limit_n": limits.hard_force_n,
         "hard_torque_nm": limits.hard_torque_nm,
         "on_period": streams.tick,
         "force_setpoint_n": setpoint_n,
+        "setpoint_ceiling_n": ceiling_n,
     }
     if press.strategy == "guarded":
         streams.phase = "press"

@@ -5,10 +5,16 @@ already finished in the session file (complete or failed) are skipped, so the sa
 a Ctrl-C, a termination signal or a protective stop. Library code: no printing; progress goes through callbacks the
 CLI renders.
 
+Before the first motion the whole plan is checked: every stand-off, clearance and retract waypoint of every press
+and rotation against the workspace box and the arm's reach (one line names the first outside).
+
 When the session stops instead of carrying on blind: a protective stop (the operator must clear it on the pendant),
 the controller's program stopping (the watchdog after a host stall), a lost robot state stream, a hard force limit,
-and ``limits.max_presses_without_contact`` presses in a row that touch nothing (the object is missing or not where
-the rig file says). Only a sensor that stalls or drops off is reconnected and its press retried, once.
+and ``limits.max_failed_in_a_row`` presses in a row that do not complete (no contact, timeout, travel limit, force
+settled below the threshold: the object is missing, misplaced or not what the rig file says). Only a sensor that
+stalls or drops off is reconnected and its press retried, once. After any abort the arm retracts from where it is
+(:func:`~unitac_rig.collection.press.retract_from_object`), never toward a pose it did not reach; after Ctrl-C,
+SIGTERM or SIGHUP too, so the pad is not left loaded against the object.
 While the host writes a press or waits for the operator, the arm is at rest and :meth:`Arm.keep_alive` feeds the
 controller's watchdog. :func:`dry_run` visits every stand-off and clearance waypoint without pressing.
 """
@@ -27,21 +33,22 @@ import numpy as np
 
 from drivers.arm import Arm
 from drivers.errors import ArmError, ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop
-from drivers.motion import check_controller, move_to, settle
+from drivers.motion import check_controller, settle
 from drivers.sensor import TactileSensor
 from unitac_rig.collection.press import (
-    TRANSIT_ACCEL_M_S2,
     PressPlan,
     TickInfo,
+    check_session_plan,
     clearance_waypoints,
     make_plan,
     move_clear,
+    retract_from_object,
     run_press,
     transit_guard,
     zero_wrist,
 )
 from unitac_rig.errors import CarriesPressRecord, SafetyLimit
-from unitac_rig.interrupts import raise_if_interrupted
+from unitac_rig.interrupts import acknowledged_interrupts, raise_if_interrupted
 from unitac_rig.provenance import git_commit, package_version
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import RigConfig
@@ -55,6 +62,10 @@ log = logging.getLogger(__name__)
 RECONNECT_WAIT_S = 3.0  # how long a lost sensor may take to come back (USB replug, controller reboot), s
 RECONNECT_POLL_S = 0.25  # pause between reconnect attempts, s
 DRY_RUN_HOLD_S = 0.2  # a dry run rests this long at each stand-off, s
+PROGRAM_STOPPED_HINT = (
+    "the RTDE watchdog stops it when this computer sends nothing in time (a frozen or overloaded host, a cut cable); "
+    "the arm is at rest: check the pendant's log and that the pad is clear, then run the same command again to resume"
+)
 PROTECTIVE_STOP_HINT = (
     "on the teach pendant: unlock the protective stop (if the pad still presses on something, move the arm clear in "
     "freedrive first), then run the same command again to resume"
@@ -73,7 +84,7 @@ class SessionOutcome:
     aborted: int = 0
     stopped: str | None = None  # why the session ended early, if it did
     recovery_notes: list[str] = field(default_factory=list)
-    no_contact_streak: int = 0  # presses in a row so far that touched nothing
+    failure_streak: int = 0  # presses in a row so far that did not complete
 
     @property
     def finished(self) -> bool:
@@ -158,6 +169,7 @@ def collect_session(
     # rewriting the session file on resume) run kept alive, or the controller stops the program under them.
     try:
         arm = rig.arm
+        check_session_plan(arm.read_state().tcp_pose, todo, config.object.clearance_mm / 1000.0, config.limits)
         with _kept_alive(arm):  # python-can's slcan alone waits 2 s after opening the port
             sensor = rig.open_sensor(sensor_name)
     except BaseException:
@@ -168,14 +180,14 @@ def collect_session(
             with _kept_alive(arm):
                 writer.update_root_attrs({"sensor_identity": sensor.identity(), "layout": sensor.layout.name})
             rig.mount(obj, todo[0].rotation_deg, sensor_name)
-            tare = session_tare(rig, sensor, todo[0])
+            tare = _first_move_and_tare(rig, sensor, todo[0])
             with _kept_alive(arm):  # copies the whole session file: seconds on a long resumed session
                 writer.update_root_attrs({"session_tare": tare})
         except BaseException:
             writer.discard_if_unused()  # nor may an arm or sensor that fails before the first press
             raise
         current_rotation: float | None = None
-        limit = config.limits.max_presses_without_contact
+        limit = config.limits.max_failed_in_a_row
         for index, plan in enumerate(todo):
             raise_if_interrupted()
             if plan.rotation_deg != current_rotation:
@@ -190,12 +202,12 @@ def collect_session(
                 with rig.arm.keep_alive():
                     on_press(PressDone(outcome.already_done + index + 1, outcome.planned, record, matched))
             if record is not None:
-                outcome.no_contact_streak = outcome.no_contact_streak + 1 if record.reason == "no_contact" else 0
-            if outcome.no_contact_streak >= limit:
+                outcome.failure_streak = outcome.failure_streak + 1 if record.status != "complete" else 0
+            if outcome.failure_streak >= limit:
                 outcome.stopped = (
-                    f"{limit} presses in a row touched nothing (the last: {plan.press_id}): is {obj.id} mounted at "
-                    f"object.center_m = {list(config.object.center_m)}, press_height_m = "
-                    f"{config.object.press_height_m} in the rig file?"
+                    f"{limit} presses in a row did not complete (the last: {plan.press_id}, {record_reason(record)}): "
+                    f"is {obj.id} mounted at object.center_m = {list(config.object.center_m)}, press_height_m = "
+                    f"{config.object.press_height_m} as the rig file says, and is it the object named?"
                 )
                 break
             if stop:
@@ -203,6 +215,34 @@ def collect_session(
     finally:
         sensor.disconnect()
     return outcome
+
+
+def _first_move_and_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> dict[str, Any]:
+    """:func:`session_tare`, retracting from where the arm is if the first move or the zero is aborted (the pad
+    touched something on the way: the object is not where the rig file says)."""
+    try:
+        return session_tare(rig, sensor, first)
+    except KeyboardInterrupt:
+        with acknowledged_interrupts():
+            _retract(rig, first, to_clearance=False)
+        raise
+    except (SafetyLimit, DeviceError) as exc:
+        _retract(rig, first)
+        raise _controller_stop_explained(exc, f"before the first press ({first.press_id})") from exc
+
+
+def _controller_stop_explained(exc: BaseException, where: str) -> BaseException:
+    """A protective stop or a stopped program as one line saying what happened and what to do (else ``exc``)."""
+    if isinstance(exc, ControlScriptStopped) and not isinstance(exc, ProtectiveStop):
+        return ControlScriptStopped(f"the controller's program stopped {where} ({exc})", hint=PROGRAM_STOPPED_HINT)
+    if isinstance(exc, ProtectiveStop):
+        return ProtectiveStop(f"protective stop {where} ({exc})", hint=PROTECTIVE_STOP_HINT)
+    return exc
+
+
+def record_reason(record: PressRecord | None) -> str:
+    """How a press ended, for a one-line message (e.g. 'failed: settled')."""
+    return "not recorded" if record is None else f"{record.status}: {record.reason}"
 
 
 def session_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> dict[str, Any]:
@@ -257,17 +297,19 @@ def _one_press(
                     _save(writer, sensor, partial, extraction, outcome)
             if isinstance(exc, KeyboardInterrupt):
                 outcome.stopped = f"interrupted at press {plan.press_id}"
+                with acknowledged_interrupts():  # a second Ctrl-C still ends the retract, arm stopped
+                    _retract(rig, plan, to_clearance=False)
                 raise
             if isinstance(exc, SafetyLimit):
-                _back_off(rig, plan)
+                _retract(rig, plan)
             outcome.stopped = f"{type(exc).__name__} at press {plan.press_id}: {exc}"
             if isinstance(exc, ControlScriptStopped) and _safety_stopped(rig.arm):
                 # a safety stop stops the program too, and the program's state can arrive before the safety bits
                 exc = ProtectiveStop(f"the program stopped in a safety stop ({exc})")
-            if isinstance(exc, ProtectiveStop):
-                stop = ProtectiveStop(f"protective stop at press {plan.press_id} ({exc})", hint=PROTECTIVE_STOP_HINT)
-                stop.press_record = partial
-                raise stop from exc
+            explained = _controller_stop_explained(exc, f"at press {plan.press_id}")
+            if explained is not exc:
+                explained.press_record = partial  # type: ignore[attr-defined]
+                raise explained from exc
             raise
         except DeviceError as exc:  # the sensor stalled (DeviceTimeout) or its link failed (port/bus gone)
             partial = exc.press_record
@@ -275,7 +317,7 @@ def _one_press(
                 with _kept_alive(rig.arm):  # the arm is stopped; writing may take longer than the watchdog allows
                     _save(writer, sensor, partial, extraction, outcome)
             what = "stalled" if isinstance(exc, DeviceTimeout) else "failed"
-            _back_off(rig, plan)
+            _retract(rig, plan)
             if attempt == 1:
                 log.warning("%s; reconnecting the sensor and retrying the press once", exc)
                 try:
@@ -336,17 +378,25 @@ def _reconnect(rig: Rig, sensor: TactileSensor) -> None:
             rig.clock.sleep(RECONNECT_POLL_S)
 
 
-def _back_off(rig: Rig, plan: PressPlan) -> None:
-    """Move back along the ray to the press's stand-off after an abort, so a stopped session never leaves the pad
-    loaded. Not when the controller stopped on its own (protective stop, program stopped): the operator decides."""
-    arm = rig.arm
+def _retract(rig: Rig, plan: PressPlan, *, to_clearance: bool = True) -> None:
+    """After an abort, pull the pad off the object from where the arm is (:func:`retract_from_object`), so a stopped
+    session never leaves the pad loaded. Not when the controller stopped on its own (protective stop, program
+    stopped): the operator decides on the pendant. Best effort: a failure is logged (the arm is stopped by then) and
+    the next run starts with a checked move from wherever the arm is."""
+    arm, config = rig.arm, rig.config
     try:
-        check_controller(arm.read_state(), "the back-off")
-        move_to(arm, plan.start_pose, rig.config.press.transit_speed_mm_s / 1000.0, TRANSIT_ACCEL_M_S2)
+        check_controller(arm.read_state(), "the retract")
+        retract_from_object(
+            arm, plan, config.limits, standoff_m=config.object.standoff_mm / 1000.0,
+            clearance_m=config.object.clearance_mm / 1000.0, transit_speed_m_s=config.press.transit_speed_mm_s / 1000.0,
+            to_clearance=to_clearance,
+        )  # fmt: skip
     except (ProtectiveStop, ControlScriptStopped) as exc:
-        log.warning("not backing off after press %s: %s", plan.press_id, exc)
-    except Exception:  # best effort; the next run starts with a checked move to the stand-off anyway
-        log.exception("backing off to the stand-off of press %s failed", plan.press_id)
+        log.info("not retracting after press %s: %s", plan.press_id, exc)
+    except KeyboardInterrupt:
+        raise  # a second interrupt: the move stopped the arm on its way out
+    except Exception:
+        log.exception("retracting from the object after press %s failed; the arm is stopped", plan.press_id)
 
 
 def _save(
@@ -400,6 +450,7 @@ def dry_run(
     outcome = DryRunOutcome()
     speed = config.press.transit_speed_mm_s / 1000.0
     clearance = config.object.clearance_mm / 1000.0
+    check_session_plan(arm.read_state().tcp_pose, plans, clearance, config.limits)
     for index, plan in enumerate(plans):
         here = arm.read_state().tcp_pose
         outcome.waypoints += len(clearance_waypoints(here, plan, clearance))

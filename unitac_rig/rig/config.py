@@ -10,7 +10,16 @@ import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, SerializeAsAny, ValidationError, model_validator
+from pydantic import (
+    AliasChoices,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    SerializeAsAny,
+    ValidationError,
+    model_validator,
+)
 
 from drivers.arm import DEFAULT_WATCHDOG_HZ
 from unitac_rig.errors import ConfigError
@@ -20,7 +29,9 @@ STRATEGIES = ("guarded", "two-phase", "force-ramp")
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # allow_inf_nan=False: every number in the rig file is finite. A NaN or inf limit would switch its check off
+    # silently (every comparison with NaN is False; nothing passes inf), so it is refused naming the field.
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class ArmConfig(_Strict):
@@ -37,6 +48,11 @@ class ArmConfig(_Strict):
     )
     payload_kg: float | None = Field(
         None, ge=0, le=5, description="payload mass set on the pendant, kg; checked at connect"
+    )
+    unchecked_tool: bool = Field(
+        False,
+        description="run without tcp_offset / payload_kg (not recommended: a wrong TCP moves every pose, a wrong "
+        "payload shifts the wrist force); every session then starts with a warning",
     )
 
 
@@ -71,7 +87,23 @@ class PressConfig(_Strict):
     dwell_s: float = Field(0.2, ge=0, description="hold at the stop before retracting, s")
     transit_speed_mm_s: float = Field(50.0, gt=0, description="speed between presses, mm/s")
     setpoint_margin_n: float = Field(
-        0.2, gt=0, description="the controller's force set-point during contact is threshold + this, N"
+        0.2,
+        gt=0,
+        description="the controller's force set-point during contact is threshold + this, N: what a stalled host "
+        "leaves the controller holding, so small; a force that settles below the threshold (the host's F/T offset "
+        "estimate is off by more than this) raises it within 0.3 s, see setpoint_ceiling_margin_n",
+    )
+    setpoint_ceiling_margin_n: float = Field(
+        2.0,
+        gt=0,
+        description="a force that settles below the threshold raises the set-point in 0.5 N steps up to threshold + "
+        "this, N; at the ceiling the press fails as 'settled' within seconds",
+    )
+    force_mode_damping: float = Field(
+        0.025, ge=0, le=1, description="URScript force_mode_set_damping, sent before every press (UR default 0.005)"
+    )
+    force_mode_gain_scaling: float = Field(
+        1.0, gt=0, le=2, description="URScript force_mode_set_gain_scaling, sent before every press (UR default 1)"
     )
     stop_samples: int = Field(
         15, ge=1, le=50, description="the press stops when the mean of this many wrist readings reaches the threshold"
@@ -90,14 +122,32 @@ class LimitsConfig(_Strict):
     min_standoff_mm: float = Field(
         5.0, gt=0, description="object.standoff_mm may not be smaller: no position move ends closer, mm"
     )
-    max_presses_without_contact: int = Field(
-        3, ge=1, description="stop the session after this many presses in a row that touch nothing"
+    max_failed_in_a_row: int = Field(
+        3,
+        ge=1,
+        validation_alias=AliasChoices("max_failed_in_a_row", "max_presses_without_contact"),
+        description="stop the session after this many presses in a row that did not complete (no contact, "
+        "timeout, travel limit, ...): the object is missing, misplaced or not what the rig file says "
+        "(the old name max_presses_without_contact is still read)",
     )
     max_reach_m: float = Field(
         0.85, gt=0, description="no waypoint farther than this from the shoulder (0, 0, 0.1625 m): UR5e reach"
     )
     max_travel_after_contact_mm: float = Field(8.0, gt=0, description="fail a press that travels further, mm")
     max_speed_mm_s: float = Field(100.0, gt=0, description="no press or transit speed may exceed this, mm/s")
+    near_speed_mm_s: float = Field(
+        10.0,
+        gt=0,
+        description="position moves toward the object within near_zone_mm of its expected surface go no faster, "
+        "mm/s: what bounds the force on the controller when the host freezes at an unexpected contact (see "
+        "docs/real-rig.md)",
+    )
+    near_zone_mm: float = Field(
+        50.0,
+        ge=0,
+        description="how far from the expected surface the object may really stand (placement uncertainty), mm; "
+        "approaches inside it run at near_speed_mm_s",
+    )
     workspace_min_m: tuple[float, float, float] = (-0.6, 0.2, 0.0)
     workspace_max_m: tuple[float, float, float] = (0.4, 1.0, 0.6)
 
@@ -138,6 +188,10 @@ class RigConfig(_Strict):
             )
         if self.press.threshold_n + self.press.setpoint_margin_n >= self.limits.hard_force_n:
             raise ValueError("press.threshold_n + press.setpoint_margin_n must stay below limits.hard_force_n")
+        if self.press.setpoint_ceiling_margin_n < self.press.setpoint_margin_n:
+            raise ValueError("press.setpoint_ceiling_margin_n must be at least press.setpoint_margin_n")
+        if self.press.threshold_n + self.press.setpoint_ceiling_margin_n >= self.limits.hard_force_n:
+            raise ValueError("press.threshold_n + press.setpoint_ceiling_margin_n must stay below limits.hard_force_n")
         if self.press.angle_min_deg > self.press.angle_max_deg:
             raise ValueError("press.angle_min_deg is above press.angle_max_deg")
         lo, hi = self.limits.workspace_min_m, self.limits.workspace_max_m
@@ -152,6 +206,18 @@ class RigConfig(_Strict):
                 raise ValueError(f"sensors.{name}: type {sensor.type!r} does not fit sensor {name!r}")
         if self.arm is not None and not self.sensors:
             raise ValueError("an [arm] is configured but no [sensors.*]: a real rig needs at least one sensor")
+        if self.arm is not None and not self.arm.unchecked_tool:
+            missing = [n for n in ("tcp_offset", "payload_kg") if getattr(self.arm, n) is None]
+            if missing:
+                raise ValueError(
+                    f"arm.{' and arm.'.join(missing)} must be set for a real arm (what the teach pendant says; "
+                    "they are read back and checked at connect), or set arm.unchecked_tool = true to run unchecked"
+                )
+        if self.limits.near_speed_mm_s > self.limits.max_speed_mm_s:
+            raise ValueError(
+                f"limits.near_speed_mm_s = {self.limits.near_speed_mm_s} exceeds limits.max_speed_mm_s = "
+                f"{self.limits.max_speed_mm_s}"
+            )
         return self
 
     def angles_deg(self) -> list[float]:

@@ -183,6 +183,8 @@ class SimArm:
         self._bias = rng.normal(0.0, self.params.ft_bias_sigma_n, 6) * self._axis_scale
         self._filtered = self._true_wrench + self._bias
         self._zero_offset = np.zeros(6)
+        self.force_mode_damping, self.force_mode_gain_scaling = 0.005, 1.0  # the URScript defaults
+        self._ft_sign = 1.0
         cutoff = self.params.ft_filter_cutoff_hz
         self._filter_alpha = 1.0 if cutoff is None else 1.0 - math.exp(-2 * math.pi * cutoff * self.control_period_s)
         self._latest = self._snapshot()
@@ -306,6 +308,21 @@ class SimArm:
         speed_limits = np.abs(_as_vector(limits, 6, "limits"))
         self._mode, self._path = "force", None
         self._force_command = (rotvec_to_matrix(frame[3:]), chosen, target, speed_limits)
+
+    def set_ft_sign(self, sign: float) -> None:
+        """A fault hook: -1 reports the negated F/T (a flipped sensor frame); force mode regulates on the same
+        reading, as a controller does."""
+        self._ft_sign = float(sign)
+        self._latest = self._snapshot()
+
+    def set_force_mode_parameters(self, damping: float, gain_scaling: float) -> None:
+        """``force_mode_set_damping`` / ``force_mode_set_gain_scaling``: the gain scaling multiplies the admittance
+        gains (as on a UR, where above 1 the loop may go unstable on hard contacts); damping is stored, not modelled
+        (the admittance here has no free-air coasting for it to brake)."""
+        if not (0.0 <= damping <= 1.0 and 0.0 <= gain_scaling <= 2.0):
+            raise ArmError(f"force mode damping must be in [0, 1] and gain scaling in [0, 2], got {damping}, "
+                           f"{gain_scaling}")  # fmt: skip
+        self.force_mode_damping, self.force_mode_gain_scaling = float(damping), float(gain_scaling)
 
     def force_mode_stop(self) -> None:
         """Leave force mode and stop (the ur_rtde script does ``end_force_mode(); stopl(10)``)."""
@@ -493,9 +510,11 @@ class SimArm:
         """Velocity the force-mode admittance law asks for this period (base frame)."""
         assert self._force_command is not None
         rotation, chosen, target, speed_limits = self._force_command
-        measured = self._filtered - self._zero_offset
+        measured = self._ft_sign * (self._filtered - self._zero_offset)
         applied_task = -np.concatenate([rotation.T @ measured[:3], rotation.T @ measured[3:]])
-        gains = np.array([self.params.force_mode_gain_m_s_per_n] * 3 + [self.params.force_mode_gain_rad_s_per_nm] * 3)
+        gains = self.force_mode_gain_scaling * np.array(
+            [self.params.force_mode_gain_m_s_per_n] * 3 + [self.params.force_mode_gain_rad_s_per_nm] * 3
+        )
         twist_task = np.where(chosen, np.clip(gains * (target - applied_task), -speed_limits, speed_limits), 0.0)
         return np.concatenate([rotation @ twist_task[:3], rotation @ twist_task[3:]])
 
@@ -567,7 +586,7 @@ class SimArm:
             host_t_ns=now_ns,
             controller_t_s=now_ns / 1e9,
             tcp_pose=self.true_tcp_pose(),
-            tcp_force=self._filtered - self._zero_offset,
+            tcp_force=self._ft_sign * (self._filtered - self._zero_offset),
             robot_mode=ROBOT_MODE_RUNNING,
             safety_mode=SAFETY_MODE_PROTECTIVE_STOP if self._protective_stop else SAFETY_MODE_NORMAL,
             protective_stop=self._protective_stop,

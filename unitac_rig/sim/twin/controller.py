@@ -123,6 +123,7 @@ class _SceneWorld:
     def __init__(self, spec: SceneSpec | None) -> None:
         self.scene: Any = None
         self.spec = spec
+        self.force_scale = 1.0  # a fault hook: x10 makes the contact ten times stiffer (same geometry)
         self._radius_mm = 0.0
         self._warming = threading.Event()
         self.warm_builds = 0
@@ -165,7 +166,7 @@ class _SceneWorld:
             return np.zeros(6)
         if self._warming.is_set() and self._clear_of_object(tcp_pose):
             return np.zeros(6)  # out of reach of the object: the scene's answer, without waiting for its lock
-        result: np.ndarray = self.scene.wrench_on_tool(tcp_pose)
+        result: np.ndarray = self.scene.wrench_on_tool(tcp_pose) * self.force_scale
         return result
 
 
@@ -732,6 +733,10 @@ class Controller:
                 return {"ok": False, "error": "the twin has no scene"}
             dx, dy = (float(v) for v in request["error_m"])
             self.world.rebuild(dataclasses.replace(spec, placement_error_m=(dx, dy)))
+        elif op == "contact_scale":
+            self.world.force_scale = float(request["scale"])
+        elif op == "ft_sign":
+            self.arm.sim.set_ft_sign(float(request["sign"]))
         elif op == "remote_control":
             self.remote_control = bool(request["on"])
         elif op == "pendant_tcp":

@@ -206,6 +206,14 @@ class ControllerTwin:
         """Move the object by (dx, dy) m from where the rig file says it stands (the controller's scene only)."""
         self._hook("placement_error", error_m=[dx_m, dy_m])
 
+    def set_contact_scale(self, scale: float) -> None:
+        """Scale every contact force the controller's scene answers (10: a ten times stiffer object; 0.1: softer)."""
+        self._hook("contact_scale", scale=scale)
+
+    def set_ft_sign(self, sign: float) -> None:
+        """-1: the wrist F/T reports (and force mode regulates on) the negated wrench: a flipped sensor frame."""
+        self._hook("ft_sign", sign=sign)
+
     def set_remote_control(self, on: bool) -> None:
         """Pendant in Remote Control (True) or Local mode (False: clients refused, uploads ignored)."""
         self._hook("remote_control", on=on)

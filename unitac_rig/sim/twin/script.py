@@ -358,6 +358,16 @@ class ControlScript:
     def _get_steptime(self) -> None:
         self.out.doubles[self.offset] = self.host.arm.period_s
 
+    def _force_mode_set_damping(self) -> None:
+        """``force_mode_set_damping(d0)``: clamped to [0, 1] as URScript does."""
+        sim = self.host.arm.sim
+        sim.set_force_mode_parameters(min(max(self._in_double(0), 0.0), 1.0), sim.force_mode_gain_scaling)
+
+    def _force_mode_set_gain_scaling(self) -> None:
+        """``force_mode_set_gain_scaling(d0)``: clamped to [0, 2] as URScript does."""
+        sim = self.host.arm.sim
+        sim.set_force_mode_parameters(sim.force_mode_damping, min(max(self._in_double(0), 0.0), 2.0))
+
     def _accepted(self) -> None:
         """Commands whose effect the twin does not model but which a real controller accepts (logged)."""
         logger.info("control script: command %d accepted without effect in the twin", self._in_int(0))
@@ -375,8 +385,8 @@ _HANDLERS = {
     CMD_SPEED_STOP: ControlScript._speed_stop,
     CMD_SET_PAYLOAD: ControlScript._set_payload,
     CMD_SET_TARGET_PAYLOAD: ControlScript._set_payload,
-    CMD_FORCE_MODE_SET_DAMPING: ControlScript._accepted,
-    CMD_FORCE_MODE_SET_GAIN_SCALING: ControlScript._accepted,
+    CMD_FORCE_MODE_SET_DAMPING: ControlScript._force_mode_set_damping,
+    CMD_FORCE_MODE_SET_GAIN_SCALING: ControlScript._force_mode_set_gain_scaling,
     CMD_SET_GRAVITY: ControlScript._accepted,
     CMD_GET_STEPTIME: ControlScript._get_steptime,
     CMD_SET_TCP: ControlScript._set_tcp,

@@ -4,8 +4,8 @@
 the real PapillArray driver on a socket:// URL) against ``RigTwin``; the signal lands when the twin's ground truth
 says the pad presses with 5 N. What a UR controller does next is what the twin does: with kill -9 or a frozen host
 (SIGSTOP, as a cut cable looks from the controller) nobody sends a stop, and only the RTDE watchdog ends the force
-command; with SIGTERM or SIGHUP the process itself stops the arm, keeps what it recorded and pulls the pad off the object
-before it exits, like Ctrl-C.
+command; with SIGTERM or SIGHUP the process itself stops the arm, keeps what it recorded and pulls the pad off the
+object before it exits, like Ctrl-C.
 Loopback addresses 127.0.0.180-199 belong to these tests.
 """
 

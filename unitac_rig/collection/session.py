@@ -187,16 +187,24 @@ def collect_session(
             writer.discard_if_unused()  # nor may an arm or sensor that fails before the first press
             raise
         current_rotation: float | None = None
+        previous: PressPlan | None = None
         limit = config.limits.max_failed_in_a_row
         for index, plan in enumerate(todo):
             raise_if_interrupted()
             if plan.rotation_deg != current_rotation:
+                if previous is not None:  # out to the clearance radius before anyone turns the object by hand
+                    retract_from_object(
+                        arm, previous, config.limits, standoff_m=config.object.standoff_mm / 1000.0,
+                        clearance_m=config.object.clearance_mm / 1000.0,
+                        transit_speed_m_s=config.press.transit_speed_mm_s / 1000.0,
+                    )  # fmt: skip
                 rig.mount(obj, plan.rotation_deg, sensor_name)
                 if ask_operator is not None and not rig.simulated and len(rotations) > 1:
                     with rig.arm.keep_alive():
                         ask_operator(f"Turn {obj.id} to {plan.rotation_deg:g} deg on its mount, then press Enter.")
                 current_rotation = plan.rotation_deg
             record, stop = _one_press(rig, sensor, plan, writer, extraction, outcome, on_tick)
+            previous = plan
             if on_press is not None and record is not None:
                 matched = 0 if record.extraction is None else record.extraction.n_matched
                 with rig.arm.keep_alive():

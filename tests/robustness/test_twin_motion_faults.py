@@ -116,9 +116,7 @@ def test_the_double_fault_misplaced_object_and_a_host_frozen_at_first_contact_is
 
 
 @pytest.mark.slow
-def test_a_workspace_that_excludes_the_second_press_is_refused_before_any_motion(
-    twin: RigTwin, tmp_path: Path
-) -> None:
+def test_a_workspace_that_excludes_the_second_press_is_refused_before_any_motion(twin: RigTwin, tmp_path: Path) -> None:
     """Review row 3 (was 37.9 N and the arm outside the box): the whole plan is checked first."""
     start = twin.controller.truth().tcp_pose.copy()
     path = rig_file(twin, tmp_path, limits={"workspace_max_m": [-0.13, 1.0, 0.6]})

@@ -471,3 +471,30 @@ def test_any_single_fault_at_any_moment_stays_bounded_and_ends_at_rest(
         assert at_rest(rig) and inside_workspace(rig, config.limits)
     assert truth.peak_n < HARD_LIMIT_N
     assert injector.fired or offset != (0.0, 0.0)  # with the object in place every moment comes
+
+
+@pytest.mark.parametrize(("offset_y", "confirmed"), [(0.0, True), (0.002, True), (0.012, False)])
+def test_a_press_that_finds_the_object_where_expected_confirms_its_placement(
+    tmp_path: Path, offset_y: float, confirmed: bool
+) -> None:
+    """First contact within 5 mm of the stand-off distance: the object stands where the rig file says, and the near
+    zone of later approaches shrinks to limits.near_zone_confirmed_mm. 12 mm farther (9 mm along the ray): it stays wide."""
+    from unitac_rig.collection.session import placement_confirmed
+
+    config = few(1)
+    with MisplacedRig(config, (0.0, offset_y), seed=0) as rig:
+        collect_session(rig, get_object("circle_pla"), "uskin", tmp_path)
+    (press,) = read_presses(session_path(tmp_path, "circle_pla", "uskin"))
+    assert press.status == "complete"
+    assert placement_confirmed(press, config) is confirmed
+
+
+def test_a_confirmed_placement_makes_the_sweep_faster_than_an_unconfirmed_one(tmp_path: Path) -> None:
+    def rig_time(limits: dict[str, object]) -> float:
+        config = few(4, limits=limits)
+        with SimRig(config, seed=0) as rig:
+            start = rig.clock.now_ns()
+            collect_session(rig, get_object("circle_pla"), "uskin", tmp_path / str(len(limits)))
+            return (rig.clock.now_ns() - start) / 1e9
+
+    assert rig_time({}) < rig_time({"near_zone_confirmed_mm": 50.0}) - 5.0  # 3 approaches, ~40 mm less at 10 mm/s

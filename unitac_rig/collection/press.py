@@ -743,6 +743,14 @@ def _retract(arm: Arm, streams: _Streams, plan: PressPlan, press: PressConfig) -
     streams.hold(0.02)
 
 
+def contact_travel_mm(contact_pose: np.ndarray | None, plan: PressPlan) -> float:
+    """Travel (mm) from the stand-off to where the press first felt the object (NaN: never): the stand-off distance
+    when the object stands where the rig file says."""
+    if contact_pose is None:
+        return math.nan
+    return 1000.0 * float(np.dot(np.asarray(contact_pose[:3]) - np.asarray(plan.start_pose[:3]), plan.direction))
+
+
 def _retract_quietly(arm: Arm, streams: _Streams, plan: PressPlan, press: PressConfig) -> None:
     streams.phase = "retract"
     try:
@@ -807,6 +815,7 @@ def _to_record(
             "duration_s": float(t[-1] - t[0]) if t.size else 0.0,
             "ft_zero_offset": ft_offset.tolist(),
             "tare": tare,
+            "contact_travel_mm": contact_travel_mm(streams.contact_pose, plan),
             "start_pose": np.asarray(plan.start_pose).tolist(),
             "direction": np.asarray(plan.direction).tolist(),
         },

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -51,7 +52,7 @@ from unitac_rig.errors import CarriesPressRecord, SafetyLimit
 from unitac_rig.interrupts import acknowledged_interrupts, raise_if_interrupted
 from unitac_rig.provenance import git_commit, package_version
 from unitac_rig.rig.base import Rig
-from unitac_rig.rig.config import RigConfig
+from unitac_rig.rig.config import LimitsConfig, RigConfig
 from unitac_rig.rig.objects import ObjectSpec, pad_side_direction
 from unitac_rig.storage.extraction import ExtractionSettings, extract_press
 from unitac_rig.storage.press_record import PressRecord
@@ -59,6 +60,7 @@ from unitac_rig.storage.recorder import SessionWriter
 
 log = logging.getLogger(__name__)
 
+PLACEMENT_CONFIRMED_MM = 5.0  # a first contact this close to where expected confirms the object's placement, mm
 RECONNECT_WAIT_S = 3.0  # how long a lost sensor may take to come back (USB replug, controller reboot), s
 RECONNECT_POLL_S = 0.25  # pause between reconnect attempts, s
 DRY_RUN_HOLD_S = 0.2  # a dry run rests this long at each stand-off, s
@@ -188,10 +190,12 @@ def collect_session(
             raise
         current_rotation: float | None = None
         previous: PressPlan | None = None
+        moves_limits = config.limits
         limit = config.limits.max_failed_in_a_row
         for index, plan in enumerate(todo):
             raise_if_interrupted()
             if plan.rotation_deg != current_rotation:
+                moves_limits = config.limits  # the placement is unknown again after the object is turned
                 if previous is not None:  # out to the clearance radius before anyone turns the object by hand
                     retract_from_object(
                         arm, previous, config.limits, standoff_m=config.object.standoff_mm / 1000.0,
@@ -203,8 +207,10 @@ def collect_session(
                     with rig.arm.keep_alive():
                         ask_operator(f"Turn {obj.id} to {plan.rotation_deg:g} deg on its mount, then press Enter.")
                 current_rotation = plan.rotation_deg
-            record, stop = _one_press(rig, sensor, plan, writer, extraction, outcome, on_tick)
+            record, stop = _one_press(rig, sensor, plan, writer, extraction, outcome, on_tick, moves_limits)
             previous = plan
+            if record is not None and placement_confirmed(record, config):
+                moves_limits = config.limits.model_copy(update={"near_zone_mm": config.limits.near_zone_confirmed_mm})
             if on_press is not None and record is not None:
                 matched = 0 if record.extraction is None else record.extraction.n_matched
                 with rig.arm.keep_alive():
@@ -248,6 +254,14 @@ def _controller_stop_explained(exc: BaseException, where: str) -> BaseException:
     return exc
 
 
+def placement_confirmed(record: PressRecord, config: RigConfig) -> bool:
+    """Whether a press found the object where the rig file says: complete, and first contact within
+    ``PLACEMENT_CONFIRMED_MM`` of the stand-off distance. Then the near zone of the moves can shrink to
+    ``limits.near_zone_confirmed_mm`` (docs/real-rig.md)."""
+    travel = float(record.attrs.get("contact_travel_mm", math.nan))
+    return record.status == "complete" and abs(travel - config.object.standoff_mm) <= PLACEMENT_CONFIRMED_MM
+
+
 def record_reason(record: PressRecord | None) -> str:
     """How a press ended, for a one-line message (e.g. 'failed: settled')."""
     return "not recorded" if record is None else f"{record.status}: {record.reason}"
@@ -283,6 +297,7 @@ def _one_press(
     extraction: ExtractionSettings,
     outcome: SessionOutcome,
     on_tick: Callable[[TickInfo], None] | None,
+    limits: LimitsConfig,
 ) -> tuple[PressRecord | None, bool]:
     """Run one press and record it; also says whether the session must stop.
 
@@ -295,7 +310,7 @@ def _one_press(
     for attempt in (1, 2):
         try:
             record = run_press(
-                rig.arm, sensor, plan, config.press, config.limits, on_tick=on_tick,
+                rig.arm, sensor, plan, config.press, limits, on_tick=on_tick,
                 clearance_m=config.object.clearance_mm / 1000.0,
             )  # fmt: skip
         except (SafetyLimit, ProtectiveStop, ArmError, KeyboardInterrupt) as exc:

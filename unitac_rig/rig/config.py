@@ -148,6 +148,12 @@ class LimitsConfig(_Strict):
         description="how far from the expected surface the object may really stand (placement uncertainty), mm; "
         "approaches inside it run at near_speed_mm_s",
     )
+    near_zone_confirmed_mm: float = Field(
+        10.0,
+        ge=0,
+        description="the near zone once a press has touched the object within 5 mm of where the rig file says (the "
+        "placement is then measured); back to near_zone_mm whenever the object is turned or the session restarts, mm",
+    )
     workspace_min_m: tuple[float, float, float] = (-0.6, 0.2, 0.0)
     workspace_max_m: tuple[float, float, float] = (0.4, 1.0, 0.6)
 

@@ -478,7 +478,8 @@ def test_a_press_that_finds_the_object_where_expected_confirms_its_placement(
     tmp_path: Path, offset_y: float, confirmed: bool
 ) -> None:
     """First contact within 5 mm of the stand-off distance: the object stands where the rig file says, and the near
-    zone of later approaches shrinks to limits.near_zone_confirmed_mm. 12 mm farther (9 mm along the ray): it stays wide."""
+    zone of later approaches shrinks to limits.near_zone_confirmed_mm. 12 mm farther (9 mm along the ray): it stays
+    wide."""
     from unitac_rig.collection.session import placement_confirmed
 
     config = few(1)

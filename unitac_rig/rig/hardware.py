@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+
 from drivers.arm import Arm
 from drivers.clock import MonotonicClock
 from drivers.sensor import TactileSensor
@@ -9,6 +11,8 @@ from unitac_rig.errors import UsageError
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import RigConfig
 from unitac_rig.rig.sensors import get_sensor
+
+log = logging.getLogger(__name__)
 
 
 class HardwareRig(Rig):
@@ -30,6 +34,11 @@ class HardwareRig(Rig):
 
             arm = self.config.arm
             assert arm is not None
+            if arm.unchecked_tool and (arm.tcp_offset is None or arm.payload_kg is None):
+                log.warning(
+                    "arm.unchecked_tool = true: the TCP and payload on the pendant are not checked; a wrong TCP moves "
+                    "every pose and a wrong payload shifts the wrist force the press stops on"
+                )
             self._arm = UR5eArm(
                 arm.host,
                 frequency_hz=arm.frequency_hz,

@@ -1,6 +1,6 @@
 """Rotation-vector helpers for the arm drivers (UR poses are [x, y, z (m), rx, ry, rz (rad, rotation vector)]).
 
-The application has its own copies in ``unitac_rig.rig.poses``; drivers may not import the application.
+The one implementation: the application (``unitac_rig.rig.poses``, the simulator) uses these too.
 """
 
 from __future__ import annotations

@@ -12,6 +12,18 @@ import math
 
 import numpy as np
 
+from drivers.rotations import matrix_to_rotvec, rotvec_to_matrix
+
+__all__ = [
+    "approach_direction",
+    "matrix_to_rotvec",
+    "pose_from",
+    "press_force_n",
+    "press_rotation",
+    "rotvec_to_matrix",
+    "tool_z",
+]
+
 
 def approach_direction(angle_deg: float) -> np.ndarray:
     """Unit vector (3,) in the base frame from the object centre toward where the pad comes from."""
@@ -27,34 +39,6 @@ def press_rotation(press_dir: np.ndarray) -> np.ndarray:
     x = np.array([-d[1], d[0], 0.0])
     y = np.array([0.0, 0.0, 1.0])
     return np.column_stack([x, y, d])
-
-
-def rotvec_to_matrix(rotvec: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula: rotation vector (rad) to a 3x3 rotation matrix."""
-    r = np.asarray(rotvec, dtype=np.float64)
-    theta = float(np.linalg.norm(r))
-    if theta < 1e-12:
-        return np.eye(3)
-    k = r / theta
-    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + math.sin(theta) * kx + (1 - math.cos(theta)) * (kx @ kx)
-
-
-def matrix_to_rotvec(rot: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`rotvec_to_matrix` (robust near 0 and pi)."""
-    m = np.asarray(rot, dtype=np.float64)
-    cos_theta = max(-1.0, min(1.0, (np.trace(m) - 1.0) / 2.0))
-    theta = math.acos(cos_theta)
-    if theta < 1e-9:
-        return np.zeros(3)
-    if math.pi - theta < 1e-6:
-        # axis from the largest diagonal term of (R + I) / 2
-        b = (m + np.eye(3)) / 2.0
-        i = int(np.argmax(np.diag(b)))
-        axis = b[:, i] / math.sqrt(b[i, i])
-        return axis * theta
-    axis = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]]) / (2 * math.sin(theta))
-    return axis * theta
 
 
 def pose_from(position_m: np.ndarray, rot: np.ndarray) -> np.ndarray:

@@ -68,8 +68,8 @@ def export_into(run: LoadedRun, engine: StackedAutoencoders, staging: Path, memb
             "layout": _layout(sensor),
             "encoder_widths": [n_taxels * 3, *engine.shape.encoder_hidden, latent],
             "decoder_widths": [latent, *engine.shape.decoder_hidden, n_taxels * 3],
-            "encoder": f"encoder.{sensor}.<i>.weight / .bias, i = 0..{len(engine.shape.encoder_hidden)}",
-            "decoder": f"decoder.{sensor}.<i>.weight / .bias, i = 0..{len(engine.shape.decoder_hidden)}",
+            "encoder": f"encoder.{sensor}.*",  # tensors encoder.<sensor>.<i>.weight and .bias, layer i in order
+            "decoder": f"decoder.{sensor}.*",
             "normaliser_folded_in": {
                 "mean": np.asarray(mean, dtype=float).tolist(),
                 "std": np.asarray(std, dtype=float).tolist(),

@@ -176,4 +176,4 @@ def render_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str
         f"shape, and the SHA-256 of `{WEIGHTS_NAME}`.",
         "",
     ]
-    return "\n".join(front) + head + "\n".join(loading)
+    return "\n".join(front) + "\n" + head + "\n".join(loading)

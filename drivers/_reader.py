@@ -83,6 +83,7 @@ class PumpedSensor:
         self._health = SensorHealth()
         self._watch = TaxelWatch(layout.n_taxels, is_saturated)
         self._lock = threading.Lock()
+        self._queued = threading.Condition(self._lock)  # notified when the reader thread queues frames
         self._queue: collections.deque[TactileFrame] = collections.deque()
         self._reader: threading.Thread | None = None
         self._stop_reader = threading.Event()
@@ -205,6 +206,23 @@ class PumpedSensor:
         self._check_stall()
         return frames
 
+    def poll_wait(self, timeout_s: float) -> list[TactileFrame]:
+        """Like :meth:`poll`, but waits up to ``timeout_s`` for the first frame, without a sleep loop: a live
+        consumer (``unitac-rig stream``) gets each frame as soon as it is decoded. Without a reader thread the pump
+        runs on the caller's thread, blocked in the transport until bytes arrive."""
+        self._require_connected()
+        if self._reader is None and self._reader_error is None:
+            frames = self._take_queued()
+            if not frames:
+                frames = self._pump(timeout_s)
+                self._account(frames)
+            self._check_stall()
+            return frames
+        with self._queued:
+            if not self._queue and self._reader_error is None:
+                self._queued.wait(timeout_s)
+        return self.poll()
+
     def _take_queued(self) -> list[TactileFrame]:
         """Frames the reader thread queued (also those left over after ``stop_reader``)."""
         with self._lock:
@@ -273,12 +291,15 @@ class PumpedSensor:
                         overflow = len(self._queue) - MAX_QUEUED_FRAMES
                         for _ in range(max(0, overflow)):
                             self._queue.popleft()
+                        self._queued.notify_all()
                     if overflow > 0:
                         logger.warning("%s: nobody polls; dropped %d old frames", self.layout.name, overflow)
                 self._check_stall()
         except BaseException as exc:  # handed to the caller through poll()
             logger.info("%s: reader thread stopped: %s", self.layout.name, exc)
-            self._reader_error = exc
+            with self._queued:
+                self._reader_error = exc
+                self._queued.notify_all()
 
     # ---- health -----------------------------------------------------------------------------------------------
     def health(self) -> SensorHealth:

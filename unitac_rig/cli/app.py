@@ -37,6 +37,7 @@ COMMAND_MODULES = (
     "unitac_rig.cli.import_unitac_nv",  # import-unitac-nv
     "unitac_rig.cli.bench",  # bench ...
     "unitac_rig.cli.twin",  # twin (the real-time twin of the rig)
+    "unitac_rig.cli.stream",  # stream (a trained run on the live sensor)
 )
 
 _state = {"debug": False}

@@ -140,17 +140,39 @@ def inspect(
 def export(
     data: list[Path] = typer.Argument(..., help="Dataset directories to pool (each one a collect/campaign --data)."),
     out: Path = typer.Option(..., "--out", help="New directory to write the export into (must not hold files)."),
+    fmt: str = typer.Option(
+        "parquet", "--format", help="parquet (the paired dataset) or lerobot (every press, LeRobotDataset v3)."
+    ),
 ) -> None:
-    """Write the force-matched paired dataset as Parquet, the raw sessions, a dataset card and manifest.json."""
+    """Write the force-matched paired dataset as Parquet, the raw sessions, a dataset card and manifest.json
+    (--format lerobot: one LeRobotDataset v3 per sensor, a press per episode, see docs/dataset.md)."""
     from unitac_rig.learning.data import build_paired_dataset
     from unitac_rig.storage.export import export_dataset
 
+    if fmt == "lerobot":
+        _export_lerobot(data, out)
+        return
+    if fmt != "parquet":
+        raise UsageError(f"unknown export format {fmt!r}", hint="use parquet or lerobot")
     summary = export_dataset(data, out, build_paired_dataset)
     console.print(
         f"exported {summary.contacts} contacts x {len(summary.sensors)} sensors ({', '.join(summary.sensors)}) = "
         f"{summary.rows} rows from {summary.sessions} sessions, objects {', '.join(summary.objects)}"
     )
     console.print(f"{summary.files} files, {summary.bytes / 1e6:.1f} MB -> {summary.out}")
+    console.print(f"check a copy with: unitac-rig verify {summary.out}")
+
+
+def _export_lerobot(data: list[Path], out: Path) -> None:
+    from unitac_rig.storage.lerobot import export_lerobot
+
+    summary = export_lerobot(data, out)
+    for sensor, counts in summary.sensors.items():
+        console.print(
+            f"{sensor}: {counts['episodes']} presses, {counts['frames']} frames at {counts['fps']} fps -> "
+            f"{summary.out / sensor}"
+        )
+    console.print(f"{summary.files} files, {summary.bytes / 1e6:.1f} MB from {summary.sessions} sessions")
     console.print(f"check a copy with: unitac-rig verify {summary.out}")
 
 

@@ -487,14 +487,19 @@ def geometry_command(
 
 def export_model_command(
     run: Path = typer.Argument(..., help="Run directory."),
-    fmt: str = typer.Option(..., "--format", help="torchscript, onnx or state-dict."),
-    out: Path = typer.Option(..., "--out", help="New directory for the networks, model.json and README.md."),
+    fmt: str = typer.Option(
+        "safetensors",
+        "--format",
+        help="safetensors (default: model.safetensors + config.json), torchscript, onnx, state-dict.",
+    ),
+    out: Path = typer.Option(..., "--out", help="New directory for the networks, config/model.json and README.md."),
     member: int = typer.Option(0, "--member", help="Which seed of a multi-seed run (index)."),
 ) -> None:
     """Write each sensor's encoder and decoder (normaliser folded in: sensor units in and out) with a model card."""
     from rich.console import Console
 
     from unitac_rig.learning.export import CARD_NAME, MODEL_JSON, export_model
+    from unitac_rig.learning.safetensors_export import CONFIG_NAME
 
     document = export_model(run, out, fmt, member)
     console = Console()
@@ -504,7 +509,8 @@ def export_model_command(
             f"  {sensor}: ({entry['n_taxels']}, 3) {entry['units']} <-> latent {document['latent_dim']}: "
             f"{entry['encoder']}, {entry['decoder']}"
         )
-    console.print(f"  {MODEL_JSON}, {CARD_NAME} (model card: data hash, metrics, intended use, limits, loading)")
+    config = CONFIG_NAME if fmt == "safetensors" else MODEL_JSON
+    console.print(f"  {config}, {CARD_NAME} (model card: data hash, metrics, intended use, limits, loading)")
 
 
 def register(app: typer.Typer) -> None:

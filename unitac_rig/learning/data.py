@@ -54,7 +54,8 @@ class MatchedSetLike(Protocol):
 
 
 def load_sets(data_dir: Path | Sequence[Path]) -> list[MatchedSetLike]:
-    """Every force-matched set under ``data_dir`` (one per session file), via the session reader.
+    """Every force-matched set under ``data_dir`` (one per session file), via the session reader; a LeRobot export
+    (``unitac-rig export --format lerobot``) is read back from its episodes.
 
     Several directories are pooled by :func:`unitac_rig.storage.pooling.pool_sessions` (the rule ``export`` uses): a
     byte-identical copy of a session counts once, two different files for one (object, sensor) are a DataError.
@@ -67,6 +68,10 @@ def load_sets(data_dir: Path | Sequence[Path]) -> list[MatchedSetLike]:
         if not directory.is_dir():
             raise DataError(f"data directory {directory} does not exist", hint="pass the --data folder `collect` wrote")
     if len(dirs) == 1:
+        from unitac_rig.storage import lerobot
+
+        if lerobot.is_lerobot_export(dirs[0]):  # `export --format lerobot` read back: the same matched frames
+            return list(lerobot.load_matched_sets(dirs[0]))
         return list(load_matched_sets(dirs[0]))
     pooled = pool_sessions(dirs)
     for item in pooled:

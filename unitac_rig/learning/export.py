@@ -1,5 +1,8 @@
 """``unitac-rig export-model``: a trained run as plain PyTorch/ONNX networks that need nothing of unitac-rig.
 
+``safetensors`` (the default: ``model.safetensors`` + ``config.json``, the Hub's layout) is written by
+:mod:`unitac_rig.learning.safetensors_export`; the formats below, one file per network, here.
+
 For every sensor of the run's UniTac-NV model, one member (seed):
 
 * ``encoder_<sensor>``: frames ``(B, n_taxels, 3)`` in the sensor's own units -> latent ``(B, latent_dim)``;
@@ -11,8 +14,8 @@ encoder's first layer absorbs ``(x - mean) / std``, the decoder's last layer ``y
 so each file is an ordinary ``Flatten -> Linear/ReLU... -> Linear`` (``-> Unflatten`` for a decoder): no
 preprocessing outside it, no dropout (inference). Formats:
 
-* ``torchscript``: ``<part>_<sensor>.torchscript.pt`` for ``torch.jit.load`` (PyTorch itself marks TorchScript as
-  deprecated in favour of ``torch.export``; the files still load with plain torch);
+* ``torchscript``: ``<part>_<sensor>.torchscript.pt`` for ``torch.jit.load`` (deprecated by PyTorch: torch 2.13 warns
+  on ``torch.jit.script`` in favour of ``torch.export``; the files still load with plain torch);
 * ``onnx``: ``<part>_<sensor>.onnx`` (opset of torch's exporter, dynamic batch axis; needs the ``onnx`` extra:
   ``pip install "unitac-rig[onnx]"``);
 * ``state-dict``: ``<part>_<sensor>.state_dict.pt``, the ``nn.Sequential``'s tensors only, for
@@ -49,7 +52,7 @@ from unitac_rig.learning.train import LoadedRun, load_run
 
 log = logging.getLogger(__name__)
 
-FORMATS = ("torchscript", "onnx", "state-dict")
+FORMATS = ("safetensors", "torchscript", "onnx", "state-dict")  # safetensors: learning/safetensors_export.py
 SUFFIX = {"torchscript": ".torchscript.pt", "onnx": ".onnx", "state-dict": ".state_dict.pt"}
 MODEL_JSON = "model.json"
 CARD_NAME = "README.md"
@@ -218,7 +221,12 @@ def export_model(run_dir: Path, out: Path, fmt: str, member: int = 0) -> dict[st
     staging = out.parent / f".{out.name}.export-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     staging.mkdir()  # not tempfile.mkdtemp: that is private (0700), and the export is meant to be shared
     try:
-        document = _export_into(run, engine, staging, fmt, member)
+        if fmt == "safetensors":
+            from unitac_rig.learning.safetensors_export import export_into
+
+            document = export_into(run, engine, staging, member)
+        else:
+            document = _export_into(run, engine, staging, fmt, member)
         if out.exists():
             out.rmdir()
         os.replace(staging, out)

@@ -1,0 +1,202 @@
+"""``unitac-rig stream RUN``: the trained model on the mounted sensor, live, as JSON lines.
+
+Reads the sensor the rig file names (``--rig``; detected when the file lists several) or the real-time twin's
+(``--simulated``: the twin started in this process), tares on the first frames (keep the pad unloaded), then writes
+one JSON line per frame to stdout, or to the one client of ``--listen 127.0.0.1:PORT``: the frame's latent, the frame
+translated into every other sensor of the run, and the contact-geometry estimate when the run has a fitted one
+(``unitac-rig geometry RUN``). Until Ctrl-C, ``--frames`` or ``--duration``; then a summary (frames, device-counter
+gaps, latency from the frame's host timestamp to the line written) on stderr and in ``--summary``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import signal
+import socket
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+import typer
+
+from unitac_rig.errors import UsageError
+
+
+def _listen_address(text: str) -> tuple[str, int]:
+    host, _, port = text.rpartition(":")
+    host = host or "127.0.0.1"
+    if host not in ("127.0.0.1", "localhost") or not port.isdigit():
+        raise UsageError(
+            f"--listen {text!r}: stream serves on 127.0.0.1 only",
+            hint="use --listen 127.0.0.1:PORT (forward it with ssh if another machine needs it)",
+        )
+    return "127.0.0.1", int(port)
+
+
+@contextlib.contextmanager
+def _socket_writer(address: tuple[str, int], stop: threading.Event) -> Iterator[Callable[[bytes], None]]:
+    """Wait for one client on ``address`` (127.0.0.1), then hand out a writer that sends it each line."""
+    server = socket.create_server(address)
+    server.settimeout(0.2)
+    typer.echo(f"stream: waiting for a client on {address[0]}:{server.getsockname()[1]}", err=True)
+    try:
+        client = None
+        while client is None and not stop.is_set():
+            with contextlib.suppress(TimeoutError):
+                client, _ = server.accept()
+        if client is None:
+            raise KeyboardInterrupt
+        client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        client.settimeout(None)
+        try:
+            yield client.sendall
+        finally:
+            client.close()
+    finally:
+        server.close()
+
+
+def _stdout_writer() -> Callable[[bytes], None]:
+    out = sys.stdout.buffer
+
+    def write(line: bytes) -> None:
+        out.write(line)
+        out.flush()
+
+    return write
+
+
+@contextlib.contextmanager
+def _mounted_sensor(
+    rig_file: Path | None,
+    simulated: bool,
+    sensor: str | None,
+    object_id: str,
+    rate_hz: int | None,
+    run_sensors: tuple[str, ...],
+) -> Iterator[tuple[Any, str]]:
+    """(the connected driver, its sensor name), from the rig file or the real-time twin started here."""
+    from unitac_rig.rig.config import load_rig_config, parse_rig_config
+    from unitac_rig.rig.hardware import HardwareRig
+
+    twin = None
+    try:
+        if simulated:
+            import tomllib
+
+            from unitac_rig.sim.twin import first_free_loopback
+            from unitac_rig.sim.twin.rig import RigTwin
+
+            name = sensor or next(s for s in ("papillarray", "uskin") if s in run_sensors)
+            twin = RigTwin(object_id, sensor=name, host=first_free_loopback(211, 239))
+            config = parse_rig_config(tomllib.loads(twin.rig_file()))
+        else:
+            assert rig_file is not None
+            config = load_rig_config(rig_file)
+        if rate_hz is not None:
+            table = config.sensors.get("papillarray")
+            if table is None:
+                raise UsageError("--rate sets the PapillArray's rate, and the rig has no PapillArray")
+            config.sensors["papillarray"] = table.model_copy(update={"rate_hz": rate_hz})
+        rig = HardwareRig(config)
+        try:
+            name = sensor if sensor is not None else (twin.sensor if twin is not None else rig.detect_sensor())
+            driver = rig.open_sensor(name)
+            try:
+                yield driver, name
+            finally:
+                driver.disconnect()
+        finally:
+            rig.close()
+    finally:
+        if twin is not None:
+            twin.close()
+
+
+def stream_command(
+    run: Path = typer.Argument(..., help="Run directory (trained on the mounted sensor and others)."),
+    rig_file: Path = typer.Option(None, "--rig", help="Rig file with the mounted sensor (e.g. the twin's)."),
+    simulated: bool = typer.Option(False, "--simulated", help="Start the real-time twin here and read its sensor."),
+    sensor: str = typer.Option(None, "--sensor", help="Mounted sensor (default: detected; --simulated: papillarray)."),
+    object_id: str = typer.Option("circle_pla", "--object", help="With --simulated: the object in front of the pad."),
+    rate_hz: int = typer.Option(None, "--rate", help="PapillArray sample rate, Hz (100, 250, 500 or 1000)."),
+    member: int = typer.Option(0, "--member", help="Which seed of a multi-seed run (index)."),
+    tare_frames: int = typer.Option(50, "--tare-frames", help="Frames to tare on (median) before streaming."),
+    frames: int = typer.Option(None, "--frames", help="Stop after this many frames."),
+    duration: float = typer.Option(None, "--duration", help="Stop after this many seconds of streaming."),
+    listen: str = typer.Option(None, "--listen", help="Serve the lines to one client on 127.0.0.1:PORT."),
+    summary_path: Path = typer.Option(None, "--summary", help="Also write the summary (JSON) here."),
+    geometry: bool = typer.Option(True, "--geometry/--no-geometry", help="Add the run's geometry estimate."),
+) -> None:
+    """Stream the mounted sensor through the run live: latent, translations (and geometry) per frame, JSON lines."""
+    from unitac_rig.learning.live import LiveModel, live_sensor, stream_frames
+
+    if (rig_file is None) == (not simulated):
+        raise UsageError("stream needs --rig RIG.toml or --simulated (one of them)")
+    if tare_frames < 1:
+        raise UsageError("--tare-frames must be at least 1")
+    address = _listen_address(listen) if listen is not None else None
+    from unitac_rig.learning.engine import UNITAC_GROUP
+    from unitac_rig.learning.train import load_run
+
+    run_sensors = tuple(load_run(run).engine.group(UNITAC_GROUP).sensors)
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    handled = [signal.SIGINT, signal.SIGTERM] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
+    previous = {sig: signal.signal(sig, on_signal) for sig in handled}
+    try:
+        with _mounted_sensor(rig_file, simulated, sensor, object_id, rate_hz, run_sensors) as (driver, name):
+            model = LiveModel(run, name, member=member, geometry=geometry)
+            extra = (
+                f", geometry from the MLP trained on {model.geometry_meta['trained_on']}" if model.geometry_meta else ""
+            )
+            typer.echo(
+                f"stream: {name} -> latent {model.encoder.weights[-1].shape[1]}, "
+                f"{', '.join(model.targets) or 'no other sensor'}{extra}; taring on {tare_frames} frames "
+                "(keep the pad unloaded)",
+                err=True,
+            )
+            with contextlib.ExitStack() as stack:
+                write = stack.enter_context(_socket_writer(address, stop)) if address else _stdout_writer()
+                try:
+                    stats = stream_frames(live_sensor(driver), model, write, tare_frames=tare_frames,
+                                          max_frames=frames, duration_s=duration, should_stop=stop.is_set)  # fmt: skip
+                except (BrokenPipeError, ConnectionError):
+                    raise UsageError(
+                        "the reader of the stream went away", hint="stream stops with its reader"
+                    ) from None
+            health = driver.health().as_dict() if hasattr(driver, "health") else {}
+    except KeyboardInterrupt:
+        typer.echo("stream: stopped before the first frame", err=True)
+        return
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    summary = {"run": str(run), "sensor": name, "targets": list(model.targets), **stats.summary(), "driver": health,
+               "finished_unix": time.time()}  # fmt: skip
+    latency = summary["latency_ms"]
+    typer.echo(
+        f"stream: {summary['frames_out']} frames in {summary['seconds']:.1f} s, {summary['seq_gaps']} lost by the "
+        f"device counter; latency (host ms, frame stamped -> line written) median "
+        f"{_ms(latency['median'])}, p99 {_ms(latency['p99'])}, max {_ms(latency['max'])}",
+        err=True,
+    )
+    if summary_path is not None:
+        summary_path.write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+
+
+def _ms(value: float | None) -> str:
+    return "-" if value is None else f"{value:.3f}"
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``stream`` to the root app."""
+    app.command("stream")(stream_command)

@@ -1,0 +1,279 @@
+"""The trained model on live frames: ``unitac-rig stream`` reads the mounted sensor and emits, per frame, its latent,
+the frame translated into every other sensor of the run, and the contact-geometry estimate when the run has one.
+
+:class:`LiveModel` is one member of a run flattened into float32 numpy layers (the normaliser folded in as for
+``export-model``, :func:`unitac_rig.learning.export.encoder_module`), because a frame at 1 kHz leaves no room for
+torch's per-call overhead on networks this small: a batch of one goes through a handful of (64 x 27) matmuls.
+
+:func:`stream_frames` is the loop: tare on the first frames (the pad unloaded), then for every frame the sensor
+delivers (all of them, in order: none is skipped to catch up) one JSON line handed to ``write``, and the latency
+from the frame's host timestamp (stamped by the driver when the frame was complete) to the moment ``write``
+returned, on the same host clock.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from drivers.frames import TactileFrame
+from unitac_rig.errors import ModelError, UsageError
+
+
+class _Layers:
+    """An MLP as float32 (W (in, out), b) pairs, ReLU between layers: ``y = relu(x @ W + b) ...``."""
+
+    def __init__(self, weights: list[np.ndarray], biases: list[np.ndarray]) -> None:
+        self.weights = [np.ascontiguousarray(w, dtype=np.float32) for w in weights]
+        self.biases = [np.ascontiguousarray(b, dtype=np.float32).reshape(-1) for b in biases]
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        last = len(self.weights) - 1
+        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            x = x @ w + b
+            if i < last:
+                np.maximum(x, 0.0, out=x)
+        return x
+
+
+def _from_sequential(module: Any) -> _Layers:
+    from torch import nn
+
+    linears = [m for m in module if isinstance(m, nn.Linear)]
+    return _Layers([m.weight.detach().numpy().T for m in linears], [m.bias.detach().numpy() for m in linears])
+
+
+@dataclass
+class LiveOutput:
+    latent: np.ndarray  # (B, latent)
+    translated: dict[str, np.ndarray]  # sensor -> (B, n_taxels, 3) in that sensor's units
+    geometry_mm: np.ndarray | None  # (B, points) depth profile, mm
+
+
+class LiveModel:
+    """One member of a run, ready for frames of ``sensor`` (tare-subtracted, the sensor's units)."""
+
+    def __init__(self, run_dir: Path, sensor: str, member: int = 0, geometry: bool = True) -> None:
+        from unitac_rig.learning.engine import UNITAC_GROUP
+        from unitac_rig.learning.export import decoder_module, encoder_module
+        from unitac_rig.learning.train import load_run
+
+        run = load_run(Path(run_dir))
+        engine = run.engine
+        if not 0 <= member < engine.members:
+            raise UsageError(f"member {member} does not exist", hint=f"the run has {engine.members} member(s)")
+        sensors = engine.group(UNITAC_GROUP).sensors
+        if sensor not in sensors:
+            raise ModelError(
+                f"the run was not trained on the mounted sensor {sensor!r}", hint=f"it knows {', '.join(sensors)}"
+            )
+        self.run_dir = Path(run_dir)
+        self.sensor = sensor
+        self.member = member
+        self.targets = tuple(s for s in sensors if s != sensor)
+        self.n_taxels = engine.feature_dims[sensor] // 3
+        norm = run.normaliser
+        self.encoder = _from_sequential(encoder_module(engine, norm.mean[sensor], norm.std[sensor], sensor, member))
+        self.decoders = {
+            t: _from_sequential(decoder_module(engine, norm.mean[t], norm.std[t], t, member)) for t in self.targets
+        }
+        self.taxels = {t: engine.feature_dims[t] // 3 for t in self.targets}
+        self.geometry: _Layers | None = None
+        self.geometry_meta: dict[str, Any] | None = None
+        if geometry:
+            self._load_geometry(run, member)
+
+    def _load_geometry(self, run: Any, member: int) -> None:
+        from unitac_rig.learning.contact_geometry import ESTIMATOR_PT, GeometryEstimator, encoder_fingerprint
+
+        if not (self.run_dir / ESTIMATOR_PT).is_file():
+            return
+        estimator = GeometryEstimator.load(self.run_dir)
+        if int(estimator.meta["member"]) != member or encoder_fingerprint(run, member) != estimator.meta.get(
+            "encoder_sha256"
+        ):
+            raise ModelError(
+                f"the geometry estimator in {self.run_dir} was fitted to other encoder weights than member {member}",
+                hint=f"use --member {estimator.meta['member']}, --no-geometry, or refit: unitac-rig geometry RUN",
+            )
+        chosen = self.sensor if self.sensor in estimator.train_sensors else estimator.train_sensors[0]
+        k = estimator.train_sensors.index(chosen)
+        self.geometry = _Layers([w[k].numpy() for w in estimator.weights], [b[k, 0].numpy() for b in estimator.biases])
+        self.geometry_meta = {"trained_on": chosen, "offsets_mm": list(estimator.meta["offsets_mm"]),
+                              "object": estimator.meta.get("object")}  # fmt: skip
+
+    def __call__(self, frames: np.ndarray) -> LiveOutput:
+        """``frames`` (B, n_taxels, 3) of the mounted sensor -> latents, translations and geometry."""
+        x = np.ascontiguousarray(frames, dtype=np.float32).reshape(len(frames), -1)
+        latent = self.encoder(x)
+        translated = {t: d(latent).reshape(len(frames), self.taxels[t], 3) for t, d in self.decoders.items()}
+        geometry = self.geometry(latent) if self.geometry is not None else None
+        return LiveOutput(latent, translated, geometry)
+
+
+class LiveSensor(Protocol):
+    """What the loop needs of a driver (``drivers._reader.PumpedSensor``)."""
+
+    def poll_wait(self, timeout_s: float) -> list[TactileFrame]: ...
+
+
+@dataclass
+class StreamStats:
+    """What a stream did: frames in and out, device-counter gaps, and the per-frame latency (host clock, ns)."""
+
+    frames_in: int = 0  # every frame the driver delivered up to the stop (each is tared on or emitted: none skipped)
+    frames_out: int = 0
+    tare_frames: int = 0
+    seq_gaps: int = 0  # frames the device counted but the host never received (devices with a frame counter)
+    latencies_ns: list[int] = field(default_factory=list)
+    started_ns: int = 0
+    ended_ns: int = 0
+
+    def summary(self) -> dict[str, Any]:
+        ms = sorted(x / 1e6 for x in self.latencies_ns)
+
+        def pct(p: float) -> float | None:
+            return ms[min(len(ms) - 1, int(p * (len(ms) - 1) + 0.5))] if ms else None
+
+        seconds = (self.ended_ns - self.started_ns) / 1e9
+        return {
+            "frames_in": self.frames_in,
+            "frames_out": self.frames_out,
+            "tare_frames": self.tare_frames,
+            "seq_gaps": self.seq_gaps,
+            "seconds": seconds,
+            "rate_hz": self.frames_out / seconds if seconds > 0 else None,
+            "latency_ms": {
+                "median": statistics.median(ms) if ms else None,
+                "p90": pct(0.90),
+                "p99": pct(0.99),
+                "p999": pct(0.999),
+                "max": ms[-1] if ms else None,
+                "over_1ms": sum(x > 1.0 for x in ms),
+            },
+            # 0.05 ms bins up to 5 ms (the last bin holds everything slower), for a figure of the distribution
+            "histogram_ms": {
+                "bin_ms": 0.05,
+                "counts": np.bincount(np.minimum((np.asarray(ms) / 0.05).astype(int), 100), minlength=101).tolist(),
+            },
+        }
+
+
+_FORMATS: dict[tuple[int | bool, ...], str] = {}
+
+
+def json_numbers(values: np.ndarray) -> str:
+    """A 1-D or 2-D array as JSON with 6 significant digits (float32 carries about 7), about 4x faster than
+    ``json.dumps(values.tolist())``; a non-finite number becomes null."""
+    array = np.asarray(values)
+    finite = bool(np.isfinite(array).all())
+    key = (*array.shape, finite)
+    template = _FORMATS.get(key)
+    if template is None:
+        row = "[" + ",".join(["%.6g" if finite else "%s"] * array.shape[-1]) + "]"
+        template = row if array.ndim == 1 else "[" + ",".join([row] * array.shape[0]) + "]"
+        _FORMATS[key] = template
+    numbers = array.reshape(-1).tolist()
+    if finite:
+        return template % tuple(numbers)
+    return template % tuple(f"{x:.6g}" if np.isfinite(x) else "null" for x in numbers)
+
+
+def frame_line(index: int, frame: TactileFrame, output: LiveOutput, row: int, model: LiveModel, now_ns: int) -> bytes:
+    """One JSON line: the frame's identity and host time, its latent, its translations, its geometry, and the
+    latency up to building this line (ms; the stats also count writing it)."""
+    translated = ",".join(f'"{t}":{json_numbers(v[row])}' for t, v in output.translated.items())
+    geometry = "" if output.geometry_mm is None else f',"geometry_mm":{json_numbers(output.geometry_mm[row])}'
+    seq = "null" if frame.seq is None else str(int(frame.seq))
+    return (
+        f'{{"i":{index},"sensor":"{model.sensor}","host_t_ns":{frame.host_t_ns},"seq":{seq},'
+        f'"valid":{"true" if frame.valid else "false"},"latent":{json_numbers(output.latent[row])},'
+        f'"translated":{{{translated}}}{geometry},"latency_ms":{(now_ns - frame.host_t_ns) / 1e6:.4f}}}\n'
+    ).encode()
+
+
+def stream_frames(
+    sensor: LiveSensor,
+    model: LiveModel,
+    write: Callable[[bytes], None],
+    *,
+    tare_frames: int = 50,
+    max_frames: int | None = None,
+    duration_s: float | None = None,
+    should_stop: Callable[[], bool] = lambda: False,
+    clock_ns: Callable[[], int] = time.monotonic_ns,
+) -> StreamStats:
+    """Tare on the first ``tare_frames`` valid frames (median, as a press's tare), then emit every frame until
+    ``max_frames`` were emitted, ``duration_s`` passed since the first emitted frame, or ``should_stop()``."""
+    stats = StreamStats()
+    tare: list[np.ndarray] = []
+    baseline: np.ndarray | None = None
+    last_seq: int | None = None
+    deadline_ns: int | None = None
+    while not should_stop():
+        frames = sensor.poll_wait(0.1)
+        if not frames:
+            continue
+        if max_frames is not None and baseline is not None:
+            frames = frames[: max_frames - stats.frames_out]  # the rest arrived after the stop: not dropped
+        stats.frames_in += len(frames)
+        for frame in frames:
+            if frame.seq is not None and last_seq is not None and frame.seq > last_seq + 1:
+                stats.seq_gaps += frame.seq - last_seq - 1
+            last_seq = frame.seq if frame.seq is not None else last_seq
+        if baseline is None:
+            take = frames[: max(0, tare_frames - len(tare))]
+            tare += [f.values for f in take if f.valid]
+            stats.tare_frames += len(take)
+            frames = frames[len(take) :]
+            if len(tare) >= tare_frames or (stats.tare_frames >= tare_frames and tare):
+                baseline = np.median(np.stack(tare), axis=0).astype(np.float32)
+            if not frames or baseline is None:
+                continue
+            if max_frames is not None and len(frames) > max_frames:
+                stats.frames_in -= len(frames) - max_frames
+                frames = frames[:max_frames]
+        values = np.stack([f.values for f in frames]).astype(np.float32) - baseline
+        output = model(values)
+        for row, frame in enumerate(frames):
+            line = frame_line(stats.frames_out, frame, output, row, model, clock_ns())
+            write(line)
+            done_ns = clock_ns()
+            stats.latencies_ns.append(done_ns - frame.host_t_ns)
+            if stats.frames_out == 0:
+                stats.started_ns = frame.host_t_ns
+                if duration_s is not None:
+                    deadline_ns = frame.host_t_ns + round(duration_s * 1e9)
+            stats.frames_out += 1
+            stats.ended_ns = done_ns
+        if max_frames is not None and stats.frames_out >= max_frames:
+            break
+        if deadline_ns is not None and stats.ended_ns >= deadline_ns:
+            break
+    return stats
+
+
+class _PolledSensor:
+    """A driver without ``poll_wait`` (not a :class:`drivers._reader.PumpedSensor`): polled every 0.2 ms."""
+
+    def __init__(self, sensor: Any) -> None:
+        self._sensor = sensor
+
+    def poll_wait(self, timeout_s: float) -> list[TactileFrame]:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            frames = list(self._sensor.poll())
+            if frames or time.monotonic() >= deadline:
+                return frames
+            time.sleep(0.0002)
+
+
+def live_sensor(sensor: Any) -> LiveSensor:
+    """``sensor`` itself when it can wait for frames (every driver of this package), else a polling adapter."""
+    return sensor if callable(getattr(sensor, "poll_wait", None)) else _PolledSensor(sensor)

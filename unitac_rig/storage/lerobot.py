@@ -1,0 +1,685 @@
+"""``unitac-rig export --format lerobot``: the recorded presses as LeRobotDataset v3 datasets, and the way back.
+
+LeRobot (Hugging Face's robot-learning library) shares datasets in its v3.0 layout: ``meta/info.json`` (features with
+dtype, shape and names; one ``fps``), ``meta/stats.json``, ``meta/tasks.parquet``, ``meta/episodes/chunk-XXX/
+file-XXX.parquet`` (one row per episode: length, where its frames are, per-episode stats) and ``data/chunk-XXX/
+file-XXX.parquet`` (one row per frame). Those facts are taken from the standalone ``lerobot-dataset`` package
+(0.4.4), whose ``LeRobotDataset`` loads what is written here (``tests/storage/test_lerobot_export.py``); nothing of
+it is imported: the files are written with pyarrow.
+
+One press is one episode and one tactile frame one row. A LeRobot dataset has one frame rate, and the sensors of a
+press dataset never run together (each session mounts one sensor, at its own rate: uSkin 100 Hz, PapillArray up to
+1 kHz), so each sensor is **its own LeRobot dataset** in ``OUT/<sensor>/`` at that sensor's rate; the arm's 500 Hz
+wrench and TCP pose are sampled at each tactile frame (the arm sample nearest in host time, its offset kept in
+``observation.arm_dt_s``). Every time is host time, the one clock both streams were stamped with.
+
+Next to them: ``README.md`` (the card) and ``manifest.json`` (SHA-256 of every file; ``unitac-rig verify OUT``).
+:func:`load_matched_sets` reads an export back into the force-matched sets ``train`` joins, which give the same
+pairs as the Parquet export of the same data (the frames are the rows the press's extraction picked).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from unitac_rig.errors import DataError
+from unitac_rig.provenance import git_commit, package_version
+from unitac_rig.storage.manifest import MANIFEST_NAME, write_manifest
+from unitac_rig.storage.pooling import pool_sessions
+from unitac_rig.storage.press_record import PressRecord
+from unitac_rig.storage.reader import MatchedSet, read_presses, read_session_info
+
+CODEBASE_VERSION = "v3.0"  # LeRobotDataset format version (lerobot-dataset 0.4.x reads v3.0)
+CHUNKS_SIZE = 1000  # files per chunk directory (LeRobot's default)
+DATA_FILE_SIZE_MB = 100  # a data file is closed once it holds about this much (LeRobot's default)
+DATA_PATH = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
+EPISODES_PATH = "meta/episodes/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
+QUANTILES = (0.01, 0.10, 0.50, 0.90, 0.99)  # the quantiles LeRobot's stats carry (q01 ... q99)
+EXPORT_FORMAT = "unitac-rig press dataset (LeRobotDataset v3.0, one dataset per sensor)"
+CARD_NAME = "README.md"
+ARRAY2D = "datasets.features.features.Array2DExtensionType"  # how `datasets` tags a fixed 2-D feature in Parquet
+
+
+@dataclass(frozen=True)
+class LeRobotExportSummary:
+    out: Path
+    sensors: dict[str, dict[str, int]]  # sensor -> episodes, frames, fps
+    sessions: int
+    files: int
+    bytes: int
+
+
+@dataclass(frozen=True)
+class _Feature:
+    name: str
+    dtype: str  # LeRobot dtype: float32, int64, bool, string
+    shape: tuple[int, ...]
+    names: list[str] | None
+    unit: str
+    description: str
+
+    def info(self) -> dict[str, Any]:
+        return {"dtype": self.dtype, "shape": list(self.shape), "names": self.names, "unit": self.unit,
+                "description": self.description}  # fmt: skip
+
+
+def _tactile_key(sensor: str) -> str:
+    return f"observation.tactile.{sensor}"
+
+
+def _features(sensor: str, layout: dict[str, Any], targets: Sequence[float], displacement: bool) -> list[_Feature]:
+    n = int(layout["n_taxels"])
+    key = _tactile_key(sensor)
+    units = str(layout["units"])
+    grid = f"taxel k at row k // {layout['cols']}, column k % {layout['cols']} of the {layout['rows']} x " \
+           f"{layout['cols']} grid"  # fmt: skip
+    features = [
+        _Feature(key, "float32", (n, 3), ["taxel", "channel"], units,
+                 f"tare-subtracted tactile frame: {grid}; channels x, y, z in the sensor's frame"),
+        _Feature(f"{key}.valid", "bool", (1,), None, "", "false where a taxel was missing or stale"),
+        _Feature(f"{key}.seq", "int64", (1,), None, "", "the device's frame counter (-1: the protocol has none)"),
+        _Feature(f"{key}.device_t_us", "int64", (1,), None, "us", "the device's own clock (-1: none)"),
+    ]  # fmt: skip
+    if displacement:
+        features.append(_Feature(f"{key}.displacement_mm", "float32", (n, 3), ["taxel", "channel"], "mm",
+                                 "pillar displacement x, y, z (PapillArray)"))  # fmt: skip
+    features += [
+        _Feature("observation.wrench", "float32", (6,), ["fx", "fy", "fz", "tx", "ty", "tz"], "N, N m",
+                 "wrist wrench on the tool, base axes, after the press's F/T zero (nearest arm sample)"),
+        _Feature("observation.tcp_pose", "float32", (6,), ["x", "y", "z", "rx", "ry", "rz"], "m, rad",
+                 "TCP pose in the base frame, rotation vector (nearest arm sample)"),
+        _Feature("observation.press_force_n", "float32", (1,), None, "N",
+                 "wrist force along the press direction, positive while pressing (nearest arm sample)"),
+        _Feature("observation.arm_dt_s", "float32", (1,), None, "s",
+                 "host time of the arm sample used minus the tactile frame's host time"),
+        _Feature("annotation.object", "string", (1,), None, "", "object id (see `unitac-rig objects`)"),
+        _Feature("annotation.rotation_deg", "float32", (1,), None, "deg", "rotation of the object on its mount"),
+        _Feature("annotation.angle_deg", "float32", (1,), None, "deg", "approach angle of the press"),
+        _Feature("annotation.matched_targets", "bool", (len(targets),), [f"{t:.2f} N" for t in targets], "",
+                 "true for each target force this frame was force-matched to (the press's extraction; misses "
+                 "false): the frames the paired dataset is built from"),
+        _Feature("timestamp", "float32", (1,), None, "s",
+                 "host time of the tactile frame minus that of the episode's first frame (measured, not index/fps)"),
+        _Feature("frame_index", "int64", (1,), None, "", "frame number within the episode"),
+        _Feature("episode_index", "int64", (1,), None, "", "episode (press) number"),
+        _Feature("index", "int64", (1,), None, "", "frame number within the dataset"),
+        _Feature("task_index", "int64", (1,), None, "", "row of meta/tasks.parquet"),
+    ]  # fmt: skip
+    return features
+
+
+def _layout_info(sensor: str, n_taxels: int) -> dict[str, Any]:
+    from unitac_rig.rig.sensors import SENSORS
+
+    spec = SENSORS.get(sensor)
+    if spec is None:
+        return {"model": "unknown", "rows": n_taxels, "cols": 1, "n_taxels": n_taxels, "pitch_mm": None,
+                "units": "sensor units"}  # fmt: skip
+    layout = spec.layout
+    return {"model": layout.model, "rows": layout.rows, "cols": layout.cols, "n_taxels": layout.n_taxels,
+            "pitch_mm": layout.pitch_mm, "units": layout.units}  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# statistics, as LeRobot computes them: over frames; a (n, 3) feature per channel (over frames and taxels)
+
+
+def feature_stats(values: np.ndarray) -> dict[str, np.ndarray]:
+    """min, max, mean, std, count and the q01..q99 quantiles of ``values`` (frames first), LeRobot's shapes:
+    (1,) for a scalar feature, (k,) for a vector, (channels,) for a (n, channels) array."""
+    array = np.asarray(values)
+    count = int(array.shape[0])
+    if array.ndim == 1:
+        flat = array.reshape(-1, 1)
+    elif array.ndim == 2:
+        flat = array
+    else:
+        flat = array.reshape(-1, array.shape[-1])
+    numbers = flat.astype(np.float64)
+    stats: dict[str, np.ndarray] = {
+        "min": flat.min(axis=0),
+        "max": flat.max(axis=0),
+        "mean": numbers.mean(axis=0),
+        "std": numbers.std(axis=0),
+        "count": np.array([count], dtype=np.int64),
+    }
+    for q, value in zip(QUANTILES, np.quantile(numbers, QUANTILES, axis=0), strict=True):
+        stats[f"q{round(q * 100):02d}"] = value
+    return stats
+
+
+def _stats_json(stats: dict[str, np.ndarray]) -> dict[str, Any]:
+    return {k: np.asarray(v).tolist() for k, v in stats.items()}
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Arrow helpers (pyarrow is imported lazily, as in storage/export.py)
+
+
+def _column(feature: _Feature, values: Any) -> tuple[Any, Any]:
+    """(pyarrow array, pyarrow field) in the layout `datasets` reads as the feature's type."""
+    import pyarrow as pa
+
+    arrow_type = {"float32": pa.float32(), "int64": pa.int64(), "bool": pa.bool_(), "string": pa.string()}
+    if feature.dtype == "string":
+        return pa.array(list(values), pa.string()), pa.field(feature.name, pa.string())
+    array = np.ascontiguousarray(values, dtype=np.dtype(feature.dtype if feature.dtype != "bool" else bool))
+    value_type = arrow_type[feature.dtype]
+    if feature.shape == (1,):
+        return pa.array(array.reshape(-1), value_type), pa.field(feature.name, value_type)
+    m = int(array.shape[0])
+    flat = pa.array(array.reshape(-1), value_type)
+    if len(feature.shape) == 1:
+        list_type = pa.list_(value_type, feature.shape[0])
+        return pa.FixedSizeListArray.from_arrays(flat, feature.shape[0]), pa.field(feature.name, list_type)
+    n, c = feature.shape
+    inner = pa.ListArray.from_arrays(pa.array(np.arange(0, m * n * c + 1, c, dtype=np.int32)), flat)
+    outer = pa.ListArray.from_arrays(pa.array(np.arange(0, m * n + 1, n, dtype=np.int32)), inner)
+    metadata = {b"ARROW:extension:name": ARRAY2D.encode(),
+                b"ARROW:extension:metadata": json.dumps([[n, c], feature.dtype]).encode()}  # fmt: skip
+    return outer, pa.field(feature.name, pa.list_(pa.list_(value_type)), metadata=metadata)
+
+
+def _hf_features(features: Sequence[_Feature]) -> dict[str, Any]:
+    """The ``huggingface`` schema metadata `datasets` writes beside the data (so a plain ``load_dataset`` of the
+    Parquet gets the same types)."""
+    out: dict[str, Any] = {}
+    for f in features:
+        if f.shape == (1,):
+            out[f.name] = {"dtype": f.dtype, "_type": "Value"}
+        elif len(f.shape) == 1:
+            out[f.name] = {"feature": {"dtype": f.dtype, "_type": "Value"}, "length": f.shape[0], "_type": "List"}
+        else:
+            out[f.name] = {"shape": list(f.shape), "dtype": f.dtype, "_type": "Array2D"}
+    return {"info": {"features": out}}
+
+
+def _list_array(rows: Sequence[Any], value_type: Any) -> Any:
+    import pyarrow as pa
+
+    return pa.array([np.asarray(r).tolist() for r in rows], pa.list_(value_type))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# one press -> one episode
+
+
+@dataclass
+class _Episode:
+    columns: dict[str, np.ndarray]  # feature name -> (length, ...) values (frame-wise, without the index columns)
+    meta: dict[str, Any]  # unitac/* and extraction/* columns of meta/episodes
+    task: str
+    length: int
+
+
+def _nearest(sorted_t: np.ndarray, query: np.ndarray) -> np.ndarray:
+    pos = np.searchsorted(sorted_t, query)
+    left = np.clip(pos - 1, 0, sorted_t.size - 1)
+    right = np.clip(pos, 0, sorted_t.size - 1)
+    return np.where(np.abs(sorted_t[right] - query) < np.abs(sorted_t[left] - query), right, left)
+
+
+def _episode(rec: PressRecord, session: dict[str, Any], sensor: str, targets: Sequence[float],
+             displacement: bool) -> _Episode:  # fmt: skip
+    t = np.asarray(rec.tactile_t_s, dtype=np.float64)
+    m = int(t.size)
+    key = _tactile_key(sensor)
+    tare = np.asarray(rec.tare_baseline, dtype=np.float64)
+    # the recorder's own rule (storage/recorder.py): float32 frames minus the float32 baseline
+    tared = np.asarray(rec.tactile_values, np.float32) - tare.astype(np.float32)[None]
+    robot_t = np.asarray(rec.robot_t_s, dtype=np.float64)
+    if robot_t.size:
+        arm = _nearest(robot_t, t)
+        wrench = np.asarray(rec.robot_force, np.float32).reshape(-1, 6)[arm]
+        pose = np.asarray(rec.robot_pose, np.float64).reshape(-1, 6)[arm].astype(np.float32)
+        press = np.asarray(rec.press_force_n, np.float32)[arm]
+        arm_dt = (robot_t[arm] - t).astype(np.float32)
+    else:
+        wrench = pose = np.full((m, 6), np.nan, np.float32)
+        press = arm_dt = np.full(m, np.nan, np.float32)
+    column_of = {round(float(x) * 100): i for i, x in enumerate(targets)}
+    matched = np.zeros((m, len(targets)), dtype=bool)
+    ex = rec.extraction
+    if ex is not None:
+        for k in np.flatnonzero(~np.asarray(ex.miss, bool)):
+            if int(ex.frame_index[k]) >= 0:
+                matched[int(ex.frame_index[k]), column_of[round(float(ex.targets_n[k]) * 100)]] = True
+    columns: dict[str, np.ndarray] = {
+        key: tared,
+        f"{key}.valid": np.asarray(rec.tactile_valid, bool),
+        f"{key}.seq": np.asarray(rec.tactile_seq, np.int64),
+        f"{key}.device_t_us": np.asarray(rec.tactile_device_t_us, np.int64),
+        "observation.wrench": wrench,
+        "observation.tcp_pose": pose,
+        "observation.press_force_n": press,
+        "observation.arm_dt_s": arm_dt,
+        "annotation.object": np.array([session["object"]] * m, dtype=object),
+        "annotation.rotation_deg": np.full(m, rec.rotation_deg, np.float32),
+        "annotation.angle_deg": np.full(m, rec.angle_deg, np.float32),
+        "annotation.matched_targets": matched,
+        "timestamp": (t - t[0]).astype(np.float32),
+    }
+    if displacement:
+        disp = rec.tactile_displacement_mm
+        columns[f"{key}.displacement_mm"] = np.asarray(disp, np.float32)
+    threshold = rec.attrs.get("threshold_n")
+    meta: dict[str, Any] = {
+        "unitac/object": session["object"],
+        "unitac/sensor": sensor,
+        "unitac/press_id": rec.press_id,
+        "unitac/rotation_deg": float(rec.rotation_deg),
+        "unitac/angle_deg": float(rec.angle_deg),
+        "unitac/status": rec.status,
+        "unitac/reason": rec.reason,
+        "unitac/threshold_n": float(threshold) if isinstance(threshold, int | float) else float("nan"),
+        "unitac/session": session["file"],
+        "unitac/simulated": bool(session["simulated"]),
+        "unitac/t0_host_s": float(t[0]),
+        "unitac/tare_baseline": tare.reshape(-1),
+    }
+    if ex is not None:
+        meta.update({
+            "extraction/targets_n": np.asarray(ex.targets_n, np.float64),
+            "extraction/crossing_t_s": np.asarray(ex.crossing_t_s, np.float64),
+            "extraction/frame_index": np.asarray(ex.frame_index, np.int64),
+            "extraction/force_at_frame_n": np.asarray(ex.force_at_frame_n, np.float64),
+            "extraction/error_n": np.asarray(ex.error_n, np.float64),
+            "extraction/miss": np.asarray(ex.miss, bool),
+            "extraction/settings": json.dumps(ex.settings.to_dict()),
+        })  # fmt: skip
+    shape = session.get("shape")
+    material = session.get("material")
+    what = f" ({' '.join(str(x) for x in (shape, material) if x)})" if shape or material else ""
+    force = f" to {threshold:g} N" if isinstance(threshold, int | float) else ""
+    return _Episode(columns, meta, f"press the {session['object']} object{what} onto the tactile pad{force}", m)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# one sensor -> one LeRobot dataset
+
+
+def _sessions_of(pooled: Sequence[Any], sensor: str) -> Iterator[tuple[dict[str, Any], list[PressRecord]]]:
+    for item in pooled:
+        if item.info.sensor != sensor:
+            continue
+        attrs = read_session_info(item.info.path).attrs
+        raw_spec = attrs.get("object_spec")
+        spec: dict[str, Any] = raw_spec if isinstance(raw_spec, dict) else {}
+        material = spec.get("material")
+        session = {
+            "object": item.info.object_id,
+            "file": item.info.path.name,
+            "simulated": item.info.simulated,
+            "shape": spec.get("shape"),
+            "material": str(material).upper() if material is not None else None,
+            "sha256": item.sha256,
+            "source": str(item.source),
+        }
+        presses = [p for p in read_presses(item.info.path) if len(p.tactile_t_s) > 0]
+        yield session, presses
+
+
+def _write_sensor_dataset(root: Path, sensor: str, pooled: Sequence[Any]) -> dict[str, Any]:
+    """Write ``root`` as one LeRobotDataset v3.0; returns a summary for the card and manifest."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    sessions = list(_sessions_of(pooled, sensor))
+    presses = [p for _, ps in sessions for p in ps]
+    if not presses:
+        raise DataError(f"no presses with tactile frames for {sensor}")
+    n_taxels = int(np.asarray(presses[0].tactile_values).shape[1])
+    layout = _layout_info(sensor, n_taxels)
+    targets = sorted({round(float(x), 2) for p in presses if p.extraction is not None for x in p.extraction.targets_n})
+    displacement = all(p.tactile_displacement_mm is not None for p in presses)
+    intervals = np.concatenate([np.diff(np.asarray(p.tactile_t_s, np.float64)) for p in presses])
+    intervals = intervals[intervals > 0]
+    fps = max(1, round(1.0 / float(np.median(intervals)))) if intervals.size else 1
+    features = _features(sensor, layout, targets, displacement)
+    by_name = {f.name: f for f in features}
+    schema_meta = {b"huggingface": json.dumps(_hf_features(features)).encode()}
+
+    tasks: dict[str, int] = {}
+    episode_rows: list[dict[str, Any]] = []
+    all_columns: dict[str, list[np.ndarray]] = {f.name: [] for f in features if f.dtype != "string"}
+    chunk, file_index, file_bytes, writer = 0, 0, 0, None
+    total = 0
+    try:
+        for session, records in sessions:
+            for rec in records:
+                episode = _episode(rec, session, sensor, targets, displacement)
+                index = len(episode_rows)
+                task_index = tasks.setdefault(episode.task, len(tasks))
+                cols = dict(episode.columns)
+                cols["frame_index"] = np.arange(episode.length, dtype=np.int64)
+                cols["episode_index"] = np.full(episode.length, index, np.int64)
+                cols["index"] = np.arange(total, total + episode.length, dtype=np.int64)
+                cols["task_index"] = np.full(episode.length, task_index, np.int64)
+                arrays, fields = zip(*(_column(f, cols[f.name]) for f in features), strict=True)
+                table = pa.Table.from_arrays(list(arrays), schema=pa.schema(list(fields), metadata=schema_meta))
+                if writer is not None and file_bytes + table.nbytes > DATA_FILE_SIZE_MB * 1024 * 1024:
+                    writer.close()
+                    writer = None
+                    file_index += 1
+                    if file_index == CHUNKS_SIZE:
+                        chunk, file_index = chunk + 1, 0
+                if writer is None:
+                    path = root / DATA_PATH.format(chunk_index=chunk, file_index=file_index)
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    writer = pq.ParquetWriter(path, table.schema, compression="zstd")
+                    file_bytes = 0
+                writer.write_table(table)
+                file_bytes += table.nbytes
+                stats = {f.name: feature_stats(cols[f.name]) for f in features if f.dtype != "string"}
+                for name in all_columns:
+                    all_columns[name].append(cols[name])
+                episode_rows.append({
+                    "episode_index": index,
+                    "tasks": [episode.task],
+                    "length": episode.length,
+                    "data/chunk_index": chunk,
+                    "data/file_index": file_index,
+                    "dataset_from_index": total,
+                    "dataset_to_index": total + episode.length,
+                    **{f"stats/{name}/{stat}": value for name, s in stats.items() for stat, value in s.items()},
+                    "meta/episodes/chunk_index": 0,
+                    "meta/episodes/file_index": 0,
+                    **episode.meta,
+                })  # fmt: skip
+                total += episode.length
+    finally:
+        if writer is not None:
+            writer.close()
+
+    dataset_stats = {name: feature_stats(np.concatenate(parts)) for name, parts in all_columns.items()}
+    _write_episodes(root, episode_rows, by_name)
+    _write_tasks(root, tasks)
+    (root / "meta" / "stats.json").write_text(
+        json.dumps({k: _stats_json(v) for k, v in dataset_stats.items()}, indent=1) + "\n", encoding="utf-8"
+    )
+    simulated = all(bool(s["simulated"]) for s, _ in sessions)
+    info = {
+        "codebase_version": CODEBASE_VERSION,
+        "robot_type": "ur5e (simulated rig)" if simulated else "ur5e",
+        "total_episodes": len(episode_rows),
+        "total_frames": total,
+        "total_tasks": len(tasks),
+        "chunks_size": CHUNKS_SIZE,
+        "data_files_size_in_mb": DATA_FILE_SIZE_MB,
+        "video_files_size_in_mb": 200,
+        "fps": int(fps),
+        "splits": {"train": f"0:{len(episode_rows)}"},
+        "data_path": DATA_PATH,
+        "video_path": None,
+        "features": {f.name: f.info() for f in features},
+        "unitac_rig": {
+            "format": EXPORT_FORMAT,
+            "sensor": sensor,
+            "layout": layout,
+            "fps_is": "the sensor's nominal rate (1 / median frame interval); timestamps are measured host times",
+            "targets_n": targets,
+            "simulated": simulated,
+            "sessions": [{k: s[k] for k in ("object", "file", "sha256", "source", "simulated")} for s, _ in sessions],
+        },
+    }
+    (root / "meta" / "info.json").write_text(json.dumps(info, indent=1) + "\n", encoding="utf-8")
+    objects = sorted({s["object"] for s, _ in sessions})
+    return {"episodes": len(episode_rows), "frames": total, "fps": int(fps), "objects": objects,
+            "tasks": len(tasks), "layout": layout, "simulated": simulated, "displacement": displacement,
+            "sessions": [s["file"] for s, _ in sessions]}  # fmt: skip
+
+
+def _write_episodes(root: Path, rows: list[dict[str, Any]], features: dict[str, _Feature]) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    names = list(dict.fromkeys(k for row in rows for k in row))
+    arrays = []
+    for name in names:
+        values = [row.get(name) for row in rows]
+        if name.startswith("stats/"):
+            feature = features[name.split("/")[1]]
+            stat = name.rsplit("/", 1)[1]
+            if stat == "count":
+                value_type = pa.int64()
+            elif stat in ("min", "max") and feature.dtype in ("int64", "bool"):
+                value_type = pa.int64() if feature.dtype == "int64" else pa.bool_()
+            else:
+                value_type = pa.float64()
+            arrays.append(_list_array(values, value_type))
+        elif name == "tasks":
+            arrays.append(pa.array(values, pa.list_(pa.string())))
+        elif isinstance(values[0], np.ndarray):
+            value_type = {"f": pa.float64(), "i": pa.int64(), "b": pa.bool_()}[values[0].dtype.kind]
+            arrays.append(_list_array(values, value_type))
+        else:
+            arrays.append(pa.array(values))
+    path = root / EPISODES_PATH.format(chunk_index=0, file_index=0)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    pq.write_table(pa.Table.from_arrays(arrays, names=names), path, compression="zstd")
+
+
+def _write_tasks(root: Path, tasks: dict[str, int]) -> None:
+    """``meta/tasks.parquet``: LeRobot reads it with pandas as a frame indexed by the task string, so the index is
+    declared in the ``pandas`` schema metadata the way pandas itself writes it (pandas is not needed to write it)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    ordered = sorted(tasks, key=tasks.__getitem__)
+    pandas_meta = {
+        "index_columns": ["__index_level_0__"],
+        "column_indexes": [{"name": None, "field_name": None, "pandas_type": "unicode", "numpy_type": "object",
+                            "metadata": {"encoding": "UTF-8"}}],
+        "columns": [
+            {"name": "task_index", "field_name": "task_index", "pandas_type": "int64", "numpy_type": "int64",
+             "metadata": None},
+            {"name": None, "field_name": "__index_level_0__", "pandas_type": "unicode", "numpy_type": "object",
+             "metadata": None},
+        ],
+        "attributes": {},
+        "creator": {"library": "pyarrow", "version": pa.__version__},
+        "pandas_version": "2.2.0",
+    }  # fmt: skip
+    schema = pa.schema([pa.field("task_index", pa.int64()), pa.field("__index_level_0__", pa.string())],
+                       metadata={b"pandas": json.dumps(pandas_meta).encode()})  # fmt: skip
+    table = pa.Table.from_arrays([pa.array([tasks[t] for t in ordered], pa.int64()), pa.array(ordered)], schema=schema)
+    pq.write_table(table, root / "meta" / "tasks.parquet")
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the export
+
+
+def export_lerobot(data_dirs: Sequence[Path], out: Path) -> LeRobotExportSummary:
+    """Pool ``data_dirs`` and write one LeRobotDataset v3.0 per sensor into ``out/<sensor>/``, with a card and a
+    manifest. Built in a hidden sibling directory and renamed into place, so ``out`` is complete or absent."""
+    from unitac_rig.rig.sensors import SENSORS
+
+    out = Path(out)
+    pooled = pool_sessions([Path(d) for d in data_dirs])
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise DataError(
+            f"{out} already exists and is not an empty directory",
+            hint="choose a new --out directory (an export is never merged into another one)",
+        )
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = out.parent / f".{out.name}.partial-{os.getpid()}"
+    if staging.exists():
+        shutil.rmtree(staging)
+    staging.mkdir(parents=True)
+    try:
+        present = {item.info.sensor for item in pooled}
+        sensors = [s for s in SENSORS if s in present] + sorted(present - set(SENSORS))  # the registry's order
+        summaries = {s: _write_sensor_dataset(staging / s, s, pooled) for s in sensors}
+        document = {
+            "format": EXPORT_FORMAT,
+            "created_unix": time.time(),
+            "exported_by": {"package_version": package_version(), "git_commit": git_commit(),
+                            "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else ""},
+            "lerobot_codebase_version": CODEBASE_VERSION,
+            "datasets": {s: {k: v for k, v in summary.items()} for s, summary in summaries.items()},
+            "sessions": [{"file": item.info.path.name, "object": item.info.object_id, "sensor": item.info.sensor,
+                          "sha256": item.sha256, "source": str(item.source)} for item in pooled],
+        }  # fmt: skip
+        (staging / CARD_NAME).write_text(render_card(document), encoding="utf-8")
+        files = sorted(str(p.relative_to(staging)) for p in staging.rglob("*") if p.is_file())
+        write_manifest(staging, document, files)
+        if out.exists():
+            out.rmdir()
+        os.replace(staging, out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    total = sum((out / rel).stat().st_size for rel in files)
+    return LeRobotExportSummary(
+        out,
+        {s: {"episodes": v["episodes"], "frames": v["frames"], "fps": v["fps"]} for s, v in summaries.items()},
+        len(pooled),
+        len(files) + 1,
+        total,
+    )
+
+
+def render_card(doc: dict[str, Any]) -> str:
+    """The export's README.md: what the datasets are, how to load them with LeRobot, the features and limits."""
+    datasets = doc["datasets"]
+    simulated = all(d["simulated"] for d in datasets.values())
+    lines = [
+        "---",
+        "tags: [tactile, robotics, LeRobot, unitac-rig]",
+        "task_categories: [robotics]",
+        "configs:",
+        *(line for s in datasets for line in (f"- config_name: {s}", f"  data_files: {s}/data/*/*.parquet")),
+        "---",
+        "",
+        "# Tactile press dataset (unitac-rig export, LeRobotDataset v3.0)",
+        "",
+        "Presses of 3D-printed prisms onto a tactile pad by a UR5e arm"
+        + (
+            " (**simulated rig**: contact mechanics and sensor responses are models, not measurements)"
+            if simulated
+            else ""
+        )
+        + ". One LeRobot dataset per sensor (each at its own frame rate); one episode per press, one row per "
+        "tactile frame, with the wrist wrench and TCP pose sampled at that frame.",
+        "",
+        "| dataset | sensor model | taxels | frame unit | fps | episodes | frames | objects |",
+        "|---|---|---|---|---:|---:|---:|---|",
+        *(
+            f"| `{s}/` | {d['layout']['model']} | {d['layout']['rows']} x {d['layout']['cols']} | "
+            f"{d['layout']['units']} | {d['fps']} | {d['episodes']} | {d['frames']} | {', '.join(d['objects'])} |"
+            for s, d in datasets.items()
+        ),
+        "",
+        "## Load it",
+        "",
+        "```python",
+        "from ledataset.datasets.lerobot_dataset import LeRobotDataset  # pip install lerobot-dataset",
+        "# (with the full lerobot package: from lerobot.datasets.lerobot_dataset import LeRobotDataset)",
+        *(f'{s} = LeRobotDataset("local/{s}", root="{s}")' for s in datasets),
+        "```",
+        "",
+        "Every feature's dtype, shape, names, `unit` and `description` are in `<sensor>/meta/info.json`; per-episode "
+        "press metadata (object, rotation, angle, status, tare baseline, and the force-matching `extraction/*`) are "
+        "columns of `<sensor>/meta/episodes/`. `annotation.matched_targets` marks the frames force-matched to each "
+        "target force: those are the frames of unitac-rig's paired dataset (`unitac-rig train --data` reads this "
+        "export back).",
+        "",
+        "## Limits",
+        "",
+        "- Tactile frames are tare-subtracted, in each sensor's own unit (uSkin raw counts are not newtons).",
+        "- `timestamp` is the measured host time since the press's first frame; `fps` is the sensor's nominal rate. "
+        "LeRobot turns `delta_timestamps` into row offsets with `fps`, so a delta lands on the row that far back, "
+        "which is that far back in time within the sensor's jitter.",
+        "- There is no `action`: the press is a scripted force-terminated move (see the episode's `unitac/*` columns).",
+        "",
+        f"Exported by unitac-rig {doc['exported_by']['package_version']}; `{MANIFEST_NAME}` lists every file with its "
+        "SHA-256 (`unitac-rig verify .`).",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the way back: an export -> the force-matched sets
+
+
+def is_lerobot_export(directory: Path) -> bool:
+    """True when ``directory`` is an export written by :func:`export_lerobot`."""
+    return any(_export_info(p) is not None for p in Path(directory).glob("*/meta/info.json"))
+
+
+def _export_info(path: Path) -> dict[str, Any] | None:
+    try:
+        info = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    marker = info.get("unitac_rig") if isinstance(info, dict) else None
+    return info if isinstance(marker, dict) and marker.get("format") == EXPORT_FORMAT else None
+
+
+def load_matched_sets(directory: Path) -> list[MatchedSet]:
+    """The force-matched sets of a LeRobot export (one per object and sensor, the presses in session order): each
+    complete press's matched targets, their frames (the rows its extraction picked), forces and errors."""
+    import pyarrow.parquet as pq
+
+    directory = Path(directory)
+    infos = [(p.parents[1], info) for p in sorted(directory.glob("*/meta/info.json"))
+             if (info := _export_info(p)) is not None]  # fmt: skip
+    if not infos:
+        raise DataError(f"{directory} holds no unitac-rig LeRobot export (no <sensor>/meta/info.json of one)",
+                        hint="pass the --out directory of `unitac-rig export --format lerobot`")  # fmt: skip
+    sets: list[MatchedSet] = []
+    for root, info in infos:
+        sensor = str(info["unitac_rig"]["sensor"])
+        key = _tactile_key(sensor)
+        episodes = pq.read_table(sorted((root / "meta" / "episodes").glob("*/*.parquet"))).to_pylist()
+        frames_by_file: dict[tuple[int, int], Any] = {}
+        parts: dict[str, dict[str, list[Any]]] = {}
+        for ep in sorted(episodes, key=lambda e: e["episode_index"]):
+            if ep.get("unitac/status") != "complete" or ep.get("extraction/miss") is None:
+                continue
+            where = (int(ep["data/chunk_index"]), int(ep["data/file_index"]))
+            if where not in frames_by_file:
+                table = pq.read_table(root / DATA_PATH.format(chunk_index=where[0], file_index=where[1]),
+                                      columns=["index", key])  # fmt: skip
+                n_taxels = int(info["features"][key]["shape"][0])
+                flat = table.column(key).combine_chunks().flatten().flatten().to_numpy(zero_copy_only=False)
+                frames_by_file[where] = (table.column("index").to_numpy(), flat.reshape(-1, n_taxels, 3))
+            index, frames = frames_by_file[where]
+            keep = ~np.asarray(ep["extraction/miss"], bool)
+            rows = int(ep["dataset_from_index"]) + np.asarray(ep["extraction/frame_index"], np.int64)[keep]
+            picked = frames[np.searchsorted(index, rows)]
+            part = parts.setdefault(str(ep["unitac/object"]), {k: [] for k in ("rot", "ang", "tgt", "val", "f", "e")})
+            part["rot"].append(np.full(int(keep.sum()), float(ep["unitac/rotation_deg"])))
+            part["ang"].append(np.full(int(keep.sum()), float(ep["unitac/angle_deg"])))
+            part["tgt"].append(np.asarray(ep["extraction/targets_n"], np.float64)[keep])
+            part["val"].append(picked.astype(np.float32))
+            part["f"].append(np.asarray(ep["extraction/force_at_frame_n"], np.float64)[keep])
+            part["e"].append(np.asarray(ep["extraction/error_n"], np.float64)[keep])
+            part.setdefault("simulated", []).append(bool(ep["unitac/simulated"]))
+        for object_id, part in sorted(parts.items()):
+            sets.append(
+                MatchedSet(
+                    object_id=object_id,
+                    sensor=sensor,
+                    simulated=all(part["simulated"]),
+                    rotation_deg=np.concatenate(part["rot"]),
+                    angle_deg=np.concatenate(part["ang"]),
+                    target_n=np.concatenate(part["tgt"]),
+                    values=np.concatenate(part["val"]),
+                    force_n=np.concatenate(part["f"]),
+                    error_n=np.concatenate(part["e"]),
+                )
+            )
+    return sets

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -344,12 +345,16 @@ def write_report(
     figures: bool = True,
     nmae_normaliser: str | None = None,
     ssim_range: str | None = None,
+    on_stage: Callable[[str], None] | None = None,
 ) -> Path:
     """metrics.json (recomputed), the figures and report.md for a run directory; the metric options default to the
-    run's own."""
+    run's own. ``on_stage`` hears what each step (seconds to minutes on a small machine) is about to do."""
+    stage = on_stage or (lambda message: None)
     run_dir = Path(run_dir)
+    stage("loading the run and its test set")
     run = (run or load_run(run_dir)).scored_under(nmae_normaliser, ssim_range)
     test = test or load_test_set(run_dir)
+    stage(f"scoring {len(test)} test contacts (metrics.json)")
     previous = run_dir / METRICS_JSON
     kept = json.loads(previous.read_text(encoding="utf-8")).get("tsne_mixing") if previous.exists() else None
     metrics = write_metrics(run_dir, run, test)
@@ -359,11 +364,13 @@ def write_report(
     drawn: dict[str, str] = {}
     if figures:
         fig_dir = run_dir / FIGURES
+        stage("drawing the training curves")
         drawn["training curves"] = _rel(plot_curves(run.history, run.sensors, fig_dir / "curves.png"), run_dir)
         evaluator = Evaluator.for_run(run, test)
         first = run.payload.get("latents_first_epoch")
         rows = np.asarray(run.payload.get("tsne_rows", []), dtype=int)
         if first is not None and rows.size >= 10:
+            stage(f"t-SNE of {rows.size} contacts' latents, first and last epoch (the slowest step)")
             latents = evaluator.latents(run.engine)
             last = {s: z[0, rows].numpy() for s, z in latents.items()}
             sensors = [s for s in test.sensors if s in first and s in last]
@@ -379,6 +386,7 @@ def write_report(
                 "last_epoch": embedding_mixing(embeddings["last"], len(sensors)),
             }
             (run_dir / METRICS_JSON).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
+        stage("drawing example reconstructions")
         scores, _ = evaluator.per_frame(run.engine.member(0, groups=[UNITAC_GROUP]))
         cross = [direction_name(a, b) for a in run.sensors for b in run.sensors if a != b]
         cross_nmae = torch.stack([scores[c]["nmae"][0] for c in cross]).mean(dim=0).numpy()
@@ -409,6 +417,7 @@ def write_report(
     geometry_path = run_dir / GEOMETRY_JSON
     geometry = json.loads(geometry_path.read_text(encoding="utf-8")) if geometry_path.exists() else None
     report = run_dir / REPORT_MD
+    stage("writing report.md")
     report.write_text(render_markdown(metrics, run, drawn, geometry), encoding="utf-8")
     return report
 

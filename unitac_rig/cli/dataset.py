@@ -142,6 +142,8 @@ def export(
     out: Path = typer.Option(..., "--out", help="New directory to write the export into (must not hold files)."),
 ) -> None:
     """Write the force-matched paired dataset as Parquet, the raw sessions, a dataset card and manifest.json."""
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):  # a usage error like export-model's: exit 2
+        raise UsageError(f"--out {out} already exists and is not an empty directory", hint="choose a new --out")
     from unitac_rig.learning.data import build_paired_dataset
     from unitac_rig.storage.export import export_dataset
 
@@ -150,6 +152,11 @@ def export(
         f"exported {summary.contacts} contacts x {len(summary.sensors)} sensors ({', '.join(summary.sensors)}) = "
         f"{summary.rows} rows from {summary.sessions} sessions, objects {', '.join(summary.objects)}"
     )
+    if summary.incomplete:
+        console.print(
+            f"[yellow]incomplete sessions (presses finished/planned):[/] {', '.join(summary.incomplete)} "
+            "(listed under incomplete_sessions in manifest.json)"
+        )
     console.print(f"{summary.files} files, {summary.bytes / 1e6:.1f} MB -> {summary.out}")
     console.print(f"check a copy with: unitac-rig verify {summary.out}")
 

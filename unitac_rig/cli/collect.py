@@ -179,6 +179,7 @@ class ProgressLines:
             f"{self.title}: press {done.index}/{done.planned} {r.status}, peak "
             f"{r.attrs.get('peak_force_n', 0):.2f} N, {done.matched}/25 targets matched{left}",
             highlight=False,
+            soft_wrap=True,  # a log line is one line (a terminal folds it itself)
         )
 
 
@@ -379,7 +380,7 @@ def campaign(
                     progress.skipped(obj.id, sensor)
                     console.print(f"{obj.id} / {sensor}: already complete")
                     continue
-                console.print(progress.line(obj.id, sensor), style="bold", highlight=False)
+                console.print(progress.line(obj.id, sensor), style="bold", highlight=False, soft_wrap=True)
                 if not rig.simulated:
                     _ask_operator(rig, f"Mount {obj.id} at rotation 0, then press Enter")
                 outcome = _run_session(rig, obj, sensor, data, None, live, None)

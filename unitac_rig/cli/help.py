@@ -131,8 +131,21 @@ def first_sentence(text: str | None) -> str:
     return paragraph.rstrip(".")
 
 
+def usage_pieces(command: Any, ctx: Any) -> list[str]:
+    """``[OPTIONS] RUN INPUT``: the arguments by their placeholders (typer wrote ``{run}``)."""
+    pieces = [command.options_metavar] if command.options_metavar else []
+    for param in command.get_params(ctx):
+        if isinstance(param, TyperArgument):
+            name = placeholder(param) + ("..." if param.nargs != 1 else "")
+            pieces.append(name if param.required else f"[{name}]")
+    return pieces
+
+
 class PlainCommand(TyperCommand):
     """A command whose help is plain text: grouped options, one placeholder and default style, no cut words."""
+
+    def collect_usage_pieces(self, ctx: Any) -> list[str]:
+        return usage_pieces(self, ctx)
 
     def format_options(self, ctx: Any, formatter: Any) -> None:
         write_params(self.get_params(ctx), ctx, formatter)

@@ -354,7 +354,7 @@ def train_command(
         f"objects {', '.join(dataset.objects)}"
     )
     for line in dropped_sessions(sets, dataset.objects):
-        console.print(f"[yellow]left out:[/] {line}")
+        console.print(f"[yellow]left out:[/] {line}", soft_wrap=True)
     total = epochs if config is None else config.epochs
     lines = EveryFewSeconds()
     with Progress(
@@ -381,7 +381,7 @@ def train_command(
                     status += f" (ratio {seen['latent_ratio'][0]:.2f})"
             progress.update(task, completed=record["epoch"], status=status)
             if not console.is_terminal and lines.due(last=record["epoch"] == total):
-                console.print(f"train: epoch {record['epoch']}/{total} {status}".rstrip())
+                console.print(f"train: epoch {record['epoch']}/{total} {status}".rstrip(), soft_wrap=True)
 
         outcome = train(
             dataset,
@@ -443,7 +443,7 @@ def stage_printer(console: Any) -> Any:
     """A report's ``on_stage`` callback: one line per stage (the t-SNE alone can take a minute or two)."""
 
     def on_stage(message: str) -> None:
-        console.print(f"report: {message}...", highlight=False)
+        console.print(f"report: {message}...", highlight=False, soft_wrap=True)
 
     return on_stage
 
@@ -540,12 +540,14 @@ def _train_new_sensor(
 
 
 def report_command(
-    run: Path = typer.Argument(..., help="Run directory."),
+    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Redraw the figures too."),
     nmae_normaliser: str = typer.Option(
-        None, "--nmae-normaliser", help="Score under another NMAE normaliser (default: the run's)."
+        None, "--nmae-normaliser", metavar="NAME", show_default="the run's", help="Score under another NMAE normaliser."
     ),
-    ssim_range: str = typer.Option(None, "--ssim-range", help="Score under another SSIM range (default: the run's)."),
+    ssim_range: str = typer.Option(
+        None, "--ssim-range", metavar="NAME", show_default="the run's", help="Score under another SSIM range."
+    ),
 ) -> None:
     """Recompute RUN/metrics.json and rewrite RUN/report.md (and its figures)."""
     from rich.console import Console
@@ -778,7 +780,7 @@ def geometry_command(
         return
 
     def on_stage(message: str) -> None:
-        console.print(f"{message}...", highlight=False)
+        console.print(f"{message}...", highlight=False, soft_wrap=True)
 
     result, json_path, png_path = geometry_for_run(
         run, object_id, member=member, config=GeometryConfig(epochs=epochs), on_stage=on_stage
@@ -803,7 +805,7 @@ def geometry_command(
 
 
 def export_model_command(
-    run: Path = typer.Argument(..., help="Run directory."),
+    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
     fmt: str = typer.Option(..., "--format", help="torchscript, onnx or state-dict."),
     out: Path = typer.Option(..., "--out", help="New directory for the networks, model.json and README.md."),
     member: int = typer.Option(0, "--member", help="Which seed of a multi-seed run (index)."),

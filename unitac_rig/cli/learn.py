@@ -554,8 +554,7 @@ def report_command(
 
     from unitac_rig.learning.report import write_report
 
-    if not (run / RUN_MARKER).is_file():
-        raise UsageError(f"{run} holds no trained run", hint="pass the --out directory of a `train` call")
+    _require_run(run)
     console = Console()
     path = write_report(
         run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range, on_stage=stage_printer(console)
@@ -676,8 +675,9 @@ def _output_beside_run(run: Path, folder: str, name: str, out: Path | None) -> P
 
 
 def _require_run(run: Path) -> None:
+    """A cheap check before torch is imported (the same words as :func:`unitac_rig.learning.run.load_checkpoint`)."""
     if not (run / RUN_MARKER).is_file():
-        raise UsageError(f"{run} holds no trained run", hint="pass the --out directory of a `train` call")
+        raise UsageError(f"{run} is not a training run (no {RUN_MARKER})", hint="run `unitac-rig train` first")
 
 
 def translate_command(

@@ -197,6 +197,7 @@ def test_7_ctrl_c_says_what_was_kept_and_that_the_same_command_resumes(tmp_path:
     kept = re.search(r"hex_tpu / uskin: kept (\d+)/91 presses in ", stderr)
     assert kept and int(kept.group(1)) >= 1, stderr
     assert "run the same command again to resume" in stderr
+    assert stderr.strip().splitlines()[-1] == "interrupted"
 
 
 # ---- 9-13: conventions ---------------------------------------------------------------------------------------------

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -65,7 +66,7 @@ def _configure(
         raise UsageError(_option_error(exc, given)) from exc
 
 
-def _option_error(exc: ConfigError, given: dict[str, object]) -> str:
+def _option_error(exc: ConfigError, given: Mapping[str, object]) -> str:
     """A rig-file validation error caused by an override, named by the option typed (``--angles 0: ...``)."""
     cause = exc.__cause__
     errors = cause.errors() if isinstance(cause, ValidationError) else []
@@ -241,8 +242,7 @@ def _run_session(
                 panel.live.stop()
             panel = None
         with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone
-            typer.echo(_kept_line(data_dir, obj.id, sensor), err=True)
-            typer.echo("run the same command again to resume from the next press", err=True)
+            typer.echo(f"{_kept_line(data_dir, obj.id, sensor)}; run the same command again to resume", err=True)
         raise
     finally:
         if panel is not None:

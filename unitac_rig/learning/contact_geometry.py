@@ -320,11 +320,11 @@ def run_geometry(
     if not is_test.any() or not is_train.any():
         raise DataError(f"object {object_id} has too few approach directions to split for geometry")
 
-    unseen = object_id in set(run.unseen_objects)
+    held_out = object_id in set(run.unseen_objects)
     if on_stage is not None:
         on_stage(
             f"training the profile MLPs on {object_id} ({int(is_train.sum())} contacts, {config.epochs} epochs; "
-            f"{'unseen' if unseen else 'seen'} in training)"
+            f"{'unseen' if held_out else 'seen'} in training)"
         )
     engine = run.engine.member(member, groups=[UNITAC_GROUP])
     latents = {
@@ -358,7 +358,7 @@ def run_geometry(
                 "test_sensor": test_sensor,
                 "mae_mm": float(errors.mean()),
                 "per_point_mae_mm": errors.mean(axis=0).tolist(),
-                "paper_mae_mm": PAPER_GEOMETRY_MAE_MM.get(name) if unseen else None,
+                "paper_mae_mm": PAPER_GEOMETRY_MAE_MM.get(name) if held_out else None,
                 "dropout": config.dropout_for(train_sensor),
             }
             predictions[name] = predicted
@@ -376,7 +376,7 @@ def run_geometry(
         config=config,
         model=model,
         sensors=tuple(sensors),
-        unseen=unseen,
+        unseen=held_out,
     )
 
 

@@ -381,41 +381,74 @@ def run_geometry(
 
 
 def plot_geometry(result: GeometryResult, outline: OutlineGeometry, sensors: Sequence[str], path: Path) -> Path:
-    """The paper's picture: predicted local profiles put back around the outline; columns = training sensor,
-    rows = test sensor."""
+    """The paper's picture: predicted local profiles put back around the outline (columns = training sensor, rows =
+    test sensor; the measured profiles thin black under them); below it, three test contacts' profiles across the pad
+    (best, median and worst), where errors of a fraction of a millimetre are visible at page size."""
     from matplotlib.collections import LineCollection
 
     from unitac_rig.plotting import new_figure, save_figure
 
     n = len(sensors)
-    fig = new_figure(4.2 * n, 4.2 * n, layout="tight")
-    axes = fig.subplots(n, n, squeeze=False)
+    fig = new_figure(3.4 * n + 1.2, 3.4 * n + 3.0, layout="constrained")
+    top, bottom = fig.subfigures(2, 1, height_ratios=[3.4 * n, 2.8])
+    axes = top.subplots(n, n, squeeze=False)
     closed = np.vstack([outline.outline_mm, outline.outline_mm[:1]])
+
+    def placed(profiles: np.ndarray) -> list[np.ndarray]:
+        segments = []
+        for i in range(len(profiles)):
+            u, origin = outline.contact(float(result.angle_deg[i]), float(result.rotation_deg[i]))
+            x_hat, u = surface_frame(u)
+            segments.append(origin + np.outer(result.offsets_mm, x_hat) - np.outer(profiles[i], u))
+        return segments
+
+    truth_segments = placed(result.truth_mm)
+    lines = None
     for col, train_sensor in enumerate(sensors):
         for row, test_sensor in enumerate(sensors):
             ax = axes[row][col]
             name = f"{train_sensor}_to_{test_sensor}"
             predicted = result.predictions[name]
-            segments = []
-            colours = []
-            for i in range(len(predicted)):
-                u, origin = outline.contact(float(result.angle_deg[i]), float(result.rotation_deg[i]))
-                x_hat, u = surface_frame(u)
-                pts = origin + np.outer(result.offsets_mm, x_hat) - np.outer(predicted[i], u)
-                segments.append(pts)
-                colours.append(float(np.abs(predicted[i] - result.truth_mm[i]).mean()))
-            ax.plot(closed[:, 0], closed[:, 1], color="0.6", lw=1.0, ls="--", label="outline")
-            lines = LineCollection(segments, array=np.asarray(colours), cmap="viridis_r", linewidths=1.4)
-            lines.set_clim(0.0, max(1.0, float(np.percentile(colours, 95))))
+            colours = np.abs(predicted - result.truth_mm).mean(axis=1)
+            ax.plot(closed[:, 0], closed[:, 1], color="0.6", lw=1.0, ls="--")
+            ax.add_collection(LineCollection(truth_segments, colors="black", linewidths=0.6))
+            lines = LineCollection(placed(predicted), array=colours, cmap="viridis_r", linewidths=2.2)
+            lines.set_clim(0.0, 1.0)
             ax.add_collection(lines)
             ax.set_aspect("equal")
-            ax.set_title(
-                f"train {train_sensor} / test {test_sensor}\nMAE {result.scenarios[name]['mae_mm']:.3f} mm", fontsize=9
-            )
-            ax.set_xlabel("x (mm)")
-            ax.set_ylabel("y (mm)")
-            fig.colorbar(lines, ax=ax, fraction=0.046, label="profile MAE (mm)")
-    fig.suptitle(f"Contact geometry on {result.object_id}: predicted 14 mm profiles placed on the outline")
+            ax.set_title(f"train {train_sensor} / test {test_sensor}: MAE {result.scenarios[name]['mae_mm']:.3f} mm",
+                         fontsize=9)  # fmt: skip
+            ax.tick_params(labelsize=8)
+            ax.set_xlabel("x (mm)", fontsize=8)
+            ax.set_ylabel("y (mm)", fontsize=8)
+    if lines is not None:
+        top.colorbar(lines, ax=axes, shrink=0.8, label="profile error (mm; darkest: 1 mm or more)", extend="max")
+    top.suptitle(
+        f"Contact geometry on {result.object_id}: predicted 14 mm profiles on the outline (measured: thin black)",
+        fontsize=10,
+    )
+
+    # three contacts across the pad: best, median and worst by the mean error over every scenario
+    mean_error = np.mean([np.abs(p - result.truth_mm).mean(axis=1) for p in result.predictions.values()], axis=0)
+    order = np.argsort(mean_error, kind="stable")
+    picks = dict.fromkeys(int(order[k]) for k in (0, len(order) // 2, len(order) - 1))
+    panels = bottom.subplots(1, 3, squeeze=False)[0]
+    for ax, (label, i) in zip(panels, zip(("best", "median", "worst"), picks, strict=False), strict=False):
+        ax.plot(result.offsets_mm, -result.truth_mm[i], color="black", lw=2.5, label="measured")
+        for name, predicted in result.predictions.items():
+            ax.plot(result.offsets_mm, -predicted[i], lw=1.2, label=name.replace("_to_", " → "))
+        ax.set_title(
+            f"{label}: error {mean_error[i]:.2f} mm\nrotation {result.rotation_deg[i]:.0f}°, angle "
+            f"{result.angle_deg[i]:+.0f}°",
+            fontsize=9,
+        )
+        ax.set_xlabel("across the pad (mm)", fontsize=8)
+        ax.set_ylabel("surface height (mm)", fontsize=8)
+        ax.tick_params(labelsize=8)
+        ax.grid(alpha=0.3)
+    for ax in panels[len(picks) :]:
+        ax.set_visible(False)
+    panels[0].legend(fontsize=7, title="train → test sensor", title_fontsize=7)
     return save_figure(fig, path)
 
 

@@ -147,6 +147,7 @@ def export(
     from unitac_rig.learning.data import build_paired_dataset
     from unitac_rig.storage.export import export_dataset
 
+    console.print(f"copying and pairing the sessions of {', '.join(map(str, data))} into {out}...", soft_wrap=True)
     summary = export_dataset(data, out, build_paired_dataset)
     console.print(
         f"exported {summary.contacts} contacts x {len(summary.sensors)} sensors ({', '.join(summary.sensors)}) = "

@@ -390,7 +390,7 @@ def plot_geometry(result: GeometryResult, outline: OutlineGeometry, sensors: Seq
 
     n = len(sensors)
     fig = new_figure(3.4 * n + 1.2, 3.4 * n + 3.0, layout="constrained")
-    parts = np.atleast_1d(fig.subfigures(2, 1, height_ratios=[3.4 * n, 2.8]))
+    parts: Any = fig.subfigures(2, 1, height_ratios=[3.4 * n, 2.8])  # an array of two subfigures
     top, bottom = parts[0], parts[1]
     axes = top.subplots(n, n, squeeze=False)
     closed = np.vstack([outline.outline_mm, outline.outline_mm[:1]])

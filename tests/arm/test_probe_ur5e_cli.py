@@ -51,7 +51,7 @@ def test_simulated_probe_prints_one_json_object_per_state() -> None:
 def test_readable_lines_show_mm_and_newtons() -> None:
     result = CliRunner().invoke(probe_app(), ["ur5e", "--simulated", "--frames", "1"])
     assert result.exit_code == 0, result.output
-    assert "-150.00" in result.output and "520.00" in result.output and "mode=7" in result.output
+    assert "-150.00" in result.output and "520.00" in result.output and "mode 7" in result.output
 
 
 def test_unreachable_host_is_device_not_found() -> None:

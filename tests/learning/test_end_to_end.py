@@ -127,7 +127,7 @@ def test_cli_trains_from_session_files_and_translates_them(tmp_path: Path, capsy
 
     session = data / "circle_pla__uskin.h5"
     assert cli(["translate", str(run), str(session), "--from", "uskin", "--to", "papillarray"]) == 0
-    out = np.load(data / "circle_pla__uskin_to_papillarray.npz")
+    out = np.load(run / "translations" / "circle_pla__uskin_to_papillarray.npz")  # never into the dataset
     assert out["frames"].shape == (55, 9, 3)
     assert sorted(out["angle_deg"].tolist())[0] == -45.0
     assert "single-frame latency" in capsys.readouterr().out

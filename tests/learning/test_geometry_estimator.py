@@ -67,7 +67,7 @@ def test_predict_gives_the_estimators_own_test_predictions(  # type: ignore[no-u
     assert cli(["geometry", str(run), "--predict", str(tmp_path / "frames.npy"), "--sensor", "uskin"]) == 0
     printed = capsys.readouterr().out
     assert "MLP trained on uskin latents" in printed and f"{len(frames)} profiles" in printed
-    written = np.load(tmp_path / "frames_geometry.npz")
+    written = np.load(run / "geometry" / "frames_geometry.npz")  # with the run, not beside the frames
     assert written["profiles_mm"].shape == (len(frames), 11)
     np.testing.assert_allclose(written["offsets_mm"], result.offsets_mm)
     np.testing.assert_allclose(written["profiles_mm"], result.predictions["uskin_to_uskin"], rtol=1e-5, atol=1e-5)

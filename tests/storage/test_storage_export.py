@@ -162,7 +162,7 @@ def test_export_never_writes_into_a_directory_that_holds_files(
     out.mkdir()
     (out / "notes.txt").write_text("mine")
     before = tree_hashes(out)
-    assert cli(["export", str(two_dirs[0]), "--out", str(out)]) == 1
+    assert cli(["export", str(two_dirs[0]), "--out", str(out)]) == 2  # a usage error, like export-model's
     assert "already exists and is not an empty directory" in one_error_line(capsys)
     assert tree_hashes(out) == before
 

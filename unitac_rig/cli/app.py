@@ -16,8 +16,10 @@ import sys
 import typer
 
 from protocols.errors import UnitacError
+from unitac_rig.cli.help import use_plain_help
 from unitac_rig.cli.signals import last_termination_signal, termination_signal
 from unitac_rig.errors import UsageError
+from unitac_rig.provenance import package_version
 
 app = typer.Typer(
     name="unitac-rig",
@@ -26,6 +28,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # plain help, readable at 80 columns (see cli/help.py)
 )
 
 # Modules that add commands to ``app`` through a ``register(app)`` function, in help order.
@@ -40,12 +43,31 @@ COMMAND_MODULES = (
     "unitac_rig.cli.stream",  # stream (a trained run on the live sensor)
 )
 
+# The root help lists the commands under these headings, in this order (a command not named here is listed last).
+COMMAND_GROUPS = {
+    "Collect data": ("collect", "campaign", "extract", "objects"),
+    "Look at and share data": ("inspect", "export", "verify", "import-unitac-nv"),
+    "Learn": ("train", "report", "translate", "geometry", "export-model"),
+    "Devices and the simulated rig": ("probe", "twin", "bench"),
+}
+
 _state = {"debug": False}
+
+
+def _show_version(value: bool) -> None:
+    if value:
+        typer.echo(f"unitac-rig {package_version()}")
+        raise typer.Exit(0)
 
 
 @app.callback()
 def _root(
-    debug: bool = typer.Option(False, "--debug", help="Show full tracebacks and debug logging."),
+    debug: bool = typer.Option(
+        False, "--debug", help="Show full tracebacks and debug logging (also after the command)."
+    ),
+    version: bool = typer.Option(
+        False, "--version", callback=_show_version, is_eager=True, help="Print the version and exit."
+    ),
 ) -> None:
     _state["debug"] = debug
     logging.basicConfig(
@@ -56,6 +78,7 @@ def _root(
 
 for _module in COMMAND_MODULES:
     importlib.import_module(_module).register(app)
+use_plain_help(app, COMMAND_GROUPS)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -66,7 +89,7 @@ def main(argv: list[str] | None = None) -> None:
     Only names typer itself exports are used here: typer 0.29 dropped its click dependency, so importing click
     (which is not declared) broke this very path on a fresh install.
     """
-    args = sys.argv[1:] if argv is None else argv
+    args = hoist_debug(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
     try:
         result = app(args=args, standalone_mode=False)
@@ -99,6 +122,14 @@ def main(argv: list[str] | None = None) -> None:
         if result == 130:
             _interrupted(last_termination_signal())
         sys.exit(result)
+
+
+def hoist_debug(args: list[str]) -> list[str]:
+    """``--debug`` is accepted anywhere before a ``--``: moved in front of the command, where the app reads it."""
+    end = args.index("--") if "--" in args else len(args)
+    if "--debug" not in args[:end]:
+        return list(args)
+    return ["--debug", *(a for a in args[:end] if a != "--debug"), *args[end:]]
 
 
 def _interrupted(number: int | None) -> None:

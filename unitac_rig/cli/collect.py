@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import contextlib
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 import typer
+from pydantic import ValidationError
 from rich.console import Console, Group
 from rich.live import Live
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
@@ -18,7 +20,7 @@ from unitac_rig.cli.signals import termination_as_interrupt
 from unitac_rig.collection.press import PressPlan, TickInfo
 from unitac_rig.collection.sensor_choice import choose_sensor, collection_order, session_complete
 from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session, dry_run
-from unitac_rig.errors import UsageError
+from unitac_rig.errors import ConfigError, UsageError
 from unitac_rig.interrupts import immediate_interrupts
 from unitac_rig.rig.backends import open_rig
 from unitac_rig.rig.base import Rig
@@ -26,13 +28,29 @@ from unitac_rig.rig.config import STRATEGIES, RigConfig, load_rig_config, parse_
 from unitac_rig.rig.objects import ObjectSpec, get_object, list_objects
 from unitac_rig.rig.sensors import sensor_layout
 from unitac_rig.storage.extraction import ExtractionSettings
-from unitac_rig.storage.reader import list_sessions
-from unitac_rig.storage.recorder import reextract_session
+from unitac_rig.storage.press_record import FINISHED_STATUSES
+from unitac_rig.storage.reader import list_sessions, press_summaries, read_session_info
+from unitac_rig.storage.recorder import reextract_session, session_path
 
 console = Console(stderr=False)
 
-DATA_OPTION = typer.Option(Path("data"), "--data", help="Dataset directory (one HDF5 file per object and sensor).")
-RIG_OPTION = typer.Option(None, "--rig", help="Rig file (TOML). Without one, the simulated rig is used.")
+DATA_OPTION = typer.Option(
+    Path("data"), "--data", metavar="DIR", help="Dataset directory (one HDF5 file per object and sensor)."
+)
+RIG_OPTION = typer.Option(
+    None, "--rig", metavar="FILE", help="Rig file (TOML). Without one, the simulated rig is used."
+)
+_PRESS = RigConfig().press  # the rig file's defaults, for the help of the options that override them
+
+
+# rig-file field -> the command-line option that overrides it (an error in an override names the option typed)
+OVERRIDE_OPTIONS = {
+    "press.strategy": "--strategy",
+    "press.speed_mm_s": "--speed",
+    "press.angle_count": "--angles",
+    "object.standoff_mm": "--standoff",
+}
+PROGRESS_EVERY_S = 10.0  # without a terminal (a log, nohup, CI): a progress line at most this often, s
 
 
 def _configure(
@@ -41,6 +59,30 @@ def _configure(
     config = load_rig_config(rig_file)
     if strategy is None and speed is None and angles is None and standoff is None:
         return config
+    given = {"--strategy": strategy, "--speed": speed, "--angles": angles, "--standoff": standoff}
+    try:
+        return _override(config, strategy, speed, angles, standoff)
+    except ConfigError as exc:
+        raise UsageError(_option_error(exc, given)) from exc
+
+
+def _option_error(exc: ConfigError, given: Mapping[str, object]) -> str:
+    """A rig-file validation error caused by an override, named by the option typed (``--angles 0: ...``)."""
+    cause = exc.__cause__
+    errors = cause.errors() if isinstance(cause, ValidationError) else []
+    if errors:
+        field = ".".join(str(p) for p in errors[0]["loc"])
+        option = OVERRIDE_OPTIONS.get(field)
+        message = str(errors[0]["msg"]).removeprefix("Value error, ")
+        if option is not None:
+            return f"{option} {given[option]}: {message[:1].lower()}{message[1:]}"
+    typed = " ".join(f"{name} {value}" for name, value in given.items() if value is not None)
+    return f"{typed}: {exc}"
+
+
+def _override(
+    config: RigConfig, strategy: str | None, speed: float | None, angles: int | None, standoff: float | None
+) -> RigConfig:
     data = config.model_dump(mode="json")
     if strategy is not None:
         if strategy not in STRATEGIES:
@@ -112,6 +154,55 @@ class LivePanel:
         self.live.update(self._render())
 
 
+class ProgressLines:
+    """Progress for a log or pipe (no terminal to redraw the panel): one line per press, at most one every
+    ``PROGRESS_EVERY_S`` (the first and the last always), with the time left at this run's pace."""
+
+    def __init__(self, title: str, every_s: float = PROGRESS_EVERY_S) -> None:
+        self.title = title
+        self.every_s = every_s
+        self.started = time.monotonic()
+        self.first_index: int | None = None
+        self._last_line: float | None = None
+
+    def on_press(self, done: PressDone) -> None:
+        now = time.monotonic()
+        if self.first_index is None:
+            self.first_index = done.index - 1  # presses finished before this run
+        last = done.index >= done.planned
+        if not last and self._last_line is not None and now - self._last_line < self.every_s:
+            return
+        self._last_line = now
+        r = done.record
+        pace = (now - self.started) / max(done.index - self.first_index, 1)
+        left = "" if last else f", about {_duration(pace * (done.planned - done.index))} left"
+        console.print(
+            f"{self.title}: press {done.index}/{done.planned} {r.status}, peak "
+            f"{r.attrs.get('peak_force_n', 0):.2f} N, {done.matched}/25 targets matched{left}",
+            highlight=False,
+            soft_wrap=True,  # a log line is one line (a terminal folds it itself)
+        )
+
+
+def _duration(seconds: float) -> str:
+    """``45 s``, ``12 min``, ``1 h 05 min``: a time left, rounded as a person would say it."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    minutes = round(seconds / 60)
+    return f"{minutes} min" if minutes < 60 else f"{minutes // 60} h {minutes % 60:02d} min"
+
+
+def _kept_line(data_dir: Path, object_id: str, sensor: str) -> str:
+    """What an interrupted session kept, read back from its file: ``kept 12/91 presses in data/...``."""
+    path = session_path(data_dir, object_id, sensor)
+    try:
+        finished = sum(p["status"] in FINISHED_STATUSES for p in press_summaries(path))
+        planned = len(read_session_info(path).attrs.get("planned_presses", []))
+    except Exception:  # nothing written yet, or the file is mid-recovery: the journal keeps what was pressed
+        return f"{object_id} / {sensor}: the presses recorded so far are kept under {data_dir}"
+    return f"{object_id} / {sensor}: kept {finished}/{planned} presses in {path}"
+
+
 def _run_session(
     rig: Rig,
     obj: ObjectSpec,
@@ -126,6 +217,7 @@ def _run_session(
     # Only a terminal can redraw the panel; piped into a file it was one last frame glued to the summary line.
     show = live and console.is_terminal
     panel = LivePanel(f"{obj.id} / {sensor}", planned, 0, sensor, rig.config.press.threshold_n) if show else None
+    lines = None if panel is not None else ProgressLines(f"{obj.id} / {sensor}")
 
     def ask(message: str) -> None:
         if panel is not None:
@@ -140,10 +232,18 @@ def _run_session(
             panel.live.start()
         outcome = collect_session(
             rig, obj, sensor, data_dir, rotations=rot,
-            on_press=panel.on_press if panel else None,
+            on_press=panel.on_press if panel else lines.on_press if lines else None,
             on_tick=panel.on_tick if panel else None,
             ask_operator=ask, max_presses=max_presses,
         )  # fmt: skip
+    except KeyboardInterrupt:  # Ctrl-C, SIGTERM, SIGHUP: the arm has stopped; say what is kept and how to go on
+        if panel is not None:
+            with contextlib.suppress(OSError):
+                panel.live.stop()
+            panel = None
+        with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone
+            typer.echo(f"{_kept_line(data_dir, obj.id, sensor)}; run the same command again to resume", err=True)
+        raise
     finally:
         if panel is not None:
             with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone; stopping the arm matters
@@ -160,15 +260,35 @@ def _run_session(
 
 
 def collect(
-    object_id: str = typer.Option(..., "--object", help="Object id, e.g. hex_tpu (see `unitac-rig objects`)."),
-    sensor: str | None = typer.Option(None, "--sensor", help="uskin or papillarray; detected when omitted."),
+    object_id: str = typer.Option(
+        ..., "--object", metavar="ID", help="Object id, e.g. hex_tpu (see `unitac-rig objects`)."
+    ),
+    sensor: str | None = typer.Option(
+        None, "--sensor", metavar="SENSOR", show_default="detected", help="uskin or papillarray."
+    ),
     rig_file: Path | None = RIG_OPTION,
     data: Path = DATA_OPTION,
-    strategy: str | None = typer.Option(None, "--strategy", help="guarded, two-phase or force-ramp."),
-    speed: float | None = typer.Option(None, "--speed", help="Press speed in mm/s."),
-    rotation: float | None = typer.Option(None, "--rotation", help="Run the sweep at this object rotation only (deg)."),
+    strategy: str | None = typer.Option(
+        None,
+        "--strategy",
+        metavar="NAME",
+        show_default=f"the rig file's, else {_PRESS.strategy}",
+        help="guarded, two-phase or force-ramp.",
+    ),
+    speed: float | None = typer.Option(
+        None,
+        "--speed",
+        metavar="MM_S",
+        show_default=f"the rig file's, else {_PRESS.speed_mm_s:g}",
+        help="Press speed in mm/s.",
+    ),
+    rotation: float | None = typer.Option(
+        None, "--rotation", metavar="DEG", show_default="every rotation", help="Sweep this object rotation only."
+    ),
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed (runs are deterministic per seed)."),
-    angles: int | None = typer.Option(None, "--angles", help="Number of approach angles (default 91)."),
+    angles: int | None = typer.Option(
+        None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
+    ),
     max_presses: int | None = typer.Option(None, "--max-presses", help="Stop after this many presses (resume later)."),
     live: bool = typer.Option(True, "--live/--no-live", help="Show the live panel."),
     dry_run_only: bool = typer.Option(
@@ -229,8 +349,12 @@ def campaign(
     rig_file: Path | None = RIG_OPTION,
     data: Path = DATA_OPTION,
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed."),
-    angles: int | None = typer.Option(None, "--angles", help="Number of approach angles (default 91)."),
-    objects: str | None = typer.Option(None, "--objects", help="Comma-separated object ids (default: all)."),
+    angles: int | None = typer.Option(
+        None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
+    ),
+    objects: str | None = typer.Option(
+        None, "--objects", metavar="ID,ID", show_default="every object", help="Comma-separated object ids."
+    ),
     live: bool = typer.Option(True, "--live/--no-live", help="Show the live panel."),
 ) -> None:
     """Every object with every sensor: unattended on the simulated rig, operator-guided on hardware."""
@@ -243,19 +367,58 @@ def campaign(
         console.print("[bold yellow]SIMULATED RIG[/]: running the whole campaign unattended.")
     started = time.monotonic()
     with termination_as_interrupt(), open_rig(config, seed=seed) as rig:
-        for sensor in collection_order(rig):
+        sensors = collection_order(rig)
+        progress = CampaignProgress(
+            [(obj.id, sensor, len(obj.rotations_deg) * config.press.angle_count) for sensor in sensors
+             for obj in catalogue]
+        )  # fmt: skip
+        for sensor in sensors:
             if not rig.simulated:
                 _ask_operator(rig, f"Mount the {sensor} on the arm, then press Enter")
             for obj in catalogue:
                 if session_complete(data, obj.id, sensor):
+                    progress.skipped(obj.id, sensor)
                     console.print(f"{obj.id} / {sensor}: already complete")
                     continue
+                console.print(progress.line(obj.id, sensor), style="bold", highlight=False, soft_wrap=True)
                 if not rig.simulated:
                     _ask_operator(rig, f"Mount {obj.id} at rotation 0, then press Enter")
                 outcome = _run_session(rig, obj, sensor, data, None, live, None)
+                progress.finished(obj.id, sensor, outcome)
                 if outcome.stopped:
                     raise UsageError(f"campaign stopped: {outcome.stopped}", hint="rerun the same command to resume")
-    console.print(f"campaign done in {time.monotonic() - started:.1f} s wall time -> {data}")
+    console.print(f"campaign done in {_duration(time.monotonic() - started)} wall time -> {data}")
+
+
+class CampaignProgress:
+    """The campaign's overall line before each session: which session of how many, presses done, and the time left
+    at this run's pace (pressing time per press; operator waits on hardware count too)."""
+
+    def __init__(self, sessions: list[tuple[str, str, int]]) -> None:
+        self.planned = {(obj, sensor): presses for obj, sensor, presses in sessions}
+        self.total_presses = sum(self.planned.values())
+        self.done: dict[tuple[str, str], int] = {}
+        self.pressed_now = 0  # presses finished by this run
+        self.started = time.monotonic()
+
+    def skipped(self, obj: str, sensor: str) -> None:
+        self.done[(obj, sensor)] = self.planned[(obj, sensor)]
+
+    def finished(self, obj: str, sensor: str, outcome: SessionOutcome) -> None:
+        self.done[(obj, sensor)] = outcome.already_done + outcome.complete + outcome.failed
+        self.pressed_now += outcome.complete + outcome.failed + outcome.aborted
+
+    def line(self, obj: str, sensor: str) -> str:
+        keys = list(self.planned)
+        index = keys.index((obj, sensor)) + 1
+        presses = sum(self.done.values())
+        text = f"campaign: session {index}/{len(keys)} ({obj} / {sensor}), {presses}/{self.total_presses} presses done"
+        if self.pressed_now:
+            pace = (time.monotonic() - self.started) / self.pressed_now
+            text += f", about {_duration(pace * (self.total_presses - presses))} left"
+        else:
+            text += ", time left known after the first session"
+        return text
 
 
 def extract(

@@ -146,19 +146,27 @@ def export(
 ) -> None:
     """Write the force-matched paired dataset as Parquet, the raw sessions, a dataset card and manifest.json
     (--format lerobot: one LeRobotDataset v3 per sensor, a press per episode, see docs/dataset.md)."""
-    from unitac_rig.learning.data import build_paired_dataset
-    from unitac_rig.storage.export import export_dataset
-
+    if fmt not in ("parquet", "lerobot"):
+        raise UsageError(f"--format {fmt}: unknown export format", hint="use parquet or lerobot")
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):  # a usage error like export-model's: exit 2
+        raise UsageError(f"--out {out} already exists and is not an empty directory", hint="choose a new --out")
     if fmt == "lerobot":
         _export_lerobot(data, out)
         return
-    if fmt != "parquet":
-        raise UsageError(f"unknown export format {fmt!r}", hint="use parquet or lerobot")
+    from unitac_rig.learning.data import build_paired_dataset
+    from unitac_rig.storage.export import export_dataset
+
+    console.print(f"copying and pairing the sessions of {', '.join(map(str, data))} into {out}...", soft_wrap=True)
     summary = export_dataset(data, out, build_paired_dataset)
     console.print(
         f"exported {summary.contacts} contacts x {len(summary.sensors)} sensors ({', '.join(summary.sensors)}) = "
         f"{summary.rows} rows from {summary.sessions} sessions, objects {', '.join(summary.objects)}"
     )
+    if summary.incomplete:
+        console.print(
+            f"[yellow]incomplete sessions (presses finished/planned):[/] {', '.join(summary.incomplete)} "
+            "(listed under incomplete_sessions in manifest.json)"
+        )
     console.print(f"{summary.files} files, {summary.bytes / 1e6:.1f} MB -> {summary.out}")
     console.print(f"check a copy with: unitac-rig verify {summary.out}")
 

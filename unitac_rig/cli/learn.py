@@ -56,60 +56,245 @@ def training_overrides(
     return flat
 
 
+# Help headings of `train` (the options are many: grouped, as git groups its own).
+_RUN = "Data and run"
+_TRAINING = "Training"
+_MODEL = "Model (the paper's shape by default)"
+_SPLIT = "Split, preprocessing and metrics"
+_REPORT = "Evaluation and report"
+
+# What the checks before the heavy imports compare with (tests keep them equal to the library's own tables).
+RUN_MARKER = "checkpoint.pt"  # learning.run.CHECKPOINT_NAME: a folder holding it is a trained run
+DEVICES = ("auto", "cpu", "cuda")
+PREPROCESSING_NAMES = ("channel_z", "sensor_minmax", "sensor_scale", "raw")  # learning.data.PREPROCESSING
+NMAE_NORMALISER_NAMES = ("channel_range", "sensor_range", "channel_std", "frame_range")  # metrics.NMAE_NORMALISERS
+SSIM_RANGE_NAMES = ("channel_range", "sensor_range", "z_range")  # metrics.SSIM_RANGES
+
+
+def check_train_arguments(
+    data: list[Path], out: Path, resume: bool, device: str, config_file: Path | None, choices: dict[str, str | None]
+) -> None:
+    """What a ``train`` call can be refused for without torch or the data: a usage error naming the option, in
+    well under a second (importing torch alone takes seconds on a loaded box)."""
+    if device not in DEVICES:
+        raise UsageError(f"--device {device!r} is not a device", hint=f"use one of: {', '.join(DEVICES)}")
+    for option, (value, known) in {
+        "--preprocessing": (choices.get("preprocessing"), PREPROCESSING_NAMES),
+        "--nmae-normaliser": (choices.get("nmae_normaliser"), NMAE_NORMALISER_NAMES),
+        "--ssim-range": (choices.get("ssim_range"), SSIM_RANGE_NAMES),
+    }.items():
+        if value is not None and value not in known:
+            raise UsageError(f"{option} {value!r} is not one of: {', '.join(known)}")
+    for directory in data:
+        if not directory.is_dir():
+            raise UsageError(f"--data {directory} is not a directory", hint="pass the --data folder `collect` wrote")
+    if config_file is not None and not config_file.is_file():
+        raise UsageError(f"--config {config_file} does not exist")
+    if resume:
+        if not (out / RUN_MARKER).is_file():
+            raise UsageError(f"--out {out} holds no run to resume", hint="drop --resume to start a new run there")
+    elif (out / RUN_MARKER).exists():
+        raise UsageError(
+            f"--out {out} already holds a run", hint="pass --resume to continue it, or choose another --out"
+        )
+
+
 def train_command(
     ctx: typer.Context,
     data: list[Path] = typer.Option(
-        ..., "--data", help="Directory of session files (collect/campaign/import output); repeat to pool several."
+        ...,
+        "--data",
+        metavar="DIR",
+        help="Directory of session files (collect, campaign or import output); repeat to pool several.",
+        rich_help_panel=_RUN,
     ),
-    out: Path = typer.Option(..., "--out", help="Run directory to create (or to continue with --resume)."),
-    from_run: Path = typer.Option(None, "--from", help="A trained run to add --new-sensor to (it is not modified)."),
-    new_sensor: str = typer.Option(
-        None, "--new-sensor", help="With --from: train only this sensor's encoder and output layer (docs/learning.md)."
+    out: Path = typer.Option(
+        ...,
+        "--out",
+        metavar="RUN",
+        help="Run directory to create (or to continue with --resume).",
+        rich_help_panel=_RUN,
+    ),
+    resume: bool = typer.Option(
+        False, "--resume", help="Continue the run in --out from its last checkpoint.", rich_help_panel=_RUN
     ),
     config_file: Path = typer.Option(
-        None, "--config", help="TOML file with any training keys (docs/learning.md); options given here win."
+        None,
+        "--config",
+        metavar="FILE",
+        help="TOML file with any training keys (docs/learning.md); options given here win.",
+        rich_help_panel=_RUN,
     ),
-    epochs: int = typer.Option(None, "--epochs", help="Training epochs (the paper: 1000); with --resume, extends."),
-    seed: int = typer.Option(None, "--seed", help="Seed of the first model (initialisation, shuffling, dropout)."),
-    n_seeds: int = typer.Option(None, "--n-seeds", help="Train seeds SEED..SEED+N-1 together in one batched run."),
-    split_seed: int = typer.Option(None, "--split-seed", help="Seed of the test/validation split (default 0)."),
-    learning_rate: float = typer.Option(None, "--lr", help="Adam learning rate (the paper: 5e-4)."),
-    batch_size: int = typer.Option(None, "--batch-size", help="Batch size (the paper: 64)."),
-    dropout: float = typer.Option(None, "--dropout", help="Dropout after every layer (the paper: 0.007)."),
-    encoder_hidden: str = typer.Option(None, "--encoder-hidden", help="Encoder hidden widths (the paper: 64,48)."),
-    latent_dim: int = typer.Option(None, "--latent-dim", help="Latent size (the paper: 16)."),
-    decoder_hidden: str = typer.Option(None, "--decoder-hidden", help="Decoder hidden widths (the paper: 64,96)."),
-    align_weight: float = typer.Option(
-        None, "--align-weight", help="Weight of a scale-free latent alignment term (beyond the paper; default 0)."
-    ),
-    test_fraction: float = typer.Option(None, "--test-fraction", help="Share of directions held out for test."),
-    val_fraction: float = typer.Option(None, "--val-fraction", help="Share of directions for validation (0.1)."),
-    preprocessing: str = typer.Option(
-        None, "--preprocessing", help="channel_z, sensor_minmax, sensor_scale (default) or raw."
-    ),
-    nmae_normaliser: str = typer.Option(
-        None, "--nmae-normaliser", help="channel_range (default), sensor_range, channel_std or frame_range."
-    ),
-    ssim_range: str = typer.Option(
-        None, "--ssim-range", help="SSIM data range: channel_range, sensor_range (default) or z_range."
-    ),
-    baselines: bool = typer.Option(None, "--baselines/--no-baselines", help="Also train per-sensor autoencoders."),
-    device: str = typer.Option("auto", "--device", help="auto, cpu or cuda."),
-    threads: int = typer.Option(0, "--threads", help="CPU threads (0: one, fastest for these small layers)."),
-    resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its last checkpoint."),
-    eval_every: int = typer.Option(None, "--eval-every", help="Epochs between validation evaluations (1)."),
-    checkpoint_every: int = typer.Option(None, "--checkpoint-every", help="Epochs between checkpoints (50)."),
-    tsne_contacts: int = typer.Option(None, "--tsne-contacts", help="Test contacts kept for the t-SNE (600)."),
-    report: bool = typer.Option(True, "--report/--no-report", help="Write metrics.json, report.md and figures."),
     partial: bool = typer.Option(
         False,
         "--partial/--complete-only",
         help="Also train on contacts only some sensors recorded (at least two; masked loss). Test and validation "
         "use contacts every sensor recorded.",
+        rich_help_panel=_RUN,
+    ),
+    from_run: Path = typer.Option(
+        None,
+        "--from",
+        metavar="RUN",
+        help="A trained run to add --new-sensor to (it is not modified).",
+        rich_help_panel=_RUN,
+    ),
+    new_sensor: str = typer.Option(
+        None,
+        "--new-sensor",
+        metavar="SENSOR",
+        help="With --from: train only this sensor's encoder and output layer (docs/learning.md).",
+        rich_help_panel=_RUN,
+    ),
+    epochs: int = typer.Option(
+        None,
+        "--epochs",
+        min=1,
+        show_default="1000, as in the paper",
+        help="Training epochs; with --resume, the new total.",
+        rich_help_panel=_TRAINING,
+    ),
+    seed: int = typer.Option(
+        None,
+        "--seed",
+        show_default="0",
+        help="Seed of the first model (initialisation, shuffling, dropout).",
+        rich_help_panel=_TRAINING,
+    ),
+    n_seeds: int = typer.Option(
+        None,
+        "--n-seeds",
+        min=1,
+        show_default="1",
+        help="Train seeds SEED..SEED+N-1 together in one batched run.",
+        rich_help_panel=_TRAINING,
+    ),
+    learning_rate: float = typer.Option(
+        None, "--lr", show_default="5e-4, as in the paper", help="Adam learning rate.", rich_help_panel=_TRAINING
+    ),
+    batch_size: int = typer.Option(
+        None, "--batch-size", min=1, show_default="64, as in the paper", help="Batch size.", rich_help_panel=_TRAINING
+    ),
+    device: str = typer.Option(
+        "auto", "--device", metavar="NAME", help="auto, cpu or cuda.", rich_help_panel=_TRAINING
+    ),
+    threads: int = typer.Option(
+        0, "--threads", min=0, help="CPU threads (0: one, fastest for these small layers).", rich_help_panel=_TRAINING
+    ),
+    dropout: float = typer.Option(
+        None, "--dropout", show_default="0.007", help="Dropout after every layer.", rich_help_panel=_MODEL
+    ),
+    encoder_hidden: str = typer.Option(
+        None,
+        "--encoder-hidden",
+        metavar="W,W",
+        show_default="64,48",
+        help="Encoder hidden widths.",
+        rich_help_panel=_MODEL,
+    ),
+    latent_dim: int = typer.Option(
+        None, "--latent-dim", min=1, show_default="16", help="Latent size.", rich_help_panel=_MODEL
+    ),
+    decoder_hidden: str = typer.Option(
+        None,
+        "--decoder-hidden",
+        metavar="W,W",
+        show_default="64,96",
+        help="Decoder hidden widths.",
+        rich_help_panel=_MODEL,
+    ),
+    align_weight: float = typer.Option(
+        None,
+        "--align-weight",
+        show_default="0",
+        help="Weight of a scale-free latent alignment term (beyond the paper).",
+        rich_help_panel=_MODEL,
+    ),
+    split_seed: int = typer.Option(
+        None, "--split-seed", show_default="0", help="Seed of the test/validation split.", rich_help_panel=_SPLIT
+    ),
+    test_fraction: float = typer.Option(
+        None,
+        "--test-fraction",
+        show_default="0.1",
+        help="Share of directions held out for test.",
+        rich_help_panel=_SPLIT,
+    ),
+    val_fraction: float = typer.Option(
+        None,
+        "--val-fraction",
+        show_default="0.1",
+        help="Share of directions for validation.",
+        rich_help_panel=_SPLIT,
+    ),
+    preprocessing: str = typer.Option(
+        None,
+        "--preprocessing",
+        metavar="NAME",
+        show_default="sensor_scale",
+        help="channel_z, sensor_minmax, sensor_scale or raw.",
+        rich_help_panel=_SPLIT,
+    ),
+    nmae_normaliser: str = typer.Option(
+        None,
+        "--nmae-normaliser",
+        metavar="NAME",
+        show_default="channel_range",
+        help="channel_range, sensor_range, channel_std or frame_range.",
+        rich_help_panel=_SPLIT,
+    ),
+    ssim_range: str = typer.Option(
+        None,
+        "--ssim-range",
+        metavar="NAME",
+        show_default="sensor_range",
+        help="SSIM data range: channel_range, sensor_range or z_range.",
+        rich_help_panel=_SPLIT,
+    ),
+    baselines: bool = typer.Option(
+        None,
+        "--baselines/--no-baselines",
+        show_default="--baselines",
+        help="Also train per-sensor autoencoders.",
+        rich_help_panel=_REPORT,
+    ),
+    eval_every: int = typer.Option(
+        None,
+        "--eval-every",
+        min=1,
+        show_default="1",
+        help="Epochs between validation evaluations.",
+        rich_help_panel=_REPORT,
+    ),
+    checkpoint_every: int = typer.Option(
+        None,
+        "--checkpoint-every",
+        min=1,
+        show_default="50",
+        help="Epochs between checkpoints.",
+        rich_help_panel=_REPORT,
+    ),
+    tsne_contacts: int = typer.Option(
+        None,
+        "--tsne-contacts",
+        min=0,
+        show_default="600",
+        help="Test contacts kept for the t-SNE.",
+        rich_help_panel=_REPORT,
+    ),
+    report: bool = typer.Option(
+        True, "--report/--no-report", help="Write metrics.json, report.md and figures.", rich_help_panel=_REPORT
     ),
 ) -> None:
     """Train UniTac-NV (and the baselines) on paired data; writes RUN/checkpoint.pt, config.toml, metrics.json,
-    report.md."""
+    report.md and figures."""
+    if learning_rate is not None and not learning_rate > 0:
+        raise UsageError(f"--lr must be positive, got {learning_rate:g}")
+    if from_run is None and new_sensor is None:
+        check_train_arguments(
+            data, out, resume, device, config_file,
+            {"preprocessing": preprocessing, "nmae_normaliser": nmae_normaliser, "ssim_range": ssim_range},
+        )  # fmt: skip
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -161,12 +346,17 @@ def train_command(
 
         if checkpoint_path(out).is_file():
             partial = int(load_checkpoint(out).get("dataset_summary", {}).get("partial_train_rows", 0)) > 0
-    dataset = build_paired_dataset(load_sets(data), partial=partial)
+    console.print(f"reading the sessions in {', '.join(map(str, data))}...")
+    sets = load_sets(data)
+    dataset = build_paired_dataset(sets, partial=partial)
     console.print(
         f"paired dataset: {len(dataset)} contacts, sensors {', '.join(dataset.sensors)}, "
         f"objects {', '.join(dataset.objects)}"
     )
+    for line in dropped_sessions(sets, dataset.objects):
+        console.print(f"[yellow]left out:[/] {line}", soft_wrap=True)
     total = epochs if config is None else config.epochs
+    lines = EveryFewSeconds()
     with Progress(
         TextColumn("[bold]train"),
         BarColumn(),
@@ -174,6 +364,7 @@ def train_command(
         TextColumn("{task.fields[status]}"),
         TimeRemainingColumn(),
         console=console,
+        disable=not console.is_terminal,  # a log gets a line every few seconds instead (below)
     ) as progress:
         task = progress.add_task("train", total=total, status="")
 
@@ -189,6 +380,8 @@ def train_command(
                 if "latent_ratio" in seen:
                     status += f" (ratio {seen['latent_ratio'][0]:.2f})"
             progress.update(task, completed=record["epoch"], status=status)
+            if not console.is_terminal and lines.due(last=record["epoch"] == total):
+                console.print(f"train: epoch {record['epoch']}/{total} {status}".rstrip(), soft_wrap=True)
 
         outcome = train(
             dataset,
@@ -203,10 +396,56 @@ def train_command(
         progress.update(task, total=outcome.epochs_done)
     console.print(f"trained {outcome.epochs_done} epochs in {outcome.train_seconds:.1f} s -> {out}")
     if report:
-        console.print("evaluating and drawing the report (t-SNE takes a little while)...")
-        path = write_report(out, run=load_run(out))
+        path = write_report(out, run=load_run(out), on_stage=stage_printer(console))
         _print_table(console, out)
         console.print(f"report: {path}")
+
+
+def dropped_sessions(sets: list[Any], paired_objects: tuple[str, ...] | list[str]) -> list[str]:
+    """One line per session that gave the paired dataset nothing: no other sensor recorded its object (or none of
+    its contacts matched another sensor's). Training on the rest silently would hide a missing partner session."""
+    sensors_of: dict[str, list[str]] = {}
+    for matched in sets:
+        sensors_of.setdefault(matched.object_id, []).append(matched.sensor)
+    lines = []
+    for matched in sets:
+        if matched.object_id in paired_objects:
+            continue
+        others = [s for s in sensors_of[matched.object_id] if s != matched.sensor]
+        why = (
+            f"no contact shared with {', '.join(others)}"
+            if others
+            else "no session of the same object with another sensor"
+        )
+        lines.append(f"{matched.object_id}/{matched.sensor} ({len(matched)} matched frames): {why}")
+    return lines
+
+
+class EveryFewSeconds:
+    """Throttle for progress lines written to a log or pipe (no terminal to redraw a bar): the first call, then one
+    every ``seconds``, and the last."""
+
+    def __init__(self, seconds: float = 10.0) -> None:
+        self.seconds = seconds
+        self._last: float | None = None
+
+    def due(self, *, last: bool = False) -> bool:
+        import time
+
+        now = time.monotonic()
+        if last or self._last is None or now - self._last >= self.seconds:
+            self._last = now
+            return True
+        return False
+
+
+def stage_printer(console: Any) -> Any:
+    """A report's ``on_stage`` callback: one line per stage (the t-SNE alone can take a minute or two)."""
+
+    def on_stage(message: str) -> None:
+        console.print(f"report: {message}...", highlight=False, soft_wrap=True)
+
+    return on_stage
 
 
 # the options that mean something for `train --from RUN --new-sensor NAME` (the rest are the trained run's own)
@@ -301,20 +540,25 @@ def _train_new_sensor(
 
 
 def report_command(
-    run: Path = typer.Argument(..., help="Run directory."),
+    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Redraw the figures too."),
     nmae_normaliser: str = typer.Option(
-        None, "--nmae-normaliser", help="Score under another NMAE normaliser (default: the run's)."
+        None, "--nmae-normaliser", metavar="NAME", show_default="the run's", help="Score under another NMAE normaliser."
     ),
-    ssim_range: str = typer.Option(None, "--ssim-range", help="Score under another SSIM range (default: the run's)."),
+    ssim_range: str = typer.Option(
+        None, "--ssim-range", metavar="NAME", show_default="the run's", help="Score under another SSIM range."
+    ),
 ) -> None:
     """Recompute RUN/metrics.json and rewrite RUN/report.md (and its figures)."""
     from rich.console import Console
 
     from unitac_rig.learning.report import write_report
 
+    _require_run(run)
     console = Console()
-    path = write_report(run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range)
+    path = write_report(
+        run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range, on_stage=stage_printer(console)
+    )
     _print_table(console, run)
     console.print(f"report: {path}")
 
@@ -408,14 +652,49 @@ def _print_table(console: Any, run: Path) -> None:
         console.print(line)
 
 
+def _sensor_of(path: Path, given: str | None, option: str) -> str:
+    """The sensor that recorded ``path``: ``given``, else (a session file) the one its file names, as translate does."""
+    if given:
+        return given
+    if path.suffix.lower() in (".h5", ".hdf5"):
+        if not path.is_file():
+            raise UsageError(f"{path} does not exist")
+        from unitac_rig.storage.reader import read_session_info
+
+        return read_session_info(path).sensor
+    raise UsageError(f"{path.name} does not say which sensor recorded it: pass {option}", hint=f"e.g. {option} uskin")
+
+
+def _output_beside_run(run: Path, folder: str, name: str, out: Path | None) -> Path:
+    """``--out`` if given, else ``RUN/<folder>/<name>``: outputs go with the run, never into the dataset folder."""
+    if out is not None:
+        return out
+    path = run / folder / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _require_run(run: Path) -> None:
+    """A cheap check before torch is imported (the same words as :func:`unitac_rig.learning.run.load_checkpoint`)."""
+    if not (run / RUN_MARKER).is_file():
+        raise UsageError(f"{run} is not a training run (no {RUN_MARKER})", hint="run `unitac-rig train` first")
+
+
 def translate_command(
-    run: Path = typer.Argument(..., help="Run directory."),
+    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
     input_path: Path = typer.Argument(..., metavar="INPUT", help="Session .h5, or frames as .npy/.npz (M, n, 3)."),
-    source: str = typer.Option(..., "--from", help="Sensor that recorded INPUT."),
-    target: str = typer.Option(..., "--to", help="Sensor to translate into."),
-    out: Path = typer.Option(None, "--out", help="Output .npz (default: INPUT_to_<sensor>.npz beside INPUT)."),
+    source: str = typer.Option(
+        None, "--from", metavar="SENSOR", show_default="the session file's sensor", help="Sensor that recorded INPUT."
+    ),
+    target: str = typer.Option(..., "--to", metavar="SENSOR", help="Sensor to translate into."),
+    out: Path = typer.Option(
+        None, "--out", metavar="FILE", show_default="RUN/translations/INPUT_to_SENSOR.npz", help="Output .npz."
+    ),
 ) -> None:
     """Translate one sensor's frames into another sensor's format."""
+    _require_run(run)
+    source = _sensor_of(input_path, source, "--from")
+    out = _output_beside_run(run, "translations", f"{input_path.stem}_to_{target}.npz", out)
     from rich.console import Console
 
     from unitac_rig.learning.translate import translate_file
@@ -433,21 +712,50 @@ def translate_command(
 
 
 def geometry_command(
-    run: Path = typer.Argument(..., help="Run directory."),
-    object_id: str = typer.Option(None, "--object", help="Object to estimate (default: the run's unseen object)."),
-    member: int = typer.Option(0, "--member", help="Which seed of a multi-seed run (index)."),
-    epochs: int = typer.Option(80, "--epochs", help="MLP training epochs (the paper: 80)."),
+    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
+    object_id: str = typer.Option(
+        None, "--object", metavar="ID", show_default="the run's unseen object", help="Object to estimate."
+    ),
+    member: int = typer.Option(0, "--member", min=0, help="Which seed of a multi-seed run (index)."),
+    epochs: int = typer.Option(80, "--epochs", min=1, help="MLP training epochs (80 in the paper)."),
     predict: Path = typer.Option(
-        None, "--predict", help="Apply the saved estimator to these frames (.npy/.npz or a session .h5) instead."
+        None,
+        "--predict",
+        metavar="FRAMES",
+        help="Apply the saved estimator to these frames (.npy/.npz or a session .h5) instead.",
+        rich_help_panel="Prediction",
     ),
-    sensor: str = typer.Option(None, "--sensor", help="With --predict: the sensor that recorded the frames."),
+    sensor: str = typer.Option(
+        None,
+        "--sensor",
+        metavar="SENSOR",
+        show_default="the session file's sensor",
+        help="With --predict: the sensor that recorded the frames.",
+        rich_help_panel="Prediction",
+    ),
     trained_on: str = typer.Option(
-        None, "--trained-on", help="With --predict: use the MLP trained on this sensor's latents (default: --sensor)."
+        None,
+        "--trained-on",
+        metavar="SENSOR",
+        show_default="--sensor",
+        help="With --predict: use the MLP trained on this sensor's latents.",
+        rich_help_panel="Prediction",
     ),
-    out: Path = typer.Option(None, "--out", help="With --predict: output .npz (default: FRAMES_geometry.npz)."),
+    out: Path = typer.Option(
+        None,
+        "--out",
+        metavar="FILE",
+        show_default="RUN/geometry/FRAMES_geometry.npz",
+        help="With --predict: output .npz.",
+        rich_help_panel="Prediction",
+    ),
 ) -> None:
     """Downstream contact geometry on the unseen object: N x N train/test-sensor scenarios, RUN/geometry.json and
     the saved estimator; with --predict, the estimator's profiles for new frames."""
+    _require_run(run)
+    if predict is not None:
+        sensor = _sensor_of(predict, sensor, "--sensor")
+        out = _output_beside_run(run, "geometry", f"{predict.stem}_geometry.npz", out)
     from rich.console import Console
     from rich.table import Table
 
@@ -456,8 +764,6 @@ def geometry_command(
 
     console = Console()
     if predict is not None:
-        if not sensor:
-            raise UsageError("--predict needs --sensor (the sensor that recorded the frames)")
         prediction, path = predict_file(run, predict, sensor, trained_on, out)
         profiles = prediction.profiles_mm
         title = f"Predicted depth under the pad (mm), {sensor} frames, MLP trained on {prediction.trained_on} latents"
@@ -472,25 +778,38 @@ def geometry_command(
         more = f" (first {shown} shown)" if len(profiles) > shown else ""
         console.print(f"{len(profiles)} profiles{more} -> {path}")
         return
-    console.print("training the profile MLPs...")
-    result, json_path, png_path = geometry_for_run(run, object_id, member=member, config=GeometryConfig(epochs=epochs))
-    table = Table(title=f"Contact geometry on {result.object_id}: mean profile error (mm)")
-    for column in ("train sensor", "test sensor", "ours", "paper"):
+
+    def on_stage(message: str) -> None:
+        console.print(f"{message}...", highlight=False, soft_wrap=True)
+
+    result, json_path, png_path = geometry_for_run(
+        run, object_id, member=member, config=GeometryConfig(epochs=epochs), on_stage=on_stage
+    )
+    unseen = result.unseen
+    kind = "unseen in training" if unseen else "seen in training"
+    table = Table(title=f"Contact geometry on {result.object_id} ({kind}): mean profile error (mm)")
+    for column in ("train sensor", "test sensor", "ours", "paper (unseen object)"):
         table.add_column(column, justify="right")
     for s in result.scenarios.values():
         paper = "–" if s["paper_mae_mm"] is None else f"{s['paper_mae_mm']:.3f}"
         table.add_row(s["train_sensor"], s["test_sensor"], f"{s['mae_mm']:.3f}", paper)
     console.print(table)
+    if not unseen:
+        console.print(
+            f"{result.object_id} was seen in training: its errors are not comparable with the paper's, which are on "
+            "an object the autoencoder never saw (omit --object for the run's unseen object)",
+            style="yellow",
+        )
     write_report(run, figures=False)
-    console.print(f"{json_path}\n{png_path}\n{Path(run) / ESTIMATOR_PT} (apply it: --predict FRAMES --sensor S)")
+    console.print(f"{json_path}\n{png_path}\n{Path(run) / ESTIMATOR_PT} (apply it: --predict FRAMES)")
 
 
 def export_model_command(
-    run: Path = typer.Argument(..., help="Run directory."),
+    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
     fmt: str = typer.Option(
         "safetensors",
         "--format",
-        help="safetensors (default: model.safetensors + config.json), torchscript, onnx, state-dict.",
+        help="safetensors (model.safetensors + config.json), torchscript, onnx or state-dict.",
     ),
     out: Path = typer.Option(..., "--out", help="New directory for the networks, config/model.json and README.md."),
     member: int = typer.Option(0, "--member", help="Which seed of a multi-seed run (index)."),

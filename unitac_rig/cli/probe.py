@@ -40,10 +40,12 @@ SIMULATED_OPTION = typer.Option(False, "--simulated", help="Probe a simulated de
 
 
 def frame_json(frame: TactileFrame, layout: SensorLayout) -> dict[str, Any]:
-    """One frame as the ``--json`` line: host time (s), device counter, values in wire order and their units."""
+    """One frame as the ``--json`` line: host time (s; frames that arrived in one read share it), the device's own
+    sample time (s; null where the wire has none), device counter, values in wire order and their units."""
     record: dict[str, Any] = {
         "sensor": frame.sensor,
         "t": frame.host_t_ns / 1e9,
+        "device_t": None if frame.device_t_us is None else frame.device_t_us / 1e6,
         "seq": frame.seq,
         "values": np.asarray(frame.values).tolist(),
         "units": layout.units,
@@ -51,6 +53,23 @@ def frame_json(frame: TactileFrame, layout: SensorLayout) -> dict[str, Any]:
     if layout.has_displacement:
         record["displacement"] = None if frame.displacement_mm is None else frame.displacement_mm.tolist()
     return record
+
+
+def frame_rate(frames: list[TactileFrame]) -> str:
+    """``about 100 Hz (device clock)``: from the device's sample times where it sends them (frames that arrive in one
+    read share a host time, so two or three frames can span no host time at all), else from the host times."""
+    device = [f.device_t_us for f in frames]
+    if len(frames) > 1 and all(t is not None for t in device):
+        span_s = (device[-1] - device[0]) / 1e6  # type: ignore[operator]
+        clock = "device clock"
+    else:
+        span_s = (frames[-1].host_t_ns - frames[0].host_t_ns) / 1e9
+        clock = "host clock"
+    if len(frames) < 2:
+        return "one frame: no rate (read more with --frames)"
+    if span_s <= 0:
+        return f"{len(frames)} frames in one read: no rate (read more with --frames)"
+    return f"about {(len(frames) - 1) / span_s:.0f} Hz ({clock})"
 
 
 def _cell(values: np.ndarray, units: str, displacement: np.ndarray | None) -> str:
@@ -64,9 +83,7 @@ def _cell(values: np.ndarray, units: str, displacement: np.ndarray | None) -> st
 
 def _print_map(console: Console, frames: list[TactileFrame], layout: SensorLayout, health: SensorHealth) -> None:
     last = frames[-1]
-    span_s = (frames[-1].host_t_ns - frames[0].host_t_ns) / 1e9
-    rate = f"{(len(frames) - 1) / span_s:.0f} Hz" if span_s > 0 and len(frames) > 1 else "n/a"
-    title = f"{layout.model}: last of {len(frames)} frames ({layout.units}), about {rate}"
+    title = f"{layout.model}: last of {len(frames)} frames ({layout.units}), {frame_rate(frames)}"
     table = Table(title=title, show_lines=True)
     table.add_column("row")
     for col in range(layout.cols):

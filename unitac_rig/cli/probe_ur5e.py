@@ -49,7 +49,8 @@ def state_json(state: ArmState) -> dict[str, Any]:
 
 
 def state_line(state: ArmState) -> str:
-    """One state as a readable line: position in mm, rotation vector in rad, force in N, torque in N*m."""
+    """One state as three readable lines under 80 columns: times and modes; TCP position (mm) and rotation vector
+    (rad); force (N) and torque (N*m)."""
     pose, force = state.tcp_pose, state.tcp_force
     position_mm = " ".join(f"{1000 * v:8.2f}" for v in pose[:3])
     rotation = " ".join(f"{v:+.3f}" for v in pose[3:])
@@ -57,9 +58,10 @@ def state_line(state: ArmState) -> str:
     torques = " ".join(f"{v:+.3f}" for v in force[3:])
     stop = "PROTECTIVE STOP" if state.protective_stop else ("EMERGENCY STOP" if state.emergency_stop else "ok")
     return (
-        f"t={state.host_t_ns / 1e9:.4f}s ctrl={state.controller_t_s:.3f}s "
-        f"xyz=[{position_mm}] mm rv=[{rotation}] F=[{forces}] N T=[{torques}] N*m "
-        f"mode={state.robot_mode} safety={state.safety_mode} {stop}"
+        f"t {state.host_t_ns / 1e9:.4f} s  controller {state.controller_t_s:.3f} s  mode {state.robot_mode}  "
+        f"safety {state.safety_mode}  {stop}\n"
+        f"  xyz {position_mm} mm    rv {rotation} rad\n"
+        f"  F   {forces} N     T  {torques} N*m"
     )
 
 

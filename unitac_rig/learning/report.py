@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -54,8 +55,14 @@ def plot_curves(history: list[dict[str, Any]], sensors: tuple[str, ...], path: P
     matched-latent L1 (the paper's), the scale-free matched/unmatched ratio and the sensor mixing."""
     key, evaluated = _evaluated(history)
     subsets = [s for s in ("seen", "unseen") if any(s in h[key] for h in evaluated)]
-    fig = new_figure(4.6 * (len(subsets) + 3), 4.0, layout="tight")
-    axes = fig.subplots(1, len(subsets) + 3, squeeze=False)[0]
+    # two panels a row, 7 inches wide: readable on a page at 100 % (a 1 x 5 strip's text was tiny there)
+    count = len(subsets) + 3
+    rows = -(-count // 2)
+    fig = new_figure(7.0, 3.1 * rows, layout="constrained")
+    grid = fig.subplots(rows, 2, squeeze=False)
+    axes = [grid[i // 2][i % 2] for i in range(count)]
+    for spare in range(count, rows * 2):
+        grid[spare // 2][spare % 2].set_visible(False)
     where = "validation" if key == "val" else "test"
     for ax, subset in zip(axes, subsets, strict=False):
         points = [h for h in evaluated if subset in h[key]]
@@ -69,8 +76,8 @@ def plot_curves(history: list[dict[str, Any]], sensors: tuple[str, ...], path: P
         ax.set_yscale("log")
         ax.set_xlabel("epoch")
         ax.set_ylabel(f"{where} NMAE")
-        ax.set_title(f"reconstruction, {subset} objects ({where})")
-        ax.legend(fontsize=7)
+        ax.set_title(f"reconstruction, {subset} objects ({where})", fontsize=10)
+        ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
     subset = "all" if any("all" in h[key] for h in evaluated) else (subsets[0] if subsets else "all")
     panels = (
@@ -91,12 +98,12 @@ def plot_curves(history: list[dict[str, Any]], sensors: tuple[str, ...], path: P
                 ax.plot(epochs, expected, "--", color="tab:green", label="perfect mixing")
             if name == "latent_ratio":
                 ax.axhline(1.0, ls="--", color="tab:red", lw=1.0, label="chance")
-            ax.legend(fontsize=7)
+            ax.legend(fontsize=8)
         else:
             ax.text(0.5, 0.5, "not measured in this run", ha="center", va="center", transform=ax.transAxes)
         ax.set_xlabel("epoch")
         ax.set_ylabel(ylabel)
-        ax.set_title(f"{title}\n({where} contacts)", fontsize=9)
+        ax.set_title(f"{title}\n({where} contacts)", fontsize=10)
         ax.grid(alpha=0.3)
     return save_figure(fig, path)
 
@@ -164,15 +171,23 @@ def plot_tsne(
 
 
 def pick_examples(test: PairedDataset, cross_nmae: np.ndarray, unseen: tuple[str, ...]) -> dict[str, list[int]]:
-    """Rows to draw: one seen contact (strongest target of the first seen object, mid angle), and the best and
-    worst unseen contacts by cross-sensor NMAE among presses past 8 N."""
+    """Rows to draw: up to three seen contacts (the first seen object's strongest press at its most negative, middle
+    and most positive test angle), and the best and worst unseen contacts by cross-sensor NMAE past 8 N."""
     picks: dict[str, list[int]] = {}
     seen_rows = np.flatnonzero(~np.isin(test.object_id, list(unseen)))
     if seen_rows.size:
         first_object = test.object_id[seen_rows[0]]
         candidates = seen_rows[test.object_id[seen_rows] == first_object]
-        strongest = candidates[test.target_n[candidates] == test.target_n[candidates].max()]
-        picks["seen"] = [int(strongest[np.argmin(np.abs(test.angle_deg[strongest]))])]
+        angles = np.unique(test.angle_deg[candidates])
+        if len(angles) >= 3:  # each angle's strongest contact, at the first, middle and last angle
+            at_angles = (
+                candidates[test.angle_deg[candidates] == a] for a in (angles[0], angles[len(angles) // 2], angles[-1])
+            )
+            chosen = [at[np.argmax(test.target_n[at])] for at in at_angles]
+        else:  # few test angles (a short sweep): one direction's weakest, middle and strongest contact
+            ordered = candidates[np.argsort(test.target_n[candidates], kind="stable")]
+            chosen = [ordered[0], ordered[len(ordered) // 2], ordered[-1]]
+        picks["seen"] = list(dict.fromkeys(int(row) for row in chosen))
     unseen_rows = np.flatnonzero(np.isin(test.object_id, list(unseen)) & (test.target_n >= 8.0))
     if unseen_rows.size:
         order = unseen_rows[np.argsort(cross_nmae[unseen_rows])]
@@ -191,40 +206,47 @@ def plot_reconstructions(run: LoadedRun, evaluator: Evaluator, rows: list[int], 
         return None
     sensors = run.sensors
     engine = run.engine.member(0, groups=[UNITAC_GROUP])
-    panels = len(sensors) + len(sensors) ** 2
-    fig = new_figure(2.6 * panels, 2.9 * len(rows), layout="tight")
+    # each sensor's panels side by side (its original, then every sensor's reconstruction of it) and one colour bar
+    # per sensor and contact, in the sensor's units
+    panels = len(sensors) * (1 + len(sensors))
+    fig = new_figure(1.9 * panels + 0.9 * len(sensors), 2.3 * len(rows) + 0.7, layout="constrained")
     axes = fig.subplots(len(rows), panels, squeeze=False)
     index = torch.tensor(rows)
     latents = {s: engine.encode(UNITAC_GROUP, s, evaluator.inputs[s][index]) for s in sensors}
     decoded = {s: engine.decode(UNITAC_GROUP, latents[s]) for s in sensors}
     test = evaluator.dataset
     for r, row in enumerate(rows):
-        frames: list[tuple[str, str, np.ndarray]] = []
-        for s in sensors:
-            frames.append((s, f"{s} original", test.values[s][row]))
-        for source in sensors:
-            for target in sensors:
-                estimate = evaluator.to_frames(target, decoded[source][target][0, r]).numpy()
-                frames.append((target, f"{source} → {target}", estimate))
-        scale = {s: float(np.abs(test.values[s][row][:, 2]).max() or 1.0) for s in sensors}
-        for c, (sensor, label, frame) in enumerate(frames):
+        for k, target in enumerate(sensors):
+            frames = [(f"{target} original", test.values[target][row])]
+            frames += [
+                (f"{source} → {target}", evaluator.to_frames(target, decoded[source][target][0, r]).numpy())
+                for source in sensors
+            ]
+            scale = float(np.abs(test.values[target][row][:, 2]).max() or 1.0)
             # the original's largest shear draws 0.45 pitch long in every panel of that sensor
-            shear = float(np.linalg.norm(test.values[sensor][row][:, :2], axis=1).max() or 1.0)
-            draw_taxel_map(
-                axes[r][c],
-                layouts[sensor],
-                frame,
-                vmin=-0.1 * scale[sensor],
-                vmax=scale[sensor],
-                title=label,
-                arrow_scale=shear / (0.45 * layouts[sensor].pitch_mm),
-            )
+            shear = float(np.linalg.norm(test.values[target][row][:, :2], axis=1).max() or 1.0)
+            group = [axes[r][k * (1 + len(sensors)) + j] for j in range(len(frames))]
+            for ax, (label, frame) in zip(group, frames, strict=True):
+                mesh = draw_taxel_map(
+                    ax,
+                    layouts[target],
+                    frame,
+                    vmin=-0.1 * scale,
+                    vmax=scale,
+                    title=label,
+                    arrow_scale=shear / (0.45 * layouts[target].pitch_mm),
+                )
+            bar = fig.colorbar(mesh, ax=group, fraction=0.05, pad=0.02, shrink=0.85)
+            bar.set_label(f"normal ({layouts[target].units})", fontsize=8)
+            bar.ax.tick_params(labelsize=7)
         axes[r][0].set_ylabel(
             f"{test.object_id[row]}\nrot {test.rotation_deg[row]:.0f}°, {test.angle_deg[row]:+.0f}°, "
             f"{test.target_n[row]:.2f} N",
             fontsize=8,
         )
-    fig.suptitle(title)
+    fig.suptitle(
+        f"{title}\ncolour: normal (z) per taxel; arrows: shear (x, y), same scale within a sensor", fontsize=10
+    )
     return save_figure(fig, path)
 
 
@@ -344,12 +366,16 @@ def write_report(
     figures: bool = True,
     nmae_normaliser: str | None = None,
     ssim_range: str | None = None,
+    on_stage: Callable[[str], None] | None = None,
 ) -> Path:
     """metrics.json (recomputed), the figures and report.md for a run directory; the metric options default to the
-    run's own."""
+    run's own. ``on_stage`` hears what each step (seconds to minutes on a small machine) is about to do."""
+    stage = on_stage or (lambda message: None)
     run_dir = Path(run_dir)
+    stage("loading the run and its test set")
     run = (run or load_run(run_dir)).scored_under(nmae_normaliser, ssim_range)
     test = test or load_test_set(run_dir)
+    stage(f"scoring {len(test)} test contacts (metrics.json)")
     previous = run_dir / METRICS_JSON
     kept = json.loads(previous.read_text(encoding="utf-8")).get("tsne_mixing") if previous.exists() else None
     metrics = write_metrics(run_dir, run, test)
@@ -359,11 +385,13 @@ def write_report(
     drawn: dict[str, str] = {}
     if figures:
         fig_dir = run_dir / FIGURES
+        stage("drawing the training curves")
         drawn["training curves"] = _rel(plot_curves(run.history, run.sensors, fig_dir / "curves.png"), run_dir)
         evaluator = Evaluator.for_run(run, test)
         first = run.payload.get("latents_first_epoch")
         rows = np.asarray(run.payload.get("tsne_rows", []), dtype=int)
         if first is not None and rows.size >= 10:
+            stage(f"t-SNE of {rows.size} contacts' latents, first and last epoch (the slowest step)")
             latents = evaluator.latents(run.engine)
             last = {s: z[0, rows].numpy() for s, z in latents.items()}
             sensors = [s for s in test.sensors if s in first and s in last]
@@ -379,6 +407,7 @@ def write_report(
                 "last_epoch": embedding_mixing(embeddings["last"], len(sensors)),
             }
             (run_dir / METRICS_JSON).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
+        stage("drawing example reconstructions")
         scores, _ = evaluator.per_frame(run.engine.member(0, groups=[UNITAC_GROUP]))
         cross = [direction_name(a, b) for a in run.sensors for b in run.sensors if a != b]
         cross_nmae = torch.stack([scores[c]["nmae"][0] for c in cross]).mean(dim=0).numpy()
@@ -409,6 +438,7 @@ def write_report(
     geometry_path = run_dir / GEOMETRY_JSON
     geometry = json.loads(geometry_path.read_text(encoding="utf-8")) if geometry_path.exists() else None
     report = run_dir / REPORT_MD
+    stage("writing report.md")
     report.write_text(render_markdown(metrics, run, drawn, geometry), encoding="utf-8")
     return report
 

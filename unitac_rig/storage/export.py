@@ -99,6 +99,7 @@ class ExportSummary:
     bytes: int
     sensors: tuple[str, ...]
     objects: tuple[str, ...]
+    incomplete: tuple[str, ...] = ()  # "object/sensor finished/planned" of each session with presses still to do
 
 
 def _sensor_layout_info(sensor: str) -> dict[str, Any]:
@@ -273,6 +274,12 @@ def export_dataset(data_dirs: Sequence[Path], out: Path, pair: PairFn) -> Export
             "matched_frames_without_partner": {s: int(n) for s, n in paired.dropped_per_sensor.items()},
             "sessions": len(provenance),
         }
+        incomplete = [
+            {"file": e["file"], "object": e["object"], "sensor": e["sensor"],
+             "finished": e["presses"]["complete"] + e["presses"]["failed"], "planned": e["presses"]["planned"]}
+            for e in provenance
+            if e["presses"]["complete"] + e["presses"]["failed"] < e["presses"]["planned"]
+        ]  # fmt: skip
         schema = _arrow_schema(sensors, {"join": ["object", "rotation_deg", "angle_deg", "target_n"]})
         table = paired_table(paired, by_key, simulated).cast(schema)
         pq.write_table(table, staging / PARQUET_NAME, compression="zstd")
@@ -292,6 +299,7 @@ def export_dataset(data_dirs: Sequence[Path], out: Path, pair: PairFn) -> Export
             "sensors": {s: _sensor_layout_info(s) for s in sensors},
             "simulated": simulated,
             "counts": counts,
+            "incomplete_sessions": incomplete,  # collected only in part: resume them with the same collect command
             "sessions": provenance,
         }  # fmt: skip
         (staging / CARD_NAME).write_text(render_card(document), encoding="utf-8")
@@ -304,8 +312,9 @@ def export_dataset(data_dirs: Sequence[Path], out: Path, pair: PairFn) -> Export
         shutil.rmtree(staging, ignore_errors=True)
         raise
     total = sum((out / rel).stat().st_size for rel in files)
+    partial = tuple(f"{e['object']}/{e['sensor']} {e['finished']}/{e['planned']}" for e in incomplete)
     return ExportSummary(out, len(paired), len(paired) * len(sensors), len(provenance), len(files) + 1, total,
-                         sensors, objects)  # fmt: skip
+                         sensors, objects, partial)  # fmt: skip
 
 
 def render_card(doc: dict[str, Any]) -> str:

@@ -68,5 +68,9 @@ def parse_sensor_config(value: Any) -> SensorConfigBase:
     if isinstance(value, SensorConfigBase):
         return value
     types = tuple(t for spec in SENSORS.values() for t in spec.config_types)
+    by_type = {t.model_fields["type"].default: t for t in types}
+    tag = value.get("type") if isinstance(value, dict) else None
+    if isinstance(tag, str) and tag in by_type:  # its own table alone: an error names sensors.<name>.<field>, not
+        types = (by_type[tag],)  # the union's tag as well (sensors.papillarray.papillarray.port)
     result: SensorConfigBase = _config_adapter(types).validate_python(value)
     return result

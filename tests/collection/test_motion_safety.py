@@ -499,3 +499,12 @@ def test_a_confirmed_placement_makes_the_sweep_faster_than_an_unconfirmed_one(tm
             return (rig.clock.now_ns() - start) / 1e9
 
     assert rig_time({}) < rig_time({"near_zone_confirmed_mm": 50.0}) - 5.0  # 3 approaches, ~40 mm less at 10 mm/s
+
+
+def test_a_tight_hard_limit_keeps_the_set_point_ceiling_halfway_below_it() -> None:
+    from unitac_rig.collection.press import setpoint_ceiling_n
+
+    default = few(1)
+    assert setpoint_ceiling_n(default.press, default.limits) == pytest.approx(12.0)  # threshold + 2 N
+    tight = few(1, limits={"hard_force_n": 11.0})
+    assert setpoint_ceiling_n(tight.press, tight.limits) == pytest.approx((10.2 + 11.0) / 2)

@@ -637,7 +637,7 @@ def _press_strategy(arm: Arm, streams: _Streams, plan: PressPlan, press: PressCo
     """Run the configured strategy; returns the stop reason ("force", "travel", "no_contact")."""
     backstop_m = plan.contact_distance_m + (limits.max_travel_after_contact_mm + 5.0) / 1000.0
     setpoint_n = press.threshold_n + press.setpoint_margin_n - streams.offset_along_press_n
-    ceiling_n = press.threshold_n + press.setpoint_ceiling_margin_n - streams.offset_along_press_n
+    ceiling_n = setpoint_ceiling_n(press, limits) - streams.offset_along_press_n
     arm.set_force_mode_parameters(press.force_mode_damping, press.force_mode_gain_scaling)
     bounds: dict[str, Any] = {
         "hard_limit_n": limits.hard_force_n,
@@ -672,6 +672,13 @@ def _press_strategy(arm: Arm, streams: _Streams, plan: PressPlan, press: PressCo
                               **bounds)  # fmt: skip
         return _reason(result.reason, streams)
     return _force_ramp(arm, streams, plan, press)
+
+
+def setpoint_ceiling_n(press: PressConfig, limits: LimitsConfig) -> float:
+    """How high a settled press may raise the force set-point (N): threshold + ``setpoint_ceiling_margin_n``, but
+    never past halfway from the first set-point to the hard limit (a tight hard limit keeps its margin)."""
+    first = press.threshold_n + press.setpoint_margin_n
+    return min(press.threshold_n + press.setpoint_ceiling_margin_n, max(first, 0.5 * (first + limits.hard_force_n)))
 
 
 def _reason(guarded_reason: str, streams: _Streams) -> str:

@@ -97,7 +97,8 @@ class PressConfig(_Strict):
         2.0,
         gt=0,
         description="a force that settles below the threshold raises the set-point in 0.5 N steps up to threshold + "
-        "this, N; at the ceiling the press fails as 'settled' within seconds",
+        "this (never past halfway from the first set-point to limits.hard_force_n), N; at the ceiling the press "
+        "fails as 'settled' within seconds",
     )
     force_mode_damping: float = Field(
         0.025, ge=0, le=1, description="URScript force_mode_set_damping, sent before every press (UR default 0.005)"
@@ -196,8 +197,6 @@ class RigConfig(_Strict):
             raise ValueError("press.threshold_n + press.setpoint_margin_n must stay below limits.hard_force_n")
         if self.press.setpoint_ceiling_margin_n < self.press.setpoint_margin_n:
             raise ValueError("press.setpoint_ceiling_margin_n must be at least press.setpoint_margin_n")
-        if self.press.threshold_n + self.press.setpoint_ceiling_margin_n >= self.limits.hard_force_n:
-            raise ValueError("press.threshold_n + press.setpoint_ceiling_margin_n must stay below limits.hard_force_n")
         if self.press.angle_min_deg > self.press.angle_max_deg:
             raise ValueError("press.angle_min_deg is above press.angle_max_deg")
         lo, hi = self.limits.workspace_min_m, self.limits.workspace_max_m

@@ -27,7 +27,7 @@ from unitac_rig.rig.objects import ObjectSpec, get_object, list_objects
 from unitac_rig.rig.sensors import sensor_layout
 from unitac_rig.storage.extraction import ExtractionSettings
 from unitac_rig.storage.reader import list_sessions
-from unitac_rig.storage.recorder import reextract_session
+from unitac_rig.storage.recorder import reextract_sessions
 
 console = Console(stderr=False)
 
@@ -264,14 +264,20 @@ def extract(
     smoothing: int = typer.Option(15, "--smoothing", help="Moving-average window on the wrist force, samples."),
     latency: float = typer.Option(0.0, "--latency", help="Tactile latency to subtract from frame times, s."),
 ) -> None:
-    """Recompute the force-matched frames of every session from the raw streams with other settings."""
+    """Recompute the force-matched frames of every session from the raw streams with other settings.
+
+    All or nothing: the settings are checked first, every session is verified (and repaired from its journal), and
+    no file changes until every new one is written.
+    """
     settings = ExtractionSettings(tolerance_n=tolerance, smoothing_samples=smoothing, tactile_latency_s=latency)
+    options = {"tolerance_n": "--tolerance", "smoothing_samples": "--smoothing", "tactile_latency_s": "--latency"}
+    for name, why in settings.problems():
+        raise UsageError(f"{options.get(name, name)} {why}")
     sessions = list_sessions(data)
     if not sessions:
         raise UsageError(f"no session files in {data}")
-    for info in sessions:
-        presses, matched = reextract_session(info.path, settings)
-        console.print(f"{info.path.name}: {presses} presses re-extracted, {matched} targets matched")
+    for path, presses, matched in reextract_sessions([info.path for info in sessions], settings):
+        console.print(f"{path.name}: {presses} presses re-extracted, {matched} targets matched")
 
 
 def objects_cmd(

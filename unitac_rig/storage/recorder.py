@@ -45,7 +45,7 @@ import numpy as np
 from unitac_rig.errors import DataError
 from unitac_rig.storage.checksums import check_press_group, check_root, seal_root
 from unitac_rig.storage.extraction import Extraction, ExtractionSettings
-from unitac_rig.storage.integrity import READABLE_SCHEMA_VERSIONS, SCHEMA_VERSION, check_session
+from unitac_rig.storage.integrity import READABLE_SCHEMA_VERSIONS, SCHEMA_VERSION, SessionCheck, check_session
 from unitac_rig.storage.lease import SessionLease, lease_holder
 from unitac_rig.storage.press_record import (
     FINISHED_STATUSES,
@@ -478,7 +478,11 @@ class SessionWriter:
                         f.attrs[key] = attr_value(value)
                     seal_root(f)
 
-            self._rewrite(apply, sum(record_nbytes(rec) for rec in restore))
+            extra = sum(record_nbytes(rec) for rec in restore)
+            if check.damaged or check.root_problem:
+                self._rebuild(check, restore, extra)
+            else:
+                self._rewrite(apply, extra)
             for pid, why in lost.items():
                 self._note(f"press {pid} was damaged ({why}): dropped, it will be pressed again (the damaged session "
                            f"file is kept as {aside.name})")  # fmt: skip
@@ -493,6 +497,33 @@ class SessionWriter:
         for rec in restore:
             what = "damaged in the session file; replaced by" if rec.press_id in check.damaged else "restored from"
             self._note(f"press {rec.press_id} ({rec.status}) {what} the journal")
+
+    def _rebuild(self, check: SessionCheck, restore: list[PressRecord], extra_bytes: int) -> None:
+        """Publish a fresh session file: root attributes from the journal header, every press that verified copied
+        from the damaged file as it is (its checksums with it), and ``restore`` written from the journal.
+
+        A damaged HDF5 file is never written to: its broken metadata (free-space lists, heaps) can corrupt what is
+        added to it, so the intact presses move into a new file instead.
+        """
+        restored = {rec.press_id for rec in restore}
+        keep = [pid for pid in check.statuses if pid not in restored]
+        attrs = self._root_attr_values()
+        attrs["schema_version"] = check.version or SCHEMA_VERSION  # a schema-1 file stays one (unsealed presses)
+
+        def build(f: h5py.File) -> None:
+            for key, value in attrs.items():
+                f.attrs[key] = attr_value(value)
+            presses = f.create_group("presses")
+            with h5py.File(self.path, "r") as src:
+                for pid in keep:
+                    src.copy(src["presses"][pid], presses, name=pid)
+            for rec in restore:
+                write_press_group(presses, rec)
+            if attrs["schema_version"] >= 2:
+                seal_root(f)
+
+        self._room(private_copy_path(self.path), self.path.stat().st_size + extra_bytes, shown=self.path)
+        replace_by_copy(self.path, build, create=True)
 
     def _read_journal(self, path: Path) -> PressRecord:
         with h5py.File(path, "r") as jf:

@@ -74,8 +74,7 @@ def _command(name: str, data: Path, tmp_path: Path) -> list[str]:
     return {
         "inspect": ["inspect", str(data)],
         "extract": ["extract", str(data), "--tolerance", "0.4"],
-        "train": ["train", "--data", str(data), "--out", str(tmp_path / "run"), "--epochs", "1", "--no-report",
-                  "--no-baselines"],  # fmt: skip
+        "train": ["train", "--data", str(data), "--out", str(tmp_path / "run"), "--epochs", "1", "--no-report"],
         "export": ["export", str(data), "--out", str(tmp_path / "export")],
     }[name]
 

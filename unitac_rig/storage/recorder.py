@@ -752,5 +752,5 @@ def reextract_sessions(paths: list[Path], settings: ExtractionSettings) -> list[
 
 def reextract_session(path: Path, settings: ExtractionSettings) -> tuple[int, int]:
     """One session (see :func:`reextract_sessions`); returns (presses, targets matched)."""
-    (_, presses, matched), = reextract_sessions([Path(path)], settings)
+    ((_, presses, matched),) = reextract_sessions([Path(path)], settings)
     return presses, matched

@@ -18,6 +18,7 @@ from unitac_rig.storage.manifest import sha256_file
 from unitac_rig.storage.recorder import journal_dir, session_path
 
 OBJ, SENSOR = "circle_pla", "uskin"
+TRAIN_FAST = ("--no-report", "--no-baselines")
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +75,7 @@ def _command(name: str, data: Path, tmp_path: Path) -> list[str]:
     return {
         "inspect": ["inspect", str(data)],
         "extract": ["extract", str(data), "--tolerance", "0.4"],
-        "train": ["train", "--data", str(data), "--out", str(tmp_path / "run"), "--epochs", "1", "--no-report"],
+        "train": ["train", "--data", str(data), "--out", str(tmp_path / "run"), "--epochs", "1", *TRAIN_FAST],
         "export": ["export", str(data), "--out", str(tmp_path / "export")],
     }[name]
 

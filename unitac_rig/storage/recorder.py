@@ -325,17 +325,7 @@ class SessionWriter:
         os.replace(tmp, header)
 
     def _journal_header(self) -> dict[str, Any]:
-        header = self.journal / "_session.json"
-        try:
-            data = json.loads(header.read_text())
-            if not isinstance(data, dict):
-                raise ValueError("not a JSON object")
-        except (OSError, ValueError, RecursionError) as exc:
-            raise DataError(
-                f"{header} is unreadable ({exc})",
-                hint="restore it from a backup, or move the session aside and collect into a new --data directory",
-            ) from exc
-        return data
+        return read_journal_header(self.journal)
 
     def _journal_press_files(self) -> dict[str, Path]:
         return {p.stem: p for p in sorted(self.journal.glob("*.h5")) if ".broken-" not in p.name}
@@ -550,15 +540,16 @@ class SessionWriter:
         """Merge attributes into the session (e.g. sensor identity once connected). A sensor whose serial number
         differs from the one the session was recorded with is refused (when both are known)."""
         header = self._journal_header()
-        identity, known = attrs.get("sensor_identity"), header.get("sensor_identity")
-        if isinstance(identity, dict) and isinstance(known, dict):
-            serial, recorded = identity.get("serial"), known.get("serial")
-            if serial is not None and recorded is not None and serial != recorded:
-                raise DataError(
-                    f"{self.path} was recorded with {self.sensor} serial {recorded}, not with serial {serial} "
-                    "mounted now",
-                    hint="collect into another --data directory (a session holds the presses of one sensor only)",
-                )
+        identity = attrs.get("sensor_identity")
+        serial = identity.get("serial") if isinstance(identity, dict) else None
+        recorded = header.get("sensor_serial")
+        if serial is not None and recorded is not None and str(serial) != str(recorded):
+            raise DataError(
+                f"{self.path} was recorded with {self.sensor} serial {recorded}, not with serial {serial} mounted now",
+                hint="collect into another --data directory (a session holds the presses of one sensor only)",
+            )
+        if serial is not None and recorded is None:
+            attrs = {**attrs, "sensor_serial": str(serial)}  # the first serial a driver reported stays the session's
         header.update(attrs)
         tmp = self.journal / "_session.tmp"
         tmp.write_text(json.dumps(header, default=json_default, indent=1))
@@ -608,6 +599,21 @@ class SessionWriter:
                 break
 
 
+def read_journal_header(journal: Path) -> dict[str, Any]:
+    """A journal's ``_session.json`` (the session's root attributes); DataError when it is unreadable."""
+    header = journal / "_session.json"
+    try:
+        data = json.loads(header.read_text())
+        if not isinstance(data, dict) or "object" not in data or "sensor" not in data:
+            raise ValueError("not a session header")
+    except (OSError, ValueError, RecursionError) as exc:
+        raise DataError(
+            f"{header} is unreadable ({exc})",
+            hint="restore it from a backup, or move the session aside and collect into a new --data directory",
+        ) from exc
+    return data
+
+
 def repair_session(path: Path, problem: str) -> list[str]:
     """Repair a damaged session file from its journal for a reader (never drops a press); returns what was done.
 
@@ -630,11 +636,8 @@ def repair_session(path: Path, problem: str) -> list[str]:
             hint="rerun when that collection has finished (collect repairs it from the journal when it next opens "
             "the session)",
         )
-    try:
-        attrs = json.loads(header.read_text())
-        object_id, sensor = str(attrs["object"]), str(attrs["sensor"])
-    except (OSError, ValueError, KeyError, TypeError, RecursionError) as exc:
-        raise DataError(f"{header} is unreadable ({exc})", hint="restore it from a backup") from exc
+    attrs = read_journal_header(journal)
+    object_id, sensor = str(attrs["object"]), str(attrs["sensor"])
     if session_path(path.parent, object_id, sensor) != path:
         raise DataError(f"{path} and its journal header name another session ({object_id}/{sensor})")
     with SessionWriter(path.parent, object_id, sensor, attrs, unrepairable="refuse") as writer:
@@ -702,7 +705,7 @@ def reextract_sessions(paths: list[Path], settings: ExtractionSettings) -> list[
         for path in paths:
             journal = path.parent / ".journal" / path.stem
             if (journal / "_session.json").is_file():
-                header = json.loads((journal / "_session.json").read_text())
+                header = read_journal_header(journal)
                 writer = SessionWriter(path.parent, str(header["object"]), str(header["sensor"]), header,
                                        unrepairable="refuse")  # fmt: skip
                 writers.append(writer)

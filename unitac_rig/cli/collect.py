@@ -35,10 +35,26 @@ DATA_OPTION = typer.Option(Path("data"), "--data", help="Dataset directory (one 
 RIG_OPTION = typer.Option(None, "--rig", help="Rig file (TOML). Without one, the simulated rig is used.")
 
 
+def _check_counts(**options: int | None) -> None:
+    """Counts and seeds the user typed: a negative seed or press count is a usage error naming the option (numpy
+    refuses negative seeds deep inside the rig; a negative --max-presses sliced the plan from the end)."""
+    for name, value in options.items():
+        if value is None:
+            continue
+        flag, lowest = f"--{name.replace('_', '-')}", 0 if name == "seed" else 1
+        if value < lowest:
+            raise UsageError(f"{flag} must be {lowest} or more, got {value}")
+
+
 def _configure(
     rig_file: Path | None, strategy: str | None, speed: float | None, angles: int | None, standoff: float | None
 ) -> RigConfig:
     config = load_rig_config(rig_file)
+    if angles is not None and not 1 <= angles <= config.press.max_angle_count():
+        raise UsageError(
+            f"--angles must be 1 to {config.press.max_angle_count()}, got {angles}",
+            hint="press ids are whole degrees: more angles than degrees in the arc would repeat presses",
+        )
     if strategy is None and speed is None and angles is None and standoff is None:
         return config
     data = config.model_dump(mode="json")
@@ -182,6 +198,7 @@ def collect(
 
     SIGTERM and SIGHUP stop the arm and keep what was recorded, like Ctrl-C.
     """
+    _check_counts(seed=seed, max_presses=max_presses)
     config = _configure(rig_file, strategy, speed, angles, None)
     obj = get_object(object_id, extra_files=config.object.objects_files)
     if rotation is not None and rotation not in obj.rotations_deg:
@@ -234,6 +251,7 @@ def campaign(
     live: bool = typer.Option(True, "--live/--no-live", help="Show the live panel."),
 ) -> None:
     """Every object with every sensor: unattended on the simulated rig, operator-guided on hardware."""
+    _check_counts(seed=seed)
     config = _configure(rig_file, None, None, angles, None)
     catalogue = list_objects(extra_files=config.object.objects_files)
     if objects:

@@ -50,3 +50,37 @@ def flip_bits_in_dataset(path: Path, dataset: str, count: int, seed: int) -> lis
 def press_ids(path: Path) -> list[str]:
     with h5py.File(path, "r") as f:
         return sorted(f["presses"])
+
+
+RAW_PARTS = ("robot/", "tactile/", "tare_baseline", "events")
+
+
+def raw_contents(path: Path) -> dict[str, str]:
+    """press id -> digest of what was recorded in a session file (raw streams, tare, events, status): what damage
+    may not lose. The extraction is left out (``extract`` recomputes it); an unreadable press is absent."""
+    from unitac_rig.storage.checksums import array_digest, attrs_digest
+
+    out: dict[str, str] = {}
+    try:
+        f = h5py.File(path, "r")
+    except OSError:
+        return out
+    with f:
+        try:
+            names = sorted(f["presses"])
+        except Exception:
+            return out
+        for pid in names:
+            try:
+                g = f["presses"][pid]
+                parts = [f"{name}={array_digest(g[name][()])}" for name in _datasets(g) if name.startswith(RAW_PARTS)]
+                out[pid] = attrs_digest([("status", g.attrs["status"]), ("arrays", parts)])
+            except Exception:
+                continue
+    return out
+
+
+def _datasets(group: h5py.Group) -> list[str]:
+    names: list[str] = []
+    group.visititems(lambda name, obj: names.append(name) if isinstance(obj, h5py.Dataset) else None)
+    return sorted(names)

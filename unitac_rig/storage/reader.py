@@ -15,6 +15,7 @@ import numpy as np
 
 from unitac_rig.errors import DataError
 from unitac_rig.rig.sensors import SENSORS
+from unitac_rig.storage.checksums import PRESS_ATTR
 from unitac_rig.storage.integrity import READABLE_SCHEMA_VERSIONS, SCHEMA_VERSION, SessionCheck, check_session
 from unitac_rig.storage.press_record import (
     PressRecord,
@@ -76,6 +77,7 @@ class Verified:
 
 _VERIFIED: dict[tuple[str, int, int, int, int], Verified] = {}
 _VERIFIED_GUARD = threading.Lock()
+_PRESSES_OK: dict[str, set[tuple[str, str]]] = {}  # file -> (press id, checksums) verified by this process
 _WARNED_UNSEALED: set[str] = set()
 
 
@@ -102,25 +104,39 @@ def verified_session(path: Path) -> Verified:
         cached = _VERIFIED.get(key) if key else None
     if cached is not None:
         return cached
-    check = check_session(path)
+    with _VERIFIED_GUARD:
+        known = set(_PRESSES_OK.get(str(path.resolve()), ()))
+    check = check_session(path, known)
     repairs: tuple[str, ...] = ()
     if check.needs_repair:
         problem = check.first_problem()
         repairs = tuple(repair_session(path, problem))
         for note in repairs:
             log.warning("%s: %s", path, note)
-        check = check_session(path)
+        check = check_session(path, known)
         if check.needs_repair:
             raise DataError(check.first_problem(), hint="restore the file from a backup")
     if check.unsealed and str(path) not in _WARNED_UNSEALED:
         _WARNED_UNSEALED.add(str(path))
         log.warning("%s: %s: read without verification", path, check.describe())
     result = Verified(check, repairs)
+    seals = _press_seals(path, check.verified)
     key = _version_key(path)
-    if key is not None:
-        with _VERIFIED_GUARD:
+    with _VERIFIED_GUARD:
+        _PRESSES_OK.setdefault(str(path.resolve()), set()).update(seals)
+        if key is not None:
             _VERIFIED[key] = result
     return result
+
+
+def _press_seals(path: Path, pids: list[str]) -> set[tuple[str, str]]:
+    """(press id, checksums attribute) of the verified presses: what a later version may trust (``known_good``)."""
+    seals: set[tuple[str, str]] = set()
+    with h5py.File(path, "r") as f:
+        for pid in pids:
+            raw = f["presses"][pid].attrs[PRESS_ATTR]
+            seals.add((pid, raw.decode() if isinstance(raw, bytes) else str(raw)))
+    return seals
 
 
 def _open(path: Path) -> h5py.File:

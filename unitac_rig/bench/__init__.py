@@ -64,3 +64,17 @@ def default_out_dir() -> Path:
     """docs/figures of the checkout this package lives in, else ./bench-out."""
     docs = Path(__file__).resolve().parents[2] / "docs" / "figures"
     return docs if docs.is_dir() else Path("bench-out")
+
+
+def replace_doc_section(doc_path: Path, name: str, body: str) -> None:
+    """Put ``body`` between ``<!-- name:begin -->`` and ``<!-- name:end -->`` in a Markdown file (appended with the
+    markers when they are missing): how a benchmark regenerates its table in the docs."""
+    doc_path = Path(doc_path)
+    text = doc_path.read_text()
+    begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
+    block = f"{begin}\n{body}\n{end}"
+    if begin in text and end in text:
+        text = text[: text.index(begin)] + block + text[text.index(end) + len(end) :]
+    else:
+        text = text.rstrip("\n") + "\n\n" + block + "\n"
+    doc_path.write_text(text)

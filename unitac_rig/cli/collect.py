@@ -30,7 +30,7 @@ from unitac_rig.rig.sensors import sensor_layout
 from unitac_rig.storage.extraction import ExtractionSettings
 from unitac_rig.storage.press_record import FINISHED_STATUSES
 from unitac_rig.storage.reader import list_sessions, press_summaries, read_session_info
-from unitac_rig.storage.recorder import reextract_session, session_path
+from unitac_rig.storage.recorder import reextract_sessions, session_path
 
 console = Console(stderr=False)
 
@@ -53,10 +53,26 @@ OVERRIDE_OPTIONS = {
 PROGRESS_EVERY_S = 10.0  # without a terminal (a log, nohup, CI): a progress line at most this often, s
 
 
+def _check_counts(**options: int | None) -> None:
+    """Counts and seeds the user typed: a negative seed or press count is a usage error naming the option (numpy
+    refuses negative seeds deep inside the rig; a negative --max-presses sliced the plan from the end)."""
+    for name, value in options.items():
+        if value is None:
+            continue
+        flag, lowest = f"--{name.replace('_', '-')}", 0 if name == "seed" else 1
+        if value < lowest:
+            raise UsageError(f"{flag} must be {lowest} or more, got {value}")
+
+
 def _configure(
     rig_file: Path | None, strategy: str | None, speed: float | None, angles: int | None, standoff: float | None
 ) -> RigConfig:
     config = load_rig_config(rig_file)
+    if angles is not None and not 1 <= angles <= config.press.max_angle_count():
+        raise UsageError(
+            f"--angles must be 1 to {config.press.max_angle_count()}, got {angles}",
+            hint="press ids are whole degrees: more angles than degrees in the arc would repeat presses",
+        )
     if strategy is None and speed is None and angles is None and standoff is None:
         return config
     given = {"--strategy": strategy, "--speed": speed, "--angles": angles, "--standoff": standoff}
@@ -302,6 +318,7 @@ def collect(
 
     SIGTERM and SIGHUP stop the arm and keep what was recorded, like Ctrl-C.
     """
+    _check_counts(seed=seed, max_presses=max_presses)
     config = _configure(rig_file, strategy, speed, angles, None)
     obj = get_object(object_id, extra_files=config.object.objects_files)
     if rotation is not None and rotation not in obj.rotations_deg:
@@ -358,6 +375,7 @@ def campaign(
     live: bool = typer.Option(True, "--live/--no-live", help="Show the live panel."),
 ) -> None:
     """Every object with every sensor: unattended on the simulated rig, operator-guided on hardware."""
+    _check_counts(seed=seed)
     config = _configure(rig_file, None, None, angles, None)
     catalogue = list_objects(extra_files=config.object.objects_files)
     if objects:
@@ -427,14 +445,20 @@ def extract(
     smoothing: int = typer.Option(15, "--smoothing", help="Moving-average window on the wrist force, samples."),
     latency: float = typer.Option(0.0, "--latency", help="Tactile latency to subtract from frame times, s."),
 ) -> None:
-    """Recompute the force-matched frames of every session from the raw streams with other settings."""
+    """Recompute the force-matched frames of every session from the raw streams with other settings.
+
+    All or nothing: the settings are checked first, every session is verified (and repaired from its journal), and
+    no file changes until every new one is written.
+    """
     settings = ExtractionSettings(tolerance_n=tolerance, smoothing_samples=smoothing, tactile_latency_s=latency)
+    options = {"tolerance_n": "--tolerance", "smoothing_samples": "--smoothing", "tactile_latency_s": "--latency"}
+    for name, why in settings.problems():
+        raise UsageError(f"{options.get(name, name)} {why}")
     sessions = list_sessions(data)
     if not sessions:
         raise UsageError(f"no session files in {data}")
-    for info in sessions:
-        presses, matched = reextract_session(info.path, settings)
-        console.print(f"{info.path.name}: {presses} presses re-extracted, {matched} targets matched")
+    for path, presses, matched in reextract_sessions([info.path for info in sessions], settings):
+        console.print(f"{path.name}: {presses} presses re-extracted, {matched} targets matched")
 
 
 def objects_cmd(

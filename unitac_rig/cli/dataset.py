@@ -55,6 +55,8 @@ def inspect_tables(report: dict[str, Any], data: Path) -> RenderableType:
     ]
     if any(s["simulated"] for s in sessions):
         notes.append("* simulated rig")
+    unverified = [s for s in sessions if s.get("integrity", "verified") != "verified"]
+    notes.extend(f"{s['object']}/{s['sensor']}: {s['integrity']}" for s in unverified)
     writers = [s for s in sessions if s.get("writer")]
     if writers:
         notes.append(
@@ -187,13 +189,12 @@ def _export_lerobot(data: list[Path], out: Path) -> None:
 def verify(
     directory: Path = typer.Argument(..., metavar="DIR", help="An export directory (holds manifest.json)."),
 ) -> None:
-    """Check every file of an export against manifest.json (size and SHA-256); exit 1 at the first mismatch."""
+    """Check every file of an export against manifest.json (size and SHA-256); exit 1 at the first mismatch or at
+    a file the manifest does not list."""
     from unitac_rig.storage.manifest import verify_manifest
 
     report = verify_manifest(directory)
     console.print(f"ok: {report.files} files, {report.bytes / 1e6:.1f} MB match {directory / 'manifest.json'}")
-    if report.unlisted:
-        console.print(f"not in the manifest (not checked): {', '.join(report.unlisted)}", style="yellow")
 
 
 def register(app: typer.Typer) -> None:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import re
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -81,6 +82,7 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any]:
         raise ModelError(
             f"{path} was written by a newer unitac-rig (checkpoint version {version})", hint="upgrade unitac-rig"
         )
+    check_finite(payload, path)
     return payload
 
 
@@ -108,7 +110,7 @@ def safe_torch_load(path: Path, *, what: str) -> Any:
         with _allow_numpy_arrays():
             return torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
-        unsafe = _unsafe_globals(path)
+        unsafe = _unsafe_globals(path) or sorted(set(re.findall(r"GLOBAL ([\w.]+)", str(exc))))
         if unsafe:
             listed = ", ".join(unsafe[:4]) + (", ..." if len(unsafe) > 4 else "")
             raise ModelError(
@@ -117,7 +119,11 @@ def safe_torch_load(path: Path, *, what: str) -> Any:
                 hint="it is an old unitac-rig file (from before checkpoint version 2) or not one of ours: retrain "
                 "with this unitac-rig, or ask its author for a fresh run",
             ) from exc
-        raise ModelError(f"{path} cannot be read as a {what} ({_first_line(exc)})", hint="the file is damaged") from exc
+        # never torch's own text here: it advises loading with weights_only=False, i.e. switching the safety off
+        raise ModelError(
+            f"{path} was not loaded: this {what} holds something other than tensors and plain values, or is damaged",
+            hint="retrain with this unitac-rig, or ask its author for a fresh run",
+        ) from exc
     except Exception as exc:  # torch raises many unrelated types (IndexError, RuntimeError...) for a damaged file
         raise ModelError(
             f"{path} cannot be read as a {what}: not a PyTorch file or damaged ({_first_line(exc)})",
@@ -136,8 +142,45 @@ def _unsafe_globals(path: Path) -> list[str]:
 
 
 def _first_line(exc: BaseException) -> str:
+    """The first line of an error, without torch's advice to reload with ``weights_only=False``."""
     text = str(exc).strip().splitlines()
-    return text[0][:200] if text else type(exc).__name__
+    first = text[0][:200] if text else type(exc).__name__
+    if "weights_only" in str(exc) or "Weights only" in first:
+        return type(exc).__name__
+    return first
+
+
+def check_finite(payload: dict[str, Any], path: Path) -> None:
+    """ModelError unless every parameter and normalisation statistic of a checkpoint is a finite number: a NaN
+    weight turns every translation into NaN (a diverged run, or a damaged file)."""
+
+    def walk(value: Any, where: str) -> None:
+        if isinstance(value, torch.Tensor):
+            bad = value.is_floating_point() and not bool(torch.isfinite(value).all())
+        elif isinstance(value, np.ndarray):
+            bad = value.dtype.kind == "f" and not bool(np.isfinite(value).all())
+        elif isinstance(value, float):
+            bad = not np.isfinite(value)
+        elif isinstance(value, dict):
+            for key, item in value.items():
+                walk(item, f"{where}.{key}")
+            return
+        elif isinstance(value, list | tuple):
+            for i, item in enumerate(value):
+                walk(item, f"{where}[{i}]")
+            return
+        else:
+            return
+        if bad:
+            raise ModelError(
+                f"{path} holds NaN or infinite values in {where.lstrip('.')}: its model cannot be used",
+                hint="the run diverged or the file is damaged: retrain (or restore the file from a backup)",
+            )
+
+    engine = payload.get("engine")
+    if isinstance(engine, dict):
+        walk({k: engine[k] for k in ("parameters", "theta") if k in engine}, "engine")
+    walk(payload.get("normaliser"), "normaliser")
 
 
 def describe_foreign(payload: Any) -> str:

@@ -6,6 +6,7 @@ become one :class:`ConfigError` line naming the field. See docs/rig-file.md for 
 
 from __future__ import annotations
 
+import math
 import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -62,6 +63,8 @@ SensorConfig = Annotated[SerializeAsAny[SensorConfigBase], BeforeValidator(parse
 
 
 class ObjectPlacement(_Strict):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN compares false to any bound
+
     center_m: tuple[float, float] = Field((-0.15, 0.625), description="object axis in the base frame (x, y), m")
     press_height_m: float = Field(0.20, description="height of the press plane (TCP z) in the base frame, m")
     standoff_mm: float = Field(
@@ -78,6 +81,8 @@ class ObjectPlacement(_Strict):
 
 
 class PressConfig(_Strict):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)  # NaN compares false to any bound
+
     threshold_n: float = Field(10.0, gt=0, description="stop force along the press, N")
     strategy: Literal["guarded", "two-phase", "force-ramp"] = "guarded"
     speed_mm_s: float = Field(2.0, gt=0, description="press speed (guarded) / slow speed (two-phase), mm/s")
@@ -109,9 +114,33 @@ class PressConfig(_Strict):
     stop_samples: int = Field(
         15, ge=1, le=50, description="the press stops when the mean of this many wrist readings reaches the threshold"
     )
-    angle_min_deg: float = -45.0
-    angle_max_deg: float = 45.0
-    angle_count: int = Field(91, ge=1)
+    angle_min_deg: float = Field(-45.0, ge=-90, le=90, description="first approach angle from the object's normal")
+    angle_max_deg: float = Field(45.0, ge=-90, le=90, description="last approach angle, deg")
+    angle_count: int = Field(91, ge=1, description="approach angles from angle_min_deg to angle_max_deg")
+
+    def max_angle_count(self) -> int:
+        """The most approach angles the arc can hold: press ids name angles in whole degrees, so two angles less
+        than a degree apart would be the same press."""
+        return math.floor(self.angle_max_deg - self.angle_min_deg) + 1
+
+    @model_validator(mode="after")
+    def _whole_degrees(self) -> PressConfig:
+        too_many = self.angle_count > 1 and self.angle_count > self.max_angle_count()  # checked first: no huge array
+        if too_many or len({round(a) for a in _arc(self)}) < self.angle_count:
+            raise ValueError(
+                f"angle_count = {self.angle_count} gives two approach angles the same whole degree between "
+                f"angle_min_deg = {self.angle_min_deg:g} and angle_max_deg = {self.angle_max_deg:g} (press ids are "
+                f"whole degrees; at most {self.max_angle_count()} angles there)"
+            )
+        return self
+
+
+def _arc(press: PressConfig) -> list[float]:
+    """The approach angles of a press config, deg (rounded to 1e-6 so they print and compare cleanly)."""
+    import numpy as np
+
+    values = np.linspace(press.angle_min_deg, press.angle_max_deg, press.angle_count)
+    return [float(a) for a in np.round(values, 6)]
 
 
 class LimitsConfig(_Strict):
@@ -226,10 +255,7 @@ class RigConfig(_Strict):
         return self
 
     def angles_deg(self) -> list[float]:
-        import numpy as np
-
-        p = self.press
-        return [float(a) for a in np.round(np.linspace(p.angle_min_deg, p.angle_max_deg, p.angle_count), 6)]
+        return _arc(self.press)
 
 
 def describe_validation_error(err: ValidationError, source: str) -> str:
@@ -242,14 +268,31 @@ def describe_validation_error(err: ValidationError, source: str) -> str:
     return f"{source}: {where}: {message}" if where else f"{source}: {message}"
 
 
+MAX_TOML_BYTES = 1 << 20  # a rig or object file is a few kB; a bigger one is the wrong file
+
+
 def read_toml(path: Path, what: str) -> dict[str, Any]:
-    """Parse a TOML file; a missing file or bad syntax becomes one ConfigError line naming ``what`` and the path."""
+    """Parse a TOML file; a missing file, a directory, non-UTF-8 text or bad syntax becomes one ConfigError line
+    naming ``what`` and the path."""
+    path = Path(path)
     try:
-        return tomllib.loads(Path(path).read_text())
+        if path.is_dir():
+            raise ConfigError(f"{what} {path} is a directory, not a TOML file")
+        with path.open("rb") as fh:
+            raw = fh.read(MAX_TOML_BYTES + 1)
+        if len(raw) > MAX_TOML_BYTES:
+            raise ConfigError(f"{path}: over {MAX_TOML_BYTES >> 20} MB, not a {what}")
+        return tomllib.loads(raw.decode("utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"{what} {path} does not exist") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}), so not TOML") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: not valid TOML (nested too deeply)") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML ({exc})") from exc
+    except OSError as exc:
+        raise ConfigError(f"{what} {path} cannot be read ({exc.strerror or exc})") from exc
 
 
 def load_rig_config(path: Path | None) -> RigConfig:

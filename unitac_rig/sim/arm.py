@@ -335,7 +335,7 @@ class SimArm:
     def set_watchdog(self, min_frequency_hz: float) -> None:
         """Arm the RTDE watchdog now: the program stops when the host writes nothing for 1 / ``min_frequency_hz``."""
         self._command()
-        if not min_frequency_hz > 0:
+        if not (math.isfinite(min_frequency_hz) and min_frequency_hz > 0):
             raise ArmError(f"watchdog frequency must be > 0 Hz, got {min_frequency_hz}")
         self._pending_watchdog_hz = min_frequency_hz
         self._watchdog_ns = round(1e9 / min_frequency_hz)

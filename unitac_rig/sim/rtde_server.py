@@ -41,6 +41,7 @@ import argparse
 import contextlib
 import errno
 import logging
+import math
 import mmap
 import os
 import select
@@ -350,7 +351,7 @@ class RtdeSession:
         recipe_id = 0
         if names and rtde.NOT_FOUND not in types:
             limit_hz = self.max_frequency_hz
-            if frequency_hz <= 0 or frequency_hz > limit_hz:
+            if not 0 < frequency_hz <= limit_hz:  # NaN and inf too: never a stream period of NaN or 0 s
                 logger.info("RTDE client %s asked for %.1f Hz; streaming at %.1f Hz", self.peer, frequency_hz, limit_hz)
                 frequency_hz = limit_hz
             recipe_id = self._next_output_id
@@ -575,8 +576,8 @@ class SimURController:
         registers_in_use: frozenset[str] = frozenset(),
         outputs_not_found: frozenset[str] = frozenset(),
     ) -> None:
-        if frequency_hz <= 0:
-            raise ValueError("frequency_hz must be > 0")
+        if not (math.isfinite(frequency_hz) and frequency_hz > 0):
+            raise ValueError(f"frequency_hz must be a positive number, got {frequency_hz}")
         self.host = host
         self.frequency_hz = frequency_hz
         self._state_provider = state_provider or self._still_state

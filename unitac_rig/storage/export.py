@@ -187,7 +187,8 @@ def paired_table(paired: PairedLike, sessions: dict[tuple[str, str], dict[str, A
 
 
 def _session_provenance(item: PooledSession, copy: Path, sha256: str) -> dict[str, Any]:
-    attrs = read_session_info(copy).attrs
+    copied = read_session_info(copy)  # verifies every press of the copy against its checksums (or refuses)
+    attrs = copied.attrs
     presses = press_summaries(copy)
     planned = attrs.get("planned_presses") or []
     writer = lease_holder(journal_dir(item.source, item.info.object_id, item.info.sensor))
@@ -203,6 +204,8 @@ def _session_provenance(item: PooledSession, copy: Path, sha256: str) -> dict[st
         "source": str(item.source),
         "also_in": [str(p) for p in item.also_in],
         "being_collected_at_export": writer is not None,
+        # "verified": every press of the copy matched the checksums it was recorded with; else why not
+        "integrity": copied.integrity,
         "presses": {
             "planned": len(planned) if planned else len(presses),
             "complete": sum(p["status"] == "complete" for p in presses),
@@ -405,6 +408,13 @@ def render_card(doc: dict[str, Any]) -> str:
         "- No train/test split is given. Do not split rows at random: the forces of one press are near-identical "
         "frames. Split by approach direction (object, rotation, angle), as unitac-rig's `train` does.",
     ]
+    unverified = [s["file"] for s in doc["sessions"] if s.get("integrity", "verified") != "verified"]
+    if unverified:
+        lines.append(
+            "- **Not verified:** " + ", ".join(f"`{f}`" for f in unverified) + " carry no checksums (recorded by an "
+            "older unitac-rig), so a change to them since recording could not be ruled out; every other session "
+            "matched the SHA-256 checksums its presses were recorded with."
+        )
     if doc["simulated"]:
         lines.append(
             "- **Simulated.** Recorded on the project's simulated rig: contact mechanics and sensor responses are "

@@ -20,9 +20,13 @@ Everything here is a pure function of the raw streams, so ``unitac-rig extract``
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+
+MAX_SMOOTHING_SAMPLES = 5000  # 10 s at 500 Hz: longer than any press; larger windows only flatten it
+MAX_LATENCY_S = 1.0  # a tactile delay beyond a second is a wrong setting, not a sensor (frames arrive at 100-1000 Hz)
 
 
 def default_targets_n() -> np.ndarray:
@@ -37,6 +41,23 @@ class ExtractionSettings:
     smoothing_samples: int = 15  # 30 ms at 500 Hz: the UR F/T noise is correlated over ~10 ms
     max_frame_gap_s: float = 0.05
     tactile_latency_s: float = 0.0
+
+    def problems(self) -> list[tuple[str, str]]:
+        """(field, what is wrong) for every setting extraction cannot work with; empty when all are usable."""
+        found: list[tuple[str, str]] = []
+        if not (math.isfinite(self.tolerance_n) and self.tolerance_n > 0):
+            found.append(("tolerance_n", f"must be a positive number of newtons, got {self.tolerance_n:g}"))
+        if not 1 <= self.smoothing_samples <= MAX_SMOOTHING_SAMPLES:
+            found.append(("smoothing_samples", f"must be 1 to {MAX_SMOOTHING_SAMPLES} samples, got "
+                          f"{self.smoothing_samples}"))  # fmt: skip
+        if not (math.isfinite(self.tactile_latency_s) and abs(self.tactile_latency_s) <= MAX_LATENCY_S):
+            found.append(("tactile_latency_s", f"must be a number of seconds within ±{MAX_LATENCY_S:g}, got "
+                          f"{self.tactile_latency_s:g}"))  # fmt: skip
+        if not (math.isfinite(self.max_frame_gap_s) and self.max_frame_gap_s > 0):
+            found.append(("max_frame_gap_s", f"must be a positive number of seconds, got {self.max_frame_gap_s:g}"))
+        if not self.targets_n or not all(math.isfinite(t) and t > 0 for t in self.targets_n):
+            found.append(("targets_n", "must be one or more positive forces in newtons"))
+        return found
 
     def to_dict(self) -> dict[str, object]:
         d = asdict(self)

@@ -3,7 +3,7 @@
 The manifest lists every file of the export (relative path, size in bytes, SHA-256) except itself, plus whatever
 the exporter describes (schema, units, counts, provenance; see :mod:`unitac_rig.storage.export`).
 :func:`verify_manifest` re-hashes the files and stops at the first one that is missing, has another size or
-another hash.
+another hash, and refuses a directory holding files the manifest does not list (added after export).
 """
 
 from __future__ import annotations
@@ -56,6 +56,8 @@ def read_manifest(root: Path) -> dict[str, Any]:
         document = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise DataError(f"{path} does not exist", hint="pass a directory written by `unitac-rig export`") from None
+    except RecursionError:
+        raise DataError(f"{path} is not a manifest (nested too deeply to be one)") from None
     except (OSError, ValueError) as exc:
         raise DataError(f"{path} is not readable JSON ({exc})") from exc
     if not isinstance(document, dict) or not isinstance(document.get("files"), list):
@@ -70,7 +72,7 @@ def read_manifest(root: Path) -> dict[str, Any]:
 class VerifyReport:
     files: int
     bytes: int
-    unlisted: tuple[str, ...]  # files in the directory the manifest does not mention (not an error)
+    unlisted: tuple[str, ...]  # files in the directory the manifest does not mention (verify_manifest refuses them)
 
 
 def _safe_relative(root: Path, relative: object) -> Path:
@@ -84,14 +86,15 @@ def _safe_relative(root: Path, relative: object) -> Path:
 
 
 def verify_manifest(root: Path) -> VerifyReport:
-    """Check every listed file's size and SHA-256; DataError naming the first file that does not match."""
+    """Check every listed file's size and SHA-256; DataError naming the first file that does not match, or a file
+    that is there but not listed."""
     root = Path(root)
     document = read_manifest(root)
     total = 0
     listed: set[str] = set()
     for entry in document["files"]:
         if not isinstance(entry, dict):
-            raise DataError(f"{root / MANIFEST_NAME} has a malformed file entry: {entry!r}")
+            raise DataError(f"{root / MANIFEST_NAME} has a malformed file entry: {repr(entry)[:80]}")
         path = _safe_relative(root, entry.get("path"))
         listed.add(str(entry["path"]))
         if not path.is_file():
@@ -111,8 +114,14 @@ def verify_manifest(root: Path) -> VerifyReport:
     unlisted = tuple(
         sorted(
             rel
-            for rel in (p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file())
+            for rel in (p.relative_to(root).as_posix() for p in root.rglob("*") if not p.is_dir())
             if rel not in listed and rel != MANIFEST_NAME
         )
     )
+    if unlisted:
+        more = f" and {len(unlisted) - 1} more" if len(unlisted) > 1 else ""
+        raise DataError(
+            f"{root / unlisted[0]}{more}: not in the manifest (added after export)",
+            hint="remove what was added, or copy the export again",
+        )
     return VerifyReport(files=len(listed), bytes=total, unlisted=unlisted)

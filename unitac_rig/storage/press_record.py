@@ -18,6 +18,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from unitac_rig.storage.checksums import array_digest, seal_press_group, sealed_arrays
 from unitac_rig.storage.extraction import Extraction, ExtractionSettings
 
 FINISHED_STATUSES = ("complete", "failed")  # never redone on resume; "aborted" presses are redone
@@ -77,25 +78,40 @@ def json_default(obj: Any) -> Any:
     raise TypeError(f"cannot serialise {type(obj).__name__}")
 
 
-def write_extraction(group: h5py.Group, extraction: Extraction, tared_values: np.ndarray) -> None:
-    """(Re)write ``group/extraction`` from an Extraction and the press's tare-subtracted frames."""
+def write_extraction(group: h5py.Group, extraction: Extraction, tared_values: np.ndarray) -> dict[str, str]:
+    """(Re)write ``group/extraction`` from an Extraction and the press's tare-subtracted frames; returns the digests
+    of the arrays written (``extraction/<name>`` -> hex SHA-256) for the group's seal."""
     if "extraction" in group:
         del group["extraction"]
     ex = group.create_group("extraction")
     ex.attrs["settings"] = json.dumps(extraction.settings.to_dict())
-    ex["targets_n"] = extraction.targets_n
-    ex["crossing_t_s"] = extraction.crossing_t_s
-    ex["frame_index"] = extraction.frame_index
-    ex["frame_t_s"] = extraction.frame_t_s
-    ex["force_at_frame_n"] = extraction.force_at_frame_n
-    ex["error_n"] = extraction.error_n
-    ex["miss"] = extraction.miss
     n_taxels = tared_values.shape[1] if tared_values.ndim == 3 else 0
     frames = np.full((extraction.targets_n.size, n_taxels, 3), np.nan, dtype=np.float32)
     chosen = extraction.frame_index >= 0
     if chosen.any() and tared_values.size:
         frames[chosen] = tared_values[extraction.frame_index[chosen]]
-    ex["values"] = frames
+    arrays = {
+        "targets_n": extraction.targets_n, "crossing_t_s": extraction.crossing_t_s,
+        "frame_index": extraction.frame_index, "frame_t_s": extraction.frame_t_s,
+        "force_at_frame_n": extraction.force_at_frame_n, "error_n": extraction.error_n, "miss": extraction.miss,
+        "values": frames,
+    }  # fmt: skip
+    digests = {}
+    for name, value in arrays.items():
+        data = np.asarray(value)
+        ex.create_dataset(name, data=data)
+        digests[f"extraction/{name}"] = array_digest(data)
+    return digests
+
+
+def reseal_extraction(group: h5py.Group, digests: dict[str, str]) -> None:
+    """After ``write_extraction`` on a sealed press (``unitac-rig extract``, raw arrays verified first): replace the
+    extraction's digests in the seal and seal the attributes again. An unsealed (older) press stays unsealed."""
+    arrays = sealed_arrays(group)
+    if arrays is None:
+        return
+    kept = {k: v for k, v in arrays.items() if not k.startswith("extraction/")}
+    seal_press_group(group, {**kept, **digests})
 
 
 def read_extraction(group: h5py.Group) -> tuple[Extraction, np.ndarray] | None:
@@ -116,7 +132,8 @@ def read_extraction(group: h5py.Group) -> tuple[Extraction, np.ndarray] | None:
 
 
 def write_press_group(parent: h5py.Group, rec: PressRecord, name: str | None = None) -> h5py.Group:
-    """Write one press under ``parent/<name or press_id>``; the ``write_complete`` attribute is set last."""
+    """Write one press under ``parent/<name or press_id>``, sealed with the SHA-256 of every array and attribute
+    (:mod:`unitac_rig.storage.checksums`); the ``write_complete`` attribute is set last."""
     name = name or rec.press_id
     if name in parent:
         del parent[name]
@@ -128,25 +145,33 @@ def write_press_group(parent: h5py.Group, rec: PressRecord, name: str | None = N
     g.attrs["reason"] = rec.reason
     for key, value in rec.attrs.items():
         g.attrs[key] = attr_value(value)
-    robot = g.create_group("robot")
-    robot.create_dataset("t_s", data=np.asarray(rec.robot_t_s, np.float64))
-    robot.create_dataset("force", data=np.asarray(rec.robot_force, np.float32).reshape(-1, 6))
-    robot.create_dataset("tcp_pose", data=np.asarray(rec.robot_pose, np.float64).reshape(-1, 6))
-    robot.create_dataset("press_force_n", data=np.asarray(rec.press_force_n, np.float32))
-    tac = g.create_group("tactile")
-    tac.create_dataset("t_s", data=np.asarray(rec.tactile_t_s, np.float64))
+    digests: dict[str, str] = {}
+
+    def put(path: str, data: np.ndarray, frames: bool = False) -> None:
+        digests[path] = array_digest(data)  # from memory, before the bytes reach the disk
+        if frames:
+            _frames_dataset(g, path, data)
+        else:
+            g.create_dataset(path, data=data)
+
+    put("robot/t_s", np.asarray(rec.robot_t_s, np.float64))
+    put("robot/force", np.asarray(rec.robot_force, np.float32).reshape(-1, 6))
+    put("robot/tcp_pose", np.asarray(rec.robot_pose, np.float64).reshape(-1, 6))
+    put("robot/press_force_n", np.asarray(rec.press_force_n, np.float32))
+    put("tactile/t_s", np.asarray(rec.tactile_t_s, np.float64))
     values = np.asarray(rec.tactile_values, np.float32)
-    _frames_dataset(tac, "values", values)
-    tac.create_dataset("seq", data=np.asarray(rec.tactile_seq, np.int64))
-    tac.create_dataset("device_t_us", data=np.asarray(rec.tactile_device_t_us, np.int64))
-    tac.create_dataset("valid", data=np.asarray(rec.tactile_valid, bool))
+    put("tactile/values", values, frames=True)
+    put("tactile/seq", np.asarray(rec.tactile_seq, np.int64))
+    put("tactile/device_t_us", np.asarray(rec.tactile_device_t_us, np.int64))
+    put("tactile/valid", np.asarray(rec.tactile_valid, bool))
     if rec.tactile_displacement_mm is not None:
-        _frames_dataset(tac, "displacement_mm", np.asarray(rec.tactile_displacement_mm, np.float32))
-    g.create_dataset("tare_baseline", data=np.asarray(rec.tare_baseline, np.float64))
+        put("tactile/displacement_mm", np.asarray(rec.tactile_displacement_mm, np.float32), frames=True)
+    put("tare_baseline", np.asarray(rec.tare_baseline, np.float64))
     ev_dtype = np.dtype([("t_s", np.float64), ("kind", h5py.string_dtype()), ("detail", h5py.string_dtype())])
-    g.create_dataset("events", data=np.array([(t, k, d) for t, k, d in rec.events], dtype=ev_dtype))
+    put("events", np.array([(t, k, d) for t, k, d in rec.events], dtype=ev_dtype))
     if rec.extraction is not None:
-        write_extraction(g, rec.extraction, values - np.asarray(rec.tare_baseline, np.float32)[None])
+        digests.update(write_extraction(g, rec.extraction, values - np.asarray(rec.tare_baseline, np.float32)[None]))
+    seal_press_group(g, digests)
     g.attrs["write_complete"] = True
     return g
 

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+import logging
+import os
+import threading
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -12,6 +15,8 @@ import numpy as np
 
 from unitac_rig.errors import DataError
 from unitac_rig.rig.sensors import SENSORS
+from unitac_rig.storage.checksums import PRESS_ATTR
+from unitac_rig.storage.integrity import READABLE_SCHEMA_VERSIONS, SCHEMA_VERSION, SessionCheck, check_session
 from unitac_rig.storage.press_record import (
     PressRecord,
     as_str,
@@ -20,7 +25,9 @@ from unitac_rig.storage.press_record import (
     read_extraction,
     read_press_group,
 )
-from unitac_rig.storage.recorder import SCHEMA_VERSION
+from unitac_rig.storage.recorder import repair_session
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -30,6 +37,8 @@ class SessionInfo:
     sensor: str
     simulated: bool
     attrs: dict[str, Any]
+    integrity: str = "verified"  # or why not (see SessionCheck.describe); "repaired: ..." when a read repaired it
+    repairs: tuple[str, ...] = field(default_factory=tuple)
 
 
 @dataclass(frozen=True)
@@ -53,7 +62,85 @@ class MatchedSet:
         return int(self.target_n.size)
 
 
+@dataclass(frozen=True)
+class Verified:
+    """A session file version that passed :func:`verified_session` (and what it took)."""
+
+    check: SessionCheck
+    repairs: tuple[str, ...] = ()
+
+    @property
+    def integrity(self) -> str:
+        described = self.check.describe()
+        return f"repaired from the journal, {described}" if self.repairs else described
+
+
+_VERIFIED: dict[tuple[str, int, int, int, int], Verified] = {}
+_VERIFIED_GUARD = threading.Lock()
+_PRESSES_OK: dict[str, set[tuple[str, str]]] = {}  # file -> (press id, checksums) verified by this process
+_WARNED_UNSEALED: set[str] = set()
+
+
+def _version_key(path: Path) -> tuple[str, int, int, int, int] | None:
+    """Identifies one version of a session file: the recorder never changes a published file in place (it renames
+    a new copy over it), so (inode, size, mtime) change with every version."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return (str(Path(path).resolve()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+
+
+def verified_session(path: Path) -> Verified:
+    """Verify every press of ``path`` against its checksums (once per file version per process), repair it from
+    the journal when it is damaged, and raise a DataError naming the file and press when it cannot be repaired.
+
+    A file without checksums (schema 1) is read unverified and says so (a warning, and ``integrity`` in
+    ``inspect`` and export manifests); a file of another schema version is left to the caller's version check.
+    """
+    path = Path(path)
+    key = _version_key(path)
+    with _VERIFIED_GUARD:
+        cached = _VERIFIED.get(key) if key else None
+    if cached is not None:
+        return cached
+    with _VERIFIED_GUARD:
+        known = set(_PRESSES_OK.get(str(path.resolve()), ()))
+    check = check_session(path, known)
+    repairs: tuple[str, ...] = ()
+    if check.needs_repair:
+        problem = check.first_problem()
+        repairs = tuple(repair_session(path, problem))
+        for note in repairs:
+            log.warning("%s: %s", path, note)
+        check = check_session(path, known)
+        if check.needs_repair:
+            raise DataError(check.first_problem(), hint="restore the file from a backup")
+    if check.unsealed and str(path) not in _WARNED_UNSEALED:
+        _WARNED_UNSEALED.add(str(path))
+        log.warning("%s: %s: read without verification", path, check.describe())
+    result = Verified(check, repairs)
+    seals = _press_seals(path, check.verified)
+    key = _version_key(path)
+    with _VERIFIED_GUARD:
+        _PRESSES_OK.setdefault(str(path.resolve()), set()).update(seals)
+        if key is not None:
+            _VERIFIED[key] = result
+    return result
+
+
+def _press_seals(path: Path, pids: list[str]) -> set[tuple[str, str]]:
+    """(press id, checksums attribute) of the verified presses: what a later version may trust (``known_good``)."""
+    seals: set[tuple[str, str]] = set()
+    with h5py.File(path, "r") as f:
+        for pid in pids:
+            raw = f["presses"][pid].attrs[PRESS_ATTR]
+            seals.add((pid, raw.decode() if isinstance(raw, bytes) else str(raw)))
+    return seals
+
+
 def _open(path: Path) -> h5py.File:
+    verified_session(path)
     try:
         f = h5py.File(path, "r")
     except OSError as exc:
@@ -62,11 +149,11 @@ def _open(path: Path) -> h5py.File:
             hint="rerun the collect command on that directory to rebuild it from the journal",
         ) from exc
     version = f.attrs.get("schema_version")
-    if version is None or int(version) != SCHEMA_VERSION:
+    if version is None or int(version) not in READABLE_SCHEMA_VERSIONS:
         f.close()
         raise DataError(
             f"{path} has session schema version {'none' if version is None else int(version)}, this unitac-rig "
-            f"reads version {SCHEMA_VERSION}",
+            f"reads versions {READABLE_SCHEMA_VERSIONS[0]} to {SCHEMA_VERSION}",
             hint="re-collect or re-import the data with this version",
         )
     return f
@@ -75,12 +162,15 @@ def _open(path: Path) -> h5py.File:
 def read_session_info(path: Path) -> SessionInfo:
     with _open(path) as f:
         attrs = {k: decode_attr(v) for k, v in f.attrs.items()}
+    verified = verified_session(path)
     return SessionInfo(
         path=Path(path),
         object_id=str(attrs.get("object", "")),
         sensor=str(attrs.get("sensor", "")),
         simulated=bool(attrs.get("simulated", False)),
         attrs=attrs,
+        integrity=verified.integrity,
+        repairs=verified.repairs,
     )
 
 

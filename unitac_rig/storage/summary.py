@@ -50,6 +50,8 @@ def inspect_dataset(data_dir: Path) -> dict[str, Any]:
                 "sensor": info.sensor,
                 "simulated": info.simulated,
                 "file": info.path.name,
+                # "verified" (every press matched its checksums), "repaired from the journal, ...", or why not
+                "integrity": info.integrity,
                 "presses_planned": len(planned) if planned else len(presses),
                 "presses_complete": len(complete),
                 "presses_failed": sum(p["status"] == "failed" for p in presses),

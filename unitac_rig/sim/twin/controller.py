@@ -466,7 +466,7 @@ class Controller:
     # ---- ScriptHost -----------------------------------------------------------------------------------------
 
     def set_watchdog(self, register: str, min_frequency_hz: float) -> None:
-        if min_frequency_hz <= 0:
+        if not (math.isfinite(min_frequency_hz) and min_frequency_hz > 0):  # NaN would never fire
             raise ScriptError(f"rtde_set_watchdog: frequency must be > 0, got {min_frequency_hz}")
         self.watchdog = (register, min_frequency_hz, self.now_s)
         logger.info("watchdog armed on %s at %.1f Hz", register, min_frequency_hz)

@@ -1,0 +1,134 @@
+"""Checking a session file against its checksums (read-only): which presses are intact, damaged, or carry none.
+
+:func:`check_session` reads every array of every press (a full read of the file) and never raises for damage; what
+to do about it is the caller's: the recorder repairs from the journal (:mod:`unitac_rig.storage.recorder`), the
+readers repair or refuse (:func:`unitac_rig.storage.reader.verified_session`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Container
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import h5py
+
+from unitac_rig.storage.checksums import PRESS_ATTR, PressCheck, check_press_group, check_root
+
+SCHEMA_VERSION = 2  # 2: SHA-256 checksums on every press and on the root attributes
+READABLE_SCHEMA_VERSIONS = (1, 2)  # 1: no checksums (read and resumed, reported as not verified)
+
+
+@dataclass
+class SessionCheck:
+    """What :func:`check_session` found in one session file."""
+
+    path: Path
+    version: int | None = None  # schema_version (None: the attribute is missing, a foreign file)
+    file_problem: str | None = None  # the file cannot be used at all (does not open, foreign, index unreadable)
+    root_problem: str | None = None  # the root attributes differ from their checksum
+    damaged: dict[str, str] = field(default_factory=dict)  # press id -> what is wrong
+    unsealed: list[str] = field(default_factory=list)  # presses without checksums (schema 1): not verified
+    verified: list[str] = field(default_factory=list)  # presses whose every array and attribute matched
+    half_written: list[str] = field(default_factory=list)  # groups without write_complete (readers skip them)
+    statuses: dict[str, str] = field(default_factory=dict)  # status of every intact, complete-written press
+
+    @property
+    def readable_version(self) -> bool:
+        return self.version in READABLE_SCHEMA_VERSIONS
+
+    @property
+    def needs_repair(self) -> bool:
+        return bool(self.file_problem or self.root_problem or self.damaged)
+
+    def first_problem(self) -> str:
+        """One line naming the file and, where it is one press, the press."""
+        if self.file_problem:
+            return f"{self.path}: {self.file_problem}"
+        if self.root_problem:
+            return f"{self.path}: {self.root_problem}"
+        pid, what = next(iter(self.damaged.items()))
+        more = f" (and {len(self.damaged) - 1} more presses)" if len(self.damaged) > 1 else ""
+        return f"{self.path}: press {pid}: {what}{more}"
+
+    def describe(self) -> str:
+        """A few words for ``inspect`` and export manifests: ``verified``, or why not."""
+        if self.needs_repair:
+            return "damaged"
+        if self.unsealed:
+            return (
+                f"not verified: {len(self.unsealed)} of {len(self.unsealed) + len(self.verified)} presses have no "
+                "checksums (recorded by an older unitac-rig)"
+            )
+        return "verified"
+
+
+def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> SessionCheck:
+    """Verify every press (and the root attributes) of a session file; see :class:`SessionCheck`.
+
+    ``known_good`` holds (press id, its ``checksums`` attribute) pairs this process verified in an earlier version
+    of the same file: those are trusted without reading their arrays again (how ``inspect --watch`` keeps up with
+    a collection, whose every press republishes the file).
+    """
+    path = Path(path)
+    check = SessionCheck(path)
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        check.file_problem = f"could not be opened ({_one_line(exc)})"
+        return check
+    with f:
+        try:
+            raw = f.attrs.get("schema_version")
+            check.version = None if raw is None else int(raw)
+        except Exception as exc:  # a damaged attribute heap
+            check.file_problem = f"its attributes could not be read ({_one_line(exc)})"
+            return check
+        if check.version is None:
+            check.file_problem = "is not a unitac-rig session file (no schema_version attribute)"
+            return check
+        if not check.readable_version:
+            return check  # another format: not ours to judge (the readers say which version it is)
+        if check.version >= 2:
+            root = check_root(f)
+            if root.damaged:
+                check.root_problem = root.detail
+        try:
+            presses = f["presses"]
+            names = sorted(presses)
+        except Exception as exc:
+            check.file_problem = f"its press index could not be read ({_one_line(exc)})"
+            return check
+        for pid in names:
+            try:
+                g = presses[pid]
+                complete = bool(g.attrs.get("write_complete", False))
+            except Exception as exc:
+                check.damaged[pid] = f"its group could not be opened ({_one_line(exc)})"
+                continue
+            if not complete:
+                check.half_written.append(pid)
+                continue
+            seal = g.attrs.get(PRESS_ATTR) if known_good else None
+            if seal is not None and (pid, seal.decode() if isinstance(seal, bytes) else str(seal)) in known_good:
+                result = PressCheck("ok")
+            else:
+                result = check_press_group(g)
+            if result.state == "unsealed" and check.version >= 2:
+                check.damaged[pid] = "it has no checksums in a file whose presses all carry them"
+            elif result.damaged:
+                check.damaged[pid] = result.detail
+            else:
+                try:
+                    status = g.attrs["status"]
+                    check.statuses[pid] = status.decode() if isinstance(status, bytes) else str(status)
+                except Exception as exc:  # only an unsealed press can get here with a damaged status
+                    check.damaged[pid] = f"its status could not be read ({_one_line(exc)})"
+                    continue
+                (check.verified if result.state == "ok" else check.unsealed).append(pid)
+    return check
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return (text[:160] + "…") if len(text) > 160 else (text or type(exc).__name__)

@@ -499,7 +499,8 @@ class _Layout:
         return len(u8) == self.length and bool(np.array_equal(u8[self.struct_pos], self.struct_val))
 
     def extract(self, body: bytes, u8: np.ndarray) -> PapillArrayPacket:
-        floats = u8[self.float_bytes].view("<f4").astype(np.float64)
+        with np.errstate(invalid="ignore"):  # a signalling NaN on the wire stays NaN, without a warning
+            floats = u8[self.float_bytes].view("<f4").astype(np.float64)
         states = u8[self.state_pos].view(np.int8).astype(np.int64)
         counter, timestamp_us = _HUB.unpack_from(body, self.hub_pos) if self.hub_pos >= 0 else (None, None)
         sensors = []

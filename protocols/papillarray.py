@@ -604,7 +604,6 @@ class PacketParser:
         # Positions are absolute stream offsets; self._buf holds the stream from self._base on.
         self._buf = bytearray()
         self._base = 0
-        self._sums = np.zeros(1, dtype=np.int64)  # _sums[i] = sum of _buf[:i]
         self._scanned = 0  # markers starting before this offset have been found
         self._starts: list[int] = []  # open start markers, ascending
         self._ends: list[int] = []  # end markers not yet consumed, ascending
@@ -649,6 +648,7 @@ class PacketParser:
         self._starts += new_starts
         max_len = self.max_packet_len
         starts = self._starts
+        sums: np.ndarray | None = None  # sums[i]: byte sum of _buf[:i], made once per read that brings an end marker
         for end in new_ends:
             self._ends.append(end)
             # starts whose packet could end here: a body of >= 1 byte and the checksum before it, within max_len
@@ -656,10 +656,19 @@ class PacketParser:
             high = bisect_right(starts, end - len(START_MARKER) - 3)
             if low >= high:
                 continue
-            candidates = np.array(starts[low:high], dtype=np.int64)
-            self.pairs_checked += len(candidates)
-            body_sums = self._sums[end - 2 - base] - self._sums[candidates + len(START_MARKER) - base]
+            self.pairs_checked += high - low
             sent = buf[end - 2 - base] | buf[end - 1 - base] << 8
+            if high - low == 1:  # the usual case, one packet start before its end: sum that body alone
+                start = starts[low]
+                body = np.frombuffer(buf, dtype=np.uint8, count=end - 2 - start - 4, offset=start + 4 - base)
+                if int(body.sum(dtype=np.uint64)) & 0xFFFF == sent:
+                    self._matches.setdefault(start, []).append(end)
+                del body  # releases the buffer, so the bytearray can shrink again
+                continue
+            if sums is None:
+                sums = np.concatenate(([0], np.cumsum(np.frombuffer(buf, dtype=np.uint8), dtype=np.int64)))
+            candidates = np.array(starts[low:high], dtype=np.int64)
+            body_sums = sums[end - 2 - base] - sums[candidates + len(START_MARKER) - base]  # a checksum per start
             for start in candidates[(body_sums & 0xFFFF) == sent].tolist():
                 self._matches.setdefault(start, []).append(end)
 
@@ -697,18 +706,18 @@ class PacketParser:
 
     def _consume(self, upto: int) -> None:
         """Forget everything before stream offset ``upto``."""
-        self._starts = self._starts[bisect_left(self._starts, upto) :]
-        self._ends = self._ends[bisect_left(self._ends, upto) :]
-        self._matches = {s: e for s, e in self._matches.items() if s >= upto}
-        self._decoded = {k: v for k, v in self._decoded.items() if k[0] >= upto}
+        dropped = bisect_left(self._starts, upto)
+        for start in self._starts[:dropped]:
+            for end in self._matches.pop(start, ()):
+                self._decoded.pop((start, end), None)
+        del self._starts[:dropped]
+        del self._ends[: bisect_left(self._ends, upto)]
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[PapillArrayPacket]:
         """Append received bytes; return the packets completed by them (possibly none)."""
         if not data:
             return []
-        new = np.frombuffer(bytes(data), dtype=np.uint8)
-        self._buf += new.tobytes()
-        self._sums = np.concatenate((self._sums, self._sums[-1] + np.cumsum(new, dtype=np.int64)))
+        self._buf += data
         self._index_markers()
         base = self._base
         end_of_data = base + len(self._buf)
@@ -747,6 +756,5 @@ class PacketParser:
             self._consume(pos)
         if pos > base:
             del self._buf[: pos - base]
-            self._sums = self._sums[pos - base :] - self._sums[pos - base]
             self._base = pos
         return out

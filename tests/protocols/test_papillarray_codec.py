@@ -363,7 +363,16 @@ def test_command_bytes() -> None:
     assert encode_command(HubCommand(Command.SET_RATE, 250)) == b"f250\n"
 
 
-@pytest.mark.parametrize(("command", "rate"), [(Command.SET_RATE, 200), (Command.SET_RATE, None), (Command.BIAS, 100)])
+@pytest.mark.parametrize(
+    ("command", "rate"),
+    [
+        (Command.SET_RATE, 200),
+        (Command.SET_RATE, None),
+        (Command.BIAS, 100),
+        (Command.SET_RATE, 250.0),  # found by benchmarks/fuzz.py: went out as "f250.0", which no hub reads
+        (Command.SET_RATE, True),
+    ],
+)
 def test_bad_command_arguments_are_refused(command: Command, rate: int | None) -> None:
     with pytest.raises(ProtocolError) as info:
         encode_command(command, rate)

@@ -47,7 +47,7 @@ each half would have to expose the other's internals.
 from __future__ import annotations
 
 import struct
-from bisect import bisect_left, bisect_right
+from bisect import bisect_left, bisect_right, insort
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
@@ -604,11 +604,14 @@ class PacketParser:
         # Positions are absolute stream offsets; self._buf holds the stream from self._base on.
         self._buf = bytearray()
         self._base = 0
+        self._waiting_for: int | None = None  # the open start marker the last read ended waiting on
         self._scanned = 0  # markers starting before this offset have been found
         self._starts: list[int] = []  # open start markers, ascending
         self._ends: list[int] = []  # end markers not yet consumed, ascending
         self._matches: dict[int, list[int]] = {}  # start -> ends whose checksum matches, ascending
         self._decoded: dict[tuple[int, int], PapillArrayPacket | None] = {}  # (start, end) -> packet, None: broken
+        self._closed: dict[int, tuple[PapillArrayPacket, int]] = {}  # start -> (packet, end) of its first intact end
+        self._closed_starts: list[int] = []  # the keys of _closed, ascending
 
     @property
     def pending_bytes(self) -> int:
@@ -661,16 +664,25 @@ class PacketParser:
             if high - low == 1:  # the usual case, one packet start before its end: sum that body alone
                 start = starts[low]
                 body = np.frombuffer(buf, dtype=np.uint8, count=end - 2 - start - 4, offset=start + 4 - base)
-                if int(body.sum(dtype=np.uint64)) & 0xFFFF == sent:
-                    self._matches.setdefault(start, []).append(end)
+                matched = int(body.sum(dtype=np.uint64)) & 0xFFFF == sent
                 del body  # releases the buffer, so the bytearray can shrink again
+                if matched:
+                    self._match(start, end)
                 continue
             if sums is None:
                 sums = np.concatenate(([0], np.cumsum(np.frombuffer(buf, dtype=np.uint8), dtype=np.int64)))
             candidates = np.array(starts[low:high], dtype=np.int64)
             body_sums = sums[end - 2 - base] - sums[candidates + len(START_MARKER) - base]  # a checksum per start
             for start in candidates[(body_sums & 0xFFFF) == sent].tolist():
-                self._matches.setdefault(start, []).append(end)
+                self._match(start, end)
+
+    def _match(self, start: int, end: int) -> None:
+        """A body whose checksum matches: decode it now (once), and remember the first intact end of each start."""
+        self._matches.setdefault(start, []).append(end)
+        packet = self._packet(start, end)
+        if packet is not None and start not in self._closed:
+            self._closed[start] = (packet, end)
+            insort(self._closed_starts, start)
 
     def _packet(self, start: int, end: int) -> PapillArrayPacket | None:
         """The packet from ``start`` to the end marker at ``end`` (checksum already matched), None if it is broken."""
@@ -686,11 +698,7 @@ class PacketParser:
 
     def _intact(self, start: int) -> tuple[PapillArrayPacket, int] | None:
         """(packet, end) for the first end that closes an intact packet from ``start``, if one has arrived."""
-        for end in self._matches.get(start, ()):
-            packet = self._packet(start, end)
-            if packet is not None:
-                return packet, end
-        return None
+        return self._closed.get(start)
 
     def _give_up(self, start: int, stop: int) -> None:
         """Count a start marker with no intact packet ending by ``stop``: a framing error when a body with the right
@@ -710,6 +718,8 @@ class PacketParser:
         for start in self._starts[:dropped]:
             for end in self._matches.pop(start, ()):
                 self._decoded.pop((start, end), None)
+            self._closed.pop(start, None)
+        del self._closed_starts[: bisect_left(self._closed_starts, upto)]
         del self._starts[:dropped]
         del self._ends[: bisect_left(self._ends, upto)]
 
@@ -717,7 +727,16 @@ class PacketParser:
         """Append received bytes; return the packets completed by them (possibly none)."""
         if not data:
             return []
+        old_len = len(self._buf)
         self._buf += data
+        waiting = self._waiting_for
+        if (
+            waiting is not None
+            and self._base + len(self._buf) < waiting + self.max_packet_len
+            and self._buf.find(END_MARKER, max(0, old_len - (len(END_MARKER) - 1))) < 0
+        ):
+            return []  # still inside the packet the buffer waits on: nothing can close without a new end marker
+        self._waiting_for = None
         self._index_markers()
         base = self._base
         end_of_data = base + len(self._buf)
@@ -747,9 +766,11 @@ class PacketParser:
                 self._consume(pos)
                 continue
             # Not closed yet: wait for more bytes, unless a later start marker already opens an intact packet.
-            later = next((s for s in sorted(self._matches) if s > start and self._intact(s) is not None), None)
-            if later is None:
+            at = bisect_right(self._closed_starts, start)
+            if at == len(self._closed_starts):
+                self._waiting_for = start
                 break
+            later = self._closed_starts[at]
             self._give_up(start, later)
             self.bytes_dropped += later - start
             pos = later

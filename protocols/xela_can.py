@@ -318,7 +318,7 @@ class FrameAssembler:
             raise ProtocolError(f"stale_after_ns must be > 0, got {stale_after_ns}", hint="e.g. 250_000_000 (250 ms)")
         self.id_map = id_map
         self.stale_after_ns = stale_after_ns
-        n = id_map.n_taxels
+        n = self._n = id_map.n_taxels
         self._index = id_map._index
         if cycle_start_id is not None and cycle_start_id not in self._index:
             raise ProtocolError(
@@ -382,7 +382,7 @@ class FrameAssembler:
             emitted = self._finish(pending, one_cycle=ends, complete=True)
         elif self._n_seen > 0 and (self._seen[index] or marked):
             pause_alone = after_pause and not (self._seen[index] or wrapped or index == self._cycle_start_index)
-            short = 2 * self._n_seen < self.n_taxels
+            short = 2 * self._n_seen < self._n
             starts = self._start_marked or _pause_around(self._gap_before, self._max_gap_ns)
             ends = marked or _pause_around(gap, self._max_gap_ns)
             emitted = self._finish(self._close(), one_cycle=starts and ends, complete=False)
@@ -416,14 +416,14 @@ class FrameAssembler:
         else:
             self._bad_this_cycle[index] = True
             self.invalid_messages += 1
-        if self._n_seen < self.n_taxels:
+        if self._n_seen < self._n:
             return emitted
         # Complete. Cannot coincide with an early close or a pending frame (either leaves one taxel seen) unless the
         # map has one taxel, where every message is a whole cycle.
         self._short_pause_closes = 0
         starts = self._start_marked or _pause_around(self._gap_before, self._max_gap_ns)
         snapshot = self._close()
-        if self.n_taxels == 1 or (starts and self._position is not None):
+        if self._n == 1 or (starts and self._position is not None):
             return self._finish(snapshot, one_cycle=True, complete=True)
         if starts:
             self._pending = snapshot
@@ -432,10 +432,10 @@ class FrameAssembler:
 
     def _learn(self, gap: int) -> None:
         """Collect one cycle's worth of gaps; a window with one clear pause counts toward learning the threshold."""
-        if self.n_taxels < 2:
+        if self._n < 2:
             return  # one message per cycle: every gap is a pause
         self._window.append(gap)
-        if len(self._window) < self.n_taxels:
+        if len(self._window) < self._n:
             return
         longest, runner_up = sorted(self._window)[-1:-3:-1]
         self._window = []
@@ -484,11 +484,11 @@ class FrameAssembler:
             self.send_order = None  # the board's order changed, or the bus loses too much to tell: learn again
             self._position = None
             self._proven_orders.clear()
-        elif self._position is None and complete and one_cycle and self.n_taxels > 1:
+        elif self._position is None and complete and one_cycle and self._n > 1:
             self._proven_orders.append(snapshot.arrival)
             if len(self._proven_orders) == ORDER_LEARN_FRAMES and len(set(self._proven_orders)) == 1:
                 self.send_order = snapshot.arrival
-                position = [0] * self.n_taxels
+                position = [0] * self._n
                 for place, index in enumerate(snapshot.arrival):
                     position[index] = place
                 self._position = position

@@ -56,8 +56,10 @@ TAXEL_PAYLOAD_LEN = 8
 MIN_TAXEL_PAYLOAD_LEN = 7  # byte 0 + three big-endian uint16 axes
 # Learning where a cycle starts: one gap this many times any other in each of this many windows of one cycle's worth
 # of messages in a row. A burst of 24 messages at 1 Mbit/s takes ~3 ms; at 100 frames/s the pause before the next
-# burst is ~7 ms, ~60x the ~0.11 ms between messages.
-BURST_GAP_RATIO = 3
+# burst is ~7 ms, ~60x the ~0.11 ms between messages. Lost messages leave gaps too (k lost in a row: k + 1 times the
+# usual gap), so a pause must be 8 times every other gap: faking one takes 7 messages lost in a row (at 10 % loss,
+# 1 in 10 million; at 3x, 2 lost in a row taught a host that reads bursts back to back a "pause" inside a cycle).
+BURST_GAP_RATIO = 8
 LEARN_CYCLES = 3
 SHORT_PAUSE_CLOSES = 3  # frames in a row cut by a pause alone with under half the taxels: pauses mark no cycle
 ORDER_LEARN_FRAMES = 3  # proven whole cycles in a row in one order make it the learned send order

@@ -5,7 +5,7 @@ from __future__ import annotations
 import contextlib
 import socket
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 import pytest
@@ -196,7 +196,7 @@ def test_a_server_that_only_sends_the_wrong_sensor_size_is_an_error_with_a_hint(
 
 
 @contextlib.contextmanager
-def _scripted_server(script: list[str | bytes]) -> Iterator[str]:
+def _scripted_server(script: Sequence[str | bytes]) -> Iterator[str]:
     """A WebSocket server on 127.0.0.1 that sends a welcome, then ``script``, then holds the connection open."""
     done = threading.Event()
 

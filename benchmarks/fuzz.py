@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 from pathlib import Path
 
@@ -69,6 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--render-only", action="store_true", help="only regenerate the table from --output")
     parser.add_argument("--show", nargs=2, metavar=("TARGET", "INDEX"), help="print one input of the campaign")
     args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.ERROR)  # the drivers' warnings about fuzzed packets are the point, not news
     if args.inputs < 1:
         parser.error("--inputs must be at least 1")
     if args.show:

@@ -32,6 +32,30 @@ BIAS_SETTLE_S = 2.0  # the hub takes up to 2 s to bias
 MIN_TARE_FRAMES = 5
 RATED_SHEAR_N = 4.0  # per-pillar Fx, Fy range
 RATED_NORMAL_N = 15.0  # per-pillar Fz range
+RATED_SHEAR_MM = 1.0  # per-pillar Dx, Dy range
+RATED_NORMAL_MM = 2.5  # per-pillar Dz range
+# Integrity (issue 28). The stream's checksum is the 16-bit sum of the body bytes, so two flips of the same bit, one
+# 0->1 and one 1->0, cancel (about 6 % of random double bit flips; about three quarters of those still decode), as do
+# swapped bytes: such a packet cannot be told from a good one on the wire. What can be caught is a value no pillar
+# produces (documented in docs/reliability.md):
+# - range: beyond IMPOSSIBLE_RANGE_FACTOR times the rated range (Fx, Fy +-4 N, Fz 15 N, Dx, Dy +-1 mm, Dz 2.5 mm;
+#   PTS 2.1 spec) on any axis, or not finite. A tip 4 mm sideways would have passed its neighbour (6 mm pillars on a
+#   7 mm pitch), and the forces are a calibration of that displacement.
+# - rate: between packets dt apart no value moves more than the whole span of that range times
+#   1 - exp(-2 pi 235 Hz dt): the hub's anti-alias filter (-3 dB at about 235 Hz) passes nothing faster. At 1 kHz
+#   that is 77 % of the span per sample, so the range check catches most; both are counted.
+IMPOSSIBLE_RANGE_FACTOR = 4.0
+# Packets in a row whose slot holds another pillar count before the driver stops with an error: one is damage that
+# passed the checksum (counted, skipped); a tenth of a second of them at 500 Hz is another array in the slot.
+WRONG_SHAPE_LIMIT = 50
+PHYSICAL_LIMITS = IMPOSSIBLE_RANGE_FACTOR * np.array(
+    [RATED_SHEAR_N, RATED_SHEAR_N, RATED_NORMAL_N, RATED_SHEAR_MM, RATED_SHEAR_MM, RATED_NORMAL_MM]
+)  # |Fx| |Fy| |Fz| (N), |Dx| |Dy| |Dz| (mm)
+ANTI_ALIAS_HZ = 235.0
+LINK_CHECK = (
+    "16-bit byte-sum checksum: two flips of the same bit in opposite directions cancel (about 6 % of double bit "
+    "flips); values no pillar can report are counted in implausible_frames and flagged"
+)
 READ_CHUNK_BYTES = 65_536
 MAX_READS_PER_PUMP = 64
 IDLE_SLEEP_S = 0.002  # reader thread nap when the port had nothing (the port is read with timeout 0)
@@ -50,6 +74,19 @@ def papillarray_saturated(values: np.ndarray) -> np.ndarray:
         | (np.abs(values[:, 1]) >= RATED_SHEAR_N)
         | (values[:, 2] >= RATED_NORMAL_N)
     )
+
+
+def implausible_pillars(readings: np.ndarray, previous: np.ndarray | None, dt_s: float | None) -> np.ndarray:
+    """(n_pillars,) bool: pillars whose (n_pillars, 6) Fx Fy Fz (N) Dx Dy Dz (mm) reading no pillar can produce:
+    outside :data:`PHYSICAL_LIMITS` or not finite, or moved from ``previous`` (the last plausible reading, ``dt_s``
+    earlier) faster than the hub's anti-alias filter lets any signal move."""
+    readings = np.asarray(readings, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        bad = ~np.all(np.abs(readings) <= PHYSICAL_LIMITS, axis=1)  # NaN compares False: flagged
+        if previous is not None and dt_s is not None and dt_s > 0:
+            max_step = 2 * PHYSICAL_LIMITS * -np.expm1(-2 * np.pi * ANTI_ALIAS_HZ * dt_s)
+            bad |= np.any(np.abs(readings - previous) > max_step, axis=1)
+    return bad
 
 
 class PapillArrayDriver(PumpedSensor):
@@ -89,6 +126,10 @@ class PapillArrayDriver(PumpedSensor):
         self._parser = PacketParser()
         self._parser_seen = {"checksum_errors": 0, "framing_errors": 0, "bytes_dropped": 0}
         self._last_counter: int | None = None
+        self._last_plausible: np.ndarray | None = None  # (9, 6) last reading that passed the physics check
+        self._last_plausible_counter: int | None = None
+        self._wrong_shape_in_a_row = 0
+        self._health.link_check = LINK_CHECK
 
     # ---- transport --------------------------------------------------------------------------------------------
     def _open(self) -> None:
@@ -105,6 +146,8 @@ class PapillArrayDriver(PumpedSensor):
         self._port = port
         self._parser.reset()
         self._last_counter = None
+        self._last_plausible = None
+        self._last_plausible_counter = None
         self._write(encode_command(Command.SET_RATE, self.rate_hz))
         logger.info("papillarray: %s open, rate set to %d Hz", self.url, self.rate_hz)
 
@@ -166,22 +209,47 @@ class PapillArrayDriver(PumpedSensor):
                 continue
             sensor = packet.sensors[self.slot]
             if len(sensor.forces_n) != PAPILLARRAY.n_taxels:
+                self._count(checksum_errors=1)
+                self._wrong_shape_in_a_row += 1
+                if self._wrong_shape_in_a_row < WRONG_SHAPE_LIMIT:
+                    continue  # one damaged packet; the reader goes on
                 raise DeviceError(
-                    f"PapillArray slot {self.slot} reports {len(sensor.forces_n)} pillars; this project reads the "
-                    f"{PAPILLARRAY.n_taxels}-pillar (3x3) array",
+                    f"PapillArray slot {self.slot} reports {len(sensor.forces_n)} pillars in {WRONG_SHAPE_LIMIT} "
+                    f"packets in a row; this project reads the {PAPILLARRAY.n_taxels}-pillar (3x3) array",
                     hint="plug the 3x3 PapillArray into this slot, or choose its slot in the rig file",
                 )
+            self._wrong_shape_in_a_row = 0
+            forces = np.asarray(sensor.forces_n, dtype=np.float64)
+            displacements = np.asarray(sensor.displacements_mm, dtype=np.float64)
+            implausible = self._implausible(np.hstack((forces, displacements)), packet.counter)
             frames.append(
                 TactileFrame(
                     sensor=PAPILLARRAY.name,
                     host_t_ns=now_ns,
-                    values=np.asarray(sensor.forces_n, dtype=np.float64),
+                    values=forces,
                     seq=packet.counter,
                     device_t_us=packet.timestamp_us,
-                    displacement_mm=np.asarray(sensor.displacements_mm, dtype=np.float64),
+                    displacement_mm=displacements,
+                    valid=not implausible.any(),
+                    stale_mask=implausible if implausible.any() else None,
                 )
             )
         return frames
+
+    def _implausible(self, readings: np.ndarray, counter: int | None) -> np.ndarray:
+        """Pillars of this packet no pillar could report (counted); else the reading becomes the last plausible one."""
+        dt_s = None
+        if counter is not None and self._last_plausible_counter is not None:
+            samples = (counter - self._last_plausible_counter) & 0xFFFF_FFFF
+            dt_s = samples / self.rate_hz if 0 < samples < 0x8000_0000 else None
+        bad = implausible_pillars(readings, self._last_plausible, dt_s)
+        if bad.any():
+            self._count(implausible_frames=1)
+            logger.debug("papillarray: packet %s holds impossible values on pillars %s", counter, np.flatnonzero(bad))
+        else:
+            self._last_plausible = readings
+            self._last_plausible_counter = counter
+        return bad
 
     def _account_parser(self) -> None:
         counters = self._parser.counters()

@@ -30,6 +30,8 @@ class SensorHealth:
     bytes_dropped: int = 0  # garbage skipped while resynchronising
     stalls: int = 0  # times no frame arrived within the stall timeout
     reconnects: int = 0
+    implausible_frames: int = 0  # passed the link's own check, but hold values the sensor cannot produce
+    link_check: str = ""  # what the link's own integrity check cannot catch, where the driver knows
     last_frame_ns: int | None = None
     saturated_taxels: list[int] = field(default_factory=list)
     dead_taxels: list[int] = field(default_factory=list)

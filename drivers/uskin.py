@@ -118,7 +118,10 @@ class UskinCanDriver(PumpedSensor):
     """uSPa46 over raw CAN: sends the start command on connect, assembles per-taxel messages into frames.
 
     ``bus`` is any python-can bus (socketcan, slcan, pcan, virtual); with ``owns_bus`` the driver shuts it down on
-    disconnect. Frames have no device counter (``seq`` None): the wire has none.
+    disconnect. Frames have no device counter (``seq`` None): the wire has none, so a frame is valid only when the
+    assembler proves it holds one controller cycle (see :class:`~protocols.xela_can.FrameAssembler`); the first few
+    frames after connecting, before it has learned where cycles start, are flagged. ``cycle_start_id`` is for
+    firmware known to send one id first (needed where the controller spreads its messages evenly over the cycle).
     """
 
     def __init__(
@@ -131,6 +134,7 @@ class UskinCanDriver(PumpedSensor):
         stall_timeout_s: float = 0.5,
         owns_bus: bool = False,
         max_tare_spread_counts: float = MAX_TARE_SPREAD_COUNTS,
+        cycle_start_id: int | None = None,
     ) -> None:
         if id_map.n_taxels != USKIN.n_taxels:
             raise DeviceError(
@@ -152,7 +156,8 @@ class UskinCanDriver(PumpedSensor):
         self.max_tare_spread_counts = max_tare_spread_counts
         self._start_command = encode_stream_command(controller_id, True)
         self._stop_command = encode_stream_command(controller_id, False)
-        self._assembler = FrameAssembler(id_map, stale_after_ns=round(STALE_AFTER_S * 1e9))
+        self.cycle_start_id = cycle_start_id
+        self._assembler = self._new_assembler()
 
     # ---- transport --------------------------------------------------------------------------------------------
     def _send(self, command: tuple[int, bytes]) -> None:
@@ -166,8 +171,13 @@ class UskinCanDriver(PumpedSensor):
                 hint="check the CAN cable, termination and that the bus is up at 1 Mbit/s",
             ) from exc
 
+    def _new_assembler(self) -> FrameAssembler:
+        return FrameAssembler(
+            self.id_map, stale_after_ns=round(STALE_AFTER_S * 1e9), cycle_start_id=self.cycle_start_id
+        )
+
     def _open(self) -> None:
-        self._assembler = FrameAssembler(self.id_map, stale_after_ns=round(STALE_AFTER_S * 1e9))
+        self._assembler = self._new_assembler()
         self._send(self._start_command)
         logger.info("uskin: start command sent to controller %d", self.controller_id)
 
@@ -265,7 +275,8 @@ class UskinCanDriver(PumpedSensor):
         return uskin_host_tare(frames, self.clock.now_ns(), self.max_tare_spread_counts)
 
     def link_counters(self) -> dict[str, int]:
-        """The frame assembler's counters (messages, unknown_ids, invalid_messages, frames, incomplete_frames)."""
+        """The frame assembler's counters (messages, unknown_ids, invalid_messages, frames, incomplete_frames,
+        unproven_frames)."""
         return self._assembler.counters()
 
     def identity(self) -> dict[str, Any]:
@@ -282,6 +293,9 @@ XELA_SERVER_HINT = (
     "versions ignore --ip and listen on the primary network address, not 127.0.0.1"
 )
 RETRY_INTERVAL_S = 0.1  # between connection attempts while the server starts
+# Messages in a row whose sensor has the wrong number of taxels before the driver stops with an error: one such
+# message is damage (counted, skipped); half a second of them at 100 Hz is the wrong sensor number or model.
+WRONG_SHAPE_LIMIT = 50
 CLIENT_MAX_QUEUE = 4096  # messages the WebSocket client buffers between polls (~40 s at 100 Hz)
 
 
@@ -319,6 +333,7 @@ class UskinXelaServerDriver(PumpedSensor):
         self._ws_stack: contextlib.ExitStack | None = None
         self._last_seq: int | None = None
         self._missing_sensor_logged = False
+        self._wrong_shape_in_a_row = 0
 
     def _open(self) -> None:
         deadline = time.monotonic() + self.connect_timeout_s
@@ -401,11 +416,16 @@ class UskinXelaServerDriver(PumpedSensor):
                 self._missing_sensor_logged = True
             return None
         if sensor.values.shape != USKIN.frame_shape:
+            self._count(checksum_errors=1)
+            self._wrong_shape_in_a_row += 1
+            if self._wrong_shape_in_a_row < WRONG_SHAPE_LIMIT:
+                return None  # one damaged message; the reader goes on
             raise DeviceError(
-                f"xela_server sensor {self.sensor_number} ({sensor.model}) has {sensor.taxels} taxels, "
-                f"the uSPa46 has {USKIN.n_taxels}",
+                f"xela_server sensor {self.sensor_number} ({sensor.model[:40]}) has {sensor.taxels} taxels in "
+                f"{WRONG_SHAPE_LIMIT} messages in a row, the uSPa46 has {USKIN.n_taxels}",
                 hint="pick the uSPa46's sensor number (--sensor-number) or fix the model in xServ.ini",
             )
+        self._wrong_shape_in_a_row = 0
         self.model = sensor.model
         invalid = invalid_taxels(sensor.values)  # e.g. FA00 placeholders while the server has no data yet
         return TactileFrame(

@@ -47,6 +47,7 @@ each half would have to expose the other's internals.
 from __future__ import annotations
 
 import struct
+from bisect import bisect_left, bisect_right, insort
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
@@ -498,7 +499,8 @@ class _Layout:
         return len(u8) == self.length and bool(np.array_equal(u8[self.struct_pos], self.struct_val))
 
     def extract(self, body: bytes, u8: np.ndarray) -> PapillArrayPacket:
-        floats = u8[self.float_bytes].view("<f4").astype(np.float64)
+        with np.errstate(invalid="ignore"):  # a signalling NaN on the wire stays NaN, without a warning
+            floats = u8[self.float_bytes].view("<f4").astype(np.float64)
         states = u8[self.state_pos].view(np.int8).astype(np.int64)
         counter, timestamp_us = _HUB.unpack_from(body, self.hub_pos) if self.hub_pos >= 0 else (None, None)
         sensors = []
@@ -577,19 +579,39 @@ class PacketParser:
     ``packets`` decoded, ``bytes_dropped`` skipped (garbage and broken packets), ``checksum_errors`` and
     ``framing_errors`` (no end marker, or a body that does not decode) per start marker given up. The body layout
     of the last packet is remembered, so a stream of same-shaped packets skips re-walking the body.
+
+    Linear time, however the bytes come (marker-dense garbage, any chunk sizes): each marker is found once; each end
+    marker is checked against every open start marker before it at once, from running byte sums (a checksum is a
+    difference of two sums); only the rare (start, end) pairs whose checksum matches are decoded, each at most once.
+    Work per byte is bounded by the markers within ``max_packet_len`` of it, never by how often it was fed.
     """
 
     def __init__(self, max_packet_len: int = MAX_PACKET_LEN) -> None:
         if max_packet_len < _FRAMING_OVERHEAD + 1:
             raise ProtocolError(f"max_packet_len {max_packet_len} too small", hint="the vendor SDK uses 2048")
         self.max_packet_len = max_packet_len
-        self._buf = bytearray()
         self._layout: _Layout | None = None
-        self._waiting = False  # the buffer opens with a start marker whose packet is not complete yet
         self.packets = 0
         self.bytes_dropped = 0
         self.checksum_errors = 0
         self.framing_errors = 0
+        # work done, for benchmarks and tests: (start, end) marker pairs whose checksum was compared, bodies decoded
+        self.pairs_checked = 0
+        self.bodies_decoded = 0
+        self._clear()
+
+    def _clear(self) -> None:
+        # Positions are absolute stream offsets; self._buf holds the stream from self._base on.
+        self._buf = bytearray()
+        self._base = 0
+        self._waiting_for: int | None = None  # the open start marker the last read ended waiting on
+        self._scanned = 0  # markers starting before this offset have been found
+        self._starts: list[int] = []  # open start markers, ascending
+        self._ends: list[int] = []  # end markers not yet consumed, ascending
+        self._matches: dict[int, list[int]] = {}  # start -> ends whose checksum matches, ascending
+        self._decoded: dict[tuple[int, int], PapillArrayPacket | None] = {}  # (start, end) -> packet, None: broken
+        self._closed: dict[int, tuple[PapillArrayPacket, int]] = {}  # start -> (packet, end) of its first intact end
+        self._closed_starts: list[int] = []  # the keys of _closed, ascending
 
     @property
     def pending_bytes(self) -> int:
@@ -598,8 +620,7 @@ class PacketParser:
 
     def reset(self) -> None:
         """Forget buffered bytes (e.g. after reopening the port); counters are kept."""
-        self._buf.clear()
-        self._waiting = False
+        self._clear()
 
     def counters(self) -> dict[str, int]:
         return {
@@ -615,75 +636,146 @@ class PacketParser:
             layout = self._layout = _Layout(body)
         return layout.extract(body, u8)
 
-    def _try_start(self, buf: bytearray, start: int, stop: int) -> tuple[PapillArrayPacket, int] | str | None:
-        """Packet opening at ``start`` and ending by ``stop``: (packet, end index), else why not (None = no end)."""
-        failure: str | None = None
-        search_from = start + len(START_MARKER) + 1 + 2
-        while True:
-            end = buf.find(END_MARKER, search_from, stop)
-            if end < 0:
-                return failure
-            body = bytes(buf[start + 4 : end - 2])
-            u8 = np.frombuffer(body, dtype=np.uint8)
-            if int(u8.sum(dtype=np.uint64)) & 0xFFFF == _U16.unpack_from(buf, end - 2)[0]:
-                try:
-                    packet = self._decode(body, u8)
-                except ProtocolError:
-                    failure = _FRAMING_FAIL
-                else:
-                    return packet, end + len(END_MARKER)
-            elif failure is None:
-                failure = _CHECKSUM_FAIL
-            search_from = end + 1
+    def _index_markers(self) -> None:
+        """Find the markers the new bytes completed, and check each new end against the open starts before it."""
+        buf, base = self._buf, self._base
+        end_of_data = base + len(buf)
+        new_starts: list[int] = []
+        new_ends: list[int] = []
+        for marker, found in ((START_MARKER, new_starts), (END_MARKER, new_ends)):
+            at = buf.find(marker, max(0, self._scanned - base))
+            while at >= 0:
+                found.append(base + at)
+                at = buf.find(marker, at + 1)
+        self._scanned = max(self._scanned, end_of_data - (len(START_MARKER) - 1))
+        self._starts += new_starts
+        max_len = self.max_packet_len
+        starts = self._starts
+        sums: np.ndarray | None = None  # sums[i]: byte sum of _buf[:i], made once per read that brings an end marker
+        for end in new_ends:
+            self._ends.append(end)
+            # starts whose packet could end here: a body of >= 1 byte and the checksum before it, within max_len
+            low = bisect_left(starts, end + len(END_MARKER) - max_len)
+            high = bisect_right(starts, end - len(START_MARKER) - 3)
+            if low >= high:
+                continue
+            self.pairs_checked += high - low
+            sent = buf[end - 2 - base] | buf[end - 1 - base] << 8
+            if high - low == 1:  # the usual case, one packet start before its end: sum that body alone
+                start = starts[low]
+                body = np.frombuffer(buf, dtype=np.uint8, count=end - 2 - start - 4, offset=start + 4 - base)
+                matched = int(body.sum(dtype=np.uint64)) & 0xFFFF == sent
+                del body  # releases the buffer, so the bytearray can shrink again
+                if matched:
+                    self._match(start, end)
+                continue
+            if sums is None:
+                sums = np.concatenate(([0], np.cumsum(np.frombuffer(buf, dtype=np.uint8), dtype=np.int64)))
+            candidates = np.array(starts[low:high], dtype=np.int64)
+            body_sums = sums[end - 2 - base] - sums[candidates + len(START_MARKER) - base]  # a checksum per start
+            for start in candidates[(body_sums & 0xFFFF) == sent].tolist():
+                self._match(start, end)
 
-    def _give_up(self, failure: str | None) -> None:
-        if failure == _CHECKSUM_FAIL:
+    def _match(self, start: int, end: int) -> None:
+        """A body whose checksum matches: decode it now (once), and remember the first intact end of each start."""
+        self._matches.setdefault(start, []).append(end)
+        packet = self._packet(start, end)
+        if packet is not None and start not in self._closed:
+            self._closed[start] = (packet, end)
+            insort(self._closed_starts, start)
+
+    def _packet(self, start: int, end: int) -> PapillArrayPacket | None:
+        """The packet from ``start`` to the end marker at ``end`` (checksum already matched), None if it is broken."""
+        key = (start, end)
+        if key not in self._decoded:
+            body = bytes(self._buf[start + len(START_MARKER) - self._base : end - 2 - self._base])
+            self.bodies_decoded += 1
+            try:
+                self._decoded[key] = self._decode(body, np.frombuffer(body, dtype=np.uint8))
+            except ProtocolError:
+                self._decoded[key] = None
+        return self._decoded[key]
+
+    def _intact(self, start: int) -> tuple[PapillArrayPacket, int] | None:
+        """(packet, end) for the first end that closes an intact packet from ``start``, if one has arrived."""
+        return self._closed.get(start)
+
+    def _give_up(self, start: int, stop: int) -> None:
+        """Count a start marker with no intact packet ending by ``stop``: a framing error when a body with the right
+        checksum did not decode or no end marker came; a checksum error when only checksums failed."""
+        decode_failed = any(self._decoded.get((start, end), 0) is None for end in self._matches.get(start, ()) if
+                            end + len(END_MARKER) <= stop)  # fmt: skip
+        first_end = bisect_left(self._ends, start + len(START_MARKER) + 3)
+        any_end = first_end < len(self._ends) and self._ends[first_end] + len(END_MARKER) <= stop
+        if any_end and not decode_failed:
             self.checksum_errors += 1
         else:
             self.framing_errors += 1
 
+    def _consume(self, upto: int) -> None:
+        """Forget everything before stream offset ``upto``."""
+        dropped = bisect_left(self._starts, upto)
+        for start in self._starts[:dropped]:
+            for end in self._matches.pop(start, ()):
+                self._decoded.pop((start, end), None)
+            self._closed.pop(start, None)
+        del self._closed_starts[: bisect_left(self._closed_starts, upto)]
+        del self._starts[:dropped]
+        del self._ends[: bisect_left(self._ends, upto)]
+
     def feed(self, data: bytes | bytearray | memoryview) -> list[PapillArrayPacket]:
         """Append received bytes; return the packets completed by them (possibly none)."""
-        buf = self._buf
-        old_len = len(buf)
-        buf += data
-        max_len = self.max_packet_len
-        if self._waiting and len(buf) < max_len and buf.find(END_MARKER, max(0, old_len - 3)) < 0:
-            # Still inside the packet that opens the buffer: nothing can close without a new end marker.
+        if not data:
             return []
-        self._waiting = False
+        old_len = len(self._buf)
+        self._buf += data
+        waiting = self._waiting_for
+        if (
+            waiting is not None
+            and self._base + len(self._buf) < waiting + self.max_packet_len
+            and self._buf.find(END_MARKER, max(0, old_len - (len(END_MARKER) - 1))) < 0
+        ):
+            return []  # still inside the packet the buffer waits on: nothing can close without a new end marker
+        self._waiting_for = None
+        self._index_markers()
+        base = self._base
+        end_of_data = base + len(self._buf)
+        max_len = self.max_packet_len
         out: list[PapillArrayPacket] = []
-        pos = 0  # everything before pos is consumed
+        pos = base  # everything before pos is consumed
         while True:
-            start = buf.find(START_MARKER, pos)
-            if start < 0:
-                keep_from = max(pos, len(buf) - (len(START_MARKER) - 1))  # a marker may be split across feeds
+            if not self._starts:
+                keep_from = max(pos, end_of_data - (len(START_MARKER) - 1))  # a marker may be split across feeds
                 self.bytes_dropped += keep_from - pos
                 pos = keep_from
                 break
+            start = self._starts[0]
             self.bytes_dropped += start - pos
             pos = start
-            result = self._try_start(buf, start, start + max_len)
-            if isinstance(result, tuple):
-                out.append(result[0])
+            intact = self._intact(start)
+            if intact is not None:
+                out.append(intact[0])
                 self.packets += 1
-                pos = result[1]
+                pos = intact[1] + len(END_MARKER)
+                self._consume(pos)
                 continue
-            if len(buf) >= start + max_len:
-                self._give_up(result)
+            if end_of_data >= start + max_len:  # every end it could have has arrived
+                self._give_up(start, start + max_len)
                 self.bytes_dropped += 1
                 pos = start + 1
+                self._consume(pos)
                 continue
             # Not closed yet: wait for more bytes, unless a later start marker already opens an intact packet.
-            later = buf.find(START_MARKER, start + 1)
-            while later >= 0 and not isinstance(self._try_start(buf, later, later + max_len), tuple):
-                later = buf.find(START_MARKER, later + 1)
-            if later < 0:
-                self._waiting = True  # the buffer now opens with this start marker
+            at = bisect_right(self._closed_starts, start)
+            if at == len(self._closed_starts):
+                self._waiting_for = start
                 break
-            failure = self._try_start(buf, start, later)
-            self._give_up(failure if not isinstance(failure, tuple) else None)
+            later = self._closed_starts[at]
+            self._give_up(start, later)
             self.bytes_dropped += later - start
             pos = later
-        del buf[:pos]
+            self._consume(pos)
+        if pos > base:
+            del self._buf[: pos - base]
+            self._base = pos
         return out

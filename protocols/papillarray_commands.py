@@ -11,6 +11,7 @@ Pure codec: no I/O, threads or clocks.
 from __future__ import annotations
 
 import enum
+import numbers
 from dataclasses import dataclass
 
 from protocols.errors import ProtocolError
@@ -42,11 +43,12 @@ def encode_command(command: Command | HubCommand, rate_hz: int | None = None) ->
             rate_hz = command.rate_hz
         command = command.command
     if command is Command.SET_RATE:
-        if rate_hz not in VALID_RATES_HZ:
+        # an int, not a float or bool that compares equal: 250.0 would go out as "f250.0", which no hub reads
+        if isinstance(rate_hz, bool) or not isinstance(rate_hz, numbers.Integral) or rate_hz not in VALID_RATES_HZ:
             raise ProtocolError(
                 f"sampling rate {rate_hz!r} Hz is not supported", hint=f"use one of {VALID_RATES_HZ} Hz"
             )
-        return f"f{rate_hz}\n".encode("ascii")
+        return f"f{int(rate_hz)}\n".encode("ascii")
     if rate_hz is not None:
         raise ProtocolError(f"{command.name} takes no rate", hint="pass rate_hz only with SET_RATE")
     return f"{command.value}\n".encode("ascii")

@@ -19,11 +19,11 @@ Wire format (1 Mbit/s CAN, standard 11-bit arbitration ids, classic frames of up
   Other firmware uses other ids (one used 0x710 + taxel index), so id maps are plain data (:class:`TaxelIdMap`).
   This project's taxel index is row-major, ``index = row * cols + col`` (drivers/layouts.py).
 * There is **no frame counter** on the wire: a frame is the latest message of every taxel id. The
-  :class:`FrameAssembler` closes a frame as soon as every taxel has reported once since the previous frame; when a
-  taxel reports a second time first (a cycle lost a message), the frame is closed early with the missing taxels
-  flagged in ``stale_mask``. Where the controller sends each cycle as a burst, the assembler learns the pause
-  between bursts, so a cycle that loses its first message, or a stream joined mid-cycle, does not shift later
-  frames.
+  :class:`FrameAssembler` closes a frame as soon as every taxel has reported once since the previous frame, or early
+  (missing taxels flagged) when a taxel repeats or a cycle start is seen. A frame is flagged valid only when every
+  taxel provably came from one cycle: it must begin and end at a cycle start that the wire shows, either a learned
+  pause between bursts, a learned fixed send order wrapping round, or a configured first id. Frames nothing proves
+  are flagged and counted (``unproven_frames``).
 
 Sources: XELA-Robotics/CAN-USB README and sensor-server/server.py, ROS/4x6.ini (reverse numbering), the XELA ROS
 manual v0.0.9b and manual v1.4.0 (sentinel example), the AIST o2as_xela_sensor driver and demo (0xFA rule, 1-byte
@@ -38,6 +38,7 @@ import struct
 from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -55,11 +56,23 @@ TAXEL_PAYLOAD_LEN = 8
 MIN_TAXEL_PAYLOAD_LEN = 7  # byte 0 + three big-endian uint16 axes
 # Learning where a cycle starts: one gap this many times any other in each of this many windows of one cycle's worth
 # of messages in a row. A burst of 24 messages at 1 Mbit/s takes ~3 ms; at 100 frames/s the pause before the next
-# burst is ~7 ms, ~60x the ~0.11 ms between messages.
-BURST_GAP_RATIO = 3
+# burst is ~7 ms, ~60x the ~0.11 ms between messages. Lost messages leave gaps too (k lost in a row: k + 1 times the
+# usual gap), so a pause must be 8 times every other gap: faking one takes 7 messages lost in a row (at 10 % loss,
+# 1 in 10 million; at 3x, 2 lost in a row taught a host that reads bursts back to back a "pause" inside a cycle).
+BURST_GAP_RATIO = 8
 LEARN_CYCLES = 3
+SHORT_PAUSE_CLOSES = 3  # frames in a row cut by a pause alone with under half the taxels: pauses mark no cycle
+ORDER_LEARN_FRAMES = 3  # proven whole cycles in a row in one order make it the learned send order
+FORGET_AFTER_FRAMES = 20  # frames in a row with none valid forget the learned order (at 2 % loss: p ~ 4e-9)
 
 _AXES = struct.Struct(">HHH")  # X, Y, Z counts at payload offset 1
+
+
+def _pause_around(gap_ns: int | None, max_inner_gap_ns: int) -> bool:
+    """True when a gap next to a frame is a pause by that frame's own timing: longer than nothing, and
+    :data:`BURST_GAP_RATIO` times every gap inside it. A frame that straddles a cycle boundary holds that boundary's
+    pause inside, so the gaps next to it are no longer than the pause it holds."""
+    return gap_ns is not None and gap_ns > 0 and gap_ns >= BURST_GAP_RATIO * max_inner_gap_ns
 
 
 def command_arbitration_id(controller_id: int) -> int:
@@ -229,32 +242,67 @@ class AssembledFrame:
 
     ``values``: (n_taxels, 3) int64 raw counts; a flagged taxel holds its last good value (0 if never seen).
     ``t_ns``: caller's timestamp of the last message that went into the frame.
+    ``one_cycle``: True only when every message of the frame provably came from one controller cycle (see
+    :class:`FrameAssembler`); when False, no taxel can be trusted to belong to the frame's moment.
     ``stale_mask``: (n_taxels,) bool, True where the taxel was missing this cycle, sent the invalid sentinel, or its
-    value is older than ``stale_after_ns``. ``valid`` is True only when no taxel is flagged.
+    value is older than ``stale_after_ns``, and True everywhere when ``one_cycle`` is False. ``valid`` is True only
+    when no taxel is flagged.
     """
 
     values: np.ndarray
     t_ns: int
     stale_mask: np.ndarray
     valid: bool
+    one_cycle: bool = True
+
+
+class _Snapshot(NamedTuple):
+    """A closed frame's contents before its validity is decided."""
+
+    values: np.ndarray
+    t_ns: int
+    flags: np.ndarray  # per taxel: missing, sentinel or too old
+    arrival: tuple[int, ...]  # taxel indices in the order their messages came
+    max_gap_ns: int  # longest gap between two of its messages
 
 
 class FrameAssembler:
     """Turns the per-taxel CAN message stream into frames (there is no frame counter on the wire).
 
-    A frame closes when every taxel has reported once since the previous frame, in whatever order they came. If a
-    taxel reports a second time before that (its cycle lost a message), the frame closes early, flagging the taxels
-    that did not report, and the repeating message opens the next frame.
+    A frame closes when every taxel has reported once since the previous frame, in whatever order they came, or
+    early when a taxel reports a second time (its cycle lost a message) or a cycle mark (below) arrives; the taxels
+    that did not report are flagged.
 
-    That alone cannot tell where a cycle starts: a cycle that lost its *first* message would be completed by the next
-    cycle's first message, and later frames would mix two cycles (so would a stream joined mid-cycle). Two things
-    mark a cycle's start. Learned (default): a controller that sends each cycle as a burst leaves one pause per cycle;
-    once :data:`LEARN_CYCLES` windows of one cycle's worth of messages in a row each held one gap at least
-    :data:`BURST_GAP_RATIO` times every other, a gap longer than the geometric mean of the pauses and the other gaps
-    closes a partial frame. Evenly spaced messages teach nothing, and frames close on completeness alone. Two frames
-    closed early by a pause with no complete frame between them (the timing changed, or the host's receive times do
-    not follow the device's bursts) switch the rule off for the life of the assembler. Fixed:
-    ``cycle_start_id``, for firmware known to send a given id first, closes a partial frame when that id arrives.
+    **A frame is valid only when every taxel provably belongs to one cycle.** Completeness alone proves nothing: a
+    cycle that lost its first message is completed by the next cycle's first message (23 taxels from cycle N, 1 from
+    N + 1), and from then on every frame would straddle two cycles. What the wire and the receive times can prove is
+    where a cycle *starts*; three marks do:
+
+    * a **pause**: a controller that sends each cycle as a burst leaves one pause per cycle. A whole frame is
+      bracketed by pauses by its own timing when the gaps before and after it are each :data:`BURST_GAP_RATIO`
+      times every gap inside it (a frame straddling two cycles holds the pause between them). Once
+      :data:`LEARN_CYCLES` windows of one cycle's worth of messages in a row each held one gap at least
+      :data:`BURST_GAP_RATIO` times every other, a gap longer than the geometric mean of the pauses and the other
+      gaps marks a cycle start. A lost message only lengthens the pause around it, so losses never switch this off;
+      :data:`SHORT_PAUSE_CLOSES` frames in a row cut by a pause with under half the taxels (the messages became
+      evenly spaced) do, and learning starts over.
+    * a **learned send order**: once :data:`ORDER_LEARN_FRAMES` proven frames in a row came in the same order, a
+      message whose place in that order is not after the previous message's marks a cycle start. It does not depend
+      on the receive times. :data:`FORGET_AFTER_FRAMES` frames in a row with none valid forget it.
+    * ``cycle_start_id``: for firmware known to send a given id first.
+
+    A complete frame is one cycle when a mark opened it and the message after it carries a mark too (a frame that
+    began at a mark and holds every taxel with nothing marked inside could otherwise still end in the next cycle's
+    first message); so without a learned order a frame comes out when the next message arrives. With a learned order
+    a complete marked frame holds every place of the order once, in order, so the next message is bound to be
+    marked and the frame comes out at once. Frames that cannot be proven (the first ones, before a pause or an order
+    is learned; every frame of a stream with neither, unless ``cycle_start_id`` is set) are flagged in every taxel
+    and counted in ``unproven_frames``.
+
+    What this cannot catch: a cycle boundary with no mark at all, inside a frame that is complete and marked at both
+    ends. With a learned order that takes the bus losing one cycle's worth of messages in a row across the boundary;
+    with pauses alone (a board that changes its order every cycle), a host whose receive times show the pause
+    consistently in the wrong place, which no wire without a counter can reveal.
 
     Unknown ids are counted and ignored; payloads too short to decode or carrying the sentinel count as invalid
     reports and flag their taxel. ``stale_after_ns`` bounds how old a value in an emitted frame can be.
@@ -272,7 +320,7 @@ class FrameAssembler:
             raise ProtocolError(f"stale_after_ns must be > 0, got {stale_after_ns}", hint="e.g. 250_000_000 (250 ms)")
         self.id_map = id_map
         self.stale_after_ns = stale_after_ns
-        n = id_map.n_taxels
+        n = self._n = id_map.n_taxels
         self._index = id_map._index
         if cycle_start_id is not None and cycle_start_id not in self._index:
             raise ProtocolError(
@@ -281,15 +329,25 @@ class FrameAssembler:
         self._cycle_start_index = None if cycle_start_id is None else self._index[cycle_start_id]
         self._learn_pauses = learn_pauses
         self._prev_t_ns: int | None = None  # time of the previous known-id message
+        self._prev_index: int | None = None  # its taxel
         self._window: list[int] = []  # gaps (ns) of the last < n messages
         self._pauses: deque[tuple[int, int]] = deque(maxlen=LEARN_CYCLES)  # (pause, next longest gap) per window
         self.pause_threshold_ns: int | None = None  # a gap this long starts a cycle (learned; None: not known)
-        self._pause_closes = 0  # frames closed early by a pause since the last complete frame
+        self._short_pause_closes = 0  # frames in a row cut by a pause alone with under half the taxels
+        self.send_order: tuple[int, ...] | None = None  # learned: taxel indices in the order the board sends them
+        self._position: list[int] | None = None  # taxel index -> its place in send_order
+        self._proven_orders: deque[tuple[int, ...]] = deque(maxlen=ORDER_LEARN_FRAMES)
+        self._frames_since_valid = 0
         self._values: list[list[int]] = [[0, 0, 0] for _ in range(n)]  # last good counts per taxel
         self._good_t_ns: list[int | None] = [None] * n  # time of each taxel's last good value
         self._bad_this_cycle: list[bool] = [False] * n  # reported, but invalid
-        self._seen: list[bool] = [False] * n  # reported since the last emitted frame
+        self._seen: list[bool] = [False] * n  # reported since the last closed frame
         self._n_seen = 0
+        self._arrival: list[int] = []  # taxels of the open frame, in arrival order
+        self._start_marked = False  # the open frame's first message carried a cycle mark
+        self._gap_before: int | None = None  # gap (ns) before the open frame's first message
+        self._max_gap_ns = 0  # longest gap between two messages of the open frame
+        self._pending: _Snapshot | None = None  # a complete frame waiting for the next message to mark its end
         self._last_t_ns = 0
         # counters (monotonic)
         self.messages = 0
@@ -297,6 +355,7 @@ class FrameAssembler:
         self.invalid_messages = 0
         self.frames = 0
         self.incomplete_frames = 0
+        self.unproven_frames = 0
 
     @property
     def n_taxels(self) -> int:
@@ -312,19 +371,40 @@ class FrameAssembler:
         gap = None if self._prev_t_ns is None else t_ns - self._prev_t_ns
         self._prev_t_ns = t_ns
         after_pause = gap is not None and self.pause_threshold_ns is not None and gap >= self.pause_threshold_ns
+        position = self._position
+        wrapped = (
+            position is not None and self._prev_index is not None and position[index] <= position[self._prev_index]
+        )
+        self._prev_index = index
+        marked = after_pause or wrapped or index == self._cycle_start_index
         emitted: AssembledFrame | None = None
-        repeated = self._seen[index]
-        if self._n_seen > 0 and (repeated or index == self._cycle_start_index or after_pause):
-            emitted = self._emit(incomplete=True)
-            if after_pause and not repeated:  # only the pause closed it
-                self._pause_closes += 1
-                if self._pause_closes >= 2:  # pauses do not mark cycles on this stream: stop using them for good
-                    self.pause_threshold_ns = None
-                    self._learn_pauses = False
-        if gap is not None and self._learn_pauses:
+        if self._pending is not None:  # the message after a complete frame decides whether it was one cycle
+            pending, self._pending = self._pending, None
+            ends = marked or _pause_around(gap, pending.max_gap_ns)
+            emitted = self._finish(pending, one_cycle=ends, complete=True)
+        elif self._n_seen > 0 and (self._seen[index] or marked):
+            pause_alone = after_pause and not (self._seen[index] or wrapped or index == self._cycle_start_index)
+            short = 2 * self._n_seen < self._n
+            starts = self._start_marked or _pause_around(self._gap_before, self._max_gap_ns)
+            ends = marked or _pause_around(gap, self._max_gap_ns)
+            emitted = self._finish(self._close(), one_cycle=starts and ends, complete=False)
+            self._short_pause_closes = self._short_pause_closes + 1 if pause_alone and short else 0
+            if self._short_pause_closes >= SHORT_PAUSE_CLOSES:  # pauses no longer mark cycles: learn again
+                self.pause_threshold_ns = None
+                self._window = []
+                self._pauses.clear()
+                self._short_pause_closes = 0
+        if gap is not None and self._learn_pauses and self.pause_threshold_ns is None:
             self._learn(gap)
+        if self._n_seen == 0:
+            self._start_marked = marked
+            self._gap_before = gap
+            self._max_gap_ns = 0
+        elif gap is not None:
+            self._max_gap_ns = max(self._max_gap_ns, abs(gap))  # time running backwards is no burst
         self._seen[index] = True
         self._n_seen += 1
+        self._arrival.append(index)
         self._last_t_ns = t_ns
         if len(data) >= MIN_TAXEL_PAYLOAD_LEN and data[1] < INVALID_X_MSB:
             x, y, z = _AXES.unpack_from(data, 1)
@@ -338,19 +418,26 @@ class FrameAssembler:
         else:
             self._bad_this_cycle[index] = True
             self.invalid_messages += 1
-        if self._n_seen == len(self._seen):
-            # Cannot coincide with an early close: that leaves exactly one taxel seen, and a 1-taxel map never
-            # closes early.
-            self._pause_closes = 0
-            return self._emit(incomplete=False)
-        return emitted
+        if self._n_seen < self._n:
+            return emitted
+        # Complete. Cannot coincide with an early close or a pending frame (either leaves one taxel seen) unless the
+        # map has one taxel, where every message is a whole cycle.
+        self._short_pause_closes = 0
+        starts = self._start_marked or _pause_around(self._gap_before, self._max_gap_ns)
+        snapshot = self._close()
+        if self._n == 1 or (starts and self._position is not None):
+            return self._finish(snapshot, one_cycle=True, complete=True)
+        if starts:
+            self._pending = snapshot
+            return emitted
+        return self._finish(snapshot, one_cycle=False, complete=True)
 
     def _learn(self, gap: int) -> None:
         """Collect one cycle's worth of gaps; a window with one clear pause counts toward learning the threshold."""
-        if self.n_taxels < 2:
+        if self._n < 2:
             return  # one message per cycle: every gap is a pause
         self._window.append(gap)
-        if len(self._window) < self.n_taxels:
+        if len(self._window) < self._n:
             return
         longest, runner_up = sorted(self._window)[-1:-3:-1]
         self._window = []
@@ -358,40 +445,68 @@ class FrameAssembler:
             self._pauses.clear()
             return
         self._pauses.append((longest, runner_up))
-        if self.pause_threshold_ns is None and len(self._pauses) == LEARN_CYCLES:
+        if len(self._pauses) == LEARN_CYCLES:
             shortest_pause = min(p for p, _ in self._pauses)
             longest_other = max(r for _, r in self._pauses)
             self.pause_threshold_ns = max(1, round(math.sqrt(shortest_pause * max(longest_other, 1))))
 
-    def _emit(self, *, incomplete: bool) -> AssembledFrame:
+    def _close(self) -> _Snapshot:
+        """The open frame's contents; the next message opens a new frame."""
         t_ns = self._last_t_ns
         oldest_ok = t_ns - self.stale_after_ns
-        stale = [
+        flags = [
             (not seen) or bad or good_t is None or good_t < oldest_ok
             for seen, bad, good_t in zip(self._seen, self._bad_this_cycle, self._good_t_ns, strict=True)
         ]
-        stale_mask = np.array(stale, dtype=bool)
-        frame = AssembledFrame(
-            values=np.array(self._values, dtype=np.int64),
-            t_ns=t_ns,
-            stale_mask=stale_mask,
-            valid=not any(stale),
+        snapshot = _Snapshot(
+            np.array(self._values, dtype=np.int64),
+            t_ns,
+            np.array(flags, dtype=bool),
+            tuple(self._arrival),
+            self._max_gap_ns,
         )
-        self.frames += 1
-        if incomplete:
-            self.incomplete_frames += 1
         n = len(self._seen)
         self._seen = [False] * n
         self._bad_this_cycle = [False] * n
         self._n_seen = 0
-        return frame
+        self._arrival = []
+        return snapshot
+
+    def _finish(self, snapshot: _Snapshot, *, one_cycle: bool, complete: bool) -> AssembledFrame:
+        """Decide a closed frame's validity, count it, and learn the send order from proven whole cycles."""
+        stale_mask = snapshot.flags if one_cycle else np.ones_like(snapshot.flags)
+        valid = one_cycle and not snapshot.flags.any()
+        self.frames += 1
+        if not complete:
+            self.incomplete_frames += 1
+        elif not one_cycle:
+            self.unproven_frames += 1
+        self._frames_since_valid = 0 if valid else self._frames_since_valid + 1
+        if self._position is not None and self._frames_since_valid >= FORGET_AFTER_FRAMES:
+            self.send_order = None  # the board's order changed, or the bus loses too much to tell: learn again
+            self._position = None
+            self._proven_orders.clear()
+        elif self._position is None and complete and one_cycle and self._n > 1:
+            self._proven_orders.append(snapshot.arrival)
+            if len(self._proven_orders) == ORDER_LEARN_FRAMES and len(set(self._proven_orders)) == 1:
+                self.send_order = snapshot.arrival
+                position = [0] * self._n
+                for place, index in enumerate(snapshot.arrival):
+                    position[index] = place
+                self._position = position
+                self._frames_since_valid = 0
+        return AssembledFrame(
+            values=snapshot.values, t_ns=snapshot.t_ns, stale_mask=stale_mask, valid=valid, one_cycle=one_cycle
+        )
 
     def counters(self) -> dict[str, int]:
-        """All counters as a dict (for health reports)."""
+        """All counters as a dict (for health reports); ``unproven_frames`` are complete frames flagged because
+        nothing proved they held one cycle."""
         return {
             "messages": self.messages,
             "unknown_ids": self.unknown_ids,
             "invalid_messages": self.invalid_messages,
             "frames": self.frames,
             "incomplete_frames": self.incomplete_frames,
+            "unproven_frames": self.unproven_frames,
         }

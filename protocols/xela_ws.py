@@ -22,15 +22,22 @@ notes/websocket-data-structure.md (hex string vs int list), as summarised in the
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
 from protocols.errors import ProtocolError
 
 MAX_COUNT = 0xFFFF
+HEX_DIGITS = frozenset(
+    "0123456789ABCDEFabcdef"
+)  # ASCII only: int(..., 16) would also take "-FFF", "0x1F", "F_FF", "١٢"
+MAX_SEQ = 2**63 - 1  # the sequence number is stored as int64
+# Server Unix time (s): non-negative, and small enough that microseconds stay exact in a float64 (2**53 us, the year
+# 2255); beyond that, device_t_us (int64 us) could not be formed from it.
+MAX_SERVER_TIME_S = 2**53 / 1e6
+MAX_CALIBRATED_N = 1e6  # |force| per axis in N; far beyond any tactile sensor, small enough to stay finite in sums
 _SENSOR_KNOWN_KEYS = frozenset({"sensor", "model", "taxels", "data", "calibrated"})
 _HINT = "check the xela_server version (1.7.x/1.8.x expected) and that the client talks to xela_server"
 
@@ -72,11 +79,19 @@ def _fail(reason: str) -> ProtocolError:
     return ProtocolError(f"malformed xela_server message: {reason}", hint=_HINT)
 
 
-def _is_int(value: object) -> bool:
+def _short(value: object) -> str:
+    """repr for an error message, cut short (a 4,000-digit int or a long string stays readable)."""
+    text = (
+        repr(value) if not isinstance(value, int) or abs(value) < 10**30 else f"<int of {len(str(abs(value)))} digits>"
+    )
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _is_int(value: object) -> TypeGuard[int]:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def _is_number(value: object) -> bool:
+def _is_number(value: object) -> TypeGuard[int | float]:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
@@ -86,17 +101,15 @@ def _decode_counts(raw: object, key: str, taxels: int) -> np.ndarray:
         tokens = raw.split(",") if raw.strip() else []
         counts: list[int] = []
         for position, token in enumerate(tokens):
-            text = token.strip()
-            if not 1 <= len(text) <= 4:
-                raise _fail(f"sensor {key}: data item {position} {token!r} is not a 4-hex-digit count")
-            try:
-                counts.append(int(text, 16))
-            except ValueError:
-                raise _fail(f"sensor {key}: data item {position} {token!r} is not hexadecimal") from None
+            if len(token) != 4:
+                raise _fail(f"sensor {key}: data item {position} {token[:12]!r} is not a 4-hex-digit count")
+            if not HEX_DIGITS.issuperset(token):
+                raise _fail(f"sensor {key}: data item {position} {token!r} is not hexadecimal")
+            counts.append(int(token, 16))
     elif isinstance(raw, list):
         for position, item in enumerate(raw):
             if not _is_int(item) or not 0 <= item <= MAX_COUNT:
-                raise _fail(f"sensor {key}: data item {position} {item!r} is not an integer count 0..65535")
+                raise _fail(f"sensor {key}: data item {position} {_short(item)} is not an integer count 0..65535")
         counts = raw
     else:
         raise _fail(f"sensor {key}: 'data' is {type(raw).__name__}, expected a hex string or a list of ints")
@@ -113,8 +126,9 @@ def _decode_calibrated(raw: object, key: str, taxels: int) -> np.ndarray | None:
     if len(raw) != 3 * taxels:
         raise _fail(f"sensor {key}: 'calibrated' has {len(raw)} values, expected {3 * taxels}")
     for position, item in enumerate(raw):
-        if not _is_number(item):
-            raise _fail(f"sensor {key}: calibrated item {position} {item!r} is not a number")
+        # compared as given: a huge int never becomes a float (OverflowError), NaN and inf fail the comparison
+        if not _is_number(item) or not -MAX_CALIBRATED_N <= item <= MAX_CALIBRATED_N:
+            raise _fail(f"sensor {key}: calibrated item {position} {_short(item)} is not a force in N")
     return np.array(raw, dtype=np.float64).reshape(taxels, 3)
 
 
@@ -126,12 +140,12 @@ def _decode_sensor(key: str, obj: object) -> XelaSensorData:
             raise _fail(f"sensor {key} has no {required!r}")
     model = obj["model"]
     if not isinstance(model, str):
-        raise _fail(f"sensor {key}: 'model' is {model!r}, expected a string")
+        raise _fail(f"sensor {key}: 'model' is {_short(model)}, expected a string")
     taxels = obj["taxels"]
     if not _is_int(taxels) or taxels <= 0:
-        raise _fail(f"sensor {key}: 'taxels' is {taxels!r}, expected a positive int")
+        raise _fail(f"sensor {key}: 'taxels' is {_short(taxels)}, expected a positive int")
     if "sensor" in obj and str(obj["sensor"]) != key:
-        raise _fail(f"sensor under key {key!r} calls itself sensor {obj['sensor']!r}")
+        raise _fail(f"sensor under key {key!r} calls itself sensor {_short(obj['sensor'])}")
     return XelaSensorData(
         sensor_number=int(key),
         model=model,
@@ -168,11 +182,12 @@ def decode_message(text: str | bytes) -> XelaWelcome | XelaDataMessage:
         return XelaWelcome(raw=obj)
     if message is None:
         raise _fail("no 'message' field (expected a sequence number or 'Welcome')")
-    if not _is_int(message):
-        raise _fail(f"'message' is {message!r}, expected an int sequence number")
+    if not _is_int(message) or not 0 <= message <= MAX_SEQ:
+        raise _fail(f"'message' is {_short(message)}, expected an int sequence number 0..2**63-1")
     server_time = obj.get("time")
-    if not isinstance(server_time, int | float) or isinstance(server_time, bool) or not math.isfinite(server_time):
-        raise _fail(f"'time' is {server_time!r}, expected server Unix time in s")
+    # compared as given: a huge int never becomes a float (OverflowError), NaN and inf fail the comparison
+    if not _is_number(server_time) or not 0 <= server_time <= MAX_SERVER_TIME_S:
+        raise _fail(f"'time' is {_short(server_time)}, expected server Unix time in s (0..{MAX_SERVER_TIME_S:.0f})")
     sensors: dict[int, XelaSensorData] = {}
     for key, value in obj.items():
         if key.isdigit() and key.isascii():
@@ -184,7 +199,7 @@ def decode_message(text: str | bytes) -> XelaWelcome | XelaDataMessage:
             sensors[sensor.sensor_number] = sensor
     declared = obj.get("sensors", len(sensors))
     if not _is_int(declared) or declared != len(sensors):
-        raise _fail(f"'sensors' says {declared!r} but {len(sensors)} sensor objects are present")
+        raise _fail(f"'sensors' says {_short(declared)} but {len(sensors)} sensor objects are present")
     return XelaDataMessage(seq=message, server_time_s=float(server_time), sensors=sensors, msg_type=msg_type)
 
 

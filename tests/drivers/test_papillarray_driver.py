@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from drivers.clock import VirtualClock
 from drivers.errors import DeviceError, DeviceNotFound
 from drivers.frames import TactileFrame
-from drivers.papillarray import PapillArrayDriver
+from drivers.papillarray import WRONG_SHAPE_LIMIT, PapillArrayDriver, implausible_pillars
 from protocols.papillarray import PapillArrayPacket, PillarSensorData, encode_packet
 from unitac_rig.sim.devices import SimPapillArrayHub
 from unitac_rig.sim.faults import FaultPlan
@@ -200,8 +200,11 @@ def test_a_slot_with_another_pillar_count_is_one_clear_device_error() -> None:
     try:
         packet = PapillArrayPacket(counter=1, timestamp_us=0, sensors=[PillarSensorData.unloaded(4)])
         driver._port.write(encode_packet(packet))  # type: ignore[union-attr]
-        with pytest.raises(DeviceError, match="reports 4 pillars"):
-            driver.poll()
+        assert driver.poll() == [] and driver.health().checksum_errors == 1  # one could be damage: skipped
+        with pytest.raises(DeviceError, match="reports 4 pillars"):  # a whole run of them is the wrong array
+            for _ in range(WRONG_SHAPE_LIMIT - 1):
+                driver._port.write(encode_packet(packet))  # type: ignore[union-attr]  # (loop:// holds 4 KiB)
+                driver.poll()
     finally:
         driver.disconnect()
 
@@ -231,3 +234,66 @@ def test_a_stream_without_hub_or_global_blocks_still_gives_frames() -> None:
         assert driver.health().sequence_gaps == 0
     finally:
         driver.disconnect()
+
+
+def _packet_with(counter: int, fz: dict[int, float]) -> PapillArrayPacket:
+    sensor = PillarSensorData.unloaded()
+    for pillar, value in fz.items():
+        sensor.forces_n[pillar, 2] = value
+        sensor.displacements_mm[pillar, 2] = value / 6.0  # about 6 N/mm, as the rated 15 N at 2.5 mm
+    return PapillArrayPacket(
+        counter=counter, timestamp_us=counter * 1000, sensors=[sensor, PillarSensorData.unloaded()]
+    )
+
+
+def test_bit_flips_the_checksum_cannot_see_are_caught_as_impossible_values_and_counted() -> None:
+    """Issue 28: the checksum is a 16-bit byte sum, so a bit set in one byte and the same bit cleared in another
+    cancel. Here pillar 4's Fz (1.5 N) becomes NaN and pillar 5's (2.5 N) a denormal; the packet passes the checksum,
+    and the driver flags pillar 4 and counts the frame, and the health report says what the checksum misses."""
+    driver = PapillArrayDriver("loop://", clock=VirtualClock(), rate_hz=1000)
+    driver.connect()
+    try:
+        good = encode_packet(_packet_with(1, {4: 1.5, 5: 2.5}))
+        damaged = bytearray(encode_packet(_packet_with(2, {4: 1.5, 5: 2.5})))
+        at_4, at_5 = damaged.find(np.float32(1.5).tobytes()), damaged.find(np.float32(2.5).tobytes())
+        assert damaged.count(np.float32(1.5).tobytes()) == 1 and damaged.count(np.float32(2.5).tobytes()) == 1
+        damaged[at_4 + 3] ^= 0x40  # 0x3f -> 0x7f: bit 6 set
+        damaged[at_5 + 3] ^= 0x40  # 0x40 -> 0x00: bit 6 cleared, the byte sum is unchanged
+        after = encode_packet(_packet_with(3, {4: 1.5, 5: 2.5}))
+        driver._port.write(good + bytes(damaged) + after)  # type: ignore[union-attr]
+        frames = driver.poll()
+        health = driver.health()
+    finally:
+        driver.disconnect()
+    assert [f.seq for f in frames] == [1, 2, 3]  # the damaged packet passed the checksum
+    assert [f.valid for f in frames] == [True, False, True]
+    assert frames[1].stale_mask is not None and np.flatnonzero(frames[1].stale_mask).tolist() == [4]
+    assert (health.implausible_frames, health.checksum_errors, health.invalid_frames) == (1, 0, 1)
+    assert "16-bit" in health.link_check and "cancel" in health.link_check
+
+
+@pytest.mark.parametrize(
+    ("reading", "previous", "dt_s", "flagged"),
+    [
+        ([0.5, -0.5, 14.9, 0.1, -0.1, 2.4], None, None, False),  # within the rated range
+        ([15.9, -15.9, 59.9, 3.9, -3.9, 9.9], None, None, False),  # overload, but a pillar can be driven there
+        ([16.1, 0, 0, 0, 0, 0], None, None, True),  # 4x the rated shear
+        ([0, 0, 60.1, 0, 0, 0], None, None, True),
+        ([0, 0, 0, 0, 0, 10.1], None, None, True),  # a tip 10 mm down
+        ([0, 0, float("nan"), 0, 0, 0], None, None, True),
+        ([0, 0, float("inf"), 0, 0, 0], None, None, True),
+        ([0, 0, 1e30, 0, 0, 0], None, None, True),
+        ([0, 0, 50.0, 0, 0, 0], [0, 0, -50.0, 0, 0, 0], 0.001, True),  # 100 N in 1 ms: over 77 % of the span
+        ([0, 0, 50.0, 0, 0, 0], [0, 0, -50.0, 0, 0, 0], 0.01, False),  # in 10 ms the filter lets it through
+        ([0, 0, 14.0, 0, 0, 2.0], [0, 0, 0.0, 0, 0, 0.0], 0.001, False),  # a hard press within one sample
+    ],
+)
+def test_impossible_means_beyond_what_the_pillar_and_the_hubs_filter_allow(
+    reading: list[float], previous: list[float] | None, dt_s: float | None, flagged: bool
+) -> None:
+    readings = np.zeros((9, 6))
+    readings[4] = reading
+    before = None if previous is None else np.zeros((9, 6))
+    if before is not None and previous is not None:
+        before[4] = previous
+    assert implausible_pillars(readings, before, dt_s).tolist() == [False] * 4 + [flagged] + [False] * 4

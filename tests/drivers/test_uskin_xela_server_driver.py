@@ -6,14 +6,16 @@ import contextlib
 import socket
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 import pytest
 from driver_helpers import collect
+from websockets.sync.server import ServerConnection, serve
 
 from drivers.errors import DeviceError, DeviceNotFound
-from drivers.uskin import UskinXelaServerDriver
+from drivers.uskin import WRONG_SHAPE_LIMIT, UskinXelaServerDriver
+from protocols.xela_ws import XelaSensorData, encode_data_message, encode_welcome
 from unitac_rig.sim.devices import counts_from_sample
 from unitac_rig.sim.devices.xela_server import SimXelaServer
 from unitac_rig.sim.faults import FaultPlan
@@ -149,3 +151,83 @@ def test_placeholder_taxels_from_the_server_are_flagged_like_on_can() -> None:
         frames = driver.wait_frames(3, timeout_s=5.0)
     assert frames and all(not f.valid for f in frames)
     assert all(f.stale_mask is not None and list(np.flatnonzero(f.stale_mask)) == [3, 5] for f in frames)
+
+
+def _data(seq: int, taxels: int = 24, time_s: float = 1.7e9) -> str:
+    counts = np.full((taxels, 3), 20_000 + seq)
+    return encode_data_message(seq, time_s, [XelaSensorData(1, "uSPa46", taxels, counts)], as_hex=True)
+
+
+# What issue 28's review sent that crashed the reader thread or was read as counts (each is one message).
+_GOOD_DATA = _data(0)
+HOSTILE_MESSAGES = [
+    _GOOD_DATA.replace('"time": 1700000000.0', '"time": 1' + "0" * 400),  # OverflowError in the codec
+    _GOOD_DATA.replace('"time": 1700000000.0', '"time": 1e303'),  # passed the codec, OverflowError in the driver
+    _GOOD_DATA.replace('"time": 1700000000.0', '"time": NaN'),
+    _GOOD_DATA.replace('"message": 0', '"message": -1'),
+    _GOOD_DATA.replace("4E20", "-FFF", 1),  # read as -4095
+    _GOOD_DATA.replace("4E20", "0x1F", 1),
+    _GOOD_DATA.replace("4E20", "F_FF", 1),
+    _GOOD_DATA.replace("4E20", "\u0661\u0662\u0663\u0664", 1),  # Arabic-Indic digits
+    _GOOD_DATA.replace('"calibrated": null', '"calibrated": [' + ", ".join(["1e400"] * 72) + "]"),
+    _data(0, taxels=16),  # one damaged message with the wrong taxel count
+    "[" * 100_000,
+    b"\xff\xfe\x00garbage",
+]
+
+
+@pytest.mark.parametrize("mode", ["poll", "reader"])
+def test_the_reader_survives_whatever_the_server_sends_and_counts_it(mode: str) -> None:
+    """Issue 28: each hostile message is counted and skipped, the good ones around them come through, and the reader
+    thread keeps running (it used to die on OverflowError)."""
+    script = [_data(1), *HOSTILE_MESSAGES, _data(2), _data(3)]
+    with _scripted_server(script) as url:
+        driver = UskinXelaServerDriver(url, connect_timeout_s=5.0, stall_timeout_s=5.0)
+        driver.connect()
+        try:
+            if mode == "reader":
+                driver.start_reader()
+                frames = collect(driver, 3, timeout_s=10.0)
+            else:
+                frames = driver.wait_frames(3, timeout_s=10.0)
+            health = driver.health()
+        finally:
+            driver.disconnect()
+    assert [f.seq for f in frames] == [1, 2, 3]
+    assert all(f.valid and int(f.values.min()) == 20_000 + f.seq for f in frames)  # type: ignore[operator]
+    assert health.checksum_errors == len(HOSTILE_MESSAGES)
+
+
+def test_a_server_that_only_sends_the_wrong_sensor_size_is_an_error_with_a_hint() -> None:
+    script = [_data(seq, taxels=16) for seq in range(WRONG_SHAPE_LIMIT)]
+    with _scripted_server(script) as url:
+        driver = UskinXelaServerDriver(url, connect_timeout_s=5.0, stall_timeout_s=5.0)
+        driver.connect()
+        try:
+            with pytest.raises(DeviceError, match="16 taxels") as info:
+                driver.wait_frames(1, timeout_s=10.0)
+        finally:
+            driver.disconnect()
+    assert info.value.hint is not None and "--sensor-number" in info.value.hint
+
+
+@contextlib.contextmanager
+def _scripted_server(script: Sequence[str | bytes]) -> Iterator[str]:
+    """A WebSocket server on 127.0.0.1 that sends a welcome, then ``script``, then holds the connection open."""
+    done = threading.Event()
+
+    def handler(connection: ServerConnection) -> None:
+        connection.send(encode_welcome())
+        for message in script:
+            connection.send(message)
+        done.wait(15.0)
+
+    with serve(handler, "127.0.0.1", 0) as server:
+        thread = threading.Thread(target=server.serve_forever, daemon=True)
+        thread.start()
+        try:
+            yield f"ws://127.0.0.1:{server.socket.getsockname()[1]}"
+        finally:
+            done.set()
+            server.shutdown()
+            thread.join(5.0)

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from protocols.errors import ProtocolError
 from protocols.xela_ws import (
+    MAX_SERVER_TIME_S,
     XelaDataMessage,
     XelaSensorData,
     XelaWelcome,
@@ -160,3 +161,71 @@ def test_arbitrary_text_only_ever_raises_protocol_error(text: str | bytes) -> No
 def test_arbitrary_json_objects_only_ever_raise_protocol_error(obj: dict) -> None:
     with contextlib.suppress(ProtocolError):
         decode_message(json.dumps(obj))
+
+
+def _one_taxel(data: str, time_s: str = "1.5", message: str = "1", calibrated: str = "null") -> str:
+    return (
+        f'{{"message": {message}, "time": {time_s}, "1": {{"model": "m", "taxels": 1, "data": {data}, '
+        f'"calibrated": {calibrated}}}}}'
+    )
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        _one_taxel('"0001,0002,0003"', time_s="1" + "0" * 400),  # raised OverflowError
+        _one_taxel('"0001,0002,0003"', time_s="1e303"),  # passed, then crashed the driver
+        _one_taxel('"0001,0002,0003"', time_s="NaN"),
+        _one_taxel('"0001,0002,0003"', time_s="-Infinity"),
+        _one_taxel('"0001,0002,0003"', time_s="-1"),
+        _one_taxel('"0001,0002,0003"', message="-1"),
+        _one_taxel('"0001,0002,0003"', message=str(2**64)),
+        _one_taxel('"-FFF,0002,0003"'),  # was read as -4095
+        _one_taxel('"0x1F,0002,0003"'),
+        _one_taxel('"F_FF,0002,0003"'),
+        _one_taxel('"\u0661\u0662\u0663\u0664,0002,0003"'),  # Arabic-Indic digits: int(..., 16) takes them
+        _one_taxel('"+FFF,0002,0003"'),
+        _one_taxel('" FFF,0002,0003"'),
+        _one_taxel('"1,0002,0003"'),  # the facts say 4 hex digits
+        _one_taxel("[1, 2, 65536]"),
+        _one_taxel("[-1, 2, 3]"),
+        _one_taxel("[1, 2, 3]", calibrated="[1e400, 0, 0]"),
+        _one_taxel("[1, 2, 3]", calibrated="[NaN, 0, 0]"),
+        _one_taxel("[1, 2, 3]", calibrated="[" + "9" * 400 + ", 0, 0]"),  # OverflowError converting to float
+    ],
+)
+def test_values_outside_what_xela_server_sends_are_refused(text: str) -> None:
+    """Issue 28: huge, non-finite or negative numbers and hex forms int() takes but xela_server never writes."""
+    with pytest.raises(ProtocolError):
+        decode_message(text)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(min_size=4, max_size=4))
+def test_a_data_item_is_accepted_exactly_when_it_is_four_ascii_hex_digits(token: str) -> None:
+    text = json.dumps({"message": 1, "time": 1.5, "1": {"model": "m", "taxels": 1, "data": f"{token},0000,FFFF"}})
+    if all(c in "0123456789abcdefABCDEF" for c in token):
+        (sensor,) = decode_message(text).sensors.values()  # type: ignore[union-attr]
+        assert sensor.values[0].tolist() == [int(token, 16), 0, 0xFFFF]
+    else:
+        with pytest.raises(ProtocolError):
+            decode_message(text)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.one_of(st.integers(), st.floats()),
+    st.lists(st.one_of(st.integers(), st.floats()), min_size=3, max_size=3),
+)
+def test_accepted_messages_hold_only_finite_times_and_forces(time_s: float, calibrated: list[float]) -> None:
+    text = json.dumps({"message": 1, "time": time_s, "1": {"model": "m", "taxels": 1, "data": [1, 2, 3],
+                                                          "calibrated": calibrated}})  # fmt: skip
+    try:
+        message = decode_message(text)
+    except ProtocolError:
+        return
+    assert isinstance(message, XelaDataMessage)
+    assert 0 <= message.server_time_s <= MAX_SERVER_TIME_S
+    round(message.server_time_s * 1e6)  # the driver's device_t_us: must not overflow
+    sensor = message.sensors[1]
+    assert sensor.calibrated is not None and np.isfinite(sensor.calibrated).all()

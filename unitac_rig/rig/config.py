@@ -63,7 +63,6 @@ SensorConfig = Annotated[SerializeAsAny[SensorConfigBase], BeforeValidator(parse
 
 
 class ObjectPlacement(_Strict):
-
     center_m: tuple[float, float] = Field((-0.15, 0.625), description="object axis in the base frame (x, y), m")
     press_height_m: float = Field(0.20, description="height of the press plane (TCP z) in the base frame, m")
     standoff_mm: float = Field(
@@ -80,7 +79,6 @@ class ObjectPlacement(_Strict):
 
 
 class PressConfig(_Strict):
-
     threshold_n: float = Field(10.0, gt=0, description="stop force along the press, N")
     strategy: Literal["guarded", "two-phase", "force-ramp"] = "guarded"
     speed_mm_s: float = Field(2.0, gt=0, description="press speed (guarded) / slow speed (two-phase), mm/s")

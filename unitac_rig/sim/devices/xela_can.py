@@ -41,7 +41,11 @@ def counts_from_sample(values: np.ndarray) -> np.ndarray:
 
 
 class SimXelaController:
-    """A uSkin controller board on a python-can bus, streaming ``source`` at ``rate_hz`` once started."""
+    """A uSkin controller board on a python-can bus, streaming ``source`` at ``rate_hz`` once started.
+
+    The bus is ``can.Bus(interface=interface, channel=bus_channel)`` unless ``bus`` hands an open one (the fast twin
+    passes a :class:`~unitac_rig.sim.devices.lockstep_can.LockstepCanBus`); the controller shuts it down on close.
+    """
 
     def __init__(
         self,
@@ -52,6 +56,7 @@ class SimXelaController:
         source: SignalSource,
         clock: Clock | None = None,
         interface: str = "virtual",
+        bus: can.BusABC | None = None,
         id_map: TaxelIdMap = USPA46_ID_MAP,
         faults: FaultPlan | None = None,
         missing_taxels: tuple[int, ...] = (),
@@ -76,7 +81,10 @@ class SimXelaController:
         self.samples_sent = 0
         self._powered_off = False
         self._delayed: collections.deque[tuple[int, can.Message]] = collections.deque()
-        self._bus = can.Bus(interface=interface, channel=bus_channel, receive_own_messages=False)
+        # ``bus``: an open bus on ``bus_channel`` to use instead (the fast twin's LockstepCanBus); closed with us
+        if bus is None:
+            bus = can.Bus(interface=interface, channel=bus_channel, receive_own_messages=False)
+        self._bus = bus
         self._timer = SampleTimer(rate_hz, clock, self._tick, thread_name=f"sim-xela-can-{controller_id}")
 
     @property

@@ -119,20 +119,26 @@ class SimXelaController:
         if self.faults.is_stalled(t_ns):
             self.faults.note_stalled()
             return
-        counts = counts_from_sample(self.source.sample(t_ns).values)
+        counts = counts_from_sample(self.source.sample(t_ns).values).tolist()  # Python ints, as the codec takes
         release_ns = self.faults.release_t_ns(t_ns)
         order = self._send_order
         if self.send_order == "shuffled":
             order = [order[i] for i in self._order_rng.permutation(len(order))]
+        damage = self.faults.mangle if self.faults.damages_messages else None
+        sent = 0
         for index, arbitration_id in order:
             if index in self.missing_taxels:
                 continue
-            x, y, z = (int(v) for v in counts[index])
-            payload = self.faults.mangle(encode_taxel_message(arbitration_id, x, y, z, byte0=self.byte0))
+            x, y, z = counts[index]
+            encoded = encode_taxel_message(arbitration_id, x, y, z, byte0=self.byte0)
+            payload = encoded if damage is None else damage(encoded)
             if payload is None:
                 continue
+            sent += 1
             message = can.Message(arbitration_id=arbitration_id, data=payload[:8], is_extended_id=False)
             self._delayed.append((release_ns, message))
+        if damage is None:
+            self.faults.pass_messages(sent)  # mangle's count, once per cycle
         self.samples_sent += 1
         self._send_due(t_ns)
 

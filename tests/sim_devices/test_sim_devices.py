@@ -10,6 +10,9 @@ import can
 import numpy as np
 import pytest
 import serial
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 from websockets.sync.client import connect as ws_connect
 
 import unitac_rig.sim  # noqa: F401  (registers the simpapill:// and simslcan:// URL handlers)
@@ -186,3 +189,17 @@ def test_xela_server_sends_welcome_then_numbered_data() -> None:
         assert first["1"]["model"] == "uSPa46" and first["1"]["taxels"] == 24
         assert first["1"]["data"].split(",")[:3] == ["0001", "0002", "0003"]
         assert first["1"]["calibrated"] is None
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    hnp.arrays(np.float64, (9, 3), elements=st.floats(-1e3, 1e3)),
+    hnp.arrays(np.float64, (9, 3), elements=st.floats(-1e3, 1e3)),
+)
+def test_the_hub_torque_is_numpys_cross_product_bit_for_bit(a: np.ndarray, b: np.ndarray) -> None:
+    """The hub's global torque is Σ r × F per sample; its own cross product must give numpy's exact bits (signed
+    zeros too), or a seeded PapillArray session would change."""
+    from unitac_rig.sim.devices.papillarray import _cross_rows
+
+    ours, numpys = _cross_rows(a, b), np.cross(a, b)
+    assert np.array_equal(ours, numpys) and np.array_equal(np.signbit(ours), np.signbit(numpys))

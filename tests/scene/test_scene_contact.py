@@ -7,10 +7,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
 from unitac_rig.bench.fidelity import RECORDED
 from unitac_rig.rig.objects import get_object, list_objects
+from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
 from unitac_rig.sim.scene import PressScene, SceneParams, press_pose
 from unitac_rig.sim.sensor_models import UskinModel
 from unitac_rig.sim.world import ContactWorld
@@ -260,3 +263,67 @@ def test_centring_error_is_seeded() -> None:
     s = PressScene(obj, 0, USKIN, params=params, rng=np.random.default_rng(4))
     assert s.press_force_n(s.pose_at_travel(0, -0.01)) == 0.0
     assert s.press_force_n(s.pose_at_travel(0, 0.2)) > 0.0
+
+
+def _turned(pose: np.ndarray, turn_rad: float) -> np.ndarray:
+    """``pose`` with the pad turned about the vertical (base z) by ``turn_rad``."""
+    out = pose.copy()
+    out[3:] = matrix_to_rotvec(rotvec_to_matrix(np.array([0.0, 0.0, turn_rad])) @ rotvec_to_matrix(pose[3:]))
+    return out
+
+
+@pytest.mark.parametrize("layout", [USKIN, PAPILLARRAY], ids=["uskin", "papillarray"])
+def test_turning_at_the_stand_off_builds_no_ray_table(layout: SensorLayout) -> None:
+    """Between presses the arm turns the pad 8 mm off the object; every orientation was a new ray, and its table was
+    built each control period (a twentieth of a simulated session) only to say "no contact"."""
+    planner = PressScene(get_object("hex_tpu"), 0.0, layout, params=SceneParams())  # poses, without touching s
+    s = PressScene(get_object("hex_tpu"), 0.0, layout, params=SceneParams())
+    s.wrench_on_tool(planner.pose_at_travel(-2.0, 1.0))
+    assert s.rays_built == 1
+    for angle in np.linspace(-2.0, 0.0, 200):  # 0.01 deg a step, at the stand-off
+        pose = planner.pose_at_travel(float(angle), -8.0)
+        assert not np.any(s.wrench_on_tool(pose))
+        assert not np.any(s.taxel_loads(pose).forces_n)
+    assert s.rays_built == 1
+    # the next press builds its own ray, from its own pose: the same table as a scene that never turned
+    press = planner.pose_at_travel(0.0, 1.0)
+    fresh = PressScene(get_object("hex_tpu"), 0.0, layout, params=SceneParams())
+    assert np.array_equal(s.wrench_on_tool(press), fresh.wrench_on_tool(press))
+    assert np.array_equal(s.taxel_loads(press).forces_n, fresh.taxel_loads(press).forces_n)
+    assert s.rays_built == 2
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    object_id=st.sampled_from([o.id for o in list_objects()]),
+    pillars=st.booleans(),
+    rotation_deg=st.sampled_from([0.0, 90.0]),
+    angle_deg=st.floats(-45.0, 45.0),
+    travel_mm=st.floats(-12.0, 1.5),
+    turn_deg=st.floats(-3.0, 3.0),
+    lateral_mm=st.floats(-3.0, 3.0),
+)
+def test_a_skipped_table_never_hides_a_contact(
+    object_id: str,
+    pillars: bool,
+    rotation_deg: float,
+    angle_deg: float,
+    travel_mm: float,
+    turn_deg: float,
+    lateral_mm: float,
+) -> None:
+    """Wherever the pad is (any object, pad, approach, lateral offset, turn; from 12 mm off to pressing), a scene
+    with another ray cached answers what a scene building the table for that very pose answers."""
+    layout = PAPILLARRAY if pillars else USKIN
+    obj = get_object(object_id)
+    planner = PressScene(obj, rotation_deg, layout, params=EXACT)
+    pose = planner.pose_at_travel(angle_deg, travel_mm)
+    a = math.radians(angle_deg)
+    pose[:2] += lateral_mm * 1e-3 * np.array([math.cos(a), math.sin(a)])
+    pose = _turned(pose, math.radians(turn_deg))
+    cached = PressScene(obj, rotation_deg, layout, params=EXACT)
+    cached.wrench_on_tool(planner.pose_at_travel(angle_deg - math.copysign(20.0, angle_deg), 1.0))  # another ray
+    fresh = PressScene(obj, rotation_deg, layout, params=EXACT)  # nothing cached: builds the table at ``pose``
+    assert fresh.rays_built == 0
+    assert np.array_equal(cached.wrench_on_tool(pose), fresh.wrench_on_tool(pose))
+    assert np.array_equal(cached.taxel_loads(pose).forces_n, fresh.taxel_loads(pose).forces_n)

@@ -10,6 +10,9 @@ import can
 import numpy as np
 import pytest
 import serial
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 from websockets.sync.client import connect as ws_connect
 
 import unitac_rig.sim  # noqa: F401  (registers the simpapill:// and simslcan:// URL handlers)
@@ -18,6 +21,7 @@ from protocols.papillarray import PacketParser
 from protocols.xela_can import USPA46_ID_MAP, decode_taxel_message
 from unitac_rig.sim.devices import SimPapillArrayHub, SimSlcanAdapter, SimXelaController
 from unitac_rig.sim.devices.xela_server import SimXelaServer
+from unitac_rig.sim.faults import FaultInjector, FaultPlan
 from unitac_rig.sim.signals import SensorSample
 from unitac_rig.sim.synthetic_sources import PapillArrayPressSource, UskinPressSource
 
@@ -73,6 +77,25 @@ def test_controller_is_silent_until_started_and_stops_on_command(channel: str, h
         host_bus.send(can.Message(arbitration_id=0x203, data=b"\x07\x01", is_extended_id=False))
         clock.advance_ns(20 * MS)
         assert _drain(host_bus) == []
+
+
+@pytest.mark.parametrize("plan", [None, FaultPlan(delay_s=0.005)])
+def test_a_plan_that_damages_nothing_counts_every_message_without_mangling_each(
+    channel: str, host_bus: can.BusABC, plan: FaultPlan | None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The controller counts what it sent as the fault injector would, but a plan without per-message damage (none,
+    or only a delay) no longer copies each of the 2,400 messages per simulated second through ``mangle``."""
+    mangled: list[bytes] = []
+    monkeypatch.setattr(FaultInjector, "mangle", lambda self, message: mangled.append(message) or message)
+    clock = VirtualClock()
+    with SimXelaController(channel, source=UskinPressSource(), clock=clock, faults=plan) as controller:
+        host_bus.send(can.Message(arbitration_id=0x201, data=b"\x07\x00", is_extended_id=False))
+        clock.advance_ns(50 * MS)
+        host_bus.send(can.Message(arbitration_id=0x201, data=b"\x07\x01", is_extended_id=False))
+        clock.advance_ns(20 * MS)  # the delayed ones are out too
+        messages = _drain(host_bus)
+        assert len(messages) == controller.faults.counts.messages_seen == 24 * controller.samples_sent > 0
+    assert mangled == []
 
 
 def test_slcan_adapter_speaks_lawicel_and_bridges_to_can(channel: str) -> None:
@@ -166,3 +189,17 @@ def test_xela_server_sends_welcome_then_numbered_data() -> None:
         assert first["1"]["model"] == "uSPa46" and first["1"]["taxels"] == 24
         assert first["1"]["data"].split(",")[:3] == ["0001", "0002", "0003"]
         assert first["1"]["calibrated"] is None
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    hnp.arrays(np.float64, (9, 3), elements=st.floats(-1e3, 1e3)),
+    hnp.arrays(np.float64, (9, 3), elements=st.floats(-1e3, 1e3)),
+)
+def test_the_hub_torque_is_numpys_cross_product_bit_for_bit(a: np.ndarray, b: np.ndarray) -> None:
+    """The hub's global torque is Σ r × F per sample; its own cross product must give numpy's exact bits (signed
+    zeros too), or a seeded PapillArray session would change."""
+    from unitac_rig.sim.devices.papillarray import _cross_rows
+
+    ours, numpys = _cross_rows(a, b), np.cross(a, b)
+    assert np.array_equal(ours, numpys) and np.array_equal(np.signbit(ours), np.signbit(numpys))

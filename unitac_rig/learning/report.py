@@ -114,12 +114,17 @@ def tsne_embeddings(
     """2-D t-SNE (sklearn, PCA init) of the latents after the first and the last epoch; rows: each sensor's
     contacts in ``sensors`` order."""
     from sklearn.manifold import TSNE
+    from threadpoolctl import threadpool_limits
 
     out = {}
     for label, latents in (("first", first), ("last", last)):
         stacked = np.concatenate([latents[s] for s in sensors], axis=0)
         perplexity = float(min(30.0, max(2.0, (len(stacked) - 1) / 3.0)))
-        out[label] = TSNE(n_components=2, perplexity=perplexity, init="pca", random_state=seed).fit_transform(stacked)
+        # one BLAS/OpenMP thread: on ~1,200 points the default threads only contend (issue 27: 65 CPU-s of a 71 CPU-s
+        # `train --epochs 20` against 4.8 CPU-s with one thread, the same embedding to the 4th decimal of mixing)
+        with threadpool_limits(limits=1):
+            tsne = TSNE(n_components=2, perplexity=perplexity, init="pca", random_state=seed)
+            out[label] = tsne.fit_transform(stacked)
     return out
 
 

@@ -160,6 +160,10 @@ class SimArm:
         self._target_twist = np.zeros(6)
         self._accel_m_s2 = 0.0
         self._force_command: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        # the raw bytes of the last force_mode arguments: the host re-sends an unchanged command every period (a
+        # ur_rtde loop does), and re-validating it and rebuilding its frame was a tenth of a simulated session
+        self._force_key: tuple[bytes, bytes, bytes, bytes] | None = None
+        self._force_gains: tuple[float, np.ndarray] | None = None  # (gain scaling, the scaled gains)
         self._path: _Path | None = None
         self._protective_stop = False
         self._program_running = True
@@ -181,6 +185,7 @@ class SimArm:
         self._delay_line: deque[np.ndarray] = deque([self._true_wrench.copy()] * delay_periods)
         self._axis_scale = np.array([1.0, 1.0, 1.0] + [self.params.ft_torque_scale_m] * 3)
         self._bias = rng.normal(0.0, self.params.ft_bias_sigma_n, 6) * self._axis_scale
+        self._normals = _NormalBlocks(rng)
         self._filtered = self._true_wrench + self._bias
         self._zero_offset = np.zeros(6)
         self.force_mode_damping, self.force_mode_gain_scaling = 0.005, 1.0  # the URScript defaults
@@ -302,12 +307,16 @@ class SimArm:
         are the speed limits of compliant axes (m/s, rad/s). Non-compliant axes hold still.
         """
         self._command()
+        key = (_raw(task_frame), _raw(selection), _raw(wrench), _raw(limits))
+        if self._mode == "force" and self._force_command is not None and key == self._force_key:
+            return  # the command in force already, validated when it was first sent
         frame = _as_vector(task_frame, 6, "task_frame")
         chosen = _as_vector(selection, 6, "selection") != 0
         target = _as_vector(wrench, 6, "wrench")
         speed_limits = np.abs(_as_vector(limits, 6, "limits"))
         self._mode, self._path = "force", None
         self._force_command = (rotvec_to_matrix(frame[3:]), chosen, target, speed_limits)
+        self._force_key = key
 
     def set_ft_sign(self, sign: float) -> None:
         """A fault hook: -1 reports the negated F/T (a flipped sensor frame); force mode regulates on the same
@@ -512,9 +521,13 @@ class SimArm:
         rotation, chosen, target, speed_limits = self._force_command
         measured = self._ft_sign * (self._filtered - self._zero_offset)
         applied_task = -np.concatenate([rotation.T @ measured[:3], rotation.T @ measured[3:]])
-        gains = self.force_mode_gain_scaling * np.array(
-            [self.params.force_mode_gain_m_s_per_n] * 3 + [self.params.force_mode_gain_rad_s_per_nm] * 3
-        )
+        scaling = self.force_mode_gain_scaling
+        if self._force_gains is None or self._force_gains[0] != scaling:
+            gains = scaling * np.array(
+                [self.params.force_mode_gain_m_s_per_n] * 3 + [self.params.force_mode_gain_rad_s_per_nm] * 3
+            )
+            self._force_gains = (scaling, gains)
+        gains = self._force_gains[1]
         twist_task = np.where(chosen, np.clip(gains * (target - applied_task), -speed_limits, speed_limits), 0.0)
         return np.concatenate([rotation @ twist_task[:3], rotation @ twist_task[3:]])
 
@@ -534,14 +547,14 @@ class SimArm:
             else:
                 target, accel = self._target_twist, self._accel_m_s2
             self._velocity, step = _ramp(self._velocity, target[:3], accel, dt)
-            if np.any(self._angular_velocity) or np.any(target[3:]):
+            if self._angular_velocity.any() or target[3:].any():
                 self._angular_velocity, turn = _ramp(self._angular_velocity, target[3:], accel, dt)
             else:
                 turn = np.zeros(3)
-            if self._mode == "stop" and not np.any(self._velocity) and not np.any(self._angular_velocity):
+            if self._mode == "stop" and not self._velocity.any() and not self._angular_velocity.any():
                 self._mode = "idle"
         self._position = self._position + step
-        if np.any(turn):
+        if turn.any():
             self._set_rotation(rotvec_to_matrix(turn) @ self._rotation)
 
     def _step_path(self, path: _Path, dt: float) -> None:
@@ -570,14 +583,14 @@ class SimArm:
         delayed = self._delay_line.popleft()
         p = self.params
         if p.ft_bias_drift_n_per_sqrt_s > 0:
-            self._bias = self._bias + self._rng.normal(0.0, p.ft_bias_drift_n_per_sqrt_s * math.sqrt(dt), 6) * (
-                self._axis_scale
-            )
+            drift = p.ft_bias_drift_n_per_sqrt_s * math.sqrt(dt) * self._normals.take(6)
+            self._bias = self._bias + drift * self._axis_scale
         raw = delayed + self._bias
         if p.ft_noise_sigma_n > 0:
-            raw = raw + self._rng.normal(0.0, p.ft_noise_sigma_n, 6) * self._axis_scale
+            raw = raw + p.ft_noise_sigma_n * self._normals.take(6) * self._axis_scale
         self._filtered = self._filtered + self._filter_alpha * (raw - self._filtered)
-        if float(np.linalg.norm(self._true_wrench[:3])) > p.protective_stop_n:
+        force = self._true_wrench[:3]
+        if math.sqrt(float(force.dot(force))) > p.protective_stop_n:  # np.linalg.norm's own sum, without its checks
             self._enter_protective_stop()
 
     def _snapshot(self) -> ArmState:
@@ -595,6 +608,33 @@ class SimArm:
         )
 
 
+def _raw(values: np.ndarray) -> bytes:
+    """The float64 bytes of a command argument: equal bytes, equal command."""
+    return np.asarray(values, dtype=np.float64).tobytes()
+
+
+class _NormalBlocks:
+    """Standard normal draws from ``rng`` taken a block at a time (one generator call per ~1,000 control periods
+    instead of two per period). ``rng.normal(0, s, n)`` is ``s`` times the next ``n`` standard normals of the same
+    stream, so ``s * take(n)`` gives bit for bit what drawing ``n`` at a time gave; the generator must not be drawn
+    from elsewhere afterwards (the arm owns its stream)."""
+
+    BLOCK = 12_288
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self._rng = rng
+        self._block = np.empty(0)
+        self._next = 0
+
+    def take(self, n: int) -> np.ndarray:
+        if self._next + n > self._block.size:
+            self._block = np.concatenate([self._block[self._next :], self._rng.standard_normal(self.BLOCK)])
+            self._next = 0
+        out = self._block[self._next : self._next + n]
+        self._next += n
+        return out
+
+
 def _as_vector(values: np.ndarray, size: int, what: str) -> np.ndarray:
     vector = np.asarray(values, dtype=np.float64).reshape(-1)
     if vector.shape != (size,) or not np.all(np.isfinite(vector)):
@@ -605,7 +645,7 @@ def _as_vector(values: np.ndarray, size: int, what: str) -> np.ndarray:
 def _ramp(current: np.ndarray, target: np.ndarray, accel: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Move a velocity toward ``target`` at ``accel`` for ``dt``: -> (new velocity, exact distance covered)."""
     delta = target - current
-    change = float(np.linalg.norm(delta))
+    change = math.sqrt(float(delta.dot(delta)))  # what np.linalg.norm computes for a vector, without its checks
     if change <= accel * dt:
         reach_s = change / accel if accel > 0 else 0.0
         distance = 0.5 * (current + target) * reach_s + target * (dt - reach_s)

@@ -1,7 +1,8 @@
 """The simulated rig: a virtual clock, the simulated arm, the press scene, and simulated sensors on real transports.
 
 The collection code cannot tell it from hardware: the arm implements :class:`drivers.arm.Arm`, and each sensor is the
-*real* driver (:class:`drivers.uskin.UskinCanDriver` on a python-can ``virtual`` bus, or
+*real* driver (:class:`drivers.uskin.UskinCanDriver` on a python-can bus, a
+:class:`~unitac_rig.sim.devices.lockstep_can.LockstepCanBus`, or
 :class:`drivers.papillarray.PapillArrayDriver` on a ``simpapill://`` pyserial URL) reading the bytes a simulated
 device encodes from what the scene says the pad feels. Everything runs on one thread in lockstep with the virtual
 clock: the arm's ``wait_period`` advances the clock by 2 ms, due sensor samples are emitted into the transport, and
@@ -159,8 +160,9 @@ class SimRig(Rig):
         faults: FaultPlan | None = None,
         uskin_transport: str = "can",
     ) -> None:
-        """``faults`` damages every simulated sensor transport; ``uskin_transport`` is ``can`` (python-can virtual
-        bus) or ``slcan`` (python-can's own slcan client on a ``simslcan://`` serial URL, slower)."""
+        """``faults`` damages every simulated sensor transport; ``uskin_transport`` is ``can`` (a python-can bus in
+        this process, :class:`~unitac_rig.sim.devices.lockstep_can.LockstepCanBus`) or ``slcan`` (python-can's own
+        slcan client on a ``simslcan://`` serial URL, slower)."""
         from unitac_rig.sim.arm import SimArm
 
         self.config = config

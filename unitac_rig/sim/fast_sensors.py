@@ -23,7 +23,8 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class SimulatedUskin:
-    """The uSkin's XELA controller on a python-can ``virtual`` bus, or behind a simulated SLCAN adapter."""
+    """The uSkin's XELA controller on a :class:`~unitac_rig.sim.devices.lockstep_can.LockstepCanBus` (python-can's
+    bus interface without the ``virtual`` bus's per-message deep copy), or behind a simulated SLCAN adapter."""
 
     rng_stream: int = 2
 
@@ -35,18 +36,24 @@ class SimulatedUskin:
 
         from drivers.uskin import UskinCanDriver
         from unitac_rig.sim.devices import SimXelaController
+        from unitac_rig.sim.devices.lockstep_can import LockstepCanBus
 
         channel = rig.new_channel()
         if rig.uskin_transport == "slcan":
             from unitac_rig.sim.devices import SimSlcanAdapter
 
             adapter = rig.serve(SimSlcanAdapter(channel, clock=rig.clock, faults=rig.faults))
-            controller_faults = None
+            controller_faults, controller_bus = None, None  # the adapter bridges to a python-can virtual channel
             bus = can.Bus(interface="slcan", channel=adapter.url, bitrate=1_000_000)
         else:
             controller_faults = rig.faults
-            bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-        rig.serve(SimXelaController(channel, source=feed, clock=rig.clock, rate_hz=100.0, faults=controller_faults))
+            bus = LockstepCanBus(channel, clock=rig.clock)
+            controller_bus = LockstepCanBus(channel, clock=rig.clock)
+        rig.serve(
+            SimXelaController(
+                channel, source=feed, clock=rig.clock, rate_hz=100.0, faults=controller_faults, bus=controller_bus
+            )
+        )
         return UskinCanDriver(bus, clock=rig.clock, owns_bus=True)
 
 

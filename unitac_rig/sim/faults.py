@@ -79,6 +79,9 @@ class FaultInjector:
         self._origin_ns: int | None = None
         self._forced_stall = False
         self._forced_disconnect = False
+        p = self.plan
+        # False when no message is ever changed or dropped (mangle would hand every message back as it came)
+        self.damages_messages = bool(p.drop_message_prob or p.drop_byte_prob or p.corrupt_prob or p.garbage_prob)
 
     # ---- time windows -----------------------------------------------------------------------------------------
     def start(self, t_ns: int) -> None:
@@ -137,6 +140,11 @@ class FaultInjector:
                 self.counts.garbage_bytes += len(garbage)
                 data = bytearray(garbage) + data
             return bytes(data)
+
+    def pass_messages(self, n: int) -> None:
+        """Count ``n`` messages sent as they are: :meth:`mangle`'s bookkeeping, for a plan that damages none."""
+        with self._lock:
+            self.counts.messages_seen += n
 
     def chunk_size(self, available: int) -> int:
         """How many of ``available`` bytes one host read may take (random when splitting is planned)."""

@@ -53,6 +53,7 @@ from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
 log = logging.getLogger(__name__)
 
 RAYS_KEPT = 8  # press rays whose tables stay cached (a press, its retract, and a few neighbours)
+NO_CONTACT_MARGIN_MM = 1.0  # beyond this past the outline's reach toward the pad no ray can touch: no table is built
 TILT_ITERATIONS = 200  # fixed-point steps allowed for the object's bending tilt (38 at a 110 mm lever on TPU)
 
 
@@ -265,7 +266,11 @@ class PressScene:
         )
         self._rays: list[_RayTable] = []  # most recent first, a few kept so alternating rays stay cheap
         self._last_rotvec: tuple[float, float, float] | None = None
-        self._frame: tuple[np.ndarray, float, float, float, float, float] | None = None
+        self._frame: tuple[np.ndarray, float, float, float, float, float, float] | None = None
+        # how far any pad feature stands proud of the plane whose touch the outline's reach bounds (mm): pillars
+        # sit at or below the centre one (recess >= 0), the skin is that plane
+        proud_mm = float(max(0.0, -np.min(self._pad.recess))) if isinstance(self._pad, _PillarPad) else 0.0
+        self._no_contact_margin_mm = NO_CONTACT_MARGIN_MM + proud_mm
         self.rays_built = 0
         self._warned_tilt = False
         self._lock = threading.Lock()  # the arm and a device thread may ask at the same time
@@ -345,9 +350,12 @@ class PressScene:
             zh = np.array([rot[0, 2], rot[1, 2]])
             xh /= np.linalg.norm(xh)
             zh /= np.linalg.norm(zh)
-            self._frame = (rot, float(xh[0]), float(xh[1]), float(zh[0]), float(zh[1]), math.atan2(zh[1], zh[0]))
+            reach = self._outline.reach_toward(zh)
+            self._frame = (
+                rot, float(xh[0]), float(xh[1]), float(zh[0]), float(zh[1]), math.atan2(zh[1], zh[0]), reach
+            )  # fmt: skip
             self._last_rotvec = rotvec
-        rot, xx, xy, zx, zy, psi = self._frame
+        rot, xx, xy, zx, zy, psi, reach = self._frame
         rel_x = self.center_mm[0] - pose[0] * 1e3
         rel_y = self.center_mm[1] - pose[1] * 1e3
         c_s = rel_x * xx + rel_y * xy - self.pad_offset_mm  # across the pad, from the pad's centre
@@ -365,6 +373,11 @@ class PressScene:
                 if i:
                     self._rays.insert(0, self._rays.pop(i))
                 return ray, ray.touch_cn - c_n
+        if self._rays and not need_table and c_n > reach + self._no_contact_margin_mm:
+            # The outline reaches at most ``reach`` toward the pad along this ray, so its table would say "no
+            # contact" here: the arm turning at its stand-off between presses built a table every control period
+            # (a twentieth of a simulated session) that no press ever used.
+            return self._rays[0], -1.0
         ray = self._build_ray(rot, (xx, xy), (zx, zy), psi, c_s)
         return ray, ray.touch_cn - c_n
 
@@ -515,6 +528,13 @@ class _Outline:
 
     def section(self, x_axis: np.ndarray, z_axis: np.ndarray, c_s: float) -> _Section:
         return _Section(self, x_axis, z_axis, c_s)
+
+    def reach_toward(self, z_axis: np.ndarray) -> float:
+        """The farthest the outline reaches toward a pad looking along ``z_axis`` (unit, base xy), from the centre
+        (mm): a bound on any section's touch distance along that direction, whatever its lateral offset."""
+        if self.radius is not None:
+            return float(self.radius)
+        return float(np.max(-(self.points @ z_axis)))
 
 
 # =================================================================================================================

@@ -41,7 +41,11 @@ def counts_from_sample(values: np.ndarray) -> np.ndarray:
 
 
 class SimXelaController:
-    """A uSkin controller board on a python-can bus, streaming ``source`` at ``rate_hz`` once started."""
+    """A uSkin controller board on a python-can bus, streaming ``source`` at ``rate_hz`` once started.
+
+    The bus is ``can.Bus(interface=interface, channel=bus_channel)`` unless ``bus`` hands an open one (the fast twin
+    passes a :class:`~unitac_rig.sim.devices.lockstep_can.LockstepCanBus`); the controller shuts it down on close.
+    """
 
     def __init__(
         self,
@@ -52,6 +56,7 @@ class SimXelaController:
         source: SignalSource,
         clock: Clock | None = None,
         interface: str = "virtual",
+        bus: can.BusABC | None = None,
         id_map: TaxelIdMap = USPA46_ID_MAP,
         faults: FaultPlan | None = None,
         missing_taxels: tuple[int, ...] = (),
@@ -76,7 +81,10 @@ class SimXelaController:
         self.samples_sent = 0
         self._powered_off = False
         self._delayed: collections.deque[tuple[int, can.Message]] = collections.deque()
-        self._bus = can.Bus(interface=interface, channel=bus_channel, receive_own_messages=False)
+        # ``bus``: an open bus on ``bus_channel`` to use instead (the fast twin's LockstepCanBus); closed with us
+        if bus is None:
+            bus = can.Bus(interface=interface, channel=bus_channel, receive_own_messages=False)
+        self._bus = bus
         self._timer = SampleTimer(rate_hz, clock, self._tick, thread_name=f"sim-xela-can-{controller_id}")
 
     @property
@@ -111,20 +119,26 @@ class SimXelaController:
         if self.faults.is_stalled(t_ns):
             self.faults.note_stalled()
             return
-        counts = counts_from_sample(self.source.sample(t_ns).values)
+        counts = counts_from_sample(self.source.sample(t_ns).values).tolist()  # Python ints, as the codec takes
         release_ns = self.faults.release_t_ns(t_ns)
         order = self._send_order
         if self.send_order == "shuffled":
             order = [order[i] for i in self._order_rng.permutation(len(order))]
+        damage = self.faults.mangle if self.faults.damages_messages else None
+        sent = 0
         for index, arbitration_id in order:
             if index in self.missing_taxels:
                 continue
-            x, y, z = (int(v) for v in counts[index])
-            payload = self.faults.mangle(encode_taxel_message(arbitration_id, x, y, z, byte0=self.byte0))
+            x, y, z = counts[index]
+            encoded = encode_taxel_message(arbitration_id, x, y, z, byte0=self.byte0)
+            payload = encoded if damage is None else damage(encoded)
             if payload is None:
                 continue
+            sent += 1
             message = can.Message(arbitration_id=arbitration_id, data=payload[:8], is_extended_id=False)
             self._delayed.append((release_ns, message))
+        if damage is None:
+            self.faults.pass_messages(sent)  # mangle's count, once per cycle
         self.samples_sent += 1
         self._send_due(t_ns)
 

@@ -1,0 +1,234 @@
+"""Simulator cost: CPU seconds per simulated second of a fast-twin session, before and after, for both sensors.
+
+Run: ``python benchmarks/sim_cost.py`` (``--presses 12`` for a quick look, ``--full`` to also run the whole campaign
+on each code version). Writes ``docs/figures/sim_cost.json`` and prints a summary.
+
+Each measurement is one seeded session (``SimRig(seed)``, ``collect_session``; ``hex_tpu``, 91 angles unless told
+otherwise) in a fresh process, timed with ``time.process_time`` around the session alone (imports excluded). The
+*simulator's own* share is the CPU spent inside its entry points (the arm's control period, which also runs the
+simulated devices; ``force_mode``; the simulated CAN bus's ``recv``), measured by thin timers; the rest is the host
+code a real rig runs too (the press routine, the drivers' decoding, the recorder).
+
+"Before" is another commit (default ``2813621``, the commit issue 27 measured), checked out with
+``git worktree add`` into a temporary folder and imported through ``PYTHONPATH``; "after" is this checkout.
+The campaign estimate is the per-press CPU of each sensor times the campaign's presses (every object with both
+sensors, each of its rotations, 91 angles: 1820 presses); ``--full`` runs ``unitac-rig campaign`` instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import platform
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+OUT = ROOT / "docs" / "figures" / "sim_cost.json"
+SENSORS = ("uskin", "papillarray")
+
+
+# ---- the worker: one session in this process ----------------------------------------------------------------------
+_depth = [0]  # simulator entry points open now: one inside another (a device's bus inside a control period) counts once
+
+
+def _timed(owner: Any, name: str, totals: dict[str, float], label: str) -> None:
+    """Wrap ``owner.name`` so the CPU spent inside it adds to ``totals[label]``."""
+    inner = getattr(owner, name)
+    depth = _depth
+
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        if depth[0]:
+            return inner(*args, **kwargs)
+        depth[0] += 1
+        start = time.process_time()
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            totals[label] = totals.get(label, 0.0) + time.process_time() - start
+            depth[0] -= 1
+
+    setattr(owner, name, wrapper)
+
+
+def run_session(sensor: str, object_id: str, angles: int, presses: int | None, seed: int) -> dict[str, Any]:
+    """One seeded session of the code on ``sys.path``; CPU, simulated time and what the session recorded."""
+    import unitac_rig.sim.arm as sim_arm
+    from unitac_rig.collection.session import collect_session
+    from unitac_rig.rig.config import parse_rig_config
+    from unitac_rig.rig.objects import get_object
+    from unitac_rig.sim.fast_rig import SimRig
+    from unitac_rig.storage.summary import inspect_dataset
+
+    inside: dict[str, float] = {}
+    _timed(sim_arm.SimArm, "wait_period", inside, "simulator")
+    _timed(sim_arm.SimArm, "force_mode", inside, "simulator")
+    try:
+        from unitac_rig.sim.devices.lockstep_can import LockstepCanBus
+
+        _timed(LockstepCanBus, "recv", inside, "simulator")
+    except ImportError:  # before the lockstep bus: python-can's virtual bus carried the uSkin
+        import can.interfaces.virtual as virtual
+
+        _timed(virtual.VirtualBus, "recv", inside, "simulator")
+    rig = SimRig(parse_rig_config({"press": {"angle_count": angles}}), seed=seed)
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.process_time()
+        outcome = collect_session(rig, get_object(object_id), sensor, Path(tmp), max_presses=presses)
+        cpu_s = time.process_time() - start
+        sim_s = rig.clock.now_ns() / 1e9
+        rig.close()
+        (summary,) = inspect_dataset(Path(tmp))["sessions"]
+    simulator_s = inside.get("simulator", 0.0)
+    return {
+        "sensor": sensor,
+        "object": object_id,
+        "angles": angles,
+        "presses_complete": outcome.complete,
+        "presses_failed": outcome.failed,
+        "cpu_s": round(cpu_s, 3),
+        "simulated_s": round(sim_s, 3),
+        "cpu_per_simulated_s": round(cpu_s / sim_s, 5),
+        "simulator_cpu_s": round(simulator_s, 3),
+        "simulator_cpu_per_simulated_s": round(simulator_s / sim_s, 5),
+        "host_cpu_per_simulated_s": round((cpu_s - simulator_s) / sim_s, 5),
+        "cpu_per_press_s": round(cpu_s / max(1, outcome.complete + outcome.failed), 4),
+        "simulated_per_press_s": round(sim_s / max(1, outcome.complete + outcome.failed), 4),
+        "targets_matched": summary["targets_matched"],
+        "targets_missed": summary["targets_missed"],
+        "match_error_median_n": summary["match_error_n"]["median"],
+        "peak_force_median_n": summary["peak_force_n"]["median"],
+    }
+
+
+# ---- the driver: versions in subprocesses --------------------------------------------------------------------------
+@contextlib.contextmanager
+def checkout(ref: str) -> Iterator[Path]:
+    """A detached ``git worktree`` of ``ref`` in a temporary folder, removed afterwards."""
+    folder = Path(tempfile.mkdtemp(prefix="sim-cost-")) / "tree"
+    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "-q", str(folder), ref], check=True)
+    try:
+        yield folder
+    finally:
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(folder)], check=False)
+        shutil.rmtree(folder.parent, ignore_errors=True)
+
+
+def _env(code: Path) -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": str(code)}
+
+
+def measure(code: Path, args: argparse.Namespace, sensor: str) -> dict[str, Any]:
+    """Run one session of the code in ``code`` in a fresh process (imports from ``code`` only)."""
+    command = [sys.executable, str(Path(__file__).resolve()), "--worker", sensor, "--object", args.object]
+    command += ["--angles", str(args.angles), "--seed", str(args.seed)]
+    if args.presses:
+        command += ["--presses", str(args.presses)]
+    done = subprocess.run(command, env=_env(code), cwd=tempfile.gettempdir(), capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"session with {sensor} on {code} failed:\n{done.stderr[-2000:]}")
+    result: dict[str, Any] = json.loads(done.stdout.strip().splitlines()[-1])
+    return result
+
+
+def campaign_presses() -> dict[str, int]:
+    """Presses per sensor in the paper's campaign: every object, each of its rotations, 91 angles."""
+    from unitac_rig.rig.objects import list_objects
+
+    per_sensor = sum(len(obj.rotations_deg) * 91 for obj in list_objects())
+    return dict.fromkeys(SENSORS, per_sensor)
+
+
+def run_campaign(code: Path) -> dict[str, float]:
+    """``unitac-rig campaign`` of the code in ``code`` in a child process: its CPU (user + sys) and wall time."""
+    with tempfile.TemporaryDirectory() as tmp:
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.monotonic()
+        command = [sys.executable, "-m", "unitac_rig", "campaign", "--data", tmp, "--no-live"]
+        subprocess.run(command, env=_env(code), cwd=tmp, check=True, capture_output=True)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {"cpu_s": round(cpu, 1), "wall_s": round(time.monotonic() - start, 1)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--before", default="2813621", help="commit measured as 'before' (default: 2813621)")
+    parser.add_argument("--object", default="hex_tpu")
+    parser.add_argument("--angles", type=int, default=91, help="angles in the session's plan (91)")
+    parser.add_argument("--presses", type=int, default=None, help="stop after this many presses (default: all)")
+    parser.add_argument("--seed", type=int, default=0, help="the simulated rig's seed (0)")
+    parser.add_argument("--sensors", nargs="+", default=list(SENSORS), choices=SENSORS)
+    parser.add_argument("--full", action="store_true", help="also run the whole campaign on each version (long)")
+    parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("--worker", choices=SENSORS, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.worker:
+        print(json.dumps(run_session(args.worker, args.object, args.angles, args.presses, args.seed)))
+        return
+
+    presses = campaign_presses()
+    versions: dict[str, dict[str, Any]] = {}
+    with checkout(args.before) as before_tree:
+        for label, code in (("before", before_tree), ("after", ROOT)):
+            sessions = {sensor: measure(code, args, sensor) for sensor in args.sensors}
+            estimate = sum(sessions[s]["cpu_per_press_s"] * presses[s] for s in sessions)
+            versions[label] = {"sessions": sessions, "campaign_cpu_estimate_s": round(estimate, 1)}
+            if args.full:
+                versions[label]["campaign_measured"] = run_campaign(code)
+            for sensor, s in sessions.items():
+                print(
+                    f"{label:6s} {sensor:11s} {s['cpu_s']:7.1f} CPU-s / {s['simulated_s']:7.1f} simulated s = "
+                    f"{s['cpu_per_simulated_s']:.4f} (simulator {s['simulator_cpu_per_simulated_s']:.4f}, host "
+                    f"{s['host_cpu_per_simulated_s']:.4f}); {s['presses_complete']} presses, "
+                    f"{s['targets_matched']} targets matched, median error {s['match_error_median_n']} N"
+                )
+            print(f"{label:6s} campaign estimate {estimate / 60:.1f} CPU-min ({sum(presses.values())} presses)")
+    ratios = {
+        sensor: {
+            "session": round(
+                versions["before"]["sessions"][sensor]["cpu_per_simulated_s"]
+                / versions["after"]["sessions"][sensor]["cpu_per_simulated_s"],
+                2,
+            ),
+            "simulator": round(
+                versions["before"]["sessions"][sensor]["simulator_cpu_per_simulated_s"]
+                / versions["after"]["sessions"][sensor]["simulator_cpu_per_simulated_s"],
+                2,
+            ),
+        }
+        for sensor in args.sensors
+    }
+    print("before/after CPU per simulated second:", json.dumps(ratios))
+    doc = {
+        "what": "CPU seconds per simulated second of one seeded fast-twin session, before and after (issue 27)",
+        "command": "python benchmarks/sim_cost.py " + " ".join(sys.argv[1:]),
+        "before_commit": args.before,
+        "after_commit": subprocess.run(
+            ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+        ).stdout.strip(),
+        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "load_avg": os.getloadavg()},
+        "object": args.object,
+        "angles": args.angles,
+        "presses": args.presses,
+        "seed": args.seed,
+        "campaign_presses": presses,
+        "versions": versions,
+        "ratios_before_over_after": ratios,
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(doc, indent=2) + "\n")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -99,7 +99,7 @@ def test_a_port_or_can_channel_that_is_not_there(
     data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], sensor: str, section: str, expected: str
 ) -> None:
     rig_file = tmp_path / "rig.toml"
-    rig_file.write_text(f"[arm]\nhost = '127.0.0.1'\n[sensors.{sensor}]\n{section}\n")
+    rig_file.write_text(f"[arm]\nhost = '127.0.0.1'\nunchecked_tool = true\n[sensors.{sensor}]\n{section}\n")
     assert cli(_collect(data, "--rig", str(rig_file), "--sensor", sensor)) == 1
     assert expected in one_error_line(capsys)  # and no new file: the fixture compares the whole tree
 
@@ -108,7 +108,7 @@ def test_a_failed_start_leaves_no_empty_session_in_a_fresh_directory(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     rig_file = tmp_path / "rig.toml"
-    rig_file.write_text("[arm]\nhost = '127.0.0.1'\n[sensors.papillarray]\ntype = 'papillarray'\nport = '/dev/nope'\n")
+    rig_file.write_text("[arm]\nhost = '127.0.0.1'\nunchecked_tool = true\n[sensors.papillarray]\ntype = 'papillarray'\nport = '/dev/nope'\n")
     fresh = tmp_path / "fresh"
     assert cli(["collect", "--object", "hex_tpu", "--sensor", "papillarray", "--rig", str(rig_file), "--data",
                 str(fresh), "--no-live"]) == 1  # fmt: skip
@@ -125,7 +125,7 @@ def wrong_sensor_rig(tmp_path: Path) -> Iterator[Path]:
     hub = SimPapillArrayHub(source=PapillArrayPressSource(seed=0))  # streams on the host clock, like hardware
     rig_file = tmp_path / "rig.toml"
     rig_file.write_text(
-        "[arm]\nhost = '127.0.0.1'\n"
+        "[arm]\nhost = '127.0.0.1'\nunchecked_tool = true\n"
         f"[sensors.uskin]\ntype = 'uskin-can'\ncan_interface = 'virtual'\ncan_channel = 'silent-{tmp_path.name}'\n"
         f"[sensors.papillarray]\ntype = 'papillarray'\nport = '{hub.url}'\n"
     )

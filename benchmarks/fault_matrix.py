@@ -428,10 +428,10 @@ def run_scenario(scenario: Scenario, workdir: Path) -> dict[str, Any]:
         if scenario.clearable:
             put_back = {"pending": _clear(rig, scenario)}
             for attempt in range(1, RESUME_ATTEMPTS + 1):
-                resume = run_collect(rig, collect_command(good, data, scenario.angles), good, detector=None,
-                                     stderr_path=workdir / f"resume-{attempt}.stderr", put_back=put_back)  # fmt: skip
-                resumes.append(resume)
-                if not _stopped_by_watchdog(resume):
+                again = run_collect(rig, collect_command(good, data, scenario.angles), good, detector=None,
+                                    stderr_path=workdir / f"resume-{attempt}.stderr", put_back=put_back)  # fmt: skip
+                resumes.append(again)
+                if not _stopped_by_watchdog(again):
                     break  # done, or failed for another reason than a program the watchdog stopped
             final = recorded_presses(data)
         resume = resumes[-1] if resumes else None
@@ -523,7 +523,17 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
                                                   *(r.get("resume_runs") or [])]]  # fmt: skip
     worst_row, worst = max(runs, key=lambda rx: rx[1]["peak_n"])
     spontaneous = [(r, x) for r, x in runs if _watchdog_ended(x) and not (x is r["fault_run"] and _injected_stop(r))]
+    rerun = [r["row"] for r in doc["rows"] if r.get("rerun")]
+    note = (
+        []
+        if not rerun
+        else [
+            f"Rows run again on their own (`--only ... --merge`) after a fix to this harness: {', '.join(rerun)}.",
+            "",
+        ]
+    )
     return [
+        *note,
         f"Worst true peak over all {len(runs)} runs: **{worst['peak_n']:.1f} N** ({worst_row['fault']}, "
         f"{worst_row['motion']}). Runs that the watchdog ended without an injected stall or death (the host, at "
         f"nice 10 on a 2-core box with a load of {doc['machine']['load_average_1min']}, sent nothing for over 167 "

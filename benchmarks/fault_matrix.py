@@ -474,6 +474,12 @@ def _clear(rig: RigTwin, scenario: Scenario) -> bool:
     return pending
 
 
+def _stops_the_program(scenario: dict[str, Any]) -> bool:
+    """The fault stops the controller's program with the host alive afterwards: a stall past the watchdog period,
+    or a protective stop."""
+    return scenario["inject"] == "pstop" or (scenario["inject"] == "stall" and scenario["stall_s"] > WATCHDOG_PERIOD_S)
+
+
 def criteria(record: dict[str, Any]) -> dict[str, bool | None]:
     """Issue 26's criteria for one row (None: does not apply to this row)."""
     fault, resume = record["fault_run"], record["resume_run"]
@@ -492,6 +498,10 @@ def criteria(record: dict[str, Any]) -> dict[str, bool | None]:
         "unloaded_where_host_could_act": (fault["end_force_n"] < UNLOADED_N) if record["host_can_act"] else None,
         "resume_unloaded": None if resume is None else resume["end_force_n"] < UNLOADED_N,
         "one_clear_line": fault["one_clear_line"],
+        # issue 26 item 5: after a frozen host (or a protective stop) the line says the same command resumes (not
+        # for the back-off: its line is the abort's, the first error, which the same command also resumes)
+        "line_says_the_same_command_resumes": ("the same command" in fault["last_line"])
+        if _stops_the_program(record["scenario"]) and record["motion"] != "back-off" else None,
         "nothing_recorded_lost": not lost,
         "resume_completes": None if resume is None
         else resume["exit_code"] == 0 and len(finished) == record["expected_presses"],

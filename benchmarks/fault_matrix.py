@@ -480,6 +480,12 @@ def _stops_the_program(scenario: dict[str, Any]) -> bool:
     return scenario["inject"] == "pstop" or (scenario["inject"] == "stall" and scenario["stall_s"] > WATCHDOG_PERIOD_S)
 
 
+def _says_what_happened(scenario: dict[str, Any], line: str) -> bool:
+    """A protective stop is named as one (the operator must unlock it); a stall as the program having stopped."""
+    what = "protective stop" if scenario["inject"] == "pstop" else "program stopped"
+    return what in line and "the same command" in line
+
+
 def criteria(record: dict[str, Any]) -> dict[str, bool | None]:
     """Issue 26's criteria for one row (None: does not apply to this row)."""
     fault, resume = record["fault_run"], record["resume_run"]
@@ -498,9 +504,10 @@ def criteria(record: dict[str, Any]) -> dict[str, bool | None]:
         "unloaded_where_host_could_act": (fault["end_force_n"] < UNLOADED_N) if record["host_can_act"] else None,
         "resume_unloaded": None if resume is None else resume["end_force_n"] < UNLOADED_N,
         "one_clear_line": fault["one_clear_line"],
-        # issue 26 item 5: after a frozen host (or a protective stop) the line says the same command resumes (not
-        # for the back-off: its line is the abort's, the first error, which the same command also resumes)
-        "line_says_the_same_command_resumes": ("the same command" in fault["last_line"])
+        # issue 26 item 5: after a frozen host or a protective stop the line says which it was and that the same
+        # command resumes (not for the back-off: its line is the abort's, the first error, which the same command
+        # also resumes)
+        "line_says_what_happened_and_to_resume": _says_what_happened(record["scenario"], fault["last_line"])
         if _stops_the_program(record["scenario"]) and record["motion"] != "back-off" else None,
         "nothing_recorded_lost": not lost,
         "resume_completes": None if resume is None
@@ -518,7 +525,7 @@ def _cell(text: str, width: int = 110) -> str:
 
 def _watchdog_ended(run: dict[str, Any]) -> bool:
     """The run ended because the watchdog stopped the controller's program (its one line says so)."""
-    return "program stopped" in run["last_line"] and run["watchdog_trips"] > 0
+    return "program stopped" in run["last_line"] and "watchdog" in run.get("controller_last_error", "watchdog")
 
 
 def _injected_stop(row: dict[str, Any]) -> bool:
@@ -538,7 +545,8 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
         []
         if not rerun
         else [
-            f"Rows run again on their own (`--only ... --merge`) after a fix to this harness: {', '.join(rerun)}.",
+            f"Rows run on their own (`--only ... --merge`: again after a fix to this harness, or beside the main run "
+            f"to save time): {', '.join(rerun)}.",
             "",
         ]
     )
@@ -596,7 +604,10 @@ def render_section(doc: dict[str, Any]) -> str:
         "Criteria: true peak < 25 N over every run of the row; the arm at rest and inside the rig file's workspace "
         "at the end of each run; the pad unloaded (< 1 N) where the host could still act (not after SIGKILL, a "
         "stall past the 167 ms watchdog period, or a protective stop: the controller stopped the program); one "
-        "clear line (`error: ...`, no traceback) when the run fails (SIGKILL: nothing can print); every press "
+        "clear line (`error: ...`, no traceback) when the run fails (SIGKILL: nothing can print), and after a "
+        "stall past "
+        "the watchdog period or a protective stop (not in the back-off, whose line is the abort's) that line names "
+        "it (`program stopped`, `protective stop`) and says the same command resumes; every press "
         "recorded before the fault still there with its status; the same command, run again after the fault is "
         "cleared (object back, stiffness and sign restored, protective stop unlocked, TCP corrected), finishes "
         "the session (all presses complete or failed). *end N*: the true force when the faulted run ended.",

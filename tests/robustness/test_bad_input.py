@@ -108,7 +108,9 @@ def test_a_failed_start_leaves_no_empty_session_in_a_fresh_directory(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     rig_file = tmp_path / "rig.toml"
-    rig_file.write_text("[arm]\nhost = '127.0.0.1'\nunchecked_tool = true\n[sensors.papillarray]\ntype = 'papillarray'\nport = '/dev/nope'\n")
+    rig_file.write_text(
+        "[arm]\nhost = '127.0.0.1'\nunchecked_tool = true\n[sensors.papillarray]\ntype = 'papillarray'\nport = '/dev/nope'\n"
+    )
     fresh = tmp_path / "fresh"
     assert cli(["collect", "--object", "hex_tpu", "--sensor", "papillarray", "--rig", str(rig_file), "--data",
                 str(fresh), "--no-live"]) == 1  # fmt: skip

@@ -109,7 +109,8 @@ def test_a_failed_start_leaves_no_empty_session_in_a_fresh_directory(
 ) -> None:
     rig_file = tmp_path / "rig.toml"
     rig_file.write_text(
-        "[arm]\nhost = '127.0.0.1'\nunchecked_tool = true\n[sensors.papillarray]\ntype = 'papillarray'\nport = '/dev/nope'\n"
+        "[arm]\nhost = '127.0.0.1'\nunchecked_tool = true\n"
+        "[sensors.papillarray]\ntype = 'papillarray'\nport = '/dev/nope'\n"
     )
     fresh = tmp_path / "fresh"
     assert cli(["collect", "--object", "hex_tpu", "--sensor", "papillarray", "--rig", str(rig_file), "--data",

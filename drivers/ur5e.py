@@ -366,8 +366,18 @@ class UR5eArm:
     # ---- state ----------------------------------------------------------------------------------------------
 
     def read_state(self) -> ArmState:
-        """The receive side's latest state, with ``program_running`` from the control side."""
-        state = self._receiver.read_state()
+        """The receive side's latest state, with ``program_running`` from the control side.
+
+        A receive stream that went stale while the control side says the program stopped is a stopped program
+        (ControlScriptStopped, what to do in its hint), not a lost controller: after a host freeze longer than the
+        watchdog period the receive stream may take a while to show new states, and calling that "lost" sent the
+        operator to the network cable instead of telling them the same command resumes."""
+        try:
+            state = self._receiver.read_state()
+        except RobotStateLost:
+            if not self._closed and self._program_stopped():
+                self._raise_stopped("reading the state", "is not running")
+            raise
         if self._closed:
             return state
         running = bool(self._call("isProgramRunning", self._control.isProgramRunning))
@@ -435,6 +445,8 @@ class UR5eArm:
         if self._controller_lost():
             self._in_force_mode = self._speeding = False
             self._move = None
+            if self._program_stopped():
+                return  # the controller stopped the program (and the arm) itself: nothing to stop, nothing to wait for
             raise RobotStateLost(
                 f"the RTDE stream from the UR at {self.host} is lost: no stop command was sent (each would wait "
                 "ur_rtde's 300 s for an answer)",
@@ -687,6 +699,13 @@ class UR5eArm:
             f"{what}: the control program on the UR at {self.host} {how}",
             hint=_program_stopped_hint(self._watchdog_hz),
         )
+
+    def _program_stopped(self) -> bool:
+        """Whether the control side says the program is not running (False when it cannot tell)."""
+        try:
+            return not bool(self._control.isProgramRunning())
+        except (RuntimeError, ValueError, AttributeError):
+            return False
 
     def _rearm_watchdog(self) -> None:
         """Arm the watchdog again as a motion starts (one ~5 ms round trip). ur_rtde reconnects by itself after a

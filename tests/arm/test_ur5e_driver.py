@@ -411,6 +411,28 @@ def test_a_host_that_was_frozen_does_not_call_a_live_controller_lost() -> None:
     receiver.close()
 
 
+def test_a_stale_stream_with_the_program_stopped_is_a_stopped_program_not_a_lost_controller() -> None:
+    """After a host freeze past the watchdog the receive stream may lag; the control side already says the program
+    stopped. That is ControlScriptStopped (its hint: the same command resumes), and stop() has nothing to send."""
+    control, receive, clock = FakeControl(), FakeReceive(), VirtualClock()
+    arm = UR5eArm("ur", control=control, receive=receive, clock=clock)
+    receive.getTimestamp = lambda: 5.0  # type: ignore[method-assign]
+    arm.read_state()
+    clock.sleep(STALL_TIMEOUT_S + 0.01)
+    arm.read_state()
+    clock.sleep(STALL_TIMEOUT_S + 0.01)
+    control.program_running = False  # the watchdog stopped the program
+    with pytest.raises(ControlScriptStopped) as excinfo:
+        arm.read_state()
+    assert not isinstance(excinfo.value, RobotStateLost)
+    assert "run the same command again" in excinfo.value.one_line()
+    arm.stop()  # no RobotStateLost: the controller already stopped the arm
+    control.program_running = True  # running, yet no new state: the controller is lost
+    with pytest.raises(RobotStateLost):
+        arm.read_state()
+    arm.close()
+
+
 def test_a_move_reported_finished_before_the_pose_stream_shows_it_is_not_an_error() -> None:
     """The progress word comes with the control client's RTDE stream, the pose with the receive client's; the first
     can be a few periods ahead (seen on the real-time twin at 50 mm/s: 'a move ended 0.6 mm from its target')."""

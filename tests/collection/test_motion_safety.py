@@ -508,3 +508,47 @@ def test_a_tight_hard_limit_keeps_the_set_point_ceiling_halfway_below_it() -> No
     assert setpoint_ceiling_n(default.press, default.limits) == pytest.approx(12.0)  # threshold + 2 N
     tight = few(1, limits={"hard_force_n": 11.0})
     assert setpoint_ceiling_n(tight.press, tight.limits) == pytest.approx((10.2 + 11.0) / 2)
+
+
+class LateSafetyBitsRig(SimRig):
+    """The program's stop shows before the safety bits (two RTDE streams): for the first ``late`` reads after a
+    protective stop the state says only that the program stopped."""
+
+    def __init__(self, config: RigConfig, late: int, **kwargs: Any) -> None:
+        super().__init__(config, **kwargs)
+        self.late = late
+
+    @property
+    def arm(self) -> Any:
+        return _LateBitsArm(self, self.sim_arm)
+
+
+class _LateBitsArm:
+    def __init__(self, rig: LateSafetyBitsRig, arm: Any) -> None:
+        self._rig, self._arm = rig, arm
+
+    def read_state(self) -> ArmState:
+        state = self._arm.read_state()
+        if state.protective_stop and self._rig.late > 0:
+            self._rig.late -= 1
+            return replace(state, protective_stop=False, program_running=False)
+        return state
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._arm, name)
+
+
+def test_a_protective_stop_whose_safety_bits_arrive_late_is_still_named_a_protective_stop(tmp_path: Path) -> None:
+    """The fault matrix's 'protective stop during the transit' row: one read lost the race against the safety bits
+    and the line blamed the watchdog, so the operator was not told to unlock the stop first."""
+    from drivers.errors import ProtectiveStop
+
+    with LateSafetyBitsRig(few(3), late=3, seed=0) as rig:
+
+        def trip(tick: TickInfo) -> None:
+            if tick.press_force_n > 5.0 and not rig.sim_arm.protective_stopped:
+                rig.sim_arm.trigger_protective_stop()
+
+        with pytest.raises(ProtectiveStop) as excinfo:
+            collect_session(rig, get_object("square_pla"), "uskin", tmp_path, on_tick=trip)
+    assert "unlock the protective stop" in excinfo.value.one_line()

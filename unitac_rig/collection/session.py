@@ -61,6 +61,7 @@ from unitac_rig.storage.recorder import SessionWriter
 log = logging.getLogger(__name__)
 
 PLACEMENT_CONFIRMED_MM = 5.0  # a first contact this close to where expected confirms the object's placement, mm
+SAFETY_BITS_WAIT_S = 0.1  # a stopped program is watched this long for the safety bits of a safety stop, s
 RECONNECT_WAIT_S = 3.0  # how long a lost sensor may take to come back (USB replug, controller reboot), s
 RECONNECT_POLL_S = 0.25  # pause between reconnect attempts, s
 DRY_RUN_HOLD_S = 0.2  # a dry run rests this long at each stand-off, s
@@ -241,6 +242,8 @@ def _first_move_and_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> d
             _retract(rig, first, to_clearance=False)
         raise
     except (SafetyLimit, DeviceError) as exc:
+        if isinstance(exc, ControlScriptStopped) and _safety_stopped(rig):
+            exc = ProtectiveStop(f"the program stopped in a safety stop ({exc})")
         _retract(rig, first)
         raise _controller_stop_explained(exc, f"before the first press ({first.press_id})") from exc
 
@@ -326,7 +329,7 @@ def _one_press(
             if isinstance(exc, SafetyLimit):
                 _retract(rig, plan)
             outcome.stopped = f"{type(exc).__name__} at press {plan.press_id}: {exc}"
-            if isinstance(exc, ControlScriptStopped) and _safety_stopped(rig.arm):
+            if isinstance(exc, ControlScriptStopped) and _safety_stopped(rig):
                 # a safety stop stops the program too, and the program's state can arrive before the safety bits
                 exc = ProtectiveStop(f"the program stopped in a safety stop ({exc})")
             explained = _controller_stop_explained(exc, f"at press {plan.press_id}")
@@ -359,13 +362,22 @@ def _one_press(
     return None, True
 
 
-def _safety_stopped(arm: Arm) -> bool:
-    """Whether the controller is in a protective or emergency stop now (False when it cannot be read)."""
-    try:
-        state = arm.read_state()
-    except DeviceError:
-        return False
-    return state.protective_stop or state.emergency_stop
+def _safety_stopped(rig: Rig) -> bool:
+    """Whether the controller is in a protective or emergency stop now (False when it cannot be read).
+
+    A safety stop stops the program too, and the program's state can arrive before the safety bits (two RTDE
+    streams): so a stopped program is looked at for up to SAFETY_BITS_WAIT_S before it counts as a plain stop."""
+    deadline_ns = rig.clock.now_ns() + round(SAFETY_BITS_WAIT_S * 1e9)
+    while True:
+        try:
+            state = rig.arm.read_state()
+        except DeviceError:
+            return False
+        if state.protective_stop or state.emergency_stop:
+            return True
+        if rig.clock.now_ns() >= deadline_ns:
+            return False
+        rig.clock.sleep(0.004)
 
 
 @contextlib.contextmanager

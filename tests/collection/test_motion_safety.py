@@ -511,12 +511,13 @@ def test_a_tight_hard_limit_keeps_the_set_point_ceiling_halfway_below_it() -> No
 
 
 class LateSafetyBitsRig(SimRig):
-    """The program's stop shows before the safety bits (two RTDE streams): for the first ``late`` reads after a
-    protective stop the state says only that the program stopped."""
+    """The program's stop shows before the safety bits (two RTDE streams): for ``late_s`` after a protective stop the
+    state says only that the program stopped."""
 
-    def __init__(self, config: RigConfig, late: int, **kwargs: Any) -> None:
+    def __init__(self, config: RigConfig, late_s: float, **kwargs: Any) -> None:
         super().__init__(config, **kwargs)
-        self.late = late
+        self.late_s = late_s
+        self.stopped_at_ns: int | None = None
 
     @property
     def arm(self) -> Any:
@@ -529,8 +530,12 @@ class _LateBitsArm:
 
     def read_state(self) -> ArmState:
         state = self._arm.read_state()
-        if state.protective_stop and self._rig.late > 0:
-            self._rig.late -= 1
+        if not state.protective_stop:
+            return state
+        rig = self._rig
+        if rig.stopped_at_ns is None:
+            rig.stopped_at_ns = rig.clock.now_ns()
+        if rig.clock.now_ns() - rig.stopped_at_ns < rig.late_s * 1e9:
             return replace(state, protective_stop=False, program_running=False)
         return state
 
@@ -543,12 +548,14 @@ def test_a_protective_stop_whose_safety_bits_arrive_late_is_still_named_a_protec
     and the line blamed the watchdog, so the operator was not told to unlock the stop first."""
     from drivers.errors import ProtectiveStop
 
-    with LateSafetyBitsRig(few(3), late=3, seed=0) as rig:
+    with LateSafetyBitsRig(few(3), late_s=0.03, seed=0) as rig:
 
-        def trip(tick: TickInfo) -> None:
-            if tick.press_force_n > 5.0 and not rig.sim_arm.protective_stopped:
+        def trip(now_ns: int) -> None:
+            moving = float(np.linalg.norm(rig.sim_arm.read_state().tcp_speed[:3])) > 0.02  # a transit move
+            if moving and not rig.sim_arm.protective_stopped:
                 rig.sim_arm.trigger_protective_stop()
 
+        rig.clock.on_advance(trip)
         with pytest.raises(ProtectiveStop) as excinfo:
-            collect_session(rig, get_object("square_pla"), "uskin", tmp_path, on_tick=trip)
+            collect_session(rig, get_object("square_pla"), "uskin", tmp_path)
     assert "unlock the protective stop" in excinfo.value.one_line()

@@ -86,6 +86,16 @@ class PressConfig(_Strict):
     ramp_rate_n_s: float = Field(8.0, gt=0, description="force-ramp strategy: force rise rate after contact, N/s")
     dwell_s: float = Field(0.2, ge=0, description="hold at the stop before retracting, s")
     transit_speed_mm_s: float = Field(50.0, gt=0, description="speed between presses, mm/s")
+    retract_speed_mm_s: float = Field(
+        20.0, gt=0, description="speed back off the object after the dwell (away from it: nothing to crush), mm/s"
+    )
+    confirmed_standoff_mm: float = Field(
+        5.0,
+        gt=0,
+        description="the stand-off once a press has confirmed the object's placement (within 5 mm of where the rig "
+        "file says), mm: shortens the free-air approach; never below limits.min_standoff_mm nor above "
+        "object.standoff_mm, and object.standoff_mm again whenever the object is turned or the session restarts",
+    )
     setpoint_margin_n: float = Field(
         0.2,
         gt=0,
@@ -178,6 +188,7 @@ class RigConfig(_Strict):
             "press.speed_mm_s": self.press.speed_mm_s,
             "press.fast_speed_mm_s": self.press.fast_speed_mm_s,
             "press.transit_speed_mm_s": self.press.transit_speed_mm_s,
+            "press.retract_speed_mm_s": self.press.retract_speed_mm_s,
         }
         for name, value in speeds.items():
             if value > self.limits.max_speed_mm_s:

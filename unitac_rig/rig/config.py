@@ -79,7 +79,8 @@ class ObjectPlacement(_Strict):
 
 class PressConfig(_Strict):
     threshold_n: float = Field(10.0, gt=0, description="stop force along the press, N")
-    strategy: Literal["guarded", "two-phase", "force-ramp"] = "guarded"
+    # two-phase 15/2 mm/s: chosen from the press chart (docs/benchmarks.md, "Press strategy")
+    strategy: Literal["guarded", "two-phase", "force-ramp"] = "two-phase"
     speed_mm_s: float = Field(2.0, gt=0, description="press speed (guarded) / slow speed (two-phase), mm/s")
     fast_speed_mm_s: float = Field(15.0, gt=0, description="approach speed before contact (two-phase, force-ramp)")
     contact_force_n: float = Field(1.0, gt=0, description="force that counts as first contact, N")
@@ -116,7 +117,12 @@ class PressConfig(_Strict):
         1.0, gt=0, le=2, description="URScript force_mode_set_gain_scaling, sent before every press (UR default 1)"
     )
     stop_samples: int = Field(
-        15, ge=1, le=50, description="the press stops when the mean of this many wrist readings reaches the threshold"
+        50,
+        ge=1,
+        le=50,
+        description="the press stops when the mean of this many wrist readings reaches the threshold (50 at 500 Hz: "
+        "the mean's noise ~0.16 N, so the true force reaches the threshold instead of a noise peak ending the press "
+        "~0.3 N short)",
     )
     angle_min_deg: float = -45.0
     angle_max_deg: float = 45.0

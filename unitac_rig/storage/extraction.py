@@ -14,8 +14,10 @@ UR's wrist force has ~0.4 N of noise per 500 Hz reading even after its filter an
    least squares with a cubic spline in time (knots every ``fit_knot_s``): smooth and averaging hundreds of readings;
 3. the fitted curve is shifted earlier by ``ft_lag_s``: the true force at time t is the fitted reading at t + lag;
 4. each target's crossing is the first upward crossing of that curve; the matched frame is the nearest tactile frame
-   (after ``tactile_latency_s``) and its force is the curve at the frame's time. A target the curve misses by less
-   than ``tolerance_n`` at its peak is matched at the peak (its error then says by how much).
+   (after ``tactile_latency_s``) and its force is the curve at the frame's time. A target the curve never reaches
+   is matched at the curve's peak, and its error says by how much it fell short: the press stops on the *measured*
+   force, so the true force tops out within a few tenths of a newton of the stop target either way, and a frame
+   within ``tolerance_n`` of a target counts, as in the moving-average method.
 
 ``"moving-average"`` (sessions recorded before the fit; still selectable): for every target force F* on the
 *loading ramp* of a press:
@@ -138,14 +140,16 @@ def first_upward_crossings(t_s: np.ndarray, force_n: np.ndarray, targets_n: np.n
 
 def free_air_baseline(t_s: np.ndarray, force_n: np.ndarray) -> float:
     """The mean reading (N) where nothing touches the pad: samples whose ``FREE_AIR_SMOOTHING_S`` average is under
-    ``FREE_AIR_N`` and which are at least ``FREE_AIR_GUARD_S`` from any sample above it; 0 with fewer than 10.
+    ``FREE_AIR_N`` and which are at least ``FREE_AIR_GUARD_S`` from any sample above it (longer before a slow first
+    contact); 0 with fewer than 10.
 
     What the F/T zero left over (a zero from a short window is off by ~0.1-0.2 N), measured on the press itself."""
     t_s, force_n = np.asarray(t_s, np.float64), np.asarray(force_n, np.float64)
     if force_n.size < 10:
         return 0.0
     window = max(1, round(FREE_AIR_SMOOTHING_S / _sample_period_s(t_s)))
-    loaded_t = t_s[smooth(force_n, window) >= FREE_AIR_N]
+    smoothed = smooth(force_n, window)
+    loaded_t = t_s[smoothed >= FREE_AIR_N]
     if loaded_t.size == 0:
         free = np.ones(force_n.size, bool)
     else:
@@ -153,6 +157,11 @@ def free_air_baseline(t_s: np.ndarray, force_n: np.ndarray) -> float:
         before = np.abs(t_s - loaded_t[np.clip(pos - 1, 0, loaded_t.size - 1)])
         after = np.abs(loaded_t[np.clip(pos, 0, loaded_t.size - 1)] - t_s)
         free = np.minimum(before, after) >= FREE_AIR_GUARD_S
+        # A slow press into a soft object takes a while to show FREE_AIR_N: leave out twice the time the force took
+        # from FREE_AIR_N to 2 x FREE_AIR_N before it (on a linear or stiffening contact, at least its rise from 0).
+        higher = t_s[smoothed >= 2 * FREE_AIR_N]
+        rise_s = float(higher[0] - loaded_t[0]) if higher.size and higher[0] > loaded_t[0] else 0.0
+        free &= ~((t_s >= loaded_t[0] - 2 * rise_s) & (t_s <= loaded_t[0]))
     return float(force_n[free].mean()) if free.sum() >= 10 else 0.0
 
 

@@ -187,3 +187,14 @@ def test_stored_settings_without_a_method_re_extract_with_the_fit_and_the_old_me
     assert ExtractionSettings.from_dict(chosen.to_dict()) == chosen
     with pytest.raises(ValueError, match="unknown extraction method"):
         extract_press(np.arange(10.0), np.arange(10.0), np.arange(10.0), settings=ExtractionSettings(method="x"))  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("method", ["fit", MOVING_AVERAGE])
+def test_a_press_that_never_touched_anything_misses_every_target_without_an_error(method: str):
+    """An aborted press (no contact, a protective stop in the approach) is still extracted and stored."""
+    t = np.arange(0.0, 1.0, 0.002)
+    noise = np.random.default_rng(0).normal(0.0, 0.3, t.size)
+    for force in (noise, np.zeros(0)):
+        times = t[: force.size]
+        ex = extract_press(times, force, np.arange(0.0, 1.0, 0.01), settings=ExtractionSettings(method=method))  # type: ignore[arg-type]
+        assert ex.miss.all() and (ex.frame_index == -1).all()

@@ -243,7 +243,7 @@ def extract_press(
         crossing, curve_t, curve_f = _fit_crossings(robot_t, raw, targets, settings)
 
         def force_at_times(times: np.ndarray, reached: np.ndarray) -> np.ndarray:
-            return np.interp(times, curve_t, curve_f)
+            return np.interp(times, curve_t, curve_f) if curve_t.size else np.full(times.shape, np.nan)
 
     elif settings.method == "moving-average":
         force = smooth(press_force_n, settings.smoothing_samples)

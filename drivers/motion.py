@@ -160,6 +160,7 @@ def guarded_move(
     hard_torque_nm: float | None = None,
     max_duration_s: float | None = None,
     setpoint_ceiling_n: float | None = None,
+    keep_moving: bool = False,
 ) -> GuardedMoveResult:
     """Move along ``direction`` at ``speed_m_s`` until the press force reaches ``force_threshold_n``.
 
@@ -178,6 +179,10 @@ def guarded_move(
     stopping transient included (it may raise to abort; the arm is still stopped). After the arm is at rest,
     reading goes on for ``settle_s`` so a lagging F/T reading reaches its peak. Raises ArmError for nonsensical
     arguments, ControlScriptStopped if the controller's program stops (the watchdog after a host stall).
+    ``keep_moving``: when the move ends on the force threshold, return at once without stopping the arm, so the
+    caller goes straight on with the next guarded move (a two-phase press switches from its fast to its slow speed
+    limit without stopping and starting again). Meanwhile the controller goes on regulating the last command: in
+    force mode that is still bounded by the set-point. Every other way out stops the arm as usual.
     """
     unit = _unit_direction(direction)
     if not speed_m_s > 0:
@@ -214,6 +219,10 @@ def guarded_move(
             reason, trigger, peak = _approach(arm, command, unit, start_position, max_travel_m, force_threshold_n,
                                              hard_limit_n, hard_torque_nm, stop_samples, max_duration_s, on_period,
                                              peak)  # fmt: skip
+        if keep_moving and reason == "force":
+            stop_sent = True  # nothing to stop: the next guarded move takes over within one control period
+            travel = float(np.dot(np.asarray(trigger.tcp_pose[:3]) - start_position, unit))
+            return GuardedMoveResult(reason, trigger, peak, travel, np.asarray(trigger.tcp_pose, dtype=np.float64))
         arm.stop(stop_decel_m_s2)
         stop_sent = True
         final, peak = _ride_out_stop(arm, unit, speed_m_s, stop_decel_m_s2, settle_s, on_period, peak)

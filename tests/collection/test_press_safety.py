@@ -25,7 +25,7 @@ from unitac_rig.collection.press import (
 )
 from unitac_rig.collection.session import collect_session, dry_run, plan_presses, session_tare
 from unitac_rig.errors import SafetyLimit
-from unitac_rig.rig.config import LimitsConfig, RigConfig, parse_rig_config
+from unitac_rig.rig.config import LimitsConfig, PressConfig, RigConfig, parse_rig_config
 from unitac_rig.rig.objects import get_object
 from unitac_rig.rig.poses import pose_from, press_rotation
 from unitac_rig.sim.fast_rig import SimRig
@@ -109,9 +109,10 @@ def test_a_one_second_host_stall_at_the_worst_moment_stays_below_the_hard_limit(
 def test_a_100_ms_stall_on_the_default_press_adds_at_most_half_a_newton(seed: int) -> None:
     """The true press force with a 100 ms host freeze just before the stop, against the same press without one
     (before: +2.1 N at 2 mm/s on this prism, issue 11's table)."""
-    baseline, _ = press_with_stall("guarded", 0.0, 0.05, seed=seed, along_press=True)
+    default = PressConfig().strategy
+    baseline, _ = press_with_stall(default, 0.0, 0.05, seed=seed, along_press=True)
     for at_n in (8.0, 9.5):
-        peak, status = press_with_stall("guarded", 0.1, at_n, seed=seed, along_press=True)
+        peak, status = press_with_stall(default, 0.1, at_n, seed=seed, along_press=True)
         assert status == "complete"
         assert peak <= baseline + 0.5, (at_n, peak, baseline)
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.extraction import extract_press
+from unitac_rig.storage.extraction import ExtractionSettings, extract_press
 from unitac_rig.storage.press_record import PressRecord, press_id
 from unitac_rig.storage.reader import list_sessions, load_matched_set, read_presses
 from unitac_rig.storage.recorder import SessionWriter, session_path
@@ -19,7 +19,7 @@ def make_press(rotation: float, angle: float, status: str = "complete", n_taxels
     tactile_t = np.arange(0.0, 1.2, 0.01)
     values = np.full((tactile_t.size, n_taxels, 3), 32000.0, np.float32)
     values[:, :, 2] += (1000 * tactile_t)[:, None].astype(np.float32)  # z rises 1000 counts/s
-    ex = extract_press(robot_t, force, tactile_t)
+    ex = extract_press(robot_t, force, tactile_t, settings=ExtractionSettings(ft_lag_s=0.0))  # the true force: no lag
     return PressRecord(
         press_id=press_id(rotation, angle),
         rotation_deg=rotation,

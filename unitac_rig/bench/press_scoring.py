@@ -67,6 +67,7 @@ class Score:
     abs_error_n: list[np.ndarray] = field(default_factory=list)  # misses as inf
     true_abs_error_n: list[np.ndarray] = field(default_factory=list)  # matched targets only
     true_overshoot_n: list[float] = field(default_factory=list)
+    true_peak_n: list[float] = field(default_factory=list)  # the true press force's largest value per press, N
     recorded_overshoot_n: list[float] = field(default_factory=list)
     rise_rate_n_s: list[float] = field(default_factory=list)
     cycle_s: list[float] = field(default_factory=list)
@@ -77,8 +78,10 @@ class Score:
         from unitac_rig.storage.extraction import ExtractionSettings, extract_press
 
         settings = ExtractionSettings(
+            method=variant.method,  # type: ignore[arg-type]
             smoothing_samples=variant.smoothing_samples,
             tactile_latency_s=-ft_lag_s() if variant.ft_lag_compensation else 0.0,
+            ft_lag_s=ft_lag_s(),
         )
         ex = extract_press(sample.robot_t_s, sample.press_force_n, sample.tactile_t_s, sample.tactile_valid, settings)
         self.presses += 1
@@ -92,6 +95,7 @@ class Score:
             self.true_abs_error_n.append(np.abs(true_force - ex.targets_n[matched]))
         if sample.truth_force_n.size:
             self.true_overshoot_n.append(float(sample.truth_force_n.max()) - threshold_n)
+            self.true_peak_n.append(float(sample.truth_force_n.max()))
         self.recorded_overshoot_n.append(sample.recorded_overshoot_n)
         lo, hi = np.searchsorted(ex.targets_n, [4.0, 9.5])
         t_lo, t_hi = ex.crossing_t_s[lo], ex.crossing_t_s[hi]
@@ -123,6 +127,7 @@ class Score:
             "true_overshoot_median_n": float(np.median(self.true_overshoot_n)) if self.true_overshoot_n else None,
             "true_overshoot_max_n": float(np.max(self.true_overshoot_n)) if self.true_overshoot_n else None,
             "true_overshoot_min_n": float(np.min(self.true_overshoot_n)) if self.true_overshoot_n else None,
+            "true_peak_max_n": float(np.max(self.true_peak_n)) if self.true_peak_n else None,
             "recorded_overshoot_median_n": float(np.nanmedian(self.recorded_overshoot_n))
             if self.recorded_overshoot_n
             else None,
@@ -209,8 +214,11 @@ def score(plan: PressBenchPlan, samples: list[PressSample]) -> dict[str, Any]:
             )
         points = [(r["campaign_h"], inf_if_missing(r["median_abs_error_n"])) for r in rows]
         front = pareto_front(points)
+        true_points = [(r["campaign_h"], inf_if_missing(r["true_median_abs_error_n"])) for r in rows]
+        true_front = pareto_front(true_points)
         for i, row in enumerate(rows):
             row["pareto"] = i in front
+            row["pareto_true"] = i in true_front
         variants.append(
             {
                 "name": variant.name,
@@ -218,7 +226,9 @@ def score(plan: PressBenchPlan, samples: list[PressSample]) -> dict[str, Any]:
                 "smoothing_samples": variant.smoothing_samples,
                 "tactile_latency_s": -ft_lag_s() if variant.ft_lag_compensation else 0.0,
                 "rows": rows,
+                "method": variant.method,
                 "pareto_front": [rows[i]["setting"] for i in front],
+                "pareto_front_true": [rows[i]["setting"] for i in true_front],
                 "goal": evaluate_goal(rows),
             }
         )

@@ -43,6 +43,7 @@ from drivers.arm import Arm, ArmState
 from drivers.errors import ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop, RobotStateLost
 from drivers.frames import TactileFrame
 from drivers.motion import (
+    DEFAULT_SETTLE_S,
     check_controller,
     force_limits,
     force_magnitude,
@@ -62,6 +63,12 @@ from unitac_rig.storage.press_record import PressRecord, press_id
 log = logging.getLogger(__name__)
 
 UNLOADED_FORCE_N = 3.0  # mean wrist force (since the last zero) below which the pad counts as unloaded, N
+# The window whose mean decides "unloaded" before a zero: 25 readings at 500 Hz. A UR's wrist F/T noise is ~1.15 N
+# white before its ~20 Hz filter, so the mean of 25 readings is off by ~0.23 N (1 sigma): 13 sigma below
+# UNLOADED_FORCE_N. The window after the zero (run_press's settle_s, 0.2 s) sets the host offset and the press-force
+# noise behind the contact threshold: the readings are correlated over ~8 ms, so a 0.1 s window misjudges the noise by
+# up to 40 % and a fast approach then stops on noise (measured on the fast twin); it stays 0.2 s.
+UNLOADED_CHECK_S = 0.05
 ZEROED_FORCE_N = 2.5  # mean |F| right after zeroing must be below this, else the zero did not take, N (a zero
 # taken from one filtered sample is off by its noise, ~0.5 N per axis on a UR; 2.5 N is ~4.5 sigma of that)
 # First contact is declared at max(contact_force_n, CONTACT_NOISE_SIGMAS x the press-force noise measured at the
@@ -136,6 +143,15 @@ def make_plan(
         contact_distance_m=standoff_mm / 1000.0,
         center_xy_m=(float(center_m[0]), float(center_m[1])),
     )
+
+
+def with_standoff(plan: PressPlan, standoff_mm: float) -> PressPlan:
+    """The same press with its stand-off pose moved along its ray to ``standoff_mm`` from the expected surface
+    (the session's smaller stand-off once the object's placement is confirmed)."""
+    shift_m = plan.contact_distance_m - standoff_mm / 1000.0
+    position = np.asarray(plan.start_pose[:3], dtype=np.float64) + np.asarray(plan.direction) * shift_m
+    start_pose = np.concatenate([position, np.asarray(plan.start_pose[3:], dtype=np.float64)])
+    return replace(plan, start_pose=start_pose, contact_distance_m=standoff_mm / 1000.0)
 
 
 def clearance_waypoints(here: np.ndarray, plan: PressPlan, clearance_m: float) -> list[np.ndarray]:
@@ -482,6 +498,21 @@ class _Streams:
         if self.on_tick is not None:
             self.on_tick(TickInfo(self.plan.press_id, self.phase, force, self.frames[-1] if self.frames else None))
 
+    def recording(self, guard: Callable[[ArmState], None]) -> Callable[[ArmState], None]:
+        """An ``on_period`` for the move back to the stand-off: ``guard`` checks, and the streams go on recording
+        (the pad is off the object: free-air readings that let the extraction measure what the F/T zero left over)
+        without the press's contact, travel and tactile-stall rules."""
+
+        def on_period(state: ArmState) -> None:
+            guard(state)
+            self.robot_t.append(state.host_t_ns / 1e9)
+            self.robot_force.append(np.asarray(state.tcp_force, dtype=np.float64))
+            self.robot_pose.append(np.asarray(state.tcp_pose, dtype=np.float64))
+            self.press_force.append(press_force_n(state.tcp_force, self.plan.direction))
+            self.frames.extend(self.sensor.poll())
+
+        return on_period
+
     def hold(self, seconds: float) -> None:
         for _ in range(max(0, round(seconds / self.arm.control_period_s))):
             self.arm.wait_period()
@@ -510,17 +541,24 @@ def _settle_window(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[lis
 
 
 def zero_wrist(
-    arm: Arm, sensor: TactileSensor, settle_s: float, where: str, *, check_unloaded: bool = True
+    arm: Arm,
+    sensor: TactileSensor,
+    settle_s: float,
+    where: str,
+    *,
+    check_unloaded: bool = True,
+    check_s: float | None = None,
 ) -> tuple[list[TactileFrame], np.ndarray]:
-    """Zero the wrist F/T at rest after settling, refusing when the pad is loaded; -> (frames, wrenches (K, 6)) of a
-    window after the zero, whose mean is the host-side offset left over (a zero from one noisy sample is off).
+    """Zero the wrist F/T at rest after settling, refusing when the pad is loaded; -> (frames of both windows,
+    wrenches (K, 6) of the ``settle_s`` window after the zero, whose mean is the host-side offset left over: a zero
+    from one noisy sample is off). ``check_s``: the window before the zero (None: ``settle_s``).
 
     The unloaded check uses the mean force since the previous zero (a UR's F/T drifts by well under
     ``UNLOADED_FORCE_N`` between presses), so the session's first zero (``check_unloaded=False``) relies on the
     stand-off being clear of the object by construction. After zeroing, the window's mean must be near zero.
     """
     wait_until_at_rest(arm)
-    _, mean_wrench = settle_frames(arm, sensor, settle_s)
+    before, mean_wrench = settle_frames(arm, sensor, settle_s if check_s is None else check_s)
     mean_force = float(np.linalg.norm(mean_wrench[:3]))
     if check_unloaded and mean_force > UNLOADED_FORCE_N:
         raise SafetyLimit(
@@ -535,7 +573,7 @@ def zero_wrist(
             f"wrist still reads {left:.2f} N after zeroing at {where}: the F/T zero did not take",
             hint="check the wrist force with `unitac-rig probe ur5e` and the payload set on the teach pendant",
         )
-    return frames, wrenches
+    return before + frames, wrenches
 
 
 def run_press(
@@ -560,7 +598,8 @@ def run_press(
     should be).
     """
     move_clear(arm, plan, clearance_m, press.transit_speed_mm_s / 1000.0, limits)
-    frames, wrenches = zero_wrist(arm, sensor, settle_s, f"the stand-off of press {plan.press_id}")
+    frames, wrenches = zero_wrist(arm, sensor, settle_s, f"the stand-off of press {plan.press_id}",
+                                  check_s=UNLOADED_CHECK_S)  # fmt: skip
     ft_offset = wrenches.mean(axis=0)
     arm = cast(Arm, ZeroedArm(arm, ft_offset))
     noise_n = float(np.std(-(wrenches[:, :3] @ plan.direction)))
@@ -600,15 +639,17 @@ def run_press(
         streams.event("abort", detail)
         if not isinstance(exc, ProtectiveStop | ControlScriptStopped):  # the controller has already stopped the arm
             stop_arm(arm)
+    if pending is None:
+        try:  # back out to the stand-off, so the next transit starts clear of the object
+            streams.phase = "return"
+            here = np.asarray(arm.read_state().tcp_pose, dtype=np.float64)
+            for pose, speed in approach_legs(here, [plan.start_pose], plan, limits, press.transit_speed_mm_s / 1000.0):
+                move_to(arm, pose, speed, TRANSIT_ACCEL_M_S2, on_period=streams.recording(transit_guard(arm, limits)))
+        except BaseException as exc:
+            pending = exc
     record = _to_record(streams, plan, press, status, reason, baseline, tare, ft_offset)
     if pending is not None:
-        raise with_press_record(pending, record)
-    try:  # back out to the stand-off, so the next transit starts clear of the object
-        here = np.asarray(arm.read_state().tcp_pose, dtype=np.float64)
-        for pose, speed in approach_legs(here, [plan.start_pose], plan, limits, press.transit_speed_mm_s / 1000.0):
-            move_to(arm, pose, speed, TRANSIT_ACCEL_M_S2, on_period=transit_guard(arm, limits))
-    except BaseException as exc:
-        raise with_press_record(exc, record)  # noqa: B904 - the same exception (or Ctrl-C as Interrupted, caused by it)
+        raise with_press_record(pending, record)  # the same exception (or Ctrl-C as Interrupted, caused by it)
     return record
 
 
@@ -646,20 +687,22 @@ def _press_strategy(arm: Arm, streams: _Streams, plan: PressPlan, press: PressCo
         "force_setpoint_n": setpoint_n,
         "setpoint_ceiling_n": ceiling_n,
     }
+    # The dwell that follows the stop reads on at rest, so the stop itself need not wait for the lagging F/T.
+    stop_settle_s = 0.0 if press.dwell_s >= DEFAULT_SETTLE_S else DEFAULT_SETTLE_S
     if press.strategy == "guarded":
         streams.phase = "press"
         result = guarded_move(arm, plan.direction, press.speed_mm_s / 1000.0, press.threshold_n,
                               max_travel_m=backstop_m, stop_samples=press.stop_samples,
                               max_duration_s=backstop_m / (press.speed_mm_s / 1000.0) + PRESS_EXTRA_S,
-                              **bounds)  # fmt: skip
+                              settle_s=stop_settle_s, **bounds)  # fmt: skip
         return _reason(result.reason, streams)
     # two-phase and force-ramp: fast to first contact (one reading over the contact threshold: a false alarm only
-    # makes the rest of the approach slow)
+    # makes the rest of the approach slow). Two-phase goes on to its slow speed limit without stopping in between.
     streams.phase = "approach"
     result = guarded_move(arm, plan.direction, press.fast_speed_mm_s / 1000.0, streams.contact_threshold_n,
                           max_travel_m=backstop_m,
                           max_duration_s=backstop_m / (press.fast_speed_mm_s / 1000.0) + PRESS_EXTRA_S,
-                          **bounds)  # fmt: skip
+                          keep_moving=press.strategy == "two-phase", **bounds)  # fmt: skip
     if result.reason != "force":
         return _reason(result.reason, streams)
     streams.phase = "press"
@@ -669,7 +712,7 @@ def _press_strategy(arm: Arm, streams: _Streams, plan: PressPlan, press: PressCo
         result = guarded_move(arm, plan.direction, press.speed_mm_s / 1000.0, press.threshold_n,
                               max_travel_m=budget_m, stop_samples=press.stop_samples,
                               max_duration_s=budget_m / (press.speed_mm_s / 1000.0) + PRESS_EXTRA_S,
-                              **bounds)  # fmt: skip
+                              settle_s=stop_settle_s, **bounds)  # fmt: skip
         return _reason(result.reason, streams)
     return _force_ramp(arm, streams, plan, press)
 
@@ -725,9 +768,10 @@ def _force_ramp(arm: Arm, streams: _Streams, plan: PressPlan, press: PressConfig
 
 
 def _retract(arm: Arm, streams: _Streams, plan: PressPlan, press: PressConfig) -> None:
-    """Back off along the ray, still recording, until the pad is unloaded (a held, filtered condition: the mean of
-    the last ``RETRACT_HOLD_PERIODS`` readings, not one noisy sample) and 1 mm back; then stop recording."""
-    speed = min(press.transit_speed_mm_s, 4 * press.speed_mm_s) / 1000.0
+    """Back off along the ray at ``press.retract_speed_mm_s``, still recording, until the pad is unloaded (a held,
+    filtered condition: the mean of the last ``RETRACT_HOLD_PERIODS`` readings, not one noisy sample) and 1 mm back;
+    then stop recording."""
+    speed = min(press.transit_speed_mm_s, press.retract_speed_mm_s) / 1000.0
     twist = np.concatenate([-plan.direction * speed, np.zeros(3)])
     start = np.asarray(arm.read_state().tcp_pose[:3])
     try:
@@ -823,6 +867,7 @@ def _to_record(
             "ft_zero_offset": ft_offset.tolist(),
             "tare": tare,
             "contact_travel_mm": contact_travel_mm(streams.contact_pose, plan),
+            "standoff_mm": 1000.0 * plan.contact_distance_m,  # where first contact was expected, mm
             "start_pose": np.asarray(plan.start_pose).tolist(),
             "direction": np.asarray(plan.direction).tolist(),
         },

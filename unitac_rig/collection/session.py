@@ -46,6 +46,7 @@ from unitac_rig.collection.press import (
     retract_from_object,
     run_press,
     transit_guard,
+    with_standoff,
     zero_wrist,
 )
 from unitac_rig.errors import CarriesPressRecord, SafetyLimit
@@ -192,11 +193,13 @@ def collect_session(
         current_rotation: float | None = None
         previous: PressPlan | None = None
         moves_limits = config.limits
+        confirmed = False  # a press has found the object where the rig file says (since the last turn)
         limit = config.limits.max_failed_in_a_row
         for index, plan in enumerate(todo):
             raise_if_interrupted()
             if plan.rotation_deg != current_rotation:
                 moves_limits = config.limits  # the placement is unknown again after the object is turned
+                confirmed = False
                 if previous is not None:  # out to the clearance radius before anyone turns the object by hand
                     retract_from_object(
                         arm, previous, config.limits, standoff_m=config.object.standoff_mm / 1000.0,
@@ -208,9 +211,12 @@ def collect_session(
                     with rig.arm.keep_alive():
                         ask_operator(f"Turn {obj.id} to {plan.rotation_deg:g} deg on its mount, then press Enter.")
                 current_rotation = plan.rotation_deg
+            if confirmed:  # the object stands where measured: a shorter free-air approach (and return to it)
+                plan = with_standoff(plan, confirmed_standoff_mm(config))
             record, stop = _one_press(rig, sensor, plan, writer, extraction, outcome, on_tick, moves_limits)
             previous = plan
             if record is not None and placement_confirmed(record, config):
+                confirmed = True
                 moves_limits = config.limits.model_copy(update={"near_zone_mm": config.limits.near_zone_confirmed_mm})
             if on_press is not None and record is not None:
                 matched = 0 if record.extraction is None else record.extraction.n_matched
@@ -259,10 +265,17 @@ def _controller_stop_explained(exc: BaseException, where: str) -> BaseException:
 
 def placement_confirmed(record: PressRecord, config: RigConfig) -> bool:
     """Whether a press found the object where the rig file says: complete, and first contact within
-    ``PLACEMENT_CONFIRMED_MM`` of the stand-off distance. Then the near zone of the moves can shrink to
-    ``limits.near_zone_confirmed_mm`` (docs/real-rig.md)."""
+    ``PLACEMENT_CONFIRMED_MM`` of the press's stand-off distance. Then the near zone of the moves can shrink to
+    ``limits.near_zone_confirmed_mm`` (docs/real-rig.md) and the stand-off to :func:`confirmed_standoff_mm`."""
     travel = float(record.attrs.get("contact_travel_mm", math.nan))
-    return record.status == "complete" and abs(travel - config.object.standoff_mm) <= PLACEMENT_CONFIRMED_MM
+    expected = float(record.attrs.get("standoff_mm", config.object.standoff_mm))
+    return record.status == "complete" and abs(travel - expected) <= PLACEMENT_CONFIRMED_MM
+
+
+def confirmed_standoff_mm(config: RigConfig) -> float:
+    """The stand-off (mm) once the placement is confirmed: ``press.confirmed_standoff_mm``, never below
+    ``limits.min_standoff_mm`` nor above ``object.standoff_mm``."""
+    return max(config.limits.min_standoff_mm, min(config.press.confirmed_standoff_mm, config.object.standoff_mm))
 
 
 def record_reason(record: PressRecord | None) -> str:

@@ -79,6 +79,9 @@ class ExtractionConventions(_Strict):
             smoothing_samples=self.smoothing_samples,
             max_frame_gap_s=self.max_frame_gap_s,
             tactile_latency_s=self.tactile_latency_s,
+            # the moving average, as before the fit: the authors' wrist lag and noise are not known, and their rows
+            # pair the tactile frame with the wrist reading as recorded (`unitac-rig extract` can re-run with the fit)
+            method="moving-average",
         )
 
 

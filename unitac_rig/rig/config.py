@@ -80,13 +80,24 @@ class ObjectPlacement(_Strict):
 
 class PressConfig(_Strict):
     threshold_n: float = Field(10.0, gt=0, description="stop force along the press, N")
-    strategy: Literal["guarded", "two-phase", "force-ramp"] = "guarded"
+    # two-phase 15/2 mm/s: chosen from the press chart (docs/benchmarks.md, "Press strategy")
+    strategy: Literal["guarded", "two-phase", "force-ramp"] = "two-phase"
     speed_mm_s: float = Field(2.0, gt=0, description="press speed (guarded) / slow speed (two-phase), mm/s")
     fast_speed_mm_s: float = Field(15.0, gt=0, description="approach speed before contact (two-phase, force-ramp)")
     contact_force_n: float = Field(1.0, gt=0, description="force that counts as first contact, N")
     ramp_rate_n_s: float = Field(8.0, gt=0, description="force-ramp strategy: force rise rate after contact, N/s")
     dwell_s: float = Field(0.2, ge=0, description="hold at the stop before retracting, s")
     transit_speed_mm_s: float = Field(50.0, gt=0, description="speed between presses, mm/s")
+    retract_speed_mm_s: float = Field(
+        20.0, gt=0, description="speed back off the object after the dwell (away from it: nothing to crush), mm/s"
+    )
+    confirmed_standoff_mm: float = Field(
+        5.0,
+        gt=0,
+        description="the stand-off once a press has confirmed the object's placement (within 5 mm of where the rig "
+        "file says), mm: shortens the free-air approach; never below limits.min_standoff_mm nor above "
+        "object.standoff_mm, and object.standoff_mm again whenever the object is turned or the session restarts",
+    )
     setpoint_margin_n: float = Field(
         0.2,
         gt=0,
@@ -108,7 +119,12 @@ class PressConfig(_Strict):
         1.0, gt=0, le=2, description="URScript force_mode_set_gain_scaling, sent before every press (UR default 1)"
     )
     stop_samples: int = Field(
-        15, ge=1, le=50, description="the press stops when the mean of this many wrist readings reaches the threshold"
+        50,
+        ge=1,
+        le=50,
+        description="the press stops when the mean of this many wrist readings reaches the threshold (50 at 500 Hz: "
+        "the mean's noise ~0.16 N, so the true force reaches the threshold instead of a noise peak ending the press "
+        "~0.3 N short)",
     )
     angle_min_deg: float = Field(-45.0, ge=-90, le=90, description="first approach angle from the object's normal")
     angle_max_deg: float = Field(45.0, ge=-90, le=90, description="last approach angle, deg")
@@ -204,6 +220,7 @@ class RigConfig(_Strict):
             "press.speed_mm_s": self.press.speed_mm_s,
             "press.fast_speed_mm_s": self.press.fast_speed_mm_s,
             "press.transit_speed_mm_s": self.press.transit_speed_mm_s,
+            "press.retract_speed_mm_s": self.press.retract_speed_mm_s,
         }
         for name, value in speeds.items():
             if value > self.limits.max_speed_mm_s:

@@ -1,6 +1,26 @@
 """Force-matched extraction: for each press, pick the tactile frame that goes with each target wrist force.
 
-For every target force F* (25 targets, 4.00..10.00 N in 0.25 N steps, as in the paper) on the *loading ramp* of a press:
+Two ways to estimate the press force a frame goes with (``ExtractionSettings.method``):
+
+``"fit"`` (the default): the *true* press force, estimated from the whole press instead of a few noisy samples. A
+UR's wrist force has ~0.4 N of noise per 500 Hz reading even after its filter and lags the true force by
+``ft_lag_s`` (transport latency + filter time constant, ~12 ms); a moving average of it matches frames to within
+~0.05 N of *itself* while the true force at those frames is ~0.2 N off. So:
+
+1. the baseline (what the zero left over) is re-estimated from the free-air readings before first contact and after
+   the pad has left the object again (any sample whose neighbourhood average is under ``FREE_AIR_N``, away from the
+   contact by ``FREE_AIR_GUARD_S``), and subtracted;
+2. the loading ramp (from ``RAMP_START_N`` below the lowest target up to the peak of the smoothed force) is fitted by
+   least squares with a cubic spline in time (knots every ``fit_knot_s``): smooth and averaging hundreds of readings;
+3. the fitted curve is shifted earlier by ``ft_lag_s``: the true force at time t is the fitted reading at t + lag;
+4. each target's crossing is the first upward crossing of that curve; the matched frame is the nearest tactile frame
+   (after ``tactile_latency_s``) and its force is the curve at the frame's time. A target the curve never reaches
+   is matched at the curve's peak, and its error says by how much it fell short: the press stops on the *measured*
+   force, so the true force tops out within a few tenths of a newton of the stop target either way, and a frame
+   within ``tolerance_n`` of a target counts, as in the moving-average method.
+
+``"moving-average"`` (sessions recorded before the fit; still selectable): for every target force F* on the
+*loading ramp* of a press:
 
 1. the press force (wrist force along the press direction, N) is smoothed with a centred moving average
    (``smoothing_samples``; the UR's F/T is noisy, and a single noisy sample must not decide a crossing);
@@ -15,18 +35,24 @@ For every target force F* (25 targets, 4.00..10.00 N in 0.25 N steps, as in the 
    ``max_frame_gap_s`` from t*, when that frame is flagged invalid (missing or stale taxels), or when
    ``|error| > tolerance_n``.
 
-Everything here is a pure function of the raw streams, so ``unitac-rig extract`` can recompute it with other settings.
+Both methods then apply the same miss rules (frame gap, invalid frame, tolerance). Everything here is a pure function
+of the raw streams, so ``unitac-rig extract`` can recompute it with other settings (sessions store theirs).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from typing import Literal
 
 import numpy as np
 
 MAX_SMOOTHING_SAMPLES = 5000  # 10 s at 500 Hz: longer than any press; larger windows only flatten it
 MAX_LATENCY_S = 1.0  # a tactile delay beyond a second is a wrong setting, not a sensor (frames arrive at 100-1000 Hz)
+FREE_AIR_N = 1.0  # fit: a reading whose 50 ms neighbourhood averages under this (after the zero) is free air, N
+FREE_AIR_GUARD_S = 0.05  # ... and only at least this far (s) from any reading above it (contact begins softly)
+RAMP_START_N = 1.5  # fit: the ramp fit starts where the smoothed force passes (lowest target - this), N
+FREE_AIR_SMOOTHING_S = 0.05  # the neighbourhood average that tells free air from contact, s
 
 
 def default_targets_n() -> np.ndarray:
@@ -41,6 +67,11 @@ class ExtractionSettings:
     smoothing_samples: int = 15  # 30 ms at 500 Hz: the UR F/T noise is correlated over ~10 ms
     max_frame_gap_s: float = 0.05
     tactile_latency_s: float = 0.0
+    # "fit": the fitted, lag-compensated true force (module docstring); "moving-average": the recorded force smoothed
+    # by ``smoothing_samples`` (what sessions before the fit used; their stored settings lack this field)
+    method: Literal["fit", "moving-average"] = "fit"
+    ft_lag_s: float = 0.012  # fit: the wrist F/T's lag behind the true force, s (a UR e-series: ~4 ms + 8 ms filter)
+    fit_knot_s: float = 0.5  # fit: spline knot spacing on the loading ramp, s (longer: less noise, more bias)
 
     def problems(self) -> list[tuple[str, str]]:
         """(field, what is wrong) for every setting extraction cannot work with; empty when all are usable."""
@@ -57,6 +88,12 @@ class ExtractionSettings:
             found.append(("max_frame_gap_s", f"must be a positive number of seconds, got {self.max_frame_gap_s:g}"))
         if not self.targets_n or not all(math.isfinite(t) and t > 0 for t in self.targets_n):
             found.append(("targets_n", "must be one or more positive forces in newtons"))
+        if self.method not in ("fit", "moving-average"):
+            found.append(("method", f"must be 'fit' or 'moving-average', got {self.method!r}"))
+        if not (math.isfinite(self.ft_lag_s) and 0 <= self.ft_lag_s <= MAX_LATENCY_S):
+            found.append(("ft_lag_s", f"must be a number of seconds in [0, {MAX_LATENCY_S:g}], got {self.ft_lag_s:g}"))
+        if not (math.isfinite(self.fit_knot_s) and self.fit_knot_s > 0):
+            found.append(("fit_knot_s", f"must be a positive number of seconds, got {self.fit_knot_s:g}"))
         return found
 
     def to_dict(self) -> dict[str, object]:
@@ -127,6 +164,91 @@ def first_upward_crossings(t_s: np.ndarray, force_n: np.ndarray, targets_n: np.n
     return out
 
 
+def free_air_baseline(t_s: np.ndarray, force_n: np.ndarray) -> float:
+    """The mean reading (N) where nothing touches the pad: samples whose ``FREE_AIR_SMOOTHING_S`` average is under
+    ``FREE_AIR_N`` and which are at least ``FREE_AIR_GUARD_S`` from any sample above it (longer before a slow first
+    contact); 0 with fewer than 10.
+
+    What the F/T zero left over (a zero from a short window is off by ~0.1-0.2 N), measured on the press itself."""
+    t_s, force_n = np.asarray(t_s, np.float64), np.asarray(force_n, np.float64)
+    if force_n.size < 10:
+        return 0.0
+    window = max(1, round(FREE_AIR_SMOOTHING_S / _sample_period_s(t_s)))
+    smoothed = smooth(force_n, window)
+    loaded_t = t_s[smoothed >= FREE_AIR_N]
+    if loaded_t.size == 0:
+        free = np.ones(force_n.size, bool)
+    else:
+        pos = np.searchsorted(loaded_t, t_s)
+        before = np.abs(t_s - loaded_t[np.clip(pos - 1, 0, loaded_t.size - 1)])
+        after = np.abs(loaded_t[np.clip(pos, 0, loaded_t.size - 1)] - t_s)
+        free = np.minimum(before, after) >= FREE_AIR_GUARD_S
+        # A slow press into a soft object takes a while to show FREE_AIR_N: leave out twice the time the force took
+        # from FREE_AIR_N to 2 x FREE_AIR_N before it (on a linear or stiffening contact, at least its rise from 0).
+        higher = t_s[smoothed >= 2 * FREE_AIR_N]
+        rise_s = float(higher[0] - loaded_t[0]) if higher.size and higher[0] > loaded_t[0] else 0.0
+        free &= ~((t_s >= loaded_t[0] - 2 * rise_s) & (t_s <= loaded_t[0]))
+    return float(force_n[free].mean()) if free.sum() >= 10 else 0.0
+
+
+def fit_loading_ramp(
+    t_s: np.ndarray, force_n: np.ndarray, lowest_target_n: float, settings: ExtractionSettings
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The estimated true press force on the loading ramp: (times (s), force (N)), or None with no ramp to fit.
+
+    Baseline-corrected (:func:`free_air_baseline`), least-squares cubic spline in time from where the smoothed force
+    passes ``lowest_target_n - RAMP_START_N`` to its peak (knots every ``settings.fit_knot_s``), and shifted earlier
+    by ``settings.ft_lag_s`` (the reading at t + lag is the true force at t)."""
+    t_s, force_n = np.asarray(t_s, np.float64), np.asarray(force_n, np.float64)
+    if force_n.size < 8:
+        return None
+    force = force_n - free_air_baseline(t_s, force_n)
+    smoothed = smooth(force, max(1, round(FREE_AIR_SMOOTHING_S / _sample_period_s(t_s))))
+    peak = int(np.argmax(smoothed))
+    below = np.nonzero(smoothed[: peak + 1] < lowest_target_n - RAMP_START_N)[0]
+    lo = int(below[-1]) if below.size else 0
+    ramp_t, ramp_f = t_s[lo : peak + 1], force[lo : peak + 1]
+    if ramp_t.size < 8 or ramp_t[-1] <= ramp_t[0]:
+        return None
+    span = ramp_t[-1] - ramp_t[0]
+    x = (ramp_t - ramp_t[0]) / span
+    intervals = max(1, min(round(span / settings.fit_knot_s), (ramp_t.size - 4) // 8))
+    basis = _cubic_spline_basis(x, intervals)
+    coef, *_ = np.linalg.lstsq(basis, ramp_f, rcond=None)
+    return ramp_t - settings.ft_lag_s, basis @ coef
+
+
+def _cubic_spline_basis(x: np.ndarray, intervals: int) -> np.ndarray:
+    """Truncated-power basis of a cubic spline on [0, 1] with ``intervals`` equal pieces (C2 at the knots)."""
+    columns = [np.ones_like(x), x, x**2, x**3]
+    columns += [np.clip(x - k / intervals, 0.0, None) ** 3 for k in range(1, intervals)]
+    return np.column_stack(columns)
+
+
+def _sample_period_s(t_s: np.ndarray) -> float:
+    steps = np.diff(t_s)
+    steps = steps[steps > 0]
+    return float(np.median(steps)) if steps.size else 0.002
+
+
+def _fit_crossings(
+    robot_t: np.ndarray, raw: np.ndarray, targets: np.ndarray, settings: ExtractionSettings
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Crossing times of the fitted true force; -> (crossings, curve times, curve force) (empty curve: no ramp)."""
+    crossing = np.full(targets.size, np.nan)
+    if targets.size == 0:
+        return crossing, np.zeros(0), np.zeros(0)
+    fitted = fit_loading_ramp(robot_t, raw, float(targets.min()), settings)
+    if fitted is None:
+        return crossing, np.zeros(0), np.zeros(0)
+    curve_t, curve_f = fitted
+    crossing = first_upward_crossings(curve_t, curve_f, targets)
+    top = int(np.argmax(curve_f))
+    short = np.isnan(crossing) & (curve_f[top] >= targets - settings.tolerance_n)
+    crossing[short] = curve_t[top]  # the nearest the ramp came to these targets: matched there, the error says so
+    return crossing, curve_t, curve_f
+
+
 def extract_press(
     robot_t_s: np.ndarray,
     press_force_n: np.ndarray,
@@ -138,18 +260,31 @@ def extract_press(
     settings = settings or ExtractionSettings()
     targets = np.asarray(settings.targets_n, dtype=np.float64)
     n = targets.size
-    force = smooth(press_force_n, settings.smoothing_samples)
     robot_t = np.asarray(robot_t_s, dtype=np.float64)
+    raw = np.asarray(press_force_n, np.float64)
     frame_t = np.asarray(tactile_t_s, dtype=np.float64) - settings.tactile_latency_s
     valid = np.ones(frame_t.size, bool) if tactile_valid is None else np.asarray(tactile_valid, bool)
 
-    crossing = first_upward_crossings(robot_t, force, targets)
-    # Smoothing lowers a short peak: a target the raw force reached but the smoothed force did not (the last ones,
-    # at the stop) takes its crossing from the raw force.
-    raw = np.asarray(press_force_n, np.float64)
-    from_raw = np.isnan(crossing)
-    if from_raw.any():
-        crossing[from_raw] = first_upward_crossings(robot_t, raw, targets[from_raw])
+    if settings.method == "fit":
+        crossing, curve_t, curve_f = _fit_crossings(robot_t, raw, targets, settings)
+
+        def force_at_times(times: np.ndarray, reached: np.ndarray) -> np.ndarray:
+            return np.interp(times, curve_t, curve_f) if curve_t.size else np.full(times.shape, np.nan)
+
+    elif settings.method == "moving-average":
+        force = smooth(press_force_n, settings.smoothing_samples)
+        crossing = first_upward_crossings(robot_t, force, targets)
+        # Smoothing lowers a short peak: a target the raw force reached but the smoothed force did not (the last
+        # ones, at the stop) takes its crossing from the raw force.
+        from_raw = np.isnan(crossing)
+        if from_raw.any():
+            crossing[from_raw] = first_upward_crossings(robot_t, raw, targets[from_raw])
+
+        def force_at_times(times: np.ndarray, reached: np.ndarray) -> np.ndarray:
+            return np.where(from_raw[reached], np.interp(times, robot_t, raw), np.interp(times, robot_t, force))
+
+    else:
+        raise ValueError(f"unknown extraction method {settings.method!r} (fit or moving-average)")
     frame_index = np.full(n, -1, dtype=np.int64)
     frame_time = np.full(n, np.nan)
     force_at = np.full(n, np.nan)
@@ -164,9 +299,7 @@ def extract_press(
         nearest = np.where(pick_right, right, left)
         frame_index[reached] = nearest
         frame_time[reached] = frame_t[nearest]
-        force_at[reached] = np.where(
-            from_raw[reached], np.interp(frame_t[nearest], robot_t, raw), np.interp(frame_t[nearest], robot_t, force)
-        )
+        force_at[reached] = force_at_times(frame_t[nearest], reached)
         gap_ok = np.abs(frame_t[nearest] - crossing[reached]) <= settings.max_frame_gap_s
         miss[reached] = ~(gap_ok & valid[nearest])
     error = force_at - targets

@@ -47,7 +47,7 @@ class TareRecord:
     baseline: np.ndarray  # (n_taxels, 3)
     n_frames: int
     host_t_ns: int
-    method: str  # e.g. "host-mean" or "device-bias+host-mean"
+    method: str  # e.g. "host-median" or "device-bias+host-median"
     spread: float  # max per-channel std over the tare window, layout units
 
 

@@ -61,7 +61,11 @@ def uskin_saturated(values: np.ndarray) -> np.ndarray:
 
 
 def uskin_host_tare(frames: list[TactileFrame], now_ns: int, max_spread_counts: float) -> TareRecord:
-    """Mean of the valid unloaded frames (counts); refuses when the per-channel spread says the pad is moving."""
+    """Median of the valid unloaded frames (counts); refuses when the per-channel spread says the pad is moving.
+
+    Median and a MAD-based spread (1.4826 x the median absolute deviation: the standard deviation for Gaussian
+    noise), not mean and standard deviation: SLCAN lines carry no checksum, so one line damaged on the wire can
+    decode as a wild value in one frame, which must neither shift the baseline nor read as a pad being pressed."""
     valid = [f.values for f in frames if f.valid]
     if len(valid) < MIN_TARE_FRAMES:
         raise DeviceError(
@@ -69,7 +73,8 @@ def uskin_host_tare(frames: list[TactileFrame], now_ns: int, max_spread_counts: 
             hint="record a second of unloaded frames (with every taxel reporting) before taring",
         )
     stack = np.stack(valid).astype(np.float64)
-    spread = float(stack.std(axis=0).max())
+    median = np.median(stack, axis=0)
+    spread = float(1.4826 * np.median(np.abs(stack - median), axis=0).max())
     if spread > max_spread_counts:
         raise DeviceError(
             f"uskin tare refused: taxel spread {spread:.0f} counts exceeds {max_spread_counts:.0f} "
@@ -77,7 +82,7 @@ def uskin_host_tare(frames: list[TactileFrame], now_ns: int, max_spread_counts: 
             hint="move the sensor clear of the object, wait ~3 s for the skin to settle, then tare again",
         )
     return TareRecord(
-        baseline=stack.mean(axis=0), n_frames=len(valid), host_t_ns=now_ns, method="host-mean", spread=spread
+        baseline=median, n_frames=len(valid), host_t_ns=now_ns, method="host-median", spread=spread
     )
 
 

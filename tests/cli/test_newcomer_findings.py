@@ -254,7 +254,7 @@ def test_10_version_and_debug_after_the_command() -> None:
 def test_11_an_option_error_names_the_option_typed_and_exits_2() -> None:
     result = run("collect", "--object", "hex_tpu", "--angles", "0", "--data", "/nonexistent/never")
     assert result.returncode == 2
-    assert "--angles 0" in result.stderr and "press.angle_count" not in result.stderr
+    assert "--angles" in result.stderr and "got 0" in result.stderr and "press.angle_count" not in result.stderr
 
 
 @pytest.mark.slow

@@ -245,22 +245,37 @@ def test_health_names_saturated_and_dead_taxels() -> None:
         assert driver.health().dead_taxels == [3]  # taxel 9 is pinned on z only; x and y still move
 
 
-def test_tare_takes_the_unloaded_mean_and_refuses_during_a_press() -> None:
+def test_tare_takes_the_unloaded_median_and_refuses_during_a_press() -> None:
     clock = VirtualClock()
     source = RecordingSource(UskinPressSource(period_s=2.0, rest_fraction=0.5))
     with can_rig("virtual", clock, source) as (driver, _, _):
         rest = step(clock, driver, 50)  # 0..0.5 s: unloaded
         record = driver.tare(rest)
         # the first frame is flagged (nothing shows the stream began at a cycle's start), so 49 count
-        expected = np.mean([counts_from_sample(s.values) for _, s in source.samples[1:50]], axis=0)
+        expected = np.median([counts_from_sample(s.values) for _, s in source.samples[1:50]], axis=0)
         np.testing.assert_allclose(record.baseline, expected)
-        assert record.method == "host-mean" and record.n_frames == 49 and record.spread < 50
+        assert record.method == "host-median" and record.n_frames == 49 and record.spread < 50
         step(clock, driver, 70)
         pressing = step(clock, driver, 50)  # 1.2..1.7 s: the press peaks
         with pytest.raises(DeviceError, match="tare refused"):
             driver.tare(pressing)
         with pytest.raises(DeviceError, match="at least"):
             driver.tare(rest[:2])
+
+
+def test_one_frame_damaged_on_the_wire_neither_shifts_the_tare_nor_refuses_it() -> None:
+    """SLCAN lines carry no checksum: a damaged one can decode as a wild count in one frame. The tare's median and
+    MAD-based spread ignore it (a mean moved by ~600 counts and a standard deviation of ~4,600 refused the tare)."""
+    from drivers.frames import TactileFrame
+    from drivers.uskin import uskin_host_tare
+
+    rng = np.random.default_rng(0)
+    frames = [
+        TactileFrame("uskin", host_t_ns=i, values=32768 + rng.normal(0, 3, (24, 3)), valid=True) for i in range(49)
+    ]
+    frames[20].values[7, 2] = 65535.0  # one line damaged on the wire
+    record = uskin_host_tare(frames, 0, 50.0)
+    assert abs(record.baseline[7, 2] - 32768) < 5 and record.spread < 10
 
 
 def test_open_can_bus_wraps_python_can_errors_with_a_hint() -> None:

@@ -132,8 +132,8 @@ def test_tare_over_the_server_frames() -> None:
     with server_rig(RecordingSource(UskinPressSource(peak_load_n=0.0))) as (driver, _):
         frames = driver.wait_frames(20, timeout_s=5.0)
         record = driver.tare(frames)
-    np.testing.assert_allclose(record.baseline, np.mean([f.values for f in frames], axis=0))
-    assert record.method == "host-mean"
+    np.testing.assert_allclose(record.baseline, np.median([f.values for f in frames], axis=0))
+    assert record.method == "host-median"
 
 
 class _Placeholders:

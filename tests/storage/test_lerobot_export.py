@@ -142,11 +142,11 @@ def test_exporting_into_a_directory_that_holds_files_is_one_line(
     data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     (tmp_path / "keep.txt").write_text("mine")
-    assert cli(["export", str(data), "--format", "lerobot", "--out", str(tmp_path)]) == 1
+    assert cli(["export", str(data), "--format", "lerobot", "--out", str(tmp_path)]) == 2  # a usage error
     assert "already exists and is not an empty directory" in one_error_line(capsys)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.txt"]
     assert cli(["export", str(data), "--format", "hdf5", "--out", str(tmp_path / "x")]) == 2
-    assert "unknown export format 'hdf5'" in one_error_line(capsys)
+    assert "--format hdf5: unknown export format" in one_error_line(capsys)
 
 
 def _lerobot_python() -> Path | None:

@@ -81,9 +81,7 @@ def uskin_host_tare(frames: list[TactileFrame], now_ns: int, max_spread_counts: 
             "(something is pressing on the pad)",
             hint="move the sensor clear of the object, wait ~3 s for the skin to settle, then tare again",
         )
-    return TareRecord(
-        baseline=median, n_frames=len(valid), host_t_ns=now_ns, method="host-median", spread=spread
-    )
+    return TareRecord(baseline=median, n_frames=len(valid), host_t_ns=now_ns, method="host-median", spread=spread)
 
 
 _CAN_HINTS = {

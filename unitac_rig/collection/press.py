@@ -84,6 +84,7 @@ PRESS_EXTRA_S = 5.0  # a press phase may last its travel budget at its speed plu
 RETRACT_UNLOADED_N = 0.3  # the retract ends once the mean press force of the last RETRACT_HOLD_PERIODS is below this
 RETRACT_HOLD_PERIODS = 10  # ... (20 ms at 500 Hz) and none of them is above UNLOADED_FORCE_N, and 1 mm is gained
 TRANSIT_ACCEL_M_S2 = 0.5
+HARD_LIMIT_CLEARANCE_N = 0.1  # force set-points sent to the controller stay at least this far under the hard limit
 HOST_GAP_EVENT_S = 0.02  # controller-clock gaps between two reads longer than this are recorded (host stall)
 ON_PLANE_M = 0.001  # the arm counts as on the press plane within 1 mm of its height
 ON_RAY_DEG = 3.0  # ... and on a press ray within 3 degrees of it
@@ -677,8 +678,10 @@ def json_list(values: np.ndarray) -> str:
 def _press_strategy(arm: Arm, streams: _Streams, plan: PressPlan, press: PressConfig, limits: LimitsConfig) -> str:
     """Run the configured strategy; returns the stop reason ("force", "travel", "no_contact")."""
     backstop_m = plan.contact_distance_m + (limits.max_travel_after_contact_mm + 5.0) / 1000.0
-    setpoint_n = press.threshold_n + press.setpoint_margin_n - streams.offset_along_press_n
-    ceiling_n = setpoint_ceiling_n(press, limits) - streams.offset_along_press_n
+    # in the controller's zero (see _Streams), and kept under the hard limit whatever the residual offset
+    below_limit_n = limits.hard_force_n - HARD_LIMIT_CLEARANCE_N
+    setpoint_n = min(press.threshold_n + press.setpoint_margin_n - streams.offset_along_press_n, below_limit_n)
+    ceiling_n = max(setpoint_n, min(setpoint_ceiling_n(press, limits) - streams.offset_along_press_n, below_limit_n))
     arm.set_force_mode_parameters(press.force_mode_damping, press.force_mode_gain_scaling)
     bounds: dict[str, Any] = {
         "hard_limit_n": limits.hard_force_n,

@@ -278,18 +278,7 @@ def _export_into(run: LoadedRun, engine: StackedAutoencoders, staging: Path, fmt
         "sensors": entries,
         "frame": "(B, n_taxels, 3) float32; taxel i at (row, col) = divmod(i, cols); channels x, y, z",
         "translate": "decoder_<target>(encoder_<source>(frames))",
-        "member": member,
-        "seed": engine.seeds[member],
-        "epochs": int(payload["epoch"]),
-        "dataset_hash": payload["dataset_hash"],
-        "dataset_summary": payload.get("dataset_summary", {}),
-        "extension": (
-            {k: payload["extension"][k] for k in ("new_sensor", "trained_sensors", "from_dataset_hash")}
-            if payload.get("extension")
-            else None
-        ),
-        "run_provenance": payload.get("provenance", {}),
-        "exported_by": provenance(),
+        **run_fields(payload, engine, member),
         "files": files,
     }
     (staging / MODEL_JSON).write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
@@ -323,6 +312,25 @@ def _metrics_lines(metrics: dict[str, Any] | None) -> list[str]:
     if latent is not None:
         lines.append(f"Mean L1 distance between two sensors' latents of the same contact: {latent:.3f}.")
     return lines
+
+
+def run_fields(payload: dict[str, Any], engine: StackedAutoencoders, member: int) -> dict[str, Any]:
+    """What every exported model says about the run it came from: member, seed, epochs, the dataset's hash and
+    summary, a new-sensor extension, the run's and the exporter's provenance."""
+    return {
+        "member": member,
+        "seed": engine.seeds[member],
+        "epochs": int(payload["epoch"]),
+        "dataset_hash": payload["dataset_hash"],
+        "dataset_summary": payload.get("dataset_summary", {}),
+        "extension": (
+            {k: payload["extension"][k] for k in ("new_sensor", "trained_sensors", "from_dataset_hash")}
+            if payload.get("extension")
+            else None
+        ),
+        "run_provenance": payload.get("provenance", {}),
+        "exported_by": provenance(),
+    }
 
 
 def render_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str:

@@ -21,7 +21,6 @@ import torch
 from torch import nn
 
 from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
-from unitac_rig.learning.run import provenance
 from unitac_rig.learning.train import LoadedRun
 
 WEIGHTS_NAME = "model.safetensors"
@@ -46,6 +45,7 @@ def export_into(run: LoadedRun, engine: StackedAutoencoders, staging: Path, memb
         _units,
         decoder_module,
         encoder_module,
+        run_fields,  # export.py dispatches here: imported when used
     )
 
     sensors = engine.group(UNITAC_GROUP).sensors
@@ -95,18 +95,7 @@ def export_into(run: LoadedRun, engine: StackedAutoencoders, staging: Path, memb
         "frame": "(B, n_taxels, 3) float32, tare-subtracted, sensor units; taxel i at (row, col) = divmod(i, cols); "
         "channels x, y, z",
         "translate": "decoder_<target>(encoder_<source>(frames))",
-        "member": member,
-        "seed": engine.seeds[member],
-        "epochs": int(payload["epoch"]),
-        "dataset_hash": payload["dataset_hash"],
-        "dataset_summary": payload.get("dataset_summary", {}),
-        "extension": (
-            {k: payload["extension"][k] for k in ("new_sensor", "trained_sensors", "from_dataset_hash")}
-            if payload.get("extension")
-            else None
-        ),
-        "run_provenance": payload.get("provenance", {}),
-        "exported_by": provenance(),
+        **run_fields(payload, engine, member),
         "files": {WEIGHTS_NAME: _sha256(staging / WEIGHTS_NAME)},
     }
     (staging / CONFIG_NAME).write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")

@@ -216,7 +216,9 @@ def _session_provenance(item: PooledSession, copy: Path, sha256: str) -> dict[st
     }
 
 
-def _prepare_out(out: Path) -> Path:
+def staging_for(out: Path) -> Path:
+    """A fresh hidden sibling of ``out`` to build an export in (renamed into place when complete, so ``out`` is
+    complete or absent); refuses an ``out`` that exists and is not an empty directory."""
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise DataError(
             f"{out} already exists and is not an empty directory",
@@ -226,7 +228,13 @@ def _prepare_out(out: Path) -> Path:
     staging = out.parent / f".{out.name}.partial-{os.getpid()}"
     if staging.exists():
         shutil.rmtree(staging)
-    (staging / RAW_DIR).mkdir(parents=True)
+    staging.mkdir(parents=True)
+    return staging
+
+
+def _prepare_out(out: Path) -> Path:
+    staging = staging_for(out)
+    (staging / RAW_DIR).mkdir()
     return staging
 
 

@@ -34,6 +34,7 @@ import numpy as np
 
 from unitac_rig.errors import DataError
 from unitac_rig.provenance import git_commit, package_version
+from unitac_rig.storage.export import staging_for
 from unitac_rig.storage.manifest import MANIFEST_NAME, write_manifest
 from unitac_rig.storage.pooling import pool_sessions
 from unitac_rig.storage.press_record import PressRecord
@@ -507,16 +508,7 @@ def export_lerobot(data_dirs: Sequence[Path], out: Path) -> LeRobotExportSummary
 
     out = Path(out)
     pooled = pool_sessions([Path(d) for d in data_dirs])
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise DataError(
-            f"{out} already exists and is not an empty directory",
-            hint="choose a new --out directory (an export is never merged into another one)",
-        )
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = out.parent / f".{out.name}.partial-{os.getpid()}"
-    if staging.exists():
-        shutil.rmtree(staging)
-    staging.mkdir(parents=True)
+    staging = staging_for(out)
     try:
         present = {item.info.sensor for item in pooled}
         sensors = [s for s in SENSORS if s in present] + sorted(present - set(SENSORS))  # the registry's order

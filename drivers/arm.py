@@ -20,6 +20,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from drivers.clock import Clock
+from drivers.errors import ArmError
 
 # RTDE watchdog frequency (Hz): the control program stops when the host writes nothing for 1 / 6 Hz = 167 ms. High
 # enough that the arm is at rest within 0.2 s of a dead host's last write (167 ms + braking: ~5 ms from transit speed
@@ -47,6 +48,15 @@ class ArmState:
     emergency_stop: bool = False
     tcp_speed: np.ndarray | None = None  # (6,) [vx, vy, vz (m/s), wx, wy, wz (rad/s)], base frame, if known
     program_running: bool = True  # the controller's control program runs (it refuses every command otherwise)
+
+
+def checked_force_mode_parameters(damping: float, gain_scaling: float) -> tuple[float, float]:
+    """(damping, gain scaling) as floats after checking URScript's ranges (0..1, 0..2); ArmError otherwise."""
+    if not (0.0 <= damping <= 1.0 and 0.0 <= gain_scaling <= 2.0):
+        raise ArmError(
+            f"force mode damping must be in [0, 1] and gain scaling in [0, 2], got {damping}, {gain_scaling}"
+        )
+    return float(damping), float(gain_scaling)
 
 
 @runtime_checkable

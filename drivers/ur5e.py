@@ -59,7 +59,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from drivers.arm import DEFAULT_WATCHDOG_HZ, ArmState
+from drivers.arm import DEFAULT_WATCHDOG_HZ, ArmState, checked_force_mode_parameters
 from drivers.clock import Clock, MonotonicClock
 from drivers.errors import (
     ArmError,
@@ -494,10 +494,7 @@ class UR5eArm:
     def set_force_mode_parameters(self, damping: float, gain_scaling: float) -> None:
         """Damping (0..1) and gain scaling (0..2), sent before each entry into force mode (ur_rtde: "call before
         entering force mode"; a script uploaded again after a reconnect starts from its defaults)."""
-        if not (0.0 <= damping <= 1.0 and 0.0 <= gain_scaling <= 2.0):
-            raise ArmError(f"force mode damping must be in [0, 1] and gain scaling in [0, 2], got {damping}, "
-                           f"{gain_scaling}")  # fmt: skip
-        self._force_mode_parameters = (float(damping), float(gain_scaling))
+        self._force_mode_parameters = checked_force_mode_parameters(damping, gain_scaling)
 
     def _apply_force_mode_parameters(self) -> None:
         if self._force_mode_parameters is None:

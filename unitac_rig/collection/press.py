@@ -237,6 +237,12 @@ def standoff_radius_m(plan: PressPlan) -> float:
     return float(np.linalg.norm(np.asarray(plan.start_pose[:2]) - np.asarray(plan.center_xy_m)))
 
 
+def near_speed_m_s(limits: LimitsConfig, transit_speed_m_s: float) -> float:
+    """Speed (m/s) of moves toward the object inside the near zone: ``limits.near_speed_mm_s``, never faster than
+    the transit speed."""
+    return min(transit_speed_m_s, limits.near_speed_mm_s / 1000.0)
+
+
 def approach_legs(
     here: np.ndarray, waypoints: list[np.ndarray], plan: PressPlan, limits: LimitsConfig, transit_speed_m_s: float
 ) -> list[tuple[np.ndarray, float]]:
@@ -251,7 +257,7 @@ def approach_legs(
     """
     center = np.asarray(plan.center_xy_m, dtype=np.float64)
     near_radius = standoff_radius_m(plan) + limits.near_zone_mm / 1000.0
-    near_speed = min(transit_speed_m_s, limits.near_speed_mm_s / 1000.0)
+    near_speed = near_speed_m_s(limits, transit_speed_m_s)
     legs: list[tuple[np.ndarray, float]] = []
     start = np.asarray(here, dtype=np.float64)
     for pose in waypoints:
@@ -342,7 +348,7 @@ def retract_from_object(
     if loaded:
         back_m = max(back_m, standoff_m)
     moved: list[np.ndarray] = []
-    near_speed = min(transit_speed_m_s, limits.near_speed_mm_s / 1000.0)
+    near_speed = near_speed_m_s(limits, transit_speed_m_s)
     if back_m > 2e-4:
         target = np.concatenate([here[:3] - tool_z(here) * back_m, here[3:]])
         here = _move_within_limits(arm, here, target, near_speed, limits, moved)

@@ -192,20 +192,14 @@ def collect_session(
             raise
         current_rotation: float | None = None
         previous: PressPlan | None = None
-        moves_limits = config.limits
         confirmed = False  # a press has found the object where the rig file says (since the last turn)
         limit = config.limits.max_failed_in_a_row
         for index, plan in enumerate(todo):
             raise_if_interrupted()
             if plan.rotation_deg != current_rotation:
-                moves_limits = config.limits  # the placement is unknown again after the object is turned
-                confirmed = False
+                confirmed = False  # the placement is unknown again after the object is turned
                 if previous is not None:  # out to the clearance radius before anyone turns the object by hand
-                    retract_from_object(
-                        arm, previous, config.limits, standoff_m=config.object.standoff_mm / 1000.0,
-                        clearance_m=config.object.clearance_mm / 1000.0,
-                        transit_speed_m_s=config.press.transit_speed_mm_s / 1000.0,
-                    )  # fmt: skip
+                    _retract_from_object(rig, previous)
                 rig.mount(obj, plan.rotation_deg, sensor_name)
                 if ask_operator is not None and not rig.simulated and len(rotations) > 1:
                     with rig.arm.keep_alive():
@@ -213,11 +207,10 @@ def collect_session(
                 current_rotation = plan.rotation_deg
             if confirmed:  # the object stands where measured: a shorter free-air approach (and return to it)
                 plan = with_standoff(plan, confirmed_standoff_mm(config))
-            record, stop = _one_press(rig, sensor, plan, writer, extraction, outcome, on_tick, moves_limits)
+            record, stop = _one_press(rig, sensor, plan, writer, extraction, outcome, on_tick,
+                                      moves_limits(config, confirmed))  # fmt: skip
             previous = plan
-            if record is not None and placement_confirmed(record, config):
-                confirmed = True
-                moves_limits = config.limits.model_copy(update={"near_zone_mm": config.limits.near_zone_confirmed_mm})
+            confirmed = confirmed or (record is not None and placement_confirmed(record, config))
             if on_press is not None and record is not None:
                 matched = 0 if record.extraction is None else record.extraction.n_matched
                 with rig.arm.keep_alive():
@@ -248,19 +241,30 @@ def _first_move_and_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> d
             _retract(rig, first, to_clearance=False)
         raise
     except (SafetyLimit, DeviceError) as exc:
-        if isinstance(exc, ControlScriptStopped) and _safety_stopped(rig):
-            exc = ProtectiveStop(f"the program stopped in a safety stop ({exc})")
         _retract(rig, first)
-        raise _controller_stop_explained(exc, f"before the first press ({first.press_id})") from exc
+        raise _controller_stop_explained(rig, exc, f"before the first press ({first.press_id})") from exc
 
 
-def _controller_stop_explained(exc: BaseException, where: str) -> BaseException:
-    """A protective stop or a stopped program as one line saying what happened and what to do (else ``exc``)."""
-    if isinstance(exc, ControlScriptStopped) and not isinstance(exc, ProtectiveStop):
-        return ControlScriptStopped(f"the controller's program stopped {where} ({exc})", hint=PROGRAM_STOPPED_HINT)
+def _controller_stop_explained(rig: Rig, exc: BaseException, where: str) -> BaseException:
+    """A protective stop or a stopped program as one line saying what happened and what to do (else ``exc``).
+
+    A safety stop stops the program too, and the program's state can arrive before the safety bits: a stopped
+    program is named a protective stop when :func:`_safety_stopped` sees the bits."""
+    if isinstance(exc, ControlScriptStopped) and not isinstance(exc, ProtectiveStop) and _safety_stopped(rig):
+        exc = ProtectiveStop(f"the program stopped in a safety stop ({exc})")
     if isinstance(exc, ProtectiveStop):
         return ProtectiveStop(f"protective stop {where} ({exc})", hint=PROTECTIVE_STOP_HINT)
+    if isinstance(exc, ControlScriptStopped):
+        return ControlScriptStopped(f"the controller's program stopped {where} ({exc})", hint=PROGRAM_STOPPED_HINT)
     return exc
+
+
+def moves_limits(config: RigConfig, confirmed: bool) -> LimitsConfig:
+    """The limits a press's moves run under: the rig file's, with the near zone shrunk to
+    ``limits.near_zone_confirmed_mm`` once a press has confirmed the object's placement."""
+    if not confirmed:
+        return config.limits
+    return config.limits.model_copy(update={"near_zone_mm": config.limits.near_zone_confirmed_mm})
 
 
 def placement_confirmed(record: PressRecord, config: RigConfig) -> bool:
@@ -342,10 +346,7 @@ def _one_press(
             if isinstance(exc, SafetyLimit):
                 _retract(rig, plan)
             outcome.stopped = f"{type(exc).__name__} at press {plan.press_id}: {exc}"
-            if isinstance(exc, ControlScriptStopped) and _safety_stopped(rig):
-                # a safety stop stops the program too, and the program's state can arrive before the safety bits
-                exc = ProtectiveStop(f"the program stopped in a safety stop ({exc})")
-            explained = _controller_stop_explained(exc, f"at press {plan.press_id}")
+            explained = _controller_stop_explained(rig, exc, f"at press {plan.press_id}")
             if explained is not exc:
                 explained.press_record = partial  # type: ignore[attr-defined]
                 raise explained from exc
@@ -431,20 +432,26 @@ def _retract(rig: Rig, plan: PressPlan, *, to_clearance: bool = True) -> None:
     session never leaves the pad loaded. Not when the controller stopped on its own (protective stop, program
     stopped): the operator decides on the pendant. Best effort: a failure is logged (the arm is stopped by then) and
     the next run starts with a checked move from wherever the arm is."""
-    arm, config = rig.arm, rig.config
     try:
-        check_controller(arm.read_state(), "the retract")
-        retract_from_object(
-            arm, plan, config.limits, standoff_m=config.object.standoff_mm / 1000.0,
-            clearance_m=config.object.clearance_mm / 1000.0, transit_speed_m_s=config.press.transit_speed_mm_s / 1000.0,
-            to_clearance=to_clearance,
-        )  # fmt: skip
+        check_controller(rig.arm.read_state(), "the retract")
+        _retract_from_object(rig, plan, to_clearance=to_clearance)
     except (ProtectiveStop, ControlScriptStopped) as exc:
         log.info("not retracting after press %s: %s", plan.press_id, exc)
     except KeyboardInterrupt:
         raise  # a second interrupt: the move stopped the arm on its way out
     except Exception:
         log.exception("retracting from the object after press %s failed; the arm is stopped", plan.press_id)
+
+
+def _retract_from_object(rig: Rig, plan: PressPlan, *, to_clearance: bool = True) -> None:
+    """:func:`retract_from_object` with the rig file's stand-off, clearance and transit speed (raises what it
+    raises)."""
+    config = rig.config
+    retract_from_object(
+        rig.arm, plan, config.limits, standoff_m=config.object.standoff_mm / 1000.0,
+        clearance_m=config.object.clearance_mm / 1000.0, transit_speed_m_s=config.press.transit_speed_mm_s / 1000.0,
+        to_clearance=to_clearance,
+    )  # fmt: skip
 
 
 def _save(

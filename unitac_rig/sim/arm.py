@@ -50,7 +50,7 @@ from typing import Literal
 
 import numpy as np
 
-from drivers.arm import DEFAULT_WATCHDOG_HZ, ArmState
+from drivers.arm import DEFAULT_WATCHDOG_HZ, ArmState, checked_force_mode_parameters
 from drivers.clock import Clock, VirtualClock
 from drivers.errors import ArmError, ControlScriptStopped, ProtectiveStop
 from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
@@ -328,10 +328,7 @@ class SimArm:
         """``force_mode_set_damping`` / ``force_mode_set_gain_scaling``: the gain scaling multiplies the admittance
         gains (as on a UR, where above 1 the loop may go unstable on hard contacts); damping is stored, not modelled
         (the admittance here has no free-air coasting for it to brake)."""
-        if not (0.0 <= damping <= 1.0 and 0.0 <= gain_scaling <= 2.0):
-            raise ArmError(f"force mode damping must be in [0, 1] and gain scaling in [0, 2], got {damping}, "
-                           f"{gain_scaling}")  # fmt: skip
-        self.force_mode_damping, self.force_mode_gain_scaling = float(damping), float(gain_scaling)
+        self.force_mode_damping, self.force_mode_gain_scaling = checked_force_mode_parameters(damping, gain_scaling)
 
     def force_mode_stop(self) -> None:
         """Leave force mode and stop (the ur_rtde script does ``end_force_mode(); stopl(10)``)."""

@@ -14,16 +14,10 @@ import numpy as np
 import pytest
 
 from drivers.errors import ControlScriptStopped, ProtectiveStop, RobotStateLost
-from unitac_rig.collection.press import (
-    PressPlan,
-    TickInfo,
-    check_waypoint,
-    clearance_waypoints,
-    make_plan,
-    move_clear,
-    run_press,
-)
+from unitac_rig.collection.press import run_press
 from unitac_rig.collection.session import collect_session, dry_run, plan_presses, session_tare
+from unitac_rig.collection.streams import TickInfo
+from unitac_rig.collection.transit import PressPlan, check_waypoint, clearance_waypoints, make_plan, move_clear
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.rig.config import LimitsConfig, PressConfig, RigConfig, parse_rig_config
 from unitac_rig.rig.objects import get_object

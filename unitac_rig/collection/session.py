@@ -13,7 +13,7 @@ the controller's program stopping (the watchdog after a host stall), a lost robo
 and ``limits.max_failed_in_a_row`` presses in a row that do not complete (no contact, timeout, travel limit, force
 settled below the threshold: the object is missing, misplaced or not what the rig file says). Only a sensor that
 stalls or drops off is reconnected and its press retried, once. After any abort the arm retracts from where it is
-(:func:`~unitac_rig.collection.press.retract_from_object`), never toward a pose it did not reach; after Ctrl-C,
+(:func:`~unitac_rig.collection.transit.retract_from_object`), never toward a pose it did not reach; after Ctrl-C,
 SIGTERM or SIGHUP too, so the pad is not left loaded against the object.
 While the host writes a press or waits for the operator, the arm is at rest and :meth:`Arm.keep_alive` feeds the
 controller's watchdog. :func:`dry_run` visits every stand-off and clearance waypoint without pressing.
@@ -36,18 +36,17 @@ from drivers.arm import Arm
 from drivers.errors import ArmError, ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop
 from drivers.motion import check_controller, settle
 from drivers.sensor import TactileSensor
-from unitac_rig.collection.press import (
+from unitac_rig.collection.press import run_press, zero_wrist
+from unitac_rig.collection.streams import TickInfo
+from unitac_rig.collection.transit import (
     PressPlan,
-    TickInfo,
     check_session_plan,
     clearance_waypoints,
     make_plan,
     move_clear,
     retract_from_object,
-    run_press,
     transit_guard,
     with_standoff,
-    zero_wrist,
 )
 from unitac_rig.errors import CarriesPressRecord, SafetyLimit
 from unitac_rig.interrupts import acknowledged_interrupts, raise_if_interrupted

@@ -26,7 +26,8 @@ from drivers.errors import (
     RobotStateLost,
 )
 from drivers.motion import move_to
-from drivers.ur5e import KEEP_ALIVE_KICK_S, STALL_TIMEOUT_S, UR5eArm, UR5eReceiver
+from drivers.ur5e import KEEP_ALIVE_KICK_S, UR5eArm
+from drivers.ur5e_receive import STALL_TIMEOUT_S, UR5eReceiver
 from unitac_rig.sim.rtde_server import SimURController, start_on_free_loopback
 
 POSE = np.array([-0.15, 0.6, 0.21, 0.0, 2.2214, -2.2214])

@@ -144,20 +144,7 @@ def collect_session(
     extraction = extraction or ExtractionSettings()
     rotations = list(obj.rotations_deg if rotations is None else rotations)
     plans = plan_presses(obj, config, rotations)
-    root_attrs: dict[str, Any] = {
-        "object": obj.id,
-        "sensor": sensor_name,
-        "simulated": rig.simulated,
-        "rig": config.name,
-        "config": config.model_dump(mode="json"),
-        "object_spec": {"id": obj.id, "shape": obj.shape, "material": obj.material, "outer_mm": obj.outer_mm},
-        "rotations_deg": [float(r) for r in rotations],
-        "planned_presses": [p.press_id for p in plans],
-        "extraction_settings": extraction.to_dict(),
-        "package_version": package_version(),
-        "git_commit": git_commit(),
-        "created_unix": time.time(),
-    }
+    root_attrs = session_attrs(rig, obj, sensor_name, rotations, plans, extraction)
     writer = SessionWriter(data_dir, obj.id, sensor_name, root_attrs)
     done = writer.finished_press_ids()
     outcome = SessionOutcome(obj.id, sensor_name, writer.path, planned=len(plans), recovery_notes=writer.recovery_notes)
@@ -217,17 +204,49 @@ def collect_session(
             if record is not None:
                 outcome.failure_streak = outcome.failure_streak + 1 if record.status != "complete" else 0
             if outcome.failure_streak >= limit:
-                outcome.stopped = (
-                    f"{limit} presses in a row did not complete (the last: {plan.press_id}, {record_reason(record)}): "
-                    f"is {obj.id} mounted at object.center_m = {list(config.object.center_m)}, press_height_m = "
-                    f"{config.object.press_height_m} as the rig file says, and is it the object named?"
-                )
+                outcome.stopped = _failed_in_a_row(config, obj, plan, record)
                 break
             if stop:
                 break
     finally:
         sensor.disconnect()
     return outcome
+
+
+def session_attrs(
+    rig: Rig,
+    obj: ObjectSpec,
+    sensor_name: str,
+    rotations: Sequence[float],
+    plans: Sequence[PressPlan],
+    extraction: ExtractionSettings,
+) -> dict[str, Any]:
+    """The session file's root attributes: what was planned, with which rig, settings and code."""
+    config = rig.config
+    return {
+        "object": obj.id,
+        "sensor": sensor_name,
+        "simulated": rig.simulated,
+        "rig": config.name,
+        "config": config.model_dump(mode="json"),
+        "object_spec": {"id": obj.id, "shape": obj.shape, "material": obj.material, "outer_mm": obj.outer_mm},
+        "rotations_deg": [float(r) for r in rotations],
+        "planned_presses": [p.press_id for p in plans],
+        "extraction_settings": extraction.to_dict(),
+        "package_version": package_version(),
+        "git_commit": git_commit(),
+        "created_unix": time.time(),
+    }
+
+
+def _failed_in_a_row(config: RigConfig, obj: ObjectSpec, plan: PressPlan, record: PressRecord | None) -> str:
+    """Why the session stopped after ``limits.max_failed_in_a_row`` presses in a row did not complete."""
+    limit = config.limits.max_failed_in_a_row
+    return (
+        f"{limit} presses in a row did not complete (the last: {plan.press_id}, {record_reason(record)}): "
+        f"is {obj.id} mounted at object.center_m = {list(config.object.center_m)}, press_height_m = "
+        f"{config.object.press_height_m} as the rig file says, and is it the object named?"
+    )
 
 
 def _first_move_and_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> dict[str, Any]:

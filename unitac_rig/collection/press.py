@@ -158,6 +158,7 @@ def run_press(
     touches anything ends ``aborted`` with reason ``no_contact`` (it is redone on resume, once the object is where it
     should be).
     """
+    strategy = press_strategy(press.strategy)  # an unregistered name fails before the arm moves
     move_clear(arm, plan, clearance_m, press.transit_speed_mm_s / 1000.0, limits)
     frames, wrenches = zero_wrist(arm, sensor, settle_s, f"the stand-off of press {plan.press_id}",
                                   check_s=UNLOADED_CHECK_S)  # fmt: skip
@@ -174,7 +175,7 @@ def run_press(
     tare = {"method": "host-median", "n_frames": len(valid), "spread": float(stack.std(axis=0).max())}
 
     streams = PressStreams(arm, sensor, plan, press, limits, stall_timeout_s, on_tick, contact_threshold_n,
-                       offset_along_press_n=float(np.dot(ft_offset[:3], plan.direction)))  # fmt: skip
+                           offset_along_press_n=float(np.dot(ft_offset[:3], plan.direction)))  # fmt: skip
     streams.event("start", f"strategy={press.strategy} speed={press.speed_mm_s} mm/s")
     streams.event("contact_threshold", f"{contact_threshold_n:.2f} N (press-force noise {noise_n:.3f} N rms)")
     streams.event("ft_zero", json_list(ft_offset))
@@ -182,7 +183,7 @@ def run_press(
     status, reason = "aborted", "interrupted"
     pending: BaseException | None = None
     try:
-        reason = PressContext(arm, streams, plan, press, limits).run(press_strategy(press.strategy))
+        reason = PressContext(arm, streams, plan, press, limits).run(strategy)
         status = "complete" if reason == "force" else ("aborted" if reason == "no_contact" else "failed")
         streams.event("stop", reason)
         streams.phase = "dwell"

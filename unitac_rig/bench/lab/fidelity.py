@@ -9,6 +9,9 @@ prism) within-frame std on faces, and the session's peak press force sampled as 
 reading per tactile sample).
 
 The recorded numbers are carried here (:data:`RECORDED`), not read from anywhere at run time.
+
+Why one module of ~680 lines: the recorded numbers, the measurement, the verdicts, the refit and the figure share
+the same targets and tolerances.
 """
 
 from __future__ import annotations

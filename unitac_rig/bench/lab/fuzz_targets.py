@@ -1,5 +1,9 @@
 """The fuzz campaign's targets (see unitac_rig/bench/lab/fuzz.py): one per wire codec, each also driving its driver's
-decode path where there is one."""
+decode path where there is one.
+
+Why one module of ~730 lines: five targets of about 130 lines each (input kinds, the check, the long-lived stream),
+alike in shape, read side by side.
+"""
 
 from __future__ import annotations
 

@@ -11,8 +11,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from robustness_helpers import few_angles
 
+from tests.robustness.robustness_helpers import few_angles
 from unitac_rig.collection.session import collect_session
 from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.fast_rig import SimRig

@@ -11,8 +11,9 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from robustness_helpers import cli, one_error_line, tree_hashes, write_synthetic_sessions
 
+from tests.helpers import cli
+from tests.robustness.robustness_helpers import one_error_line, tree_hashes, write_synthetic_sessions
 from unitac_rig.learning.data import build_paired_dataset, join_key
 from unitac_rig.storage.reader import load_matched_set, load_matched_sets
 from unitac_rig.storage.recorder import session_path

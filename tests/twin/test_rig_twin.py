@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rtde_control
-from twin_helpers import wait_until
 
 from drivers.frames import TactileFrame
 from drivers.sensor import TactileSensor
+from tests.twin.twin_helpers import wait_until
 from unitac_rig.rig.config import ObjectPlacement, load_rig_config, parse_rig_config
 from unitac_rig.rig.hardware import HardwareRig
 from unitac_rig.sim.twin import first_free_loopback

@@ -86,7 +86,9 @@ class PressContext:
     stand-off (the expected contact distance + ``limits.max_travel_after_contact_mm`` + 5 mm).
     """
 
-    def __init__(self, arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfig, limits: LimitsConfig):
+    def __init__(
+        self, arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfig, limits: LimitsConfig
+    ) -> None:
         self._arm, self._streams, self._plan = arm, streams, plan
         self.press, self.limits = press, limits
         self.contact_threshold_n = streams.contact_threshold_n

@@ -414,6 +414,14 @@ def _resume_run(dataset: PairedDataset, run_dir: Path, epochs: int | None, devic
     return run
 
 
+def trained_on_partial_join(run_dir: Path) -> bool:
+    """Whether the run in ``run_dir`` trained on contacts some sensors did not record (so it resumes on a partial
+    join too); False when there is no run there."""
+    if not checkpoint_path(run_dir).is_file():
+        return False
+    return int(load_checkpoint(run_dir).get("dataset_summary", {}).get("partial_train_rows", 0)) > 0
+
+
 def _restored_rng(state: Mapping[str, Any]) -> np.random.Generator:
     rng = np.random.default_rng()
     rng.bit_generator.state = state

@@ -2,7 +2,7 @@
 layer and the dropout streams beside them) still loads, predicts bit for bit what it predicted when it was written,
 continues its dropout streams and resumes training.
 
-The fixture ``fixtures/v2_run`` was written by commit 6641b69's code (``make_with_6641b69.py.txt``): a two-seed run
+The fixture ``fixtures/v2_run`` was written by commit 6641b69's code (its README says how): a two-seed run
 with the baselines and a tiny shape, trained 2 epochs on ``small_sets()``, and what that code's model computed for
 fixed inputs (latents, reconstructions, the next dropout masks)."""
 

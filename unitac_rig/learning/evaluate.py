@@ -39,9 +39,9 @@ def direction_name(source: str, target: str) -> str:
 
 
 class Evaluator:
-    """Metrics of every model and member on one set of rows (validation or test): NMAE and SSIM per frame in sensor
-    units under the given metric options (:meth:`for_run`: the run's), and the latent alignment (raw L1, scale-free
-    ratio, sensor mixing)."""
+    """Metrics of every model and member on one set of rows (validation or test): every frame metric of the metric
+    table (NMAE and SSIM) per frame in sensor units under the given metric options (:meth:`for_run`: the run's), and
+    every alignment metric of the latents (raw L1, scale-free ratio, sensor mixing)."""
 
     @classmethod
     def for_run(cls, run: LoadedRun, rows: PairedDataset, device: torch.device | None = None) -> Evaluator:

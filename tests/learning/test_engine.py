@@ -9,6 +9,7 @@ import pytest
 import torch
 from torch import nn
 
+from unitac_rig.errors import ModelError
 from unitac_rig.learning.engine import Autoencoder, GroupSpec, ModelShape, StackedAutoencoders, default_groups
 
 TWO_SENSORS = {"uskin": 72, "papillarray": 27}
@@ -183,3 +184,8 @@ def test_training_lowers_the_loss_on_a_learnable_pairing() -> None:
         for start in range(0, 512, 64):
             last = float(engine.train_step(data[start : start + 64].unsqueeze(0), optimizer)[0, 0])
     assert last < 0.5 * first
+
+
+def test_a_sensor_name_with_a_dot_is_refused_as_it_would_break_the_state_dict_keys() -> None:
+    with pytest.raises(ModelError, match=r"cannot contain a dot: pad\.v2"):
+        StackedAutoencoders({"uskin": 72, "pad.v2": 12}, default_groups(["uskin", "pad.v2"], False), [0], ModelShape())

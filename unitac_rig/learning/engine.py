@@ -191,6 +191,9 @@ class StackedAutoencoders(nn.Module):
                 raise ModelError(f"group {group.name} names unknown sensor(s) {unknown}")
 
         self._layers = {layer.key: layer for layer in self._layer_plan()}
+        dotted = sorted({name for g in self.groups for name in (g.name, *g.sensors) if "." in name})
+        if dotted:  # a state_dict key is "layers.<group>/<part>/<index>.weight": a dot would make it ambiguous
+            raise ModelError(f"model and sensor names cannot contain a dot: {', '.join(dotted)}")
         self.layers = nn.ModuleDict(
             {k: StackedLinear(self.members, n.fan_in, n.fan_out, self.device) for k, n in self._layers.items()}
         )

@@ -3,7 +3,8 @@
 ``safetensors`` (the default: ``model.safetensors`` + ``config.json``, the Hub's layout) is written by
 :mod:`unitac_rig.learning.safetensors_export`; the formats below, one file per network, here.
 
-For every sensor of the run's UniTac-NV model, one member (seed):
+For every sensor of the run's UniTac-NV model, one member (seed), cut from that member's plain network
+(:meth:`unitac_rig.learning.engine.StackedAutoencoders.network`, the one model's own slice):
 
 * ``encoder_<sensor>``: frames ``(B, n_taxels, 3)`` in the sensor's own units -> latent ``(B, latent_dim)``;
 * ``decoder_<sensor>``: latent ``(B, latent_dim)`` -> frames ``(B, n_taxels, 3)`` in that sensor's units: the shared

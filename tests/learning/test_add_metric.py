@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from learning_helpers import small_sets, write_sessions
 
-from unitac_rig.cli import main
+from tests.helpers import cli
+from tests.learning.learning_helpers import small_sets, write_sessions
 from unitac_rig.learning.engine import UNITAC_GROUP
 from unitac_rig.learning.metric_table import METRICS
 from unitac_rig.learning.train import load_run, load_test_set
@@ -34,14 +34,6 @@ def rmse(estimate: torch.Tensor, scoring: FrameScoring, variant: str | None = No
 
 RMSE = Metric("rmse", "RMSE", "lower", "sensor units", "frame", rmse, "root-mean-square error over taxels and axes")
 '''
-
-
-def cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 def test_a_new_metric_module_and_one_table_line_reach_train_evaluate_report_and_the_terminal(

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 import torch
-from learning_helpers import small_sets
 
+from tests.learning.learning_helpers import small_sets
 from unitac_rig.learning.data import build_paired_dataset
 from unitac_rig.learning.run import checkpoint_path, load_checkpoint
 from unitac_rig.learning.train import load_run, train

@@ -26,7 +26,7 @@ from unitac_rig.rig.config import ObjectPlacement, load_rig_config, parse_rig_co
 from unitac_rig.rig.hardware import HardwareRig
 from unitac_rig.sim.twin import first_free_loopback
 from unitac_rig.sim.twin.controller import build_scene
-from unitac_rig.sim.twin.rig import DEFAULT_HOST, RigTwin, SensorPorts, rig_file_text
+from unitac_rig.sim.twin.rig import DEFAULT_HOST, RigTwin, rig_file_text
 from unitac_rig.storage.reader import press_summaries
 
 REPO = Path(__file__).resolve().parents[2]
@@ -52,7 +52,7 @@ def frames_for(sensor: TactileSensor, seconds: float) -> list[TactileFrame]:
 
 
 def test_the_example_rig_file_is_the_one_the_twin_prints_and_points_at_it() -> None:
-    text = rig_file_text(DEFAULT_HOST, ObjectPlacement(), SensorPorts())
+    text = rig_file_text(DEFAULT_HOST, ObjectPlacement())
     assert (REPO / "examples" / "twin.toml").read_text() == text
     config = load_rig_config(REPO / "examples" / "twin.toml")
     assert config.arm is not None and config.arm.host == DEFAULT_HOST
@@ -65,7 +65,7 @@ def test_a_rehearsed_rig_file_keeps_its_object_press_and_limits() -> None:
     """``unitac-rig twin --like FILE`` prints a twin rig file with that file's object placement, press and limits."""
     mine = load_rig_config(REPO / "examples" / "rig.toml")
     tables = {"press": mine.press.model_dump(mode="json"), "limits": mine.limits.model_dump(mode="json")}
-    twin_file = parse_rig_config(tomllib.loads(rig_file_text("127.0.0.9", mine.object, SensorPorts(), tables=tables)))
+    twin_file = parse_rig_config(tomllib.loads(rig_file_text("127.0.0.9", mine.object, tables=tables)))
     assert (twin_file.object, twin_file.press, twin_file.limits) == (mine.object, mine.press, mine.limits)
     assert twin_file.arm is not None and twin_file.arm.host == "127.0.0.9"
 
@@ -100,7 +100,7 @@ def test_the_mounted_sensor_feels_the_arm_the_controller_moves(papillarray_twin:
 def test_both_uskin_transports_stream_from_the_twin() -> None:
     with RigTwin("circle_pla", sensor="uskin", host=free_host(), seed=4) as rig:
         for via in ("xela-server", "slcan"):
-            config = parse_rig_config(tomllib.loads(rig.rig_file(via)))
+            config = parse_rig_config(tomllib.loads(rig.rig_file(sensor_options={"uskin": {"transport": via}})))
             hardware = HardwareRig(config)
             sensor = hardware.open_sensor("uskin")
             try:

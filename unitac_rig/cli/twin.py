@@ -58,10 +58,8 @@ def twin(
 ) -> None:
     """Serve the real-time twin of the rig (controller + mounted sensor) until Ctrl-C or SIGTERM."""
     from unitac_rig.sim.twin import ControllerParams
-    from unitac_rig.sim.twin.rig import USKIN_VIA, RigTwin
+    from unitac_rig.sim.twin.rig import RigTwin
 
-    if uskin_via not in USKIN_VIA:
-        raise UsageError(f"unknown uSkin transport {uskin_via!r}", hint=f"use one of: {', '.join(USKIN_VIA)}")
     if not host.startswith("127."):
         raise UsageError(f"the twin serves on loopback only, not {host!r}", hint="use an address like 127.0.0.210")
     params = ControllerParams(protective_stop_n=protective_stop_n, unlock_delay_s=unlock_delay_s)
@@ -87,9 +85,16 @@ def twin(
     previous = {sig: signal.signal(sig, on_signal) for sig in handled}
     try:
         with RigTwin(
-            object_id, rotation_deg=rotation, sensor=sensor, host=host, seed=seed, params=params, placement=placement
+            object_id,
+            rotation_deg=rotation,
+            sensor=sensor,
+            host=host,
+            seed=seed,
+            params=params,
+            placement=placement,
+            sensor_options={"uskin": {"transport": uskin_via}},  # --uskin-via: which route the rig file names
         ) as rig:
-            text = rig.rig_file(uskin_via, tables)
+            text = rig.rig_file(tables)
             if write_rig is not None:
                 write_rig.write_text(text)
             typer.echo(text)

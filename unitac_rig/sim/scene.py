@@ -49,6 +49,7 @@ from drivers.layouts import SensorLayout
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.objects import DEFAULT_OBJECT_CENTER_M, MaterialSpec, ObjectSpec
 from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
+from unitac_rig.rig.sensors import SENSORS
 
 log = logging.getLogger(__name__)
 
@@ -187,11 +188,11 @@ class TaxelLoads:
 
 
 def pad_kind(layout: SensorLayout) -> str:
-    """``"skin"`` for a continuous-skin pad (uSkin), ``"pillars"`` for separate pillars (PapillArray)."""
-    if layout.name == "uskin":
-        return "skin"
-    if layout.name == "papillarray":
-        return "pillars"
+    """``"skin"`` for a continuous-skin pad, ``"pillars"`` for separate pillars: the registered sensor's ``pad``; a
+    layout no sensor registers has pillars where it reports their displacement."""
+    spec = SENSORS.get(layout.name)
+    if spec is not None:
+        return spec.pad
     return "pillars" if layout.has_displacement else "skin"
 
 

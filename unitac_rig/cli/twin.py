@@ -22,6 +22,7 @@ from types import FrameType
 import typer
 
 from unitac_rig.errors import UsageError
+from unitac_rig.rig.sensors import sensor_names
 
 
 def _status_line(truth: object) -> str:
@@ -40,7 +41,9 @@ def _status_line(truth: object) -> str:
 def twin(
     object_id: str = typer.Option(..., "--object", help="Object in front of the arm, e.g. circle_pla."),
     rotation: float | None = typer.Option(None, "--rotation", help="Object rotation (deg); its first by default."),
-    sensor: str = typer.Option("uskin", "--sensor", help="Mounted sensor: uskin or papillarray."),
+    sensor: str | None = typer.Option(
+        None, "--sensor", help="Mounted sensor (a registered one).", show_default=sensor_names()[0]
+    ),
     host: str = typer.Option("127.0.0.210", "--host", help="Loopback address to serve on (127.0.0.x)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the scene and the sensors' noise."),
     uskin_via: str = typer.Option(

@@ -226,15 +226,17 @@ class PressScene:
         params: SceneParams | None = None,
         rng: np.random.Generator | None = None,
         placement_rng: np.random.Generator | None = None,
+        pad: str | None = None,
     ) -> None:
         """``rng`` draws the sensor mount's errors (the pad pitch); ``placement_rng`` the object's centring error,
         so that two scenes of one object placement with different sensors can share it. Without ``placement_rng``
-        both come from ``rng`` (centring first), for a scene on its own."""
+        both come from ``rng`` (centring first), for a scene on its own. ``pad``: the layout's :func:`pad_kind`
+        unless given."""
         self.obj = obj
         self.rotation_deg = float(rotation_deg)
         self.layout = layout
         self.params = params or SceneParams()
-        self.kind = pad_kind(layout)
+        self.kind = pad or pad_kind(layout)
         drag = obj.material_params.skin_drag_mm
         if drag < 0 or (drag > 0 and self.params.skin_spread_sigma_mm <= 0):
             raise ConfigError(

@@ -22,6 +22,7 @@ from twin_helpers import wait_until
 
 from drivers.frames import TactileFrame
 from drivers.sensor import TactileSensor
+from unitac_rig.errors import UsageError
 from unitac_rig.rig.config import ObjectPlacement, load_rig_config, parse_rig_config
 from unitac_rig.rig.hardware import HardwareRig
 from unitac_rig.sim.twin import first_free_loopback
@@ -59,6 +60,20 @@ def test_the_example_rig_file_is_the_one_the_twin_prints_and_points_at_it() -> N
     assert config.sensors["papillarray"].port == f"socket://{DEFAULT_HOST}:30100"  # type: ignore[attr-defined]
     assert config.sensors["uskin"].url == f"ws://{DEFAULT_HOST}:5000"  # type: ignore[attr-defined]
     assert config.object == ObjectPlacement()  # the twin's scene stands where the file says
+
+
+def test_each_sensor_writes_its_own_table_with_its_options() -> None:
+    """The rig file's sensor tables come from the sensors' simulated sides: the uSkin's route and the PapillArray's
+    rate are their options, and an option the twin cannot serve is refused before anything starts."""
+    options = {"uskin": {"transport": "slcan"}, "papillarray": {"rate_hz": 500, "twin_port": 30111}}
+    config = parse_rig_config(tomllib.loads(rig_file_text("127.0.0.9", ObjectPlacement(), sensor_options=options)))
+    uskin, papillarray = config.sensors["uskin"], config.sensors["papillarray"]
+    assert (uskin.type, uskin.can_interface, uskin.can_channel) == ("uskin-can", "slcan", "socket://127.0.0.9:30101")  # type: ignore[attr-defined]
+    assert (papillarray.port, papillarray.rate_hz) == ("socket://127.0.0.9:30111", 500)  # type: ignore[attr-defined]
+    with pytest.raises(UsageError, match="serves the uSkin through slcan or xela-server, not 'can'"):
+        RigTwin("circle_pla", host="127.0.0.9", sensor_options={"uskin": {"transport": "can"}})
+    with pytest.raises(UsageError, match="PapillArray samples at 100, 250, 500, 1000 Hz, not 300"):
+        RigTwin("circle_pla", host="127.0.0.9", sensor_options={"papillarray": {"rate_hz": 300}})
 
 
 def test_a_rehearsed_rig_file_keeps_its_object_press_and_limits() -> None:

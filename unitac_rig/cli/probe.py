@@ -147,13 +147,22 @@ class ProbeOption:
     tables: tuple[type[SensorConfigBase], ...]  # the tables that have this field
 
     def typer_option(self) -> Any:
-        bounds = {k: v for m in self.info.metadata for k, v in (("min", getattr(m, "ge", None)),
-                  ("max", getattr(m, "le", None))) if v is not None}  # fmt: skip
-        default = self.info.default
-        shown = None if self.info.is_required() or default is None else str(default)
-        panel = None if len(self.tables) > 1 else str(self.tables[0].model_fields["type"].default)
-        return typer.Option(None, self.flag, help=self.info.description or "", show_default=shown or False,
-                            rich_help_panel=panel, **bounds)  # fmt: skip
+        """The option, unset by default (the table's own default applies); grouped under its table's ``type``."""
+        bounds: dict[str, Any] = {}
+        for constraint in self.info.metadata:  # pydantic's ge / le: the range the help shows and typer checks
+            if getattr(constraint, "ge", None) is not None:
+                bounds["min"] = constraint.ge
+            if getattr(constraint, "le", None) is not None:
+                bounds["max"] = constraint.le
+        default = None if self.info.is_required() else self.info.default
+        return typer.Option(
+            None,
+            self.flag,
+            help=self.info.description or "",
+            show_default=False if default is None else str(default),
+            rich_help_panel=None if len(self.tables) > 1 else str(self.tables[0].model_fields["type"].default),
+            **bounds,
+        )
 
 
 def probe_options(spec: SensorSpec) -> dict[str, ProbeOption]:
@@ -289,7 +298,7 @@ class _ProbeApp(typer.Typer):
 
 probe_app = _ProbeApp(
     name="probe",
-    help="Read a few frames from one device (uSkin, PapillArray, UR5e) to check it is connected.",
+    help="Read a few frames from one device (a registered tactile sensor, or the UR5e) to check it is connected.",
     no_args_is_help=True,
 )
 

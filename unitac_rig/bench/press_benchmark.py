@@ -190,7 +190,7 @@ def run_cell(cell: Cell) -> list[PressSample]:
     rotation = obj.rotations_deg[0]
     plans = plan_presses(obj, config, [rotation])
     samples: list[PressSample] = []
-    rig = SimRig(config, seed=cell.seed, papillarray_rate_hz=cell.papillarray_rate_hz)
+    rig = SimRig(config, seed=cell.seed, sensor_options={"papillarray": {"rate_hz": cell.papillarray_rate_hz}})
     with rig:
         sensor = rig.open_sensor(cell.sensor)
         try:

@@ -10,9 +10,9 @@ Ground truth, cut from the object's outline (CAD frame, mm) as the paper describ
 3. 11 points evenly over 14 mm of x, centred on the origin; at each, the depth (mm, >= 0 on a convex object) is
    how far below the origin's tangent line the outline's pad-facing surface lies.
 
-Model: MLP 16 -> 64 -> 128 -> 64 -> 32 -> 11, ReLU and dropout (0.2 for uSkin latents, 0.3 for PapillArray, 0.2 for
-other sensors) between layers, Adam lr 5e-5, weight decay 1e-3, L1 loss (mm), 80 epochs, batch 64. Split: a seeded
-10% of the object's approach directions (rotation, angle) go to test with all their forces.
+Model: MLP 16 -> 64 -> 128 -> 64 -> 32 -> 11, ReLU and dropout (the sensor's registered ``geometry_dropout``: 0.2
+for uSkin latents, 0.3 for PapillArray) between layers, Adam lr 5e-5, weight decay 1e-3, L1 loss (mm), 80 epochs,
+batch 64. Split: a seeded 10% of the object's approach directions (rotation, angle) go to test with all their forces.
 
 The trained MLPs are kept in the run (``geometry_estimator.pt``: tensors and plain metadata, read with
 ``weights_only=True``; ``geometry_estimator.json`` for people) and applied to new frames by :func:`predict_geometry`
@@ -49,7 +49,6 @@ log = logging.getLogger(__name__)
 
 GEOMETRY_JSON = "geometry.json"
 GEOMETRY_PNG = "geometry.png"
-DEFAULT_DROPOUT = {"uskin": 0.2, "papillarray": 0.3}
 
 
 def profile_offsets_mm(points: int = 11, span_mm: float = 14.0) -> np.ndarray:
@@ -139,11 +138,14 @@ class GeometryConfig:
     test_fraction: float = 0.1
     points: int = 11
     span_mm: float = 14.0
-    dropout: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_DROPOUT))
-    other_dropout: float = 0.2
+    dropout: dict[str, float] = field(default_factory=dict)  # per sensor, over its registered geometry_dropout
+    other_dropout: float = 0.2  # a sensor the registry does not know
 
     def dropout_for(self, sensor: str) -> float:
-        return float(self.dropout.get(sensor, self.other_dropout))
+        from unitac_rig.rig.sensors import SENSORS
+
+        spec = SENSORS.get(sensor)
+        return float(self.dropout.get(sensor, spec.geometry_dropout if spec is not None else self.other_dropout))
 
 
 class StackedProfileMLP(nn.Module):

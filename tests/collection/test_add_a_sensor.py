@@ -31,7 +31,7 @@ from drivers.clock import Clock, MonotonicClock
 from drivers.frames import TactileFrame
 from drivers.layouts import SensorLayout
 from drivers.sensor import TactileSensor, TareRecord
-from unitac_rig.cli import main
+from tests.helpers import cli
 from unitac_rig.learning.synthetic_data import synthetic_matched_sets
 from unitac_rig.rig.objects import get_object
 from unitac_rig.rig.sensors import SENSORS, SensorConfigBase, SensorSpec, SyntheticResponse
@@ -227,14 +227,6 @@ def registered() -> Iterator[SensorSpec]:
     with pytest.MonkeyPatch.context() as patch:
         patch.setitem(SENSORS, TINY.name, SPEC)
         yield SPEC
-
-
-def cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 @pytest.fixture(scope="module")

@@ -100,6 +100,10 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
             check.file_problem = f"its press index could not be read ({_one_line(exc)})"
             return check
         for pid in names:
+            missing = _missing_press_file(path, presses, pid)
+            if missing:
+                check.damaged[pid] = missing
+                continue
             try:
                 g = presses[pid]
                 complete = bool(g.attrs.get("write_complete", False))
@@ -127,6 +131,26 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
                     continue
                 (check.verified if result.state == "ok" else check.unsealed).append(pid)
     return check
+
+
+def _missing_press_file(path: Path, presses: h5py.Group, pid: str) -> str | None:
+    """Why the press file ``pid`` links to cannot be there (missing, or outside the session's folder), or None.
+
+    A session file links one file per press (``<object>__<sensor>.presses/``): copied without that folder, its
+    presses are missing, which is damage to repair from the journal or to refuse, never a silent gap.
+    """
+    try:
+        link = presses.get(pid, getlink=True)
+    except Exception as exc:
+        return f"its link could not be read ({_one_line(exc)})"
+    if not isinstance(link, h5py.ExternalLink):
+        return None
+    target = Path(str(link.filename))
+    if target.is_absolute() or ".." in target.parts:
+        return f"it links to {target}, outside the session's folder"
+    if not (path.parent / target).is_file():
+        return f"its press file {target} is missing"
+    return None
 
 
 def _one_line(exc: BaseException) -> str:

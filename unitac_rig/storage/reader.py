@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import os
+import shutil
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,7 +17,7 @@ import numpy as np
 
 from unitac_rig.errors import DataError
 from unitac_rig.rig.sensors import SENSORS
-from unitac_rig.storage.checksums import PRESS_ATTR
+from unitac_rig.storage.checksums import PRESS_ATTR, attrs_digest, content_seal, root_attr_items
 from unitac_rig.storage.integrity import READABLE_SCHEMA_VERSIONS, SCHEMA_VERSION, SessionCheck, check_session
 from unitac_rig.storage.press_record import (
     PressRecord,
@@ -25,7 +27,7 @@ from unitac_rig.storage.press_record import (
     read_extraction,
     read_press_group,
 )
-from unitac_rig.storage.recorder import repair_session
+from unitac_rig.storage.recorder import private_copy_path, repair_session, session_layout
 
 log = logging.getLogger(__name__)
 
@@ -256,3 +258,52 @@ def root_config(path: Path) -> dict[str, Any]:
         raw = f.attrs.get("config", "{}")
     value = json.loads(as_str(raw)) if isinstance(raw, bytes | str) else {}
     return value if isinstance(value, dict) else {}
+
+
+def session_files(path: Path) -> list[Path]:
+    """The files a session is stored in: the session file and every press file it links (none in the older
+    single-file layout). Copy all of them (or use :func:`snapshot_session`) to move a session elsewhere."""
+    path = Path(path)
+    with _open(path) as f:
+        links = session_layout(f)[0]
+    return [path, *(path.parent / target for _, target in sorted(links.items()))]
+
+
+def session_digest(path: Path) -> str:
+    """Hex SHA-256 of a session's content: its root attributes and every press's checksums (computed for presses
+    recorded without). The same for two copies of one session whatever their layout (single file, press files, an
+    export's snapshot), different as soon as one press or attribute differs; what pooling calls one session."""
+    digest = hashlib.sha256()
+    with _open(path) as f:
+        digest.update(attrs_digest((k, v) for k, v in root_attr_items(f)).encode())
+        for pid, group in iter_press_groups(f):
+            digest.update(f"\n{pid}\n{content_seal(group)}".encode())
+    return digest.hexdigest()
+
+
+def snapshot_session(path: Path, dest: Path) -> None:
+    """Write the session ``path`` to ``dest`` as one self-contained HDF5 file (every press a group inside it, checksums
+    as recorded): what an export ships. A single-file session is copied byte for byte; a session with press files is
+    read from one version of its session file, so a collection writing it meanwhile changes nothing in the copy."""
+    path, dest = Path(path), Path(dest)
+    tmp = private_copy_path(dest)
+    try:
+        for _ in range(3):  # a single-file session may be moved into press files (by a writer) between two reads
+            with _open(path) as f:
+                if session_layout(f)[0]:
+                    with h5py.File(tmp, "w") as out:
+                        for key, value in f.attrs.items():
+                            out.attrs[key] = value
+                        presses = out.create_group("presses")
+                        for pid, group in iter_press_groups(f):
+                            f.copy(group, presses, pid)
+                    break
+            shutil.copyfile(path, tmp)
+            with h5py.File(tmp, "r") as copied:
+                if not session_layout(copied)[0]:
+                    break
+        os.replace(tmp, dest)
+    except OSError as exc:
+        raise DataError(f"could not copy {path} to {dest}: {exc}") from exc
+    finally:
+        tmp.unlink(missing_ok=True)

@@ -17,8 +17,14 @@ import numpy as np
 
 from unitac_rig.errors import DataError
 from unitac_rig.rig.sensors import SENSORS
-from unitac_rig.storage.checksums import PRESS_ATTR, attrs_digest, content_seal, root_attr_items
-from unitac_rig.storage.integrity import READABLE_SCHEMA_VERSIONS, SCHEMA_VERSION, SessionCheck, check_session
+from unitac_rig.storage.checksums import attrs_digest, content_seal, root_attr_items
+from unitac_rig.storage.integrity import (
+    READABLE_SCHEMA_VERSIONS,
+    SCHEMA_VERSION,
+    SessionCheck,
+    check_session,
+    press_seal,
+)
 from unitac_rig.storage.press_record import (
     PressRecord,
     as_str,
@@ -77,20 +83,30 @@ class Verified:
         return f"repaired from the journal, {described}" if self.repairs else described
 
 
-_VERIFIED: dict[tuple[str, int, int, int, int], Verified] = {}
+_VERIFIED: dict[tuple[Any, ...], Verified] = {}
 _VERIFIED_GUARD = threading.Lock()
 _PRESSES_OK: dict[str, set[tuple[str, str]]] = {}  # file -> (press id, checksums) verified by this process
 _WARNED_UNSEALED: set[str] = set()
 
 
-def _version_key(path: Path) -> tuple[str, int, int, int, int] | None:
-    """Identifies one version of a session file: the recorder never changes a published file in place (it renames
-    a new copy over it), so (inode, size, mtime) change with every version."""
+def _version_key(path: Path) -> tuple[Any, ...] | None:
+    """Identifies one version of a session: the recorder never changes a published file in place (it renames a new
+    file over it), so the (inode, size, mtime) of the session file and of every press file it links change with
+    every version, and with any change made behind the recorder's back (a deleted or damaged press file)."""
     try:
         st = os.stat(path)
-    except OSError:
+        with h5py.File(path, "r") as f:
+            links = session_layout(f)[0]
+        files = []
+        for target in sorted(links.values()):
+            try:
+                pst = os.stat(Path(path).parent / target)
+                files.append((target, pst.st_ino, pst.st_size, pst.st_mtime_ns))
+            except OSError:
+                files.append((target, -1, -1, -1))
+    except Exception:  # a file that does not open or list: never cached, the check says why
         return None
-    return (str(Path(path).resolve()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+    return (str(Path(path).resolve()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, tuple(files))
 
 
 def verified_session(path: Path) -> Verified:
@@ -132,12 +148,13 @@ def verified_session(path: Path) -> Verified:
 
 
 def _press_seals(path: Path, pids: list[str]) -> set[tuple[str, str]]:
-    """(press id, checksums attribute) of the verified presses: what a later version may trust (``known_good``)."""
+    """(press id, :func:`press_seal`) of the verified presses: what a later version may trust (``known_good``)."""
     seals: set[tuple[str, str]] = set()
     with h5py.File(path, "r") as f:
         for pid in pids:
-            raw = f["presses"][pid].attrs[PRESS_ATTR]
-            seals.add((pid, raw.decode() if isinstance(raw, bytes) else str(raw)))
+            seal = press_seal(path, f["presses"], pid)
+            if seal is not None:
+                seals.add((pid, seal))
     return seals
 
 

@@ -175,6 +175,9 @@ def test_resuming_a_single_file_session_moves_its_presses_out_and_a_held_handle_
         writer = SessionWriter(tmp_path, OBJ, SENSOR, ATTRS)
         assert old.stat().st_ino == inode  # opening alone rewrites nothing
         assert writer.finished_press_ids() == {r.press_id for r in records[:4]}
+        writer.update_root_attrs({"session_tare": {"method": "median"}})  # what collect writes first: moves them out
+        with h5py.File(old, "r") as f:
+            assert session_layout(f)[1] == [] and f.attrs["session_tare"] == '{"method": "median"}'
         writer.write_press(records[4])
         writer.close()
         with h5py.File(old, "r") as f:

@@ -440,6 +440,7 @@ class SessionWriter:
         private name and renamed over the published one. Presses still stored inside the session file (the older
         single-file layout) are first copied out, as they are (checksums with them), into press files."""
         if self._groups:
+            self.press_dir.mkdir(exist_ok=True)
             self._room(self.press_dir / ".room.tmp", self.path.stat().st_size, "the session's press files",
                        shown=self.press_dir)  # fmt: skip
             with h5py.File(self.path, "r") as src:
@@ -559,7 +560,8 @@ class SessionWriter:
         if lost:
             session_aside: Path | None = None
             for pid in lost:
-                if pid in self._links and self._press_file(pid).is_file():
+                ours = pid in self._links and self._press_file(pid).parent == self.press_dir  # never a file elsewhere
+                if ours and self._press_file(pid).is_file():
                     kept_as[pid] = keep_aside(self._press_file(pid), move=True).name
                 elif pid in self._groups:  # the older layout: the damaged version of the whole file survives
                     session_aside = session_aside or keep_aside(self.path, move=False)

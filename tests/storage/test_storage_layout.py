@@ -13,7 +13,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from robustness_helpers import cli, one_error_line
+from robustness_helpers import cli, one_error_line, tree_hashes
 
 from unitac_rig.bench.damage import flip_bits
 from unitac_rig.bench.recorder import synthetic_press
@@ -203,6 +203,25 @@ def test_extract_on_a_single_file_session_rewrites_it_into_press_files(tmp_path:
     assert groups == [] and len(links) == 4
     assert session_digest(old) != before and read_session_info(old).integrity == "verified"
     assert _same_presses(read_presses(old), _reference(tmp_path / "ref", records))
+
+
+def test_extract_failing_on_a_single_file_session_leaves_it_exactly_as_it_was(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    old = write_single_file_session(tmp_path, _presses(4))
+    real, calls = recorder._reextract_copy, []
+
+    def failing(path: Path, *args: object, **kwargs: object) -> object:
+        calls.append(path)
+        if len(calls) == 3:
+            raise OSError(28, "No space left on device")
+        return real(path, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(recorder, "_reextract_copy", failing)
+    before = tree_hashes(tmp_path)
+    assert cli(["extract", str(tmp_path), "--tolerance", "0.3"]) == 1
+    assert "nothing was changed" in one_error_line(capsys)
+    assert tree_hashes(tmp_path) == before and not press_dir(old).exists()
 
 
 # -- readers keep their version --------------------------------------------------------------------------------------

@@ -869,6 +869,9 @@ def reextract_sessions(paths: list[Path], settings: ExtractionSettings) -> list[
     finally:
         for tmp, _ in copies:
             tmp.unlink(missing_ok=True)
+        for path in paths:
+            with contextlib.suppress(OSError):
+                press_dir(path).rmdir()  # only when empty: a single-file session that was not rewritten
         for writer in writers:
             writer.close()
         for lease in leases:

@@ -22,7 +22,7 @@ class PooledSession:
     info: SessionInfo
     source: Path  # the dataset directory it was taken from
     sha256: str  # session_digest: the content's SHA-256 (root attributes and every press's checksums)
-    also_in: tuple[Path, ...] = ()  # other directories holding a byte-identical copy
+    also_in: tuple[Path, ...] = ()  # other directories holding a copy of the same content
 
 
 def pool_sessions(data_dirs: Sequence[Path]) -> list[PooledSession]:

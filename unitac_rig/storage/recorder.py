@@ -449,7 +449,7 @@ class SessionWriter:
                     self._links[pid] = self._new_press_file(pid, copying(group))
                     self._groups.remove(pid)
         tmp = private_copy_path(self.path)
-        root_bytes = len(json.dumps(self._root, default=json_default))
+        root_bytes = sum(len(str(value)) for value in self._root.values())
         self._room(tmp, root_bytes + LINK_BYTES * len(self._links), shown=self.path)
         os.replace(write_session_file(self.path, self._root, self._links), self.path)
 

@@ -304,3 +304,30 @@ def test_bits_flipped_in_press_files_are_repaired_or_refused_never_passed_on(
         assert _same_presses(read_presses(path), _reference(tmp_path / "ref", records))
     else:
         assert code == 1 and OBJ in one_error_line(capsys)
+
+
+def test_random_bits_in_a_session_file_with_real_attributes_are_repaired_or_refused_never_a_crash(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The session file is small, so random bits mostly hit its attribute heap and link table (seeds 4 and 10 broke
+    the heap's strings and a link's name): the session file is rebuilt from the journal, never a crash."""
+    from unitac_rig.rig.config import RigConfig
+
+    attrs = {**ATTRS, "config": RigConfig().model_dump(mode="json"), "planned_presses": [f"p{i}" for i in range(91)]}
+    records = _presses(4)
+    pristine = tmp_path / "pristine"
+    with SessionWriter(pristine, OBJ, SENSOR, attrs) as writer:
+        for rec in records:
+            writer.write_press(rec)
+    expected = _reference(tmp_path / "ref", records)
+    for seed in range(12):
+        data = tmp_path / f"seed{seed}"
+        shutil.copytree(pristine, data)
+        flip_bits(session_path(data, OBJ, SENSOR), 20, seed)
+        code = cli(["inspect", str(data)])
+        if code == 0:
+            assert _same_presses(read_presses(session_path(data, OBJ, SENSOR)), expected), seed
+        else:
+            line = one_error_line(capsys)
+            assert code == 1 and OBJ in line and "unexpected" not in line, (seed, line)
+        capsys.readouterr()

@@ -456,8 +456,11 @@ class SessionWriter:
     def _load(self) -> None:
         """Read what the published session file holds (see ``_root``, ``_links``, ``_groups``)."""
         with h5py.File(self.path, "r") as f:
-            self._root = {key: f.attrs[key] for key in f.attrs if key != ROOT_ATTR}
             self._links, self._groups = session_layout(f)
+            try:
+                self._root = {key: f.attrs[key] for key in f.attrs if key != ROOT_ATTR}
+            except Exception:  # a damaged attribute heap: the check reports it, the journal header replaces them
+                self._root = self._header_root()
 
     def _unusable(self) -> str | None:
         """Why the session file must be set aside and rebuilt from the journal (it does not open, or it is not a
@@ -478,7 +481,7 @@ class SessionWriter:
                 # which rig recorded it, unless the root attributes are damaged (then the journal header says)
                 trusted = not check_root(f).damaged
                 attrs = {k: f.attrs[k] for k in RIG_IDENTITY_KEYS if k in f.attrs and trusted}
-                _ = list(f["presses"])  # touching the index proves the file is readable
+                session_layout(f)  # reading the press index and every link proves the file is readable
         except DataError:
             raise
         except OSError as exc:

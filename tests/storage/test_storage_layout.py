@@ -192,6 +192,16 @@ def test_resuming_a_single_file_session_moves_its_presses_out_and_a_held_handle_
         held.close()
 
 
+def test_a_press_aborted_in_a_single_file_session_is_replaced_when_pressed_again(tmp_path: Path) -> None:
+    aborted, redone = _presses(1)[0], _presses(1)[0]
+    aborted.status, aborted.reason = "aborted", "interrupted"
+    old = write_single_file_session(tmp_path, [aborted])
+    with SessionWriter(tmp_path, OBJ, SENSOR, ATTRS) as writer:
+        assert writer.finished_press_ids() == set()  # aborted presses are pressed again on resume
+        writer.write_press(redone)
+    assert [p.status for p in read_presses(old)] == ["complete"]
+
+
 def test_extract_on_a_single_file_session_rewrites_it_into_press_files(tmp_path: Path) -> None:
     records = _presses(4)
     old = write_single_file_session(tmp_path, records)

@@ -664,6 +664,8 @@ class SessionWriter:
             self._presses_written += 1
             # durable from here on: a failure below only delays the press file and its link to the next open
             self._links[rec.press_id] = self._new_press_file(rec.press_id, writing(rec))
+            if rec.press_id in self._groups:  # an older version inside a single-file session: this one replaces it
+                self._groups.remove(rec.press_id)
             self._publish()
         except OSError as exc:
             raise DataError(

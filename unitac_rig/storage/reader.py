@@ -1,4 +1,10 @@
-"""Reading session files: listing sessions, reading presses, and the force-matched frames learning trains on."""
+"""Reading sessions: listing them, reading presses, and the force-matched frames learning trains on.
+
+Every reader goes through here, so it reads both storage layouts (docs/dataset.md, "Storage layout"): a session file
+whose presses are links to press files, and the older single file holding every press. :func:`session_files` names
+the files a session is stored in, :func:`session_digest` identifies its content whatever the layout (pooling), and
+:func:`snapshot_session` writes it as one self-contained file (export).
+"""
 
 from __future__ import annotations
 

@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from unitac_rig.storage.reader import snapshot_session
+
 ANGLES = "3"
 
 
@@ -155,7 +157,7 @@ def test_12_geometry_refuses_a_run_without_an_unseen_object_before_training(
     seen_only = tmp_path / "seen_only"
     seen_only.mkdir()
     for name in ("hex_tpu__uskin.h5", "hex_tpu__papillarray.h5"):
-        shutil.copy(data / name, seen_only / name)
+        snapshot_session(data / name, seen_only / name)  # the session as one self-contained file
     run_dir = tmp_path / "run"
     ok("train", "--data", str(seen_only), "--out", str(run_dir), "--epochs", "1", "--no-report")
     result = run("geometry", str(run_dir))

@@ -18,6 +18,7 @@ from unitac_rig.learning.data import build_paired_dataset, load_sets
 from unitac_rig.learning.run import load_test_set
 from unitac_rig.learning.train import TrainConfig, load_run, train
 from unitac_rig.learning.translate import Translator
+from unitac_rig.storage.reader import snapshot_session
 
 
 @pytest.fixture(scope="module")
@@ -28,8 +29,8 @@ def two_dirs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path
     write_sessions(root / "all", sets)
     for name in ("a", "b"):
         (root / name).mkdir()
-    for path in sorted((root / "all").glob("*.h5")):
-        shutil.copy2(path, root / ("a" if path.name.startswith(("circle", "irregular")) else "b") / path.name)
+    for path in sorted((root / "all").glob("*.h5")):  # each session as one self-contained file, without its journal
+        snapshot_session(path, root / ("a" if path.name.startswith(("circle", "irregular")) else "b") / path.name)
     return root / "all", root / "a", root / "b"
 
 
@@ -47,7 +48,7 @@ def test_an_identical_copy_pools_once_and_a_different_session_is_refused(
     everything, a, b = two_dirs
     copy = tmp_path / "copy"
     copy.mkdir()
-    shutil.copy2(a / "circle_pla__uskin.h5", copy / "circle_pla__uskin.h5")
+    shutil.copy2(a / "circle_pla__uskin.h5", copy / "circle_pla__uskin.h5")  # a's copy is one self-contained file
     assert (
         build_paired_dataset(load_sets([a, b, copy])).content_hash()
         == build_paired_dataset(load_sets(everything)).content_hash()

@@ -16,7 +16,14 @@ from tests.helpers import cli
 from tests.robustness.robustness_helpers import one_error_line, tree_hashes, write_synthetic_sessions
 from unitac_rig.storage.export import export_dataset
 from unitac_rig.storage.paired import build_paired_dataset, join_key
-from unitac_rig.storage.reader import load_matched_set, load_matched_sets
+from unitac_rig.storage.reader import (
+    load_matched_set,
+    load_matched_sets,
+    read_presses,
+    session_digest,
+    session_files,
+    snapshot_session,
+)
 from unitac_rig.storage.recorder import session_path
 
 
@@ -95,8 +102,11 @@ def test_manifest_lists_every_file_with_its_sha256_and_every_session_with_proven
     source = session_path(two_dirs[0], "circle_pla", "uskin")
     raw = sessions[("circle_pla", "uskin")]
     assert raw["source"] == str(two_dirs[0]) and raw["file"] == "raw/circle_pla__uskin.h5"
-    # the raw session stays HDF5, byte for byte the source
-    assert raw["sha256"] == tree_hashes(source.parent)[source.name] == listed["raw/circle_pla__uskin.h5"]
+    # the raw session is one self-contained HDF5 file holding exactly the source's presses (same checksums)
+    assert raw["sha256"] == listed["raw/circle_pla__uskin.h5"]
+    copy = exported / "raw" / "circle_pla__uskin.h5"
+    assert session_files(copy) == [copy] and session_digest(copy) == session_digest(source)
+    assert [p.press_id for p in read_presses(copy)] == [p.press_id for p in read_presses(source)]
     assert raw["presses"]["planned"] == 3 and raw["rig"] and raw["git_commit"] and raw["package_version"]
     assert raw["extraction_settings"]["tolerance_n"] > 0 and raw["being_collected_at_export"] is False
     assert sessions[("hex_tpu", "uskin")]["presses"] == {"planned": 11, "complete": 11, "failed": 0, "aborted": 0}
@@ -183,7 +193,7 @@ def test_export_never_writes_into_a_directory_that_holds_files(
 def test_one_sensor_only_cannot_be_paired(two_dirs: tuple[Path, Path], tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
     solo = tmp_path / "solo"
     solo.mkdir()
-    shutil.copy(session_path(two_dirs[0], "circle_pla", "uskin"), solo)
+    snapshot_session(session_path(two_dirs[0], "circle_pla", "uskin"), solo / "circle_pla__uskin.h5")
     assert cli(["export", str(solo), "--out", str(tmp_path / "out")]) == 1
     assert "only one sensor" in one_error_line(capsys)
     assert load_matched_set(solo / "circle_pla__uskin.h5").sensor == "uskin"

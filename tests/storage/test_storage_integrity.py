@@ -14,9 +14,10 @@ import pytest
 
 from tests.helpers import cli
 from tests.robustness.robustness_helpers import one_error_line, tree_hashes, write_synthetic_sessions
-from unitac_rig.bench.lab.damage import flip_bits, flip_bits_in_dataset, press_ids
+from unitac_rig.bench.lab.damage import dataset_location, flip_bits, flip_bits_in_dataset, press_ids
 from unitac_rig.storage.manifest import sha256_file
-from unitac_rig.storage.recorder import journal_dir, session_path
+from unitac_rig.storage.reader import session_digest, session_files
+from unitac_rig.storage.recorder import journal_dir, press_dir, session_path
 
 OBJ, SENSOR = "circle_pla", "uskin"
 TRAIN_FAST = ("--no-report", "--no-baselines")
@@ -97,7 +98,9 @@ def test_twenty_flipped_bits_are_repaired_from_the_journal_by_every_reader(
     if command == "export":  # the export holds (and its manifest certifies) the repaired file
         manifest = json.loads((tmp_path / "export" / "manifest.json").read_text())
         entry = next(s for s in manifest["sessions"] if s["object"] == OBJ and s["sensor"] == SENSOR)
-        assert entry["sha256"] == sha256_file(path) and entry["integrity"] == "verified"
+        raw = tmp_path / "export" / "raw" / path.name
+        assert entry["sha256"] == sha256_file(raw) and entry["integrity"] == "verified"
+        assert session_digest(raw) == session_digest(path)  # the repaired presses, not the damaged ones
         assert cli(["verify", str(tmp_path / "export")]) == 0
 
 
@@ -123,8 +126,10 @@ def test_damage_without_a_journal_is_refused_naming_file_and_press(
 ) -> None:
     alone = tmp_path / "copied_without_journal"
     alone.mkdir()
+    for part in session_files(session_path(data, OBJ, SENSOR)):  # the session file and its press files
+        (alone / part.relative_to(data)).parent.mkdir(exist_ok=True)
+        shutil.copyfile(part, alone / part.relative_to(data))
     path = alone / session_path(data, OBJ, SENSOR).name
-    shutil.copyfile(session_path(data, OBJ, SENSOR), path)
     pid = press_ids(path)[0]
     flip_bits_in_dataset(path, f"presses/{pid}/tactile/values", 4, 0)
     assert cli(["inspect", str(alone)]) == 1
@@ -155,16 +160,17 @@ def test_collect_drops_a_press_damaged_in_both_copies_keeps_them_aside_and_press
     assert cli(args) == 0
     path = session_path(data, "hex_tpu", "uskin")
     pid = press_ids(path)[0]
+    press_file = dataset_location(path, f"presses/{pid}/robot/t_s")[0]  # the press's own file
     flip_bits_in_dataset(path, f"presses/{pid}/robot/t_s", 4, 0)
     entry = journal_dir(data, "hex_tpu", "uskin") / f"{pid}.h5"
     flip_bits_in_dataset(entry, "press/robot/t_s", 4, 1)
-    damaged_file, damaged_entry = sha256_file(path), sha256_file(entry)
+    damaged_file, damaged_entry = sha256_file(press_file), sha256_file(entry)
     capsys.readouterr()
     assert cli(args) == 0
     out = capsys.readouterr().out
     assert f"press {pid} was damaged" in out and "it will be pressed again" in out
     assert "2/2 presses finished (1 this run" in out
-    (aside,) = data.glob("hex_tpu__uskin.broken-*.h5")
+    (aside,) = press_dir(path).glob(f"{pid}-*.broken-*.h5")  # the damaged press file, kept aside
     (entry_aside,) = journal_dir(data, "hex_tpu", "uskin").glob(f"{pid}.broken-*.h5")
     assert sha256_file(aside) == damaged_file and sha256_file(entry_aside) == damaged_entry
     assert _matches_journal(data, "hex_tpu", "uskin")

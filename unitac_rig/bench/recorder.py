@@ -1,11 +1,12 @@
 """The data path against the hardware's rates: the recorder's sustained write rate, and the live PapillArray path.
 
 1. Recorder: :meth:`unitac_rig.storage.recorder.SessionWriter.write_press` (journal file written, fsynced and renamed,
-   then appended to the session file) on presses of realistic length carrying the streams the hardware produces: the
-   robot at 500 Hz, the PapillArray at 1000 Hz (forces + displacements) and the uSkin at 100 Hz. The rate that counts
-   is seconds of streams recorded per second of writing (the *real-time factor*); the combined figure writes one
-   uSkin and one PapillArray press of the same length, so it covers all three streams (the robot twice). Every press
-   is read back and compared array by array: the count of frames lost must be zero.
+   then the press file written and the session file republished) on presses of realistic length carrying the
+   streams the hardware produces: the robot at 500 Hz, the PapillArray at 1000 Hz (forces + displacements) and the
+   uSkin at 100 Hz. The rate that counts is seconds of streams recorded per second of writing (the *real-time
+   factor*); the combined figure writes one uSkin and one PapillArray press of the same length, so it covers all
+   three streams (the robot twice). Every press is read back and compared array by array: the count of frames lost
+   must be zero.
 2. Live path: a simulated PapillArray hub streaming in real time (its own thread, 1000 Hz, real wire bytes over a
    pyserial URL) read by :class:`drivers.papillarray.PapillArrayDriver` in reader-thread mode for a few seconds while
    the caller polls every 2 ms as the press loop does; frames the hub sent against frames the driver delivered, and
@@ -119,7 +120,7 @@ def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
 
 def measure_recorder(plan: RecorderPlan, work_dir: Path) -> dict[str, Any]:
     """Write ``presses_per_length`` presses per length and sensor, read them back, compare; timings and losses."""
-    from unitac_rig.storage.reader import read_presses
+    from unitac_rig.storage.reader import read_presses, session_files
     from unitac_rig.storage.recorder import SessionWriter
 
     rng = np.random.default_rng(0)
@@ -156,7 +157,7 @@ def measure_recorder(plan: RecorderPlan, work_dir: Path) -> dict[str, Any]:
                 )
                 mismatched += not all(checks)
             seq = np.concatenate([b.tactile_seq for b in back.values()]) if back else np.zeros(0, np.int64)
-            files = [writer.path, *writer.journal.glob("*.h5")]
+            files = [*session_files(writer.path), *writer.journal.glob("*.h5")]
             file_mb = sum(p.stat().st_size for p in files) / 1e6
             per_sensor[sensor] = {
                 "presses": len(records),

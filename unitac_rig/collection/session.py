@@ -171,7 +171,7 @@ def collect_session(
                 writer.update_root_attrs({"sensor_identity": sensor.identity(), "layout": sensor.layout.name})
             rig.mount(obj, todo[0].rotation_deg, sensor_name)
             tare = _first_move_and_tare(rig, sensor, todo[0])
-            with _kept_alive(arm):  # copies the whole session file: seconds on a long resumed session
+            with _kept_alive(arm):  # republishes the session file (moves a single-file session's presses out first)
                 writer.update_root_attrs({"session_tare": tare})
         except BaseException:
             writer.discard_if_unused()  # nor may an arm or sensor that fails before the first press

@@ -99,6 +99,17 @@ def sealed_arrays(group: h5py.Group) -> dict[str, str] | None:
     return dict(document["arrays"])
 
 
+def content_seal(group: h5py.Group) -> str:
+    """The ``checksums`` document of a press group: the one it carries, or for an unsealed (schema 1) press the one
+    it would carry, computed from what is stored. Equal for two copies of one press in any file or layout."""
+    raw = group.attrs.get(PRESS_ATTR)
+    if raw is not None:
+        return raw.decode() if isinstance(raw, bytes) else str(raw)
+    arrays = {path: array_digest(group[path][()]) for path in dataset_paths(group)}
+    return json.dumps({"algorithm": ALGORITHM, "arrays": dict(sorted(arrays.items())),
+                       "attrs": attrs_digest(_group_attr_items(group))})  # fmt: skip
+
+
 @dataclass(frozen=True)
 class PressCheck:
     """The outcome of verifying one press group: ``ok``, ``unsealed`` (no checksums: an older file) or ``damaged``."""

@@ -5,7 +5,8 @@ An export directory holds:
 * ``pairs.parquet``: one row per joined contact and sensor (object, rotation, angle, target, the wrist force at that
   sensor's matched frame, its error, and the frame), units in the schema's field metadata. pandas and
   ``datasets.load_dataset("parquet", ...)`` read it as it is (plain Arrow types, nested lists for the frames).
-* ``raw/<object>__<sensor>.h5``: the session files it was built from, unchanged (HDF5, docs/dataset.md).
+* ``raw/<object>__<sensor>.h5``: the sessions it was built from, each one self-contained HDF5 file (every press a group
+  in it, checksums as recorded; docs/dataset.md).
 * ``README.md``: the dataset card (what, how to load, columns and units, sessions, limits).
 * ``manifest.json``: schema, units, counts, every session's provenance and the SHA-256 of every file
   (:mod:`unitac_rig.storage.manifest`; ``unitac-rig verify DIR`` checks it).
@@ -34,7 +35,14 @@ from unitac_rig.storage.lease import lease_holder
 from unitac_rig.storage.manifest import MANIFEST_NAME, sha256_file, write_manifest
 from unitac_rig.storage.paired import PairedDataset, build_paired_dataset
 from unitac_rig.storage.pooling import PooledSession, pool_sessions
-from unitac_rig.storage.reader import MatchedSet, load_matched_set, press_summaries, read_session_info
+from unitac_rig.storage.reader import (
+    MatchedSet,
+    load_matched_set,
+    press_summaries,
+    read_session_info,
+    session_digest,
+    snapshot_session,
+)
 from unitac_rig.storage.recorder import journal_dir
 
 log = logging.getLogger(__name__)
@@ -229,9 +237,9 @@ def export_dataset(data_dirs: Sequence[Path], out: Path) -> ExportSummary:
         sets: list[MatchedSet] = []
         for item in pooled:
             copy = staging / RAW_DIR / item.info.path.name
-            shutil.copyfile(item.info.path, copy)
+            snapshot_session(item.info.path, copy)  # one self-contained file, whatever the session's layout
             digest = sha256_file(copy)
-            if digest != item.sha256:
+            if session_digest(copy) != item.sha256:
                 log.warning("%s changed while it was exported (a collection is running); exported the newer version",
                             item.info.path)  # fmt: skip
             provenance.append(_session_provenance(item, copy, digest))

@@ -7,6 +7,7 @@ readers repair or refuse (:func:`unitac_rig.storage.reader.verified_session`).
 
 from __future__ import annotations
 
+import os
 from collections.abc import Container
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -66,7 +67,7 @@ class SessionCheck:
 def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> SessionCheck:
     """Verify every press (and the root attributes) of a session file; see :class:`SessionCheck`.
 
-    ``known_good`` holds (press id, its ``checksums`` attribute) pairs this process verified in an earlier version
+    ``known_good`` holds (press id, :func:`press_seal`) pairs this process verified in an earlier version
     of the same file: those are trusted without reading their arrays again (how ``inspect --watch`` keeps up with
     a collection, whose every press republishes the file).
     """
@@ -100,6 +101,10 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
             check.file_problem = f"its press index could not be read ({_one_line(exc)})"
             return check
         for pid in names:
+            missing = _missing_press_file(path, presses, pid)
+            if missing:
+                check.damaged[pid] = missing
+                continue
             try:
                 g = presses[pid]
                 complete = bool(g.attrs.get("write_complete", False))
@@ -109,11 +114,9 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
             if not complete:
                 check.half_written.append(pid)
                 continue
-            seal = g.attrs.get(PRESS_ATTR) if known_good else None
-            if seal is not None and (pid, seal.decode() if isinstance(seal, bytes) else str(seal)) in known_good:
-                result = PressCheck("ok")
-            else:
-                result = check_press_group(g)
+            seal = press_seal(path, presses, pid) if known_good else None
+            trusted = seal is not None and (pid, seal) in known_good
+            result = PressCheck("ok") if trusted else check_press_group(g)
             if result.state == "unsealed" and check.version >= 2:
                 check.damaged[pid] = "it has no checksums in a file whose presses all carry them"
             elif result.damaged:
@@ -127,6 +130,44 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
                     continue
                 (check.verified if result.state == "ok" else check.unsealed).append(pid)
     return check
+
+
+def press_seal(path: Path, presses: h5py.Group, pid: str) -> str | None:
+    """What a verified press is remembered by (``known_good``): its ``checksums`` attribute and, for a press file,
+    the file's identity (name, inode, size, mtime), so a press file changed since (damaged, replaced) is read again.
+    None when the press has no checksums or its file cannot be looked at."""
+    try:
+        raw = presses[pid].attrs.get(PRESS_ATTR)
+        if raw is None:
+            return None
+        seal = raw.decode() if isinstance(raw, bytes) else str(raw)
+        link = presses.get(pid, getlink=True)
+        if isinstance(link, h5py.ExternalLink):
+            st = os.stat(Path(path).parent / str(link.filename))
+            seal += f"|{link.filename}|{st.st_ino}|{st.st_size}|{st.st_mtime_ns}"
+    except Exception:  # damaged metadata raises anything: the press is then read in full
+        return None
+    return seal
+
+
+def _missing_press_file(path: Path, presses: h5py.Group, pid: str) -> str | None:
+    """Why the press file ``pid`` links to cannot be there (missing, or outside the session's folder), or None.
+
+    A session file links one file per press (``<object>__<sensor>.presses/``): copied without that folder, its
+    presses are missing, which is damage to repair from the journal or to refuse, never a silent gap.
+    """
+    try:
+        link = presses.get(pid, getlink=True)
+    except Exception as exc:
+        return f"its link could not be read ({_one_line(exc)})"
+    if not isinstance(link, h5py.ExternalLink):
+        return None
+    target = Path(str(link.filename))
+    if target.is_absolute() or ".." in target.parts:
+        return f"it links to {target}, outside the session's folder"
+    if not (path.parent / target).is_file():
+        return f"its press file {target} is missing"
+    return None
 
 
 def _one_line(exc: BaseException) -> str:

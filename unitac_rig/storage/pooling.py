@@ -1,9 +1,10 @@
 """Pooling dataset directories: every session of several ``--data`` directories, each (object, sensor) once.
 
 A session's identity is its (object, sensor): the file name, the join and the learning side all key on it. Pooled
-directories may hold the *same* session twice (a copy on a laptop and on the lab server): byte-identical files are
-one session. Two different files for one (object, sensor) are a conflict the tool refuses to settle silently (which
-one is right? both are real presses), so pooling stops with an error naming both files.
+directories may hold the *same* session twice (a copy on a laptop and on the lab server): sessions of identical
+content (root attributes and every press's checksums: :func:`unitac_rig.storage.reader.session_digest`, the same in
+any storage layout) are one session. Two different sessions for one (object, sensor) are a conflict the tool refuses
+to settle silently (which one is right? both are real presses), so pooling stops with an error naming both files.
 """
 
 from __future__ import annotations
@@ -13,16 +14,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.manifest import sha256_file
-from unitac_rig.storage.reader import SessionInfo, list_sessions
+from unitac_rig.storage.reader import SessionInfo, list_sessions, session_digest
 
 
 @dataclass(frozen=True)
 class PooledSession:
     info: SessionInfo
     source: Path  # the dataset directory it was taken from
-    sha256: str
-    also_in: tuple[Path, ...] = ()  # other directories holding a byte-identical copy
+    sha256: str  # session_digest: the content's SHA-256 (root attributes and every press's checksums)
+    also_in: tuple[Path, ...] = ()  # other directories holding a copy of the same content
 
 
 def pool_sessions(data_dirs: Sequence[Path]) -> list[PooledSession]:
@@ -34,7 +34,7 @@ def pool_sessions(data_dirs: Sequence[Path]) -> list[PooledSession]:
     for data_dir in data_dirs:
         for info in list_sessions(Path(data_dir)):
             key = (info.object_id, info.sensor)
-            digest = sha256_file(info.path)
+            digest = session_digest(info.path)
             first = chosen.get(key)
             if first is None:
                 chosen[key] = PooledSession(info, Path(data_dir), digest)

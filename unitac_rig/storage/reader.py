@@ -1,10 +1,18 @@
-"""Reading session files: listing sessions, reading presses, and the force-matched frames learning trains on."""
+"""Reading sessions: listing them, reading presses, and the force-matched frames learning trains on.
+
+Every reader goes through here, so it reads both storage layouts (docs/dataset.md, "Storage layout"): a session file
+whose presses are links to press files, and the older single file holding every press. :func:`session_files` names
+the files a session is stored in, :func:`session_digest` identifies its content whatever the layout (pooling), and
+:func:`snapshot_session` writes it as one self-contained file (export).
+"""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import os
+import shutil
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,8 +23,14 @@ import numpy as np
 
 from unitac_rig.errors import DataError
 from unitac_rig.rig.sensors import SENSORS
-from unitac_rig.storage.checksums import PRESS_ATTR
-from unitac_rig.storage.integrity import READABLE_SCHEMA_VERSIONS, SCHEMA_VERSION, SessionCheck, check_session
+from unitac_rig.storage.checksums import attrs_digest, content_seal, root_attr_items
+from unitac_rig.storage.integrity import (
+    READABLE_SCHEMA_VERSIONS,
+    SCHEMA_VERSION,
+    SessionCheck,
+    check_session,
+    press_seal,
+)
 from unitac_rig.storage.press_record import (
     PressRecord,
     as_str,
@@ -25,7 +39,7 @@ from unitac_rig.storage.press_record import (
     read_extraction,
     read_press_group,
 )
-from unitac_rig.storage.recorder import repair_session
+from unitac_rig.storage.recorder import private_copy_path, repair_session, session_layout
 
 log = logging.getLogger(__name__)
 
@@ -75,20 +89,30 @@ class Verified:
         return f"repaired from the journal, {described}" if self.repairs else described
 
 
-_VERIFIED: dict[tuple[str, int, int, int, int], Verified] = {}
+_VERIFIED: dict[tuple[Any, ...], Verified] = {}
 _VERIFIED_GUARD = threading.Lock()
 _PRESSES_OK: dict[str, set[tuple[str, str]]] = {}  # file -> (press id, checksums) verified by this process
 _WARNED_UNSEALED: set[str] = set()
 
 
-def _version_key(path: Path) -> tuple[str, int, int, int, int] | None:
-    """Identifies one version of a session file: the recorder never changes a published file in place (it renames
-    a new copy over it), so (inode, size, mtime) change with every version."""
+def _version_key(path: Path) -> tuple[Any, ...] | None:
+    """Identifies one version of a session: the recorder never changes a published file in place (it renames a new
+    file over it), so the (inode, size, mtime) of the session file and of every press file it links change with
+    every version, and with any change made behind the recorder's back (a deleted or damaged press file)."""
     try:
         st = os.stat(path)
-    except OSError:
+        with h5py.File(path, "r") as f:
+            links = session_layout(f)[0]
+        files = []
+        for target in sorted(links.values()):
+            try:
+                pst = os.stat(Path(path).parent / target)
+                files.append((target, pst.st_ino, pst.st_size, pst.st_mtime_ns))
+            except OSError:
+                files.append((target, -1, -1, -1))
+    except Exception:  # a file that does not open or list: never cached, the check says why
         return None
-    return (str(Path(path).resolve()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+    return (str(Path(path).resolve()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, tuple(files))
 
 
 def verified_session(path: Path) -> Verified:
@@ -130,12 +154,13 @@ def verified_session(path: Path) -> Verified:
 
 
 def _press_seals(path: Path, pids: list[str]) -> set[tuple[str, str]]:
-    """(press id, checksums attribute) of the verified presses: what a later version may trust (``known_good``)."""
+    """(press id, :func:`press_seal`) of the verified presses: what a later version may trust (``known_good``)."""
     seals: set[tuple[str, str]] = set()
     with h5py.File(path, "r") as f:
         for pid in pids:
-            raw = f["presses"][pid].attrs[PRESS_ATTR]
-            seals.add((pid, raw.decode() if isinstance(raw, bytes) else str(raw)))
+            seal = press_seal(path, f["presses"], pid)
+            if seal is not None:
+                seals.add((pid, seal))
     return seals
 
 
@@ -256,3 +281,52 @@ def root_config(path: Path) -> dict[str, Any]:
         raw = f.attrs.get("config", "{}")
     value = json.loads(as_str(raw)) if isinstance(raw, bytes | str) else {}
     return value if isinstance(value, dict) else {}
+
+
+def session_files(path: Path) -> list[Path]:
+    """The files a session is stored in: the session file and every press file it links (none in the older
+    single-file layout). Copy all of them (or use :func:`snapshot_session`) to move a session elsewhere."""
+    path = Path(path)
+    with _open(path) as f:
+        links = session_layout(f)[0]
+    return [path, *(path.parent / target for _, target in sorted(links.items()))]
+
+
+def session_digest(path: Path) -> str:
+    """Hex SHA-256 of a session's content: its root attributes and every press's checksums (computed for presses
+    recorded without). The same for two copies of one session whatever their layout (single file, press files, an
+    export's snapshot), different as soon as one press or attribute differs; what pooling calls one session."""
+    digest = hashlib.sha256()
+    with _open(path) as f:
+        digest.update(attrs_digest((k, v) for k, v in root_attr_items(f)).encode())
+        for pid, group in iter_press_groups(f):
+            digest.update(f"\n{pid}\n{content_seal(group)}".encode())
+    return digest.hexdigest()
+
+
+def snapshot_session(path: Path, dest: Path) -> None:
+    """Write the session ``path`` to ``dest`` as one self-contained HDF5 file (every press a group inside it, checksums
+    as recorded): what an export ships. A single-file session is copied byte for byte; a session with press files is
+    read from one version of its session file, so a collection writing it meanwhile changes nothing in the copy."""
+    path, dest = Path(path), Path(dest)
+    tmp = private_copy_path(dest)
+    try:
+        for _ in range(3):  # a single-file session may be moved into press files (by a writer) between two reads
+            with _open(path) as f:
+                if session_layout(f)[0]:
+                    with h5py.File(tmp, "w") as out:
+                        for key, value in f.attrs.items():
+                            out.attrs[key] = value
+                        presses = out.create_group("presses")
+                        for pid, group in iter_press_groups(f):
+                            f.copy(group, presses, pid)
+                    break
+            shutil.copyfile(path, tmp)
+            with h5py.File(tmp, "r") as copied:
+                if not session_layout(copied)[0]:
+                    break
+        os.replace(tmp, dest)
+    except OSError as exc:
+        raise DataError(f"could not copy {path} to {dest}: {exc}") from exc
+    finally:
+        tmp.unlink(missing_ok=True)

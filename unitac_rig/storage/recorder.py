@@ -1,28 +1,37 @@
-"""Crash-safe HDF5 session recording: one file per (object, sensor) session, one group per press.
+"""Crash-safe HDF5 session recording: one session per (object, sensor), one immutable file per press.
 
-Durability rule: killing the process at any moment loses at most the press in progress, the session file stays
-readable, and the same command resumes without duplicating a finished press. How:
+Layout (docs/dataset.md, "Storage layout"):
 
-1. A finished press is first written to its own small HDF5 file in the session's *journal*
-   (``DATA/.journal/<object>__<sensor>/<press_id>.h5``): written under a temporary name, fsynced, then atomically
-   renamed. A press is durable from that rename on.
-2. The press is then added to the session file by *copy-on-write*: the writer copies the published file to a private
-   hidden name, appends the press there (the group's ``write_complete`` attribute set last), and atomically renames
-   the copy over the published name.
-3. On every open, the session file is checked against the journal: a file that no longer opens is moved aside
-   (``*.broken-<time>.h5``) and rebuilt from the journal; a press group without ``write_complete`` is replaced from the
-   journal; a journalled press missing from the file (a kill between steps 1 and 2) is copied in.
+* ``DATA/<object>__<sensor>.h5``, the *session file*: the session's root attributes and ``/presses/<press_id>``, an
+  HDF5 external link to that press's own file. Attributes and links only (a few hundred bytes per press), so a new
+  version of it is cheap: it is written under a private name and atomically renamed over the published one.
+* ``DATA/<object>__<sensor>.presses/<press_id>-<sha12>.h5``: one file per press (the group ``/press``: the format of
+  :mod:`unitac_rig.storage.press_record`), written once under a private name and renamed into place, never changed
+  afterwards. ``sha12`` is the start of the file's SHA-256, so a new version of a press (redone after an abort,
+  re-extracted, repaired) gets a new name and the files an older session file links to stay as they were.
+* ``DATA/.journal/<object>__<sensor>/<press_id>.h5``: the durable log and repair copy of every press (the same
+  ``/press`` group), written first, fsynced, atomically renamed.
 
-Readers never disturb the writer, and the writer never disturbs readers: a published session file is never opened
-for writing, so ``inspect``, ``train``, ``extract``'s reader path or a notebook's plain ``h5py.File(path, "r")``
-can open it at any moment, take HDF5's shared lock and keep it open as long as they like. They see a complete
-snapshot (the file as of the last finished press: a rename is atomic, a reader holding the old file keeps reading
-the old inode), and the writer's next rename is unaffected by their locks. One process at a time may *write* a
-session: see :mod:`unitac_rig.storage.lease`. The cost is one file copy per press (measured in docs/dataset.md).
+Every byte of a press is written twice (journal entry, press file); the session file adds its links. The single-file
+layout before it copied the whole session file for every press, so its bytes written grew with the square of the
+presses (docs/benchmarks.md, "Storage: bytes written").
 
-Schema (see docs/dataset.md): root attributes describe the session; ``/presses/<press_id>`` holds the raw streams
-(``robot/*``, ``tactile/*``, ``events``), the tare, and ``extraction/*`` (force-matched frames): the group's format is
-:mod:`unitac_rig.storage.press_record`.
+Durability: killing the process at any moment loses at most the press in progress, every file stays readable, and the
+same command resumes without duplicating a finished press. A press is durable once its journal entry is renamed,
+then written to its press file, then published by the session file's rename. On every open, the session file, its
+press files and the journal are checked against their checksums and each is repaired from the other: a session file
+that no longer opens is moved aside (``*.broken-<time>.h5``) and rebuilt from the journal; a press whose file is
+damaged or missing is rewritten from its journal entry; a journalled press the session file does not link yet (a
+kill between the steps) is added. A session in the older single-file layout (every press a group inside the session
+file) still reads as it is; the first time it is written again its presses move out into press files.
+
+Readers never disturb the writer, and the writer never disturbs readers: no published file is ever opened for
+writing, so ``inspect``, ``train``, ``extract``'s reader path or a notebook's plain ``h5py.File(path, "r")`` can open
+the session file at any moment and keep it open as long as they like. HDF5 follows the external links, read-only,
+when a press is opened. A reader sees the session as of the last finished press and keeps its version while it holds
+the file: press files are immutable, and one no longer linked by the current session file (a superseded version, a
+kill's leftover) is only deleted when a later command opens the session for writing. One process at a time may
+*write* a session: see :mod:`unitac_rig.storage.lease`.
 """
 
 from __future__ import annotations
@@ -43,10 +52,11 @@ import h5py
 import numpy as np
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.checksums import check_press_group, check_root, seal_root
+from unitac_rig.storage.checksums import ROOT_ATTR, check_press_group, check_root, seal_root
 from unitac_rig.storage.extraction import Extraction, ExtractionSettings
-from unitac_rig.storage.integrity import READABLE_SCHEMA_VERSIONS, SCHEMA_VERSION, SessionCheck, check_session
+from unitac_rig.storage.integrity import READABLE_SCHEMA_VERSIONS, SCHEMA_VERSION, check_session
 from unitac_rig.storage.lease import SessionLease, lease_holder
+from unitac_rig.storage.manifest import sha256_file
 from unitac_rig.storage.press_record import (
     FINISHED_STATUSES,
     PressRecord,
@@ -66,6 +76,12 @@ log = logging.getLogger(__name__)
 
 #: root attributes that say which rig recorded a session: a session is never continued from another one
 RIG_IDENTITY_KEYS = ("simulated", "rig", "source")
+#: the folder of a session's press files: ``<object>__<sensor>.presses`` beside the session file
+PRESS_DIR_SUFFIX = ".presses"
+#: the group that holds the press in a press file and in a journal entry
+PRESS_GROUP = "press"
+#: room claimed per press link when the session file is republished (an external link and its name), bytes
+LINK_BYTES = 256
 
 
 def session_stem(object_id: str, sensor: str) -> str:
@@ -80,6 +96,12 @@ def journal_dir(data_dir: Path, object_id: str, sensor: str) -> Path:
     return Path(data_dir) / ".journal" / session_stem(object_id, sensor)
 
 
+def press_dir(path: Path) -> Path:
+    """The folder holding the press files of the session file ``path`` (``<object>__<sensor>.presses``)."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}{PRESS_DIR_SUFFIX}")
+
+
 def private_copy_path(path: Path) -> Path:
     """Where a process builds the next version of ``path`` before renaming it over ``path``.
 
@@ -89,25 +111,88 @@ def private_copy_path(path: Path) -> Path:
 
 
 def remove_stale_copies(path: Path, journal: Path) -> None:
-    """Delete private copies of the session file and its journal entries left by a killed writer or ``extract``
-    (call only while holding the session's lease)."""
-    for leftover in [*path.parent.glob(f".{path.name}.*.tmp"), *journal.glob(".*.h5.*.tmp")]:
+    """Delete private copies of the session file, its press files and its journal entries left by a killed writer or
+    ``extract`` (call only while holding the session's lease)."""
+    leftovers = [*path.parent.glob(f".{path.name}.*.tmp"), *journal.glob(".*.h5.*.tmp"), *journal.glob("*.h5.tmp"),
+                 *press_dir(path).glob(".*.tmp")]  # fmt: skip
+    for leftover in leftovers:
         leftover.unlink(missing_ok=True)
 
 
-def replace_by_copy(path: Path, change: Callable[[h5py.File], None], *, create: bool = False) -> None:
-    """Copy-on-write: apply ``change`` to a private copy of ``path`` (a new file when ``create``), then atomically
-    rename the copy over ``path``. A reader that has ``path`` open keeps its complete old version; on any error
-    ``path`` is left as it was."""
-    tmp = private_copy_path(path)
+def write_press_file(folder: Path, press_id: str, fill: Callable[[h5py.File], None], *, durable: bool = False) -> str:
+    """Write one immutable press file into ``folder``: ``fill`` writes the ``press`` group into a private file, which
+    is renamed to ``<press_id>-<sha12>.h5`` (the start of its SHA-256). Returns the file name.
+
+    Not fsynced unless ``durable``: the journal entry is the durable copy, and a press file torn by a power cut is
+    rewritten from it on the next open.
+    """
+    folder.mkdir(exist_ok=True)
+    tmp = folder / f".{press_id}.{os.getpid()}.tmp"
     try:
-        if not create:
-            shutil.copyfile(path, tmp)
-        with h5py.File(tmp, "w" if create else "a") as f:
-            change(f)
-        os.replace(tmp, path)
+        with h5py.File(tmp, "w") as pf:
+            fill(pf)
+        if durable:
+            with open(tmp, "rb+") as fh:
+                os.fsync(fh.fileno())
+        name = f"{press_id}-{sha256_file(tmp)[:12]}.h5"
+        os.replace(tmp, folder / name)
     finally:
         tmp.unlink(missing_ok=True)
+    return name
+
+
+def writing(rec: PressRecord) -> Callable[[h5py.File], None]:
+    """A press file's content written from a record (checksums computed from memory)."""
+
+    def fill(pf: h5py.File) -> None:
+        write_press_group(pf, rec, name=PRESS_GROUP)
+
+    return fill
+
+
+def copying(group: h5py.Group) -> Callable[[h5py.File], None]:
+    """A press file's content copied from a press group as it is stored (its checksums with it)."""
+
+    def fill(pf: h5py.File) -> None:
+        group.file.copy(group, pf, PRESS_GROUP)
+
+    return fill
+
+
+def session_layout(f: h5py.File) -> tuple[dict[str, str], list[str]]:
+    """(press id -> linked press file, relative to the session file's folder; press ids stored as groups inside the
+    session file itself: the single-file layout) of an open session file."""
+    links: dict[str, str] = {}
+    groups: list[str] = []
+    presses = f.get("presses")
+    if presses is None:
+        return links, groups
+    for pid in sorted(presses):
+        link = presses.get(pid, getlink=True)
+        if isinstance(link, h5py.ExternalLink):
+            links[pid] = str(link.filename)
+        else:
+            groups.append(pid)
+    return links, groups
+
+
+def write_session_file(path: Path, root: Mapping[str, Any], links: Mapping[str, str]) -> Path:
+    """Write a session file (``root`` attributes, sealed from schema 2 on, and one external link per press) under a
+    private name beside ``path`` and return that name; the caller renames it over ``path``."""
+    tmp = private_copy_path(path)
+    try:
+        with h5py.File(tmp, "w") as f:
+            for key, value in root.items():
+                f.attrs[key] = value
+            presses = f.create_group("presses")
+            for pid in sorted(links):
+                presses[pid] = h5py.ExternalLink(links[pid], f"/{PRESS_GROUP}")
+            if int(root.get("schema_version", SCHEMA_VERSION)) >= 2:  # a schema-1 session stays unsealed
+                seal_root(f)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return tmp
 
 
 ROOM_MARGIN_BYTES = 64 * 1024  # HDF5 metadata (object headers, B-trees, heaps) on top of the raw data, bytes
@@ -243,12 +328,12 @@ def check_same_rig(existing: Mapping[str, Any], new: Mapping[str, Any], where: P
 
 
 class SessionWriter:
-    """Appends presses to one session file, durably (see the module docstring).
+    """Appends presses to one session, durably (see the module docstring).
 
-    Opening it verifies the file and the journal against their checksums and repairs each from the other
-    (:meth:`_reconcile_with_journal`). A press damaged in both copies is dropped from the session (``unrepairable=
-    "drop"``: collect presses it again; the damaged versions are kept aside) or refused (``"refuse"``: the readers'
-    repair, :func:`repair_session`, which must never lose a press).
+    Opening it verifies the session file, its press files and the journal against their checksums and repairs each
+    from the other (:meth:`_reconcile_with_journal`). A press damaged in both copies is dropped from the session
+    (``unrepairable="drop"``: collect presses it again; the damaged versions are kept aside) or refused
+    (``"refuse"``: the readers' repair, :func:`repair_session`, which must never lose a press).
     """
 
     def __init__(
@@ -264,6 +349,7 @@ class SessionWriter:
         self.object_id = object_id
         self.sensor = sensor
         self.path = session_path(self.data_dir, object_id, sensor)
+        self.press_dir = press_dir(self.path)
         self.journal = journal_dir(self.data_dir, object_id, sensor)
         self.root_attrs = dict(root_attrs)
         self.unrepairable = unrepairable
@@ -271,6 +357,11 @@ class SessionWriter:
         # True when this writer started the session (no file, no journal yet): see discard_if_unused()
         self.created = not self.path.exists() and not (self.journal / "_session.json").exists()
         self._presses_written = 0
+        # what the published session file holds: its root attributes (as stored, schema_version included), the press
+        # file each press links to (relative to the data directory), and presses still stored inside it (older layout)
+        self._root: dict[str, Any] = {}
+        self._links: dict[str, str] = {}
+        self._groups: list[str] = []
         try:
             self.journal.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -281,6 +372,7 @@ class SessionWriter:
             remove_stale_copies(self.path, self.journal)
             self._write_journal_header()
             self._open_or_recover()
+            self._remove_unlinked_press_files()
         except BaseException:
             self.close()
             raise
@@ -330,28 +422,45 @@ class SessionWriter:
     def _journal_press_files(self) -> dict[str, Path]:
         return {p.stem: p for p in sorted(self.journal.glob("*.h5")) if ".broken-" not in p.name}
 
-    def _root_attr_values(self) -> dict[str, Any]:
-        attrs = self._journal_header()
-        attrs["schema_version"] = SCHEMA_VERSION
-        return attrs
+    def _header_root(self, version: int = SCHEMA_VERSION) -> dict[str, Any]:
+        """Root attributes from the journal header (the session file's are rebuilt from it when damaged)."""
+        root = {key: attr_value(value) for key, value in self._journal_header().items()}
+        root["schema_version"] = version
+        return root
 
-    def _create_file(self, path: Path) -> None:
-        self._room(private_copy_path(path), 0, shown=path)
-        attrs = self._root_attr_values()
+    def _press_file(self, pid: str) -> Path:
+        return self.data_dir / self._links[pid]
 
-        def create(f: h5py.File) -> None:
-            for key, value in attrs.items():
-                f.attrs[key] = attr_value(value)
-            f.create_group("presses")
-            seal_root(f)
+    def _new_press_file(self, pid: str, fill: Callable[[h5py.File], None]) -> str:
+        """Write a press file for ``pid`` and return the link to it (relative to the data directory)."""
+        return f"{self.press_dir.name}/{write_press_file(self.press_dir, pid, fill)}"
 
-        replace_by_copy(path, create, create=True)
+    def _publish(self) -> None:
+        """Publish a new version of the session file: its root attributes and one link per press, written under a
+        private name and renamed over the published one. Presses still stored inside the session file (the older
+        single-file layout) are first copied out, as they are (checksums with them), into press files."""
+        if self._groups:
+            self.press_dir.mkdir(exist_ok=True)
+            self._room(self.press_dir / ".room.tmp", self.path.stat().st_size, "the session's press files",
+                       shown=self.press_dir)  # fmt: skip
+            with h5py.File(self.path, "r") as src:
+                for pid in list(self._groups):
+                    group = src["presses"][pid]
+                    self._links[pid] = self._new_press_file(pid, copying(group))
+                    self._groups.remove(pid)
+        tmp = private_copy_path(self.path)
+        root_bytes = sum(len(str(value)) for value in self._root.values())
+        self._room(tmp, root_bytes + LINK_BYTES * len(self._links), shown=self.path)
+        os.replace(write_session_file(self.path, self._root, self._links), self.path)
 
-    def _rewrite(self, change: Callable[[h5py.File], None], extra_bytes: int, what: str = "the session") -> None:
-        """Publish a new version of the session file with ``change`` applied (see ``replace_by_copy``)."""
-        size = self.path.stat().st_size
-        self._room(private_copy_path(self.path), size + extra_bytes, what, shown=self.path)
-        replace_by_copy(self.path, change)
+    def _load(self) -> None:
+        """Read what the published session file holds (see ``_root``, ``_links``, ``_groups``)."""
+        with h5py.File(self.path, "r") as f:
+            self._links, self._groups = session_layout(f)
+            try:
+                self._root = {key: f.attrs[key] for key in f.attrs if key != ROOT_ATTR}
+            except Exception:  # a damaged attribute heap: the check reports it, the journal header replaces them
+                self._root = self._header_root()
 
     def _unusable(self) -> str | None:
         """Why the session file must be set aside and rebuilt from the journal (it does not open, or it is not a
@@ -372,7 +481,7 @@ class SessionWriter:
                 # which rig recorded it, unless the root attributes are damaged (then the journal header says)
                 trusted = not check_root(f).damaged
                 attrs = {k: f.attrs[k] for k in RIG_IDENTITY_KEYS if k in f.attrs and trusted}
-                _ = list(f["presses"])  # touching the index proves the file is readable
+                session_layout(f)  # reading the press index and every link proves the file is readable
         except DataError:
             raise
         except OSError as exc:
@@ -395,24 +504,28 @@ class SessionWriter:
             if problem is not None:
                 broken = keep_aside(self.path, move=True)
                 self._note(f"{self.path.name} {problem}; moved aside to {broken.name} and rebuilt from the journal")
-        if not self.path.exists():
-            self._create_file(self.path)
+        if self.path.exists():
+            self._load()
+        else:
+            self._root, self._links, self._groups = self._header_root(), {}, []
+            self._publish()
         self._reconcile_with_journal()
 
     def _reconcile_with_journal(self) -> None:
-        """Make the file and the journal agree, each verified against its checksums, each repaired from the other.
+        """Make the session and the journal agree, each verified against its checksums, each repaired from the other.
 
-        In the file: a half-written press is replaced from the journal (or dropped); a damaged press is replaced by
-        its intact journal copy; a journalled press missing from the file (a kill between the two writes) is copied
-        in; damaged root attributes are rewritten from the journal header. In the journal: a torn or damaged entry
-        whose press the file holds intact is rewritten from the file. The file is rewritten only when something
-        changes.
+        In the session: a half-written press (older layout) is dropped, and replaced from the journal when it has a
+        copy there; a damaged or missing press file is replaced by its intact journal copy; a journalled press the
+        session file does not link (a kill between the writes) is added; damaged root attributes are rewritten from
+        the journal header. In the journal: a torn or damaged entry whose press the session holds intact is
+        rewritten from it. The session file is republished only when something changes.
         """
         check = check_session(self.path)
         if check.file_problem:  # the index went bad since _unusable() looked (or a race with a disk error)
             broken = keep_aside(self.path, move=True)
             self._note(f"{self.path.name} {check.file_problem}; moved aside to {broken.name}, rebuilt from the journal")
-            self._create_file(self.path)
+            self._root, self._links, self._groups = self._header_root(), {}, []
+            self._publish()
             check = check_session(self.path)
         restore: list[PressRecord] = []
         journal_fix: list[str] = []
@@ -421,11 +534,11 @@ class SessionWriter:
         journal = self._journal_press_files()
         for pid, path in journal.items():
             state, detail = _journal_check(path)
-            if pid in check.statuses:  # intact in the file
+            if pid in check.statuses:  # intact in the session
                 if state == "damaged":
                     journal_fix.append(pid)
                 elif check.statuses[pid] not in FINISHED_STATUSES and detail != check.statuses[pid]:
-                    restore.append(self._read_journal(path))  # e.g. aborted in the file, finished in the journal
+                    restore.append(self._read_journal(path))  # e.g. aborted in the session, finished in the journal
                 continue
             if state == "damaged":
                 if pid in check.damaged:
@@ -446,36 +559,31 @@ class SessionWriter:
                 hint="run `unitac-rig collect` for this session to drop it and press it again (the damaged copies "
                 "are kept aside), or restore the file from a backup",
             )
-        drop = list(check.half_written) + list(lost)
-        root_attrs = self._root_attr_values() if check.root_problem else None
-        if drop or restore or root_attrs is not None:
-            if lost:
-                aside = keep_aside(self.path, move=False)  # the damaged version survives the rewrite below
-                for entry in broken_entries:
-                    keep_aside(entry, move=True)
-
-            def apply(f: h5py.File) -> None:
-                group = f.require_group("presses")
-                for pid in drop:
-                    if pid in group:
-                        del group[pid]
-                for rec in restore:
-                    write_press_group(group, rec)
-                if root_attrs is not None:
-                    for key in list(f.attrs):
-                        del f.attrs[key]
-                    for key, value in root_attrs.items():
-                        f.attrs[key] = attr_value(value)
-                    seal_root(f)
-
-            extra = sum(record_nbytes(rec) for rec in restore)
-            if check.damaged or check.root_problem:
-                self._rebuild(check, restore, extra)
-            else:
-                self._rewrite(apply, extra)
-            for pid, why in lost.items():
-                self._note(f"press {pid} was damaged ({why}): dropped, it will be pressed again (the damaged session "
-                           f"file is kept as {aside.name})")  # fmt: skip
+        kept_as: dict[str, str] = {}
+        if lost:
+            session_aside: Path | None = None
+            for pid in lost:
+                ours = pid in self._links and self._press_file(pid).parent == self.press_dir  # never a file elsewhere
+                if ours and self._press_file(pid).is_file():
+                    kept_as[pid] = keep_aside(self._press_file(pid), move=True).name
+                elif pid in self._groups:  # the older layout: the damaged version of the whole file survives
+                    session_aside = session_aside or keep_aside(self.path, move=False)
+                    kept_as[pid] = session_aside.name
+            for entry in broken_entries:
+                keep_aside(entry, move=True)
+        gone = set(check.half_written) | set(lost) | set(check.damaged) | {rec.press_id for rec in restore}
+        for pid in gone:
+            self._links.pop(pid, None)
+        self._groups = [pid for pid in self._groups if pid not in gone]
+        for rec in restore:
+            self._links[rec.press_id] = self._new_press_file(rec.press_id, writing(rec))
+        if check.root_problem:
+            self._root = self._header_root(check.version or SCHEMA_VERSION)
+        if gone or check.root_problem:
+            self._publish()
+        for pid, why in lost.items():
+            aside = f" (the damaged copy is kept as {kept_as[pid]})" if pid in kept_as else ""
+            self._note(f"press {pid} was damaged ({why}): dropped, it will be pressed again{aside}")
         if check.root_problem:
             self._note(f"{self.path.name}: {check.root_problem}; rewritten from the journal header")
         for pid in journal_fix:
@@ -488,36 +596,20 @@ class SessionWriter:
             what = "damaged in the session file; replaced by" if rec.press_id in check.damaged else "restored from"
             self._note(f"press {rec.press_id} ({rec.status}) {what} the journal")
 
-    def _rebuild(self, check: SessionCheck, restore: list[PressRecord], extra_bytes: int) -> None:
-        """Publish a fresh session file: root attributes from the journal header, every press that verified copied
-        from the damaged file as it is (its checksums with it), and ``restore`` written from the journal.
-
-        A damaged HDF5 file is never written to: its broken metadata (free-space lists, heaps) can corrupt what is
-        added to it, so the intact presses move into a new file instead.
-        """
-        restored = {rec.press_id for rec in restore}
-        keep = [pid for pid in check.statuses if pid not in restored]
-        attrs = self._root_attr_values()
-        attrs["schema_version"] = check.version or SCHEMA_VERSION  # a schema-1 file stays one (unsealed presses)
-
-        def build(f: h5py.File) -> None:
-            for key, value in attrs.items():
-                f.attrs[key] = attr_value(value)
-            presses = f.create_group("presses")
-            with h5py.File(self.path, "r") as src:
-                for pid in keep:
-                    src.copy(src["presses"][pid], presses, name=pid)
-            for rec in restore:
-                write_press_group(presses, rec)
-            if attrs["schema_version"] >= 2:
-                seal_root(f)
-
-        self._room(private_copy_path(self.path), self.path.stat().st_size + extra_bytes, shown=self.path)
-        replace_by_copy(self.path, build, create=True)
+    def _remove_unlinked_press_files(self) -> None:
+        """Delete press files the published session file does not link: versions superseded by an earlier command
+        (a redone press, a re-extraction, a repair) and a killed writer's last press file (its journal entry was
+        written first and restored it). Files kept aside (``.broken-``) stay."""
+        if not self.press_dir.is_dir():
+            return
+        linked = {Path(target).name for target in self._links.values()}
+        for path in self.press_dir.glob("*.h5"):
+            if path.name not in linked and ".broken-" not in path.name:
+                path.unlink(missing_ok=True)
 
     def _read_journal(self, path: Path) -> PressRecord:
         with h5py.File(path, "r") as jf:
-            return read_press_group(jf["press"])
+            return read_press_group(jf[PRESS_GROUP])
 
     def _room(self, path: Path, nbytes: int, what: str = "the session", shown: Path | None = None) -> None:
         try:
@@ -555,25 +647,26 @@ class SessionWriter:
         tmp.write_text(json.dumps(header, default=json_default, indent=1))
         os.replace(tmp, self.journal / "_session.json")
 
-        def apply(f: h5py.File) -> None:
-            for key, value in attrs.items():
-                f.attrs[key] = attr_value(value)
-            if int(f.attrs.get("schema_version", 0)) >= 2:  # a schema-1 file stays unsealed (its past is unknown)
-                seal_root(f)
-
-        self._rewrite(apply, len(json.dumps(dict(attrs), default=json_default)))
+        for key, value in attrs.items():
+            self._root[key] = attr_value(value)
+        try:
+            self._publish()
+        except OSError as exc:
+            raise DataError(f"could not update {self.path}: {exc}", hint="check free disk space") from exc
 
     def write_press(self, rec: PressRecord) -> None:
-        """Make ``rec`` durable (journal), then add it to the session file."""
+        """Make ``rec`` durable (journal), write its press file, then publish it in the session file."""
         tmp = self.journal / f"{rec.press_id}.h5.tmp"
         nbytes = record_nbytes(rec)
-        self._room(tmp, nbytes, f"press {rec.press_id}")
+        self._room(tmp, 2 * nbytes, f"press {rec.press_id}")  # the journal entry and the press file
         try:
             write_journal_entry(self.journal, rec)
             self._presses_written += 1
-            # durable from here on: a failure below only delays the copy into the session file to the next open
-            self._rewrite(lambda f: write_press_group(f["presses"], rec), nbytes,
-                          f"press {rec.press_id} (it is safe in the journal)")  # fmt: skip
+            # durable from here on: a failure below only delays the press file and its link to the next open
+            self._links[rec.press_id] = self._new_press_file(rec.press_id, writing(rec))
+            if rec.press_id in self._groups:  # an older version inside a single-file session: this one replaces it
+                self._groups.remove(rec.press_id)
+            self._publish()
         except OSError as exc:
             raise DataError(
                 f"could not record press {rec.press_id} in {self.path}: {exc}",
@@ -589,6 +682,8 @@ class SessionWriter:
         if not self.created or self._presses_written or self._journal_press_files():
             return
         self.path.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            self.press_dir.rmdir()  # only when empty
         for leftover in ("_session.json", "_session.tmp"):
             (self.journal / leftover).unlink(missing_ok=True)
         self._lease.release(unlink=True)
@@ -656,23 +751,49 @@ def _reextract_group(g: h5py.Group, settings: ExtractionSettings) -> Extraction:
     return extraction
 
 
-def _reextract_copy(path: Path, settings: ExtractionSettings, journal_entry: bool) -> tuple[Path, int, int]:
-    """A fsynced private copy of ``path`` with every extraction recomputed: (the copy, presses, targets matched)."""
+def _reextract_copy(path: Path, settings: ExtractionSettings) -> tuple[Path, int]:
+    """A fsynced private copy of the press file or journal entry ``path`` (group ``press``) with its extraction
+    recomputed: (the copy, targets matched)."""
     tmp = private_copy_path(path)
     shutil.copy2(path, tmp)
-    presses = matched = 0
     with h5py.File(tmp, "a") as f:
-        groups = [("press", f["press"])] if journal_entry else list(iter_press_groups(f))
-        for _, g in groups:
-            presses += 1
-            matched += _reextract_group(g, settings).n_matched
-        if not journal_entry:
-            f.attrs["extraction_settings"] = json.dumps(settings.to_dict())
-            if int(f.attrs.get("schema_version", 0)) >= 2:
-                seal_root(f)
+        matched = _reextract_group(f[PRESS_GROUP], settings).n_matched
     with open(tmp, "rb+") as fh:
         os.fsync(fh.fileno())
-    return tmp, presses, matched
+    return tmp, matched
+
+
+def _reextract_session(path: Path, settings: ExtractionSettings, copies: list[tuple[Path, Path]]) -> tuple[int, int]:
+    """Private copies of every press file of the session file ``path`` with the extraction recomputed, and of the
+    session file linking them: appended to ``copies`` as (copy, where it goes), the session file last. Presses
+    stored inside the session file (older layout) are copied out into press files first. Returns (presses, matched).
+    """
+    folder = press_dir(path)
+    folder.mkdir(exist_ok=True)
+    presses = matched = 0
+    links: dict[str, str] = {}
+    with h5py.File(path, "r") as f:
+        root = {key: f.attrs[key] for key in f.attrs if key != ROOT_ATTR}
+        stored = session_layout(f)[0]
+        for pid, group in iter_press_groups(f):
+            if pid in stored:
+                tmp, n = _reextract_copy(path.parent / stored[pid], settings)
+            else:  # the single-file layout: the group is copied out into a press file of its own first
+                source = folder / f".{pid}.{os.getpid()}.group.tmp"
+                try:
+                    with h5py.File(source, "w") as pf:
+                        f.copy(group, pf, PRESS_GROUP)
+                    tmp, n = _reextract_copy(source, settings)
+                finally:
+                    source.unlink(missing_ok=True)
+            target = folder / f"{pid}-{sha256_file(tmp)[:12]}.h5"
+            copies.append((tmp, target))
+            links[pid] = f"{folder.name}/{target.name}"
+            presses += 1
+            matched += n
+    root["extraction_settings"] = json.dumps(settings.to_dict())
+    copies.append((write_session_file(path, root, links), path))
+    return presses, matched
 
 
 def reextract_sessions(paths: list[Path], settings: ExtractionSettings) -> list[tuple[Path, int, int]]:
@@ -681,10 +802,12 @@ def reextract_sessions(paths: list[Path], settings: ExtractionSettings) -> list[
 
     1. Every session's lease is taken (a session being collected refuses the whole run), then every session and
        journal is verified and repaired from the other copy (a press damaged in both refuses the whole run);
-    2. every new file is built as a private copy (room for all of them is claimed first) and fsynced;
-    3. only then are the copies renamed over the originals, one rename each. Any failure before step 3 removes the
-       copies and leaves the dataset as it was; step 3 cannot fail short of a crash between two renames, which
-       leaves each file either old or new, never a mix within a file.
+    2. every new press file, journal entry and session file is built as a private copy (room for all of them is
+       claimed first) and fsynced;
+    3. only then are the copies renamed into place, each session's file last (its rename switches every link at
+       once; the new press files have new names, so the old ones stay whole until then). Any failure before step 3
+       removes the copies and leaves the dataset as it was; a crash during step 3 leaves each session's file old
+       or new, never a mix of presses.
     """
     problems = settings.problems()
     if problems:
@@ -693,7 +816,7 @@ def reextract_sessions(paths: list[Path], settings: ExtractionSettings) -> list[
     hint = "rerun extract when that collection has finished"
     leases: list[SessionLease] = []
     writers: list[SessionWriter] = []
-    copies: list[tuple[Path, Path]] = []  # (private copy, the file it replaces)
+    copies: list[tuple[Path, Path]] = []  # (private copy, where it goes)
     try:
         plans: list[tuple[Path, list[Path]]] = []
         for path in paths:
@@ -716,7 +839,7 @@ def reextract_sessions(paths: list[Path], settings: ExtractionSettings) -> list[
                     raise DataError(f"{check.first_problem()}; there is no journal to repair it from")
                 entries = []
             plans.append((path, entries))
-        needed = sum(p.stat().st_size + sum(e.stat().st_size for e in entries) for p, entries in plans)
+        needed = sum(session_bytes(p) + sum(e.stat().st_size for e in entries) for p, entries in plans)
         try:
             ensure_room(private_copy_path(paths[0]), needed)
         except OSError as exc:
@@ -726,10 +849,14 @@ def reextract_sessions(paths: list[Path], settings: ExtractionSettings) -> list[
             ) from exc
         results = []
         for path, entries in plans:
-            tmp, presses, matched = _reextract_copy(path, settings, journal_entry=False)
-            copies.append((tmp, path))
+            session_copies: list[tuple[Path, Path]] = []
+            try:
+                presses, matched = _reextract_session(path, settings, session_copies)
+            finally:
+                copies[:0] = session_copies[:-1]  # press files before every session file
+                copies.extend(session_copies[-1:])
             for entry in entries:
-                copies.append((_reextract_copy(entry, settings, journal_entry=True)[0], entry))
+                copies.append((_reextract_copy(entry, settings)[0], entry))
             header_path = path.parent / ".journal" / path.stem / "_session.json"
             if header_path.exists():
                 data = json.loads(header_path.read_text())
@@ -747,10 +874,22 @@ def reextract_sessions(paths: list[Path], settings: ExtractionSettings) -> list[
     finally:
         for tmp, _ in copies:
             tmp.unlink(missing_ok=True)
+        for path in paths:
+            with contextlib.suppress(OSError):
+                press_dir(path).rmdir()  # only when empty: a single-file session that was not rewritten
         for writer in writers:
             writer.close()
         for lease in leases:
             lease.release()
+
+
+def session_bytes(path: Path) -> int:
+    """Bytes a session holds on disk: its session file and every press file it links (bytes)."""
+    path = Path(path)
+    total = path.stat().st_size
+    with h5py.File(path, "r") as f:
+        links = session_layout(f)[0]
+    return total + sum((path.parent / target).stat().st_size for target in links.values())
 
 
 def reextract_session(path: Path, settings: ExtractionSettings) -> tuple[int, int]:

@@ -1,4 +1,4 @@
-"""Damage a session file the ways disks and copies do, for the storage-damage tests and
+"""Damage a session the ways disks and copies do, for the storage-damage tests and
 ``benchmarks/storage_damage.py``: flipped bits (anywhere, or inside one dataset's stored bytes), truncation.
 
 Only ever applied to copies made for the purpose: these functions write into the file in place, bypassing the
@@ -28,23 +28,27 @@ def flip_bits(path: Path, count: int, seed: int, span: tuple[int, int] | None = 
     return positions
 
 
-def dataset_span(path: Path, dataset: str) -> tuple[int, int]:
-    """Byte range [start, stop) of a dataset's stored data in ``path`` (its first chunk when chunked)."""
+def dataset_location(path: Path, dataset: str) -> tuple[Path, tuple[int, int]]:
+    """The file that stores ``dataset`` (``path`` itself, or the press file a session file links the press to) and
+    the byte range [start, stop) of its stored data in that file (its first chunk when chunked)."""
     with h5py.File(path, "r") as f:
         ds = f[dataset]
+        holder = Path(ds.file.filename)
         if ds.chunks is not None:
             info = ds.id.get_chunk_info(0)
-            return int(info.byte_offset), int(info.byte_offset + info.size)
+            return holder, (int(info.byte_offset), int(info.byte_offset + info.size))
         offset = ds.id.get_offset()
         if offset is None:
             raise ValueError(f"{dataset} in {path} has no stored data")
-        return int(offset), int(offset + ds.id.get_storage_size())
+        return holder, (int(offset), int(offset + ds.id.get_storage_size()))
 
 
 def flip_bits_in_dataset(path: Path, dataset: str, count: int, seed: int) -> list[int]:
-    """Flip ``count`` bits inside the stored bytes of ``dataset`` (e.g. ``presses/rot000_ang+00/robot/t_s``):
-    a plain array then reads back other values; a compressed chunk no longer decompresses."""
-    return flip_bits(path, count, seed, dataset_span(path, dataset))
+    """Flip ``count`` bits inside the stored bytes of ``dataset`` (e.g. ``presses/rot000_ang+00/robot/t_s``), in
+    the file that stores them (a session's press file when the session file links it): a plain array then reads
+    back other values; a compressed chunk no longer decompresses."""
+    holder, span = dataset_location(path, dataset)
+    return flip_bits(holder, count, seed, span)
 
 
 def press_ids(path: Path) -> list[str]:

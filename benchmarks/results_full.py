@@ -15,7 +15,7 @@ Stages, each in parallel processes (``--jobs``, one torch thread each: the layer
    ceiling on ``--ceiling-members`` members per split);
 5. per split: report, Table I under every metric reading, one JSON; then the page from the JSON.
 
-    python benchmarks/results_full.py OUT [--work DIR] [--jobs 16] [--budget-s 480] [--epochs 1000]
+    python benchmarks/results_full.py OUT [--work DIR] [--jobs 16] [--budget-s 500] [--epochs 1000]
         [--splits 5] [--seeds 5] [--angles N] [--protocol random --protocol blocked] [--ceiling-members 1]
 
 OUT gets ``results/<protocol>/split-<K>.json`` (commit as docs/results/), ``figures/`` (docs/figures/),
@@ -43,7 +43,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SENSORS = ("uskin", "papillarray")
 PROBE_EPOCHS = 2
 EVAL_OVERHEAD = 1.25  # validation every 10 epochs, checkpoints and the process's start, on top of training time
-GEOMETRY_RESERVE_S = 150.0  # wall seconds kept for stages 4-5 at full size on 16 cores (measured: docs/learning.md)
+GEOMETRY_RESERVE_S = 230.0  # wall seconds kept for stages 4-5 at full size on 16 cores (estimate: docs/learning.md)
 
 
 def main() -> None:
@@ -51,13 +51,16 @@ def main() -> None:
     parser.add_argument("out", type=Path)
     parser.add_argument("--work", type=Path, default=Path("/tmp/unitac-results-work"))
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
-    parser.add_argument("--budget-s", type=float, default=480.0, help="wall seconds for everything")
+    parser.add_argument("--budget-s", type=float, default=500.0, help="wall seconds for everything")
     parser.add_argument("--epochs", type=int, default=1000, help="at most this many (fewer if the budget says so)")
     parser.add_argument("--splits", type=int, default=5)
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--angles", type=int, default=None, help="approach angles per sweep (default: the rig's 91)")
     parser.add_argument("--protocol", action="append", choices=("random", "blocked"), default=None)
-    parser.add_argument("--ceiling-members", type=int, default=1)
+    parser.add_argument(
+        "--ceiling-members", type=int, default=1, help="members per split that also run the ceiling and pooled head"
+    )
+    parser.add_argument("--geometry-members", type=int, default=None, help="members per split with geometry (all)")
     parser.add_argument("--reserve-s", type=float, default=GEOMETRY_RESERVE_S, help="wall kept for geometry + JSON")
     args = parser.parse_args()
     began = time.monotonic()
@@ -92,13 +95,14 @@ def main() -> None:
         print(f"{per_epoch:.2f} s per epoch per run: training {epochs} epochs ({args.epochs} asked)", flush=True)
         list(pool.map(_train_task, [(dataset_dir, args.work, p, k, args.seeds, epochs) for p, k in runs]))
         mark("trained")
-        tasks = [(args.work, p, k, m, m < args.ceiling_members) for p, k in runs for m in range(args.seeds)]
+        geometry_members = min(args.seeds, args.geometry_members or args.seeds)
+        tasks = [(args.work, p, k, m, m < args.ceiling_members) for p, k in runs for m in range(geometry_members)]
         tasks.sort(key=lambda t: not t[4])  # the ceiling members first: they take longest
         list(pool.map(_geometry_task, tasks))
         mark("geometry")
         list(pool.map(_export_task, [(args.work, p, k, args.out) for p, k in runs]))
         mark("exported")
-    render(args.out)
+    render(args.out, args.work / "runs")
     mark("rendered")
     (args.out / "timings.json").write_text(json.dumps(timings, indent=2) + "\n", encoding="utf-8")
 
@@ -151,7 +155,9 @@ def _train_task(task: tuple[Path, Path, str, int, int, int]) -> float:
     from unitac_rig.learning.train import TrainConfig, load_run
 
     run_dir = work / "runs" / protocol / f"split-{split}"
-    config = split_config(TrainConfig().updated({"eval_every": 10, "epochs": epochs}), protocol, split, seeds)
+    # validation every 10 epochs, at most about 25 times a run: curves enough, and evaluation stays under a tenth
+    every = max(10, epochs // 250 * 10)
+    config = split_config(TrainConfig().updated({"eval_every": every, "epochs": epochs}), protocol, split, seeds)
     train_split(load_test_set(dataset_dir), run_dir, config, log=lambda message: None)
     payload = load_run(run_dir).payload
     return float(payload["train_seconds"]) / max(1, int(payload["epoch"]))
@@ -173,17 +179,16 @@ def _export_task(task: tuple[Path, str, int, Path]) -> None:
     )
 
 
-def render(out: Path) -> None:
-    """The page from OUT's JSON: the repo's results.md with its generated block replaced, figures beside it."""
+def render(out: Path, runs: Path) -> None:
+    """The page from OUT's JSON: the repo's results.md with its generated block replaced, figures beside it (split
+    0's run figures copied from ``runs``)."""
     import run_results
 
     page = out / "results.md"
     if not page.exists() and (ROOT / "docs" / "results.md").exists():
         shutil.copyfile(ROOT / "docs" / "results.md", page)
     results = run_results.load_results(out / "results")
-    figures = run_results.draw_figures(
-        results, out / "figures", Path(os.environ.get("UNITAC_RESULTS_RUNS", "")) or None
-    )
+    figures = run_results.draw_figures(results, out / "figures", runs)
     run_results.write_results(page, run_results.render(results, figures))
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -83,29 +84,36 @@ def train_split(dataset: PairedDataset, run_dir: Path, config: TrainConfig, log:
     return time.perf_counter() - began
 
 
-def geometry_member(run_dir: Path, protocol: str, member: int, ceiling: bool) -> dict[str, Any]:
-    """Every geometry head for one member: the paper's heads (the paper's random split, or blocked rays), the pooled
-    same-sensor head on the same split, and the strict cross-sensor study (with the tuned ceiling if ``ceiling``).
-    Written to ``RUN/geometry_member_<m>.json`` and returned."""
+def geometry_member(
+    run_dir: Path, protocol: str, member: int, ceiling: bool, epochs: int | None = None
+) -> dict[str, Any]:
+    """Every geometry head for one member: the paper's heads (the paper's random split, or blocked rays) and the
+    strict cross-sensor study; with ``ceiling`` also the tuned ceiling and the pooled same-sensor head on the same
+    split (the two costliest: 100 and 40 CPU-s a member at full size, so a full run gives them to the first member
+    of each split). Written to ``RUN/geometry_member_<m>.json`` and returned."""
     run, test = load_run(run_dir), load_test_set(run_dir)
     split_seed = geometry_split_seed(int(run.config.split_seed), member)
     config = GeometryConfig(split_mode=GEOMETRY_MODE[protocol])
+    if epochs is not None:  # the paper's 80 unless a quick check asks for fewer
+        config = replace(config, epochs=epochs)
     seen = load_test_set(run_dir / SEEN_PAIRS) if (run_dir / SEEN_PAIRS).exists() else None
     cross = cross_sensor_geometry(
         run, test, member=member, split_seed=split_seed, seen=seen, config=config, ceiling=ceiling
     )
     paper = cross["methods"]["paper"]  # the paper's heads, one per training sensor, fitted among the methods
     scenarios = {name: {"mae_mm": mae} for name, mae in {**paper["same"], **paper["cross"]}.items()}
-    record = {
+    record: dict[str, Any] = {
         "member": member,
         "model_seed": run.engine.seeds[member],
         "geometry_split_seed": split_seed,
         "paper_heads": {"scenarios": scenarios, "seconds": paper["seconds"] * len(run.sensors)},
-        "pooled_head": pooled_geometry(run, test, member=member, config=config, split_seed=split_seed),
         "cross_sensor": cross,
     }
-    for scenario in record["pooled_head"]["scenarios"].values():
-        scenario.pop("per_point_mae_mm", None)
+    if ceiling:
+        pooled = pooled_geometry(run, test, member=member, config=config, split_seed=split_seed)
+        for scenario in pooled["scenarios"].values():
+            scenario.pop("per_point_mae_mm", None)
+        record["pooled_head"] = pooled
     (run_dir / MEMBER_JSON.format(member)).write_text(json.dumps(_rounded(record)) + "\n", encoding="utf-8")
     return record
 
@@ -161,12 +169,9 @@ def _as_members(table: dict[str, Any]) -> dict[str, Any]:
 def _member_seconds(member: dict[str, Any]) -> float:
     cross = member["cross_sensor"]
     ceiling = sum(v.get("seconds", 0.0) for v in cross.get("ceiling", {}).values())
-    return float(
-        member["paper_heads"]["seconds"]
-        + member["pooled_head"]["seconds"]
-        + ceiling
-        + sum(m["seconds"] for m in cross["methods"].values())
-    )
+    pooled = member.get("pooled_head", {}).get("seconds", 0.0)
+    methods = sum(m["seconds"] for m in cross["methods"].values())
+    return float(member["paper_heads"]["seconds"] + pooled + ceiling + methods)
 
 
 def compact_history(history: list[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -117,7 +117,7 @@ def load_results(folder: Path) -> dict[str, list[dict[str, Any]]]:
                     "split": doc.get("split", {}),
                     "geometry": {
                         "paper_heads": [m["paper_heads"] for m in members],
-                        "pooled_head": [m["pooled_head"] for m in members],
+                        "pooled_head": [m["pooled_head"] for m in members if "pooled_head" in m],
                         "cross": [m["cross_sensor"] for m in members],
                         "members": members,
                         "seconds": {"train_wall": doc["seconds"]["train"], "geometry": doc["seconds"]["geometry_cpu"]},
@@ -648,10 +648,11 @@ def geometry_lines(protocol: str, splits: list[dict[str, Any]], n_members: int) 
             f"{'–' if paper_mm is None else f'{paper_mm:.3f}'} |"
         )
     lines.append(f"| no latent (the training rays' mean profile) | {_pm(no_latent)} | – |")
-    for name in splits[0]["geometry"]["pooled_head"][0]["scenarios"]:
+    pooled = [head for split in splits for head in split["geometry"]["pooled_head"]]
+    for name in pooled[0]["scenarios"] if pooled else []:
         lines.append(
             f"| {_arrow(name)} (same-sensor option: one head trained on both sensors' latents, the test "
-            f"sensor's included) | {_pm(geometry_values(splits, name))} | – |"
+            f"sensor's included; {len(pooled)} members) | {_pm(geometry_values(splits, name))} | – |"
         )
     return lines
 

@@ -93,7 +93,8 @@ def translated_latents(run: LoadedRun, member: int, frames: np.ndarray, source: 
     return engine.encode(UNITAC_GROUP, target, decoded)[0].numpy()
 
 
-def _predict(model: StackedProfileMLP, inputs: Sequence[np.ndarray]) -> np.ndarray:
+def _predict(model: StackedProfileMLP, inputs: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
+    """(members, M, inputs) -> (members, M, points) with each member's head."""
     with torch.no_grad():
         return model(torch.from_numpy(np.stack(inputs).astype(np.float32))).numpy()
 

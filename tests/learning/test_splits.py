@@ -154,3 +154,12 @@ def test_the_geometry_split_follows_its_own_seed_not_the_model_seed() -> None:
         for s in seeds
     }
     assert len(tests) == 25  # 25 members, 25 geometry test sets
+
+
+def test_the_config_file_selects_the_blocked_split() -> None:
+    from unitac_rig.learning.config import parse_config
+    from unitac_rig.learning.train import TrainConfig
+
+    config = TrainConfig().updated(parse_config({"split": {"mode": "blocked"}}))
+    assert config.split_mode == "blocked"
+    assert TrainConfig().split_mode == "random"  # the paper's split stays the default (Table I comparable)

@@ -96,7 +96,8 @@ def translated_latents(run: LoadedRun, member: int, frames: np.ndarray, source: 
 def _predict(model: StackedProfileMLP, inputs: Sequence[np.ndarray] | np.ndarray) -> np.ndarray:
     """(members, M, inputs) -> (members, M, points) with each member's head."""
     with torch.no_grad():
-        return model(torch.from_numpy(np.stack(inputs).astype(np.float32))).numpy()
+        stacked = inputs if isinstance(inputs, np.ndarray) else np.stack(list(inputs))
+        return model(torch.from_numpy(stacked.astype(np.float32))).numpy()
 
 
 def _mae(predicted: np.ndarray, truth: np.ndarray) -> float:
@@ -218,7 +219,7 @@ def _ceiling(
     seed: int,
 ) -> dict[str, Any]:
     """Per sensor, the best same-sensor head on its latents and on its raw (normalised) frames: dropout (of
-    ``CEILING_DROPOUTS``) and epochs (every ``CEILING_EVERY`` up to twice the paper's) chosen by the validation rays'
+    ``CEILING_DROPOUTS``) and epochs (every ``CEILING_EVERY`` up to 1.5x the paper's) chosen by the validation rays'
     error at learning rate ``CEILING_LEARNING_RATE``; the test error is read at that choice. All heads train in one
     stacked fit, inputs zero-padded to the widest (a zero input feeds nothing forward and gets no gradient)."""
     if not split.val.any():
@@ -241,7 +242,7 @@ def _ceiling(
             if val[h] < best[key]["val_mm"]:
                 best[key].update(val_mm=float(val[h]), test_mm=float(test[h]), dropout=dropout, epochs=epoch)
 
-    tuned = replace(config, epochs=2 * config.epochs, learning_rate=CEILING_LEARNING_RATE)
+    tuned = replace(config, epochs=max(CEILING_EVERY, 3 * config.epochs // 2), learning_rate=CEILING_LEARNING_RATE)
     began = time.process_time()
     fit_single_thread(
         [padded[k][split.train] for k, _ in heads],
@@ -255,4 +256,5 @@ def _ceiling(
     return {
         k: {**v, "learning_rate": CEILING_LEARNING_RATE, "seconds": seconds, "contacts_val": int(split.val.sum())}
         for k, v in best.items()
+        if "test_mm" in v  # scored at least once (always, with CEILING_EVERY epochs or more)
     }

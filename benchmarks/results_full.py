@@ -43,7 +43,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SENSORS = ("uskin", "papillarray")
 PROBE_EPOCHS = 2
 EVAL_OVERHEAD = 1.25  # validation every 10 epochs, checkpoints and the process's start, on top of training time
-GEOMETRY_RESERVE_S = 230.0  # wall seconds kept for stages 4-5 at full size on 16 cores (estimate: docs/learning.md)
+GEOMETRY_RESERVE_S = 160.0  # wall seconds kept for stages 4-5 at full size on 16 cores (estimate: docs/learning.md)
 
 
 def main() -> None:

@@ -652,7 +652,8 @@ def geometry_lines(protocol: str, splits: list[dict[str, Any]], n_members: int) 
     for name in pooled[0]["scenarios"] if pooled else []:
         lines.append(
             f"| {_arrow(name)} (same-sensor option: one head trained on both sensors' latents, the test "
-            f"sensor's included; {len(pooled)} members) | {_pm(geometry_values(splits, name))} | – |"
+            f"sensor's included; {len(pooled)} member{'s' if len(pooled) != 1 else ''}) | "
+            f"{_pm(geometry_values(splits, name))} | – |"
         )
     return lines
 

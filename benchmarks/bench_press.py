@@ -1,6 +1,6 @@
 """Press strategy and speed against force-matching accuracy on the simulated rig.
 
-The measuring code is unitac_rig/bench/press_strategies.py (scoring in press_scoring.py, figure in press_report.py).
+The measuring code is unitac_rig/bench/press_benchmark.py (scoring in press_scoring.py, figure in press_report.py).
 
     python benchmarks/bench_press.py [--quick] [--jobs 2] [--out docs/figures]
 
@@ -17,8 +17,8 @@ import os
 from pathlib import Path
 
 from unitac_rig.bench import default_out_dir, write_json
+from unitac_rig.bench.press_benchmark import full_plan, quick_plan, run_press_benchmark
 from unitac_rig.bench.press_report import plot_press_benchmark, summary_lines
-from unitac_rig.bench.press_strategies import full_plan, quick_plan, run_press_benchmark
 
 
 def progress(done: int, total: int) -> None:

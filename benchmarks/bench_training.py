@@ -1,6 +1,6 @@
-"""Training speed of UniTac-NV: the autograd trainer against the hand-written engine it replaced, torch.func vmap and
-the plain eager loop, at 1, 3 and 15 stacked models; the 5-seed paper run's wall time; budget against accuracy.
-Measuring code: unitac_rig/bench/training.py.
+"""Training speed of UniTac-NV: the stacked autograd trainer against torch.func vmap and the plain eager loop (both
+over the plain per-member networks sliced out of the stacked model), at 1, 3 and 15 stacked models; the 5-seed paper
+run's wall time; budget against accuracy. Measuring code: unitac_rig/bench/training.py.
 
     nice -n 10 python benchmarks/bench_training.py [--data DIR] [--quick] [--out docs/figures]
         [--rounds 8] [--seconds-per-cell 0.6] [--paper-run-epochs 5] [--budget-epochs 100]

@@ -24,8 +24,9 @@ from typing import Any
 import numpy as np
 import torch
 
+from unitac_rig.learning.evaluate import Evaluator
 from unitac_rig.learning.metrics import nmae_per_frame, nmae_scale, sensor_mixing, ssim_per_frame, ssim_scale
-from unitac_rig.learning.train import Evaluator, load_run, load_test_set
+from unitac_rig.learning.train import load_run, load_test_set
 
 ROOT = Path(__file__).resolve().parent.parent
 CHANNELS = ("x", "y", "z")

@@ -20,7 +20,7 @@ import argparse
 from pathlib import Path
 
 from unitac_rig.bench import default_out_dir, write_json
-from unitac_rig.bench.fidelity import draw_spread, model_settings
+from unitac_rig.bench.lab.fidelity import draw_spread, model_settings
 from unitac_rig.errors import ConfigError
 
 

@@ -9,7 +9,7 @@ frame path), ``papillarray`` (PacketParser on chunked streams; PapillArrayDriver
 (CommandParser, encode_command) and ``rtde`` (RtdePackageParser and every package decoder). Reports crashes
 (anything outside the project's error tree), hangs (over 50 ms CPU for one input, twice), wrong decodes of valid
 packets placed among garbage and damage, and memory growth of one long-lived decoder (tracemalloc). The method is in
-:mod:`unitac_rig.bench.fuzz`.
+:mod:`unitac_rig.bench.lab.fuzz`.
 
 Writes docs/figures/fuzz.json; with ``--write-docs`` also the table between the fuzz markers of docs/reliability.md.
 Exits 1 when anything was found. Run it niced on a shared box: ``nice -n 10 python benchmarks/fuzz.py``.
@@ -24,7 +24,7 @@ import sys
 from pathlib import Path
 
 from unitac_rig.bench import machine_info
-from unitac_rig.bench.fuzz import (
+from unitac_rig.bench.lab.fuzz import (
     HANG_MS,
     MAX_MEMORY_GROWTH_BYTES,
     TARGETS,

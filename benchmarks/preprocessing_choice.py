@@ -24,9 +24,10 @@ import torch
 
 from unitac_rig.learning.data import PREPROCESSING, build_paired_dataset, load_sets
 from unitac_rig.learning.engine import UNITAC_GROUP
+from unitac_rig.learning.evaluate import Evaluator
 from unitac_rig.learning.metrics import ssim_per_frame, ssim_scale
 from unitac_rig.learning.run import checkpoint_path
-from unitac_rig.learning.train import Evaluator, TrainConfig, load_run, train
+from unitac_rig.learning.train import TrainConfig, load_run, train
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULT = "choice.json"

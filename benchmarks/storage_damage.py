@@ -30,7 +30,7 @@ from typing import Any
 import h5py
 
 from unitac_rig.bench import default_out_dir, machine_info, replace_doc_section, write_json
-from unitac_rig.bench.damage import flip_bits, flip_bits_in_dataset, press_ids, raw_contents
+from unitac_rig.bench.lab.damage import flip_bits, flip_bits_in_dataset, press_ids, raw_contents
 from unitac_rig.cli import main as cli_main
 from unitac_rig.storage.integrity import check_session
 from unitac_rig.storage.recorder import journal_dir, session_path

@@ -1,4 +1,5 @@
-"""The real UR5e over ur_rtde: :class:`UR5eArm` (implements :class:`drivers.arm.Arm`) and :class:`UR5eReceiver`.
+"""The real UR5e over ur_rtde: :class:`UR5eArm` (implements :class:`drivers.arm.Arm`); its read side,
+:class:`~drivers.ur5e_receive.UR5eReceiver`, is in ``drivers/ur5e_receive.py``.
 
 State comes from ``rtde_receive.RTDEReceiveInterface`` (RTDE port 30004, 500 Hz on e-Series), commands go through
 ``rtde_control.RTDEControlInterface`` (which uploads a URScript program and needs the robot in Remote Control mode).
@@ -39,8 +40,8 @@ Gotchas: ur_rtde's Python constructors hold the GIL until the handshake finishes
 process would deadlock, hence the twins' server processes); the C++ library prints to file descriptor 2 itself
 (e.g. ``connect: Connection refused``), so the constructors run with fd 2 routed to the log.
 
-Why one module of ~680 lines: every ur_rtde call the project makes goes through the same error mapping and safety
-checks here (watchdog, stops, TCP/payload read-back); the read-only receiver shares its state decoding.
+Why one module of ~640 lines: every ur_rtde control call the project makes goes through the same error mapping and
+safety checks here (watchdog, stops, TCP/payload read-back).
 """
 
 from __future__ import annotations
@@ -48,9 +49,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
-import os
-import sys
-import tempfile
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
@@ -60,7 +58,7 @@ from typing import Any, NoReturn
 import numpy as np
 
 from drivers.arm import DEFAULT_WATCHDOG_HZ, ArmState, checked_force_mode_parameters
-from drivers.clock import Clock, MonotonicClock
+from drivers.clock import Clock
 from drivers.errors import (
     ArmError,
     ControlScriptStopped,
@@ -70,24 +68,11 @@ from drivers.errors import (
     RobotStateLost,
 )
 from drivers.rotations import angle_between
+from drivers.ur5e_receive import UR5eReceiver, native_stderr_to_log
 
 logger = logging.getLogger(__name__)
 
-# What the receive side subscribes to: an explicit list (the default list depends on the controller version).
-RECEIVE_VARIABLES = (
-    "timestamp",
-    "actual_TCP_pose",
-    "actual_TCP_force",
-    "robot_mode",
-    "safety_mode",
-    "safety_status_bits",
-)
-# Subscribed too where the controller offers them; one answered NOT_FOUND fails the whole recipe, so the receiver
-# then connects with RECEIVE_VARIABLES alone.
-SPEED_VARIABLE = "actual_TCP_speed"  # m/s, rad/s; without it motion.py tells rest from the pose's change
-PAYLOAD_VARIABLE = "payload"  # kg; subscribed only when the rig file gives a payload to check
 FORCE_MODE_TYPE = 2  # URScript force_mode type 2: the task frame is used as given
-STALL_TIMEOUT_S = 0.5  # no new controller timestamp for this long = the RTDE stream stalled
 SPEED_TIME_LIMIT_PERIODS = 4  # speedL's t: a few control periods (see the module docstring for what it does not do)
 KEEP_ALIVE_KICK_S = 0.02  # keep_alive's kicker thread writes at 50 Hz, far above any sensible watchdog frequency
 MAX_TOOL_SPEED_M_S = 3.0  # ur_rtde refuses faster tool speeds (hardware-facts 3.4)
@@ -97,9 +82,6 @@ TCP_TOLERANCE_RAD = 0.01  # ... and 0.01 rad
 PAYLOAD_TOLERANCE_KG = 0.05  # read-back payload must match within 50 g
 SAFETY_CATCH_UP_STATES = 5  # a stopped program: read up to this many new states (~10 ms) for the safety bits
 
-_RECEIVE_HINT = (
-    "check the cable/network (can you ping it?), that the robot is powered on, and that nothing blocks TCP port 30004"
-)
 _CONTROL_HINT = (
     "put the teach pendant in Remote Control mode, turn off EtherNet/IP, PROFINET and MODBUS (they hold the RTDE "
     "input registers), and check the network"
@@ -120,176 +102,14 @@ def _program_stopped_hint(watchdog_hz: float | None) -> str:
     return f"{why}; check the pendant's log, then run the same command again to resume"
 
 
-@contextlib.contextmanager
-def _native_stderr_to_log(what: str) -> Iterator[None]:
-    """Route what ur_rtde's C++ code prints on file descriptor 2 to the log while it connects.
-
-    Otherwise a failed connection leaves a stray "connect: Connection refused" line above the CLI's one-line error.
-    Anything else written to fd 2 by other threads in that window lands in the log too.
-    """
-    sys.stderr.flush()
-    saved_fd = os.dup(2)
-    with tempfile.TemporaryFile() as capture:
-        os.dup2(capture.fileno(), 2)
-        try:
-            yield
-        finally:
-            os.dup2(saved_fd, 2)
-            os.close(saved_fd)
-            capture.seek(0)
-            text = capture.read().decode("utf-8", "replace").strip()
-            if text:
-                logger.info("ur_rtde (%s) printed: %s", what, text)
-
-
-def _connect_receive(host: str, frequency_hz: float, variables: Sequence[str]) -> Any:
-    import rtde_receive
-
-    try:
-        with _native_stderr_to_log("receive"):
-            return rtde_receive.RTDEReceiveInterface(host, frequency_hz, list(variables))
-    except (RuntimeError, ValueError) as exc:
-        raise DeviceNotFound(f"no UR controller answers RTDE at {host}: {exc}", hint=_RECEIVE_HINT) from exc
-
-
 def _connect_control(host: str, frequency_hz: float) -> Any:
     import rtde_control
 
     try:
-        with _native_stderr_to_log("control"):
+        with native_stderr_to_log("control"):
             return rtde_control.RTDEControlInterface(host, frequency_hz)
     except (RuntimeError, ValueError) as exc:
         raise DeviceNotFound(f"cannot take control of the UR at {host}: {exc}", hint=_CONTROL_HINT) from exc
-
-
-class UR5eReceiver:
-    """Read-only view of a UR controller over RTDE; never moves the arm (used by ``probe ur5e``).
-
-    ``receive``: an object with RTDEReceiveInterface's methods (injected in tests); connected to ``host`` if None.
-    ``read_payload``: also subscribe to the payload (kg). The TCP speed is subscribed too; if the controller does not
-    offer one of these (ur_rtde then refuses the whole recipe), the receiver connects with :data:`RECEIVE_VARIABLES`
-    alone, ``tcp_speed`` reads None and :meth:`payload_kg` returns None. Raises DeviceNotFound when nothing answers
-    at ``host``.
-    """
-
-    def __init__(
-        self,
-        host: str,
-        *,
-        frequency_hz: float = 500.0,
-        receive: Any | None = None,
-        clock: Clock | None = None,
-        read_payload: bool = False,
-    ) -> None:
-        self.host = host
-        self.clock: Clock = clock or MonotonicClock()
-        self._has_payload = read_payload
-        self._has_speed = True
-        if receive is not None:
-            self._receive = receive
-        else:
-            optional = (SPEED_VARIABLE, PAYLOAD_VARIABLE) if read_payload else (SPEED_VARIABLE,)
-            try:
-                self._receive = _connect_receive(host, frequency_hz, (*RECEIVE_VARIABLES, *optional))
-            except DeviceNotFound as exc:  # e.g. an older controller has no "payload" output; connect without them
-                logger.info("RTDE refused %s (%s); retrying without them", ", ".join(optional), exc)
-                self._has_payload = self._has_speed = False
-                self._receive = _connect_receive(host, frequency_hz, RECEIVE_VARIABLES)
-        self._closed = False
-        self._last_controller_t_s: float | None = None
-        self._stale_since_ns: int | None = None  # host time of the first read that saw the timestamp unchanged
-
-    def read_state(self) -> ArmState:
-        """The latest state the RTDE client holds, stamped with the host clock (ns).
-
-        Raises RobotStateLost (a DeviceTimeout) if the connection dropped or the controller timestamp has not moved
-        for ``STALL_TIMEOUT_S``, DeviceError if the client fails.
-        """
-        if self._closed:
-            raise DeviceError(f"the RTDE connection to {self.host} is closed")
-        receive = self._receive
-        try:
-            if not receive.isConnected():
-                raise RobotStateLost(f"lost the RTDE connection to {self.host}", hint=_RECEIVE_HINT)
-            controller_t_s = float(receive.getTimestamp())
-            pose = np.asarray(receive.getActualTCPPose(), dtype=np.float64)
-            force = np.asarray(receive.getActualTCPForce(), dtype=np.float64)
-            speed = np.asarray(receive.getActualTCPSpeed(), dtype=np.float64) if self._has_speed else None
-            robot_mode = int(receive.getRobotMode())
-            safety_mode = int(receive.getSafetyMode())
-            protective = bool(receive.isProtectiveStopped())
-            emergency = bool(receive.isEmergencyStopped())
-        except (RuntimeError, ValueError) as exc:
-            raise DeviceError(f"reading the UR state from {self.host} failed: {exc}", hint=_RECEIVE_HINT) from exc
-        now_ns = self.clock.now_ns()
-        # Stale = unchanged over STALL_TIMEOUT_S of *reads*, counted from the first read that saw it unchanged: a
-        # host that was itself frozen (SIGSTOP, a long GC) sees an old timestamp on its first read after waking, and
-        # that says nothing about the controller (it would call a live controller lost and send it no stop).
-        if controller_t_s != self._last_controller_t_s:
-            self._last_controller_t_s = controller_t_s
-            self._stale_since_ns = None
-        elif self._stale_since_ns is None:
-            self._stale_since_ns = now_ns
-        elif now_ns - self._stale_since_ns > STALL_TIMEOUT_S * 1e9:
-            raise RobotStateLost(
-                f"the UR at {self.host} sent no new state for {(now_ns - self._stale_since_ns) / 1e9:.2f} s",
-                hint=_RECEIVE_HINT,
-            )
-        return ArmState(
-            host_t_ns=now_ns,
-            controller_t_s=controller_t_s,
-            tcp_pose=pose,
-            tcp_force=force,
-            robot_mode=robot_mode,
-            safety_mode=safety_mode,
-            protective_stop=protective,
-            emergency_stop=emergency,
-            tcp_speed=speed,
-        )
-
-    def payload_kg(self) -> float | None:
-        """The payload mass the controller uses (kg), or None when the controller does not report it."""
-        if not self._has_payload:
-            return None
-        try:
-            return float(self._receive.getPayload())
-        except (RuntimeError, ValueError) as exc:
-            logger.info("the UR at %s does not report its payload: %s", self.host, exc)
-            return None
-
-    def wait_for_new_state(self, timeout_s: float = 1.0, poll_s: float = 0.0005) -> ArmState:
-        """Block until the controller timestamp moves on, then return that state; RobotStateLost after ``timeout_s``."""
-        previous = self._last_controller_t_s
-        deadline_ns = self.clock.now_ns() + round(timeout_s * 1e9)
-        while True:
-            state = self.read_state()
-            if state.controller_t_s != previous:
-                return state
-            if self.clock.now_ns() > deadline_ns:
-                raise RobotStateLost(
-                    f"no new state from the UR at {self.host} within {timeout_s} s", hint=_RECEIVE_HINT
-                )
-            self.clock.sleep(poll_s)
-
-    def close(self) -> None:
-        """Disconnect. Safe to call more than once."""
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            self._receive.disconnect()
-        except (RuntimeError, ValueError) as exc:
-            logger.warning("RTDE receive disconnect from %s failed: %s", self.host, exc)
-        finally:
-            self._receive = None  # its destructor blocks: let it run now, not during a later connection
-
-    def __enter__(self) -> UR5eReceiver:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
 
 @dataclass

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from arm_fakes import PRESS_DIR, SpringWorld, make_arm
 
 from drivers.arm import ArmState
 from drivers.errors import ArmError, ProtectiveStop
 from drivers.motion import guarded_move, settle
+from tests.arm.arm_fakes import PRESS_DIR, SpringWorld, make_arm
 from unitac_rig.sim.arm import SimArm
 
 

@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 from drivers.arm import ArmState
 from drivers.clock import VirtualClock
 from drivers.errors import DeviceNotFound
+from tests.helpers import cli
 from unitac_rig.cli import main
 from unitac_rig.cli.probe_ur5e import register_ur5e, run_sign_check, sign_check_verdict
 from unitac_rig.errors import UsageError
@@ -105,7 +106,7 @@ def test_sign_check_passes_a_push_toward_the_flange_and_refuses_a_reversed_sign(
 
     monkeypatch.setattr(typer, "echo", operator_reads_and_pushes)
     with start_on_free_loopback(pad, first=60) as server:
-        code = _exit_code(["probe", "ur5e", "--host", server.host, "--sign-check", "--push-timeout", "10"])
+        code = cli(["probe", "ur5e", "--host", server.host, "--sign-check", "--push-timeout", "10"])
     out, err = capfd.readouterr()
     assert "push the pad face back toward the flange" in out
     if ok:
@@ -131,11 +132,3 @@ def test_sideways_push_is_not_taken_for_a_good_sign() -> None:
     sideways[:3] = 12.0 * np.array([0.0, 0.0, 1.0])  # straight down: across the horizontal press direction
     ok, line = sign_check_verdict(np.zeros(6), sideways, STILL_POSE)
     assert not ok and "sideways" in line
-
-
-def _exit_code(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0

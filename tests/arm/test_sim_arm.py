@@ -6,12 +6,12 @@ import math
 
 import numpy as np
 import pytest
-from arm_fakes import EXACT_FT, PRESS_DIR, START_POSE, SpringWorld, make_arm
 
 from drivers.arm import Arm
 from drivers.clock import VirtualClock
 from drivers.errors import ArmError, ControlScriptStopped, ProtectiveStop
 from drivers.motion import guarded_move, press_force
+from tests.arm.arm_fakes import EXACT_FT, PRESS_DIR, START_POSE, SpringWorld, make_arm
 from unitac_rig.sim.arm import SimArm, SimArmParams
 from unitac_rig.sim.world import FreeSpace
 

@@ -13,7 +13,6 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from arm_fakes import FakeControl, FakeReceive
 
 from drivers.arm import Arm, ArmState
 from drivers.clock import VirtualClock
@@ -26,7 +25,9 @@ from drivers.errors import (
     RobotStateLost,
 )
 from drivers.motion import move_to
-from drivers.ur5e import KEEP_ALIVE_KICK_S, STALL_TIMEOUT_S, UR5eArm, UR5eReceiver
+from drivers.ur5e import KEEP_ALIVE_KICK_S, UR5eArm
+from drivers.ur5e_receive import STALL_TIMEOUT_S, UR5eReceiver
+from tests.arm.arm_fakes import FakeControl, FakeReceive
 from unitac_rig.sim.rtde_server import SimURController, start_on_free_loopback
 
 POSE = np.array([-0.15, 0.6, 0.21, 0.0, 2.2214, -2.2214])

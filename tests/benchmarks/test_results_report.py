@@ -13,10 +13,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))
-sys.path.insert(0, str(ROOT / "tests" / "learning"))
 
-from learning_helpers import small_sets  # noqa: E402
-
+from tests.learning.learning_helpers import small_sets  # noqa: E402
 from unitac_rig.learning.data import build_paired_dataset  # noqa: E402
 from unitac_rig.learning.train import TrainConfig  # noqa: E402
 

@@ -16,8 +16,8 @@ import pytest
 
 from drivers.errors import ProtectiveStop
 from unitac_rig.cli import main
-from unitac_rig.collection.press import TickInfo
 from unitac_rig.collection.session import collect_session
+from unitac_rig.collection.streams import TickInfo
 from unitac_rig.rig.config import RigConfig, parse_rig_config
 from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.fast_rig import SimRig

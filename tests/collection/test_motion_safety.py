@@ -24,14 +24,9 @@ from hypothesis import strategies as st
 
 from drivers.arm import ArmState
 from drivers.errors import ControlScriptStopped
-from unitac_rig.collection.press import (
-    TickInfo,
-    approach_legs,
-    check_session_plan,
-    clearance_waypoints,
-    retract_from_object,
-)
 from unitac_rig.collection.session import collect_session, plan_presses
+from unitac_rig.collection.streams import TickInfo
+from unitac_rig.collection.transit import approach_legs, check_session_plan, clearance_waypoints, retract_from_object
 from unitac_rig.errors import ConfigError, SafetyLimit, UnitacError
 from unitac_rig.interrupts import forget_interrupts, note_interrupt
 from unitac_rig.rig.config import LimitsConfig, RigConfig, parse_rig_config
@@ -502,7 +497,7 @@ def test_a_confirmed_placement_makes_the_sweep_faster_than_an_unconfirmed_one(tm
 
 
 def test_a_tight_hard_limit_keeps_the_set_point_ceiling_halfway_below_it() -> None:
-    from unitac_rig.collection.press import setpoint_ceiling_n
+    from unitac_rig.collection.strategy import setpoint_ceiling_n
 
     default = few(1)
     assert setpoint_ceiling_n(default.press, default.limits) == pytest.approx(12.0)  # threshold + 2 N

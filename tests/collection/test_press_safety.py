@@ -14,16 +14,11 @@ import numpy as np
 import pytest
 
 from drivers.errors import ControlScriptStopped, ProtectiveStop, RobotStateLost
-from unitac_rig.collection.press import (
-    PressPlan,
-    TickInfo,
-    check_waypoint,
-    clearance_waypoints,
-    make_plan,
-    move_clear,
-    run_press,
-)
+from tests.helpers import cli
+from unitac_rig.collection.press import run_press
 from unitac_rig.collection.session import collect_session, dry_run, plan_presses, session_tare
+from unitac_rig.collection.streams import TickInfo
+from unitac_rig.collection.transit import PressPlan, check_waypoint, clearance_waypoints, make_plan, move_clear
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.rig.config import LimitsConfig, PressConfig, RigConfig, parse_rig_config
 from unitac_rig.rig.objects import get_object
@@ -294,18 +289,8 @@ def test_the_dry_run_visits_every_stand_off_and_presses_nothing(tmp_path: Path) 
     assert not list(tmp_path.iterdir())  # nothing recorded
 
 
-def run_cli(args: list[str]) -> int:
-    from unitac_rig.cli import main
-
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
-
-
 def test_collect_dry_run_through_the_cli(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    code = run_cli(["collect", "--object", "hex_pla", "--dry-run", "--angles", "3", "--data", str(tmp_path)])
+    code = cli(["collect", "--object", "hex_pla", "--dry-run", "--angles", "3", "--data", str(tmp_path)])
     out = capsys.readouterr().out
     assert code == 0
     assert out.count("stand-off ") == 3 and "dry run: 3 stand-offs" in out and "nothing pressed" in out

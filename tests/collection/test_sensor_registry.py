@@ -18,7 +18,7 @@ from drivers.layouts import SensorLayout
 from drivers.sensor import TactileSensor, TareRecord
 from unitac_rig.cli import main
 from unitac_rig.collection.sensor_choice import choose_sensor, collection_order
-from unitac_rig.errors import ConfigError
+from unitac_rig.errors import ConfigError, UsageError
 from unitac_rig.rig.config import parse_rig_config
 from unitac_rig.rig.hardware import HardwareRig
 from unitac_rig.rig.sensors import SENSORS, SensorConfigBase, SensorSpec
@@ -180,3 +180,27 @@ def test_a_simulated_collect_mounts_it_after_the_other_sensors_are_complete(
     for expected in ("uskin", "papillarray", "fakeskin"):
         main(["collect", "--object", "circle_pla", "--data", str(tmp_path), "--angles", "1", "--no-live"])
         assert f"mounting {expected}" in capsys.readouterr().out
+
+
+def test_simulation_options_are_each_sensors_own_and_a_wrong_one_is_named() -> None:
+    """The fast twin takes each sensor's options by name (its simulated side's fields), not as rig arguments."""
+    config = parse_rig_config({"press": {"angle_count": 2}})
+    with SimRig(config, seed=0, sensor_options={"papillarray": {"rate_hz": 1000}}) as rig:
+        sensor = rig.open_sensor("papillarray")
+        try:
+            assert sensor.rate_hz == 1000  # type: ignore[attr-defined]
+            frames: list[TactileFrame] = []
+            while len(frames) < 20:  # the arm's control period advances the virtual clock
+                rig.arm.wait_period()
+                frames += sensor.poll()
+            spacing_us = np.diff([f.device_t_us for f in frames])
+            assert np.median(spacing_us) == pytest.approx(1000, rel=0.05)  # 1 kHz on the device clock
+        finally:
+            sensor.disconnect()
+    with pytest.raises(UsageError, match="the simulated uskin has no option 'rate_hz'") as error:
+        SimRig(config, sensor_options={"uskin": {"rate_hz": 1000}})
+    assert "transport" in (error.value.hint or "")
+    with pytest.raises(UsageError, match="unknown uSkin transport 'usb'"):
+        SimRig(config, sensor_options={"uskin": {"transport": "usb"}})
+    with pytest.raises(UsageError, match="unknown sensor 'gelsight'"):
+        SimRig(config, sensor_options={"gelsight": {}})

@@ -8,7 +8,6 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from driver_helpers import PERIOD_NS, run_mode, step
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -17,6 +16,7 @@ from drivers.errors import DeviceError, DeviceNotFound
 from drivers.frames import TactileFrame
 from drivers.papillarray import WRONG_SHAPE_LIMIT, PapillArrayDriver, implausible_pillars
 from protocols.papillarray import PapillArrayPacket, PillarSensorData, encode_packet
+from tests.drivers.driver_helpers import PERIOD_NS, run_mode, step
 from unitac_rig.sim.devices import SimPapillArrayHub
 from unitac_rig.sim.faults import FaultPlan
 from unitac_rig.sim.signals import SensorSample, SignalSource

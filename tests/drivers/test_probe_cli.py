@@ -6,15 +6,11 @@ import json
 
 import pytest
 
-from unitac_rig.cli import main
+from tests.helpers import cli
 
 
 def run_cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    code = 0
-    try:
-        main(args)
-    except SystemExit as exc:
-        code = int(exc.code or 0)
+    code = cli(args)
     out, err = capsys.readouterr()
     return code, out, err
 

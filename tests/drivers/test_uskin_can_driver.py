@@ -10,12 +10,12 @@ from typing import Literal
 
 import numpy as np
 import pytest
-from driver_helpers import PERIOD_NS, collect, run_mode, step
 
 from drivers.clock import VirtualClock
 from drivers.errors import DeviceError, DeviceNotFound
 from drivers.frames import TactileFrame
 from drivers.uskin import UskinCanDriver, open_can_bus
+from tests.drivers.driver_helpers import PERIOD_NS, collect, run_mode, step
 from unitac_rig.sim.devices import SimSlcanAdapter, SimXelaController, counts_from_sample
 from unitac_rig.sim.faults import FaultPlan
 from unitac_rig.sim.signals import SensorSample, SignalSource

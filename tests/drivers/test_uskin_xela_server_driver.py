@@ -10,12 +10,12 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 import pytest
-from driver_helpers import collect
 from websockets.sync.server import ServerConnection, serve
 
 from drivers.errors import DeviceError, DeviceNotFound
 from drivers.uskin import WRONG_SHAPE_LIMIT, UskinXelaServerDriver
 from protocols.xela_ws import XelaSensorData, encode_data_message, encode_welcome
+from tests.drivers.driver_helpers import collect
 from unitac_rig.sim.devices import counts_from_sample
 from unitac_rig.sim.devices.xela_server import SimXelaServer
 from unitac_rig.sim.faults import FaultPlan

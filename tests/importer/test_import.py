@@ -8,8 +8,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from unitac_nv_fixtures import QUIET, Press, write_processed_npz, write_raw_csv
 
+from tests.importer.unitac_nv_fixtures import QUIET, Press, write_processed_npz, write_raw_csv
 from unitac_rig.cli import main
 from unitac_rig.errors import ConfigError, DataError
 from unitac_rig.importer import ImportConventions, conventions_from_dict, import_unitac_nv

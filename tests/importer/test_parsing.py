@@ -11,8 +11,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from unitac_nv_fixtures import USKIN_GRID, Press, write_raw_csv
 
+from tests.importer.unitac_nv_fixtures import USKIN_GRID, Press, write_raw_csv
 from unitac_rig.errors import DataError
 from unitac_rig.importer.parsing import parse_number_column, parse_times, read_raw_csv
 

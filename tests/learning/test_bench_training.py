@@ -1,5 +1,5 @@
-"""The training benchmark compares like with like: its four trainers (autograd engine, the retired hand-written
-engine, torch.func vmap, the plain loop) start from the same weights and take the same steps."""
+"""The training benchmark compares like with like: its three trainers (the stacked model, torch.func vmap and the plain
+loop over the member networks sliced out of it) start from the same weights and take the same steps."""
 
 from __future__ import annotations
 

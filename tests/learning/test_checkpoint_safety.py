@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from unitac_rig.cli import main
+from tests.helpers import cli
 from unitac_rig.errors import ModelError
 from unitac_rig.learning.run import CHECKPOINT_FORMAT, checkpoint_path, load_checkpoint
 from unitac_rig.learning.train import TrainConfig
@@ -24,14 +24,6 @@ class _RunsCode:
 
     def __reduce__(self) -> tuple[object, tuple[str]]:
         return (exec, (f"open({str(self.marker)!r}, 'w').write('ran')",))
-
-
-def cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 def _write(run: Path, payload: object) -> Path:

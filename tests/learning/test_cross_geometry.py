@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from learning_helpers import small_sets
 
+from tests.learning.learning_helpers import small_sets
 from unitac_rig.learning import cross_geometry
 from unitac_rig.learning.contact_geometry import GeometryConfig
 from unitac_rig.learning.cross_geometry import cca_projections, cross_sensor_geometry, ridge_map

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from learning_helpers import small_sets, write_sessions
 
 from drivers.layouts import PAPILLARRAY, USKIN
-from unitac_rig.cli import main
+from tests.helpers import cli
+from tests.learning.learning_helpers import small_sets, write_sessions
 from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.contact_geometry import GeometryConfig, geometry_for_run
 from unitac_rig.learning.data import build_paired_dataset
@@ -20,16 +20,6 @@ from unitac_rig.learning.paper import TABLE1_COLUMNS
 from unitac_rig.learning.report import write_report
 from unitac_rig.learning.train import TrainConfig, load_run, train
 from unitac_rig.learning.translate import Translator
-
-
-def cli(args: list[str]) -> int:
-    """Exit status of ``unitac-rig ARGS`` (main returns on success, exits otherwise)."""
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
-
 
 TINY = TrainConfig(epochs=3, seeds=(0, 1), tsne_contacts=60, checkpoint_every=1)
 

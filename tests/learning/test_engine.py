@@ -1,5 +1,5 @@
-"""The stacked engine computes what independent textbook modules compute: the same losses and the same gradient for
-every parameter of every model and seed, with dropout on."""
+"""The stacked model computes what each member's plain network computes: the same losses and the same gradient for
+every parameter of every model and seed, with dropout on; a member sliced out is that plain network."""
 
 from __future__ import annotations
 
@@ -7,9 +7,10 @@ from collections.abc import Iterator
 
 import pytest
 import torch
+from torch import nn
 
-from unitac_rig.learning.engine import GroupSpec, ModelShape, StackedAutoencoders, default_groups
-from unitac_rig.learning.reference import UniTacModule
+from unitac_rig.errors import ModelError
+from unitac_rig.learning.engine import Autoencoder, GroupSpec, ModelShape, StackedAutoencoders, default_groups
 
 TWO_SENSORS = {"uskin": 72, "papillarray": 27}
 THREE_SENSORS = {"uskin": 72, "papillarray": 27, "fakepad": 12}
@@ -26,21 +27,32 @@ def one_thread() -> Iterator[None]:
     torch.set_num_threads(previous)
 
 
-def reference_keep_masks(masks: dict[str, torch.Tensor], group: GroupSpec, member: int) -> dict[str, torch.Tensor]:
-    """The engine's masks of one member and model, in the reference module's terms (True = kept). The engine decodes
-    all sources' latents in one batch (rows of source 0, then source 1, ...); the module decodes one source at a
-    time."""
-    keep = {}
-    for key, mask in masks.items():
-        name, part, index = key.split("/")
-        if name != group.name:
-            continue
-        if part == "dec":
-            for j, source in enumerate(group.sensors):
-                keep[f"dec_{source}/{index}"] = mask[member, j * ROWS : (j + 1) * ROWS] != 0
-        else:
-            keep[f"{part}/{index}"] = mask[member] != 0
-    return keep
+def run_with_masks(mlp: nn.Sequential, h: torch.Tensor, masks: list[torch.Tensor]) -> torch.Tensor:
+    """``mlp(h)`` with its ``nn.Dropout`` modules, in order, replaced by the stacked model's masks (0 dropped,
+    1/(1-p) kept): the plain network must have a dropout exactly where the stacked one drew a mask."""
+    left = list(masks)
+    for module in mlp:
+        h = h * left.pop(0) if isinstance(module, nn.Dropout) else module(h)
+    assert not left, "a mask with no nn.Dropout in the plain network"
+    return h
+
+
+def plain_loss(
+    net: Autoencoder, inputs: list[torch.Tensor], masks: dict[str, torch.Tensor], group: GroupSpec, member: int
+) -> torch.Tensor:
+    """The member's loss written the textbook way on its plain network: each source encoded and decoded on its own
+    (the stacked model decodes every source's latent in one batch: rows of source 0, then source 1, ...), one
+    ``l1_loss`` per (source, target)."""
+    mine = {key.split("/", 1)[1]: mask[member] for key, mask in masks.items() if key.startswith(group.name + "/")}
+    total = torch.zeros(())
+    for j, (source, x) in enumerate(zip(group.sensors, inputs, strict=True)):
+        z = run_with_masks(net.encoders[source], x, [v for k, v in mine.items() if k.startswith(f"enc_{source}/")])
+        dec = [v[j * ROWS : (j + 1) * ROWS] for k, v in mine.items() if k.startswith("dec/")]
+        h = run_with_masks(net.decoder, z, dec)
+        recon = torch.cat([head(h) for head in net.heads], dim=-1)
+        for target, estimate in zip(inputs, recon.split([t.shape[1] for t in inputs], dim=-1), strict=True):
+            total = total + nn.functional.l1_loss(estimate, target)
+    return total
 
 
 @pytest.mark.parametrize("dropout", [0.007, 0.2])
@@ -65,38 +77,33 @@ def test_every_gradient_matches_independent_modules_with_dropout_seeds_and_basel
     columns = dict(zip(feature_dims, per_sensor, strict=True))
     compared = 0
     for g, group in enumerate(engine.groups):
-        dims = {s: feature_dims[s] for s in group.sensors}
         for member in range(len(SEEDS)):
-            module = UniTacModule(dims, shape)
-            module.load_from_engine(engine, member, group.name)
+            net = engine.network(group.name, member)
+            assert sum(isinstance(m, nn.Dropout) for m in net.modules()) == len(group.sensors) * 3 + 2
             inputs = [columns[s][member] for s in group.sensors]
-            reference = module.loss(inputs, keep=reference_keep_masks(masks, group, member))
+            reference = plain_loss(net, inputs, masks, group, member)
             reference.backward()
             assert float(losses[g, member]) == pytest.approx(float(reference.detach()), rel=1e-5)
 
             ours = engine.layer_gradients(group.name, member)
-            theirs = {f"enc_{s}": module.encoders[s] for s in group.sensors} | {"dec": module.decoder}
-            for part, mlp in theirs.items():
-                linears = [m for m in mlp.modules() if isinstance(m, torch.nn.Linear)]
-                for i, layer in enumerate(linears):
-                    assert layer.weight.grad is not None and layer.bias.grad is not None
-                    weight_grad, bias_grad = ours[f"{part}/{i}"]
-                    torch.testing.assert_close(torch.from_numpy(weight_grad), layer.weight.grad.T, rtol=1e-4, atol=1e-7)
-                    torch.testing.assert_close(torch.from_numpy(bias_grad), layer.bias.grad, rtol=1e-4, atol=1e-7)
-                    compared += 2
+            for key, layer in net.linears().items():
+                assert layer.weight.grad is not None and layer.bias.grad is not None
+                weight_grad, bias_grad = ours[key]
+                torch.testing.assert_close(torch.from_numpy(weight_grad), layer.weight.grad.T, rtol=1e-4, atol=1e-7)
+                torch.testing.assert_close(torch.from_numpy(bias_grad), layer.bias.grad, rtol=1e-4, atol=1e-7)
+                compared += 2
     assert compared == len(SEEDS) * sum(2 * 3 * (len(g.sensors) + 1) for g in engine.groups)  # every tensor
 
 
-def test_inference_matches_the_module_in_eval_mode() -> None:
+def test_a_member_sliced_out_is_the_plain_network_in_eval_mode() -> None:
     engine = StackedAutoencoders(TWO_SENSORS, default_groups(list(TWO_SENSORS), True), [0, 1], ModelShape())
-    module = UniTacModule(TWO_SENSORS, ModelShape())
-    module.load_from_engine(engine, 1)
-    module.eval()
+    module = engine.network("unitac", 1).eval()
+    assert isinstance(module, nn.Module) and not isinstance(module, StackedAutoencoders)
     x = torch.randn(5, 27)
     z = engine.encode("unitac", "papillarray", x)
     assert z.shape == (2, 5, 16)
     decoded = engine.decode("unitac", z)
-    expected = module.decoder(module.encoders["papillarray"](x)).detach()
+    expected = module.decode(module.encoders["papillarray"](x)).detach()
     torch.testing.assert_close(decoded["uskin"][1], expected[:, :72], rtol=1e-5, atol=1e-6)
     torch.testing.assert_close(decoded["papillarray"][1], expected[:, 72:], rtol=1e-5, atol=1e-6)
     # a baseline has its own encoder and a decoder for its sensor only
@@ -139,9 +146,22 @@ def test_members_are_independent_and_state_round_trips() -> None:
     assert next_masks is not None and restored_masks is not None
     assert all(torch.equal(next_masks[k], restored_masks[k]) for k in next_masks)  # dropout streams continue
 
-    version_1 = {k: v for k, v in together.state().items() if k not in ("parameters", "dropout_rng")}
+    version_1 = {k: v for k, v in together.state().items() if k != "state_dict"}
     version_1["theta"] = together.theta  # checkpoints before the autograd engine kept one flat vector
     assert torch.equal(StackedAutoencoders.from_state(version_1).theta, together.theta)
+
+
+def test_the_model_is_an_nn_module_with_a_standard_state_dict() -> None:
+    engine = StackedAutoencoders(TWO_SENSORS, default_groups(list(TWO_SENSORS), True), [0, 1], ModelShape())
+    assert isinstance(engine, nn.Module)
+    keys = list(engine.state_dict())
+    assert "layers.unitac/enc_uskin/0.weight" in keys and "layers.ae_papillarray/dec/2.bias" in keys
+    assert sum(p.numel() for p in engine.parameters()) == engine.theta.numel()
+    copy = StackedAutoencoders(TWO_SENSORS, default_groups(list(TWO_SENSORS), True), [5, 6], ModelShape())
+    copy.load_state_dict(engine.state_dict())  # the weights and each member's dropout stream
+    assert torch.equal(copy.theta, engine.theta)
+    a, b = engine.draw_masks(ROWS), copy.draw_masks(ROWS)
+    assert a is not None and b is not None and all(torch.equal(a[k], b[k]) for k in a)
 
 
 def test_state_loads_without_pickled_objects(tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -164,3 +184,8 @@ def test_training_lowers_the_loss_on_a_learnable_pairing() -> None:
         for start in range(0, 512, 64):
             last = float(engine.train_step(data[start : start + 64].unsqueeze(0), optimizer)[0, 0])
     assert last < 0.5 * first
+
+
+def test_a_sensor_name_with_a_dot_is_refused_as_it_would_break_the_state_dict_keys() -> None:
+    with pytest.raises(ModelError, match=r"cannot contain a dot: pad\.v2"):
+        StackedAutoencoders({"uskin": 72, "pad.v2": 12}, default_groups(["uskin", "pad.v2"], False), [0], ModelShape())

@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from learning_helpers import small_sets
 from torch import nn
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
-from unitac_rig.cli import main
+from tests.helpers import cli
+from tests.learning.learning_helpers import small_sets
 from unitac_rig.learning.data import PairedDataset, build_paired_dataset
 from unitac_rig.learning.evaluate import write_metrics
 from unitac_rig.learning.extend import ExtendConfig, add_sensor
@@ -51,14 +51,6 @@ for source, target in [("uskin", "papillarray"), ("papillarray", "uskin"), ("usk
 torch.save(results, out_path)
 print(sorted(m for m in sys.modules if m.split(".")[0] in ("unitac_rig", "drivers", "protocols")))
 """
-
-
-def cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 @pytest.fixture(scope="module")

@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from learning_helpers import small_sets
 from safetensors import safe_open
 
-from unitac_rig.cli import main
+from tests.helpers import cli
+from tests.learning.learning_helpers import small_sets
 from unitac_rig.learning.data import PairedDataset, build_paired_dataset
 from unitac_rig.learning.evaluate import write_metrics
 from unitac_rig.learning.train import TrainConfig, train
@@ -50,14 +50,6 @@ with torch.no_grad():
 torch.save(results, sys.argv[2])
 print(sorted(m for m in sys.modules if m.split(".")[0] in ("unitac_rig", "drivers", "protocols")))
 """
-
-
-def cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from learning_helpers import small_sets
 
+from tests.learning.learning_helpers import small_sets
 from unitac_rig.learning.data import build_paired_dataset
 from unitac_rig.learning.engine import UNITAC_GROUP
 from unitac_rig.learning.extend import evaluate_new_sensor

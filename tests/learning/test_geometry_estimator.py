@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from learning_helpers import small_sets, write_sessions
 
-from unitac_rig.cli import main
+from tests.helpers import cli
+from tests.learning.learning_helpers import small_sets, write_sessions
 from unitac_rig.errors import ModelError
 from unitac_rig.learning.contact_geometry import (
     ESTIMATOR_JSON,
@@ -23,14 +23,6 @@ from unitac_rig.learning.contact_geometry import (
 from unitac_rig.learning.data import PairedDataset, build_paired_dataset
 from unitac_rig.learning.run import load_test_set
 from unitac_rig.learning.train import TrainConfig, train
-
-
-def cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 @pytest.fixture(scope="module")

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from learning_helpers import SMALL_TARGETS, write_sessions
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
-from unitac_rig.cli import main
+from tests.helpers import cli
+from tests.learning.learning_helpers import SMALL_TARGETS, write_sessions
 from unitac_rig.learning.data import PairedDataset, build_paired_dataset
 from unitac_rig.learning.engine import UNITAC_GROUP
 from unitac_rig.learning.extend import ExtendConfig, add_sensor
@@ -32,14 +32,6 @@ FAST = 2e-3  # a higher learning rate than the paper's, so a test-sized run lear
 
 def contacts(layouts: tuple[SensorLayout, ...]) -> list:
     return synthetic_matched_sets(OBJECTS, layouts, angles_deg=ANGLES, targets_n=SMALL_TARGETS, seed=0)
-
-
-def cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 def _sha(path: Path) -> str:

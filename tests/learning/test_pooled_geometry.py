@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from learning_helpers import small_sets
 
+from tests.learning.learning_helpers import small_sets
 from unitac_rig.learning.contact_geometry import GeometryConfig, run_geometry
 from unitac_rig.learning.data import build_paired_dataset, ray_deg
 from unitac_rig.learning.pooled_geometry import pooled_geometry

@@ -9,23 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from learning_helpers import small_sets, write_sessions
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
-from unitac_rig.cli import main
+from tests.helpers import cli
+from tests.learning.learning_helpers import small_sets, write_sessions
 from unitac_rig.errors import DataError
 from unitac_rig.learning.data import build_paired_dataset, load_sets
 from unitac_rig.learning.run import load_test_set
 from unitac_rig.learning.train import TrainConfig, load_run, train
 from unitac_rig.learning.translate import Translator
-
-
-def cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 @pytest.fixture(scope="module")

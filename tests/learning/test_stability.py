@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 import pytest
-from learning_helpers import small_sets
 
+from tests.learning.learning_helpers import small_sets
 from unitac_rig.errors import DataError, UsageError
 from unitac_rig.learning.contact_geometry import GeometryConfig
 from unitac_rig.learning.data import build_paired_dataset

@@ -8,22 +8,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from learning_helpers import small_sets, write_sessions
 
-from unitac_rig.cli import main
+from tests.helpers import cli
+from tests.learning.learning_helpers import small_sets, write_sessions
 from unitac_rig.errors import ConfigError, UsageError
 from unitac_rig.learning.config import parse_config, to_toml
 from unitac_rig.learning.data import Normaliser, build_paired_dataset, split_by_direction
 from unitac_rig.learning.engine import ModelShape
 from unitac_rig.learning.train import TrainConfig, load_run, train
-
-
-def cli(args: list[str]) -> int:
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from unitac_rig.bench.fuzz import MAX_MEMORY_GROWTH_BYTES, TARGETS, markdown_table, rebuild, run_campaign, run_target
+from unitac_rig.bench.lab.fuzz import (
+    MAX_MEMORY_GROWTH_BYTES,
+    TARGETS,
+    markdown_table,
+    rebuild,
+    run_campaign,
+    run_target,
+)
 
 SLICE_INPUTS = 2_000
 SEED = 28  # the benchmark's default seed: these are the first 2,000 inputs of its campaign

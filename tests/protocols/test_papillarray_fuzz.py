@@ -12,7 +12,6 @@ from collections import Counter
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from test_papillarray_codec import GOLDEN_2, random_packet
 
 from protocols.errors import ProtocolError
 from protocols.papillarray import (
@@ -23,6 +22,7 @@ from protocols.papillarray import (
     encode_packet,
     frame_body,
 )
+from tests.protocols.test_papillarray_codec import GOLDEN_2, random_packet
 
 _START_IN_DATA = float(np.frombuffer(START_MARKER, dtype="<f4")[0])
 _END_IN_DATA = float(np.frombuffer(END_MARKER, dtype="<f4")[0])

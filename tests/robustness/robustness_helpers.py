@@ -7,7 +7,6 @@ from pathlib import Path
 
 import pytest
 
-from unitac_rig.cli import main
 from unitac_rig.rig.config import parse_rig_config
 from unitac_rig.storage.lease import LEASE_NAME
 
@@ -22,15 +21,6 @@ def few_angles(count: int = 3, **sections: dict[str, object]):  # type: ignore[n
         merged.update(value)
         data[key] = merged
     return parse_rig_config(data)
-
-
-def cli(args: list[str]) -> int:
-    """Exit status of ``unitac-rig ARGS`` run in-process (main returns on success, exits otherwise)."""
-    try:
-        main(args)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    return 0
 
 
 def one_error_line(capsys: pytest.CaptureFixture[str]) -> str:

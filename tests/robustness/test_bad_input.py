@@ -11,8 +11,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from robustness_helpers import cli, few_angles, one_error_line, tree_hashes, write_synthetic_sessions
 
+from tests.helpers import cli
+from tests.robustness.robustness_helpers import few_angles, one_error_line, tree_hashes, write_synthetic_sessions
 from unitac_rig.collection.session import collect_session
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.config import parse_rig_config

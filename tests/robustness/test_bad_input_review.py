@@ -12,10 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from robustness_helpers import cli, one_error_line, tree_hashes
 
 from protocols import rtde
 from protocols.rtde import ControllerVersion
+from tests.helpers import cli
+from tests.robustness.robustness_helpers import one_error_line, tree_hashes
 from unitac_rig.learning.run import CHECKPOINT_FORMAT, checkpoint_path
 from unitac_rig.rig.config import load_rig_config
 

@@ -16,8 +16,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from robustness_helpers import cli, few_angles, one_error_line
 
+from tests.helpers import cli
+from tests.robustness.robustness_helpers import few_angles, one_error_line
 from unitac_rig.collection.press import TickInfo
 from unitac_rig.collection.session import collect_session
 from unitac_rig.errors import SafetyLimit

@@ -9,8 +9,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from robustness_helpers import few_angles
 
+from tests.robustness.robustness_helpers import few_angles
 from unitac_rig.collection.press import TickInfo
 from unitac_rig.collection.session import collect_session
 from unitac_rig.rig.objects import get_object

@@ -11,8 +11,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from robustness_helpers import few_angles
 
+from tests.robustness.robustness_helpers import few_angles
 from unitac_rig.collection.session import collect_session
 from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.fast_rig import SimRig
@@ -22,8 +22,10 @@ from unitac_rig.storage.reader import read_presses
 from unitac_rig.storage.recorder import session_path
 
 
-def _collect(tmp_path: Path, sensor: str, faults: FaultPlan, angles: int, **rig_options: str) -> list[PressRecord]:
-    with SimRig(few_angles(angles), seed=0, faults=faults, **rig_options) as rig:  # type: ignore[arg-type]
+def _collect(
+    tmp_path: Path, sensor: str, faults: FaultPlan, angles: int, **options: dict[str, object]
+) -> list[PressRecord]:
+    with SimRig(few_angles(angles), seed=0, faults=faults, sensor_options=options) as rig:
         outcome = collect_session(rig, get_object("hex_tpu"), sensor, tmp_path)
     assert outcome.stopped is None
     assert outcome.complete == angles and outcome.failed == outcome.aborted == 0
@@ -42,7 +44,7 @@ def _matched_frames_are_valid(press: PressRecord) -> tuple[int, int]:
 
 def test_slcan_lines_split_corrupted_and_noisy_still_give_a_complete_session(tmp_path: Path) -> None:
     faults = FaultPlan(seed=3, split_max_bytes=5, corrupt_prob=0.01, garbage_prob=0.01)
-    presses = _collect(tmp_path, "uskin", faults, angles=2, uskin_transport="slcan")
+    presses = _collect(tmp_path, "uskin", faults, angles=2, uskin={"transport": "slcan"})
     damaged_lines = sum(p.attrs["sensor_health"]["checksum_errors"] for p in presses)
     assert damaged_lines > 0  # the damage was seen and counted, not silently decoded
     for press in presses:

@@ -1,15 +1,14 @@
-"""The fidelity report's measuring code (unitac_rig/bench/fidelity.py): verdicts on hand-made numbers, and the pooled
-statistics of a short simulated session read back through the real drivers and the session file."""
+"""The fidelity report's measuring code (unitac_rig/bench/lab/fidelity.py): verdicts on hand-made numbers, and the
+pooled statistics of a short simulated session read back through the real drivers and the session file."""
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from unitac_rig.bench.fidelity import (
+from unitac_rig.bench.lab.fidelity import (
     RECORDED,
     collect_object,
     compare,
@@ -21,7 +20,6 @@ from unitac_rig.bench.fidelity import (
     scene_extremes,
     summarise,
     target_errors,
-    with_creep,
 )
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.config import parse_rig_config
@@ -185,22 +183,3 @@ def test_a_fit_over_draws_scores_each_targets_median() -> None:
     for key, error in over.items():
         assert error == pytest.approx(sorted(d[key] for d in draws)[1], abs=1e-12), key
     assert fit_cost(over) == fit_evaluation({}, angles=5, draws=3)[0]
-
-
-def test_creep_adds_a_lagging_share_of_each_press_worked_by_hand() -> None:
-    """One taxel axis, two presses of 0.5 then 1 N, creep fraction 0.5, tau 1 press cycle, loaded 0.3 of a cycle."""
-    forces = np.array([0.5, 1.0, 0.5, 1.0]).reshape(4, 1, 1)
-    out = with_creep(forces, fraction=0.5, tau_cycles=1.0, duty=0.3).ravel()
-    held = 1.0 - math.exp(-0.3)  # the state after the first hold: 0.2592
-    assert out[0] == pytest.approx(0.5)  # nothing crept yet
-    assert out[1] == pytest.approx(1.0 + 0.5 * held)  # 1.1296
-    relaxed = held * math.exp(-0.7)  # what is left after the unloaded rest: 0.1287
-    assert out[2] == pytest.approx(0.5 + 0.5 * relaxed)
-    assert out[3] == pytest.approx(1.0 + 0.5 * (relaxed * math.exp(-0.3) + held))
-
-
-def test_creep_is_linear_and_off_at_fraction_zero() -> None:
-    rng = np.random.default_rng(0)
-    forces = rng.normal(size=(10, 24, 3))
-    np.testing.assert_array_equal(with_creep(forces, 0.0, 5.0, 0.3), forces)
-    np.testing.assert_allclose(with_creep(-forces, 0.4, 5.0, 0.3), -with_creep(forces, 0.4, 5.0, 0.3))

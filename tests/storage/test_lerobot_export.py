@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from robustness_helpers import cli, one_error_line
 
+from tests.helpers import cli
+from tests.robustness.robustness_helpers import one_error_line
 from unitac_rig.learning.data import build_paired_dataset, load_sets
 from unitac_rig.storage import lerobot
 from unitac_rig.storage.reader import read_presses

@@ -15,8 +15,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from robustness_helpers import cli, one_error_line, write_synthetic_sessions
 
+from tests.helpers import cli
+from tests.robustness.robustness_helpers import one_error_line, write_synthetic_sessions
 from unitac_rig.errors import DataError
 from unitac_rig.storage.reader import list_sessions, load_matched_set, load_matched_sets, press_summaries, read_presses
 from unitac_rig.storage.recorder import SessionWriter, journal_dir, session_path

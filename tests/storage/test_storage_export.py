@@ -11,9 +11,11 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from robustness_helpers import cli, one_error_line, tree_hashes, write_synthetic_sessions
 
-from unitac_rig.learning.data import build_paired_dataset, join_key
+from tests.helpers import cli
+from tests.robustness.robustness_helpers import one_error_line, tree_hashes, write_synthetic_sessions
+from unitac_rig.storage.export import export_dataset
+from unitac_rig.storage.paired import build_paired_dataset, join_key
 from unitac_rig.storage.reader import load_matched_set, load_matched_sets
 from unitac_rig.storage.recorder import session_path
 
@@ -137,6 +139,19 @@ def test_pooling_a_byte_identical_copy_counts_the_session_once(
     assert len(manifest["sessions"]) == 2
     assert all(s["also_in"] == [str(mirror)] for s in manifest["sessions"])
     assert len(pd.read_parquet(out / "pairs.parquet")) == 2 * len(build_paired_dataset(load_matched_sets(mirror)))
+
+
+def test_the_export_pairs_by_itself_exactly_as_training_does(two_dirs: tuple[Path, Path], tmp_path: Path) -> None:
+    """Storage owns the join: the library call needs no join passed in, and its pairs are the ones ``train`` reads
+    (the learning side's ``build_paired_dataset`` is this very function, so the content hashes agree)."""
+    from unitac_rig.learning import data
+
+    summary = export_dataset([two_dirs[1]], tmp_path / "out")
+    paired = data.build_paired_dataset(data.load_sets(two_dirs[1]))
+    assert data.build_paired_dataset is build_paired_dataset
+    manifest = json.loads((tmp_path / "out" / "manifest.json").read_text())
+    assert manifest["paired_content_hash"] == paired.content_hash()
+    assert summary.contacts == len(paired) and summary.sensors == ("uskin", "papillarray")
 
 
 def test_two_sources_disagreeing_on_a_session_is_a_clear_error(

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 from rich.console import Console
-from robustness_helpers import write_synthetic_sessions
 
+from tests.robustness.robustness_helpers import write_synthetic_sessions
 from unitac_rig.cli.learn import _print_table
 from unitac_rig.learning.paper import PAPER_TABLE1
 from unitac_rig.learning.report import baseline_name, direction_name, table_columns

@@ -5,8 +5,8 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import pytest
-from twin_helpers import CENTER_M, TwinClients, open_twin
 
+from tests.twin.twin_helpers import CENTER_M, TwinClients, open_twin
 from unitac_rig.sim.twin import ControllerParams, SceneSpec
 
 

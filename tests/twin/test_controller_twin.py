@@ -13,8 +13,8 @@ import time
 import numpy as np
 import pytest
 import rtde_control
-from twin_helpers import TwinClients, open_twin, press_direction, wait_until
 
+from tests.twin.twin_helpers import TwinClients, open_twin, press_direction, wait_until
 from unitac_rig.sim.twin import ControllerParams
 
 UP = [0.0, 0.0, 0.01, 0.0, 0.0, 0.0]  # 10 mm/s straight up: away from the object, nothing to touch

@@ -18,15 +18,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rtde_control
-from twin_helpers import wait_until
 
 from drivers.frames import TactileFrame
 from drivers.sensor import TactileSensor
+from tests.twin.twin_helpers import wait_until
+from unitac_rig.errors import UsageError
 from unitac_rig.rig.config import ObjectPlacement, load_rig_config, parse_rig_config
 from unitac_rig.rig.hardware import HardwareRig
 from unitac_rig.sim.twin import first_free_loopback
 from unitac_rig.sim.twin.controller import build_scene
-from unitac_rig.sim.twin.rig import DEFAULT_HOST, RigTwin, SensorPorts, rig_file_text
+from unitac_rig.sim.twin.rig import DEFAULT_HOST, RigTwin, rig_file_text
 from unitac_rig.storage.reader import press_summaries
 
 REPO = Path(__file__).resolve().parents[2]
@@ -52,7 +53,7 @@ def frames_for(sensor: TactileSensor, seconds: float) -> list[TactileFrame]:
 
 
 def test_the_example_rig_file_is_the_one_the_twin_prints_and_points_at_it() -> None:
-    text = rig_file_text(DEFAULT_HOST, ObjectPlacement(), SensorPorts())
+    text = rig_file_text(DEFAULT_HOST, ObjectPlacement())
     assert (REPO / "examples" / "twin.toml").read_text() == text
     config = load_rig_config(REPO / "examples" / "twin.toml")
     assert config.arm is not None and config.arm.host == DEFAULT_HOST
@@ -61,11 +62,25 @@ def test_the_example_rig_file_is_the_one_the_twin_prints_and_points_at_it() -> N
     assert config.object == ObjectPlacement()  # the twin's scene stands where the file says
 
 
+def test_each_sensor_writes_its_own_table_with_its_options() -> None:
+    """The rig file's sensor tables come from the sensors' simulated sides: the uSkin's route and the PapillArray's
+    rate are their options, and an option the twin cannot serve is refused before anything starts."""
+    options = {"uskin": {"transport": "slcan"}, "papillarray": {"rate_hz": 500, "twin_port": 30111}}
+    config = parse_rig_config(tomllib.loads(rig_file_text("127.0.0.9", ObjectPlacement(), sensor_options=options)))
+    uskin, papillarray = config.sensors["uskin"], config.sensors["papillarray"]
+    assert (uskin.type, uskin.can_interface, uskin.can_channel) == ("uskin-can", "slcan", "socket://127.0.0.9:30101")  # type: ignore[attr-defined]
+    assert (papillarray.port, papillarray.rate_hz) == ("socket://127.0.0.9:30111", 500)  # type: ignore[attr-defined]
+    with pytest.raises(UsageError, match="serves the uSkin through slcan or xela-server, not 'can'"):
+        RigTwin("circle_pla", host="127.0.0.9", sensor_options={"uskin": {"transport": "can"}})
+    with pytest.raises(UsageError, match="PapillArray samples at 100, 250, 500, 1000 Hz, not 300"):
+        RigTwin("circle_pla", host="127.0.0.9", sensor_options={"papillarray": {"rate_hz": 300}})
+
+
 def test_a_rehearsed_rig_file_keeps_its_object_press_and_limits() -> None:
     """``unitac-rig twin --like FILE`` prints a twin rig file with that file's object placement, press and limits."""
     mine = load_rig_config(REPO / "examples" / "rig.toml")
     tables = {"press": mine.press.model_dump(mode="json"), "limits": mine.limits.model_dump(mode="json")}
-    twin_file = parse_rig_config(tomllib.loads(rig_file_text("127.0.0.9", mine.object, SensorPorts(), tables=tables)))
+    twin_file = parse_rig_config(tomllib.loads(rig_file_text("127.0.0.9", mine.object, tables=tables)))
     assert (twin_file.object, twin_file.press, twin_file.limits) == (mine.object, mine.press, mine.limits)
     assert twin_file.arm is not None and twin_file.arm.host == "127.0.0.9"
 
@@ -100,7 +115,7 @@ def test_the_mounted_sensor_feels_the_arm_the_controller_moves(papillarray_twin:
 def test_both_uskin_transports_stream_from_the_twin() -> None:
     with RigTwin("circle_pla", sensor="uskin", host=free_host(), seed=4) as rig:
         for via in ("xela-server", "slcan"):
-            config = parse_rig_config(tomllib.loads(rig.rig_file(via)))
+            config = parse_rig_config(tomllib.loads(rig.rig_file(sensor_options={"uskin": {"transport": via}})))
             hardware = HardwareRig(config)
             sensor = hardware.open_sensor("uskin")
             try:

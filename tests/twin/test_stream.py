@@ -23,9 +23,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rtde_control
-from twin_helpers import wait_until
 
-from unitac_rig.cli import main
+from tests.helpers import cli
+from tests.learning.learning_helpers import small_sets
+from tests.twin.twin_helpers import wait_until
 from unitac_rig.learning.contact_geometry import GeometryConfig, GeometryEstimator, geometry_for_run
 from unitac_rig.learning.data import PairedDataset, build_paired_dataset
 from unitac_rig.learning.live import LiveModel, json_numbers
@@ -34,9 +35,6 @@ from unitac_rig.learning.translate import Translator
 from unitac_rig.sim.twin import first_free_loopback
 from unitac_rig.sim.twin.controller import build_scene
 from unitac_rig.sim.twin.rig import RigTwin
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "learning"))
-from learning_helpers import small_sets
 
 
 @pytest.fixture(scope="module")
@@ -187,14 +185,7 @@ def test_stream_serves_one_local_client_over_a_socket(run_dir: Path, twin: RigTw
 
 
 def test_bad_stream_requests_are_one_line_usage_errors(run_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    def run(args: list[str]) -> int:
-        try:
-            main(args)
-        except SystemExit as exc:
-            return int(exc.code or 0)
-        return 0
-
-    assert run(["stream", str(run_dir)]) == 2
+    assert cli(["stream", str(run_dir)]) == 2
     assert "stream needs --rig RIG.toml or --simulated" in capsys.readouterr().err
-    assert run(["stream", str(run_dir), "--simulated", "--listen", "0.0.0.0:9000"]) == 2
+    assert cli(["stream", str(run_dir), "--simulated", "--listen", "0.0.0.0:9000"]) == 2
     assert "127.0.0.1 only" in capsys.readouterr().err

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from unitac_rig.bench.press_strategies import ExtractionVariant, PressBenchPlan, PressSample
+    from unitac_rig.bench.press_benchmark import ExtractionVariant, PressBenchPlan, PressSample
 
 CAMPAIGN_PRESSES = 1820  # 7 objects x 91 angles x 2 sensors, the irregular prism at 4 rotations
 GOAL_MEDIAN_ERROR_N = 0.05

@@ -1,17 +1,16 @@
-"""Training speed of the UniTac-NV trainer against the ways it could have been written, measured in one run.
+"""Training speed of the UniTac-NV trainer against the ways it could have been written with plain PyTorch, measured
+in one run.
 
-Four trainers train the same models from the same initial weights at the paper's batch size (64):
+Three trainers train the same models from the same initial weights at the paper's batch size (64):
 
 * ``autograd`` - the project's trainer (:class:`unitac_rig.learning.engine.StackedAutoencoders`): every model and
   seed stacked, one parameter tensor per layer, ``baddbmm``, ``loss.backward()``, fused Adam, sparse dropout masks
   drawn on the device, the training rows gathered once per epoch on the device;
-* ``legacy`` - the hand-written engine it replaced (:mod:`unitac_rig.bench.legacy_engine`): the same stacking with
-  the backward written out by hand, one flat parameter tensor, masks drawn with numpy on the host;
-* ``vmap`` - ``torch.func``: the reference ``nn.Module`` of each architecture stacked over seeds with
-  ``stack_module_state`` and run through ``vmap(functional_call)`` (dropout ``randomness="different"``), fed by the
-  same per-epoch gather, ``loss.backward()``, fused Adam;
-* ``plain`` - the textbook loop (:mod:`unitac_rig.learning.reference`): one ``nn.Module`` per model, a shuffling
-  ``DataLoader`` over a ``TensorDataset``, ``torch.optim.Adam`` with its defaults, models trained one after another.
+* ``vmap`` - ``torch.func``: each member's plain network (:class:`unitac_rig.learning.network.Autoencoder`, sliced
+  out of the stacked model) stacked over seeds with ``stack_module_state`` and run through ``vmap(functional_call)``
+  (dropout ``randomness="different"``), fed by the same per-epoch gather, ``loss.backward()``, fused Adam;
+* ``plain`` - the textbook loop: one plain network per model and seed, a shuffling ``DataLoader`` over a
+  ``TensorDataset``, ``torch.optim.Adam`` with its defaults, models trained one after another.
 
 A stack of n models is UniTac-NV alone (1), UniTac-NV and the two per-sensor baselines of one seed (3, the paper's
 single run) or of five seeds (15, the 5-seed run). One stack step moves every model of the stack by one batch
@@ -22,8 +21,8 @@ the other jobs too; wall-clock rates are kept in the JSON.
 
 Everything runs on the CPU at one torch thread, as ``unitac-rig train`` does on a CPU.
 
-Why one module of ~510 lines: four trainers (autograd, retired engine, vmap, plain loop) run under one interleaved
-timing harness so their numbers are comparable.
+Why one module of ~470 lines: three trainers (stacked, vmap, plain loop) run under one interleaved timing harness so
+their numbers are comparable.
 """
 
 from __future__ import annotations
@@ -44,12 +43,10 @@ from torch import nn
 from torch.func import functional_call, stack_module_state, vmap
 from torch.utils.data import DataLoader, TensorDataset
 
-from unitac_rig.bench.legacy_engine import LegacyStackedAutoencoders
 from unitac_rig.learning.data import PairedDataset
-from unitac_rig.learning.engine import ModelShape, StackedAutoencoders, default_groups
-from unitac_rig.learning.reference import UniTacModule
+from unitac_rig.learning.engine import Autoencoder, ModelShape, StackedAutoencoders, default_groups
 
-TRAINERS = ("autograd", "legacy", "vmap", "plain")
+TRAINERS = ("autograd", "vmap", "plain")
 BATCH = 64
 LEARNING_RATE = 5e-4
 PAPER_EPOCHS = 1000
@@ -117,38 +114,18 @@ def autograd_step(x: torch.Tensor, dims: dict[str, int], seeds: list[int], basel
     return lambda: engine.train_step(batches.next(), optimizer).sum()
 
 
-def legacy_step(x: torch.Tensor, dims: dict[str, int], seeds: list[int], baselines: bool, shape: ModelShape) -> Step:
-    engine = LegacyStackedAutoencoders(dims, default_groups(list(dims), baselines), seeds, shape)
-    optimizer = engine.make_optimizer(LEARNING_RATE)
-    batches = _Batches(x, seeds)
-
-    def step() -> torch.Tensor:
-        with torch.no_grad():
-            return engine.train_step(batches.next(), optimizer).sum()
-
-    return step
-
-
-def _modules(dims: dict[str, int], seeds: list[int], baselines: bool, shape: ModelShape) -> list[list[UniTacModule]]:
-    """Per model of the stack (UniTac-NV, then each baseline), one reference module per seed, initialised as the
-    engine initialises that seed."""
+def _modules(dims: dict[str, int], seeds: list[int], baselines: bool, shape: ModelShape) -> list[list[Autoencoder]]:
+    """Per model of the stack (UniTac-NV, then each baseline), each seed's plain network, sliced out of the stacked
+    model (so initialised as the stacked trainer initialises that seed)."""
     groups = default_groups(list(dims), baselines)
     init = StackedAutoencoders(dims, groups, seeds, shape)
-    out = []
-    for group in groups:
-        per_seed = []
-        for member in range(len(seeds)):
-            module = UniTacModule({s: dims[s] for s in group.sensors}, shape)
-            module.load_from_engine(init, member, group.name)
-            per_seed.append(module)
-        out.append(per_seed)
-    return out
+    return [[init.network(group.name, member) for member in range(len(seeds))] for group in groups]
 
 
 class _Loss(nn.Module):
     """``model.loss`` as ``forward``, so ``functional_call`` can run it."""
 
-    def __init__(self, model: UniTacModule) -> None:
+    def __init__(self, model: Autoencoder) -> None:
         super().__init__()
         self.model = model
 
@@ -210,7 +187,7 @@ class _PlainModel:
     """One model of the textbook loop, a step at a time: the next batch of a shuffling ``DataLoader`` over a
     ``TensorDataset``, the module's loss, ``zero_grad``, ``backward``, ``torch.optim.Adam`` with its defaults."""
 
-    def __init__(self, module: UniTacModule, loader: DataLoader) -> None:
+    def __init__(self, module: Autoencoder, loader: DataLoader) -> None:
         self.module = module.train()
         self.loader = loader
         self.batches = iter(loader)
@@ -231,7 +208,6 @@ class _PlainModel:
 
 BUILDERS: dict[str, Callable[..., Step]] = {
     "autograd": autograd_step,
-    "legacy": legacy_step,
     "vmap": vmap_step,
     "plain": plain_step,
 }
@@ -454,7 +430,7 @@ def plot_training_benchmark(doc: dict[str, Any], path: Path) -> Path:
     fig = new_figure(14.0, 9.0)
     (ax_rate, ax_paper), (ax_nmae, ax_ssim) = fig.subplots(2, 2)
     sizes = list(doc["rates"]["autograd"])
-    colours = {"autograd": "tab:green", "legacy": "tab:blue", "vmap": "tab:orange", "plain": "0.55"}
+    colours = {"autograd": "tab:green", "vmap": "tab:orange", "plain": "0.55"}
     width = 0.8 / len(TRAINERS)
     for i, trainer in enumerate(TRAINERS):
         cells = [doc["rates"][trainer][n] for n in sizes]

@@ -42,8 +42,8 @@ def press_command(
     from rich.progress import Progress
 
     from unitac_rig.bench import write_json
+    from unitac_rig.bench.press_benchmark import full_plan, quick_plan, run_press_benchmark
     from unitac_rig.bench.press_report import plot_press_benchmark, summary_lines
-    from unitac_rig.bench.press_strategies import full_plan, quick_plan, run_press_benchmark
 
     folder = _out_dir(out)
     with Progress(transient=True) as progress:

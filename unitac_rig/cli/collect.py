@@ -17,16 +17,18 @@ from rich.table import Table
 from rich.text import Text
 
 from unitac_rig.cli.signals import termination_as_interrupt
-from unitac_rig.collection.press import PressPlan, TickInfo
 from unitac_rig.collection.sensor_choice import choose_sensor, collection_order, session_complete
 from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session, dry_run
+from unitac_rig.collection.streams import TickInfo
+from unitac_rig.collection.transit import PressPlan
 from unitac_rig.errors import ConfigError, UsageError
 from unitac_rig.interrupts import immediate_interrupts
 from unitac_rig.rig.backends import open_rig
 from unitac_rig.rig.base import Rig
-from unitac_rig.rig.config import STRATEGIES, RigConfig, load_rig_config, parse_rig_config
+from unitac_rig.rig.config import RigConfig, load_rig_config, parse_rig_config
 from unitac_rig.rig.objects import ObjectSpec, get_object, list_objects
 from unitac_rig.rig.sensors import sensor_layout
+from unitac_rig.rig.strategies import PRESS_STRATEGIES
 from unitac_rig.storage.extraction import ExtractionSettings
 from unitac_rig.storage.press_record import FINISHED_STATUSES
 from unitac_rig.storage.reader import list_sessions, press_summaries, read_session_info
@@ -101,8 +103,8 @@ def _override(
 ) -> RigConfig:
     data = config.model_dump(mode="json")
     if strategy is not None:
-        if strategy not in STRATEGIES:
-            raise UsageError(f"unknown strategy {strategy!r}", hint=f"use one of: {', '.join(STRATEGIES)}")
+        if strategy not in PRESS_STRATEGIES:
+            raise UsageError(f"unknown strategy {strategy!r}", hint=f"use one of: {', '.join(PRESS_STRATEGIES)}")
         data["press"]["strategy"] = strategy
     if speed is not None:
         data["press"]["speed_mm_s"] = speed

@@ -155,11 +155,10 @@ def export(
     if fmt == "lerobot":
         _export_lerobot(data, out)
         return
-    from unitac_rig.learning.data import build_paired_dataset
     from unitac_rig.storage.export import export_dataset
 
     console.print(f"copying and pairing the sessions of {', '.join(map(str, data))} into {out}...", soft_wrap=True)
-    summary = export_dataset(data, out, build_paired_dataset)
+    summary = export_dataset(data, out)
     console.print(
         f"exported {summary.contacts} contacts x {len(summary.sensors)} sensors ({', '.join(summary.sensors)}) = "
         f"{summary.rows} rows from {summary.sessions} sessions, objects {', '.join(summary.objects)}"

@@ -3,10 +3,16 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from unitac_rig.errors import DataError, UsageError
+
+if TYPE_CHECKING:  # the importer and rich load when the command runs, not when the CLI starts
+    from rich.console import Console
+
+    from unitac_rig.importer import FileReport, ImportReport
 
 
 def register(app: typer.Typer) -> None:
@@ -32,7 +38,7 @@ def import_unitac_nv_command(
     """Import the dataset published by the UniTac-NV authors (download it by hand first, see docs/import.md)."""
     from rich.console import Console
 
-    from unitac_rig.importer import FileReport, import_unitac_nv, load_conventions
+    from unitac_rig.importer import import_unitac_nv, load_conventions
 
     console = Console(highlight=False, soft_wrap=True, markup=False)
     conv = load_conventions(conventions)
@@ -52,34 +58,47 @@ def import_unitac_nv_command(
         f"{conv.drop_first_rows} rows)"
     )
 
-    def show_file(report: FileReport) -> None:
-        where = f"{report.relative} -> {report.object_id}__{report.sensor}"
-        if report.outcome == "imported":
-            line = (
-                f"  {where}: {report.presses_found} presses found, {report.complete} complete, "
-                f"{report.targets_matched} targets matched, {report.written} written"
-            )
-            if report.already_written:
-                line += f" ({report.already_written} already there from an interrupted run)"
-            console.print(line)
-        else:
-            console.print(f"  {where}: {report.outcome}: {report.message}")
-        if report.bad_rows:
-            listed = ", ".join(f"row {row} ({reason})" for row, reason in report.bad_rows[:5])
-            more = f" and {len(report.bad_rows) - 5} more" if len(report.bad_rows) > 5 else ""
-            console.print(f"    {len(report.bad_rows)} rows could not be parsed and were dropped: {listed}{more}")
-        for text in report.duplicates:
-            console.print(f"    dropped {text}")
-        for note in report.notes:
-            console.print(f"    note: {note}")
-
-    result = import_unitac_nv(source, data, conv, mode=mode, on_file=show_file)
+    result = import_unitac_nv(source, data, conv, mode=mode, on_file=lambda report: _show_file(console, report))
     if not result.sessions:
         raise UsageError(
             f"no UniTac-NV files found under {source}",
             hint="expected e.g. 'UniTac-NV Dataset/hexagonal_PLA/xela/sensor_data_*.csv' (see docs/import.md)",
         )
     console.print("")
+    outcomes = _show_totals(console, result)
+    failed = outcomes.count("failed")
+    if failed:
+        raise DataError(
+            f"{failed} of {len(outcomes)} files could not be imported (see above)",
+            hint="the rest was imported; fix or remove those files and rerun to add them",
+        )
+
+
+def _show_file(console: Console, report: FileReport) -> None:
+    """One imported (or skipped) file and what was dropped from it."""
+    where = f"{report.relative} -> {report.object_id}__{report.sensor}"
+    if report.outcome == "imported":
+        line = (
+            f"  {where}: {report.presses_found} presses found, {report.complete} complete, "
+            f"{report.targets_matched} targets matched, {report.written} written"
+        )
+        if report.already_written:
+            line += f" ({report.already_written} already there from an interrupted run)"
+        console.print(line)
+    else:
+        console.print(f"  {where}: {report.outcome}: {report.message}")
+    if report.bad_rows:
+        listed = ", ".join(f"row {row} ({reason})" for row, reason in report.bad_rows[:5])
+        more = f" and {len(report.bad_rows) - 5} more" if len(report.bad_rows) > 5 else ""
+        console.print(f"    {len(report.bad_rows)} rows could not be parsed and were dropped: {listed}{more}")
+    for text in report.duplicates:
+        console.print(f"    dropped {text}")
+    for note in report.notes:
+        console.print(f"    note: {note}")
+
+
+def _show_totals(console: Console, result: ImportReport) -> list[str]:
+    """One line per session written and the totals; -> the outcome of every file."""
     total_presses = total_complete = total_matched = total_targets = 0
     for s in result.sessions:
         if not s.path.exists():
@@ -103,9 +122,4 @@ def import_unitac_nv_command(
         console.print(f"{len(result.superseded)} processed files not used: their sessions have raw files")
     if result.ignored:
         console.print(f"{len(result.ignored)} files ignored (not UniTac-NV sessions), e.g. {result.ignored[0]}")
-    failed = outcomes.count("failed")
-    if failed:
-        raise DataError(
-            f"{failed} of {len(outcomes)} files could not be imported (see above)",
-            hint="the rest was imported; fix or remove those files and rerun to add them",
-        )
+    return outcomes

@@ -1,8 +1,10 @@
 """``unitac-rig probe``: read a few frames from one device to check it is wired up (or try a simulated one).
 
-``probe uskin --can-interface socketcan --can-channel can0``, ``probe uskin --xela-server ws://HOST:5000`` and
-``probe papillarray --port /dev/ttyACM0`` print a taxel map of the last frame, or one JSON object per frame with
-``--json``. ``--simulated`` starts the matching simulated device with a synthetic press, so a newcomer can try the
+Every registered sensor (:mod:`unitac_rig.rig.sensors`) is a ``probe <sensor>`` command whose options are the
+fields of its rig-file tables, so ``probe uskin --can-interface socketcan --can-channel can0``, ``probe uskin
+--xela-server ws://HOST:5000`` and ``probe papillarray --port /dev/ttyACM0`` open the driver the rig file would, and
+a new sensor is probed with no edit here. They print a taxel map of the last frame, or one JSON object per frame with
+``--json``. ``--simulated`` starts the sensor's simulated device with a synthetic press, so a newcomer can try the
 command with no hardware. A port that is not there, or a device that sends nothing within ``--timeout``, ends with
 one error line and exit status 1.
 """
@@ -10,28 +12,27 @@ one error line and exit status 1.
 from __future__ import annotations
 
 import contextlib
-import itertools
+import functools
+import inspect
 import json
-from collections.abc import Iterator
-from typing import Any
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, Literal, Protocol, cast, get_args, get_origin
 
 import numpy as np
 import typer
+from pydantic import ValidationError
+from pydantic.fields import FieldInfo
 from rich.console import Console
 from rich.table import Table
+from typer.models import CommandInfo
 
 from drivers.frames import TactileFrame
-from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
-from drivers.sensor import SensorHealth
+from drivers.layouts import SensorLayout
+from drivers.sensor import SensorHealth, TactileSensor
+from unitac_rig.cli.help import PlainCommand
 from unitac_rig.errors import UsageError
-
-probe_app = typer.Typer(
-    name="probe",
-    help="Read a few frames from one device (uSkin, PapillArray, UR5e) to check it is connected.",
-    no_args_is_help=True,
-)
-
-_sim_channels = itertools.count(1)
+from unitac_rig.rig.sensors import SENSORS, SensorConfigBase, SensorSpec
 
 FRAMES_OPTION = typer.Option(10, "--frames", min=1, help="How many frames to read.")
 JSON_OPTION = typer.Option(False, "--json", help="Print one JSON object per frame instead of a taxel map.")
@@ -123,104 +124,183 @@ def _run_probe(driver: Any, layout: SensorLayout, n_frames: int, as_json: bool, 
         _print_map(Console(), frames, layout, health)
 
 
-# ---- uSkin ---------------------------------------------------------------------------------------------------------
+# ---- one command per registered sensor -------------------------------------------------------------------------
 
 
-@contextlib.contextmanager
-def _simulated_uskin(
-    can_interface: str | None, xela_server: str | None, controller_id: int, sensor_number: int
-) -> Iterator[tuple[str | None, str | None, str | None]]:
-    """Start the simulated device for ``probe uskin --simulated``; yields (can interface, channel, server url)."""
-    from unitac_rig.sim.devices import SimSlcanAdapter, SimXelaController
-    from unitac_rig.sim.devices.xela_server import SimXelaServer
-    from unitac_rig.sim.synthetic_sources import synthetic_press
+class SimulatedProbe(Protocol):
+    """A sensor's simulated side as ``probe --simulated`` uses it (see sim/fast_sensors.py)."""
 
-    source = synthetic_press(USKIN.name)
-    if xela_server is not None:
-        with SimXelaServer(source=source, sensor_number=sensor_number) as server:
-            yield None, None, server.url
-        return
-    can_channel = f"unitac-probe-sim-{next(_sim_channels)}"
-    with SimXelaController(can_channel, controller_id=controller_id, source=source):
-        if can_interface == "slcan":
-            with SimSlcanAdapter(can_channel) as adapter:
-                yield "slcan", adapter.url, None
-        else:
-            yield "virtual", can_channel, None
+    def probe(self, options: Mapping[str, Any], stack: contextlib.ExitStack) -> TactileSensor:
+        """The real driver on a simulated device streaming a synthetic press, set up as ``options`` (the probe
+        options given, by config field name) say; ``stack`` closes the device."""
+        ...
 
 
-@probe_app.command("uskin")
-def probe_uskin(
-    can_interface: str | None = typer.Option(
-        None, "--can-interface", help="python-can interface: socketcan, slcan, pcan, virtual..."
-    ),
-    can_channel: str | None = typer.Option(None, "--can-channel", help="CAN channel: can0, /dev/ttyUSB0, ..."),
-    controller_id: int = typer.Option(1, "--controller-id", min=0, max=15, help="XELA controller id (0..15)."),
-    xela_server: str | None = typer.Option(
-        None, "--xela-server", help="Read through xela_server instead of CAN, e.g. ws://127.0.0.1:5000."
-    ),
-    sensor_number: int = typer.Option(1, "--sensor-number", min=1, help="Sensor number in xela_server's data."),
-    frames: int = FRAMES_OPTION,
-    as_json: bool = JSON_OPTION,
-    timeout: float = TIMEOUT_OPTION,
-    simulated: bool = SIMULATED_OPTION,
-) -> None:
-    """Read frames from a XELA uSkin uSPa46 over CAN or xela_server (raw counts)."""
-    from drivers.uskin import UskinCanDriver, UskinXelaServerDriver, open_can_bus
+@dataclass(frozen=True)
+class ProbeOption:
+    """One field of a sensor's rig-file table as a probe option: ``--can-channel``, or the field's ``cli`` name."""
 
-    if xela_server is not None and (can_interface is not None or can_channel is not None):
-        raise UsageError("give either --xela-server or --can-interface/--can-channel, not both")
-    if not simulated and xela_server is None and (can_interface is None or can_channel is None):
-        raise UsageError(
-            "probe uskin needs --can-interface and --can-channel, or --xela-server",
-            hint="e.g. --can-interface socketcan --can-channel can0, or add --simulated to try it without hardware",
+    field: str
+    flag: str
+    kind: type
+    info: FieldInfo
+    tables: tuple[type[SensorConfigBase], ...]  # the tables that have this field
+
+    def typer_option(self) -> Any:
+        """The option, unset by default (the table's own default applies); grouped under its table's ``type``."""
+        bounds: dict[str, Any] = {}
+        for constraint in self.info.metadata:  # pydantic's ge / le: the range the help shows and typer checks
+            if getattr(constraint, "ge", None) is not None:
+                bounds["min"] = constraint.ge
+            if getattr(constraint, "le", None) is not None:
+                bounds["max"] = constraint.le
+        default = None if self.info.is_required() else self.info.default
+        return typer.Option(
+            None,
+            self.flag,
+            help=self.info.description or "",
+            show_default=False if default is None else str(default),
+            rich_help_panel=None if len(self.tables) > 1 else str(self.tables[0].model_fields["type"].default),
+            **bounds,
         )
-    with contextlib.ExitStack() as stack:
-        if simulated:
-            can_interface, can_channel, xela_server = stack.enter_context(
-                _simulated_uskin(can_interface, xela_server, controller_id, sensor_number)
-            )
-        if xela_server is not None:
-            driver: Any = UskinXelaServerDriver(
-                xela_server, sensor_number=sensor_number, connect_timeout_s=min(timeout, 5.0)
-            )
-        else:
-            assert can_interface is not None and can_channel is not None
-            options = {"sleep_after_open": 0} if simulated and can_interface == "slcan" else {}
-            bus = open_can_bus(can_interface, can_channel, **options)
-            driver = UskinCanDriver(bus, controller_id=controller_id, owns_bus=True)
-            stack.callback(driver.disconnect)  # shuts the bus down even if connect() fails
-        _run_probe(driver, USKIN, frames, as_json, timeout)
 
 
-# ---- PapillArray ---------------------------------------------------------------------------------------------------
+def probe_options(spec: SensorSpec) -> dict[str, ProbeOption]:
+    """The probe options of a sensor: every field of every rig-file table it accepts (``type`` aside), by name."""
+    found: dict[str, list[type[SensorConfigBase]]] = {}
+    infos: dict[str, FieldInfo] = {}
+    for table in spec.config_types:
+        for name, info in table.model_fields.items():
+            if name != "type":
+                found.setdefault(name, []).append(table)
+                infos.setdefault(name, info)
+    options = {}
+    for name, tables in found.items():
+        info = infos[name]
+        extra = info.json_schema_extra if isinstance(info.json_schema_extra, dict) else {}
+        flag = str(extra.get("cli", "--" + name.replace("_", "-")))
+        annotation: Any = info.annotation
+        if get_origin(annotation) is Literal:
+            annotation = type(get_args(annotation)[0])
+        kind: type = annotation if annotation in (str, int, float, bool) else str
+        options[name] = ProbeOption(name, flag, kind, info, tuple(tables))
+    return options
 
 
-@probe_app.command("papillarray")
-def probe_papillarray(
-    port: str | None = typer.Option(None, "--port", help="Serial port or pyserial URL, e.g. /dev/ttyACM0."),
-    slot: int = typer.Option(0, "--slot", min=0, max=1, help="Sensor port on the hub (0 or 1)."),
-    rate_hz: int = typer.Option(100, "--rate-hz", help="Sampling rate to set: 100, 250, 500 or 1000 Hz."),
-    frames: int = FRAMES_OPTION,
-    as_json: bool = JSON_OPTION,
-    timeout: float = TIMEOUT_OPTION,
-    simulated: bool = SIMULATED_OPTION,
+def _choose_table(spec: SensorSpec, given: Mapping[str, Any], simulated: bool) -> type[SensorConfigBase] | None:
+    """The rig-file table the given options describe: the one holding all of them. None when several would do and
+    the device is simulated (its simulated side reads the options itself)."""
+    options = probe_options(spec)
+    tables = [t for t in spec.config_types if set(given) <= set(t.model_fields)]
+    routes = " or ".join("/".join(o.flag for o in options.values() if t in o.tables) for t in spec.config_types)
+    if not tables:
+        raise UsageError(f"give the options of one {spec.name} connection, not of two", hint=f"use {routes}")
+    if len(tables) == 1:
+        return tables[0]
+    if simulated:
+        return None
+    raise UsageError(
+        f"probe {spec.name} needs {routes}", hint="name the connection, or add --simulated to try it without hardware"
+    )
+
+
+def _config(spec: SensorSpec, table: type[SensorConfigBase], given: Mapping[str, Any]) -> SensorConfigBase:
+    """The rig-file table the options describe, validated as the rig file is (a bad value names its option)."""
+    options = probe_options(spec)
+    try:
+        return table.model_validate({"type": table.model_fields["type"].default, **given})
+    except ValidationError as exc:
+        error = exc.errors()[0]
+        option = options.get(str(error["loc"][0])) if error["loc"] else None
+        flag = option.flag if option is not None else str(error["loc"])
+        if error["type"] == "missing":
+            raise UsageError(
+                f"probe {spec.name} needs {flag}", hint="or add --simulated to try it without hardware"
+            ) from None
+        raise UsageError(f"{flag}: {error['msg']}") from None
+
+
+def probe_sensor(
+    spec: SensorSpec, given: Mapping[str, Any], frames: int, as_json: bool, timeout: float, simulated: bool
 ) -> None:
-    """Read frames from a Contactile PapillArray (pillar forces in N, displacements in mm)."""
-    from drivers.papillarray import PapillArrayDriver
+    """Read ``frames`` frames from the sensor the options (fields of its rig-file tables) point at, or from its
+    simulated device; print them as a taxel map or JSON lines."""
+    from drivers.clock import MonotonicClock
 
-    if port is None and not simulated:
-        raise UsageError("probe papillarray needs --port", hint="e.g. --port /dev/ttyACM0, or --simulated")
+    table = _choose_table(spec, given, simulated)
     with contextlib.ExitStack() as stack:
         if simulated:
-            from unitac_rig.sim.devices import SimPapillArrayHub
-            from unitac_rig.sim.synthetic_sources import synthetic_press
+            device = spec.simulated_device()
+            if not callable(getattr(device, "probe", None)):
+                raise UsageError(f"sensor {spec.name!r} has no simulated device to probe", hint="probe the hardware")
+            driver = cast(SimulatedProbe, device).probe(given, stack)
+        else:
+            assert table is not None
+            driver = spec.open_driver(_config(spec, table, given), MonotonicClock())
+            stack.callback(driver.disconnect)  # closes the transport even if connect() fails
+        _run_probe(driver, spec.layout, frames, as_json, timeout)
 
-            hub = stack.enter_context(SimPapillArrayHub(source=synthetic_press(PAPILLARRAY.name), slot=slot))
-            port = hub.url
-        assert port is not None
-        driver = PapillArrayDriver(port, slot=slot, rate_hz=rate_hz)
-        _run_probe(driver, PAPILLARRAY, frames, as_json, timeout)
+
+def _units_text(layout: SensorLayout) -> str:
+    if layout.units == "counts":
+        return "raw counts"
+    return f"forces in {layout.units}" + (", displacements in mm" if layout.has_displacement else "")
+
+
+class _SensorProbeInfo(CommandInfo):
+    """A ``probe <sensor>`` command built from the sensor registry (told apart from the fixed device commands)."""
+
+
+@functools.lru_cache(maxsize=32)
+def sensor_probe_command(spec: SensorSpec) -> CommandInfo:
+    """``probe <sensor>``: its options are the fields of the sensor's rig-file tables, plus the common ones."""
+    options = probe_options(spec)
+
+    def command(frames: int, as_json: bool, timeout: float, simulated: bool, **values: Any) -> None:
+        given = {name: value for name, value in values.items() if value is not None}
+        probe_sensor(spec, given, frames, as_json, timeout, simulated)
+
+    keyword = inspect.Parameter.KEYWORD_ONLY
+    parameters = [
+        *(inspect.Parameter(o.field, keyword, default=o.typer_option(), annotation=o.kind | None)
+          for o in options.values()),
+        inspect.Parameter("frames", keyword, default=FRAMES_OPTION, annotation=int),
+        inspect.Parameter("as_json", keyword, default=JSON_OPTION, annotation=bool),
+        inspect.Parameter("timeout", keyword, default=TIMEOUT_OPTION, annotation=float),
+        inspect.Parameter("simulated", keyword, default=SIMULATED_OPTION, annotation=bool),
+    ]  # fmt: skip
+    command.__signature__ = inspect.Signature(parameters)  # type: ignore[attr-defined]
+    command.__annotations__ = {p.name: p.annotation for p in parameters}
+    layout = spec.layout
+    tables = " or ".join(f"[{t.model_fields['type'].default}]" for t in spec.config_types)
+    text = (
+        f"Read frames from a {layout.model} ({_units_text(layout)}). The options are those of its rig-file table "
+        f"[sensors.{spec.name}], one connection: {tables}."
+    )
+    return _SensorProbeInfo(name=spec.name, callback=command, cls=PlainCommand, help=text)
+
+
+class _ProbeApp(typer.Typer):
+    """The ``probe`` group: a command per registered sensor, read from the registry whenever the CLI is built (so a
+    sensor added to the registry is probed with no edit here), then the device commands registered on it
+    (``ur5e``)."""
+
+    @property
+    def registered_commands(self) -> list[CommandInfo]:
+        devices = [c for c in self._commands if not isinstance(c, _SensorProbeInfo)]
+        self._commands[:] = [*(sensor_probe_command(spec) for spec in SENSORS.values()), *devices]
+        return self._commands
+
+    @registered_commands.setter
+    def registered_commands(self, value: list[CommandInfo]) -> None:
+        self._commands = value
+
+
+probe_app = _ProbeApp(
+    name="probe",
+    help="Read a few frames from one device (a registered tactile sensor, or the UR5e) to check it is connected.",
+    no_args_is_help=True,
+)
 
 
 def register(app: typer.Typer) -> None:

@@ -98,11 +98,12 @@ def _mounted_sensor(
         else:
             assert rig_file is not None
             config = load_rig_config(rig_file)
-        if rate_hz is not None:
-            table = config.sensors.get("papillarray")
-            if table is None:
-                raise UsageError("--rate sets the PapillArray's rate, and the rig has no PapillArray")
-            config.sensors["papillarray"] = table.model_copy(update={"rate_hz": rate_hz})
+        if rate_hz is not None:  # every sensor table with a sample rate (rate_hz) takes it: the PapillArray's
+            rated = [n for n, table in config.sensors.items() if "rate_hz" in type(table).model_fields]
+            if not rated:
+                raise UsageError("--rate sets a sensor's sample rate, and no sensor of the rig has one (rate_hz)")
+            for n in rated:
+                config.sensors[n] = config.sensors[n].model_copy(update={"rate_hz": rate_hz})
         rig = HardwareRig(config)
         try:
             name = sensor if sensor is not None else (twin.sensor if twin is not None else rig.detect_sensor())

@@ -22,6 +22,7 @@ from types import FrameType
 import typer
 
 from unitac_rig.errors import UsageError
+from unitac_rig.rig.sensors import sensor_names
 
 
 def _status_line(truth: object) -> str:
@@ -40,7 +41,9 @@ def _status_line(truth: object) -> str:
 def twin(
     object_id: str = typer.Option(..., "--object", help="Object in front of the arm, e.g. circle_pla."),
     rotation: float | None = typer.Option(None, "--rotation", help="Object rotation (deg); its first by default."),
-    sensor: str = typer.Option("uskin", "--sensor", help="Mounted sensor: uskin or papillarray."),
+    sensor: str | None = typer.Option(
+        None, "--sensor", help="Mounted sensor (a registered one).", show_default=sensor_names()[0]
+    ),
     host: str = typer.Option("127.0.0.210", "--host", help="Loopback address to serve on (127.0.0.x)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the scene and the sensors' noise."),
     uskin_via: str = typer.Option(
@@ -58,10 +61,8 @@ def twin(
 ) -> None:
     """Serve the real-time twin of the rig (controller + mounted sensor) until Ctrl-C or SIGTERM."""
     from unitac_rig.sim.twin import ControllerParams
-    from unitac_rig.sim.twin.rig import USKIN_VIA, RigTwin
+    from unitac_rig.sim.twin.rig import RigTwin
 
-    if uskin_via not in USKIN_VIA:
-        raise UsageError(f"unknown uSkin transport {uskin_via!r}", hint=f"use one of: {', '.join(USKIN_VIA)}")
     if not host.startswith("127."):
         raise UsageError(f"the twin serves on loopback only, not {host!r}", hint="use an address like 127.0.0.210")
     params = ControllerParams(protective_stop_n=protective_stop_n, unlock_delay_s=unlock_delay_s)
@@ -87,9 +88,16 @@ def twin(
     previous = {sig: signal.signal(sig, on_signal) for sig in handled}
     try:
         with RigTwin(
-            object_id, rotation_deg=rotation, sensor=sensor, host=host, seed=seed, params=params, placement=placement
+            object_id,
+            rotation_deg=rotation,
+            sensor=sensor,
+            host=host,
+            seed=seed,
+            params=params,
+            placement=placement,
+            sensor_options={"uskin": {"transport": uskin_via}},  # --uskin-via: which route the rig file names
         ) as rig:
-            text = rig.rig_file(uskin_via, tables)
+            text = rig.rig_file(tables)
             if write_rig is not None:
                 write_rig.write_text(text)
             typer.echo(text)

@@ -13,7 +13,7 @@ the controller's program stopping (the watchdog after a host stall), a lost robo
 and ``limits.max_failed_in_a_row`` presses in a row that do not complete (no contact, timeout, travel limit, force
 settled below the threshold: the object is missing, misplaced or not what the rig file says). Only a sensor that
 stalls or drops off is reconnected and its press retried, once. After any abort the arm retracts from where it is
-(:func:`~unitac_rig.collection.press.retract_from_object`), never toward a pose it did not reach; after Ctrl-C,
+(:func:`~unitac_rig.collection.transit.retract_from_object`), never toward a pose it did not reach; after Ctrl-C,
 SIGTERM or SIGHUP too, so the pad is not left loaded against the object.
 While the host writes a press or waits for the operator, the arm is at rest and :meth:`Arm.keep_alive` feeds the
 controller's watchdog. :func:`dry_run` visits every stand-off and clearance waypoint without pressing.
@@ -36,18 +36,17 @@ from drivers.arm import Arm
 from drivers.errors import ArmError, ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop
 from drivers.motion import check_controller, settle
 from drivers.sensor import TactileSensor
-from unitac_rig.collection.press import (
+from unitac_rig.collection.press import run_press, zero_wrist
+from unitac_rig.collection.streams import TickInfo
+from unitac_rig.collection.transit import (
     PressPlan,
-    TickInfo,
     check_session_plan,
     clearance_waypoints,
     make_plan,
     move_clear,
     retract_from_object,
-    run_press,
     transit_guard,
     with_standoff,
-    zero_wrist,
 )
 from unitac_rig.errors import CarriesPressRecord, SafetyLimit
 from unitac_rig.interrupts import acknowledged_interrupts, raise_if_interrupted
@@ -145,20 +144,7 @@ def collect_session(
     extraction = extraction or ExtractionSettings()
     rotations = list(obj.rotations_deg if rotations is None else rotations)
     plans = plan_presses(obj, config, rotations)
-    root_attrs: dict[str, Any] = {
-        "object": obj.id,
-        "sensor": sensor_name,
-        "simulated": rig.simulated,
-        "rig": config.name,
-        "config": config.model_dump(mode="json"),
-        "object_spec": {"id": obj.id, "shape": obj.shape, "material": obj.material, "outer_mm": obj.outer_mm},
-        "rotations_deg": [float(r) for r in rotations],
-        "planned_presses": [p.press_id for p in plans],
-        "extraction_settings": extraction.to_dict(),
-        "package_version": package_version(),
-        "git_commit": git_commit(),
-        "created_unix": time.time(),
-    }
+    root_attrs = session_attrs(rig, obj, sensor_name, rotations, plans, extraction)
     writer = SessionWriter(data_dir, obj.id, sensor_name, root_attrs)
     done = writer.finished_press_ids()
     outcome = SessionOutcome(obj.id, sensor_name, writer.path, planned=len(plans), recovery_notes=writer.recovery_notes)
@@ -218,17 +204,49 @@ def collect_session(
             if record is not None:
                 outcome.failure_streak = outcome.failure_streak + 1 if record.status != "complete" else 0
             if outcome.failure_streak >= limit:
-                outcome.stopped = (
-                    f"{limit} presses in a row did not complete (the last: {plan.press_id}, {record_reason(record)}): "
-                    f"is {obj.id} mounted at object.center_m = {list(config.object.center_m)}, press_height_m = "
-                    f"{config.object.press_height_m} as the rig file says, and is it the object named?"
-                )
+                outcome.stopped = _failed_in_a_row(config, obj, plan, record)
                 break
             if stop:
                 break
     finally:
         sensor.disconnect()
     return outcome
+
+
+def session_attrs(
+    rig: Rig,
+    obj: ObjectSpec,
+    sensor_name: str,
+    rotations: Sequence[float],
+    plans: Sequence[PressPlan],
+    extraction: ExtractionSettings,
+) -> dict[str, Any]:
+    """The session file's root attributes: what was planned, with which rig, settings and code."""
+    config = rig.config
+    return {
+        "object": obj.id,
+        "sensor": sensor_name,
+        "simulated": rig.simulated,
+        "rig": config.name,
+        "config": config.model_dump(mode="json"),
+        "object_spec": {"id": obj.id, "shape": obj.shape, "material": obj.material, "outer_mm": obj.outer_mm},
+        "rotations_deg": [float(r) for r in rotations],
+        "planned_presses": [p.press_id for p in plans],
+        "extraction_settings": extraction.to_dict(),
+        "package_version": package_version(),
+        "git_commit": git_commit(),
+        "created_unix": time.time(),
+    }
+
+
+def _failed_in_a_row(config: RigConfig, obj: ObjectSpec, plan: PressPlan, record: PressRecord | None) -> str:
+    """Why the session stopped after ``limits.max_failed_in_a_row`` presses in a row did not complete."""
+    limit = config.limits.max_failed_in_a_row
+    return (
+        f"{limit} presses in a row did not complete (the last: {plan.press_id}, {record_reason(record)}): "
+        f"is {obj.id} mounted at object.center_m = {list(config.object.center_m)}, press_height_m = "
+        f"{config.object.press_height_m} as the rig file says, and is it the object named?"
+    )
 
 
 def _first_move_and_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> dict[str, Any]:

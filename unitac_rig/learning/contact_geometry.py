@@ -12,11 +12,12 @@ Ground truth, cut from the object's outline (CAD frame, mm) as the paper describ
    from the line through the origin across the pad (the pad's plane), not from the outline's tangent there, so a
    face pressed at an angle has a sloped profile.
 
-Model: MLP 16 -> 64 -> 128 -> 64 -> 32 -> 11, ReLU and dropout (0.2 for uSkin latents, 0.3 for PapillArray, 0.2 for
-other sensors) between layers, Adam lr 5e-5, weight decay 1e-3, L1 loss (mm), 80 epochs, batch 64. Split: 10% of
-the object's approach rays go to test with all their forces, drawn at random (the paper's) or as one contiguous block
-(``GeometryConfig.split_mode``, :func:`unitac_rig.learning.data.hold_out_rays`); two (rotation, angle) keys of one
-physical ray are one unit, and the split's seed is its own (``split_seed``), apart from the MLPs' seed.
+Model: MLP 16 -> 64 -> 128 -> 64 -> 32 -> 11, ReLU and dropout (the sensor's registered ``geometry_dropout``: 0.2
+for uSkin latents, 0.3 for PapillArray) between layers, Adam lr 5e-5, weight decay 1e-3, L1 loss (mm), 80 epochs,
+batch 64. Split: 10% of the object's approach rays go to test with all their forces, drawn at random (the paper's) or
+as one contiguous block (``GeometryConfig.split_mode``, :func:`unitac_rig.learning.data.hold_out_rays`); two
+(rotation, angle) keys of one physical ray are one unit, and the split's seed is its own (``split_seed``), apart from
+the MLPs' seed.
 
 The trained MLPs are kept in the run (``geometry_estimator.pt``: tensors and plain metadata, read with
 ``weights_only=True``; ``geometry_estimator.json`` for people) and applied to new frames by :func:`predict_geometry`
@@ -53,7 +54,6 @@ log = logging.getLogger(__name__)
 
 GEOMETRY_JSON = "geometry.json"
 GEOMETRY_PNG = "geometry.png"
-DEFAULT_DROPOUT = {"uskin": 0.2, "papillarray": 0.3}
 
 
 def profile_offsets_mm(points: int = 11, span_mm: float = 14.0) -> np.ndarray:
@@ -143,14 +143,17 @@ class GeometryConfig:
     test_fraction: float = 0.1
     points: int = 11
     span_mm: float = 14.0
-    dropout: dict[str, float] = field(default_factory=lambda: dict(DEFAULT_DROPOUT))
-    other_dropout: float = 0.2
+    dropout: dict[str, float] = field(default_factory=dict)  # per sensor, over its registered geometry_dropout
+    other_dropout: float = 0.2  # a sensor the registry does not know
     split_mode: str = "random"  # "random" (the paper's), "blocked" or "corner" (data.hold_out_rays)
     gap_deg: float = DEFAULT_GAP_DEG  # blocked / corner: guard band around the test rays, out of training
     val_fraction: float = 0.0  # validation rays (for choices), taken from the training side
 
     def dropout_for(self, sensor: str) -> float:
-        return float(self.dropout.get(sensor, self.other_dropout))
+        from unitac_rig.rig.sensors import SENSORS
+
+        spec = SENSORS.get(sensor)
+        return float(self.dropout.get(sensor, spec.geometry_dropout if spec is not None else self.other_dropout))
 
 
 class StackedProfileMLP(nn.Module):

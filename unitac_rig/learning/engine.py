@@ -1,21 +1,28 @@
-"""The UniTac-NV training engine: every model of a run stacked layer by layer, gradients by autograd.
+"""The UniTac-NV model: every model of a run, for every seed, as one ``nn.Module`` with one ``state_dict``.
+
+:class:`StackedAutoencoders` holds all models of a run (UniTac-NV and the per-sensor baselines) for all seeds
+("members"); :meth:`StackedAutoencoders.network` slices one member's model out of it as an ordinary PyTorch network
+(:class:`Autoencoder`: ``nn.Linear``, ``nn.ReLU``, ``nn.Dropout``), the network that ``export-model`` writes and the
+benchmark's plain loop trains. The trainer, evaluation, translation, geometry and export all use this one model.
 
 At the paper's batch size (64) the networks are so small that PyTorch's per-operation overhead, not arithmetic, sets
 the speed of an ordinary loop (one ``nn.Module`` per model, a ``DataLoader``, an optimizer kernel per tensor, one
-random number per dropout unit). What this engine keeps to stay fast, and why:
+random number per dropout unit). What the stacked model keeps to stay fast, and why:
 
-* all models of a run (UniTac-NV and the per-sensor baselines) for all seeds ("members") are trained in lock-step:
-  each layer of a model is ONE weight parameter ``(members, in, out)`` and one bias ``(members, 1, out)``, and one
-  ``baddbmm`` runs that layer for every member, so the operation count does not grow with the number of seeds;
-* the loss is the sum over models and members of each one's loss; members share no parameter, so autograd's
-  gradient of the sum (``loss.backward()``) is each member's own gradient;
+* every layer of a model is ONE :class:`StackedLinear`: a weight parameter ``(members, in, out)`` and a bias
+  ``(members, 1, out)``, and one ``baddbmm`` runs that layer for every member, so the operation count does not grow
+  with the number of seeds;
+* the loss (:meth:`StackedAutoencoders.forward`) is the sum over models and members of each one's loss; members share
+  no parameter, so autograd's gradient of the sum (``loss.backward()``) is each member's own gradient;
 * the L1 losses of all (source, target) sensor pairs of a model are one weighted ``abs().sum()``;
 * one fused Adam step updates every parameter tensor (Adam is element-wise, so this equals a separate Adam per model);
-* a whole step's dropout masks come from one buffer on the device, drawn sparsely: the dropped positions of a
-  Bernoulli(p) sequence are the running sums of geometric gaps, so a fixed number of geometric draws per member
-  (mean + 12 sd + 50 of the binomial count, or every unit if that is fewer) gives an exact Bernoulli(p) mask unless
-  the gaps run out before the buffer's end (probability below 1e-20) - at p = 0.007 about 1/100 of the random
-  numbers of a dense mask, with no host round-trip.
+* dropout is not ``nn.Dropout``: that draws one number per unit from the global generator, so members would share a
+  stream and a seed would train differently stacked than alone. A whole step's masks come from one buffer on the
+  device, drawn per member from the member's own generator and sparsely: the dropped positions of a Bernoulli(p)
+  sequence are the running sums of geometric gaps, so a fixed number of geometric draws per member (mean + 12 sd +
+  50 of the binomial count, or every unit if that is fewer) gives an exact Bernoulli(p) mask unless the gaps run out
+  before the buffer's end (probability below 1e-20) - at p = 0.007 about 1/100 of the random numbers of a dense
+  mask, with no host round-trip. The streams' states are the module's extra state, so ``state_dict`` carries them.
 
 Each member has its own random streams (initialisation, shuffling in :mod:`unitac_rig.learning.train`, dropout)
 derived from its own seed, so a seed trains the same whether it runs alone or stacked with others (tested).
@@ -24,8 +31,9 @@ Layout of a frame in the model: the sensor's (n_taxels, 3) frame flattened taxel
 (:class:`unitac_rig.learning.data.Normaliser`); the decoder of a group outputs the concatenation of its sensors'
 frames in the group's sensor order.
 
-Why one module of ~700 lines: the stacked layers, the dropout masks, the masked loss, frozen layers and the
-checkpoint state all index one (member, layer) layout; apart, each piece would have to re-explain that layout.
+Why one module of ~800 lines: the stacked layers, the dropout masks, the masked loss, frozen layers, the checkpoint
+state and the plain per-member network all index one (member, layer) layout; apart, each piece would have to
+re-explain that layout.
 """
 
 from __future__ import annotations
@@ -33,97 +41,42 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Collection, Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import torch
+from torch import nn
 
 from unitac_rig.errors import ModelError
+from unitac_rig.learning.network import (
+    UNITAC_GROUP,
+    Autoencoder,
+    GroupSpec,
+    ModelShape,
+    baseline_name,
+    default_groups,
+    head_part,
+)
+
+__all__ = [
+    "UNITAC_GROUP",
+    "Autoencoder",
+    "GroupSpec",
+    "ModelShape",
+    "StackedAutoencoders",
+    "StackedLinear",
+    "baseline_name",
+    "default_groups",
+    "head_part",
+]
 
 log = logging.getLogger(__name__)
-
-UNITAC_GROUP = "unitac"
 
 # Sparse dropout draws this many geometric gaps beyond the binomial mean (in standard deviations, plus a constant),
 # which makes running out before the end of the mask buffer rarer than 1e-20 (Chernoff bound).
 _GAP_MARGIN_SD = 12.0
 _GAP_MARGIN_ABS = 50
-
-
-@dataclass(frozen=True)
-class ModelShape:
-    """Layer widths and dropout of every autoencoder (the paper's values by default)."""
-
-    encoder_hidden: tuple[int, ...] = (64, 48)
-    latent_dim: int = 16
-    decoder_hidden: tuple[int, ...] = (64, 96)
-    dropout: float = 0.007
-    # beyond the paper: weight of a scale-free alignment term (matched / shifted-partner latent L1) in the loss
-    align_weight: float = 0.0
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> ModelShape:
-        return cls(
-            encoder_hidden=tuple(int(x) for x in d["encoder_hidden"]),
-            latent_dim=int(d["latent_dim"]),
-            decoder_hidden=tuple(int(x) for x in d["decoder_hidden"]),
-            dropout=float(d["dropout"]),
-            align_weight=float(d.get("align_weight", 0.0)),
-        )
-
-
-@dataclass(frozen=True)
-class GroupSpec:
-    """One autoencoder: an encoder per sensor in ``sensors`` and one decoder that outputs all of them.
-
-    UniTac-NV is the group of every sensor; a per-sensor baseline is a group of one.
-    """
-
-    name: str
-    sensors: tuple[str, ...]
-    # The decoder's output layers, each for some of ``sensors`` (in order); () means one layer for all of them. A
-    # sensor added to a trained model gets its own output layer (its "head") beside the frozen original one.
-    heads: tuple[tuple[str, ...], ...] = ()
-
-    def __post_init__(self) -> None:
-        if self.heads and tuple(s for head in self.heads for s in head) != tuple(self.sensors):
-            raise ModelError(f"group {self.name}: heads {self.heads} do not list its sensors {self.sensors} in order")
-
-    @property
-    def output_heads(self) -> tuple[tuple[str, ...], ...]:
-        return self.heads or (tuple(self.sensors),)
-
-    def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"name": self.name, "sensors": list(self.sensors)}
-        if len(self.output_heads) > 1:
-            out["heads"] = [list(head) for head in self.heads]
-        return out
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> GroupSpec:
-        heads = tuple(tuple(str(s) for s in head) for head in d.get("heads") or ())
-        return cls(str(d["name"]), tuple(str(s) for s in d["sensors"]), heads if len(heads) > 1 else ())
-
-
-def head_part(head: Sequence[str], index: int) -> str:
-    """Layer-key part of a decoder output layer: ``dec`` for the first (the original model's), ``head_<sensors>``
-    for a head added later, so a trained model's keys never change when a sensor is added."""
-    return "dec" if index == 0 else "head_" + "+".join(head)
-
-
-def baseline_name(sensor: str) -> str:
-    return f"ae_{sensor}"
-
-
-def default_groups(sensors: Sequence[str], baselines: bool) -> list[GroupSpec]:
-    groups = [GroupSpec(UNITAC_GROUP, tuple(sensors))]
-    if baselines:
-        groups += [GroupSpec(baseline_name(s), (s,)) for s in sensors]
-    return groups
 
 
 def _stream_seed(seed: int, stream: int) -> int:
@@ -176,11 +129,35 @@ def _alignment_term(latents: Sequence[torch.Tensor], present: torch.Tensor | Non
     return torch.stack(terms).mean(dim=0)
 
 
-class StackedAutoencoders:
-    """Every group x member of a run, trained in lock-step.
+class StackedLinear(nn.Module):
+    """``members`` independent ``nn.Linear`` layers of one shape, run by one ``baddbmm``: ``weight`` (members, in,
+    out) and ``bias`` (members, 1, out). Member ``m`` computes ``x @ weight[m] + bias[m]``, i.e. ``nn.Linear`` with
+    ``weight[m].T``."""
+
+    def __init__(self, members: int, fan_in: int, fan_out: int, device: torch.device) -> None:
+        super().__init__()
+        self.weight = nn.Parameter(torch.zeros(members, fan_in, fan_out, device=device))
+        self.bias = nn.Parameter(torch.zeros(members, 1, fan_out, device=device))
+
+    def forward(self, h: torch.Tensor) -> torch.Tensor:
+        """(members, rows, in) -> (members, rows, out)."""
+        return torch.baddbmm(self.bias, h, self.weight)
+
+    def copy_into(self, linear: nn.Linear, member: int, columns: slice = slice(None)) -> nn.Linear:
+        """Member ``member``'s layer (optionally only some output ``columns``) written into ``linear``."""
+        with torch.no_grad():
+            linear.weight.copy_(self.weight[member, :, columns].T)
+            linear.bias.copy_(self.bias[member, 0, columns])
+        return linear
+
+
+class StackedAutoencoders(nn.Module):
+    """Every group x member of a run, trained in lock-step: one ``nn.Module`` whose ``layers`` (a ``ModuleDict`` of
+    :class:`StackedLinear`, keyed ``<group>/<part>/<index>``) are all its parameters.
 
     ``feature_dims``: sensor -> flattened frame length (n_taxels * 3), in the run's sensor order.
     ``seeds``: one per member; member ``m`` is initialised and dropped out from ``seeds[m]`` alone.
+    Build it on its device (``device``): ``.to()`` would leave its dropout streams and caches behind.
     """
 
     def __init__(
@@ -196,6 +173,7 @@ class StackedAutoencoders:
     ) -> None:
         """``frozen``: layer keys that are never trained (their tensors do not require gradients and the optimizer
         does not hold them), as when a sensor is added to a trained model (:meth:`with_new_sensor`)."""
+        super().__init__()
         if not seeds:
             raise ModelError("at least one seed is needed")
         if not 0.0 <= shape.dropout < 1.0:
@@ -213,18 +191,21 @@ class StackedAutoencoders:
                 raise ModelError(f"group {group.name} names unknown sensor(s) {unknown}")
 
         self._layers = {layer.key: layer for layer in self._layer_plan()}
-        dev, m = self.device, self.members
-        self.weights = {
-            k: torch.zeros(m, n.fan_in, n.fan_out, device=dev, requires_grad=True) for k, n in self._layers.items()
-        }
-        self.biases = {k: torch.zeros(m, 1, n.fan_out, device=dev, requires_grad=True) for k, n in self._layers.items()}
+        dotted = sorted({name for g in self.groups for name in (g.name, *g.sensors) if "." in name})
+        if dotted:  # a state_dict key is "layers.<group>/<part>/<index>.weight": a dot would make it ambiguous
+            raise ModelError(f"model and sensor names cannot contain a dot: {', '.join(dotted)}")
+        self.layers = nn.ModuleDict(
+            {k: StackedLinear(self.members, n.fan_in, n.fan_out, self.device) for k, n in self._layers.items()}
+        )
+        # plain dicts of the same Parameter objects: the hot loop looks them up without nn.Module's __getattr__
+        self.weights: dict[str, nn.Parameter] = {k: layer.weight for k, layer in self._stacked().items()}
+        self.biases: dict[str, nn.Parameter] = {k: layer.bias for k, layer in self._stacked().items()}
         unknown_frozen = sorted(set(frozen) - set(self._layers))
         if unknown_frozen:
             raise ModelError(f"cannot freeze unknown layer(s) {unknown_frozen}")
         self.frozen = frozenset(frozen)
         for key in self.frozen:
-            self.weights[key].requires_grad_(False)
-            self.biases[key].requires_grad_(False)
+            self.layers[key].requires_grad_(False)
         self._plan = self._forward_plan()
         self._trained_plan = [g for g in self._plan if self._trains(g)]
         self._pair_masks = {g.spec.name: self._pair_mask(g) for g in self._plan}
@@ -236,6 +217,9 @@ class StackedAutoencoders:
         ]
         if initialise:
             self._initialise()
+
+    def _stacked(self) -> dict[str, StackedLinear]:
+        return {key: layer for key, layer in self.layers.items() if isinstance(layer, StackedLinear)}
 
     # ---- structure -------------------------------------------------------------------------------------------
     def group(self, name: str) -> GroupSpec:
@@ -312,13 +296,10 @@ class StackedAutoencoders:
         )
         return None if bool(on.all()) else on.to(self.device)
 
-    def parameters(self) -> list[torch.Tensor]:
-        """Every parameter tensor, in the fixed order (per layer: weight, bias)."""
-        return [p for key in self._layers for p in (self.weights[key], self.biases[key])]
-
     def trainable_parameters(self) -> list[torch.Tensor]:
-        """The parameters that are not frozen, in :meth:`parameters`' order: what the optimizer state refers to."""
-        return [p for key in self._layers if key not in self.frozen for p in (self.weights[key], self.biases[key])]
+        """The parameters that are not frozen, in ``parameters()``' order (per layer: weight, bias): what the
+        optimizer state refers to."""
+        return [p for p in self.parameters() if p.requires_grad]
 
     @property
     def theta(self) -> torch.Tensor:
@@ -415,6 +396,27 @@ class StackedAutoencoders:
         outs = [torch.baddbmm(self.biases[key], h, self.weights[key]) for key in group.heads]
         return outs[0] if len(outs) == 1 else torch.cat(outs, dim=-1)
 
+    def forward(
+        self,
+        batch: torch.Tensor,
+        masks: Mapping[str, torch.Tensor] | None = None,
+        present: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """The loss of every (group, member), a (groups, members) tensor (0 for a wholly frozen group), on ``batch``
+        (members, B, sum of feature dims), normalised, sensor order.
+
+        Loss per group: sum over (source, target) sensor pairs of the MAE of target's frame reconstructed from the
+        source's latent. ``masks`` (from :meth:`draw_masks`) are the dropout masks; None runs without dropout.
+        ``present`` (members, B, sensors) is 1.0 where a row has that sensor's frame and 0.0 where the contact was not
+        recorded with it (the frame's columns must then hold finite filler, e.g. 0): each pair's MAE is then taken
+        over the rows that have both sensors (the masked loss). Pairs and groups whose layers are all frozen are left
+        out.
+        """
+        zero = torch.zeros(self.members, device=self.device)
+        return torch.stack(
+            [self._group_loss(g, batch, masks, present) if g in self._trained_plan else zero for g in self._plan]
+        )
+
     def train_step(
         self,
         batch: torch.Tensor,
@@ -422,25 +424,14 @@ class StackedAutoencoders:
         masks: Mapping[str, torch.Tensor] | None = None,
         present: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """One optimisation step on ``batch`` (members, B, sum of feature dims), normalised, sensor order.
-
-        Loss per group: sum over (source, target) sensor pairs of the MAE of target's frame reconstructed from the
-        source's latent. ``masks`` (from :meth:`draw_masks`) replaces this step's own draw. ``present``
-        (members, B, sensors) is 1.0 where a row has that sensor's frame and 0.0 where the contact was not recorded
-        with it (the frame's columns must then hold finite filler, e.g. 0): each pair's MAE is then taken over the
-        rows that have both sensors (the masked loss). Pairs and groups whose layers are all frozen are left out.
-        Returns the loss of every (group, member) as a detached (groups, members) tensor (0 for a frozen group);
-        the gradients stay in the parameters' ``.grad``.
-        """
-        rows = batch.shape[1]
-        if masks is None:
-            masks = self.draw_masks(rows)
+        """One optimisation step of every member on ``batch`` (see :meth:`forward`); in training mode (the default,
+        ``nn.Module.train()``) with this step's own dropout masks unless ``masks`` are given. Returns the detached
+        (groups, members) losses; the gradients stay in the parameters' ``.grad``."""
+        if masks is None and self.training:
+            masks = self.draw_masks(batch.shape[1])
         optimizer.zero_grad(set_to_none=True)
-        zero = torch.zeros(self.members, device=self.device)
         with torch.enable_grad():
-            losses = torch.stack(
-                [self._group_loss(g, batch, masks, present) if g in self._trained_plan else zero for g in self._plan]
-            )
+            losses = self(batch, masks, present)
             losses.sum().backward()
         optimizer.step()
         return losses.detach()
@@ -554,26 +545,30 @@ class StackedAutoencoders:
             return torch.optim.Adam(parameters, lr=lr, foreach=True)
 
     def state(self) -> dict[str, Any]:
-        """Structure, parameters and dropout streams as tensors and plain Python values (no pickled objects)."""
+        """Structure and ``state_dict`` (parameters and dropout streams) as tensors and plain Python values (no
+        pickled objects): what a checkpoint stores as ``engine``."""
         return {
             "feature_dims": dict(self.feature_dims),
             "groups": [g.to_dict() for g in self.groups],
             "seeds": list(self.seeds),
             "shape": self.shape.to_dict(),
             "frozen": sorted(self.frozen),
-            "parameters": {
-                key: {
-                    "weight": self.weights[key].detach().cpu().clone(),
-                    "bias": self.biases[key].detach().cpu().clone(),
-                }
-                for key in self._layers
+            "state_dict": {
+                k: v.detach().cpu().clone() if isinstance(v, torch.Tensor) else v for k, v in self.state_dict().items()
             },
-            "dropout_rng": {"device": self.device.type, "states": [g.get_state() for g in self._dropout_generators]},
         }
+
+    def get_extra_state(self) -> dict[str, Any]:
+        """Each member's dropout stream (so ``state_dict`` resumes the same masks), tagged with its device kind."""
+        return {"device": self.device.type, "states": [g.get_state() for g in self._dropout_generators]}
+
+    def set_extra_state(self, state: Any) -> None:
+        self._restore_dropout_streams(state)
 
     @classmethod
     def from_state(cls, state: Mapping[str, Any], device: torch.device | str = "cpu") -> StackedAutoencoders:
-        """The engine a :meth:`state` describes; also reads the flat ``theta`` of checkpoint version 1."""
+        """The model a :meth:`state` describes; also reads the per-layer ``parameters`` of checkpoint version 2 and
+        the flat ``theta`` of version 1."""
         engine = cls(
             state["feature_dims"],
             [GroupSpec.from_dict(g) for g in state["groups"]],
@@ -583,23 +578,25 @@ class StackedAutoencoders:
             initialise=False,
             frozen=[str(k) for k in state.get("frozen", ())],
         )
-        if "parameters" in state:
-            tensors = []
+        if "state_dict" in state:
+            tensors = dict(state["state_dict"])
+        elif "parameters" in state:  # version 2: {layer key: {"weight", "bias"}} and the streams beside them
+            tensors = {"_extra_state": state.get("dropout_rng")}
             for key in engine._layers:
                 layer = state["parameters"].get(key)
                 if layer is None:
                     raise ModelError(f"checkpoint has no parameters for layer {key}", hint="the file is damaged")
-                tensors += [torch.as_tensor(layer["weight"]), torch.as_tensor(layer["bias"])]
-        else:
-            tensors = engine.split_flat(torch.as_tensor(state["theta"]))
-        with torch.no_grad():
-            for target, source in zip(engine.parameters(), tensors, strict=True):
-                if source.shape != target.shape:
-                    raise ModelError(
-                        "checkpoint parameters do not match the model they describe", hint="the file is damaged"
-                    )
-                target.copy_(source)
-        engine._restore_dropout_streams(state.get("dropout_rng"))
+                tensors |= {f"layers.{key}.weight": layer["weight"], f"layers.{key}.bias": layer["bias"]}
+        else:  # version 1: one flat vector
+            names = [name for name, _ in engine.named_parameters()]
+            tensors = dict(zip(names, engine.split_flat(torch.as_tensor(state["theta"])), strict=True))
+            tensors["_extra_state"] = state.get("dropout_rng")
+        try:
+            engine.load_state_dict({k: torch.as_tensor(v) if k != "_extra_state" else v for k, v in tensors.items()})
+        except (RuntimeError, TypeError, ValueError) as exc:
+            raise ModelError(
+                "checkpoint parameters do not match the model they describe", hint="the file is damaged"
+            ) from exc
         return engine
 
     def _restore_dropout_streams(self, saved: Any) -> None:
@@ -637,6 +634,17 @@ class StackedAutoencoders:
                 single.weights[key][0].copy_(self.weights[key][index])
                 single.biases[key][0].copy_(self.biases[key][index])
         return single
+
+    def network(self, group: str, member: int, dropout: float | None = None) -> Autoencoder:
+        """Member ``member``'s model ``group`` as an ordinary PyTorch network (:class:`Autoencoder`), a copy of its
+        weights: ``dropout`` None keeps the run's (``nn.Dropout`` where this model drops out), 0 leaves it out (the
+        network ``export-model`` writes)."""
+        spec = self.group(group)
+        net = Autoencoder(self.feature_dims, spec, self.shape, dropout).to(self.device)
+        stacked = self._stacked()
+        for key, linear in net.linears().items():
+            stacked[f"{group}/{key}"].copy_into(linear, member)
+        return net
 
     def with_new_sensor(self, sensor: str, feature_dim: int, group: str = UNITAC_GROUP) -> StackedAutoencoders:
         """This engine with ``sensor`` added to ``group``: its own encoder and its own decoder output layer (head),
@@ -693,10 +701,10 @@ class StackedAutoencoders:
         return out
 
     def optimizer_state_from_flat(self, flat_state: Mapping[str, Any]) -> dict[str, Any]:
-        """An Adam ``state_dict`` of checkpoint version 1 (one flat parameter) for this engine's parameter list."""
+        """An Adam ``state_dict`` of checkpoint version 1 (one flat parameter) for this model's parameter list."""
         (moments,) = flat_state["state"].values()
         group = dict(flat_state["param_groups"][0])
-        n = len(self.parameters())
+        n = len(list(self.parameters()))
         group["params"] = list(range(n))
         exp_avg, exp_avg_sq = self.split_flat(moments["exp_avg"]), self.split_flat(moments["exp_avg_sq"])
         state = {

@@ -1,6 +1,9 @@
-"""Table I for a trained run: NMAE and SSIM per test row group (each object, all seen objects' held-out angles,
-each unseen object) for every baseline and every UniTac-NV direction, under the run's metric options; latent
-alignment (raw, scale-free and sensor mixing, after epoch 1 and at the end); ``RUN/metrics.json``.
+"""Evaluation of a trained model: :class:`Evaluator` scores every model and member on a set of rows (what training
+records per epoch on the validation and test rows), and :func:`evaluate_run` makes Table I for a run: every frame
+metric of the metric table (:data:`unitac_rig.learning.metric_table.METRICS`; NMAE and SSIM) per test row group (each
+object, all seen objects' held-out angles, each unseen object) for every baseline and every UniTac-NV direction, under
+the run's metric options; every alignment metric (raw, scale-free and sensor mixing, after epoch 1 and at the end);
+``RUN/metrics.json``.
 
 With several members (seeds) the table holds the mean over members, ``table1_std`` the standard deviation and
 ``table1_members`` each member's values.
@@ -9,19 +12,197 @@ With several members (seeds) the table holds the mean over members, ``table1_std
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
 
-from unitac_rig.learning.data import PairedDataset
-from unitac_rig.learning.metrics import MIXING_K
+from unitac_rig.errors import ModelError
+from unitac_rig.learning.data import Normaliser, PairedDataset
+from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders, baseline_name
+from unitac_rig.learning.metric_table import METRICS, alignment_metrics, frame_metrics
+from unitac_rig.learning.metrics import FrameScoring, LatentPairs, latent_l1_per_pair
 from unitac_rig.learning.paper import TABLE1_ROWS
-from unitac_rig.learning.train import Evaluator, LoadedRun, load_run, load_test_set
+from unitac_rig.learning.run import load_test_set
+
+if TYPE_CHECKING:  # train.py imports this module: its run record is only a type here
+    from unitac_rig.learning.train import LoadedRun
 
 METRICS_JSON = "metrics.json"
 ALL_SEEN = "all_seen"
+
+
+def direction_name(source: str, target: str) -> str:
+    return f"{source}_to_{target}"
+
+
+class Evaluator:
+    """Metrics of every model and member on one set of rows (validation or test): every frame metric of the metric
+    table (NMAE and SSIM) per frame in sensor units under the given metric options (:meth:`for_run`: the run's), and
+    every alignment metric of the latents (raw L1, scale-free ratio, sensor mixing)."""
+
+    @classmethod
+    def for_run(cls, run: LoadedRun, rows: PairedDataset, device: torch.device | None = None) -> Evaluator:
+        """An evaluator of ``rows`` scored under the metric options the run was configured with."""
+        return cls(
+            rows,
+            run.normaliser,
+            run.unseen_objects,
+            device or torch.device("cpu"),
+            nmae_normaliser=run.config.nmae_normaliser,
+            ssim_range=run.config.ssim_range,
+        )
+
+    def __init__(
+        self,
+        test: PairedDataset,
+        normaliser: Normaliser,
+        unseen_objects: Sequence[str],
+        device: torch.device,
+        nmae_normaliser: str = "channel_range",
+        ssim_range: str = "channel_range",
+    ):
+        self.dataset = test
+        self.sensors = test.sensors
+        self.device = device
+        self.nmae_normaliser = nmae_normaliser
+        self.ssim_range = ssim_range
+        self.options = {"nmae_normaliser": nmae_normaliser, "ssim_range": ssim_range}  # TrainConfig field -> value
+        self.inputs = {s: torch.from_numpy(normaliser.normalise(s, test.values[s])).to(device) for s in self.sensors}
+        self.targets = {s: torch.from_numpy(test.values[s]).to(device, torch.float32) for s in self.sensors}
+        self.mean = {s: torch.tensor(normaliser.mean[s], dtype=torch.float32, device=device) for s in self.sensors}
+        self.std = {s: torch.tensor(normaliser.std[s], dtype=torch.float32, device=device) for s in self.sensors}
+        self.range = {
+            s: torch.tensor(normaliser.data_range[s], dtype=torch.float32, device=device) for s in self.sensors
+        }
+        self._normaliser = normaliser
+        unseen = np.isin(test.object_id, list(unseen_objects))
+        self.subsets = {
+            "all": torch.ones(len(test), dtype=torch.bool, device=device),
+            "seen": torch.from_numpy(~unseen).to(device),
+            "unseen": torch.from_numpy(unseen).to(device),
+        }
+
+    def stats(self, sensor: str) -> dict[str, torch.Tensor]:
+        """The training statistics behind the metric options, as tensors on the device (channel range always;
+        channel std and sensor range where the run stored them)."""
+        raw = self._normaliser.metric_stats(sensor)
+        return {k: torch.as_tensor(v, dtype=torch.float32, device=self.device) for k, v in raw.items()}
+
+    def to_frames(self, sensor: str, flat: torch.Tensor) -> torch.Tensor:
+        """Normalised (..., F) -> (..., n_taxels, 3) in sensor units."""
+        return flat.reshape(*flat.shape[:-1], -1, 3) * self.std[sensor] + self.mean[sensor]
+
+    @torch.no_grad()
+    def latents(self, engine: StackedAutoencoders) -> dict[str, torch.Tensor]:
+        """UniTac-NV latents of every row, per sensor: (members, M, latent)."""
+        return {s: engine.encode(UNITAC_GROUP, s, self.inputs[s]) for s in self.sensors}
+
+    @torch.no_grad()
+    def reconstructions(self, engine: StackedAutoencoders) -> dict[str, tuple[str, torch.Tensor]]:
+        """{column: (target sensor, frames (members, M, n_taxels, 3) in sensor units)} for every UniTac-NV direction
+        ``<src>_to_<dst>`` and every baseline ``ae_<sensor>`` the run trained."""
+        out: dict[str, tuple[str, torch.Tensor]] = {}
+        latents = self.latents(engine)
+        for source in self.sensors:
+            decoded = engine.decode(UNITAC_GROUP, latents[source])
+            for target in self.sensors:
+                out[direction_name(source, target)] = (target, self.to_frames(target, decoded[target]))
+        names = {g.name for g in engine.groups}
+        for sensor in self.sensors:
+            if baseline_name(sensor) in names:
+                z = engine.encode(baseline_name(sensor), sensor, self.inputs[sensor])
+                frames = self.to_frames(sensor, engine.decode(baseline_name(sensor), z)[sensor])
+                out[baseline_name(sensor)] = (sensor, frames)
+        return out
+
+    @torch.no_grad()
+    def per_frame(self, engine: StackedAutoencoders) -> tuple[dict[str, dict[str, torch.Tensor]], torch.Tensor | None]:
+        """{column: {frame metric name: (members, M)}} for every frame metric of the table, and the mean pairwise
+        latent L1 (members, M) (None for 1 sensor).
+
+        Columns: ``<src>_to_<dst>`` for UniTac-NV, ``ae_<sensor>`` for baselines the run trained.
+        """
+        out = {
+            column: self._scores(target, frames) for column, (target, frames) in self.reconstructions(engine).items()
+        }
+        latents = self.latents(engine)
+        pairs = self.sensor_pairs()
+        distance = None
+        if pairs:
+            distance = torch.stack([latent_l1_per_pair(latents[a], latents[b]) for a, b in pairs]).mean(dim=0)
+        return out, distance
+
+    def sensor_pairs(self) -> list[tuple[str, str]]:
+        return [(a, b) for i, a in enumerate(self.sensors) for b in self.sensors[i + 1 :]]
+
+    def scoring(self, sensor: str) -> FrameScoring:
+        """What a frame metric needs to score reconstructions of ``sensor``'s frames."""
+        return FrameScoring(self.targets[sensor], self.stats(sensor), self.options)
+
+    def _scores(self, sensor: str, estimate: torch.Tensor) -> dict[str, torch.Tensor]:
+        scoring = self.scoring(sensor)
+        try:
+            return {metric.name: metric.score(estimate, scoring, None) for metric in frame_metrics()}
+        except KeyError as exc:
+            raise ModelError(
+                f"this run stored no {exc.args[0]} for {sensor} (it predates the metric options)",
+                hint="score it with the channel_range options, or retrain",
+            ) from exc
+
+    @torch.no_grad()
+    def alignment(self, engine: StackedAutoencoders, mask: torch.Tensor | None = None) -> dict[str, Any]:
+        """Per member, over the rows ``mask`` selects (all by default), every alignment metric of the table (the
+        paper's raw ``latent_l1``, the scale-free ``latent_ratio``, sensor ``mixing`` and ``mixing_expected``), each
+        averaged over sensor pairs. Empty for one sensor."""
+        pairs = self.sensor_pairs()
+        if not pairs:
+            return {}
+        latents = self.latents(engine)
+        if mask is not None:
+            latents = {s: z[:, mask] for s, z in latents.items()}
+        scored = LatentPairs([(latents[a], latents[b]) for a, b in pairs])
+        return {metric.name: metric.score(scored).tolist() for metric in alignment_metrics()}
+
+    def summary(self, engine: StackedAutoencoders) -> dict[str, Any]:
+        """Means over the subsets ("all", "seen" objects' held-out angles, "unseen" objects), per member, with the
+        latent alignment of each subset."""
+        scores, _ = self.per_frame(engine)
+        summary: dict[str, Any] = {}
+        for subset, mask in self.subsets.items():
+            if not bool(mask.any()):
+                continue
+            entry: dict[str, Any] = {
+                column: {metric: values[:, mask].mean(dim=1).tolist() for metric, values in metrics.items()}
+                for column, metrics in scores.items()
+            }
+            entry.update(self.alignment(engine, mask))
+            summary[subset] = entry
+        return summary
+
+    @torch.no_grad()
+    def metric_variants(self, engine: StackedAutoencoders, subset: str = "seen") -> dict[str, Any]:
+        """Each column's mean of every frame metric that has readings to choose from (NMAE's normalisers, SSIM's
+        ranges) under every reading, per member, on one subset: the numbers behind the choice of the metric reading
+        (docs/learning.md)."""
+        mask = self.subsets[subset]
+        if not bool(mask.any()):
+            return {}
+        out: dict[str, Any] = {"subset": subset}
+        reconstructions = self.reconstructions(engine)
+        for metric in (m for m in frame_metrics() if m.variants):
+            out[metric.name] = {}
+            for variant in metric.variants:
+                try:
+                    out[metric.name][variant] = {
+                        column: metric.score(frames, self.scoring(t), variant)[:, mask].mean(dim=1).tolist()
+                        for column, (t, frames) in reconstructions.items()
+                    }
+                except KeyError:  # a statistic this (older) run did not store
+                    continue
+        return out
 
 
 def table_rows(test: PairedDataset, unseen: tuple[str, ...]) -> list[tuple[str, np.ndarray]]:
@@ -101,8 +282,8 @@ def evaluate_run(run: LoadedRun, test: PairedDataset) -> dict[str, Any]:
         now = evaluator.alignment(run.engine, subset_mask)
         then = first_test.get(subset, {})
         alignment[subset] = {
-            key: {"first_epoch": then.get(key), "final": now[key]}
-            for key in ("latent_l1", "latent_ratio", "mixing", "mixing_expected")
+            metric.name: {"first_epoch": then.get(metric.name), "final": now[metric.name]}
+            for metric in alignment_metrics()
         }
     result: dict[str, Any] = {
         "table1": table,
@@ -115,15 +296,7 @@ def evaluate_run(run: LoadedRun, test: PairedDataset) -> dict[str, Any]:
         },
         "alignment": {
             "per_subset": alignment,
-            "definition": {
-                "latent_l1": "mean Manhattan distance between the two sensors' latents of the same test contact "
-                "(the paper's alignment measure; it also changes with the latents' scale)",
-                "latent_ratio": "mean matched L1 / mean L1 between one sensor's latent of contact i and the other's "
-                "of contact j != i (scale-free: 1 = no closer than any other contact, 0 = identical)",
-                "mixing": f"fraction of each latent's {MIXING_K} nearest neighbours (Euclidean, both sensors pooled) "
-                "that come from the other sensor, averaged over latents",
-                "mixing_expected": "the same fraction with the sensor labels shuffled (perfect mixing)",
-            },
+            "definition": {metric.name: metric.description for metric in alignment_metrics()},
             "note": "first_epoch values are the test rows scored once after epoch 1 (per member); they are never "
             "used for a choice",
         },
@@ -139,6 +312,10 @@ def evaluate_run(run: LoadedRun, test: PairedDataset) -> dict[str, Any]:
         "provenance": run.payload.get("provenance", {}),
         "preprocessing": {"scaling": config.preprocessing, "text": PREPROCESSING_TEXT[config.preprocessing]},
         "metrics": metric_description(config.nmae_normaliser, config.ssim_range),
+        "metric_table": {
+            m.name: {"label": m.label, "direction": m.direction, "units": m.units, "scope": m.scope}
+            for m in METRICS.values()
+        },
         "normaliser": NMAE_TEXT[config.nmae_normaliser],
         "config": config.to_dict(),
     }
@@ -152,7 +329,11 @@ def evaluate_run(run: LoadedRun, test: PairedDataset) -> dict[str, Any]:
 
 
 def write_metrics(run_dir: Path, run: LoadedRun | None = None, test: PairedDataset | None = None) -> dict[str, Any]:
-    run = run or load_run(run_dir)
+    """Evaluate the run in ``run_dir`` (read from disk unless given) and write ``RUN/metrics.json``."""
+    if run is None:
+        from unitac_rig.learning.train import load_run  # train.py imports this module
+
+        run = load_run(run_dir)
     test = test or load_test_set(run_dir)
     metrics = evaluate_run(run, test)
     (Path(run_dir) / METRICS_JSON).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")

@@ -3,7 +3,8 @@
 ``safetensors`` (the default: ``model.safetensors`` + ``config.json``, the Hub's layout) is written by
 :mod:`unitac_rig.learning.safetensors_export`; the formats below, one file per network, here.
 
-For every sensor of the run's UniTac-NV model, one member (seed):
+For every sensor of the run's UniTac-NV model, one member (seed), cut from that member's plain network
+(:meth:`unitac_rig.learning.engine.StackedAutoencoders.network`, the one model's own slice):
 
 * ``encoder_<sensor>``: frames ``(B, n_taxels, 3)`` in the sensor's own units -> latent ``(B, latent_dim)``;
 * ``decoder_<sensor>``: latent ``(B, latent_dim)`` -> frames ``(B, n_taxels, 3)`` in that sensor's units: the shared
@@ -36,8 +37,7 @@ import os
 import shutil
 import uuid
 import warnings
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -46,7 +46,7 @@ import torch
 from torch import nn
 
 from unitac_rig.errors import ModelError, UsageError
-from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders, head_part
+from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
 from unitac_rig.learning.run import provenance
 from unitac_rig.learning.train import LoadedRun, load_run
 
@@ -60,72 +60,60 @@ EXPORT_FORMAT = "unitac-rig/unitac-nv-export"
 EXPORT_VERSION = 1
 
 
-@dataclass(frozen=True)
-class _Linear:
-    weight: np.ndarray  # (in, out) float64, the engine's orientation
-    bias: np.ndarray  # (out,)
-
-
-def _member_layers(engine: StackedAutoencoders, member: int) -> dict[str, _Linear]:
-    """The UniTac-NV group's layers of one member, keyed ``enc_<sensor>/<i>``, ``dec/<i>``, ``head_<s>/<i>``."""
-    return {
-        key: _Linear(w.astype(np.float64), b.astype(np.float64))
-        for key, (w, b) in engine.layer_parameters(UNITAC_GROUP, member).items()
-    }
-
-
-def _sequential(layers: Sequence[_Linear], flatten: bool, unflatten_taxels: int | None) -> nn.Sequential:
-    modules: list[nn.Module] = [nn.Flatten(1)] if flatten else []
-    for index, layer in enumerate(layers):
-        linear = nn.Linear(*layer.weight.shape)
-        with torch.no_grad():
-            linear.weight.copy_(torch.from_numpy(layer.weight.T.copy()))
-            linear.bias.copy_(torch.from_numpy(layer.bias.copy()))
-        modules.append(linear)
-        if index < len(layers) - 1:
-            modules.append(nn.ReLU())
-    if unflatten_taxels is not None:
-        modules.append(nn.Unflatten(1, (unflatten_taxels, 3)))
-    return nn.Sequential(*modules).eval()
+def _folded(
+    linear: nn.Linear,
+    scale_in: np.ndarray | None,
+    shift_in: np.ndarray | None,
+    scale_out: np.ndarray | None = None,
+    shift_out: np.ndarray | None = None,
+) -> nn.Linear:
+    """A copy of ``linear`` with the normaliser folded in, computed in float64: ``W ((x - shift_in) * scale_in) + b``
+    for an input layer, ``(W z + b) * scale_out + shift_out`` for an output layer."""  # fmt: skip
+    weight = linear.weight.detach().cpu().double().numpy().T  # (in, out)
+    bias = linear.bias.detach().cpu().double().numpy()
+    if scale_in is not None and shift_in is not None:
+        weight, bias = weight * scale_in[:, None], bias - (shift_in * scale_in) @ weight
+    if scale_out is not None and shift_out is not None:
+        weight, bias = weight * scale_out[None, :], bias * scale_out + shift_out
+    out = nn.Linear(*weight.shape)
+    with torch.no_grad():
+        out.weight.copy_(torch.from_numpy(weight.T.copy()))
+        out.bias.copy_(torch.from_numpy(bias.copy()))
+    return out
 
 
 def encoder_module(
     engine: StackedAutoencoders, mean: np.ndarray, std: np.ndarray, sensor: str, member: int = 0
 ) -> nn.Sequential:
-    """``nn.Sequential``: frames (B, n_taxels, 3) in sensor units -> latent (B, latent_dim), normaliser folded in."""
-    layers = _member_layers(engine, member)
-    keys = sorted((k for k in layers if k.startswith(f"enc_{sensor}/")), key=lambda k: int(k.rsplit("/", 1)[1]))
-    if not keys:
+    """``nn.Sequential``: frames (B, n_taxels, 3) in sensor units -> latent (B, latent_dim): the member's plain
+    UniTac-NV encoder (:meth:`StackedAutoencoders.network`) with the normaliser folded into its first layer."""
+    net = engine.network(UNITAC_GROUP, member, dropout=0.0)
+    if sensor not in net.sensors:
         raise ModelError(f"the model has no encoder for {sensor!r}", hint=f"it has {', '.join(engine.sensors)}")
-    first = layers[keys[0]]
-    scale = np.tile(1.0 / np.asarray(std, dtype=np.float64), first.weight.shape[0] // 3)  # per input column
-    shift = np.tile(np.asarray(mean, dtype=np.float64), first.weight.shape[0] // 3)
-    # W' x + b' = W ((x - mean) / std) + b
-    folded = _Linear(first.weight * scale[:, None], first.bias - (shift * scale) @ first.weight)
-    return _sequential([folded, *(layers[k] for k in keys[1:])], flatten=True, unflatten_taxels=None)
+    layers = list(net.encoder(sensor).cpu())
+    first = layers[0]
+    assert isinstance(first, nn.Linear)
+    scale = np.tile(1.0 / np.asarray(std, dtype=np.float64), first.in_features // 3)  # per input column
+    shift = np.tile(np.asarray(mean, dtype=np.float64), first.in_features // 3)
+    return nn.Sequential(nn.Flatten(1), _folded(first, scale, shift), *layers[1:]).eval()
 
 
 def decoder_module(
     engine: StackedAutoencoders, mean: np.ndarray, std: np.ndarray, sensor: str, member: int = 0
 ) -> nn.Sequential:
-    """``nn.Sequential``: latent (B, latent_dim) -> frames (B, n_taxels, 3) in ``sensor``'s units: the shared
-    hidden layers, then the sensor's columns of the output layer with the de-normalisation folded in."""
-    layers = _member_layers(engine, member)
+    """``nn.Sequential``: latent (B, latent_dim) -> frames (B, n_taxels, 3) in ``sensor``'s units: the member's plain
+    shared hidden layers, then the sensor's columns of the output layer with the de-normalisation folded in."""
     spec = engine.group(UNITAC_GROUP)
     if sensor not in spec.sensors:
         raise ModelError(f"the model has no decoder output for {sensor!r}", hint=f"it has {', '.join(spec.sensors)}")
-    n_hidden = len(engine.shape.decoder_hidden)
-    trunk = [layers[f"dec/{i}"] for i in range(n_hidden)]
-    h, head = next((h, head) for h, head in enumerate(spec.output_heads) if sensor in head)
-    out_layer = layers[f"{head_part(head, h)}/{n_hidden}"]
-    start = sum(engine.feature_dims[s] for s in head[: head.index(sensor)])
-    width = engine.feature_dims[sensor]
-    columns = slice(start, start + width)
+    layers = list(engine.network(UNITAC_GROUP, member, dropout=0.0).decoder_for(sensor).cpu())
+    last = layers[-1]
+    assert isinstance(last, nn.Linear)
+    width = last.out_features
     scale = np.tile(np.asarray(std, dtype=np.float64), width // 3)
     shift = np.tile(np.asarray(mean, dtype=np.float64), width // 3)
-    # (W z + b) * std + mean
-    folded = _Linear(out_layer.weight[:, columns] * scale[None, :], out_layer.bias[columns] * scale + shift)
-    return _sequential([*trunk, folded], flatten=False, unflatten_taxels=width // 3)
+    folded = _folded(last, None, None, scale, shift)
+    return nn.Sequential(*layers[:-1], folded, nn.Unflatten(1, (width // 3, 3))).eval()
 
 
 @contextlib.contextmanager

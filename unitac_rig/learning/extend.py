@@ -36,7 +36,6 @@ import torch
 
 from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.data import (
-    MatchedSetLike,
     Normaliser,
     PairedDataset,
     build_paired_dataset,
@@ -46,6 +45,7 @@ from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
 from unitac_rig.learning.metrics import nmae_per_frame, nmae_scale, ssim_per_frame, ssim_scale
 from unitac_rig.learning.run import checkpoint_path, provenance, save_checkpoint, save_test_set
 from unitac_rig.learning.train import LoadedRun, default_threads, load_run, resolve_device
+from unitac_rig.storage.reader import MatchedSet
 
 log = logging.getLogger(__name__)
 
@@ -83,7 +83,7 @@ class ExtendOutcome:
     history: list[dict[str, Any]] = field(default_factory=list)
 
 
-def extension_dataset(sets: Sequence[MatchedSetLike], trained: Sequence[str], new_sensor: str) -> PairedDataset:
+def extension_dataset(sets: Sequence[MatchedSet], trained: Sequence[str], new_sensor: str) -> PairedDataset:
     """The contacts the new sensor shares with at least one trained sensor (partial join; sensors neither trained
     nor new are ignored)."""
     present = {s.sensor for s in sets}
@@ -203,7 +203,7 @@ def evaluate_new_sensor(
 
 def add_sensor(
     base_run: Path,
-    sets: Sequence[MatchedSetLike],
+    sets: Sequence[MatchedSet],
     new_sensor: str,
     out: Path,
     config: ExtendConfig | None = None,
@@ -232,7 +232,7 @@ def add_sensor(
 
 def _add_sensor(
     base_run: Path,
-    sets: Sequence[MatchedSetLike],
+    sets: Sequence[MatchedSet],
     new_sensor: str,
     out: Path,
     config: ExtendConfig,

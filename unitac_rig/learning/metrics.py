@@ -34,8 +34,9 @@ Latent alignment:
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from typing import Literal
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
 
 import numpy as np
 import torch
@@ -206,3 +207,117 @@ def latent_alignment_ratio(z_a: np.ndarray, z_b: np.ndarray) -> float:
 def latent_mixing(latents: Sequence[np.ndarray], k: int = MIXING_K) -> tuple[float, float]:
     """:func:`sensor_mixing` of one (M_s, d) array per sensor."""
     return sensor_mixing(_as_tensors(*latents), k=k)
+
+
+# ---- the metric table's entries ------------------------------------------------------------------------------------
+# Every metric that training, evaluation, the report and the CLI show is a :class:`Metric`; the table that lists them
+# is :data:`unitac_rig.learning.metric_table.METRICS`.
+
+
+@dataclass(frozen=True)
+class FrameScoring:
+    """What a frame metric scores: the true frames ``target`` (M, n_taxels, 3) in sensor units, the sensor's training
+    statistics ``stats`` (see :func:`nmae_scale`) and the run's metric options (``TrainConfig`` field -> value)."""
+
+    target: torch.Tensor
+    stats: Mapping[str, torch.Tensor]
+    options: Mapping[str, str]
+
+
+@dataclass
+class LatentPairs:
+    """What an alignment metric scores: per sensor pair, each sensor's latents (members, M, d) of the same contacts;
+    ``cache`` lets metrics computed together (sensor mixing and its expected value) share one computation."""
+
+    pairs: list[tuple[torch.Tensor, torch.Tensor]]
+    cache: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One metric: its name in metrics.json and the training history, how the report and the terminal label it,
+    whether higher or lower is better, its units, and its function.
+
+    ``scope`` "frame": ``score(estimate (members, M, n, 3), FrameScoring, variant) -> (members, M)``, one value per
+    reconstructed frame (``variant`` None: the run's option, see ``option``); "alignment": ``score(LatentPairs) ->
+    (members,)``, averaged over sensor pairs. ``option``/``variants``: the ``TrainConfig`` field that picks how this
+    metric is read and the readings offered (the validation's metric-variant table scores every one)."""
+
+    name: str
+    label: str
+    direction: Literal["lower", "higher"]
+    units: str
+    scope: Literal["frame", "alignment"]
+    score: Callable[..., torch.Tensor]
+    description: str
+    option: str | None = None
+    variants: tuple[str, ...] = ()
+    reference_for: str | None = None  # this is the value another metric would have at its best (shown beside it)
+
+    def better(self, a: float, b: float) -> bool:
+        """Whether ``a`` is a better value than ``b``."""
+        return a < b if self.direction == "lower" else a > b
+
+
+def _nmae(estimate: torch.Tensor, scoring: FrameScoring, variant: str | None = None) -> torch.Tensor:
+    option = variant or scoring.options.get("nmae_normaliser", "channel_range")
+    return nmae_per_frame(scoring.target, estimate, nmae_scale(option, scoring.stats, scoring.target))
+
+
+def _ssim(estimate: torch.Tensor, scoring: FrameScoring, variant: str | None = None) -> torch.Tensor:
+    option = variant or scoring.options.get("ssim_range", "channel_range")
+    return ssim_per_frame(scoring.target, estimate, ssim_scale(option, scoring.stats))
+
+
+def _latent_l1(latents: LatentPairs) -> torch.Tensor:
+    return torch.stack([latent_l1_per_pair(a, b).mean(dim=-1) for a, b in latents.pairs]).mean(dim=0)
+
+
+def _latent_ratio(latents: LatentPairs) -> torch.Tensor:
+    return torch.stack([alignment_ratio(a.cpu(), b.cpu()) for a, b in latents.pairs]).mean(dim=0)
+
+
+def _mixing_both(latents: LatentPairs) -> tuple[torch.Tensor, torch.Tensor]:
+    """(observed, expected) per member, averaged over sensor pairs; computed once for both metrics."""
+    if "mixing" not in latents.cache:
+        members = latents.pairs[0][0].shape[0]
+        per_member = [[sensor_mixing([a[m].cpu(), b[m].cpu()]) for a, b in latents.pairs] for m in range(members)]
+        observed = torch.tensor([float(np.mean([p[0] for p in pairs])) for pairs in per_member], dtype=torch.float64)
+        expected = torch.tensor([float(np.mean([p[1] for p in pairs])) for pairs in per_member], dtype=torch.float64)
+        latents.cache["mixing"] = (observed, expected)
+    result: tuple[torch.Tensor, torch.Tensor] = latents.cache["mixing"]
+    return result
+
+
+NMAE = Metric(
+    "nmae", "NMAE", "lower", "dimensionless (error / a training range)", "frame", _nmae,
+    "mean |error| per channel over a training range (the run's nmae_normaliser), mean over channels",
+    option="nmae_normaliser", variants=NMAE_NORMALISERS,
+)  # fmt: skip
+SSIM = Metric(
+    "ssim", "SSIM", "higher", "dimensionless (1 = identical)", "frame", _ssim,
+    "structural similarity over the taxel grid per channel (the run's ssim_range), mean over channels",
+    option="ssim_range", variants=SSIM_RANGES,
+)  # fmt: skip
+LATENT_L1 = Metric(
+    "latent_l1", "matched L1 (paper's)", "lower", "latent units", "alignment", _latent_l1,
+    "mean Manhattan distance between the two sensors' latents of the same test contact (the paper's alignment "
+    "measure; it also changes with the latents' scale)",
+)  # fmt: skip
+LATENT_RATIO = Metric(
+    "latent_ratio", "matched / unmatched L1", "lower", "dimensionless (1 = chance, 0 = identical)", "alignment",
+    _latent_ratio,
+    "mean matched L1 / mean L1 between one sensor's latent of contact i and the other's of contact j != i "
+    "(scale-free: 1 = no closer than any other contact, 0 = identical)",
+)  # fmt: skip
+MIXING = Metric(
+    "mixing", f"sensor mixing ({MIXING_K} NN)", "higher", "fraction of neighbours", "alignment",
+    lambda latents: _mixing_both(latents)[0],
+    f"fraction of each latent's {MIXING_K} nearest neighbours (Euclidean, both sensors pooled) that come from the "
+    "other sensor, averaged over latents",
+)  # fmt: skip
+MIXING_EXPECTED = Metric(
+    "mixing_expected", "perfect mixing", "higher", "fraction of neighbours", "alignment",
+    lambda latents: _mixing_both(latents)[1],
+    "the same fraction with the sensor labels shuffled (perfect mixing)", reference_for="mixing",
+)  # fmt: skip

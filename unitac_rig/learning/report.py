@@ -17,10 +17,18 @@ from unitac_rig.errors import UnitacError
 from unitac_rig.learning.contact_geometry import GEOMETRY_JSON
 from unitac_rig.learning.data import PairedDataset, object_shape_material
 from unitac_rig.learning.engine import UNITAC_GROUP, baseline_name
-from unitac_rig.learning.evaluate import METRICS_JSON, PREPROCESSING_TEXT, metric_description, write_metrics
+from unitac_rig.learning.evaluate import (
+    METRICS_JSON,
+    PREPROCESSING_TEXT,
+    Evaluator,
+    direction_name,
+    metric_description,
+    write_metrics,
+)
+from unitac_rig.learning.metric_table import alignment_metrics, frame_metrics
 from unitac_rig.learning.metrics import latent_mixing
 from unitac_rig.learning.paper import PAPER_TABLE1
-from unitac_rig.learning.train import Evaluator, LoadedRun, direction_name, load_run, load_test_set
+from unitac_rig.learning.train import LoadedRun, load_run, load_test_set
 from unitac_rig.plotting import draw_taxel_map, new_figure, save_figure
 
 log = logging.getLogger(__name__)
@@ -64,18 +72,19 @@ def plot_curves(history: list[dict[str, Any]], sensors: tuple[str, ...], path: P
     for spare in range(count, rows * 2):
         grid[spare // 2][spare % 2].set_visible(False)
     where = "validation" if key == "val" else "test"
+    primary = frame_metrics()[0]  # the table's first frame metric (NMAE) draws the reconstruction curves
     for ax, subset in zip(axes, subsets, strict=False):
         points = [h for h in evaluated if subset in h[key]]
         epochs = [h["epoch"] for h in points]
         for column, value in points[-1][key][subset].items():
             if not isinstance(value, dict):
                 continue
-            values = [_member_mean(h[key][subset][column]["nmae"]) for h in points]
+            values = [_member_mean(h[key][subset][column][primary.name]) for h in points]
             style = "--" if column.startswith("ae_") else "-"
             ax.plot(epochs, values, style, label=column.replace("_to_", " → "), lw=1.2)
         ax.set_yscale("log")
         ax.set_xlabel("epoch")
-        ax.set_ylabel(f"{where} NMAE")
+        ax.set_ylabel(f"{where} {primary.label}")
         ax.set_title(f"reconstruction, {subset} objects ({where})", fontsize=10)
         ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
@@ -256,7 +265,10 @@ def plot_reconstructions(run: LoadedRun, evaluator: Evaluator, rows: list[int], 
 
 
 def _cell(value: dict[str, float] | None) -> str:
-    return "–" if value is None else f"{value['nmae']:.3f} / {value['ssim']:.3f}"
+    """One Table I cell: every frame metric of the table the run scored, in the table's order (NMAE / SSIM)."""
+    if value is None:
+        return "–"
+    return " / ".join(f"{value[m.name]:.3f}" for m in frame_metrics() if m.name in value)
 
 
 def _paper_cell(row: str, column: str) -> str:
@@ -283,19 +295,24 @@ def alignment_lines(metrics: dict[str, Any]) -> list[str]:
             f"Mean Manhattan distance between matched test latents: {_fmt(latent['first_epoch'])} after epoch 1, "
             f"{_fmt(latent['final'])} after epoch {metrics['epochs']}.",
         ]
+    shown = [m for m in alignment_metrics() if any(m.name in entry for entry in per_subset.values())]
     lines = [
         "",
         "## Latent alignment (test contacts, after epoch 1 -> at the end, mean over seeds)",
         "",
-        "| contacts | matched L1 (paper's) | matched / unmatched L1 | sensor mixing (10 NN) | perfect mixing |",
-        "|---|---|---|---|---|",
+        "| contacts | " + " | ".join(m.label for m in shown) + " |",
+        "|---|" + "---|" * len(shown),
     ]
     for subset, entry in per_subset.items():
         cells = [
-            f"{_fmt(entry[k]['first_epoch'])} → {_fmt(entry[k]['final'])}"
-            for k in ("latent_l1", "latent_ratio", "mixing")
+            "–"
+            if m.name not in entry
+            else _fmt(entry[m.name]["final"])
+            if m.reference_for  # a reference value: only where training ended
+            else f"{_fmt(entry[m.name]['first_epoch'])} → {_fmt(entry[m.name]['final'])}"
+            for m in shown
         ]
-        lines.append(f"| {subset} | " + " | ".join(cells) + f" | {_fmt(entry['mixing_expected']['final'])} |")
+        lines.append(f"| {subset} | " + " | ".join(cells) + " |")
     tsne = metrics.get("tsne_mixing")
     if tsne:
         lines += [
@@ -331,10 +348,12 @@ def render_markdown(metrics: dict[str, Any], run: LoadedRun, figures: dict[str, 
         f"- unitac-rig {prov.get('package_version', '?')}, commit `{str(prov.get('git_commit', '?'))[:12]}`, "
         f"torch {prov.get('torch_version', '?')}",
         "",
-        "## Table I: NMAE / SSIM on the test set (ours, then the paper's)",
+        f"## Table I: {' / '.join(m.label for m in frame_metrics())} on the test set (ours, then the paper's)",
         "",
         f"NMAE (`{described['nmae_normaliser']}`): {described['nmae']}. SSIM (`{described['ssim_range']}`): "
-        f"{described['ssim']}. " + ("Values are means over the run's seeds." if len(metrics["seeds"]) > 1 else ""),
+        f"{described['ssim']}. "
+        + "".join(f"{m.label}: {m.description} ({m.units}). " for m in frame_metrics() if m.option is None)
+        + ("Values are means over the run's seeds." if len(metrics["seeds"]) > 1 else ""),
         "",
         "| row | contacts | " + " | ".join(c.replace("_to_", " → ") for c in columns) + " |",
         "|---|---:|" + "---|" * len(columns),

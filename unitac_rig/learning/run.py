@@ -32,7 +32,7 @@ from unitac_rig.provenance import git_commit, package_version
 CHECKPOINT_NAME = "checkpoint.pt"
 TEST_SET_NAME = "test_set.npz"
 CHECKPOINT_FORMAT = "unitac-rig/unitac-nv-run"
-CHECKPOINT_VERSION = 2  # 2: one tensor per layer (autograd engine); 1: one flat parameter vector, still read
+CHECKPOINT_VERSION = 3  # 3: the model's state_dict; 2: one tensor per layer; 1: one flat parameter vector (both read)
 
 
 def checkpoint_path(run_dir: Path) -> Path:
@@ -179,7 +179,7 @@ def check_finite(payload: dict[str, Any], path: Path) -> None:
 
     engine = payload.get("engine")
     if isinstance(engine, dict):
-        walk({k: engine[k] for k in ("parameters", "theta") if k in engine}, "engine")
+        walk({k: engine[k] for k in ("state_dict", "parameters", "theta") if k in engine}, "engine")
     walk(payload.get("normaliser"), "normaliser")
 
 

@@ -12,7 +12,7 @@ TPU, and the spread of every Table I cell over the seeds of a run.
    (TPU - PLA), and the pooled held-out frames of all PLA and all TPU seen objects.
 3. **Seed spread**: mean, standard deviation, min and max over the run's members (seeds) of every Table I cell.
 
-Metrics come from the existing code: per-frame NMAE/SSIM from :class:`unitac_rig.learning.train.Evaluator`, Table I
+Metrics come from the existing code: per-frame NMAE/SSIM from :class:`unitac_rig.learning.evaluate.Evaluator`, Table I
 rows from :func:`unitac_rig.learning.evaluate.table_rows`, the ground-truth profiles and the profile MLP from
 :mod:`unitac_rig.learning.contact_geometry`.
 
@@ -50,10 +50,10 @@ from unitac_rig.learning.contact_geometry import (
 )
 from unitac_rig.learning.data import PairedDataset, object_shape_material
 from unitac_rig.learning.engine import UNITAC_GROUP
-from unitac_rig.learning.evaluate import table_rows
+from unitac_rig.learning.evaluate import Evaluator, table_rows
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM, PAPER_TABLE1
 from unitac_rig.learning.report import table_columns
-from unitac_rig.learning.train import Evaluator, LoadedRun, load_run, load_test_set
+from unitac_rig.learning.train import LoadedRun, load_run, load_test_set
 from unitac_rig.rig.objects import ObjectSpec, get_object, interior_angles_deg, pad_side_direction
 
 log = logging.getLogger(__name__)

@@ -8,11 +8,11 @@ learning code has realistic sizes and a real cross-sensor signal to learn:
   :mod:`unitac_rig.learning.contact_geometry`); each taxel column at lateral offset x sits ``depth(x)`` mm below
   contact;
 * the pad sinks ``delta = delta10 * (F / 10 N)^(2/3)`` mm (Hertz-like; soft TPU conforms more), each taxel carries a
-  share of the normal force ``F`` proportional to ``max(0, delta - depth)^1.5``; the PapillArray's centre pillar is
-  0.3 mm proud;
+  share of the normal force ``F`` proportional to ``max(0, delta - depth)^1.5``;
 * shear along x follows the surface slope under the pad (capped at 0.4 F), spread like the normal load;
-* uSkin: counts ~ 110 counts/N normal, 60 counts/N shear, skin spreading to neighbours, 3-count noise;
-  PapillArray: newtons, 0.01 N noise; other layouts: newtons.
+* each sensor's reading of those loads is its registered :class:`~unitac_rig.rig.sensors.SyntheticResponse`
+  (uSkin: ~110 counts/N normal, 60 counts/N shear, skin spreading to neighbours, 3-count noise; PapillArray:
+  newtons, 0.01 N noise, the centre pillar 0.3 mm proud); a layout no sensor registers reads newtons.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ import numpy as np
 
 from drivers.layouts import SensorLayout
 from unitac_rig.learning.contact_geometry import OutlineGeometry, local_depth_profile
+from unitac_rig.rig.sensors import SENSORS, SyntheticResponse
 
 PAPER_TARGETS_N = tuple(float(x) for x in np.round(np.arange(4.0, 10.0 + 1e-9, 0.25), 2))
 PAPER_ANGLES_DEG = tuple(float(a) for a in range(-45, 46))
@@ -36,14 +37,15 @@ def synthetic_frame(
     layout: SensorLayout, depths_mm: np.ndarray, force_n: float, material: str, rng: np.random.Generator
 ) -> np.ndarray:
     """One tare-subtracted frame (n_taxels, 3) in the layout's units for a contact with per-column ``depths_mm``."""
+    spec = SENSORS.get(layout.name)
+    response = spec.synthetic if spec is not None else SyntheticResponse()
     cols = layout.cols
     depth = np.where(np.isnan(depths_mm), 50.0, depths_mm).astype(np.float64)
     if material.upper() == "TPU":
         depth = depth * 0.6  # a soft wall flattens against the pad
     delta = _sink_mm(material) * (force_n / 10.0) ** (2.0 / 3.0)
     grid_depth = np.tile(depth, (layout.rows, 1))  # (rows, cols): a prism is the same along y
-    if layout.name == "papillarray":
-        grid_depth[layout.rows // 2, cols // 2] -= 0.3  # the proud centre pillar
+    grid_depth[layout.rows // 2, cols // 2] -= response.proud_centre_mm  # a centre taxel that stands out
     weight = np.clip(delta - grid_depth, 0.0, None) ** 1.5
     if layout.rows > 2:
         weight[[0, -1], :] *= 0.8  # edge rows carry a little less
@@ -55,16 +57,13 @@ def synthetic_frame(
     normal = force_n * share
     shear_x = shear_total * share
     shear_y = 0.02 * force_n * share * rng.standard_normal()
-    if layout.units == "counts":
-        spread = np.array([0.2, 0.6, 0.2])
+    if response.spread:
+        spread = np.asarray(response.spread)
         for axis in (0, 1):
             normal = np.apply_along_axis(lambda v: np.convolve(v, spread, mode="same"), axis, normal)
-        frame = np.stack([60.0 * shear_x, 60.0 * shear_y, 110.0 * normal], axis=-1)
-        noise = 3.0
-    else:
-        frame = np.stack([shear_x, shear_y, normal], axis=-1)
-        noise = 0.01
-    frame = frame + rng.normal(0.0, noise, frame.shape)
+    gain_n, gain_s = response.gain_normal, response.gain_shear
+    frame = np.stack([gain_s * shear_x, gain_s * shear_y, gain_n * normal], axis=-1)
+    frame = frame + rng.normal(0.0, response.noise, frame.shape)
     return frame.reshape(layout.n_taxels, 3).astype(np.float32)
 
 

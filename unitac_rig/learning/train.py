@@ -5,8 +5,8 @@ The loop has no per-sample Python: the training rows sit on the device as one te
 shuffled index per epoch (one gather), and batches are slices of it; see :mod:`unitac_rig.learning.engine` for the
 step itself.
 
-Why one module of ~710 lines: one run's life (start, resume, epoch, evaluation, checkpoint) shares the ``_Run``
-record; the per-epoch evaluator is the piece to move out next.
+Why one module of ~530 lines: one run's life (start, resume, epoch, evaluation, checkpoint) shares the ``_Run``
+record. The scoring of a model on a set of rows is :class:`unitac_rig.learning.evaluate.Evaluator`.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -25,18 +25,10 @@ import torch
 from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.config import CONFIG_TOML, to_toml
 from unitac_rig.learning.data import PREPROCESSING, Normaliser, PairedDataset, Split, split_by_direction
-from unitac_rig.learning.engine import UNITAC_GROUP, ModelShape, StackedAutoencoders, baseline_name, default_groups
-from unitac_rig.learning.metrics import (
-    NMAE_NORMALISERS,
-    SSIM_RANGES,
-    alignment_ratio,
-    latent_l1_per_pair,
-    nmae_per_frame,
-    nmae_scale,
-    sensor_mixing,
-    ssim_per_frame,
-    ssim_scale,
-)
+from unitac_rig.learning.engine import ModelShape, StackedAutoencoders, default_groups
+from unitac_rig.learning.evaluate import Evaluator
+from unitac_rig.learning.evaluate import direction_name as direction_name  # where reports look for it
+from unitac_rig.learning.metrics import NMAE_NORMALISERS, SSIM_RANGES
 from unitac_rig.learning.run import checkpoint_path, load_checkpoint, provenance, save_checkpoint, save_test_set
 from unitac_rig.learning.run import load_test_set as load_test_set  # where reports and geometry look for it
 
@@ -148,202 +140,6 @@ def default_threads() -> int:
     """CPU threads for training: one. The matrices are tiny (64 x 99), so a second OpenMP thread costs more in
     synchronisation than it saves, and on a shared 2-core box it can be many times slower (benchmarks/)."""
     return 1
-
-
-def direction_name(source: str, target: str) -> str:
-    return f"{source}_to_{target}"
-
-
-class Evaluator:
-    """Metrics of every model and member on one set of rows (validation or test): NMAE and SSIM per frame in sensor
-    units under the given metric options (:meth:`for_run`: the run's), and the latent alignment (raw L1, scale-free
-    ratio, sensor mixing)."""
-
-    @classmethod
-    def for_run(cls, run: LoadedRun, rows: PairedDataset, device: torch.device | None = None) -> Evaluator:
-        """An evaluator of ``rows`` scored under the metric options the run was configured with."""
-        return cls(
-            rows,
-            run.normaliser,
-            run.unseen_objects,
-            device or torch.device("cpu"),
-            nmae_normaliser=run.config.nmae_normaliser,
-            ssim_range=run.config.ssim_range,
-        )
-
-    def __init__(
-        self,
-        test: PairedDataset,
-        normaliser: Normaliser,
-        unseen_objects: Sequence[str],
-        device: torch.device,
-        nmae_normaliser: str = "channel_range",
-        ssim_range: str = "channel_range",
-    ):
-        self.dataset = test
-        self.sensors = test.sensors
-        self.device = device
-        self.nmae_normaliser = nmae_normaliser
-        self.ssim_range = ssim_range
-        self.inputs = {s: torch.from_numpy(normaliser.normalise(s, test.values[s])).to(device) for s in self.sensors}
-        self.targets = {s: torch.from_numpy(test.values[s]).to(device, torch.float32) for s in self.sensors}
-        self.mean = {s: torch.tensor(normaliser.mean[s], dtype=torch.float32, device=device) for s in self.sensors}
-        self.std = {s: torch.tensor(normaliser.std[s], dtype=torch.float32, device=device) for s in self.sensors}
-        self.range = {
-            s: torch.tensor(normaliser.data_range[s], dtype=torch.float32, device=device) for s in self.sensors
-        }
-        self._normaliser = normaliser
-        unseen = np.isin(test.object_id, list(unseen_objects))
-        self.subsets = {
-            "all": torch.ones(len(test), dtype=torch.bool, device=device),
-            "seen": torch.from_numpy(~unseen).to(device),
-            "unseen": torch.from_numpy(unseen).to(device),
-        }
-
-    def stats(self, sensor: str) -> dict[str, torch.Tensor]:
-        """The training statistics behind the metric options, as tensors on the device (channel range always;
-        channel std and sensor range where the run stored them)."""
-        raw = self._normaliser.metric_stats(sensor)
-        return {k: torch.as_tensor(v, dtype=torch.float32, device=self.device) for k, v in raw.items()}
-
-    def to_frames(self, sensor: str, flat: torch.Tensor) -> torch.Tensor:
-        """Normalised (..., F) -> (..., n_taxels, 3) in sensor units."""
-        return flat.reshape(*flat.shape[:-1], -1, 3) * self.std[sensor] + self.mean[sensor]
-
-    @torch.no_grad()
-    def latents(self, engine: StackedAutoencoders) -> dict[str, torch.Tensor]:
-        """UniTac-NV latents of every row, per sensor: (members, M, latent)."""
-        return {s: engine.encode(UNITAC_GROUP, s, self.inputs[s]) for s in self.sensors}
-
-    @torch.no_grad()
-    def reconstructions(self, engine: StackedAutoencoders) -> dict[str, tuple[str, torch.Tensor]]:
-        """{column: (target sensor, frames (members, M, n_taxels, 3) in sensor units)} for every UniTac-NV direction
-        ``<src>_to_<dst>`` and every baseline ``ae_<sensor>`` the run trained."""
-        out: dict[str, tuple[str, torch.Tensor]] = {}
-        latents = self.latents(engine)
-        for source in self.sensors:
-            decoded = engine.decode(UNITAC_GROUP, latents[source])
-            for target in self.sensors:
-                out[direction_name(source, target)] = (target, self.to_frames(target, decoded[target]))
-        names = {g.name for g in engine.groups}
-        for sensor in self.sensors:
-            if baseline_name(sensor) in names:
-                z = engine.encode(baseline_name(sensor), sensor, self.inputs[sensor])
-                frames = self.to_frames(sensor, engine.decode(baseline_name(sensor), z)[sensor])
-                out[baseline_name(sensor)] = (sensor, frames)
-        return out
-
-    @torch.no_grad()
-    def per_frame(self, engine: StackedAutoencoders) -> tuple[dict[str, dict[str, torch.Tensor]], torch.Tensor | None]:
-        """{column: {"nmae"|"ssim": (members, M)}} and the mean pairwise latent L1 (members, M) (None for 1 sensor).
-
-        Columns: ``<src>_to_<dst>`` for UniTac-NV, ``ae_<sensor>`` for baselines the run trained.
-        """
-        out = {
-            column: self._scores(target, frames, self.nmae_normaliser, self.ssim_range)
-            for column, (target, frames) in self.reconstructions(engine).items()
-        }
-        latents = self.latents(engine)
-        pairs = self.sensor_pairs()
-        distance = None
-        if pairs:
-            distance = torch.stack([latent_l1_per_pair(latents[a], latents[b]) for a, b in pairs]).mean(dim=0)
-        return out, distance
-
-    def sensor_pairs(self) -> list[tuple[str, str]]:
-        return [(a, b) for i, a in enumerate(self.sensors) for b in self.sensors[i + 1 :]]
-
-    def _scores(
-        self, sensor: str, estimate: torch.Tensor, nmae_option: str, ssim_option: str
-    ) -> dict[str, torch.Tensor]:
-        target = self.targets[sensor]
-        stats = self.stats(sensor)
-        try:
-            nmae_range, ssim_range = nmae_scale(nmae_option, stats, target), ssim_scale(ssim_option, stats)
-        except KeyError as exc:
-            raise ModelError(
-                f"this run stored no {exc.args[0]} for {sensor} (it predates the metric options)",
-                hint="score it with the channel_range options, or retrain",
-            ) from exc
-        return {
-            "nmae": nmae_per_frame(target, estimate, nmae_range),
-            "ssim": ssim_per_frame(target, estimate, ssim_range),
-        }
-
-    @torch.no_grad()
-    def alignment(self, engine: StackedAutoencoders, mask: torch.Tensor | None = None) -> dict[str, Any]:
-        """Per member, over the rows ``mask`` selects (all by default): ``latent_l1`` (the paper's raw distance),
-        ``latent_ratio`` (matched / unmatched L1) and ``mixing`` / ``mixing_expected`` (nearest-neighbour sensor
-        mixing and its value for shuffled labels), each averaged over sensor pairs. Empty for one sensor."""
-        pairs = self.sensor_pairs()
-        if not pairs:
-            return {}
-        latents = self.latents(engine)
-        if mask is not None:
-            latents = {s: z[:, mask] for s, z in latents.items()}
-        members = next(iter(latents.values())).shape[0]
-        l1 = torch.stack([latent_l1_per_pair(latents[a], latents[b]).mean(dim=-1) for a, b in pairs]).mean(dim=0)
-        ratio = torch.stack([alignment_ratio(latents[a].cpu(), latents[b].cpu()) for a, b in pairs]).mean(dim=0)
-        mixing, expected = [], []
-        for m in range(members):
-            per_pair = [sensor_mixing([latents[a][m].cpu(), latents[b][m].cpu()]) for a, b in pairs]
-            mixing.append(float(np.mean([p[0] for p in per_pair])))
-            expected.append(float(np.mean([p[1] for p in per_pair])))
-        return {
-            "latent_l1": l1.tolist(),
-            "latent_ratio": ratio.tolist(),
-            "mixing": mixing,
-            "mixing_expected": expected,
-        }
-
-    def summary(self, engine: StackedAutoencoders) -> dict[str, Any]:
-        """Means over the subsets ("all", "seen" objects' held-out angles, "unseen" objects), per member, with the
-        latent alignment of each subset."""
-        scores, _ = self.per_frame(engine)
-        summary: dict[str, Any] = {}
-        for subset, mask in self.subsets.items():
-            if not bool(mask.any()):
-                continue
-            entry: dict[str, Any] = {
-                column: {metric: values[:, mask].mean(dim=1).tolist() for metric, values in metrics.items()}
-                for column, metrics in scores.items()
-            }
-            entry.update(self.alignment(engine, mask))
-            summary[subset] = entry
-        return summary
-
-    @torch.no_grad()
-    def metric_variants(self, engine: StackedAutoencoders, subset: str = "seen") -> dict[str, Any]:
-        """Each column's mean NMAE under every NMAE normaliser and SSIM under every SSIM range, per member, on one
-        subset: the numbers behind the choice of the metric reading (docs/learning.md)."""
-        mask = self.subsets[subset]
-        if not bool(mask.any()):
-            return {}
-        out: dict[str, Any] = {"subset": subset, "nmae": {}, "ssim": {}}
-        reconstructions = self.reconstructions(engine)
-        for option in NMAE_NORMALISERS:
-            try:
-                out["nmae"][option] = {
-                    column: nmae_per_frame(self.targets[t], frames, nmae_scale(option, self.stats(t), self.targets[t]))[
-                        :, mask
-                    ]
-                    .mean(dim=1)
-                    .tolist()
-                    for column, (t, frames) in reconstructions.items()
-                }
-            except KeyError:  # a statistic this (older) run did not store
-                continue
-        for option in SSIM_RANGES:
-            try:
-                out["ssim"][option] = {
-                    column: ssim_per_frame(self.targets[t], frames, ssim_scale(option, self.stats(t)))[:, mask]
-                    .mean(dim=1)
-                    .tolist()
-                    for column, (t, frames) in reconstructions.items()
-                }
-            except KeyError:
-                continue
-        return out
 
 
 @dataclass
@@ -622,6 +418,14 @@ def _resume_run(dataset: PairedDataset, run_dir: Path, epochs: int | None, devic
             f"checkpoint in {run_dir} has {len(run.shuffle_rngs)} shuffle streams for {engine.members} seeds"
         )
     return run
+
+
+def trained_on_partial_join(run_dir: Path) -> bool:
+    """Whether the run in ``run_dir`` trained on contacts some sensors did not record (so it resumes on a partial
+    join too); False when there is no run there."""
+    if not checkpoint_path(run_dir).is_file():
+        return False
+    return int(load_checkpoint(run_dir).get("dataset_summary", {}).get("partial_train_rows", 0)) > 0
 
 
 def _restored_rng(state: Mapping[str, Any]) -> np.random.Generator:

@@ -9,9 +9,10 @@ from __future__ import annotations
 import math
 import tomllib
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 from pydantic import (
+    AfterValidator,
     AliasChoices,
     BaseModel,
     BeforeValidator,
@@ -25,8 +26,7 @@ from pydantic import (
 from drivers.arm import DEFAULT_WATCHDOG_HZ
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.sensors import SENSORS, SensorConfigBase, parse_sensor_config
-
-STRATEGIES = ("guarded", "two-phase", "force-ramp")
+from unitac_rig.rig.strategies import known_strategy
 
 
 class _Strict(BaseModel):
@@ -81,7 +81,9 @@ class ObjectPlacement(_Strict):
 class PressConfig(_Strict):
     threshold_n: float = Field(10.0, gt=0, description="stop force along the press, N")
     # two-phase 15/2 mm/s: chosen from the press chart (docs/benchmarks.md, "Press strategy")
-    strategy: Literal["guarded", "two-phase", "force-ramp"] = "two-phase"
+    strategy: Annotated[str, AfterValidator(known_strategy)] = Field(
+        "two-phase", description="how the pad goes from the stand-off to the threshold: a name in rig/strategies.py"
+    )
     speed_mm_s: float = Field(2.0, gt=0, description="press speed (guarded) / slow speed (two-phase), mm/s")
     fast_speed_mm_s: float = Field(15.0, gt=0, description="approach speed before contact (two-phase, force-ramp)")
     contact_force_n: float = Field(1.0, gt=0, description="force that counts as first contact, N")

@@ -14,6 +14,7 @@ from __future__ import annotations
 import itertools
 import logging
 import zlib
+from collections.abc import Mapping
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
@@ -28,6 +29,7 @@ from unitac_rig.rig.config import RigConfig
 from unitac_rig.rig.objects import DEFAULT_OBJECT_CENTER_M, ObjectSpec
 from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation
 from unitac_rig.rig.sensors import SENSORS, SensorSpec, sensor_layout
+from unitac_rig.sim.fast_sensors import configured_sensors
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
 from unitac_rig.sim.scene import PressScene, SceneParams, TaxelLoads
 from unitac_rig.sim.signals import SensorSample, SignalSource
@@ -66,8 +68,8 @@ class SimulatedSensor(Protocol):
         ...
 
 
-def _simulated_sensor(spec: SensorSpec) -> SimulatedSensor:
-    device = spec.simulated_device()
+def _simulated_sensor(spec: SensorSpec, device: object) -> SimulatedSensor:
+    """``device`` (the spec's simulated side), checked to be one the fast twin can mount."""
     if not isinstance(device, SimulatedSensor):
         raise UsageError(
             f"sensor {spec.name!r}: {spec.simulated} is not a simulated sensor",
@@ -156,13 +158,13 @@ class SimRig(Rig):
         config: RigConfig,
         *,
         seed: int = 0,
-        papillarray_rate_hz: int = 100,
         faults: FaultPlan | None = None,
-        uskin_transport: str = "can",
+        sensor_options: Mapping[str, Mapping[str, Any]] | None = None,
     ) -> None:
-        """``faults`` damages every simulated sensor transport; ``uskin_transport`` is ``can`` (a python-can bus in
-        this process, :class:`~unitac_rig.sim.devices.lockstep_can.LockstepCanBus`) or ``slcan`` (python-can's own
-        slcan client on a ``simslcan://`` serial URL, slower)."""
+        """``faults`` damages every simulated sensor transport. ``sensor_options`` sets each sensor's simulation
+        options by name (its simulated side's fields, sim/fast_sensors.py): e.g. ``{"uskin": {"transport": "slcan"}}``
+        (python-can's own slcan client on a ``simslcan://`` serial URL instead of the in-process CAN bus),
+        ``{"papillarray": {"rate_hz": 1000}}``."""
         from unitac_rig.sim.arm import SimArm
 
         self.config = config
@@ -175,17 +177,14 @@ class SimRig(Rig):
         home = self._home_pose()
         self.sim_arm = SimArm(self.world, clock=self.clock, rng=np.random.default_rng([seed, 1]), start_pose=home)
         self._simulated: dict[str, SimulatedSensor] = {
-            name: _simulated_sensor(spec) for name, spec in SENSORS.items() if spec.simulated is not None
+            name: _simulated_sensor(SENSORS[name], device)
+            for name, device in configured_sensors(sensor_options).items()
         }
         self._models = {
             name: device.model(np.random.default_rng([seed, device.rng_stream]))
             for name, device in self._simulated.items()
         }
-        self.papillarray_rate_hz = papillarray_rate_hz
         self.faults = faults
-        if uskin_transport not in ("can", "slcan"):
-            raise UsageError(f"unknown simulated uSkin transport {uskin_transport!r}", hint="use 'can' or 'slcan'")
-        self.uskin_transport = uskin_transport
         self._devices: list[Any] = []
         self._object: ObjectSpec | None = None
         self._rotation = 0.0

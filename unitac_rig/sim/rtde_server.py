@@ -65,6 +65,7 @@ from drivers.arm import ArmState
 from drivers.errors import DeviceError
 from protocols import rtde
 from protocols.rtde import ControllerVersion, PackageType, RecipeReply
+from unitac_rig.sim.child import stop_child
 
 logger = logging.getLogger(__name__)
 
@@ -672,18 +673,7 @@ class SimURController:
     # ---- internals ------------------------------------------------------------------------------------------
 
     def _shut_down_process(self) -> None:
-        process = self._process
-        if process.stdin is not None:
-            with contextlib.suppress(OSError):
-                process.stdin.close()  # EOF on its stdin is the server's signal to stop
-        try:
-            process.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:  # pragma: no cover - the loop polls stdin at least every 50 ms
-            logger.warning("simulated UR controller process did not stop; killing it")
-            process.kill()
-            process.wait(timeout=5.0)
-        if process.stdout is not None:
-            process.stdout.close()
+        stop_child(self._process, "simulated UR controller")
         self._shared.close()
         self._file.close()
 

@@ -49,6 +49,7 @@ from drivers.layouts import SensorLayout
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.objects import DEFAULT_OBJECT_CENTER_M, MaterialSpec, ObjectSpec
 from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
+from unitac_rig.rig.sensors import SENSORS
 
 log = logging.getLogger(__name__)
 
@@ -187,11 +188,11 @@ class TaxelLoads:
 
 
 def pad_kind(layout: SensorLayout) -> str:
-    """``"skin"`` for a continuous-skin pad (uSkin), ``"pillars"`` for separate pillars (PapillArray)."""
-    if layout.name == "uskin":
-        return "skin"
-    if layout.name == "papillarray":
-        return "pillars"
+    """``"skin"`` for a continuous-skin pad, ``"pillars"`` for separate pillars: the registered sensor's ``pad``; a
+    layout no sensor registers has pillars where it reports their displacement."""
+    spec = SENSORS.get(layout.name)
+    if spec is not None:
+        return spec.pad
     return "pillars" if layout.has_displacement else "skin"
 
 
@@ -225,15 +226,17 @@ class PressScene:
         params: SceneParams | None = None,
         rng: np.random.Generator | None = None,
         placement_rng: np.random.Generator | None = None,
+        pad: str | None = None,
     ) -> None:
         """``rng`` draws the sensor mount's errors (the pad pitch); ``placement_rng`` the object's centring error,
         so that two scenes of one object placement with different sensors can share it. Without ``placement_rng``
-        both come from ``rng`` (centring first), for a scene on its own."""
+        both come from ``rng`` (centring first), for a scene on its own. ``pad``: the layout's :func:`pad_kind`
+        unless given."""
         self.obj = obj
         self.rotation_deg = float(rotation_deg)
         self.layout = layout
         self.params = params or SceneParams()
-        self.kind = pad_kind(layout)
+        self.kind = pad or pad_kind(layout)
         drag = obj.material_params.skin_drag_mm
         if drag < 0 or (drag > 0 and self.params.skin_spread_sigma_mm <= 0):
             raise ConfigError(

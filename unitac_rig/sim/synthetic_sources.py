@@ -109,15 +109,6 @@ class PapillArrayPressSource:
         return SensorSample(values=forces, displacement_mm=forces / stiffness)
 
 
-def synthetic_press(sensor: str, *, seed: int = 0, period_s: float = 2.0, peak_load_n: float = 10.0) -> SignalSource:
-    """A repeating press for ``sensor`` ("uskin" or "papillarray")."""
-    if sensor == USKIN.name:
-        return UskinPressSource(seed=seed, period_s=period_s, peak_load_n=peak_load_n)
-    if sensor == PAPILLARRAY.name:
-        return PapillArrayPressSource(seed=seed, period_s=period_s, peak_load_n=peak_load_n)
-    raise ValueError(f"no synthetic source for sensor {sensor!r}")
-
-
 class RecordingSource:
     """Wraps a source and keeps every ``(t_ns, sample)`` it handed out, so tests can compare what was sent."""
 

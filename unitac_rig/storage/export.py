@@ -10,9 +10,8 @@ An export directory holds:
 * ``manifest.json``: schema, units, counts, every session's provenance and the SHA-256 of every file
   (:mod:`unitac_rig.storage.manifest`; ``unitac-rig verify DIR`` checks it).
 
-The join itself (which contacts every sensor recorded) belongs to the learning side; the caller passes it in as
-``pair`` (the CLI passes ``unitac_rig.learning.data.build_paired_dataset``), so storage does not import learning
-and an export holds exactly the pairs ``train`` would use.
+The join (which contacts every sensor recorded) is :func:`unitac_rig.storage.paired.build_paired_dataset`, the one
+``train`` reads too, so an export holds exactly the pairs ``train`` would use.
 """
 
 from __future__ import annotations
@@ -22,10 +21,10 @@ import os
 import shutil
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -33,6 +32,7 @@ from unitac_rig.errors import DataError
 from unitac_rig.provenance import git_commit, package_version
 from unitac_rig.storage.lease import lease_holder
 from unitac_rig.storage.manifest import MANIFEST_NAME, sha256_file, write_manifest
+from unitac_rig.storage.paired import PairedDataset, build_paired_dataset
 from unitac_rig.storage.pooling import PooledSession, pool_sessions
 from unitac_rig.storage.reader import MatchedSet, load_matched_set, press_summaries, read_session_info
 from unitac_rig.storage.recorder import journal_dir
@@ -61,32 +61,6 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("session", "", "the raw session file (under raw/) the frame comes from"),
     ("simulated", "", "true when recorded on the simulated rig"),
 )
-
-
-class PairedLike(Protocol):
-    """What the export reads from the join (``unitac_rig.learning.data.PairedDataset``)."""
-
-    @property
-    def sensors(self) -> tuple[str, ...]: ...
-    @property
-    def object_id(self) -> np.ndarray: ...
-    @property
-    def rotation_deg(self) -> np.ndarray: ...
-    @property
-    def angle_deg(self) -> np.ndarray: ...
-    @property
-    def target_n(self) -> np.ndarray: ...
-    @property
-    def values(self) -> dict[str, np.ndarray]: ...
-    @property
-    def force_n(self) -> dict[str, np.ndarray]: ...
-    @property
-    def dropped_per_sensor(self) -> dict[str, int]: ...
-    def content_hash(self) -> str: ...
-    def __len__(self) -> int: ...
-
-
-PairFn = Callable[[list[MatchedSet]], PairedLike]
 
 
 @dataclass(frozen=True)
@@ -146,7 +120,7 @@ def _arrow_schema(sensors: Sequence[str], extra: dict[str, Any]) -> Any:
     return pa.schema(fields, metadata={METADATA_KEY: json.dumps(metadata).encode("utf-8")})
 
 
-def paired_table(paired: PairedLike, sessions: dict[tuple[str, str], dict[str, Any]], simulated: bool) -> Any:
+def paired_table(paired: PairedDataset, sessions: dict[tuple[str, str], dict[str, Any]], simulated: bool) -> Any:
     """The Arrow table: contact-major, one row per sensor of each contact, in ``paired.sensors`` order.
 
     ``sessions`` maps (object, sensor) to {"file", "shape", "material", "simulated"} of the session it came from.
@@ -238,7 +212,7 @@ def _prepare_out(out: Path) -> Path:
     return staging
 
 
-def export_dataset(data_dirs: Sequence[Path], out: Path, pair: PairFn) -> ExportSummary:
+def export_dataset(data_dirs: Sequence[Path], out: Path) -> ExportSummary:
     """Pool ``data_dirs``, copy the raw sessions, write the Parquet, the card and the manifest into ``out``.
 
     Built in a hidden sibling directory and renamed into place at the end, so ``out`` is either complete or absent.
@@ -262,7 +236,7 @@ def export_dataset(data_dirs: Sequence[Path], out: Path, pair: PairFn) -> Export
                             item.info.path)  # fmt: skip
             provenance.append(_session_provenance(item, copy, digest))
             sets.append(load_matched_set(copy))
-        paired = pair(sets)
+        paired = build_paired_dataset(sets)
         sensors = tuple(paired.sensors)
         by_key = {}
         for entry in provenance:
@@ -330,10 +304,26 @@ def export_dataset(data_dirs: Sequence[Path], out: Path, pair: PairFn) -> Export
 
 def render_card(doc: dict[str, Any]) -> str:
     """The dataset card (README.md): YAML front matter a dataset hub reads, then what a colleague needs to know."""
+    exported = doc["exported_by"]
+    lines = [
+        *_card_intro(doc),
+        *_card_tables(doc),
+        *_card_limits(doc),
+        "",
+        f"Exported by unitac-rig {exported['package_version']} (commit `{str(exported['git_commit'])[:12]}`) on "
+        f"{time.strftime('%Y-%m-%d %H:%M', time.localtime(doc['created_unix']))}; `{MANIFEST_NAME}` lists every file "
+        "with its SHA-256.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _card_intro(doc: dict[str, Any]) -> list[str]:
+    """The card's front matter, what the dataset is, and how to load it."""
     counts = doc["counts"]
     sensors = list(doc["sensors"])
     kind = "the simulated rig (the project's twin)" if doc["simulated"] else "a UR5e press rig"
-    lines = [
+    return [
         "---",
         "pretty_name: unitac-rig paired tactile dataset",
         "tags: [tactile, robotics, cross-sensor, unitac-rig]",
@@ -365,6 +355,12 @@ def render_card(doc: dict[str, Any]) -> str:
         "",
         "Check the copy first: `unitac-rig verify .` (every file's SHA-256 against `manifest.json`).",
         "",
+    ]
+
+
+def _card_tables(doc: dict[str, Any]) -> list[str]:
+    """The card's tables: columns, sensors, contacts per object, sessions."""
+    return [
         "## Columns",
         "",
         "| column | unit | meaning |",
@@ -388,7 +384,7 @@ def render_card(doc: dict[str, Any]) -> str:
         "",
         "| object | contacts |",
         "|---|---:|",
-        *(f"| {o} | {n} |" for o, n in counts["contacts_per_object"].items()),
+        *(f"| {o} | {n} |" for o, n in doc["counts"]["contacts_per_object"].items()),
         "",
         "## Sessions (raw recordings, HDF5, under `raw/`)",
         "",
@@ -404,13 +400,19 @@ def render_card(doc: dict[str, Any]) -> str:
         "unitac-rig's docs/dataset.md; full provenance of each session (rig, software version, commit, sensor "
         "identity, extraction settings) is in `manifest.json`.",
         "",
+    ]
+
+
+def _card_limits(doc: dict[str, Any]) -> list[str]:
+    """How the pairs were made and what they cannot be used for."""
+    lines = [
         "## How it was made, and limits",
         "",
         "- Frames are force-matched: the tactile frame nearest the moment the smoothed wrist force first crossed "
         "each target on the loading ramp, kept only when within the extraction tolerance (`error_n`).",
         "- A contact is kept only when every sensor has it (join on object, rotation, angle, target); matched frames "
         "without a partner are left out ("
-        + ", ".join(f"{s}: {n}" for s, n in counts["matched_frames_without_partner"].items())
+        + ", ".join(f"{s}: {n}" for s, n in doc["counts"]["matched_frames_without_partner"].items())
         + ").",
         "- Frames are tare-subtracted, in each sensor's own unit (uSkin raw counts are not newtons).",
         "- No train/test split is given. Do not split rows at random: the forces of one press are near-identical "
@@ -428,12 +430,4 @@ def render_card(doc: dict[str, Any]) -> str:
             "- **Simulated.** Recorded on the project's simulated rig: contact mechanics and sensor responses are "
             "models, not measurements; do not report results on it as real-sensor results."
         )
-    exported = doc["exported_by"]
-    lines += [
-        "",
-        f"Exported by unitac-rig {exported['package_version']} (commit `{str(exported['git_commit'])[:12]}`) on "
-        f"{time.strftime('%Y-%m-%d %H:%M', time.localtime(doc['created_unix']))}; `{MANIFEST_NAME}` lists every file "
-        "with its SHA-256.",
-        "",
-    ]
-    return "\n".join(lines)
+    return lines

@@ -330,10 +330,81 @@ def _sessions_of(pooled: Sequence[Any], sensor: str) -> Iterator[tuple[dict[str,
         yield session, presses
 
 
+class _DataFiles:
+    """The dataset's ``data/chunk-XXX/file-YYY.parquet`` files, written in order: a new file once one passes
+    ``DATA_FILE_SIZE_MB``, a new chunk every ``CHUNKS_SIZE`` files (LeRobot v3's layout)."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.chunk, self.file_index, self.file_bytes = 0, 0, 0
+        self.writer: Any = None
+
+    def write(self, table: Any) -> tuple[int, int]:
+        """Append one episode's table; returns the (chunk, file) index it went to."""
+        import pyarrow.parquet as pq
+
+        if self.writer is not None and self.file_bytes + table.nbytes > DATA_FILE_SIZE_MB * 1024 * 1024:
+            self.close()
+            self.file_index += 1
+            if self.file_index == CHUNKS_SIZE:
+                self.chunk, self.file_index = self.chunk + 1, 0
+        if self.writer is None:
+            path = self.root / DATA_PATH.format(chunk_index=self.chunk, file_index=self.file_index)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self.writer = pq.ParquetWriter(path, table.schema, compression="zstd")
+            self.file_bytes = 0
+        self.writer.write_table(table)
+        self.file_bytes += table.nbytes
+        return self.chunk, self.file_index
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
+            self.writer = None
+
+
+def _info_json(
+    sensor: str,
+    layout: dict[str, Any],
+    features: Sequence[_Feature],
+    targets: list[float],
+    sessions: Sequence[tuple[dict[str, Any], Any]],
+    episodes: int,
+    total: int,
+    n_tasks: int,
+    fps: int,
+) -> dict[str, Any]:
+    """``meta/info.json``: LeRobot's dataset description, with this export's own block under ``unitac_rig``."""
+    simulated = all(bool(s["simulated"]) for s, _ in sessions)
+    return {
+        "codebase_version": CODEBASE_VERSION,
+        "robot_type": "ur5e (simulated rig)" if simulated else "ur5e",
+        "total_episodes": episodes,
+        "total_frames": total,
+        "total_tasks": n_tasks,
+        "chunks_size": CHUNKS_SIZE,
+        "data_files_size_in_mb": DATA_FILE_SIZE_MB,
+        "video_files_size_in_mb": 200,
+        "fps": int(fps),
+        "splits": {"train": f"0:{episodes}"},
+        "data_path": DATA_PATH,
+        "video_path": None,
+        "features": {f.name: f.info() for f in features},
+        "unitac_rig": {
+            "format": EXPORT_FORMAT,
+            "sensor": sensor,
+            "layout": layout,
+            "fps_is": "the sensor's nominal rate (1 / median frame interval); timestamps are measured host times",
+            "targets_n": targets,
+            "simulated": simulated,
+            "sessions": [{k: s[k] for k in ("object", "file", "sha256", "source", "simulated")} for s, _ in sessions],
+        },
+    }
+
+
 def _write_sensor_dataset(root: Path, sensor: str, pooled: Sequence[Any]) -> dict[str, Any]:
     """Write ``root`` as one LeRobotDataset v3.0; returns a summary for the card and manifest."""
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
     sessions = list(_sessions_of(pooled, sensor))
     presses = [p for _, ps in sessions for p in ps]
@@ -353,7 +424,7 @@ def _write_sensor_dataset(root: Path, sensor: str, pooled: Sequence[Any]) -> dic
     tasks: dict[str, int] = {}
     episode_rows: list[dict[str, Any]] = []
     all_columns: dict[str, list[np.ndarray]] = {f.name: [] for f in features if f.dtype != "string"}
-    chunk, file_index, file_bytes, writer = 0, 0, 0, None
+    files = _DataFiles(root)
     total = 0
     try:
         for session, records in sessions:
@@ -368,19 +439,7 @@ def _write_sensor_dataset(root: Path, sensor: str, pooled: Sequence[Any]) -> dic
                 cols["task_index"] = np.full(episode.length, task_index, np.int64)
                 arrays, fields = zip(*(_column(f, cols[f.name]) for f in features), strict=True)
                 table = pa.Table.from_arrays(list(arrays), schema=pa.schema(list(fields), metadata=schema_meta))
-                if writer is not None and file_bytes + table.nbytes > DATA_FILE_SIZE_MB * 1024 * 1024:
-                    writer.close()
-                    writer = None
-                    file_index += 1
-                    if file_index == CHUNKS_SIZE:
-                        chunk, file_index = chunk + 1, 0
-                if writer is None:
-                    path = root / DATA_PATH.format(chunk_index=chunk, file_index=file_index)
-                    path.parent.mkdir(parents=True, exist_ok=True)
-                    writer = pq.ParquetWriter(path, table.schema, compression="zstd")
-                    file_bytes = 0
-                writer.write_table(table)
-                file_bytes += table.nbytes
+                chunk, file_index = files.write(table)
                 stats = {f.name: feature_stats(cols[f.name]) for f in features if f.dtype != "string"}
                 for name in all_columns:
                     all_columns[name].append(cols[name])
@@ -399,8 +458,7 @@ def _write_sensor_dataset(root: Path, sensor: str, pooled: Sequence[Any]) -> dic
                 })  # fmt: skip
                 total += episode.length
     finally:
-        if writer is not None:
-            writer.close()
+        files.close()
 
     dataset_stats = {name: feature_stats(np.concatenate(parts)) for name, parts in all_columns.items()}
     _write_episodes(root, episode_rows, by_name)
@@ -409,30 +467,7 @@ def _write_sensor_dataset(root: Path, sensor: str, pooled: Sequence[Any]) -> dic
         json.dumps({k: _stats_json(v) for k, v in dataset_stats.items()}, indent=1) + "\n", encoding="utf-8"
     )
     simulated = all(bool(s["simulated"]) for s, _ in sessions)
-    info = {
-        "codebase_version": CODEBASE_VERSION,
-        "robot_type": "ur5e (simulated rig)" if simulated else "ur5e",
-        "total_episodes": len(episode_rows),
-        "total_frames": total,
-        "total_tasks": len(tasks),
-        "chunks_size": CHUNKS_SIZE,
-        "data_files_size_in_mb": DATA_FILE_SIZE_MB,
-        "video_files_size_in_mb": 200,
-        "fps": int(fps),
-        "splits": {"train": f"0:{len(episode_rows)}"},
-        "data_path": DATA_PATH,
-        "video_path": None,
-        "features": {f.name: f.info() for f in features},
-        "unitac_rig": {
-            "format": EXPORT_FORMAT,
-            "sensor": sensor,
-            "layout": layout,
-            "fps_is": "the sensor's nominal rate (1 / median frame interval); timestamps are measured host times",
-            "targets_n": targets,
-            "simulated": simulated,
-            "sessions": [{k: s[k] for k in ("object", "file", "sha256", "source", "simulated")} for s, _ in sessions],
-        },
-    }
+    info = _info_json(sensor, layout, features, targets, sessions, len(episode_rows), total, len(tasks), fps)
     (root / "meta" / "info.json").write_text(json.dumps(info, indent=1) + "\n", encoding="utf-8")
     objects = sorted({s["object"] for s, _ in sessions})
     return {"episodes": len(episode_rows), "frames": total, "fps": int(fps), "objects": objects,

@@ -16,13 +16,14 @@ from pydantic import Field, TypeAdapter
 from drivers.layouts import SensorLayout
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.sensors import papillarray, uskin
-from unitac_rig.rig.sensors.base import DriverFactory, SensorConfigBase, SensorSpec
+from unitac_rig.rig.sensors.base import DriverFactory, SensorConfigBase, SensorSpec, SyntheticResponse
 
 __all__ = [
     "SENSORS",
     "DriverFactory",
     "SensorConfigBase",
     "SensorSpec",
+    "SyntheticResponse",
     "get_sensor",
     "parse_sensor_config",
     "sensor_layout",

@@ -10,14 +10,14 @@ from drivers.clock import Clock
 from drivers.layouts import PAPILLARRAY
 from drivers.sensor import TactileSensor
 from unitac_rig.errors import UsageError
-from unitac_rig.rig.sensors.base import SensorConfigBase, SensorSpec
+from unitac_rig.rig.sensors.base import SensorConfigBase, SensorSpec, SyntheticResponse
 
 
 class PapillArrayConfig(SensorConfigBase):
     type: Literal["papillarray"] = "papillarray"
-    port: str = Field(description="pyserial URL of the hub, e.g. /dev/ttyACM0")
-    slot: int = Field(0, ge=0, le=1, description="the hub's sensor slot")
-    rate_hz: Literal[100, 250, 500, 1000] = 100
+    port: str = Field(description="Serial port or pyserial URL of the hub, e.g. /dev/ttyACM0.")
+    slot: int = Field(0, ge=0, le=1, description="Sensor port on the hub (0 or 1).")
+    rate_hz: Literal[100, 250, 500, 1000] = Field(100, description="Sampling rate to set: 100, 250, 500 or 1000 Hz.")
 
 
 def open_papillarray(config: SensorConfigBase, clock: Clock) -> TactileSensor:
@@ -34,4 +34,7 @@ SENSOR = SensorSpec(
     config_types=(PapillArrayConfig,),
     open_driver=open_papillarray,
     simulated="unitac_rig.sim.fast_sensors:PAPILLARRAY",
+    pad="pillars",
+    geometry_dropout=0.3,
+    synthetic=SyntheticResponse(noise=0.01, proud_centre_mm=0.3),  # newtons; the centre pillar stands 0.3 mm proud
 )

@@ -175,16 +175,17 @@ def build_scene(spec: SceneSpec) -> Any:
     from pathlib import Path
 
     from unitac_rig.rig.objects import get_object
-    from unitac_rig.rig.sensors import sensor_layout
     from unitac_rig.sim.scene import PressScene
 
     obj = get_object(spec.object_id, tuple(Path(p) for p in spec.objects_files))
+    assert spec.layout is not None  # filled in when the spec was made
     return PressScene(
         obj,
         spec.rotation_deg,
-        sensor_layout(spec.sensor),
+        spec.layout,
         object_center_m=spec.true_center_m,
         rng=np.random.default_rng([spec.seed, 4]),
+        pad=spec.pad,
     )
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import json
 import logging
@@ -22,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from drivers.errors import DeviceError
+from unitac_rig.sim.child import stop_child
 from unitac_rig.sim.twin.params import CONTROLLER_PORTS, ControllerParams, SceneSpec, TwinSettings
 from unitac_rig.sim.twin.truth import TruthBlock, TwinTruth
 
@@ -243,18 +243,7 @@ class ControllerTwin:
 
     def _shut_down(self) -> None:
         self._closed = True
-        process = self._process
-        if process.stdin is not None:
-            with contextlib.suppress(OSError):
-                process.stdin.close()  # EOF on its stdin is the controller's signal to stop
-        try:
-            process.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:  # pragma: no cover - the loop polls stdin every cycle
-            logger.warning("controller twin process did not stop; killing it")
-            process.kill()
-            process.wait(timeout=5.0)
-        if process.stdout is not None:
-            process.stdout.close()
+        stop_child(self._process, "controller twin")
         self._truth.close()
         self._file.close()
 

@@ -9,6 +9,8 @@ import json
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from drivers.layouts import SensorLayout
+
 # Ports a UR controller serves; ur_rtde has no port arguments for them (hardware-facts 3.8) [S].
 DASHBOARD_PORT = 29999
 SCRIPT_PORT = 30003
@@ -66,16 +68,30 @@ class SceneSpec:
     """The press scene inside the controller (and, built the same way, behind the twin's sensors).
 
     ``center_m`` is where the rig file says the object stands; ``placement_error_m`` is how far it really is from
-    there (a test hook); ``sensor`` is the mounted pad, which shapes the contact the wrist feels.
+    there (a test hook); ``sensor`` is the mounted pad, which shapes the contact the wrist feels (the sensor
+    registry's first by default). Its ``layout`` and ``pad`` (what the scene presses: "skin" or "pillars") are
+    filled in from the registry where the spec is made and travel with it, so the controller process builds the
+    same scene without a registry of its own (a sensor registered at run time is unknown there).
     """
 
     object_id: str
     rotation_deg: float = 0.0
-    sensor: str = "uskin"
+    sensor: str | None = None
     center_m: tuple[float, float] = (-0.15, 0.625)
     seed: int = 0
     objects_files: tuple[str, ...] = ()
     placement_error_m: tuple[float, float] = (0.0, 0.0)
+    layout: SensorLayout | None = None
+    pad: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.sensor is None or self.layout is None or self.pad is None:
+            from unitac_rig.rig.sensors import get_sensor, sensor_names
+
+            spec = get_sensor(self.sensor if self.sensor is not None else sensor_names()[0])
+            object.__setattr__(self, "sensor", spec.name)
+            object.__setattr__(self, "layout", self.layout or spec.layout)
+            object.__setattr__(self, "pad", self.pad or spec.pad)
 
     @property
     def true_center_m(self) -> tuple[float, float]:
@@ -118,6 +134,8 @@ class TwinSettings:
                 seed=scene["seed"],
                 objects_files=tuple(scene["objects_files"]),
                 placement_error_m=tuple(scene["placement_error_m"]),
+                layout=SensorLayout(**scene["layout"]),
+                pad=scene["pad"],
             ),
             seed=data["seed"],
         )

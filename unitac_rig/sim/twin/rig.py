@@ -1,7 +1,8 @@
 """The real-time twin of the whole rig: the controller twin and the mounted sensor, on loopback network transports.
 
 :class:`RigTwin` starts a :class:`~unitac_rig.sim.twin.ControllerTwin` with an object in front of the arm and serves
-the mounted sensor from the same scene, on the transports a lab uses:
+the mounted sensor from the same scene, on the transports a lab uses. What those are is the sensor's own business
+(its simulated side, named by the sensor registry: ``serve_twin`` and ``twin_table`` in sim/fast_sensors.py):
 
 * **PapillArray**: the simulated hub (:class:`~unitac_rig.sim.devices.SimPapillArrayHub`, the PTS v2.0 packets and
   ASCII commands) behind a TCP server, reached with the pyserial URL ``socket://HOST:PORT``;
@@ -10,7 +11,7 @@ the mounted sensor from the same scene, on the transports a lab uses:
   ``slcan`` interface opens with ``channel = "socket://HOST:PORT"``, and through a simulated xela_server
   (:class:`~unitac_rig.sim.devices.SimXelaServer`, WebSocket ``ws://HOST:PORT``).
 
-Only the mounted sensor is served (the other one is "unplugged"), so ``collect`` without ``--sensor`` detects it as on
+Only the mounted sensor is served (the others are "unplugged"), so ``collect`` without ``--sensor`` detects it as on
 the real rig. :meth:`RigTwin.rig_file` is the rig file that points the unchanged hardware code path
 (:class:`~unitac_rig.rig.hardware.HardwareRig`, :class:`drivers.ur5e.UR5eArm`, the real drivers) at all of it.
 
@@ -24,18 +25,20 @@ sensor threads (and a uSkin at 2,400 CAN frames a second) need; the price is two
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import logging
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
 from types import TracebackType
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from unitac_rig.errors import UsageError
 from unitac_rig.rig.config import ObjectPlacement
 from unitac_rig.rig.objects import get_object
 from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation
-from unitac_rig.rig.sensors import sensor_layout
+from unitac_rig.rig.sensors import sensor_layout, sensor_names
+from unitac_rig.sim.fast_sensors import configured_sensors
+from unitac_rig.sim.signals import SignalSource
 from unitac_rig.sim.twin.controller import build_scene
 from unitac_rig.sim.twin.handle import ControllerTwin
 from unitac_rig.sim.twin.params import ControllerParams, SceneSpec
@@ -43,18 +46,33 @@ from unitac_rig.sim.twin.params import ControllerParams, SceneSpec
 logger = logging.getLogger(__name__)
 
 DEFAULT_HOST = "127.0.0.210"  # examples/twin.toml points here
-USKIN_VIA = ("slcan", "xela-server")
 HOME_DISTANCE_M = 0.08  # the arm starts this far from the object's axis, facing it from approach angle 0
-_channels = itertools.count(1)
+SensorOptions = Mapping[str, Mapping[str, Any]]  # sensor name -> its simulation options (sim/fast_sensors.py)
 
 
-@dataclass(frozen=True)
-class SensorPorts:
-    """TCP ports of the sensor transports, on the twin's loopback address (fixed, so a rig file works as-is)."""
+@runtime_checkable
+class TwinSensor(Protocol):
+    """A registered sensor's simulated side, as the real-time twin serves it (see sim/fast_sensors.py)."""
 
-    papillarray: int = 30100  # socket:// serial URL of the PapillArray hub
-    slcan: int = 30101  # socket:// serial URL of the uSkin's SLCAN adapter
-    xela_server: int = 5000  # xela_server's own default port
+    rng_stream: int  # its noise stream under the twin's seed: the fast twin's, so both twins draw alike
+
+    def model(self, rng: Any) -> Any:
+        """What a taxel feels (N) -> what the sensor reports (sim/sensor_models.py)."""
+        ...
+
+    def serve_twin(self, host: str, source: SignalSource, serve: Callable[[Any], Any]) -> None:
+        """Serve the sensor's devices on ``host`` (fixed ports), feeding them ``source``; ``serve`` keeps each one
+        until the twin closes."""
+        ...
+
+    def twin_table(self, host: str) -> str:
+        """The body of its ``[sensors.<name>]`` rig-file table, pointing the real driver at what it serves."""
+        ...
+
+
+def twin_sensors(options: SensorOptions | None = None) -> dict[str, TwinSensor]:
+    """Every registered sensor the real-time twin can serve (registry order), with ``options`` set."""
+    return {name: s for name, s in configured_sensors(options).items() if isinstance(s, TwinSensor)}
 
 
 def home_pose(placement: ObjectPlacement) -> np.ndarray:
@@ -77,24 +95,33 @@ class RigTwin:
         object_id: str,
         *,
         rotation_deg: float | None = None,
-        sensor: str = "uskin",
+        sensor: str | None = None,
         host: str = DEFAULT_HOST,
         seed: int = 0,
         placement: ObjectPlacement | None = None,
         params: ControllerParams | None = None,
-        ports: SensorPorts | None = None,
-        papillarray_rate_hz: int = 100,
+        sensor_options: SensorOptions | None = None,
     ) -> None:
+        """``sensor``: the mounted one (the registry's first by default). ``sensor_options``: each sensor's
+        simulation options by name (its ports, the uSkin's ``transport`` in the rig file, the PapillArray's
+        ``rate_hz``), checked before anything starts."""
         obj = get_object(object_id)
+        self._sensors = twin_sensors(sensor_options)
+        sensor = sensor_names()[0] if sensor is None else sensor
         sensor_layout(sensor)  # an unknown sensor is a usage error before anything starts
+        if sensor not in self._sensors:
+            raise UsageError(
+                f"the real-time twin cannot serve sensor {sensor!r}", hint=f"it serves: {', '.join(self._sensors)}"
+            )
+        for device in self._sensors.values():
+            device.twin_table(host)  # an option the rig file cannot say is a usage error before anything starts
+        self.sensor_options = dict(sensor_options or {})
         self.object_id = object_id
         self.rotation_deg = float(obj.rotations_deg[0] if rotation_deg is None else rotation_deg)
         self.sensor = sensor
         self.host = host
         self.seed = seed
         self.placement = placement or ObjectPlacement()
-        self.ports = ports or SensorPorts()
-        self.papillarray_rate_hz = papillarray_rate_hz
         self.spec = SceneSpec(
             object_id, rotation_deg=self.rotation_deg, sensor=sensor, center_m=self.placement.center_m, seed=seed
         )
@@ -112,27 +139,12 @@ class RigTwin:
     # ---- sensors --------------------------------------------------------------------------------------------
 
     def _start_sensor(self) -> None:
-        from unitac_rig.sim.sensor_models import model_for
         from unitac_rig.sim.source import SceneSensorSource
-        from unitac_rig.sim.twin.bridge import TcpSerialBridge
 
-        scene = build_scene(self.spec)
-        stream = 2 if self.sensor == "uskin" else 3  # the fast twin's per-sensor random streams
-        model = model_for(scene.layout, rng=np.random.default_rng([self.seed, stream]))
-        self._source = SceneSensorSource(scene, model, self.controller.true_pad_pose)
-        if self.sensor == "uskin":
-            from unitac_rig.sim.devices import SimSlcanAdapter, SimXelaController, SimXelaServer
-
-            channel = f"unitac-twin-{self.host}-{next(_channels)}"
-            adapter = self._serve(SimSlcanAdapter(channel))
-            self._serve(SimXelaController(channel, source=self._source, rate_hz=100.0))
-            self._serve(TcpSerialBridge(adapter.url, self.host, self.ports.slcan))
-            self._serve(SimXelaServer(self.host, self.ports.xela_server, source=self._source, rate_hz=100))
-        else:
-            from unitac_rig.sim.devices import SimPapillArrayHub
-
-            hub = self._serve(SimPapillArrayHub(source=self._source))
-            self._serve(TcpSerialBridge(hub.url, self.host, self.ports.papillarray))
+        device = self._sensors[self.sensor]
+        model = device.model(np.random.default_rng([self.seed, device.rng_stream]))
+        self._source = SceneSensorSource(build_scene(self.spec), model, self.controller.true_pad_pose)
+        device.serve_twin(self.host, self._source, self._serve)
 
     def _serve(self, device: Any) -> Any:
         self._devices.append(device)
@@ -149,12 +161,17 @@ class RigTwin:
 
     # ---- the rig file ---------------------------------------------------------------------------------------
 
-    def rig_file(self, uskin_via: str = "xela-server", tables: dict[str, dict[str, Any]] | None = None) -> str:
-        """The rig file (TOML) that points the hardware code path at this twin (``tables``: see rig_file_text)."""
-        if uskin_via not in USKIN_VIA:
-            raise ValueError(f"uskin_via must be one of {USKIN_VIA}, got {uskin_via!r}")
+    def rig_file(
+        self, tables: dict[str, dict[str, Any]] | None = None, sensor_options: SensorOptions | None = None
+    ) -> str:
+        """The rig file (TOML) that points the hardware code path at this twin (``tables``: see rig_file_text).
+        ``sensor_options`` change what the file says over the twin's own (e.g. ``{"uskin": {"transport": "slcan"}}``:
+        the uSkin's other transport, which the twin serves too)."""
+        options = {
+            name: {**self.sensor_options.get(name, {}), **extra} for name, extra in (sensor_options or {}).items()
+        }
         return rig_file_text(
-            self.host, self.placement, self.ports, uskin_via, self.papillarray_rate_hz, self.controller.params, tables
+            self.host, self.placement, self.controller.params, tables, {**self.sensor_options, **options}
         )
 
     # ---- lifetime -------------------------------------------------------------------------------------------
@@ -183,28 +200,22 @@ class RigTwin:
 def rig_file_text(
     host: str,
     placement: ObjectPlacement,
-    ports: SensorPorts,
-    uskin_via: str = "xela-server",
-    papillarray_rate_hz: int = 100,
     params: ControllerParams | None = None,
     tables: dict[str, dict[str, Any]] | None = None,
+    sensor_options: SensorOptions | None = None,
 ) -> str:
-    """The rig file for a rig twin on ``host`` (both sensors listed: the twin serves only the mounted one).
-
-    The uSkin entry uses ``uskin_via``; the other transport follows as a comment. The arm's TCP offset and payload
-    are what the twin's pendant is set to, so the driver's read-back check at connect passes. ``tables`` (e.g. the
-    ``press`` and ``limits`` of a rig file being rehearsed) are written after ``[object]``.
+    """The rig file for a rig twin on ``host``: every sensor it can serve is listed (it serves only the mounted one),
+    each table as its simulated side writes it with ``sensor_options`` (e.g. the uSkin through xela_server, its
+    SLCAN route as a comment). The arm's TCP offset and payload are what the twin's pendant is set to, so the driver's
+    read-back check at connect passes. ``tables`` (e.g. the ``press`` and ``limits`` of a rig file being rehearsed)
+    are written after ``[object]``.
     """
     params = params or ControllerParams()
     tcp = params.tool_offset if params.pendant_tcp is None else params.pendant_tcp
     tcp_text = ", ".join(repr(float(v)) for v in tcp)
-    slcan = (
-        f'type = "uskin-can"\ncan_interface = "slcan"\ncan_channel = "socket://{host}:{ports.slcan}"\n'
-        "bitrate = 1000000\n"
+    sensors = "".join(
+        f"[sensors.{name}]\n{device.twin_table(host)}\n" for name, device in twin_sensors(sensor_options).items()
     )
-    xela = f'type = "uskin-xela-server"\nurl = "ws://{host}:{ports.xela_server}"\n'
-    chosen, other = (slcan, xela) if uskin_via == "slcan" else (xela, slcan)
-    other_commented = "".join(f"# {line}\n" for line in other.splitlines())
     center = ", ".join(repr(float(v)) for v in placement.center_m)
     return (
         "# Rig file of the real-time twin (`unitac-rig twin`): the hardware code path, pointed at loopback.\n"
@@ -219,16 +230,7 @@ def rig_file_text(
         f"tcp_offset = [{tcp_text}]  # as set on the (twin's) pendant: m, rad from the flange\n"
         f"payload_kg = {float(params.payload_kg)!r}\n"
         "\n"
-        "[sensors.uskin]\n"
-        f"{chosen}"
-        "# the same uSkin through the other transport the twin serves:\n"
-        f"{other_commented}"
-        "\n"
-        "[sensors.papillarray]\n"
-        'type = "papillarray"\n'
-        f'port = "socket://{host}:{ports.papillarray}"\n'
-        f"rate_hz = {papillarray_rate_hz}\n"
-        "\n"
+        f"{sensors}"
         "[object]  # where the twin's scene puts the object\n"
         f"center_m = [{center}]\n"
         f"press_height_m = {float(placement.press_height_m)!r}\n"

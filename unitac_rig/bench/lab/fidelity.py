@@ -9,6 +9,9 @@ prism) within-frame std on faces, and the session's peak press force sampled as 
 reading per tactile sample).
 
 The recorded numbers are carried here (:data:`RECORDED`), not read from anywhere at run time.
+
+Why one module of ~680 lines: the recorded numbers, the measurement, the verdicts, the refit and the figure share
+the same targets and tolerances.
 """
 
 from __future__ import annotations
@@ -272,77 +275,6 @@ def sweep_loads(
     force = ABLATION_FORCE_N.get(obj.material, 10.4)
     scene = seeded_scene(obj, 0.0, sensor, seed=seed, params=scene_params)
     return [scene.loads_at_force(float(a), f) for a in np.linspace(-45.0, 45.0, angles) for f in (0.5 * force, force)]
-
-
-def uskin_sweep_forces(scene_params: SceneParams, *, seed: int = 0, angles: int = 91) -> dict[str, np.ndarray]:
-    """Per recorded object, the uSkin taxel forces (2 x angles, 24, 3) N of :func:`sweep_loads`, in press order:
-    what the probes that reshape the uSkin's response start from."""
-    return {
-        object_id: np.stack(
-            [x.forces_n for x in sweep_loads(get_object(object_id), "uskin", scene_params, seed=seed, angles=angles)]
-        )
-        for object_id in RECORDED
-    }
-
-
-# The uSkin gain grids the probes re-scan (counts/N): normal at small loads, and shear.
-PROBE_GAINS_NORMAL = tuple(float(g) for g in np.arange(600.0, 1301.0, 50.0))
-PROBE_GAINS_SHEAR = tuple(float(g) for g in np.arange(3500.0, 5501.0, 250.0))
-
-
-def uskin_with_gains(gain_n: float, gain_s: float, seed: int) -> UskinModel:
-    """The uSkin model with these normal and shear gains (counts/N) and draw ``seed``'s cross-talk, as the
-    probes read a reshaped sweep through it."""
-    _, uskin_params, _ = model_settings({"gain_normal_counts_per_n": gain_n, "gain_shear_counts_per_n": gain_s})
-    return UskinModel(uskin_params, np.random.default_rng([seed, 2]))
-
-
-def uskin_target_errors(forces: dict[str, np.ndarray], gain_n: float, gain_s: float, seed: int) -> dict[str, float]:
-    """Relative error of every recorded uSkin min and max for one placement draw, read through the uSkin model with
-    these gains (counts/N) and the draw's seeded cross-talk."""
-    uskin = uskin_with_gains(gain_n, gain_s, seed)
-    out = {}
-    for object_id, f in forces.items():
-        counts = uskin.signal_counts(f)
-        low, high = RECORDED[object_id]["uskin"]
-        out[f"{object_id} uskin_min"] = float(counts.min()) / low - 1.0
-        out[f"{object_id} uskin_max"] = float(counts.max()) / high - 1.0
-    return out
-
-
-def best_uskin_gains(draws: Sequence[dict[str, np.ndarray]]) -> dict[str, Any]:
-    """The gain pair of :data:`PROBE_GAINS_NORMAL` x :data:`PROBE_GAINS_SHEAR` with the smallest worst median error
-    of the twelve uSkin min/max targets over the draws (draw i seeded i); -> gains, worst, median errors, met."""
-    best: dict[str, Any] | None = None
-    for gain_n in PROBE_GAINS_NORMAL:
-        for gain_s in PROBE_GAINS_SHEAR:
-            per_draw = [uskin_target_errors(f, gain_n, gain_s, seed) for seed, f in enumerate(draws)]
-            median = {k: float(np.median([d[k] for d in per_draw])) for k in per_draw[0]}
-            worst = max(abs(v) for v in median.values())
-            if best is None or worst < best["worst"]:
-                best = {"gain_normal": gain_n, "gain_shear": gain_s, "worst": worst, "median_errors": median}
-    assert best is not None
-    best["met"] = sum(abs(v) <= REL_TOLERANCE for v in best["median_errors"].values())
-    return best
-
-
-def with_creep(forces: np.ndarray, fraction: float, tau_cycles: float, duty: float) -> np.ndarray:
-    """The sweep's taxel forces (2 x presses, taxels, 3) N, half then full force per press (:func:`sweep_loads`), as a
-    creeping skin (a standard linear solid) passes them on: each reading is the instant load plus ``fraction`` x a
-    state that follows the full press load with time constant ``tau_cycles`` (press cycles) while loaded (``duty``
-    of a cycle) and decays towards 0 for the rest. The half-force entry of a press is read before its hold, the
-    full-force one after. Used by ``benchmarks/fidelity_creep_probe.py``; the scene has no creep."""
-    out = np.empty_like(forces)
-    state = np.zeros(forces.shape[1:])
-    keep_loaded = np.exp(-duty / tau_cycles)
-    keep_unloaded = np.exp(-(1.0 - duty) / tau_cycles)
-    for k in range(forces.shape[0] // 2):
-        half, full = forces[2 * k], forces[2 * k + 1]
-        out[2 * k] = half + fraction * state
-        state = keep_loaded * state + (1.0 - keep_loaded) * full
-        out[2 * k + 1] = full + fraction * state
-        state = keep_unloaded * state
-    return out
 
 
 def scene_extremes(

@@ -2,9 +2,9 @@
 moved to the controller, plus each strategy's overshoot and force-matching error.
 
 Everything runs on the fast twin, whose simulated controller goes on executing its last command while the host is
-frozen or dead (``unitac_rig.bench.safety_worker``). The same worker runs against this checkout ("after") and against
-an older commit unpacked with ``git archive`` ("before", by default f419c22, the code issue 11 reviewed), so both
-columns come from one measurement. Forces are the simulator's ground truth, not the wrist's noisy reading.
+frozen or dead (``unitac_rig.bench.lab.safety_worker``). The same worker runs against this checkout ("after") and
+against an older commit unpacked with ``git archive`` ("before", by default f419c22, the code issue 11 reviewed), so
+both columns come from one measurement. Forces are the simulator's ground truth, not the wrist's noisy reading.
 
 * Stall: the host freezes for 0, 50, 100, 200, 500 or 1000 ms the first time the true press force passes a trigger;
   the triggers sweep the press (first touch, 2, 5, 8, 9, 9.5 N) and the worst one counts ("the worst moment").
@@ -38,7 +38,7 @@ HARD_LIMIT_N = 25.0  # the rig file's default limits.hard_force_n
 GOAL_DEFAULT_EXCESS_N = 0.5  # issue 11: stalls up to 100 ms add at most this on the default strategy
 GOAL_REST_S = 0.2  # issue 11: host death -> arm at rest within this of the last write
 WORKER = Path(__file__).with_name("safety_worker.py")
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 # Runs the worker file against whatever checkout PYTHONPATH names: the editable install's finder is dropped, and the
 # working directory is not the repository, so neither can shadow the checkout under test.
 _RUNNER = (

@@ -10,16 +10,12 @@ from drivers.clock import VirtualClock
 from drivers.frames import TactileFrame
 from drivers.layouts import PAPILLARRAY
 from drivers.motion import move_to
-from unitac_rig.collection.press import (
-    RAMP_MAX_LEAD_N,
-    PressPlan,
-    TickInfo,
-    _force_ramp,
-    _Streams,
-    run_press,
-    settle_frames,
-)
+from unitac_rig.collection.press import run_press, settle_frames
 from unitac_rig.collection.session import plan_presses
+from unitac_rig.collection.strategies.force_ramp import RAMP_MAX_LEAD_N, ramp
+from unitac_rig.collection.strategy import PressContext
+from unitac_rig.collection.streams import PressStreams, TickInfo
+from unitac_rig.collection.transit import PressPlan
 from unitac_rig.rig.config import LimitsConfig, PressConfig, parse_rig_config
 from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.arm import SimArm, SimArmParams
@@ -120,7 +116,7 @@ def test_force_ramp_started_short_of_the_object_creeps_instead_of_winding_up() -
     arm = SimArm(_Wall(1e4, 0.003), clock=clock, rng=np.random.default_rng(0), params=params, start_pose=START_POSE)
     press = PressConfig(strategy="force-ramp", ramp_rate_n_s=16.0)
     plan = PressPlan(0.0, 0.0, START_POSE, PRESS_DIR, 0.003)
-    streams = _Streams(arm, _OneFramePerPoll(clock), plan, press, LimitsConfig(), 0.5, None, 1.0)  # type: ignore[arg-type]
+    streams = PressStreams(arm, _OneFramePerPoll(clock), plan, press, LimitsConfig(), 0.5, None, 1.0)  # type: ignore[arg-type]
     speeds: list[float] = []
     true_forces: list[float] = []
     original_tick = streams.tick
@@ -132,7 +128,7 @@ def test_force_ramp_started_short_of_the_object_creeps_instead_of_winding_up() -
 
     streams.tick = tick  # type: ignore[method-assign]
     try:
-        assert _force_ramp(arm, streams, plan, press) == "force"
+        assert ramp(PressContext(arm, streams, plan, press, LimitsConfig())) == "force"
     finally:
         arm.close()
     assert RAMP_MAX_LEAD_N == 3.0 and params.force_mode_gain_m_s_per_n == 0.002  # the numbers worked below

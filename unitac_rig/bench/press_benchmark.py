@@ -174,8 +174,9 @@ class Cell:
 def run_cell(cell: Cell) -> list[PressSample]:
     """Press every angle of ``cell`` on a fresh simulated rig; returns one sample per press."""
     from drivers.errors import DeviceTimeout, ProtectiveStop
-    from unitac_rig.collection.press import move_clear, run_press, with_standoff
+    from unitac_rig.collection.press import run_press
     from unitac_rig.collection.session import confirmed_standoff_mm, placement_confirmed, plan_presses, session_tare
+    from unitac_rig.collection.transit import move_clear, with_standoff
     from unitac_rig.errors import SafetyLimit
     from unitac_rig.rig.config import parse_rig_config
     from unitac_rig.rig.objects import get_object
@@ -189,7 +190,7 @@ def run_cell(cell: Cell) -> list[PressSample]:
     rotation = obj.rotations_deg[0]
     plans = plan_presses(obj, config, [rotation])
     samples: list[PressSample] = []
-    rig = SimRig(config, seed=cell.seed, papillarray_rate_hz=cell.papillarray_rate_hz)
+    rig = SimRig(config, seed=cell.seed, sensor_options={"papillarray": {"rate_hz": cell.papillarray_rate_hz}})
     with rig:
         sensor = rig.open_sensor(cell.sensor)
         try:

@@ -1,38 +1,17 @@
-"""A seeded fuzz campaign over every wire codec and the drivers' decode paths (issue 28).
+"""The fuzz campaign's targets (see unitac_rig/bench/lab/fuzz.py): one per wire codec, each also driving its driver's
+decode path where there is one.
 
-Each target turns one seeded random draw into one input and feeds it to a codec (and, for the sensors, through the
-driver's own decode path with the transport replaced by a fake that hands over the same bytes or messages). Per
-target it counts:
-
-* **crashes**: any exception other than the project's own error tree (ProtocolError for a codec, any UnitacError on
-  a driver path, where a device error with a hint is an answer, not a crash);
-* **hangs**: an input that takes more than ``hang_ms`` of CPU, twice in a row (the retry keeps a garbage-collector
-  pause on a loaded box from counting);
-* **wrong decodes**: a valid packet, message or command placed among garbage, damage or other packets that does not
-  come out exactly as encoded, or anything a decoder accepts that breaks what the format allows (a uSkin frame
-  flagged valid that mixes two cycles, a count outside 0..65535, a non-finite server time);
-* **memory growth**: one long-lived decoder fed a share of the inputs back to back, traced with tracemalloc; the
-  growth between a fifth of the way and the end.
-
-Every input is drawn from ``numpy.random.default_rng((seed, target number, input number))``, so any single input can
-be rebuilt from the numbers in the report (:func:`rebuild`). Input kinds: random bytes or messages, mutated valid
-ones (bit flips, cuts, insertions, field swaps to extreme values), spliced valid streams, extreme values and length
-fields, NaN/inf/huge numbers, deep JSON, non-UTF-8, and byte streams chunked at random sizes.
+Why one module of ~730 lines: five targets of about 130 lines each (input kinds, the check, the long-lived stream),
+alike in shape, read side by side.
 """
 
 from __future__ import annotations
 
 import contextlib
-import gc
-import itertools
 import json
 import math
 import struct
-import time
-import tracemalloc
-from collections import Counter
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from collections.abc import Callable
 from typing import Any
 
 import can
@@ -81,158 +60,16 @@ from protocols.rtde import (
 from protocols.xela_can import USPA46_ID_MAP, FrameAssembler
 from protocols.xela_ws import MAX_COUNT, MAX_SERVER_TIME_S, XelaDataMessage, XelaSensorData, decode_message
 from protocols.xela_ws import encode_data_message as encode_xela_message
-
-HANG_MS = 50.0
-MEMORY_SHARE = 0.05  # of the inputs fed back to back to one long-lived decoder under tracemalloc
-MIN_MEMORY_INPUTS = 200
-MAX_MEMORY_GROWTH_BYTES = 256 * 1024  # a decoder that keeps more than this after thousands of inputs is leaking
-EXAMPLES_KEPT = 5
-
-Rng = np.random.Generator
-
-
-@dataclass
-class Case:
-    """One fuzz input: its kind, the data, and what a correct decoder must give back (target-specific)."""
-
-    kind: str
-    data: Any
-    expected: Any = None
-
-
-@dataclass
-class Report:
-    """What one target did with its inputs."""
-
-    target: str
-    description: str
-    inputs: int = 0
-    kinds: Counter[str] = field(default_factory=Counter)
-    crashes: int = 0
-    hangs: int = 0
-    wrong_decodes: int = 0
-    valid_embedded: int = 0  # valid packets/messages placed among garbage and damage
-    valid_recovered: int = 0
-    driver_inputs: int = 0  # inputs also run through the driver's decode path
-    cpu_s: float = 0.0
-    cpu_ms: list[float] = field(default_factory=list, repr=False)
-    memory: dict[str, int] = field(default_factory=dict)
-    examples: list[dict[str, Any]] = field(default_factory=list)
-
-    def note(self, finding: str, index: int, case: Case, detail: str) -> None:
-        if len(self.examples) < EXAMPLES_KEPT:
-            self.examples.append({"finding": finding, "input": index, "kind": case.kind, "detail": detail[:300]})
-
-    def as_dict(self) -> dict[str, Any]:
-        cpu = np.array(self.cpu_ms) if self.cpu_ms else np.zeros(1)
-        return {
-            "target": self.target,
-            "description": self.description,
-            "inputs": self.inputs,
-            "kinds": dict(sorted(self.kinds.items())),
-            "crashes": self.crashes,
-            "hangs": self.hangs,
-            "wrong_decodes": self.wrong_decodes,
-            "valid_embedded": self.valid_embedded,
-            "valid_recovered": self.valid_recovered,
-            "driver_inputs": self.driver_inputs,
-            "cpu_s": round(self.cpu_s, 2),
-            "cpu_ms_median": round(float(np.median(cpu)), 4),
-            "cpu_ms_p99": round(float(np.percentile(cpu, 99)), 3),
-            "cpu_ms_max": round(float(cpu.max()), 3),
-            "memory": self.memory,
-            "examples": self.examples,
-        }
-
-
-class Target:
-    """A codec under fuzz: ``draw`` builds one input, ``check`` runs it and returns (wrong decodes, valid placed,
-    valid recovered), raising whatever the code under test raises; ``stream`` builds a long-lived consumer for the
-    memory phase."""
-
-    name = ""
-    description = ""
-    allowed: tuple[type[BaseException], ...] = (ProtocolError,)
-
-    def draw(self, rng: Rng) -> Case:
-        raise NotImplementedError
-
-    def check(self, case: Case, rng: Rng) -> tuple[int, int, int]:
-        raise NotImplementedError
-
-    def stream(self) -> Callable[[Case], None]:
-        raise NotImplementedError
-
-
-# ---- shared generators ------------------------------------------------------------------------------------------
-
-
-def _bytes(rng: Rng, n: int) -> bytes:
-    return rng.integers(0, 256, n, dtype=np.uint8).tobytes()
-
-
-def _chunks(rng: Rng, data: bytes) -> list[bytes]:
-    """``data`` cut at random sizes: 1 byte, 7 bytes, USB packets, random, or whole."""
-    mode = int(rng.integers(0, 5))
-    if mode == 0 or len(data) < 2:
-        return [data]
-    if mode == 1:
-        size = [1, 7, 64][int(rng.integers(0, 3))]
-        return [data[i : i + size] for i in range(0, len(data), size)]
-    cuts = np.sort(
-        rng.choice(np.arange(1, len(data)), size=min(len(data) - 1, int(rng.integers(1, 40))), replace=False)
-    )
-    bounds = [0, *cuts.tolist(), len(data)]
-    return [data[a:b] for a, b in itertools.pairwise(bounds)]
-
-
-def _flip_bits(rng: Rng, data: bytes, n: int) -> bytes:
-    out = bytearray(data)
-    for _ in range(n):
-        if out:
-            out[int(rng.integers(0, len(out)))] ^= 1 << int(rng.integers(0, 8))
-    return bytes(out)
-
-
-def _mutate_bytes(rng: Rng, data: bytes) -> bytes:
-    """A few random edits: bit flips, byte overwrites, cuts, duplications, insertions."""
-    out = bytearray(data)
-    for _ in range(int(rng.integers(1, 6))):
-        op = int(rng.integers(0, 5))
-        at = int(rng.integers(0, len(out) + 1))
-        if op == 0 and out:
-            out[min(at, len(out) - 1)] ^= 1 << int(rng.integers(0, 8))
-        elif op == 1 and out:
-            out[min(at, len(out) - 1)] = int(rng.integers(0, 256))
-        elif op == 2:
-            del out[at : at + int(rng.integers(1, 16))]
-        elif op == 3:
-            out[at:at] = out[at : at + int(rng.integers(1, 16))]
-        else:
-            out[at:at] = _bytes(rng, int(rng.integers(1, 16)))
-    return bytes(out)
-
-
-def _run_chunks(feed: Callable[[bytes], list[Any]], chunks: list[bytes]) -> list[Any]:
-    out: list[Any] = []
-    for chunk in chunks:
-        out += feed(chunk)
-    return out
-
-
-def _in_order(expected: list[Any], got: list[Any], same: Callable[[Any, Any], bool]) -> int:
-    """How many of ``expected`` appear in ``got`` in order (extra items in ``got`` allowed)."""
-    found = 0
-    it = iter(got)
-    for want in expected:
-        for item in it:
-            if same(want, item):
-                found += 1
-                break
-        else:
-            break
-    return found
-
+from unitac_rig.bench.lab.fuzz_base import (
+    Case,
+    Rng,
+    Target,
+    in_order,
+    mutate_bytes,
+    random_bytes,
+    random_chunks,
+    run_chunks,
+)
 
 # ---- XELA uSkin CAN ---------------------------------------------------------------------------------------------
 
@@ -278,7 +115,7 @@ class XelaCanTarget(Target):
             messages, cycles = self._bursts(rng, int(rng.integers(13, 17)), loss=0.0, merge=0.0)
             for _ in range(int(rng.integers(1, 30))):  # garbage on ids the map does not have, anywhere
                 at = int(rng.integers(0, len(messages) + 1))
-                messages.insert(at, (int(rng.integers(0x000, 0x100)), _bytes(rng, 8), -1))
+                messages.insert(at, (int(rng.integers(0x000, 0x100)), random_bytes(rng, 8), -1))
             return Case(kind, self._timed(messages), expected=cycles)
         if kind in ("spliced", "spliced_any"):
             # "spliced": a controller that stops mid-cycle (power loss) and starts again at a cycle's start after a
@@ -357,7 +194,7 @@ class XelaCanTarget(Target):
         n = int(rng.integers(1, 100))
         ids = np.where(rng.random(n) < 0.7, rng.choice(np.array(_IDS), n), rng.integers(0, 0x800, n))
         t = np.cumsum(rng.choice([0, 1, 100_000, 3 * _MS, -_MS], n))
-        return [(int(i), _bytes(rng, int(rng.integers(0, 9))), int(tt)) for i, tt in zip(ids, t, strict=True)]
+        return [(int(i), random_bytes(rng, int(rng.integers(0, 9))), int(tt)) for i, tt in zip(ids, t, strict=True)]
 
     @staticmethod
     def _extreme_messages(rng: Rng) -> list[tuple[int, bytes, int]]:
@@ -498,7 +335,7 @@ class XelaWsTarget(Target):
     def draw(self, rng: Rng) -> Case:
         kind = ["random", "valid", "mutated", "fields", "hex", "deep", "non_utf8"][int(rng.integers(0, 7))]
         if kind == "random":
-            data: str | bytes = _bytes(rng, int(rng.integers(0, 400)))
+            data: str | bytes = random_bytes(rng, int(rng.integers(0, 400)))
             if rng.random() < 0.5:
                 data = "".join(chr(int(c)) for c in rng.integers(32, 127, int(rng.integers(0, 300))))
             return Case(kind, data)
@@ -516,7 +353,7 @@ class XelaWsTarget(Target):
             raw[at:at] = bytes([0xFF, 0xC3, 0x28, 0x80][: int(rng.integers(1, 5))])
             return Case(kind, bytes(raw))
         if kind == "mutated":
-            return Case(kind, _mutate_bytes(rng, text.encode()))
+            return Case(kind, mutate_bytes(rng, text.encode()))
         if kind == "hex":
             tokens = text.split('"data": "', 1)
             if len(tokens) == 2:
@@ -629,12 +466,12 @@ def _marker_dense(rng: Rng, n: int) -> bytes:
         if rng.random() < 0.7:
             out += pieces[int(rng.integers(0, len(pieces)))]
         else:
-            out += _bytes(rng, int(rng.integers(1, 5)))
+            out += random_bytes(rng, int(rng.integers(1, 5)))
     return bytes(out)
 
 
 def _garbage(rng: Rng, n: int) -> bytes:
-    return _marker_dense(rng, n) if rng.random() < 0.5 else _bytes(rng, n)
+    return _marker_dense(rng, n) if rng.random() < 0.5 else random_bytes(rng, n)
 
 
 def _same_packet(a: PapillArrayPacket, b: PapillArrayPacket) -> bool:
@@ -661,9 +498,9 @@ class PapillArrayTarget(Target):
             int(rng.integers(0, 7))
         ]
         if kind == "random":
-            return Case(kind, _chunks(rng, _bytes(rng, int(rng.integers(0, 3000)))), expected=[])
+            return Case(kind, random_chunks(rng, random_bytes(rng, int(rng.integers(0, 3000)))), expected=[])
         if kind == "marker_dense":
-            return Case(kind, _chunks(rng, _marker_dense(rng, int(rng.integers(100, 2500)))), expected=[])
+            return Case(kind, random_chunks(rng, _marker_dense(rng, int(rng.integers(100, 2500)))), expected=[])
         packets = [_papillarray_packet(rng, int(rng.integers(0, 2**32))) for _ in range(int(rng.integers(1, 5)))]
         frames = [_encode_papillarray(rng, p) for p in packets]
         if kind == "embedded":
@@ -671,30 +508,30 @@ class PapillArrayTarget(Target):
             for frame in frames:
                 parts += [_garbage(rng, int(rng.integers(0, 300))), frame]
             stream = b"".join(parts) + _garbage(rng, int(rng.integers(0, 100)))
-            return Case(kind, _chunks(rng, stream), expected=packets)
+            return Case(kind, random_chunks(rng, stream), expected=packets)
         if kind == "mutated":
             damaged = int(rng.integers(0, len(frames)))
-            frames[damaged] = _mutate_bytes(rng, frames[damaged])
+            frames[damaged] = mutate_bytes(rng, frames[damaged])
             intact = [p for i, p in enumerate(packets) if i != damaged]
-            return Case(kind, _chunks(rng, b"".join(frames)), expected=intact)
+            return Case(kind, random_chunks(rng, b"".join(frames)), expected=intact)
         if kind == "spliced":
             stream = b"".join(frames)
             other = b"".join(_encode_papillarray(rng, _papillarray_packet(rng, 7)) for _ in range(2))
             cut, cut_other = int(rng.integers(0, len(stream))), int(rng.integers(0, len(other)))
-            return Case(kind, _chunks(rng, stream[:cut] + other[cut_other:]))
+            return Case(kind, random_chunks(rng, stream[:cut] + other[cut_other:]))
         # extreme: structure fields pushed to their limits, the checksum made right again so only structure is wrong
         body = bytearray(frames[0][4:-6])
         for _ in range(int(rng.integers(1, 4))):
             at = int(rng.integers(0, min(len(body), 64)))
             body[at] = int(rng.choice([0x00, 0x01, 0x04, 0x05, 0x7F, 0x80, 0xFF]))
         frame = START_MARKER + bytes(body) + (checksum(body) & 0xFFFF).to_bytes(2, "little") + END_MARKER
-        return Case(kind, _chunks(rng, frame + frames[-1]), expected=packets[-1:] if len(frames) > 1 else [])
+        return Case(kind, random_chunks(rng, frame + frames[-1]), expected=packets[-1:] if len(frames) > 1 else [])
 
     def check(self, case: Case, rng: Rng) -> tuple[int, int, int]:
         parser = PacketParser()
-        got = _run_chunks(parser.feed, case.data)
+        got = run_chunks(parser.feed, case.data)
         placed = len(case.expected) if case.expected is not None else 0
-        recovered = _in_order(case.expected or [], got, _same_packet)
+        recovered = in_order(case.expected or [], got, _same_packet)
         self._driver_turn += 1
         if self._driver_turn % 4 == 0:
             self._through_driver(case.data)
@@ -713,7 +550,7 @@ class PapillArrayTarget(Target):
         parser = PacketParser()
 
         def feed(case: Case) -> None:
-            _run_chunks(parser.feed, case.data)
+            run_chunks(parser.feed, case.data)
 
         return feed
 
@@ -742,18 +579,18 @@ class PapillArrayCommandTarget(Target):
     def draw(self, rng: Rng) -> Case:
         kind = ["random", "embedded", "mutated", "extreme_args"][int(rng.integers(0, 4))]
         if kind == "random":
-            return Case(kind, _chunks(rng, _bytes(rng, int(rng.integers(0, 500)))), expected=[])
+            return Case(kind, random_chunks(rng, random_bytes(rng, int(rng.integers(0, 500)))), expected=[])
         if kind == "extreme_args":
             rate = rng.choice(np.array([None, 0, -1, 100, 1000, 999, 2**40, True, 250.0, math.nan], dtype=object))
             return Case(kind, (list(Command)[int(rng.integers(0, len(Command)))], rate))
         lines = [_COMMANDS[int(i)] for i in rng.integers(0, len(_COMMANDS), int(rng.integers(1, 8)))]
         if kind == "mutated":
-            return Case(kind, _chunks(rng, _mutate_bytes(rng, b"".join(lines))))
+            return Case(kind, random_chunks(rng, mutate_bytes(rng, b"".join(lines))))
         parts = []
         for line in lines:  # garbage lines (ending in a newline of their own) between real commands
-            noise = _bytes(rng, int(rng.integers(0, 60))).replace(b"\n", b"")
+            noise = random_bytes(rng, int(rng.integers(0, 60))).replace(b"\n", b"")
             parts += [noise + b"\n", line]
-        return Case(kind, _chunks(rng, b"".join(parts)), expected=lines)
+        return Case(kind, random_chunks(rng, b"".join(parts)), expected=lines)
 
     def check(self, case: Case, rng: Rng) -> tuple[int, int, int]:
         if case.kind == "extreme_args":
@@ -761,11 +598,11 @@ class PapillArrayCommandTarget(Target):
             encoded = encode_command(command, rate)  # ProtocolError for what a hub does not take
             return int(encoded not in _COMMANDS), 0, 0
         parser = CommandParser()
-        got: list[HubCommand] = _run_chunks(parser.feed, case.data)
+        got: list[HubCommand] = run_chunks(parser.feed, case.data)
         if not case.expected:
             return 0, 0, 0
         want = [CommandParser().feed(line)[0] for line in case.expected]
-        recovered = _in_order(want, got, lambda a, b: a == b)
+        recovered = in_order(want, got, lambda a, b: a == b)
         return len(want) - recovered, len(want), recovered
 
     def stream(self) -> Callable[[Case], None]:
@@ -773,7 +610,7 @@ class PapillArrayCommandTarget(Target):
 
         def feed(case: Case) -> None:
             if case.kind != "extreme_args":
-                _run_chunks(parser.feed, case.data)
+                run_chunks(parser.feed, case.data)
 
         return feed
 
@@ -801,18 +638,18 @@ class RtdeTarget(Target):
     def draw(self, rng: Rng) -> Case:
         kind = ["random", "valid", "mutated", "payloads", "extreme"][int(rng.integers(0, 5))]
         if kind == "random":
-            return Case(kind, _chunks(rng, _bytes(rng, int(rng.integers(0, 2000)))))
+            return Case(kind, random_chunks(rng, random_bytes(rng, int(rng.integers(0, 2000)))))
         if kind == "payloads":
-            return Case(kind, _bytes(rng, int(rng.integers(0, 300))))
+            return Case(kind, random_bytes(rng, int(rng.integers(0, 300))))
         packages = [self._package(rng) for _ in range(int(rng.integers(1, 8)))]
         stream = b"".join(encoded for encoded, _ in packages)
         if kind == "valid":
-            return Case(kind, _chunks(rng, stream), expected=packages)
+            return Case(kind, random_chunks(rng, stream), expected=packages)
         if kind == "mutated":
-            return Case(kind, _chunks(rng, _mutate_bytes(rng, stream)))
+            return Case(kind, random_chunks(rng, mutate_bytes(rng, stream)))
         # extreme length fields: a header claiming up to 65535 bytes, or fewer than its own 3
         header = int(rng.choice([0, 1, 2, 3, 0xFFFF, 0x8000])).to_bytes(2, "big") + bytes([int(rng.choice([85, 86]))])
-        return Case(kind, _chunks(rng, header + stream))
+        return Case(kind, random_chunks(rng, header + stream))
 
     @staticmethod
     def _package(rng: Rng) -> tuple[bytes, tuple[str, Any]]:
@@ -849,7 +686,7 @@ class RtdeTarget(Target):
                 decode_data_package(case.data, types)
             return 0, 0, 0
         parser = RtdePackageParser()
-        got: list[RtdePackage] = _run_chunks(parser.feed, case.data)
+        got: list[RtdePackage] = run_chunks(parser.feed, case.data)
         for package in got:
             decode = _DECODERS.get(package.type)
             if decode is not None:
@@ -874,7 +711,7 @@ class RtdeTarget(Target):
 
         def feed(case: Case) -> None:
             if case.kind != "payloads":
-                _run_chunks(parser.feed, case.data)
+                run_chunks(parser.feed, case.data)
 
         return feed
 
@@ -899,154 +736,3 @@ def _same_values(a: list[Any], b: list[Any]) -> bool:
     flat_a = np.array([x for v in a for x in (v if isinstance(v, tuple) else (v,))], dtype=np.float64)
     flat_b = np.array([x for v in b for x in (v if isinstance(v, tuple) else (v,))], dtype=np.float64)
     return bool(np.array_equal(flat_a, flat_b, equal_nan=True))
-
-
-# ---- the campaign -----------------------------------------------------------------------------------------------
-
-TARGETS: dict[str, Callable[[], Target]] = {
-    "xela_can": XelaCanTarget,
-    "xela_ws": XelaWsTarget,
-    "papillarray": PapillArrayTarget,
-    "papillarray_commands": PapillArrayCommandTarget,
-    "rtde": RtdeTarget,
-}
-
-
-def _rng(seed: int, target_name: str, index: int) -> Rng:
-    return np.random.default_rng((seed, list(TARGETS).index(target_name), index))
-
-
-def rebuild(target_name: str, seed: int, index: int) -> Case:
-    """The input numbered ``index`` of ``target_name`` in the campaign with ``seed`` (to rerun a finding)."""
-    return TARGETS[target_name]().draw(_rng(seed, target_name, index))
-
-
-def _cases(target: Target, seed: int, n: int) -> Iterator[tuple[int, Case, Rng]]:
-    for index in range(n):
-        rng = _rng(seed, target.name, index)
-        yield index, target.draw(rng), rng
-
-
-def run_target(
-    name: str, n_inputs: int, seed: int, hang_ms: float = HANG_MS, memory_inputs: int | None = None
-) -> Report:
-    """Feed ``n_inputs`` inputs to one target, then ``memory_inputs`` (default: a share, at least
-    :data:`MIN_MEMORY_INPUTS`; 0: none) back to back to a long-lived decoder under tracemalloc."""
-    target = TARGETS[name]()
-    report = Report(name, target.description)
-    for index, case, rng in _cases(target, seed, n_inputs):
-        report.inputs += 1
-        report.kinds[case.kind] += 1
-        outcome = _timed_check(target, case, rng)
-        if outcome[0] == "crash":
-            report.crashes += 1
-            report.note("crash", index, case, outcome[1])
-            continue
-        cpu_ms, wrong, placed, recovered = outcome[1:]
-        if cpu_ms > hang_ms:  # again, on the same input, before calling it a hang
-            retry = _timed_check(target, target.draw(_rng(seed, name, index)), _rng(seed, name, index))
-            cpu_ms = min(cpu_ms, retry[1] if retry[0] == "ok" else cpu_ms)
-            if cpu_ms > hang_ms:
-                report.hangs += 1
-                report.note("hang", index, case, f"{cpu_ms:.1f} ms CPU")
-        report.cpu_ms.append(cpu_ms)
-        report.cpu_s += cpu_ms / 1000
-        report.valid_embedded += placed
-        report.valid_recovered += recovered
-        if wrong:
-            report.wrong_decodes += wrong
-            report.note("wrong_decode", index, case, f"{wrong} wrong of {placed} placed")
-    report.driver_inputs = getattr(target, "_driver_turn", 0) // 4
-    if memory_inputs is None:
-        memory_inputs = max(MIN_MEMORY_INPUTS, round(n_inputs * MEMORY_SHARE))
-    if memory_inputs:
-        report.memory = memory_growth(target, seed, memory_inputs)
-    return report
-
-
-def _timed_check(target: Target, case: Case, rng: Rng) -> tuple[Any, ...]:
-    start = time.process_time()
-    try:
-        wrong, placed, recovered = target.check(case, rng)
-    except target.allowed:
-        wrong, placed, recovered = 0, 0, 0
-        if case.expected:  # a valid input refused
-            wrong = placed = len(case.expected) if isinstance(case.expected, list) else 1
-    except Exception as exc:  # everything else is what the campaign looks for
-        return ("crash", f"{type(exc).__name__}: {exc}")
-    return ("ok", (time.process_time() - start) * 1000, wrong, placed, recovered)
-
-
-def memory_growth(target: Target, seed: int, n: int) -> dict[str, int]:
-    """Bytes one long-lived decoder holds after a fifth of ``n`` inputs and after all of them."""
-    feed = target.stream()
-    cases = [case for _, case, _ in _cases(target, seed + 1, n)]
-    gc.collect()
-    tracemalloc.start()
-    try:
-        fifth = max(1, n // 5)
-        for case in cases[:fifth]:
-            _quiet(feed, case, target.allowed)
-        gc.collect()
-        early = tracemalloc.get_traced_memory()[0]
-        for case in cases[fifth:]:
-            _quiet(feed, case, target.allowed)
-        gc.collect()
-        late, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
-    return {"inputs": n, "after_fifth_bytes": early, "at_end_bytes": late, "growth_bytes": late - early,
-            "peak_bytes": peak}  # fmt: skip
-
-
-def _quiet(feed: Callable[[Case], None], case: Case, allowed: tuple[type[BaseException], ...]) -> None:
-    with contextlib.suppress(*allowed):
-        feed(case)
-
-
-def run_campaign(n_inputs: int, seed: int, targets: list[str] | None = None, hang_ms: float = HANG_MS,
-                 progress: Callable[[Report], None] | None = None,
-                 memory_inputs: int | None = None) -> dict[str, Any]:  # fmt: skip
-    """Every target (or ``targets``) with ``n_inputs`` inputs each; a JSON-ready summary."""
-    reports = []
-    started = time.perf_counter()
-    for name in targets or list(TARGETS):
-        report = run_target(name, n_inputs, seed, hang_ms, memory_inputs)
-        reports.append(report)
-        if progress is not None:
-            progress(report)
-    rows = [r.as_dict() for r in reports]
-    return {
-        "benchmark": "fuzz",
-        "seed": seed,
-        "inputs_per_target": n_inputs,
-        "hang_ms": hang_ms,
-        "max_memory_growth_bytes": MAX_MEMORY_GROWTH_BYTES,
-        "wall_s": round(time.perf_counter() - started, 1),
-        "targets": rows,
-        "totals": {
-            "inputs": sum(r["inputs"] for r in rows),
-            "crashes": sum(r["crashes"] for r in rows),
-            "hangs": sum(r["hangs"] for r in rows),
-            "wrong_decodes": sum(r["wrong_decodes"] for r in rows),
-            "memory_growth_over_limit": sum(r["memory"].get("growth_bytes", 0) > MAX_MEMORY_GROWTH_BYTES for r in rows),
-        },
-    }
-
-
-def markdown_table(result: dict[str, Any]) -> str:
-    """The fuzz table of docs/reliability.md, from a campaign's JSON."""
-    lines = [
-        "| codec (and driver path) | inputs | crashes | hangs (> {:g} ms CPU) | wrong decodes | valid placed / "
-        "recovered | CPU per input: median / max ms | memory growth (long-lived decoder) |".format(result["hang_ms"]),
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
-    ]
-    for row in result["targets"]:
-        memory = row["memory"] or {"growth_bytes": 0, "inputs": 0}
-        lines.append(
-            f"| `{row['target']}`: {row['description']} | {row['inputs']:,} | {row['crashes']} | {row['hangs']} | "
-            f"{row['wrong_decodes']} | {row['valid_embedded']:,} / {row['valid_recovered']:,} | "
-            f"{row['cpu_ms_median']:.3f} / {row['cpu_ms_max']:.1f} | "
-            f"{memory['growth_bytes'] / 1024:+.1f} KiB over {memory['inputs']:,} inputs |"
-        )
-    return "\n".join(lines)

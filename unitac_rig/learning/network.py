@@ -1,0 +1,193 @@
+"""The model's shape and one member of it as ordinary PyTorch.
+
+:class:`ModelShape` (layer widths, dropout) and :class:`GroupSpec` (which sensors one autoencoder encodes) describe
+every model of a run; :class:`Autoencoder` is one member of one group as a plain ``nn.Module`` (``nn.Linear``,
+``nn.ReLU``, ``nn.Dropout``). The stacked model that trains every member at once
+(:class:`unitac_rig.learning.engine.StackedAutoencoders`) hands one out with ``network(group, member)``; that network is
+what ``export-model`` writes, per sensor, and what the training benchmark's plain loop trains.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import torch
+from torch import nn
+
+from unitac_rig.errors import ModelError
+
+UNITAC_GROUP = "unitac"
+
+
+@dataclass(frozen=True)
+class ModelShape:
+    """Layer widths and dropout of every autoencoder (the paper's values by default)."""
+
+    encoder_hidden: tuple[int, ...] = (64, 48)
+    latent_dim: int = 16
+    decoder_hidden: tuple[int, ...] = (64, 96)
+    dropout: float = 0.007
+    # beyond the paper: weight of a scale-free alignment term (matched / shifted-partner latent L1) in the loss
+    align_weight: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ModelShape:
+        return cls(
+            encoder_hidden=tuple(int(x) for x in d["encoder_hidden"]),
+            latent_dim=int(d["latent_dim"]),
+            decoder_hidden=tuple(int(x) for x in d["decoder_hidden"]),
+            dropout=float(d["dropout"]),
+            align_weight=float(d.get("align_weight", 0.0)),
+        )
+
+
+@dataclass(frozen=True)
+class GroupSpec:
+    """One autoencoder: an encoder per sensor in ``sensors`` and one decoder that outputs all of them.
+
+    UniTac-NV is the group of every sensor; a per-sensor baseline is a group of one.
+    """
+
+    name: str
+    sensors: tuple[str, ...]
+    # The decoder's output layers, each for some of ``sensors`` (in order); () means one layer for all of them. A
+    # sensor added to a trained model gets its own output layer (its "head") beside the frozen original one.
+    heads: tuple[tuple[str, ...], ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.heads and tuple(s for head in self.heads for s in head) != tuple(self.sensors):
+            raise ModelError(f"group {self.name}: heads {self.heads} do not list its sensors {self.sensors} in order")
+
+    @property
+    def output_heads(self) -> tuple[tuple[str, ...], ...]:
+        return self.heads or (tuple(self.sensors),)
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"name": self.name, "sensors": list(self.sensors)}
+        if len(self.output_heads) > 1:
+            out["heads"] = [list(head) for head in self.heads]
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> GroupSpec:
+        heads = tuple(tuple(str(s) for s in head) for head in d.get("heads") or ())
+        return cls(str(d["name"]), tuple(str(s) for s in d["sensors"]), heads if len(heads) > 1 else ())
+
+
+def head_part(head: Sequence[str], index: int) -> str:
+    """Layer-key part of a decoder output layer: ``dec`` for the first (the original model's), ``head_<sensors>``
+    for a head added later, so a trained model's keys never change when a sensor is added."""
+    return "dec" if index == 0 else "head_" + "+".join(head)
+
+
+def baseline_name(sensor: str) -> str:
+    return f"ae_{sensor}"
+
+
+def default_groups(sensors: Sequence[str], baselines: bool) -> list[GroupSpec]:
+    groups = [GroupSpec(UNITAC_GROUP, tuple(sensors))]
+    if baselines:
+        groups += [GroupSpec(baseline_name(s), (s,)) for s in sensors]
+    return groups
+
+
+def _plain_mlp(widths: Sequence[int], dropout: float, *, hidden: bool) -> nn.Sequential:
+    """Linear layers with ReLU between them (after the last too when ``hidden``) and ``nn.Dropout`` after every
+    layer (when ``dropout`` > 0), as :meth:`StackedAutoencoders._mlp` runs them."""
+    modules: list[nn.Module] = []
+    for i in range(len(widths) - 1):
+        modules.append(nn.Linear(widths[i], widths[i + 1]))
+        if hidden or i < len(widths) - 2:
+            modules.append(nn.ReLU())
+        if dropout > 0.0:
+            modules.append(nn.Dropout(dropout))
+    return nn.Sequential(*modules)
+
+
+class Autoencoder(nn.Module):
+    """One member of one group (UniTac-NV, or a per-sensor baseline) as ordinary PyTorch: what
+    :meth:`StackedAutoencoders.network` slices out, what ``export-model`` writes (:meth:`encoder`, :meth:`decoder`)
+    and what the training benchmark's plain loop trains.
+
+    ``encoders[sensor]``: frames (B, F) -> latent, ``nn.Linear`` with ReLU between and ``nn.Dropout`` after every
+    layer (the latent's too); ``decoder``: the hidden layers, each followed by ReLU and dropout; ``heads``: the output
+    layers (no ReLU, no dropout), whose outputs side by side are the group's sensors' frames in order.
+    """
+
+    def __init__(
+        self, feature_dims: Mapping[str, int], spec: GroupSpec, shape: ModelShape, dropout: float | None = None
+    ) -> None:
+        super().__init__()
+        p = shape.dropout if dropout is None else dropout
+        self.sensors = tuple(spec.sensors)
+        self.output_heads = spec.output_heads
+        self.feature_dims = {s: int(feature_dims[s]) for s in spec.sensors}
+        latent, trunk = shape.latent_dim, [shape.latent_dim, *shape.decoder_hidden]
+        self.encoders = nn.ModuleDict(
+            {s: _plain_mlp([d, *shape.encoder_hidden, latent], p, hidden=False) for s, d in self.feature_dims.items()}
+        )
+        self.decoder = _plain_mlp(trunk, p, hidden=True)
+        self.heads = nn.ModuleList(
+            nn.Linear(trunk[-1], sum(self.feature_dims[s] for s in head)) for head in self.output_heads
+        )
+
+    def linears(self) -> dict[str, nn.Linear]:
+        """Every layer keyed as in :meth:`StackedAutoencoders.layer_parameters` (``enc_<sensor>/<i>``, ``dec/<i>``,
+        ``head_<sensors>/<i>``)."""
+        out: dict[str, nn.Linear] = {}
+        for sensor, mlp in self.encoders.items():
+            out |= {f"enc_{sensor}/{i}": m for i, m in enumerate(_linears(mlp))}
+        hidden = _linears(self.decoder)
+        out |= {f"dec/{i}": m for i, m in enumerate(hidden)}
+        for h, (head, linear) in enumerate(zip(self.output_heads, _linears(self.heads), strict=True)):
+            out[f"{head_part(head, h)}/{len(hidden)}"] = linear
+        return out
+
+    def decode(self, z: torch.Tensor) -> torch.Tensor:
+        """Latents (B, latent) -> every sensor's frame side by side (B, sum of feature dims)."""
+        h = self.decoder(z)
+        return torch.cat([head(h) for head in self.heads], dim=-1)
+
+    def forward(self, inputs: Sequence[torch.Tensor]) -> list[torch.Tensor]:
+        """Per source sensor (in order), the reconstruction of every sensor's frame from its latent."""
+        return [self.decode(self.encoders[s](x)) for s, x in zip(self.sensors, inputs, strict=True)]
+
+    def loss(self, inputs: Sequence[torch.Tensor]) -> torch.Tensor:
+        """The training loss: the sum over (source, target) of MAE(target frame, its reconstruction from the
+        source's latent)."""
+        total = torch.zeros((), device=inputs[0].device)
+        for recon in self(inputs):
+            for target, estimate in zip(inputs, recon.split(list(self.feature_dims.values()), dim=-1), strict=True):
+                total = total + nn.functional.l1_loss(estimate, target)
+        return total
+
+    def encoder(self, sensor: str) -> nn.Sequential:
+        """``sensor``'s encoder without dropout: frames (B, F) -> latent (a copy)."""
+        mlp = self.encoders[sensor]
+        assert isinstance(mlp, nn.Sequential)
+        return nn.Sequential(*(copy.deepcopy(m) for m in mlp if not isinstance(m, nn.Dropout)))
+
+    def decoder_for(self, sensor: str) -> nn.Sequential:
+        """Latent -> ``sensor``'s frames (B, F) alone, without dropout: the hidden layers and that sensor's columns of
+        its output layer (a copy)."""
+        hidden = [copy.deepcopy(m) for m in self.decoder if not isinstance(m, nn.Dropout)]
+        h, head = next((h, head) for h, head in enumerate(self.output_heads) if sensor in head)
+        start = sum(self.feature_dims[s] for s in head[: head.index(sensor)])
+        columns = slice(start, start + self.feature_dims[sensor])
+        source = self.heads[h]
+        assert isinstance(source, nn.Linear)
+        out = nn.Linear(source.in_features, self.feature_dims[sensor], device=source.weight.device)
+        with torch.no_grad():
+            out.weight.copy_(source.weight[columns])
+            out.bias.copy_(source.bias[columns])
+        return nn.Sequential(*hidden, out)
+
+
+def _linears(mlp: nn.Module) -> list[nn.Linear]:
+    return [m for m in mlp.modules() if isinstance(m, nn.Linear)]

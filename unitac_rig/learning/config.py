@@ -81,6 +81,7 @@ class SplitSection(_Section):
     test_fraction: float | None = Field(default=None, gt=0.0, lt=1.0)
     val_fraction: float | None = Field(default=None, ge=0.0, lt=1.0)
     unseen_objects: list[str] | None = None
+    mode: Literal["random", "blocked"] | None = None
 
 
 class EvaluationSection(_Section):
@@ -125,6 +126,7 @@ _FIELDS: dict[tuple[str, str], str] = {
     ("split", "test_fraction"): "test_fraction",
     ("split", "val_fraction"): "val_fraction",
     ("split", "unseen_objects"): "unseen_objects",
+    ("split", "mode"): "split_mode",
     ("evaluation", "eval_every"): "eval_every",
     ("evaluation", "checkpoint_every"): "checkpoint_every",
     ("evaluation", "tsne_contacts"): "tsne_contacts",

@@ -8,11 +8,16 @@ Ground truth, cut from the object's outline (CAD frame, mm) as the paper describ
 2. the outline is turned about that origin so the press runs along -y (the pad sits on the +y side); the new x axis
    is the pad's column direction (tool x), i.e. ``(u_y, -u_x)`` for the pad-side direction ``u``;
 3. 11 points evenly over 14 mm of x, centred on the origin; at each, the depth (mm, >= 0 on a convex object) is
-   how far below the origin's tangent line the outline's pad-facing surface lies.
+   how far the outline's pad-facing surface lies below the contact origin along the press direction (-y): measured
+   from the line through the origin across the pad (the pad's plane), not from the outline's tangent there, so a
+   face pressed at an angle has a sloped profile.
 
 Model: MLP 16 -> 64 -> 128 -> 64 -> 32 -> 11, ReLU and dropout (the sensor's registered ``geometry_dropout``: 0.2
 for uSkin latents, 0.3 for PapillArray) between layers, Adam lr 5e-5, weight decay 1e-3, L1 loss (mm), 80 epochs,
-batch 64. Split: a seeded 10% of the object's approach directions (rotation, angle) go to test with all their forces.
+batch 64. Split: 10% of the object's approach rays go to test with all their forces, drawn at random (the paper's) or
+as one contiguous block (``GeometryConfig.split_mode``, :func:`unitac_rig.learning.data.hold_out_rays`); two
+(rotation, angle) keys of one physical ray are one unit, and the split's seed is its own (``split_seed``), apart from
+the MLPs' seed.
 
 The trained MLPs are kept in the run (``geometry_estimator.pt``: tensors and plain metadata, read with
 ``weights_only=True``; ``geometry_estimator.json`` for people) and applied to new frames by :func:`predict_geometry`
@@ -39,7 +44,7 @@ import torch
 from torch import nn
 
 from unitac_rig.errors import DataError, ModelError, UsageError
-from unitac_rig.learning.data import PairedDataset, held_out_directions
+from unitac_rig.learning.data import DEFAULT_GAP_DEG, PairedDataset, hold_out_rays
 from unitac_rig.learning.engine import UNITAC_GROUP
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM
 from unitac_rig.learning.run import safe_torch_load
@@ -140,6 +145,9 @@ class GeometryConfig:
     span_mm: float = 14.0
     dropout: dict[str, float] = field(default_factory=dict)  # per sensor, over its registered geometry_dropout
     other_dropout: float = 0.2  # a sensor the registry does not know
+    split_mode: str = "random"  # "random" (the paper's), "blocked" or "corner" (data.hold_out_rays)
+    gap_deg: float = DEFAULT_GAP_DEG  # blocked / corner: guard band around the test rays, out of training
+    val_fraction: float = 0.0  # validation rays (for choices), taken from the training side
 
     def dropout_for(self, sensor: str) -> float:
         from unitac_rig.rig.sensors import SENSORS
@@ -199,9 +207,11 @@ def fit_profile_mlps(
     config: GeometryConfig,
     dropouts: Sequence[float],
     seed: int,
+    on_epoch: Callable[[int, StackedProfileMLP], None] | None = None,
 ) -> StackedProfileMLP:
     """Train one MLP per latent set (L1 loss in mm) on the same targets (M, K), all at once; each member sees
-    its own shuffles. Batches are index slices of tensors already in memory (no DataLoader)."""
+    its own shuffles. Batches are index slices of tensors already in memory (no DataLoader). ``on_epoch(epoch,
+    model)`` hears after every epoch (the model in eval mode; it is set back to training after)."""
     generator = torch.Generator().manual_seed(seed)
     members = len(latents)
     model = StackedProfileMLP(members, latents[0].shape[1], profiles_mm.shape[1], config.hidden, dropouts, generator)
@@ -212,7 +222,7 @@ def fit_profile_mlps(
     y = torch.as_tensor(profiles_mm, dtype=torch.float32)
     rows = x.shape[1]
     model.train()
-    for _ in range(config.epochs):
+    for epoch in range(config.epochs):
         order = torch.stack([torch.randperm(rows, generator=generator) for _ in range(members)])
         xs = torch.gather(x, 1, order.unsqueeze(-1).expand(-1, -1, x.shape[2]))
         ys = y[order]
@@ -223,6 +233,10 @@ def fit_profile_mlps(
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
+        if on_epoch is not None:
+            model.eval()
+            on_epoch(epoch + 1, model)
+            model.train()
     model.eval()
     return model
 
@@ -284,20 +298,8 @@ def contact_profiles(
     return subset, truth, valid, directions
 
 
-def run_geometry(
-    run: LoadedRun,
-    test_set: PairedDataset,
-    object_id: str | None = None,
-    *,
-    member: int = 0,
-    config: GeometryConfig | None = None,
-    outline: OutlineGeometry | None = None,
-    seed: int | None = None,
-    on_stage: Callable[[str], None] | None = None,
-) -> GeometryResult:
-    """The four (N x N) scenarios on one object's contacts (default: the run's unseen object). The paper's errors
-    are given beside ours only on an unseen object: on one the autoencoder trained on they are not comparable."""
-    config = config or GeometryConfig()
+def geometry_object(run: LoadedRun, test_set: PairedDataset, object_id: str | None = None) -> tuple[str, np.ndarray]:
+    """(object id, its rows in ``test_set``): the given object, else the run's first unseen object."""
     if object_id is None:
         unseen = [o for o in run.unseen_objects if o in set(test_set.object_id.tolist())]
         if not unseen:
@@ -312,49 +314,133 @@ def run_geometry(
             f"no test contacts of object {object_id!r} in this run",
             hint=f"objects in the run's test data: {', '.join(test_set.objects)}",
         )
+    return object_id, rows
+
+
+def corner_rays_deg(outline: OutlineGeometry) -> list[float]:
+    """The CAD-frame direction (deg) from the centre to each corner of the outline (interior angle < 170 deg)."""
+    from unitac_rig.rig.objects import CORNER_MAX_INTERIOR_DEG, interior_angles_deg
+
+    vertices = np.asarray(outline.outline_mm, dtype=np.float64)
+    corners = vertices[interior_angles_deg(vertices) < CORNER_MAX_INTERIOR_DEG]
+    return [float(np.degrees(np.arctan2(v[1], v[0])) % 360.0) for v in corners]
+
+
+@dataclass(frozen=True)
+class GeometrySplit:
+    """Per contact of the object: which side of the geometry split it is on (guard contacts are on none)."""
+
+    train: np.ndarray  # (M,) bool
+    val: np.ndarray
+    test: np.ndarray
+    rays: np.ndarray  # (M,) int, each contact's physical ray (deg, CAD frame)
+
+
+def geometry_split(
+    subset: PairedDataset,
+    valid: np.ndarray,
+    object_id: str,
+    split_seed: int,
+    config: GeometryConfig,
+    outline: OutlineGeometry,
+) -> GeometrySplit:
+    """The geometry split of one object's contacts by physical ray, seeded by ``split_seed`` alone."""
+    rays = np.array(
+        [
+            round(float(np.degrees(np.arctan2(*outline.pad_direction(a, r)[::-1])))) % 360
+            for a, r in zip(subset.angle_deg.tolist(), subset.rotation_deg.tolist(), strict=True)
+        ],
+        dtype=int,
+    )
+    centres = corner_rays_deg(outline) if config.split_mode == "corner" else ()
+    held = hold_out_rays(
+        rays.tolist(),
+        object_id,
+        split_seed,
+        config.test_fraction,
+        config.val_fraction,
+        mode=config.split_mode,
+        gap_deg=config.gap_deg,
+        centres_deg=centres,
+        stream=3,
+    )
+    test = np.isin(rays, list(held.test)) & valid
+    val = np.isin(rays, list(held.val)) & valid
+    train = ~np.isin(rays, list(held.test | held.val | held.guard)) & valid
+    if not test.any() or not train.any():
+        raise DataError(f"object {object_id} has too few approach directions to split for geometry")
+    return GeometrySplit(train, val, test, rays)
+
+
+def member_latents(run: LoadedRun, member: int, frames: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """One member's UniTac-NV latents (M, latent) of each sensor's frames (M, n_taxels, 3), sensor units."""
+    if not 0 <= member < run.engine.members:
+        raise ModelError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
+    engine = run.engine.member(member, groups=[UNITAC_GROUP])
+    return {
+        s: engine.encode(UNITAC_GROUP, s, torch.from_numpy(run.normaliser.normalise(s, frames[s])))[0].numpy()
+        for s in frames
+    }
+
+
+def fit_single_thread(*args: Any, **kwargs: Any) -> StackedProfileMLP:
+    """:func:`fit_profile_mlps` on one thread (tiny layers: one thread is fastest, see train.default_threads)."""
+    previous_threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return fit_profile_mlps(*args, **kwargs)
+    finally:
+        torch.set_num_threads(previous_threads)
+
+
+def run_geometry(
+    run: LoadedRun,
+    test_set: PairedDataset,
+    object_id: str | None = None,
+    *,
+    member: int = 0,
+    config: GeometryConfig | None = None,
+    outline: OutlineGeometry | None = None,
+    seed: int | None = None,
+    split_seed: int | None = None,
+    on_stage: Callable[[str], None] | None = None,
+) -> GeometryResult:
+    """The four (N x N) scenarios on one object's contacts (default: the run's unseen object). The paper's errors
+    are given beside ours only on an unseen object: on one the autoencoder trained on they are not comparable.
+    ``seed`` seeds the MLPs (default: the member's model seed), ``split_seed`` the geometry split (default:
+    ``seed``, as before the split had its own seed; a study over members should give each its own)."""
+    config = config or GeometryConfig()
+    object_id, rows = geometry_object(run, test_set, object_id)
     if not 0 <= member < run.engine.members:
         raise ModelError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
     seed = run.engine.seeds[member] if seed is None else seed
-    subset, truth, valid, directions = contact_profiles(test_set, rows, object_id, config, outline)
-    held = set(held_out_directions(directions, object_id, seed, config.test_fraction))
-    is_test = np.array([d in held for d in directions]) & valid
-    is_train = ~np.array([d in held for d in directions]) & valid
-    if not is_test.any() or not is_train.any():
-        raise DataError(f"object {object_id} has too few approach directions to split for geometry")
-
+    outline = outline or OutlineGeometry.from_catalogue(object_id)
+    subset, truth, valid, _ = contact_profiles(test_set, rows, object_id, config, outline)
+    split = geometry_split(subset, valid, object_id, int(seed if split_seed is None else split_seed), config, outline)
     held_out = object_id in set(run.unseen_objects)
     if on_stage is not None:
         on_stage(
-            f"training the profile MLPs on {object_id} ({int(is_train.sum())} contacts, {config.epochs} epochs; "
+            f"training the profile MLPs on {object_id} ({int(split.train.sum())} contacts, {config.epochs} epochs; "
             f"{'unseen' if held_out else 'seen'} in training)"
         )
-    engine = run.engine.member(member, groups=[UNITAC_GROUP])
-    latents = {
-        s: engine.encode(UNITAC_GROUP, s, torch.from_numpy(run.normaliser.normalise(s, subset.values[s])))[0].numpy()
-        for s in run.sensors
-    }
+    latents = member_latents(run, member, subset.values)
+    sensors = run.sensors
+    model = fit_single_thread(
+        [latents[s][split.train] for s in sensors],
+        truth[split.train],
+        config,
+        [config.dropout_for(s) for s in sensors],
+        seed,
+    )
     scenarios: dict[str, dict[str, Any]] = {}
     predictions: dict[str, np.ndarray] = {}
-    sensors = run.sensors
-    previous_threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # tiny layers: one thread is fastest (see train.default_threads)
-    try:
-        model = fit_profile_mlps(
-            [latents[s][is_train] for s in sensors],
-            truth[is_train],
-            config,
-            [config.dropout_for(s) for s in sensors],
-            seed,
-        )
-    finally:
-        torch.set_num_threads(previous_threads)
     for k, train_sensor in enumerate(sensors):
         for test_sensor in sensors:
             with torch.no_grad():
-                stacked = torch.from_numpy(np.stack([latents[test_sensor][is_test]] * len(sensors)))
+                stacked = torch.from_numpy(np.stack([latents[test_sensor][split.test]] * len(sensors)))
                 predicted = model(stacked)[k].numpy()
             name = f"{train_sensor}_to_{test_sensor}"
-            errors = np.abs(predicted - truth[is_test])
+            errors = np.abs(predicted - truth[split.test])
             scenarios[name] = {
                 "train_sensor": train_sensor,
                 "test_sensor": test_sensor,
@@ -370,11 +456,11 @@ def run_geometry(
         seed=seed,
         offsets_mm=profile_offsets_mm(config.points, config.span_mm),
         scenarios=scenarios,
-        test_rows=rows[is_test],
+        test_rows=rows[split.test],
         predictions=predictions,
-        truth_mm=truth[is_test],
-        angle_deg=subset.angle_deg[is_test],
-        rotation_deg=subset.rotation_deg[is_test],
+        truth_mm=truth[split.test],
+        angle_deg=subset.angle_deg[split.test],
+        rotation_deg=subset.rotation_deg[split.test],
         config=config,
         model=model,
         sensors=tuple(sensors),

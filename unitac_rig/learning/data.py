@@ -85,6 +85,8 @@ class Split:
     val_mask: np.ndarray | None = None  # (M,) bool, disjoint from test_mask; None: no validation rows
     val_fraction: float = 0.0
     val_directions: dict[str, list[tuple[int, int]]] = field(default_factory=dict)
+    mode: str = "random"  # SPLIT_MODES
+    gap_deg: float = 0.0  # blocked: the guard band around held-out rays (its rows are validation rows)
 
     @property
     def validation_mask(self) -> np.ndarray:
@@ -102,6 +104,8 @@ class Split:
             "test_directions": {k: [list(d) for d in v] for k, v in self.test_directions.items()},
             "val_fraction": self.val_fraction,
             "val_directions": {k: [list(d) for d in v] for k, v in self.val_directions.items()},
+            "mode": self.mode,
+            "gap_deg": self.gap_deg,
         }
 
 
@@ -132,16 +136,152 @@ def validation_directions(
     return sorted(units[int(i)] for i in picked)
 
 
+SPLIT_MODES: tuple[str, ...] = ("random", "blocked")
+DEFAULT_GAP_DEG = 3  # blocked split: no training ray within this many degrees of a held-out one
+
+
+def ray_deg(rotation_deg: float, angle_deg: float) -> int:
+    """The physical ray a press comes along, whole degrees in [0, 360) in the object's CAD frame: the direction of
+    :func:`unitac_rig.rig.objects.pad_side_direction`, ``angle - rotation - 90``. Two (rotation, angle) keys of one
+    ray (on the irregular prism (0, -45) and (90, 45), (0, 45) and (270, -45), ...) press the same spot of the
+    outline, so a split treats them as one unit."""
+    return (round(float(angle_deg)) - round(float(rotation_deg)) - 90) % 360
+
+
+def ray_distance_deg(a: float, b: float) -> float:
+    """Angle between two rays (deg, 0..180)."""
+    d = abs(float(a) - float(b)) % 360.0
+    return min(d, 360.0 - d)
+
+
+def arc_order(rays: Collection[int]) -> tuple[list[int], bool]:
+    """(the rays in order along their arc, whether they close a ring). A partial arc (a seen object's -45..45 deg)
+    starts after its widest gap, so a block never joins its two ends; a ring (the irregular prism's four rotations
+    cover all 360 deg) may wrap."""
+    units = sorted(set(int(r) % 360 for r in rays))
+    n = len(units)
+    if n < 2:
+        return units, False
+    gaps = [(units[(i + 1) % n] - units[i]) % 360 for i in range(n)]
+    widest = int(np.argmax(gaps))
+    order = units[widest + 1 :] + units[: widest + 1]
+    return order, max(gaps) <= 2 * min(gaps)
+
+
+def pick_block(
+    order: Sequence[int],
+    ring: bool,
+    size: int,
+    rng: np.random.Generator,
+    avoid: Collection[int] = (),
+    centre_deg: float | None = None,
+) -> list[int]:
+    """One contiguous block of ``size`` rays along ``order`` that holds none of ``avoid``: a seeded one, or the one
+    whose middle ray is nearest ``centre_deg``. Raises DataError when no such block exists."""
+    n = len(order)
+    avoided = set(avoid)
+    starts = range(n) if ring else range(n - size + 1)
+    blocks = [[order[(s + k) % n] for k in range(size)] for s in starts]
+    blocks = [b for b in blocks if not avoided.intersection(b)]
+    if not blocks or size < 1:
+        raise DataError(f"no contiguous block of {size} approach directions is free to hold out")
+    if centre_deg is not None:
+        return min(blocks, key=lambda b: ray_distance_deg(b[size // 2], centre_deg))
+    return blocks[int(rng.integers(len(blocks)))]
+
+
+def within_gap(rays: Collection[int], held: Collection[int], gap_deg: float) -> set[int]:
+    """The rays (not held) within ``gap_deg`` of a held one: the guard band that neither trains nor tests."""
+    held_set = set(held)
+    return {r for r in rays if r not in held_set and any(ray_distance_deg(r, h) <= gap_deg for h in held_set)}
+
+
+@dataclass(frozen=True)
+class RayHoldOut:
+    """Which rays of one object are test, validation and guard-band rays (the rest train)."""
+
+    test: frozenset[int]
+    val: frozenset[int]
+    guard: frozenset[int]
+
+
+def hold_out_rays(
+    rays: Collection[int],
+    object_id: str,
+    seed: int,
+    test_fraction: float,
+    val_fraction: float = 0.0,
+    *,
+    mode: str = "random",
+    gap_deg: float = DEFAULT_GAP_DEG,
+    centres_deg: Sequence[float] = (),
+    stream: int = 0,
+) -> RayHoldOut:
+    """Test, validation and guard rays of one object, seeded by (``seed``, the object id, ``stream``).
+
+    ``random`` (the paper's): ``test_fraction`` of the rays drawn at random, then ``val_fraction`` (of all) of the
+    rest; no guard. On an object pressed at one rotation this is exactly :func:`held_out_directions` and
+    :func:`validation_directions` (stream 0). ``blocked``: one contiguous block of rays for test and one for
+    validation, with every other ray within ``gap_deg`` of either a guard ray (held out of training, scored on
+    neither side), so no training ray lies within ``gap_deg`` of a test or validation ray. ``corner``: as blocked,
+    the test block centred on one of ``centres_deg`` (a corner's ray), chosen by the seed."""
+    if mode not in (*SPLIT_MODES, "corner"):
+        raise DataError(f"unknown split mode {mode!r}", hint=f"use one of {', '.join((*SPLIT_MODES, 'corner'))}")
+    units = sorted(set(int(r) % 360 for r in rays))
+    empty = RayHoldOut(frozenset(), frozenset(), frozenset())
+    if len(units) < 2:
+        return empty
+    n_test = min(len(units) - 1, max(1, round(test_fraction * len(units))))
+    n_val = min(len(units) - 1 - n_test, max(1, round(val_fraction * len(units)))) if val_fraction > 0 else 0
+    key = [seed, zlib.crc32(object_id.encode())] + ([stream] if stream else [])
+    if mode == "random":
+        rng = np.random.default_rng(key)
+        test = {units[int(i)] for i in rng.choice(len(units), size=n_test, replace=False)}
+        rest = [u for u in units if u not in test]
+        val: set[int] = set()
+        if n_val > 0 and len(rest) >= 2:
+            val_rng = np.random.default_rng([*key[:2], 1, *key[2:]])
+            val = {rest[int(i)] for i in val_rng.choice(len(rest), size=min(n_val, len(rest) - 1), replace=False)}
+        return RayHoldOut(frozenset(test), frozenset(val), frozenset())
+    rng = np.random.default_rng([*key, 2])
+    order, ring = arc_order(units)
+    centre = None
+    if mode == "corner":
+        if not centres_deg:
+            raise DataError(f"{object_id} has no corner to hold out", hint="use the blocked split for it")
+        centre = float(centres_deg[int(rng.integers(len(centres_deg)))])
+    test = set(pick_block(order, ring, n_test, rng, centre_deg=centre))
+    guard = within_gap(units, test, gap_deg)
+    val = set()
+    if n_val > 0:
+        val = set(pick_block(order, ring, n_val, rng, avoid=test | guard))
+        guard |= within_gap(units, val, gap_deg) - test
+    if not set(units) - test - val - guard:
+        raise DataError(f"{object_id}: the blocked split leaves no approach direction to train on")
+    return RayHoldOut(frozenset(test), frozenset(val), frozenset(guard))
+
+
 def split_by_direction(
     dataset: PairedDataset,
     seed: int,
     test_fraction: float = 0.1,
     unseen_objects: Collection[str] | None = None,
     val_fraction: float = 0.0,
+    *,
+    mode: str = "random",
+    gap_deg: float = DEFAULT_GAP_DEG,
 ) -> Split:
-    """The paper's split: per seen object ``test_fraction`` of its approach directions (seeded) with all their
-    forces; every row of an unseen object is test data. With ``val_fraction`` > 0, a further seeded fraction of
-    each seen object's directions is validation data (so training keeps 1 - test - val of them)."""
+    """The paper's split (``mode="random"``): per seen object ``test_fraction`` of its approach rays (seeded) with
+    all their forces; every row of an unseen object is test data. With ``val_fraction`` > 0, a further seeded
+    fraction of each seen object's rays is validation data (so training keeps 1 - test - val of them).
+
+    ``mode="blocked"`` holds out one contiguous block of rays per seen object for test and one for validation
+    (:func:`hold_out_rays`): a test of extrapolation to approach directions the model never saw near, not of
+    interpolation between 1-degree neighbours. The guard band's contacts (within ``gap_deg`` of a held-out ray)
+    are added to the validation rows, so they are never trained on. A unit is a physical ray
+    (:func:`ray_deg`): two (rotation, angle) keys of one ray are always on the same side."""
+    if mode not in SPLIT_MODES:
+        raise DataError(f"unknown split mode {mode!r}", hint=f"use one of {', '.join(SPLIT_MODES)}")
     if not 0.0 < test_fraction < 1.0:
         raise DataError(f"test fraction must be between 0 and 1, got {test_fraction}")
     if not 0.0 <= val_fraction < 1.0 - test_fraction:
@@ -159,15 +299,14 @@ def split_by_direction(
             test_mask |= rows
             continue
         directions = list(zip(rotation[rows].tolist(), angle[rows].tolist(), strict=True))
-        held = held_out_directions(directions, object_id, seed, test_fraction)
-        test_directions[object_id] = held
-        held_set = set(held)
-        in_test = np.array([d in held_set for d in directions], dtype=bool)
+        rays = [ray_deg(r, a) for r, a in directions]
+        held = hold_out_rays(rays, object_id, seed, test_fraction, val_fraction, mode=mode, gap_deg=gap_deg)
+        in_test = np.array([r in held.test for r in rays], dtype=bool)
+        in_val = np.array([r in held.val or r in held.guard for r in rays], dtype=bool)
+        test_directions[object_id] = sorted(set(d for d, t in zip(directions, in_test, strict=True) if t))
         test_mask[np.flatnonzero(rows)[in_test]] = True
-        if val_fraction > 0.0:
-            val_directions[object_id] = validation_directions(directions, held, object_id, seed, val_fraction)
-            val_set = set(val_directions[object_id])
-            in_val = np.array([d in val_set for d in directions], dtype=bool)
+        if in_val.any():
+            val_directions[object_id] = sorted(set(d for d, v in zip(directions, in_val, strict=True) if v))
             val_mask[np.flatnonzero(rows)[in_val]] = True
     if not (~test_mask).any():
         raise DataError(
@@ -180,9 +319,11 @@ def split_by_direction(
         test_fraction,
         unseen,
         test_directions,
-        val_mask if val_fraction > 0.0 else None,
+        val_mask if val_fraction > 0.0 or val_mask.any() else None,
         val_fraction,
         val_directions,
+        mode,
+        float(gap_deg) if mode != "random" else 0.0,
     )
 
 

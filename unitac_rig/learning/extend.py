@@ -42,7 +42,7 @@ from unitac_rig.learning.data import (
     held_out_directions,
 )
 from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
-from unitac_rig.learning.metrics import nmae_per_frame, ssim_per_frame
+from unitac_rig.learning.metrics import nmae_per_frame, nmae_scale, ssim_per_frame, ssim_scale
 from unitac_rig.learning.run import checkpoint_path, provenance, save_checkpoint, save_test_set
 from unitac_rig.learning.train import LoadedRun, default_threads, load_run, resolve_device
 from unitac_rig.storage.reader import MatchedSet
@@ -167,10 +167,16 @@ def _inputs(
 
 
 def evaluate_new_sensor(
-    engine: StackedAutoencoders, normaliser: Normaliser, test: PairedDataset, new_sensor: str
+    engine: StackedAutoencoders,
+    normaliser: Normaliser,
+    test: PairedDataset,
+    new_sensor: str,
+    nmae_normaliser: str = "channel_range",
+    ssim_range: str = "channel_range",
 ) -> dict[str, dict[str, Any]]:
-    """``<src>_to_<dst>`` for every direction involving ``new_sensor``: per-member mean NMAE and SSIM (each
-    channel's training range) over the test contacts that have both sensors, and how many there are."""
+    """``<src>_to_<dst>`` for every direction involving ``new_sensor``: per-member mean NMAE and SSIM over the test
+    contacts that have both sensors, and how many there are; scored under the base run's NMAE normaliser and SSIM
+    range (``unitac_rig.learning.metrics``), so the numbers read like the run's own report."""
     out: dict[str, dict[str, Any]] = {}
     sensors = [s for s in engine.sensors if s in test.values]
     with torch.no_grad():
@@ -185,10 +191,11 @@ def evaluate_new_sensor(
                 decoded = engine.decode(UNITAC_GROUP, engine.encode(UNITAC_GROUP, source, x))[target]
                 estimate = torch.from_numpy(normaliser.denormalise(target, decoded.cpu().numpy()))
                 truth = torch.from_numpy(test.values[target][rows]).to(torch.float32)
-                data_range = torch.as_tensor(normaliser.data_range[target], dtype=torch.float32)
+                stats = {k: torch.as_tensor(v, dtype=torch.float32) for k, v in normaliser.metric_stats(target).items()}
+                nmae_range = nmae_scale(nmae_normaliser, stats, truth)
                 out[f"{source}_to_{target}"] = {
-                    "nmae": nmae_per_frame(truth, estimate, data_range).mean(dim=-1).tolist(),
-                    "ssim": ssim_per_frame(truth, estimate, data_range).mean(dim=-1).tolist(),
+                    "nmae": nmae_per_frame(truth, estimate, nmae_range).mean(dim=-1).tolist(),
+                    "ssim": ssim_per_frame(truth, estimate, ssim_scale(ssim_range, stats)).mean(dim=-1).tolist(),
                     "contacts": int(rows.sum()),
                 }
     return out
@@ -255,7 +262,9 @@ def _add_sensor(
 
     normaliser = _fit_new_sensor(run, dataset, new_sensor, ~test_mask & dataset.has(new_sensor))
     engine = run.engine.with_new_sensor(new_sensor, dataset.n_taxels(new_sensor) * 3)
-    before = evaluate_new_sensor(engine, normaliser, test_rows, new_sensor)
+    before = evaluate_new_sensor(
+        engine, normaliser, test_rows, new_sensor, run.config.nmae_normaliser, run.config.ssim_range
+    )
 
     x, present = _inputs(train_rows, engine.feature_dims, normaliser)
     x, present = x.to(device), present.to(device)
@@ -285,7 +294,9 @@ def _add_sensor(
         history.append(record)
         if progress is not None:
             progress(record)
-    after = evaluate_new_sensor(engine, normaliser, test_rows, new_sensor)
+    after = evaluate_new_sensor(
+        engine, normaliser, test_rows, new_sensor, run.config.nmae_normaliser, run.config.ssim_range
+    )
 
     summary = {
         "new_sensor": new_sensor,

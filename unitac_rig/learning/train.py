@@ -56,6 +56,7 @@ class TrainConfig:
     learning_rate: float = 5e-4
     seeds: tuple[int, ...] = (0,)
     split_seed: int = 0  # which directions are test / validation data; apart from the model seeds
+    split_mode: str = "random"  # data.SPLIT_MODES: the paper's random directions, or blocked rays (docs/learning.md)
     test_fraction: float = 0.1
     val_fraction: float = 0.1  # of each seen object's directions, taken from the training side (paper: none)
     baselines: bool = True
@@ -325,7 +326,12 @@ def _start_run(
     if epochs is not None:
         config = replace(config, epochs=epochs)
     split = split_by_direction(
-        dataset, config.split_seed, config.test_fraction, config.unseen_objects, val_fraction=config.val_fraction
+        dataset,
+        config.split_seed,
+        config.test_fraction,
+        config.unseen_objects,
+        config.val_fraction,
+        mode=config.split_mode,
     )
     train_rows, test_rows = _split_rows(dataset, split)
     feature_dims = {s: dataset.n_taxels(s) * 3 for s in dataset.sensors}

@@ -1,0 +1,67 @@
+"""docs/results.md is rendered from the committed per-split JSON alone (issue 29): a tiny run through every stage,
+its run folder deleted, then the page drawn from the JSON; each number on the page traces to the JSON."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from tests.learning.learning_helpers import small_sets  # noqa: E402
+from unitac_rig.learning.data import build_paired_dataset  # noqa: E402
+from unitac_rig.learning.train import TrainConfig  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def json_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from results_stages import export_split, geometry_member, split_config, train_split
+
+    root = tmp_path_factory.mktemp("results")
+    dataset = build_paired_dataset(small_sets())
+    base = TrainConfig().updated({"epochs": 2, "eval_every": 1, "tsne_contacts": 10})
+    for protocol in ("random", "blocked"):
+        run_dir = root / "runs" / protocol / "split-1"
+        train_split(dataset, run_dir, split_config(base, protocol, 1, 2), log=lambda message: None)
+        for member in range(2):
+            geometry_member(run_dir, protocol, member, ceiling=member == 0, epochs=3)
+        export_split(run_dir, protocol, root / "json" / protocol / "split-1.json", figures=False)
+    shutil.rmtree(root / "runs")  # the page must need nothing but the JSON
+    return root / "json"
+
+
+def test_the_page_is_drawn_from_the_json_alone_with_both_protocols(json_dir: Path, tmp_path: Path) -> None:
+    import run_results
+
+    results = run_results.load_results(json_dir)
+    assert set(results) == {"random", "blocked"}
+    page = run_results.render(results, run_results.draw_figures(results, tmp_path / "figures", None))
+    for heading in ("## Random split", "## Blocked split", "Strict cross-sensor geometry", "no latent", "**default**"):
+        assert heading in page
+    assert (tmp_path / "figures" / "results_blocked_cross_sensor.png").exists()
+
+
+def test_each_split_keeps_its_own_model_seeds_and_every_members_geometry(json_dir: Path) -> None:
+    doc = json.loads((json_dir / "blocked" / "split-1.json").read_text(encoding="utf-8"))
+    assert doc["config"]["seeds"] == [2, 3] and doc["config"]["split_mode"] == "blocked"
+    members = doc["geometry"]["members"]
+    assert [m["model_seed"] for m in members] == [2, 3]
+    assert len({m["geometry_split_seed"] for m in members}) == 2
+    assert "ceiling" in members[0]["cross_sensor"] and "ceiling" not in members[1]["cross_sensor"]
+    assert set(doc["readings"]) == {f"{n}|{s}" for n, s in __import__("results_stages").READINGS}
+
+
+def test_the_pages_no_latent_number_is_the_mean_over_the_json_members(json_dir: Path, tmp_path: Path) -> None:
+    import run_results
+
+    results = run_results.load_results(json_dir)
+    page = run_results.render(results, {})
+    doc = json.loads((json_dir / "random" / "split-1.json").read_text(encoding="utf-8"))
+    values = np.array([m["cross_sensor"]["no_latent_mm"] for m in doc["geometry"]["members"]])
+    assert f"| no latent (the training rays' mean profile) | {values.mean():.3f} ± {values.std():.3f} | – |" in page

@@ -70,10 +70,22 @@ def _root(
     ),
 ) -> None:
     _state["debug"] = debug
-    logging.basicConfig(
-        level=logging.DEBUG if debug else logging.WARNING,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
+    handler = logging.StreamHandler()
+    handler.setFormatter(_LogLine() if not debug else logging.Formatter(LOG_FORMAT))
+    logging.basicConfig(level=logging.DEBUG if debug else logging.WARNING, handlers=[handler])
+
+
+LOG_FORMAT = "%(levelname)s %(name)s: %(message)s"
+
+
+class _LogLine(logging.Formatter):
+    """A log record as one line: the exception's own message instead of its traceback (``--debug`` shows those)."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = f"{record.levelname} {record.name}: {record.getMessage()}"
+        if record.exc_info and record.exc_info[1] is not None:
+            text += f" ({record.exc_info[1]})"
+        return text
 
 
 for _module in COMMAND_MODULES:

@@ -178,6 +178,7 @@ def collect_session(
             raise
         current_rotation: float | None = None
         previous: PressPlan | None = None
+        stop = False
         confirmed = False  # a press has found the object where the rig file says (since the last turn)
         limit = config.limits.max_failed_in_a_row
         for index, plan in enumerate(todo):
@@ -208,6 +209,8 @@ def collect_session(
                 break
             if stop:
                 break
+        if previous is not None and not stop:  # the stops above retracted already
+            _retract(rig, previous)  # out to the clearance radius: the operator swaps the sensor or object next
     finally:
         sensor.disconnect()
     return outcome

@@ -63,6 +63,7 @@ SAFETY_MODE_PROTECTIVE_STOP = 3
 DEFAULT_START_POSE = np.array([-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214])  # m, rad: pad facing base +y
 
 _UNLOCK_HINT = "unlock the protective stop, then re-upload the control program"
+_NO_TURN = np.zeros(3)  # rad/s: the angular part of a force-mode twist with no compliant torque axis (read only)
 
 
 @dataclass(frozen=True)
@@ -164,6 +165,8 @@ class SimArm:
         # ur_rtde loop does), and re-validating it and rebuilding its frame was a tenth of a simulated session
         self._force_key: tuple[bytes, bytes, bytes, bytes] | None = None
         self._force_gains: tuple[float, np.ndarray] | None = None  # (gain scaling, the scaled gains)
+        self._force_turns = False  # a torque axis of the force command is compliant
+        self._force_low_limits = np.zeros(6)  # -speed_limits of the force command
         self._path: _Path | None = None
         self._protective_stop = False
         self._program_running = True
@@ -185,7 +188,12 @@ class SimArm:
         self._delay_line: deque[np.ndarray] = deque([self._true_wrench.copy()] * delay_periods)
         self._axis_scale = np.array([1.0, 1.0, 1.0] + [self.params.ft_torque_scale_m] * 3)
         self._bias = rng.normal(0.0, self.params.ft_bias_sigma_n, 6) * self._axis_scale
-        self._normals = _NormalBlocks(rng)
+        self._ft_noise = _FtNoise(
+            _NormalBlocks(rng),
+            self.params.ft_bias_drift_n_per_sqrt_s * math.sqrt(self.control_period_s),
+            self.params.ft_noise_sigma_n,
+            self._axis_scale,
+        )
         self._filtered = self._true_wrench + self._bias
         self._zero_offset = np.zeros(6)
         self.force_mode_damping, self.force_mode_gain_scaling = 0.005, 1.0  # the URScript defaults
@@ -317,6 +325,9 @@ class SimArm:
         self._mode, self._path = "force", None
         self._force_command = (rotvec_to_matrix(frame[3:]), chosen, target, speed_limits)
         self._force_key = key
+        # the press's force mode is compliant along its axis only: no torque axis, no torque terms to work out
+        self._force_turns = bool(chosen[3:].any())
+        self._force_low_limits = -speed_limits
 
     def set_ft_sign(self, sign: float) -> None:
         """A fault hook: -1 reports the negated F/T (a flipped sensor frame); force mode regulates on the same
@@ -517,7 +528,6 @@ class SimArm:
         assert self._force_command is not None
         rotation, chosen, target, speed_limits = self._force_command
         measured = self._ft_sign * (self._filtered - self._zero_offset)
-        applied_task = -np.concatenate([rotation.T @ measured[:3], rotation.T @ measured[3:]])
         scaling = self.force_mode_gain_scaling
         if self._force_gains is None or self._force_gains[0] != scaling:
             gains = scaling * np.array(
@@ -525,7 +535,15 @@ class SimArm:
             )
             self._force_gains = (scaling, gains)
         gains = self._force_gains[1]
-        twist_task = np.where(chosen, np.clip(gains * (target - applied_task), -speed_limits, speed_limits), 0.0)
+        if not self._force_turns:  # the torque rows would give a zero turn: only the force rows, same operations
+            applied = -(rotation.T @ measured[:3])
+            low, high = self._force_low_limits[:3], speed_limits[:3]
+            limited = np.minimum(np.maximum(gains[:3] * (target[:3] - applied), low), high)
+            return np.concatenate([rotation @ np.where(chosen[:3], limited, 0.0), _NO_TURN])
+        applied_task = -np.concatenate([rotation.T @ measured[:3], rotation.T @ measured[3:]])
+        # np.minimum(np.maximum(...)) is what np.clip computes, without its wrapper's cost
+        limited = np.minimum(np.maximum(gains * (target - applied_task), self._force_low_limits), speed_limits)
+        twist_task = np.where(chosen, limited, 0.0)
         return np.concatenate([rotation @ twist_task[:3], rotation @ twist_task[3:]])
 
     def _integrate_motion(self) -> None:
@@ -535,6 +553,8 @@ class SimArm:
             self._step_path(self._path, dt)
             return
         if self._mode == "idle":
+            if not self._velocity.any() and not self._angular_velocity.any():
+                return  # at rest: nothing moves (the steps below would all be zero)
             step = 0.5 * self._velocity * dt
             turn = 0.5 * self._angular_velocity * dt
             self._velocity, self._angular_velocity = np.zeros(3), np.zeros(3)
@@ -574,17 +594,14 @@ class SimArm:
 
     def _update_sensor(self) -> None:
         """One F/T sample: true wrench -> latency -> + bias + noise -> low-pass; and the protective-stop check."""
-        dt = self.control_period_s
         self._true_wrench = np.asarray(self.world.wrench_on_tool(self.true_tcp_pose()), dtype=np.float64)
         self._delay_line.append(self._true_wrench.copy())
         delayed = self._delay_line.popleft()
         p = self.params
-        if p.ft_bias_drift_n_per_sqrt_s > 0:
-            drift = p.ft_bias_drift_n_per_sqrt_s * math.sqrt(dt) * self._normals.take(6)
-            self._bias = self._bias + drift * self._axis_scale
+        self._bias, noise = self._ft_noise.next(self._bias)
         raw = delayed + self._bias
-        if p.ft_noise_sigma_n > 0:
-            raw = raw + p.ft_noise_sigma_n * self._normals.take(6) * self._axis_scale
+        if noise is not None:
+            raw = raw + noise
         self._filtered = self._filtered + self._filter_alpha * (raw - self._filtered)
         force = self._true_wrench[:3]
         if math.sqrt(float(force.dot(force))) > p.protective_stop_n:  # np.linalg.norm's own sum, without its checks
@@ -630,6 +647,50 @@ class _NormalBlocks:
         out = self._block[self._next : self._next + n]
         self._next += n
         return out
+
+
+class _FtNoise:
+    """The F/T's bias drift and white noise for the coming control periods, computed ``_NormalBlocks.BLOCK`` normals
+    at a time with the very operations, in the same order, that each period did on its own (so the same bits):
+    per period six drift normals (if the drift is on), then six noise normals (if the noise is on), each scaled
+    as ``(s * normals) * axis_scale``; the bias is the running sum of the drifts, which ``np.add.accumulate``
+    forms one period after the other as the per-period additions did."""
+
+    def __init__(self, normals: _NormalBlocks, drift_step: float, noise_sigma: float, axis_scale: np.ndarray) -> None:
+        self._normals = normals
+        self._drift_step = drift_step if drift_step > 0 else None
+        self._noise_sigma = noise_sigma if noise_sigma > 0 else None
+        self._axis_scale = axis_scale
+        self._per_period = 6 * ((self._drift_step is not None) + (self._noise_sigma is not None))
+        self._bias: np.ndarray | None = None  # (periods, 6) bias after each coming period
+        self._noise: np.ndarray | None = None  # (periods, 6)
+        self._next = 0
+        self._periods = 0
+
+    def next(self, bias: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """-> (the bias after this period's drift, this period's noise or None); ``bias`` is the bias before it."""
+        if not self._per_period:
+            return bias, None
+        if self._next >= self._periods:
+            self._refill(bias)
+        k = self._next
+        self._next += 1
+        return (self._bias[k] if self._bias is not None else bias), (
+            self._noise[k] if self._noise is not None else None
+        )
+
+    def _refill(self, bias: np.ndarray) -> None:
+        periods = _NormalBlocks.BLOCK // self._per_period
+        draws = self._normals.take(periods * self._per_period).reshape(periods, self._per_period)
+        column = 0
+        self._bias = self._noise = None
+        if self._drift_step is not None:
+            steps = self._drift_step * draws[:, :6] * self._axis_scale
+            self._bias = np.add.accumulate(np.concatenate([bias[None, :], steps]), axis=0)[1:]
+            column = 6
+        if self._noise_sigma is not None:
+            self._noise = self._noise_sigma * draws[:, column : column + 6] * self._axis_scale
+        self._next, self._periods = 0, periods
 
 
 def _as_vector(values: np.ndarray, size: int, what: str) -> np.ndarray:

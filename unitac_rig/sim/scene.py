@@ -274,14 +274,23 @@ class PressScene:
         self.rays_built = 0
         self._warned_tilt = False
         self._lock = threading.Lock()  # the arm and a device thread may ask at the same time
+        self._wrench_key: bytes | None = None  # the pose (float64 bytes) of the last wrench_on_tool, and its answer
+        self._wrench = np.zeros(6)
 
     # ---- ContactWorld ------------------------------------------------------------------------------------
     def wrench_on_tool(self, tcp_pose: np.ndarray) -> np.ndarray:
-        """Force (N) and torque (N*m) the object exerts on the tool, base axes, about the TCP; (6,)."""
-        ray, travel = self._locate(tcp_pose)
-        if travel <= 0.0:
-            return np.zeros(6)
-        return ray.interp(ray.wrench_base, travel)
+        """Force (N) and torque (N*m) the object exerts on the tool, base axes, about the TCP; (6,).
+
+        The last answer is kept for its pose: an arm at rest asks about the same pose every control period.
+        """
+        pose = np.asarray(tcp_pose, dtype=np.float64)
+        key = pose.tobytes()
+        with self._lock:
+            if key != self._wrench_key:
+                ray, travel = self._locate_unlocked(pose, False)
+                self._wrench = np.zeros(6) if travel <= 0.0 else ray.interp(ray.wrench_base, travel)
+                self._wrench_key = key
+            return self._wrench.copy()
 
     def taxel_loads(self, tcp_pose: np.ndarray) -> TaxelLoads:
         """Per-taxel loads at ``tcp_pose`` in the sensor frame (N, and pillar displacements in mm)."""

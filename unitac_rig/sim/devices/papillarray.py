@@ -107,34 +107,36 @@ class HubPacketWriter:
         sensors[self.slot] = sensor
         return PapillArrayPacket(counter=counter, timestamp_us=timestamp_us, sensors=sensors)
 
-    def encode(self, counter: int, timestamp_us: int, sensor: PillarSensorData) -> bytes:
-        """The framed packet with ``sensor`` in this writer's slot and the others idle."""
-        values = np.concatenate(
-            [
-                np.ravel(sensor.forces_n),
-                np.ravel(sensor.displacements_mm),
-                np.ravel(sensor.global_force_n),
-                np.ravel(sensor.global_torque_nmm),
-            ]
-        ).astype(np.float64)
-        if (
-            values.size != 6 * self._n + 6
-            or not np.all(np.abs(values) <= _F32_MAX)  # also False for NaN
-            or not 0 <= timestamp_us < 1 << 64
-            or not 0 <= sensor.slip_active <= 1
-            or np.any(sensor.slip_states)
-            or np.any(np.asarray(sensor.pillar_friction) != self._idle[self.slot].pillar_friction)
-            or sensor.friction_estimate != self._idle[self.slot].friction_estimate
-            or sensor.target_grip_force_n != self._idle[self.slot].target_grip_force_n
-        ):
+    def encode(
+        self,
+        counter: int,
+        timestamp_us: int,
+        forces_n: np.ndarray,
+        displacements_mm: np.ndarray,
+        torque_nmm: np.ndarray,
+        slip_active: int,
+    ) -> bytes:
+        """The framed packet: this writer's slot reads ``forces_n`` and ``displacements_mm`` (n, 3), global force
+        their sum and global torque ``torque_nmm`` (3,); the other slots idle."""
+        force_n = forces_n.sum(axis=0)
+        values = np.concatenate([forces_n.ravel(), displacements_mm.ravel(), force_n, torque_nmm])
+        if values.size != 6 * self._n + 6 or not np.abs(values).max() <= _F32_MAX:  # also False for NaN
+            sensor = replace(
+                self._idle[self.slot],
+                forces_n=forces_n,
+                displacements_mm=displacements_mm,
+                global_force_n=force_n,
+                global_torque_nmm=torque_nmm,
+                slip_active=slip_active,
+            )
             return encode_packet(self._packet(counter, timestamp_us, sensor))
         body = self._body
         u8 = np.frombuffer(body, dtype=np.uint8)
         u8[self._float_pos] = np.frombuffer(values.astype("<f4").tobytes(), dtype=np.uint8)
+        del u8  # the bytearray must not stay exported
         _U32.pack_into(body, self._counter_pos, counter)
         _U64.pack_into(body, self._time_pos, timestamp_us)
-        body[self._active_pos] = sensor.slip_active
-        del u8  # the bytearray must not stay exported (a later resize would fail)
+        body[self._active_pos] = slip_active
         return frame_body(bytes(body))
 
 
@@ -243,14 +245,15 @@ class SimPapillArrayHub(SimSerialEndpoint):
             self.faults.note_stalled()
             return
         forces = raw_forces - self._force_offset
-        sensor = PillarSensorData(
-            forces_n=forces,
-            displacements_mm=raw_displacement - self._displacement_offset,
-            global_force_n=forces.sum(axis=0),
-            global_torque_nmm=_cross_rows(self._positions_mm, forces).sum(axis=0),
-            slip_active=1 if self.slip_active else 0,
+        packet = self._writer.encode(
+            counter,
+            (t_ns - self._power_on_ns) // 1000,
+            forces,
+            raw_displacement - self._displacement_offset,
+            _cross_rows(self._positions_mm, forces).sum(axis=0),
+            1 if self.slip_active else 0,
         )
-        self.send_to_host(self._writer.encode(counter, (t_ns - self._power_on_ns) // 1000, sensor), t_ns)
+        self.send_to_host(packet, t_ns)
         self.packets_sent += 1
 
     def close(self) -> None:

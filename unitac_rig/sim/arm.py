@@ -624,7 +624,7 @@ class SimArm:
 
 def _moving(values: np.ndarray) -> bool:
     """``values.any()`` (a -0.0 is no motion either) at a fraction of the cost of numpy's reduction wrapper."""
-    return np.count_nonzero(values) > 0
+    return bool(np.count_nonzero(values))
 
 
 def _raw(values: np.ndarray) -> bytes:

@@ -14,6 +14,7 @@ import logging
 import struct
 from dataclasses import replace
 from types import TracebackType
+from typing import Any
 
 import numpy as np
 
@@ -60,6 +61,10 @@ _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
 
 
+def _field(name: str, values: np.ndarray) -> dict[str, Any]:
+    return {name: values}
+
+
 class HubPacketWriter:
     """``encode_packet`` for the hub's stream, whose packets differ only in the counter, the timestamp and one slot's
     forces, displacements, global force and torque and slip flag: the bytes of everything else are encoded once and
@@ -89,12 +94,12 @@ class HubPacketWriter:
                 for axis in range(3):
                     values = np.array(getattr(zero, field), dtype=np.float64)
                     values[i, axis] = _PROBE_F32
-                    positions.append(changed(self._packet(0, 0, replace(zero, **{field: values}))))
+                    positions.append(changed(self._packet(0, 0, replace(zero, **_field(field, values)))))
         for field in ("global_force_n", "global_torque_nmm"):
             for axis in range(3):
                 values = np.array(getattr(zero, field), dtype=np.float64)
                 values[axis] = _PROBE_F32
-                positions.append(changed(self._packet(0, 0, replace(zero, **{field: values}))))
+                positions.append(changed(self._packet(0, 0, replace(zero, **_field(field, values)))))
         if any(len(at) != 4 for at in positions):
             raise ValueError("the codec's float fields are not 4 bytes each")  # a codec change this must follow
         self._float_pos = np.concatenate(positions)

@@ -1,18 +1,22 @@
 """Simulator cost: CPU seconds per simulated second of a fast-twin session, before and after, for both sensors.
 
-Run: ``python benchmarks/sim_cost.py`` (``--presses 12`` for a quick look, ``--full`` to also run the whole campaign
-on each code version). Writes ``docs/figures/sim_cost.json`` and prints a summary.
+Run: ``python benchmarks/sim_cost.py --presses 30 --pairs 3 --campaign-presses 8`` (about 10 minutes on the loaded
+2-core box; ``--full`` also runs the whole campaign on each code version, hours). Writes
+``docs/figures/sim_cost.json`` and prints a summary.
 
 Each measurement is one seeded session (``SimRig(seed)``, ``collect_session``; ``hex_tpu``, 91 angles unless told
-otherwise) in a fresh process, timed with ``time.process_time`` around the session alone (imports excluded). The
-*simulator's own* share is the CPU spent inside its entry points (the arm's control period, which also runs the
-simulated devices; ``force_mode``; the simulated CAN bus's ``recv``), measured by thin timers; the rest is the host
-code a real rig runs too (the press routine, the drivers' decoding, the recorder).
+otherwise) in a fresh process, timed with ``time.process_time`` around the session alone (imports done first). The
+*simulator's* share comes from stack samples every millisecond of process CPU time (``ITIMER_PROF``; the kernel's
+tick makes it about every 4 ms): a sample is the simulator's when a frame on its stack runs simulator code (the
+simulated arm, devices, scene and transports); the rest is the host code a real rig runs too (the press routine,
+the drivers' decoding, the recorder). Versions are measured in ``--pairs`` alternating rounds and the medians
+reported, with the median of the per-round before/after ratios.
 
 "Before" is another commit (default ``2813621``, the commit issue 27 measured), checked out with
-``git worktree add`` into a temporary folder and imported through ``PYTHONPATH``; "after" is this checkout.
-The campaign estimate is the per-press CPU of each sensor times the campaign's presses (every object with both
-sensors, each of its rotations, 91 angles: 1820 presses); ``--full`` runs ``unitac-rig campaign`` instead.
+``git worktree add`` into a temporary folder and imported through ``PYTHONPATH``; "after" is this checkout. The
+campaign (the six seen objects x 91 presses and the irregular prism x 4 rotations x 91, with both sensors: 1820
+presses) is estimated from ``--campaign-presses`` presses of every object with each sensor, per-press CPU times the
+object's presses; ``--full`` runs ``unitac-rig campaign`` instead.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import platform
 import resource
 import shutil
 import signal
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -159,12 +164,12 @@ def _env(code: Path) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": str(code)}
 
 
-def measure(code: Path, args: argparse.Namespace, sensor: str) -> dict[str, Any]:
+def measure(code: Path, sensor: str, object_id: str, angles: int, presses: int | None, seed: int) -> dict[str, Any]:
     """Run one session of the code in ``code`` in a fresh process (imports from ``code`` only)."""
-    command = [sys.executable, str(Path(__file__).resolve()), "--worker", sensor, "--object", args.object]
-    command += ["--angles", str(args.angles), "--seed", str(args.seed)]
-    if args.presses:
-        command += ["--presses", str(args.presses)]
+    command = [sys.executable, str(Path(__file__).resolve()), "--worker", sensor, "--object", object_id]
+    command += ["--angles", str(angles), "--seed", str(seed)]
+    if presses:
+        command += ["--presses", str(presses)]
     done = subprocess.run(command, env=_env(code), cwd=tempfile.gettempdir(), capture_output=True, text=True)
     if done.returncode != 0:
         raise SystemExit(f"session with {sensor} on {code} failed:\n{done.stderr[-2000:]}")
@@ -173,11 +178,11 @@ def measure(code: Path, args: argparse.Namespace, sensor: str) -> dict[str, Any]
 
 
 def campaign_presses() -> dict[str, int]:
-    """Presses per sensor in the paper's campaign: every object, each of its rotations, 91 angles."""
+    """Presses per object and sensor in the paper's campaign: each of the object's rotations, 91 angles (the six
+    seen objects 91 each, the irregular prism 4 x 91 = 364; 910 per sensor)."""
     from unitac_rig.rig.objects import list_objects
 
-    per_sensor = sum(len(obj.rotations_deg) * 91 for obj in list_objects())
-    return dict.fromkeys(SENSORS, per_sensor)
+    return {obj.id: len(obj.rotations_deg) * 91 for obj in list_objects()}
 
 
 def run_campaign(code: Path) -> dict[str, float]:
@@ -192,6 +197,62 @@ def run_campaign(code: Path) -> dict[str, float]:
     return {"cpu_s": round(cpu, 1), "wall_s": round(time.monotonic() - start, 1)}
 
 
+_FIGURES = ("cpu_per_simulated_s", "simulator_cpu_per_simulated_s", "host_cpu_per_simulated_s", "cpu_per_press_s")
+
+
+def _median_session(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The first run's record (what the session recorded is the same every run: seeded), with each CPU figure the
+    median over the runs and the runs' figures kept."""
+    out = dict(runs[0])
+    for key in ("cpu_s", "simulator_cpu_s", "simulator_share", *_FIGURES):
+        out[key] = round(statistics.median(r[key] for r in runs), 5)
+    out["runs"] = [{key: r[key] for key in ("cpu_s", "simulator_share", *_FIGURES)} for r in runs]
+    return out
+
+
+def measure_pairs(trees: dict[str, Path], args: argparse.Namespace) -> dict[str, dict[str, Any]]:
+    """``args.pairs`` rounds of one session per version and sensor, the versions alternating, so a drift in the
+    shared machine's load hits both alike; per version and sensor the median figures and the per-round ratios."""
+    runs: dict[str, dict[str, list[dict[str, Any]]]] = {v: {s: [] for s in args.sensors} for v in trees}
+    for _ in range(args.pairs):
+        for sensor in args.sensors:
+            for version, code in trees.items():
+                runs[version][sensor].append(measure(code, sensor, args.object, args.angles, args.presses, args.seed))
+    versions = {v: {"sessions": {s: _median_session(runs[v][s]) for s in args.sensors}} for v in trees}
+    for sensor in args.sensors:
+        pairs = list(zip(runs["before"][sensor], runs["after"][sensor], strict=True))
+        versions["after"]["sessions"][sensor]["ratios_before_over_after"] = {
+            figure: round(statistics.median(b[figure] / a[figure] for b, a in pairs), 2)
+            for figure in ("cpu_per_simulated_s", "simulator_cpu_per_simulated_s", "host_cpu_per_simulated_s")
+        }
+    return versions
+
+
+def campaign_estimate(code: Path, args: argparse.Namespace) -> dict[str, Any]:
+    """CPU of the whole campaign from ``args.campaign_presses`` presses of every object with each sensor: the
+    per-press CPU of each (object, sensor) times that object's presses in the campaign."""
+    presses = campaign_presses()
+    per_press: dict[str, dict[str, float]] = {}
+    total = 0.0
+    for object_id, count in presses.items():
+        per_press[object_id] = {}
+        for sensor in SENSORS:
+            s = measure(code, sensor, object_id, 91, args.campaign_presses, args.seed)
+            per_press[object_id][sensor] = s["cpu_per_press_s"]
+            total += s["cpu_per_press_s"] * count
+    return {"presses_per_sensor": presses, "cpu_per_press_s": per_press, "cpu_s": round(total, 1)}
+
+
+def _print(label: str, s: dict[str, Any]) -> None:
+    print(
+        f"{label:6s} {s['sensor']:11s} {s['cpu_s']:7.2f} CPU-s / {s['simulated_s']:7.1f} simulated s = "
+        f"{s['cpu_per_simulated_s']:.4f} (simulator {s['simulator_cpu_per_simulated_s']:.4f}, host "
+        f"{s['host_cpu_per_simulated_s']:.4f}); {s['presses_complete']} presses, "
+        f"{s['targets_matched']} targets matched, median error {s['match_error_median_n']} N, "
+        f"median peak {s['peak_force_median_n']} N"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--before", default="2813621", help="commit measured as 'before' (default: 2813621)")
@@ -200,6 +261,10 @@ def main() -> None:
     parser.add_argument("--presses", type=int, default=None, help="stop after this many presses (default: all)")
     parser.add_argument("--seed", type=int, default=0, help="the simulated rig's seed (0)")
     parser.add_argument("--sensors", nargs="+", default=list(SENSORS), choices=SENSORS)
+    parser.add_argument("--pairs", type=int, default=3, help="alternating before/after rounds (3)")
+    parser.add_argument(
+        "--campaign-presses", type=int, default=0, help="estimate the campaign from this many presses per object"
+    )
     parser.add_argument("--full", action="store_true", help="also run the whole campaign on each version (long)")
     parser.add_argument("--out", type=Path, default=OUT)
     parser.add_argument("--worker", choices=SENSORS, help=argparse.SUPPRESS)
@@ -208,39 +273,19 @@ def main() -> None:
         print(json.dumps(run_session(args.worker, args.object, args.angles, args.presses, args.seed)))
         return
 
-    presses = campaign_presses()
-    versions: dict[str, dict[str, Any]] = {}
     with checkout(args.before) as before_tree:
-        for label, code in (("before", before_tree), ("after", ROOT)):
-            sessions = {sensor: measure(code, args, sensor) for sensor in args.sensors}
-            estimate = sum(sessions[s]["cpu_per_press_s"] * presses[s] for s in sessions)
-            versions[label] = {"sessions": sessions, "campaign_cpu_estimate_s": round(estimate, 1)}
+        trees = {"before": before_tree, "after": ROOT}
+        versions = measure_pairs(trees, args)
+        for label, code in trees.items():
+            for s in versions[label]["sessions"].values():
+                _print(label, s)
+            if args.campaign_presses:
+                versions[label]["campaign_estimate"] = estimate = campaign_estimate(code, args)
+                print(f"{label:6s} campaign estimate {estimate['cpu_s'] / 60:.1f} CPU-min")
             if args.full:
                 versions[label]["campaign_measured"] = run_campaign(code)
-            for sensor, s in sessions.items():
-                print(
-                    f"{label:6s} {sensor:11s} {s['cpu_s']:7.1f} CPU-s / {s['simulated_s']:7.1f} simulated s = "
-                    f"{s['cpu_per_simulated_s']:.4f} (simulator {s['simulator_cpu_per_simulated_s']:.4f}, host "
-                    f"{s['host_cpu_per_simulated_s']:.4f}); {s['presses_complete']} presses, "
-                    f"{s['targets_matched']} targets matched, median error {s['match_error_median_n']} N"
-                )
-            print(f"{label:6s} campaign estimate {estimate / 60:.1f} CPU-min ({sum(presses.values())} presses)")
-    ratios = {
-        sensor: {
-            "session": round(
-                versions["before"]["sessions"][sensor]["cpu_per_simulated_s"]
-                / versions["after"]["sessions"][sensor]["cpu_per_simulated_s"],
-                2,
-            ),
-            "simulator": round(
-                versions["before"]["sessions"][sensor]["simulator_cpu_per_simulated_s"]
-                / versions["after"]["sessions"][sensor]["simulator_cpu_per_simulated_s"],
-                2,
-            ),
-        }
-        for sensor in args.sensors
-    }
-    print("before/after CPU per simulated second:", json.dumps(ratios))
+    for sensor, s in versions["after"]["sessions"].items():
+        print(f"before/after {sensor}: {json.dumps(s['ratios_before_over_after'])}")
     doc = {
         "what": "CPU seconds per simulated second of one seeded fast-twin session, before and after (issue 27)",
         "command": "python benchmarks/sim_cost.py " + " ".join(sys.argv[1:]),
@@ -253,9 +298,8 @@ def main() -> None:
         "angles": args.angles,
         "presses": args.presses,
         "seed": args.seed,
-        "campaign_presses": presses,
+        "pairs": args.pairs,
         "versions": versions,
-        "ratios_before_over_after": ratios,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(doc, indent=2) + "\n")

@@ -277,6 +277,8 @@ class PressScene:
         self._lock = threading.Lock()  # the arm and a device thread may ask at the same time
         self._wrench_key: bytes | None = None  # the pose (float64 bytes) of the last wrench_on_tool, and its answer
         self._wrench = np.zeros(6)
+        self._located_key: bytes | None = None  # the pose of the last ray lookup, and its (table, travel)
+        self._located: tuple[_RayTable, float] | None = None
 
     # ---- ContactWorld ------------------------------------------------------------------------------------
     def wrench_on_tool(self, tcp_pose: np.ndarray) -> np.ndarray:
@@ -288,7 +290,7 @@ class PressScene:
         key = pose.tobytes()
         with self._lock:
             if key != self._wrench_key:
-                ray, travel = self._locate_unlocked(pose, False)
+                ray, travel = self._locate_kept(pose, key)
                 self._wrench = np.zeros(6) if travel <= 0.0 else ray.interp(ray.wrench_base, travel)
                 self._wrench_key = key
             return self._wrench.copy()
@@ -343,8 +345,20 @@ class PressScene:
         Out of the object's reach, any cached table is returned with a negative travel (no contact), unless
         ``need_table`` asks for the table of that very ray.
         """
+        pose = np.asarray(tcp_pose, dtype=np.float64)
         with self._lock:
-            return self._locate_unlocked(np.asarray(tcp_pose, dtype=np.float64), need_table)
+            if need_table:
+                self._located_key = None  # it may build a table and reorder the cache
+                return self._locate_unlocked(pose, True)
+            return self._locate_kept(pose, pose.tobytes())
+
+    def _locate_kept(self, pose: np.ndarray, key: bytes) -> tuple[_RayTable, float]:
+        """:meth:`_locate_unlocked` without a table demand, the last answer kept for its pose (``key``, its float64
+        bytes): the arm and the sensors ask about the same pose in one control period."""
+        if key != self._located_key or self._located is None:
+            self._located = self._locate_unlocked(pose, False)
+            self._located_key = key
+        return self._located
 
     def _locate_unlocked(self, pose: np.ndarray, need_table: bool) -> tuple[_RayTable, float]:
         rotvec = (float(pose[3]), float(pose[4]), float(pose[5]))

@@ -63,7 +63,7 @@ SAFETY_MODE_PROTECTIVE_STOP = 3
 DEFAULT_START_POSE = np.array([-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214])  # m, rad: pad facing base +y
 
 _UNLOCK_HINT = "unlock the protective stop, then re-upload the control program"
-_NO_TURN = np.zeros(3)  # rad/s: the angular part of a force-mode twist with no compliant torque axis (read only)
+_NO_TURN = np.zeros(3)  # rad/s: the angular part of a force-mode twist with no compliant torque axis (never written)
 
 
 @dataclass(frozen=True)
@@ -529,11 +529,11 @@ class SimArm:
         elif self._integrated_ns + self._period_ns - self._last_write_ns > self._watchdog_ns:
             self._stop_program("watchdog: the host wrote nothing in time")
 
-    def _force_twist(self) -> np.ndarray:
-        """Velocity the force-mode admittance law asks for this period (base frame)."""
+    def _force_twist(self) -> tuple[np.ndarray, np.ndarray]:
+        """Velocity the force-mode admittance law asks for this period (base frame): (linear, angular)."""
         assert self._force_command is not None
         rotation, chosen, target, speed_limits = self._force_command
-        measured = self._ft_sign * (self._filtered - self._zero_offset)
+        measured = self._measured_ft()
         scaling = self.force_mode_gain_scaling
         if self._force_gains is None or self._force_gains[0] != scaling:
             gains = scaling * np.array(
@@ -544,14 +544,14 @@ class SimArm:
         if not self._force_turns:  # the torque rows would give a zero turn: only the force rows, same operations
             # (np.dot is the same BLAS product as @ for a matrix and a vector, for a third of the call's cost)
             rotation_t, chosen3, target3, low3, high3 = self._force_rows
-            applied = -np.dot(rotation_t, measured[:3])
-            limited = np.minimum(np.maximum(gains[:3] * (target3 - applied), low3), high3)
-            return np.concatenate([np.dot(rotation, np.where(chosen3, limited, 0.0)), _NO_TURN])
+            # target - applied with applied = -(R^T m): target + R^T m, the same sum
+            limited = np.minimum(np.maximum(gains[:3] * (target3 + np.dot(rotation_t, measured[:3])), low3), high3)
+            return np.dot(rotation, np.where(chosen3, limited, 0.0)), _NO_TURN
         applied_task = -np.concatenate([rotation.T @ measured[:3], rotation.T @ measured[3:]])
         # np.minimum(np.maximum(...)) is what np.clip computes, without its wrapper's cost
         limited = np.minimum(np.maximum(gains * (target - applied_task), self._force_low_limits), speed_limits)
         twist_task = np.where(chosen, limited, 0.0)
-        return np.concatenate([rotation @ twist_task[:3], rotation @ twist_task[3:]])
+        return rotation @ twist_task[:3], rotation @ twist_task[3:]
 
     def _integrate_motion(self) -> None:
         self._check_watchdog()
@@ -567,12 +567,12 @@ class SimArm:
             self._velocity, self._angular_velocity = np.zeros(3), np.zeros(3)
         else:
             if self._mode == "force" and self._force_command is not None:
-                target, accel = self._force_twist(), self.params.force_mode_accel_m_s2
+                (linear, angular), accel = self._force_twist(), self.params.force_mode_accel_m_s2
             else:
-                target, accel = self._target_twist, self._accel_m_s2
-            self._velocity, step = _ramp(self._velocity, target[:3], accel, dt)
-            if _moving(self._angular_velocity) or _moving(target[3:]):
-                self._angular_velocity, turn = _ramp(self._angular_velocity, target[3:], accel, dt)
+                linear, angular, accel = self._target_twist[:3], self._target_twist[3:], self._accel_m_s2
+            self._velocity, step = _ramp(self._velocity, linear, accel, dt)
+            if _moving(self._angular_velocity) or _moving(angular):
+                self._angular_velocity, turn = _ramp(self._angular_velocity, angular, accel, dt)
             else:
                 turn = np.zeros(3)
             if self._mode == "stop" and not _moving(self._velocity) and not _moving(self._angular_velocity):
@@ -619,13 +619,18 @@ class SimArm:
         if math.sqrt(float(force.dot(force))) > p.protective_stop_n:  # np.linalg.norm's own sum, without its checks
             self._enter_protective_stop()
 
+    def _measured_ft(self) -> np.ndarray:
+        """The F/T reading the controller reports and regulates on: sign x (filtered - zero offset)."""
+        reading = self._filtered - self._zero_offset
+        return reading if self._ft_sign == 1.0 else self._ft_sign * reading  # 1.0 x: the same numbers
+
     def _snapshot(self) -> ArmState:
         now_ns = self.clock.now_ns()
         return ArmState(
             host_t_ns=now_ns,
             controller_t_s=now_ns / 1e9,
             tcp_pose=self.true_tcp_pose(),
-            tcp_force=self._ft_sign * (self._filtered - self._zero_offset),
+            tcp_force=self._measured_ft(),
             robot_mode=ROBOT_MODE_RUNNING,
             safety_mode=SAFETY_MODE_PROTECTIVE_STOP if self._protective_stop else SAFETY_MODE_NORMAL,
             protective_stop=self._protective_stop,
@@ -635,8 +640,9 @@ class SimArm:
 
 
 def _moving(values: np.ndarray) -> bool:
-    """``values.any()`` (a -0.0 is no motion either) at a fraction of the cost of numpy's reduction wrapper."""
-    return bool(np.count_nonzero(values))
+    """``values.any()`` for a short vector (a -0.0 is no motion either, NaN is), at a fraction of the cost of numpy's
+    reduction wrapper."""
+    return any(values.tolist())
 
 
 def _raw(values: np.ndarray) -> bytes:

@@ -132,7 +132,7 @@ class PapillArrayModel:
 
 
 def _quantise(values: np.ndarray, step: float) -> np.ndarray:
-    return np.round(values / step) * step if step > 0 else values
+    return np.rint(values / step) * step if step > 0 else values  # np.round to 0 decimals is rint
 
 
 def model_for(layout: SensorLayout, rng: np.random.Generator | None = None) -> UskinModel | PapillArrayModel:

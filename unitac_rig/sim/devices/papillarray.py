@@ -52,7 +52,11 @@ def _cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     without its axis handling: per sample, that bookkeeping cost more than the rest of the hub's arithmetic."""
     a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
     b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)
+    out = np.empty((len(a), 3))  # what np.stack([...], axis=1) builds, without its wrapper
+    out[:, 0] = a1 * b2 - a2 * b1
+    out[:, 1] = a2 * b0 - a0 * b2
+    out[:, 2] = a0 * b1 - a1 * b0
+    return out
 
 
 _F32_MAX = float(np.finfo(np.float32).max)
@@ -123,9 +127,9 @@ class HubPacketWriter:
     ) -> bytes:
         """The framed packet: this writer's slot reads ``forces_n`` and ``displacements_mm`` (n, 3), global force
         their sum and global torque ``torque_nmm`` (3,); the other slots idle."""
-        force_n = forces_n.sum(axis=0)
+        force_n = np.add.reduce(forces_n, axis=0)  # forces_n.sum(axis=0), the ufunc without the method's wrapper
         values = np.concatenate([forces_n.ravel(), displacements_mm.ravel(), force_n, torque_nmm])
-        if values.size != 6 * self._n + 6 or not np.abs(values).max() <= _F32_MAX:  # also False for NaN
+        if values.size != 6 * self._n + 6 or not np.maximum.reduce(np.abs(values)) <= _F32_MAX:  # False for NaN
             sensor = replace(
                 self._idle[self.slot],
                 forces_n=forces_n,
@@ -255,7 +259,7 @@ class SimPapillArrayHub(SimSerialEndpoint):
             (t_ns - self._power_on_ns) // 1000,
             forces,
             raw_displacement - self._displacement_offset,
-            _cross_rows(self._positions_mm, forces).sum(axis=0),
+            np.add.reduce(_cross_rows(self._positions_mm, forces), axis=0),
             1 if self.slip_active else 0,
         )
         self.send_to_host(packet, t_ns)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import hashlib
 import importlib
 import json
 import os
@@ -129,6 +130,7 @@ def run_session(sensor: str, object_id: str, angles: int, presses: int | None, s
         sim_s = rig.clock.now_ns() / 1e9
         rig.close()
         (summary,) = inspect_dataset(Path(tmp))["sessions"]
+        recorded = recorded_digest(Path(tmp))
     share = sampler.simulator / max(1, sampler.total)
     presses_done = max(1, outcome.complete + outcome.failed)
     return {
@@ -154,7 +156,27 @@ def run_session(sensor: str, object_id: str, angles: int, presses: int | None, s
         "targets_missed": summary["targets_missed"],
         "match_error_median_n": summary["match_error_n"]["median"],
         "peak_force_median_n": summary["peak_force_n"]["median"],
+        "recorded_sha256": recorded,
     }
+
+
+def recorded_digest(data_dir: Path) -> str:
+    """SHA-256 of every number the session recorded (each press's robot, tactile and extraction datasets, in name
+    order): equal digests, bit-identical sessions."""
+    import h5py
+    import numpy as np
+
+    digest = hashlib.sha256()
+
+    def visit(name: str, item: Any) -> None:
+        if isinstance(item, h5py.Dataset) and item.dtype.kind in "fiub":
+            digest.update(name.encode())
+            digest.update(np.ascontiguousarray(item[()]).tobytes())
+
+    for path in sorted(data_dir.glob("*.h5")):
+        with h5py.File(path, "r") as f:
+            f["presses"].visititems(visit)
+    return digest.hexdigest()
 
 
 # ---- the driver: versions in subprocesses --------------------------------------------------------------------------
@@ -255,6 +277,25 @@ def campaign_estimate(code: Path, args: argparse.Namespace) -> dict[str, Any]:
     return {"presses": presses, "cpu_by_object": per_object, "cpu_s": round(total, 1)}
 
 
+def compare_recordings(args: argparse.Namespace) -> dict[str, Any]:
+    """Whether a seeded session records the same numbers on ``args.identical`` and on this checkout, per sensor."""
+    result: dict[str, Any] = {}
+    with checkout(args.identical) as reference:
+        for sensor in args.sensors:
+            ref, now = (
+                measure(code, sensor, args.object, args.angles, args.presses, args.seed) for code in (reference, ROOT)
+            )
+            same = ref["recorded_sha256"] == now["recorded_sha256"]
+            print(
+                f"{sensor}: {'bit-identical' if same else 'DIFFERENT'} recordings ({now['presses_complete']} presses, "
+                f"sha256 {now['recorded_sha256'][:16]} here, {ref['recorded_sha256'][:16]} on {args.identical}); "
+                f"median peak {ref['peak_force_median_n']} -> {now['peak_force_median_n']} N, targets matched "
+                f"{ref['targets_matched']} -> {now['targets_matched']}"
+            )
+            result[sensor] = {"bit_identical": same, "reference": ref, "this_checkout": now}
+    return result
+
+
 def _print(label: str, s: dict[str, Any]) -> None:
     print(
         f"{label:6s} {s['sensor']:11s} {s['cpu_s']:7.2f} CPU-s / {s['simulated_s']:7.1f} simulated s = "
@@ -278,6 +319,11 @@ def main() -> None:
         "--campaign-presses", type=int, default=0, help="estimate the campaign from this many presses per object"
     )
     parser.add_argument("--full", action="store_true", help="also run the whole campaign on each version (long)")
+    parser.add_argument(
+        "--identical",
+        metavar="REF",
+        help="only compare what a --presses session records on REF and on this checkout, bit for bit",
+    )
     parser.add_argument("--out", type=Path, default=OUT)
     parser.add_argument("--worker", choices=SENSORS, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -285,6 +331,13 @@ def main() -> None:
         print(json.dumps(run_session(args.worker, args.object, args.angles, args.presses, args.seed)))
         return
 
+    if args.identical:
+        compared = {"command": "python benchmarks/sim_cost.py " + " ".join(sys.argv[1:]), "reference": args.identical}
+        compared["sensors"] = compare_recordings(args)
+        out = args.out.with_name("sim_identical.json")
+        out.write_text(json.dumps(compared, indent=2) + "\n")
+        print(f"wrote {out}")
+        return
     with checkout(args.before) as before_tree:
         trees = {"before": before_tree, "after": ROOT}
         versions = measure_pairs(trees, args)

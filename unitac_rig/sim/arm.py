@@ -157,6 +157,8 @@ class SimArm:
             raise ArmError(f"start pose must be 6 finite numbers, got {start_pose!r}")
         self._position = pose[:3].copy()
         self._set_rotation(rotvec_to_matrix(pose[3:]), pose[3:])
+        initial = np.concatenate([self._position, self._rotvec])
+        self._pose_of: tuple[np.ndarray, np.ndarray, np.ndarray] = (self._position, self._rotvec, initial)
         self._velocity = np.zeros(3)  # m/s, base frame
         self._angular_velocity = np.zeros(3)  # rad/s, base frame
         self._mode: _Mode = "idle"
@@ -211,7 +213,17 @@ class SimArm:
 
     def true_tcp_pose(self) -> np.ndarray:
         """Noise-free TCP pose (6,) [m, rad rotation vector], base frame: what simulated sensors feel."""
-        return np.concatenate([self._position, self._rotvec])
+        return self._pose().copy()
+
+    def _pose(self) -> np.ndarray:
+        """The pose array itself, read only: formed once for each (position, rotation vector) pair. Both are
+        replaced, never changed in place, so their identity says whether the pose moved (the world, the F/T
+        snapshot and the sensors read it every control period)."""
+        position, rotvec, pose = self._pose_of
+        if position is not self._position or rotvec is not self._rotvec:
+            pose = np.concatenate([self._position, self._rotvec])
+            self._pose_of = (self._position, self._rotvec, pose)
+        return pose
 
     def true_wrench(self) -> np.ndarray:
         """The world's wrench on the tool now (6,) [N, N*m], base axes; no latency, noise, bias or filter."""
@@ -606,7 +618,7 @@ class SimArm:
 
     def _update_sensor(self) -> None:
         """One F/T sample: true wrench -> latency -> + bias + noise -> low-pass; and the protective-stop check."""
-        self._true_wrench = np.asarray(self.world.wrench_on_tool(self.true_tcp_pose()), dtype=np.float64)
+        self._true_wrench = np.asarray(self.world.wrench_on_tool(self._pose()), dtype=np.float64)
         self._delay_line.append(self._true_wrench.copy())
         delayed = self._delay_line.popleft()
         p = self.params

@@ -35,7 +35,7 @@ advances the clock (which makes simulated sensors emit the samples that fall due
 If other code advances the clock directly (a host stall injected by a test or benchmark), the arm integrates those
 periods too (it listens to the clock), exactly as a controller goes on while its host is frozen.
 
-Why one module of ~620 lines: the kinematics, the F/T model and the controller-program model (watchdog, protective
+Why one module of ~710 lines: the kinematics, the F/T model and the controller-program model (watchdog, protective
 stop) all act on one state per control period.
 """
 
@@ -54,6 +54,7 @@ from drivers.arm import DEFAULT_WATCHDOG_HZ, ArmState, checked_force_mode_parame
 from drivers.clock import Clock, VirtualClock
 from drivers.errors import ArmError, ControlScriptStopped, ProtectiveStop
 from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
+from unitac_rig.sim.ft_noise import FtNoise, NormalBlocks
 from unitac_rig.sim.world import ContactWorld
 
 ROBOT_MODE_RUNNING = 7
@@ -194,8 +195,8 @@ class SimArm:
         self._delay_line: deque[np.ndarray] = deque([self._true_wrench.copy()] * delay_periods)
         self._axis_scale = np.array([1.0, 1.0, 1.0] + [self.params.ft_torque_scale_m] * 3)
         self._bias = rng.normal(0.0, self.params.ft_bias_sigma_n, 6) * self._axis_scale
-        self._ft_noise = _FtNoise(
-            _NormalBlocks(rng),
+        self._ft_noise = FtNoise(
+            NormalBlocks(rng),
             self.params.ft_bias_drift_n_per_sqrt_s * math.sqrt(self.control_period_s),
             self.params.ft_noise_sigma_n,
             self._axis_scale,
@@ -660,72 +661,6 @@ def _moving(values: np.ndarray) -> bool:
 def _raw(values: np.ndarray) -> bytes:
     """The float64 bytes of a command argument: equal bytes, equal command."""
     return np.asarray(values, dtype=np.float64).tobytes()
-
-
-class _NormalBlocks:
-    """Standard normal draws from ``rng`` taken a block at a time (one generator call per ~1,000 control periods
-    instead of two per period). ``rng.normal(0, s, n)`` is ``s`` times the next ``n`` standard normals of the same
-    stream, so ``s * take(n)`` gives bit for bit what drawing ``n`` at a time gave; the generator must not be drawn
-    from elsewhere afterwards (the arm owns its stream)."""
-
-    BLOCK = 12_288
-
-    def __init__(self, rng: np.random.Generator) -> None:
-        self._rng = rng
-        self._block = np.empty(0)
-        self._next = 0
-
-    def take(self, n: int) -> np.ndarray:
-        if self._next + n > self._block.size:
-            self._block = np.concatenate([self._block[self._next :], self._rng.standard_normal(self.BLOCK)])
-            self._next = 0
-        out = self._block[self._next : self._next + n]
-        self._next += n
-        return out
-
-
-class _FtNoise:
-    """The F/T's bias drift and white noise for the coming control periods, computed ``_NormalBlocks.BLOCK`` normals
-    at a time with the very operations, in the same order, that each period did on its own (so the same bits):
-    per period six drift normals (if the drift is on), then six noise normals (if the noise is on), each scaled
-    as ``(s * normals) * axis_scale``; the bias is the running sum of the drifts, which ``np.add.accumulate``
-    forms one period after the other as the per-period additions did."""
-
-    def __init__(self, normals: _NormalBlocks, drift_step: float, noise_sigma: float, axis_scale: np.ndarray) -> None:
-        self._normals = normals
-        self._drift_step = drift_step if drift_step > 0 else None
-        self._noise_sigma = noise_sigma if noise_sigma > 0 else None
-        self._axis_scale = axis_scale
-        self._per_period = 6 * ((self._drift_step is not None) + (self._noise_sigma is not None))
-        self._bias: np.ndarray | None = None  # (periods, 6) bias after each coming period
-        self._noise: np.ndarray | None = None  # (periods, 6)
-        self._next = 0
-        self._periods = 0
-
-    def next(self, bias: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """-> (the bias after this period's drift, this period's noise or None); ``bias`` is the bias before it."""
-        if not self._per_period:
-            return bias, None
-        if self._next >= self._periods:
-            self._refill(bias)
-        k = self._next
-        self._next += 1
-        return (self._bias[k] if self._bias is not None else bias), (
-            self._noise[k] if self._noise is not None else None
-        )
-
-    def _refill(self, bias: np.ndarray) -> None:
-        periods = _NormalBlocks.BLOCK // self._per_period
-        draws = self._normals.take(periods * self._per_period).reshape(periods, self._per_period)
-        column = 0
-        self._bias = self._noise = None
-        if self._drift_step is not None:
-            steps = self._drift_step * draws[:, :6] * self._axis_scale
-            self._bias = np.add.accumulate(np.concatenate([bias[None, :], steps]), axis=0)[1:]
-            column = 6
-        if self._noise_sigma is not None:
-            self._noise = self._noise_sigma * draws[:, column : column + 6] * self._axis_scale
-        self._next, self._periods = 0, periods
 
 
 def _as_vector(values: np.ndarray, size: int, what: str) -> np.ndarray:

@@ -170,3 +170,23 @@ def test_the_scene_answers_a_repeated_pose_as_a_fresh_scene_does() -> None:
     elsewhere = poser.pose_at_travel(10.0, 0.5)
     assert np.array_equal(kept.wrench_on_tool(elsewhere), fresh.wrench_on_tool(elsewhere))
     assert np.array_equal(kept.wrench_on_tool(pressing), again)
+
+
+def test_moving_the_object_changes_what_a_kept_pose_feels() -> None:
+    def scene() -> PressScene:
+        return PressScene(get_object("hex_tpu"), 0.0, USKIN, params=SceneParams().exact())
+
+    kept, moved_fresh, poser = scene(), scene(), scene()
+    pressing = poser.pose_at_travel(0.0, 1.0)  # 1 mm into the hexagon, pressing along -y
+    before = kept.wrench_on_tool(pressing)
+    loads_before = kept.taxel_loads(pressing).forces_n
+    shift = np.array([0.0, 0.5])  # the object 0.5 mm further from the pad
+    kept.center_mm = kept.center_mm + shift
+    moved_fresh.center_mm = moved_fresh.center_mm + shift
+    after = kept.wrench_on_tool(pressing)
+    assert np.array_equal(after, moved_fresh.wrench_on_tool(pressing))
+    assert np.linalg.norm(after[:3]) < np.linalg.norm(before[:3])  # less travel into it, less force
+    assert np.array_equal(kept.taxel_loads(pressing).forces_n, moved_fresh.taxel_loads(pressing).forces_n)
+    assert not np.array_equal(kept.taxel_loads(pressing).forces_n, loads_before)
+    with pytest.raises(ValueError):
+        kept.center_mm[0] += 1.0  # only a whole new centre moves the object (and forgets what was kept)

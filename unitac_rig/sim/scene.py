@@ -253,6 +253,8 @@ class PressScene:
             float(placement.standard_normal() * p.rotation_error_deg) if p.rotation_error_deg > 0 else 0.0
         )
         self.nominal_center_m = (float(object_center_m[0]), float(object_center_m[1]))  # where presses aim
+        self._wrench_key: bytes | None = None  # the pose (float64 bytes) of the last wrench_on_tool, and its answer
+        self._located_key: bytes | None = None  # the pose of the last ray lookup, and its (table, travel)
         self.center_mm = np.asarray(object_center_m, dtype=np.float64) * 1e3 + offset_mm  # where the object is
         # farthest any outline point reaches from the axis, plus room for pillar tips proud of the pad (mm)
         self._reach_mm = float(np.max(np.linalg.norm(np.asarray(obj.outer_mm), axis=1))) + 10.0
@@ -275,10 +277,21 @@ class PressScene:
         self.rays_built = 0
         self._warned_tilt = False
         self._lock = threading.Lock()  # the arm and a device thread may ask at the same time
-        self._wrench_key: bytes | None = None  # the pose (float64 bytes) of the last wrench_on_tool, and its answer
         self._wrench = np.zeros(6)
-        self._located_key: bytes | None = None  # the pose of the last ray lookup, and its (table, travel)
         self._located: tuple[_RayTable, float] | None = None
+
+    @property
+    def center_mm(self) -> np.ndarray:
+        """Where the object's axis is (x, y) in mm, base frame (read only: set the whole, e.g. to move the object)."""
+        return self._center_mm
+
+    @center_mm.setter
+    def center_mm(self, value: np.ndarray) -> None:
+        center = np.array(value, dtype=np.float64)
+        center.flags.writeable = False  # changed only through here, which forgets the answers kept for a pose
+        self._center_mm = center
+        self._center_xy = (float(center[0]), float(center[1]))
+        self._wrench_key = self._located_key = None
 
     # ---- ContactWorld ------------------------------------------------------------------------------------
     def wrench_on_tool(self, tcp_pose: np.ndarray) -> np.ndarray:
@@ -361,7 +374,8 @@ class PressScene:
         return self._located
 
     def _locate_unlocked(self, pose: np.ndarray, need_table: bool) -> tuple[_RayTable, float]:
-        rotvec = (float(pose[3]), float(pose[4]), float(pose[5]))
+        x_m, y_m, _, *turn = pose.tolist()  # Python floats: the same arithmetic as numpy's scalars, for less
+        rotvec = (turn[0], turn[1], turn[2])
         if rotvec != self._last_rotvec or self._frame is None:
             rot = rotvec_to_matrix(np.array(rotvec))
             if abs(rot[2, 1]) < 0.99 and not self._warned_tilt:
@@ -380,8 +394,9 @@ class PressScene:
             )  # fmt: skip
             self._last_rotvec = rotvec
         rot, xx, xy, zx, zy, psi, reach = self._frame
-        rel_x = self.center_mm[0] - pose[0] * 1e3
-        rel_y = self.center_mm[1] - pose[1] * 1e3
+        center_x, center_y = self._center_xy
+        rel_x = center_x - x_m * 1e3
+        rel_y = center_y - y_m * 1e3
         c_s = rel_x * xx + rel_y * xy - self.pad_offset_mm  # across the pad, from the pad's centre
         c_n = rel_x * zx + rel_y * zy
         p = self.params

@@ -159,6 +159,7 @@ class SimArm:
         self._position = pose[:3].copy()
         self._set_rotation(rotvec_to_matrix(pose[3:]), pose[3:])
         initial = np.concatenate([self._position, self._rotvec])
+        initial.flags.writeable = False
         self._pose_of: tuple[np.ndarray, np.ndarray, np.ndarray] = (self._position, self._rotvec, initial)
         self._velocity = np.zeros(3)  # m/s, base frame
         self._angular_velocity = np.zeros(3)  # rad/s, base frame
@@ -223,6 +224,7 @@ class SimArm:
         position, rotvec, pose = self._pose_of
         if position is not self._position or rotvec is not self._rotvec:
             pose = np.concatenate([self._position, self._rotvec])
+            pose.flags.writeable = False
             self._pose_of = (self._position, self._rotvec, pose)
         return pose
 

@@ -120,6 +120,10 @@ def test_hub_values_the_template_cannot_hold_go_through_the_codec() -> None:
     forces[4, 2] = 1e39  # beyond float32: refused by the codec, as before
     with pytest.raises(ProtocolError, match="float32"):
         writer.encode(7, 1000, forces, np.zeros((N_PILLARS, 3)), np.zeros(3), 0)
+    with pytest.raises(ProtocolError, match="u32"):  # the codec's own checks of the hub block, as before
+        writer.encode(2**32, 1000, np.zeros((N_PILLARS, 3)), np.zeros((N_PILLARS, 3)), np.zeros(3), 0)
+    with pytest.raises(ProtocolError, match="u64"):
+        writer.encode(7, -1, np.zeros((N_PILLARS, 3)), np.zeros((N_PILLARS, 3)), np.zeros(3), 0)
 
 
 def _reference_ft(params: SimArmParams, seed: int, periods: int) -> np.ndarray:

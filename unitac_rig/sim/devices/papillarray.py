@@ -104,8 +104,8 @@ class HubPacketWriter:
                 values = np.array(getattr(zero, field), dtype=np.float64)
                 values[axis] = _PROBE_F32
                 positions.append(changed(self._packet(0, 0, replace(zero, **_field(field, values)))))
-        if any(len(at) != 4 for at in positions):
-            raise ValueError("the codec's float fields are not 4 bytes each")  # a codec change this must follow
+        # each float field is four bytes of the body (a codec change that broke this must change this writer too)
+        assert all(len(at) == 4 for at in positions), "the codec's float fields are not 4 bytes each"
         self._float_pos = np.concatenate(positions)
         self._counter_pos = int(changed(self._packet(0xFFFF_FFFF, 0, zero))[0])
         self._time_pos = int(changed(self._packet(0, 0xFFFF_FFFF_FFFF_FFFF, zero))[0])
@@ -129,7 +129,11 @@ class HubPacketWriter:
         their sum and global torque ``torque_nmm`` (3,); the other slots idle."""
         force_n = np.add.reduce(forces_n, axis=0)  # forces_n.sum(axis=0), the ufunc without the method's wrapper
         values = np.concatenate([forces_n.ravel(), displacements_mm.ravel(), force_n, torque_nmm])
-        if values.size != 6 * self._n + 6 or not np.maximum.reduce(np.abs(values)) <= _F32_MAX:  # False for NaN
+        if (
+            values.size != 6 * self._n + 6
+            or not np.maximum.reduce(np.abs(values)) <= _F32_MAX  # also for NaN
+            or not (0 <= counter < 1 << 32 and 0 <= timestamp_us < 1 << 64)
+        ):  # the codec writes it, or says why it cannot
             sensor = replace(
                 self._idle[self.slot],
                 forces_n=forces_n,

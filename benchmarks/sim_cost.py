@@ -1,29 +1,37 @@
 """Simulator cost: CPU seconds per simulated second of a fast-twin session, before and after, for both sensors.
 
-Run: ``python benchmarks/sim_cost.py`` (``--presses 12`` for a quick look, ``--full`` to also run the whole campaign
-on each code version). Writes ``docs/figures/sim_cost.json`` and prints a summary.
+Run: ``python benchmarks/sim_cost.py --presses 30 --pairs 3 --campaign-presses 8`` (about 10 minutes on the loaded
+2-core box; ``--full`` also runs the whole campaign on each code version, hours). Writes
+``docs/figures/sim_cost.json`` and prints a summary.
 
 Each measurement is one seeded session (``SimRig(seed)``, ``collect_session``; ``hex_tpu``, 91 angles unless told
-otherwise) in a fresh process, timed with ``time.process_time`` around the session alone (imports excluded). The
-*simulator's own* share is the CPU spent inside its entry points (the arm's control period, which also runs the
-simulated devices; ``force_mode``; the simulated CAN bus's ``recv``), measured by thin timers; the rest is the host
-code a real rig runs too (the press routine, the drivers' decoding, the recorder).
+otherwise) in a fresh process, timed with ``time.process_time`` around the session alone (imports done first). The
+*simulator's* share comes from stack samples every millisecond of process CPU time (``ITIMER_PROF``; the kernel's
+tick makes it about every 4 ms): a sample is the simulator's when a frame on its stack runs simulator code (the
+simulated arm, devices, scene and transports); the rest is the host code a real rig runs too (the press routine,
+the drivers' decoding, the recorder). Versions are measured in ``--pairs`` alternating rounds and the medians
+reported, with the median of the per-round before/after ratios.
 
 "Before" is another commit (default ``2813621``, the commit issue 27 measured), checked out with
-``git worktree add`` into a temporary folder and imported through ``PYTHONPATH``; "after" is this checkout.
-The campaign estimate is the per-press CPU of each sensor times the campaign's presses (every object with both
-sensors, each of its rotations, 91 angles: 1820 presses); ``--full`` runs ``unitac-rig campaign`` instead.
+``git worktree add`` into a temporary folder and imported through ``PYTHONPATH``; "after" is this checkout. The
+campaign (the six seen objects x 91 presses and the irregular prism x 4 rotations x 91, with both sensors: 1820
+presses) is estimated from ``--campaign-presses`` presses of every object with each sensor, per-press CPU times the
+object's presses; ``--full`` runs ``unitac-rig campaign`` instead.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import hashlib
+import importlib
 import json
 import os
 import platform
 import resource
 import shutil
+import signal
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -38,57 +46,93 @@ SENSORS = ("uskin", "papillarray")
 
 
 # ---- the worker: one session in this process ----------------------------------------------------------------------
-_depth = [0]  # simulator entry points open now: one inside another (a device's bus inside a control period) counts once
+# A sample counts as the simulator's when any frame on the stack runs simulator code: the simulated arm, devices,
+# scene and transports (unitac_rig/sim/, and python-can's virtual bus, which carried the uSkin before the lockstep
+# bus). Everything else is host code a real rig runs too.
+_SIMULATOR_FILES = (
+    os.sep + os.path.join("unitac_rig", "sim") + os.sep,
+    os.path.join("can", "interfaces", "virtual.py"),
+)
+SAMPLE_INTERVAL_S = 0.001  # of process CPU time
 
 
-def _timed(owner: Any, name: str, totals: dict[str, float], label: str) -> None:
-    """Wrap ``owner.name`` so the CPU spent inside it adds to ``totals[label]``."""
-    inner = getattr(owner, name)
-    depth = _depth
+class _CpuSampler:
+    """Sample the main thread's stack every ``SAMPLE_INTERVAL_S`` of process CPU time (``ITIMER_PROF``) and count
+    the samples inside simulator code. Statistical, but it adds nothing to the code it measures: thin timers around
+    the simulator's entry points (the first version of this benchmark) cost two ``process_time`` system calls per
+    call, 0.4 M calls a session, which inflated both versions' figures by 10-35 %."""
 
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        if depth[0]:
-            return inner(*args, **kwargs)
-        depth[0] += 1
-        start = time.process_time()
-        try:
-            return inner(*args, **kwargs)
-        finally:
-            totals[label] = totals.get(label, 0.0) + time.process_time() - start
-            depth[0] -= 1
+    def __init__(self) -> None:
+        self.total = 0
+        self.simulator = 0
+        self._files: dict[str, bool] = {}
 
-    setattr(owner, name, wrapper)
+    def _in_simulator(self, filename: str) -> bool:
+        known = self._files.get(filename)
+        if known is None:
+            known = self._files[filename] = any(part in filename for part in _SIMULATOR_FILES)
+        return known
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        self.total += 1
+        while frame is not None:
+            if self._in_simulator(frame.f_code.co_filename):
+                self.simulator += 1
+                return
+            frame = frame.f_back
+
+    def __enter__(self) -> _CpuSampler:
+        signal.signal(signal.SIGPROF, self._on_signal)
+        signal.setitimer(signal.ITIMER_PROF, SAMPLE_INTERVAL_S, SAMPLE_INTERVAL_S)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        signal.setitimer(signal.ITIMER_PROF, 0.0, 0.0)
+        signal.signal(signal.SIGPROF, signal.SIG_DFL)
+
+
+def _preload() -> None:
+    """Import what a session imports on first use (a sensor's driver and simulated devices, python-can), so the
+    session's CPU is the session's and not the interpreter's (an import happens once per process, not per press)."""
+    for name in (
+        "can",
+        "unitac_rig.sim.devices",
+        "drivers.uskin",
+        "drivers.papillarray",
+        "unitac_rig.sim.fast_sensors",
+    ):
+        with contextlib.suppress(ImportError):
+            importlib.import_module(name)
 
 
 def run_session(sensor: str, object_id: str, angles: int, presses: int | None, seed: int) -> dict[str, Any]:
     """One seeded session of the code on ``sys.path``; CPU, simulated time and what the session recorded."""
-    import unitac_rig.sim.arm as sim_arm
     from unitac_rig.collection.session import collect_session
     from unitac_rig.rig.config import parse_rig_config
     from unitac_rig.rig.objects import get_object
     from unitac_rig.sim.fast_rig import SimRig
     from unitac_rig.storage.summary import inspect_dataset
 
-    inside: dict[str, float] = {}
-    _timed(sim_arm.SimArm, "wait_period", inside, "simulator")
-    _timed(sim_arm.SimArm, "force_mode", inside, "simulator")
-    try:
-        from unitac_rig.sim.devices.lockstep_can import LockstepCanBus
-
-        _timed(LockstepCanBus, "recv", inside, "simulator")
-    except ImportError:  # before the lockstep bus: python-can's virtual bus carried the uSkin
-        import can.interfaces.virtual as virtual
-
-        _timed(virtual.VirtualBus, "recv", inside, "simulator")
+    _preload()
     rig = SimRig(parse_rig_config({"press": {"angle_count": angles}}), seed=seed)
+    marks: list[float] = []  # process CPU (s) as each press is recorded
+
+    def on_press(_: object) -> None:
+        marks.append(time.process_time())
+
     with tempfile.TemporaryDirectory() as tmp:
-        start = time.process_time()
-        outcome = collect_session(rig, get_object(object_id), sensor, Path(tmp), max_presses=presses)
-        cpu_s = time.process_time() - start
+        with _CpuSampler() as sampler:
+            start = time.process_time()
+            outcome = collect_session(
+                rig, get_object(object_id), sensor, Path(tmp), max_presses=presses, on_press=on_press
+            )
+            cpu_s = time.process_time() - start
         sim_s = rig.clock.now_ns() / 1e9
         rig.close()
         (summary,) = inspect_dataset(Path(tmp))["sessions"]
-    simulator_s = inside.get("simulator", 0.0)
+        recorded = recorded_digest(Path(tmp))
+    share = sampler.simulator / max(1, sampler.total)
+    presses_done = max(1, outcome.complete + outcome.failed)
     return {
         "sensor": sensor,
         "object": object_id,
@@ -98,16 +142,41 @@ def run_session(sensor: str, object_id: str, angles: int, presses: int | None, s
         "cpu_s": round(cpu_s, 3),
         "simulated_s": round(sim_s, 3),
         "cpu_per_simulated_s": round(cpu_s / sim_s, 5),
-        "simulator_cpu_s": round(simulator_s, 3),
-        "simulator_cpu_per_simulated_s": round(simulator_s / sim_s, 5),
-        "host_cpu_per_simulated_s": round((cpu_s - simulator_s) / sim_s, 5),
-        "cpu_per_press_s": round(cpu_s / max(1, outcome.complete + outcome.failed), 4),
-        "simulated_per_press_s": round(sim_s / max(1, outcome.complete + outcome.failed), 4),
+        "samples": sampler.total,
+        "simulator_share": round(share, 4),
+        "simulator_cpu_s": round(cpu_s * share, 3),
+        "simulator_cpu_per_simulated_s": round(cpu_s * share / sim_s, 5),
+        "host_cpu_per_simulated_s": round(cpu_s * (1 - share) / sim_s, 5),
+        "cpu_per_press_s": round(cpu_s / presses_done, 4),
+        # after the first press (the session's start: first move, tare, opening the sensor, is in the first)
+        "cpu_per_later_press_s": round((marks[-1] - marks[0]) / (len(marks) - 1), 4) if len(marks) > 1 else None,
+        "cpu_session_start_s": round(2 * marks[0] - marks[1] - start, 4) if len(marks) > 1 else None,
+        "simulated_per_press_s": round(sim_s / presses_done, 4),
         "targets_matched": summary["targets_matched"],
         "targets_missed": summary["targets_missed"],
         "match_error_median_n": summary["match_error_n"]["median"],
         "peak_force_median_n": summary["peak_force_n"]["median"],
+        "recorded_sha256": recorded,
     }
+
+
+def recorded_digest(data_dir: Path) -> str:
+    """SHA-256 of every number the session recorded (each press's robot, tactile and extraction datasets, in name
+    order): equal digests, bit-identical sessions."""
+    import h5py
+    import numpy as np
+
+    digest = hashlib.sha256()
+
+    def visit(name: str, item: Any) -> None:
+        if isinstance(item, h5py.Dataset) and item.dtype.kind in "fiub":
+            digest.update(name.encode())
+            digest.update(np.ascontiguousarray(item[()]).tobytes())
+
+    for path in sorted(data_dir.glob("*.h5")):
+        with h5py.File(path, "r") as f:
+            f["presses"].visititems(visit)
+    return digest.hexdigest()
 
 
 # ---- the driver: versions in subprocesses --------------------------------------------------------------------------
@@ -127,12 +196,12 @@ def _env(code: Path) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": str(code)}
 
 
-def measure(code: Path, args: argparse.Namespace, sensor: str) -> dict[str, Any]:
+def measure(code: Path, sensor: str, object_id: str, angles: int, presses: int | None, seed: int) -> dict[str, Any]:
     """Run one session of the code in ``code`` in a fresh process (imports from ``code`` only)."""
-    command = [sys.executable, str(Path(__file__).resolve()), "--worker", sensor, "--object", args.object]
-    command += ["--angles", str(args.angles), "--seed", str(args.seed)]
-    if args.presses:
-        command += ["--presses", str(args.presses)]
+    command = [sys.executable, str(Path(__file__).resolve()), "--worker", sensor, "--object", object_id]
+    command += ["--angles", str(angles), "--seed", str(seed)]
+    if presses:
+        command += ["--presses", str(presses)]
     done = subprocess.run(command, env=_env(code), cwd=tempfile.gettempdir(), capture_output=True, text=True)
     if done.returncode != 0:
         raise SystemExit(f"session with {sensor} on {code} failed:\n{done.stderr[-2000:]}")
@@ -141,11 +210,11 @@ def measure(code: Path, args: argparse.Namespace, sensor: str) -> dict[str, Any]
 
 
 def campaign_presses() -> dict[str, int]:
-    """Presses per sensor in the paper's campaign: every object, each of its rotations, 91 angles."""
+    """Presses per object and sensor in the paper's campaign: each of the object's rotations, 91 angles (the six
+    seen objects 91 each, the irregular prism 4 x 91 = 364; 910 per sensor)."""
     from unitac_rig.rig.objects import list_objects
 
-    per_sensor = sum(len(obj.rotations_deg) * 91 for obj in list_objects())
-    return dict.fromkeys(SENSORS, per_sensor)
+    return {obj.id: len(obj.rotations_deg) * 91 for obj in list_objects()}
 
 
 def run_campaign(code: Path) -> dict[str, float]:
@@ -160,6 +229,83 @@ def run_campaign(code: Path) -> dict[str, float]:
     return {"cpu_s": round(cpu, 1), "wall_s": round(time.monotonic() - start, 1)}
 
 
+_FIGURES = ("cpu_per_simulated_s", "simulator_cpu_per_simulated_s", "host_cpu_per_simulated_s", "cpu_per_press_s")
+
+
+def _median_session(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The first run's record (what the session recorded is the same every run: seeded), with each CPU figure the
+    median over the runs and the runs' figures kept."""
+    out = dict(runs[0])
+    for key in ("cpu_s", "simulator_cpu_s", "simulator_share", *_FIGURES):
+        out[key] = round(statistics.median(r[key] for r in runs), 5)
+    out["runs"] = [{key: r[key] for key in ("cpu_s", "simulator_share", *_FIGURES)} for r in runs]
+    return out
+
+
+def measure_pairs(trees: dict[str, Path], args: argparse.Namespace) -> dict[str, dict[str, Any]]:
+    """``args.pairs`` rounds of one session per version and sensor, the versions alternating, so a drift in the
+    shared machine's load hits both alike; per version and sensor the median figures and the per-round ratios."""
+    runs: dict[str, dict[str, list[dict[str, Any]]]] = {v: {s: [] for s in args.sensors} for v in trees}
+    for _ in range(args.pairs):
+        for sensor in args.sensors:
+            for version, code in trees.items():
+                runs[version][sensor].append(measure(code, sensor, args.object, args.angles, args.presses, args.seed))
+    versions = {v: {"sessions": {s: _median_session(runs[v][s]) for s in args.sensors}} for v in trees}
+    for sensor in args.sensors:
+        pairs = list(zip(runs["before"][sensor], runs["after"][sensor], strict=True))
+        versions["after"]["sessions"][sensor]["ratios_before_over_after"] = {
+            figure: round(statistics.median(b[figure] / a[figure] for b, a in pairs), 2)
+            for figure in ("cpu_per_simulated_s", "simulator_cpu_per_simulated_s", "host_cpu_per_simulated_s")
+        }
+    return versions
+
+
+def campaign_estimate(code: Path, args: argparse.Namespace) -> dict[str, Any]:
+    """CPU of the whole campaign from ``args.campaign_presses`` presses of every object with each sensor: per (object,
+    sensor) the session's start (its first press less a later one) plus the CPU of a later press times the object's
+    presses in the campaign."""
+    presses = campaign_presses()
+    per_object: dict[str, dict[str, dict[str, float]]] = {}
+    total = 0.0
+    for object_id, count in presses.items():
+        per_object[object_id] = {}
+        for sensor in SENSORS:
+            s = measure(code, sensor, object_id, 91, args.campaign_presses, args.seed)
+            start_s, per_press_s = s["cpu_session_start_s"], s["cpu_per_later_press_s"]
+            per_object[object_id][sensor] = {"session_start_s": start_s, "per_press_s": per_press_s}
+            total += start_s + per_press_s * count
+    return {"presses": presses, "cpu_by_object": per_object, "cpu_s": round(total, 1)}
+
+
+def compare_recordings(args: argparse.Namespace) -> dict[str, Any]:
+    """Whether a seeded session records the same numbers on ``args.identical`` and on this checkout, per sensor."""
+    result: dict[str, Any] = {}
+    with checkout(args.identical) as reference:
+        for sensor in args.sensors:
+            ref, now = (
+                measure(code, sensor, args.object, args.angles, args.presses, args.seed) for code in (reference, ROOT)
+            )
+            same = ref["recorded_sha256"] == now["recorded_sha256"]
+            print(
+                f"{sensor}: {'bit-identical' if same else 'DIFFERENT'} recordings ({now['presses_complete']} presses, "
+                f"sha256 {now['recorded_sha256'][:16]} here, {ref['recorded_sha256'][:16]} on {args.identical}); "
+                f"median peak {ref['peak_force_median_n']} -> {now['peak_force_median_n']} N, targets matched "
+                f"{ref['targets_matched']} -> {now['targets_matched']}"
+            )
+            result[sensor] = {"bit_identical": same, "reference": ref, "this_checkout": now}
+    return result
+
+
+def _print(label: str, s: dict[str, Any]) -> None:
+    print(
+        f"{label:6s} {s['sensor']:11s} {s['cpu_s']:7.2f} CPU-s / {s['simulated_s']:7.1f} simulated s = "
+        f"{s['cpu_per_simulated_s']:.4f} (simulator {s['simulator_cpu_per_simulated_s']:.4f}, host "
+        f"{s['host_cpu_per_simulated_s']:.4f}); {s['presses_complete']} presses, "
+        f"{s['targets_matched']} targets matched, median error {s['match_error_median_n']} N, "
+        f"median peak {s['peak_force_median_n']} N"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--before", default="2813621", help="commit measured as 'before' (default: 2813621)")
@@ -168,7 +314,16 @@ def main() -> None:
     parser.add_argument("--presses", type=int, default=None, help="stop after this many presses (default: all)")
     parser.add_argument("--seed", type=int, default=0, help="the simulated rig's seed (0)")
     parser.add_argument("--sensors", nargs="+", default=list(SENSORS), choices=SENSORS)
+    parser.add_argument("--pairs", type=int, default=3, help="alternating before/after rounds (3)")
+    parser.add_argument(
+        "--campaign-presses", type=int, default=0, help="estimate the campaign from this many presses per object"
+    )
     parser.add_argument("--full", action="store_true", help="also run the whole campaign on each version (long)")
+    parser.add_argument(
+        "--identical",
+        metavar="REF",
+        help="only compare what a --presses session records on REF and on this checkout, bit for bit",
+    )
     parser.add_argument("--out", type=Path, default=OUT)
     parser.add_argument("--worker", choices=SENSORS, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -176,39 +331,26 @@ def main() -> None:
         print(json.dumps(run_session(args.worker, args.object, args.angles, args.presses, args.seed)))
         return
 
-    presses = campaign_presses()
-    versions: dict[str, dict[str, Any]] = {}
+    if args.identical:
+        compared = {"command": "python benchmarks/sim_cost.py " + " ".join(sys.argv[1:]), "reference": args.identical}
+        compared["sensors"] = compare_recordings(args)
+        out = args.out.with_name("sim_identical.json")
+        out.write_text(json.dumps(compared, indent=2) + "\n")
+        print(f"wrote {out}")
+        return
     with checkout(args.before) as before_tree:
-        for label, code in (("before", before_tree), ("after", ROOT)):
-            sessions = {sensor: measure(code, args, sensor) for sensor in args.sensors}
-            estimate = sum(sessions[s]["cpu_per_press_s"] * presses[s] for s in sessions)
-            versions[label] = {"sessions": sessions, "campaign_cpu_estimate_s": round(estimate, 1)}
+        trees = {"before": before_tree, "after": ROOT}
+        versions = measure_pairs(trees, args)
+        for label, code in trees.items():
+            for s in versions[label]["sessions"].values():
+                _print(label, s)
+            if args.campaign_presses:
+                versions[label]["campaign_estimate"] = estimate = campaign_estimate(code, args)
+                print(f"{label:6s} campaign estimate {estimate['cpu_s'] / 60:.1f} CPU-min")
             if args.full:
                 versions[label]["campaign_measured"] = run_campaign(code)
-            for sensor, s in sessions.items():
-                print(
-                    f"{label:6s} {sensor:11s} {s['cpu_s']:7.1f} CPU-s / {s['simulated_s']:7.1f} simulated s = "
-                    f"{s['cpu_per_simulated_s']:.4f} (simulator {s['simulator_cpu_per_simulated_s']:.4f}, host "
-                    f"{s['host_cpu_per_simulated_s']:.4f}); {s['presses_complete']} presses, "
-                    f"{s['targets_matched']} targets matched, median error {s['match_error_median_n']} N"
-                )
-            print(f"{label:6s} campaign estimate {estimate / 60:.1f} CPU-min ({sum(presses.values())} presses)")
-    ratios = {
-        sensor: {
-            "session": round(
-                versions["before"]["sessions"][sensor]["cpu_per_simulated_s"]
-                / versions["after"]["sessions"][sensor]["cpu_per_simulated_s"],
-                2,
-            ),
-            "simulator": round(
-                versions["before"]["sessions"][sensor]["simulator_cpu_per_simulated_s"]
-                / versions["after"]["sessions"][sensor]["simulator_cpu_per_simulated_s"],
-                2,
-            ),
-        }
-        for sensor in args.sensors
-    }
-    print("before/after CPU per simulated second:", json.dumps(ratios))
+    for sensor, s in versions["after"]["sessions"].items():
+        print(f"before/after {sensor}: {json.dumps(s['ratios_before_over_after'])}")
     doc = {
         "what": "CPU seconds per simulated second of one seeded fast-twin session, before and after (issue 27)",
         "command": "python benchmarks/sim_cost.py " + " ".join(sys.argv[1:]),
@@ -221,9 +363,8 @@ def main() -> None:
         "angles": args.angles,
         "presses": args.presses,
         "seed": args.seed,
-        "campaign_presses": presses,
+        "pairs": args.pairs,
         "versions": versions,
-        "ratios_before_over_after": ratios,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(doc, indent=2) + "\n")

@@ -25,7 +25,8 @@ from unitac_rig.rig.config import parse_rig_config
 from unitac_rig.rig.objects import ObjectSpec, get_object
 from unitac_rig.rig.poses import rotvec_to_matrix
 from unitac_rig.sim.fast_rig import SimRig
-from unitac_rig.sim.scene import PressScene, SceneParams, _PillarPad, _tilted_profile, bending_tilt_rad_per_n
+from unitac_rig.sim.scene import PressScene, SceneParams, bending_tilt_rad_per_n
+from unitac_rig.sim.scene_pads import PillarPad, tilted_profile
 
 EXACT = SceneParams().exact()  # object placed and pad mounted exactly: only the term under test differs
 
@@ -282,12 +283,12 @@ def test_a_tilting_prism_presses_the_pillars_nearer_its_base_harder() -> None:
     # Nine pillars, all touching at once (gap 0), 1 N/mm each, pushed 1 mm: P = sum k (d - theta y) = 9 N because
     # the rows' heights (+7, 0, -7 mm) cancel, so theta = 0.01 rad/N * 9 N = 0.09 rad, and the top row carries
     # 1 - 0.09 * 7 = 0.37 N per pillar, the middle 1 N, the bottom 1.63 N.
-    pad = _PillarPad(PAPILLARRAY, EXACT, tilt_rad_per_n=0.01)
+    pad = PillarPad(PAPILLARRAY, EXACT, tilt_rad_per_n=0.01)
     normal = pad._normal_loads(np.array([1.0]), np.zeros(9), np.ones(9)).reshape(3, 3)
     assert np.allclose(normal, [[0.37] * 3, [1.0] * 3, [1.63] * 3])
     assert normal.sum() == pytest.approx(9.0)
     # without the tilt the rows are equal
-    flat = _PillarPad(PAPILLARRAY, EXACT)._normal_loads(np.array([1.0]), np.zeros(9), np.ones(9))
+    flat = PillarPad(PAPILLARRAY, EXACT)._normal_loads(np.array([1.0]), np.zeros(9), np.ones(9))
     assert np.allclose(flat, 1.0)
 
 
@@ -299,13 +300,13 @@ def test_the_tilt_shifts_a_skin_line_load_toward_the_base_and_keeps_its_total() 
     line = np.stack([2.0 * depth, 3.0 * depth], axis=1)  # a second channel follows the same depth
     edges = np.linspace(-10.0, 10.0, 41)
     y, width = 0.5 * (edges[:-1] + edges[1:]), np.diff(edges)
-    profile = _tilted_profile(depth, line, y, width, 0.002, normal=0)
+    profile = tilted_profile(depth, line, y, width, 0.002, normal=0)
     at = profile[2]  # depth 0.5 mm
     assert np.allclose(at[:, 0], 2.0 * (0.5 - 0.04 * y))
     assert np.allclose(at[:, 1], 1.5 * at[:, 0])
     assert float(at[:, 0] @ width) == pytest.approx(20.0)
     # no tilt: the same load at every height
-    assert np.allclose(_tilted_profile(depth, line, y, width, 0.0, normal=0)[2, :, 0], 1.0)
+    assert np.allclose(tilted_profile(depth, line, y, width, 0.0, normal=0)[2, :, 0], 1.0)
 
 
 def test_a_bending_tpu_prism_loads_the_skin_rows_nearer_its_base() -> None:

@@ -35,7 +35,7 @@ advances the clock (which makes simulated sensors emit the samples that fall due
 If other code advances the clock directly (a host stall injected by a test or benchmark), the arm integrates those
 periods too (it listens to the clock), exactly as a controller goes on while its host is frozen.
 
-Why one module of ~620 lines: the kinematics, the F/T model and the controller-program model (watchdog, protective
+Why one module of ~710 lines: the kinematics, the F/T model and the controller-program model (watchdog, protective
 stop) all act on one state per control period.
 """
 
@@ -54,6 +54,7 @@ from drivers.arm import DEFAULT_WATCHDOG_HZ, ArmState, checked_force_mode_parame
 from drivers.clock import Clock, VirtualClock
 from drivers.errors import ArmError, ControlScriptStopped, ProtectiveStop
 from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
+from unitac_rig.sim.ft_noise import FtNoise, NormalBlocks
 from unitac_rig.sim.world import ContactWorld
 
 ROBOT_MODE_RUNNING = 7
@@ -63,6 +64,7 @@ SAFETY_MODE_PROTECTIVE_STOP = 3
 DEFAULT_START_POSE = np.array([-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214])  # m, rad: pad facing base +y
 
 _UNLOCK_HINT = "unlock the protective stop, then re-upload the control program"
+_NO_TURN = np.zeros(3)  # rad/s: the angular part of a force-mode twist with no compliant torque axis (never written)
 
 
 @dataclass(frozen=True)
@@ -121,6 +123,8 @@ class _Path:
     goal: np.ndarray
     profile: _Trapezoid
     elapsed_s: float = 0.0
+    # a move that does not turn has the same orientation every period: (matrix, rotation vector), formed once
+    held_rotation: tuple[np.ndarray, np.ndarray] | None = None
 
 
 class SimArm:
@@ -154,6 +158,9 @@ class SimArm:
             raise ArmError(f"start pose must be 6 finite numbers, got {start_pose!r}")
         self._position = pose[:3].copy()
         self._set_rotation(rotvec_to_matrix(pose[3:]), pose[3:])
+        initial = np.concatenate([self._position, self._rotvec])
+        initial.flags.writeable = False
+        self._pose_of: tuple[np.ndarray, np.ndarray, np.ndarray] = (self._position, self._rotvec, initial)
         self._velocity = np.zeros(3)  # m/s, base frame
         self._angular_velocity = np.zeros(3)  # rad/s, base frame
         self._mode: _Mode = "idle"
@@ -164,6 +171,10 @@ class SimArm:
         # ur_rtde loop does), and re-validating it and rebuilding its frame was a tenth of a simulated session
         self._force_key: tuple[bytes, bytes, bytes, bytes] | None = None
         self._force_gains: tuple[float, np.ndarray] | None = None  # (gain scaling, the scaled gains)
+        self._force_turns = False  # a torque axis of the force command is compliant
+        self._force_low_limits = np.zeros(6)  # -speed_limits of the force command
+        # its force rows: (rotation transposed, selection, target, -limits, limits), each of the three force axes
+        self._force_rows: tuple[np.ndarray, ...] = (np.eye(3), *(np.zeros(3) for _ in range(4)))
         self._path: _Path | None = None
         self._protective_stop = False
         self._program_running = True
@@ -185,7 +196,12 @@ class SimArm:
         self._delay_line: deque[np.ndarray] = deque([self._true_wrench.copy()] * delay_periods)
         self._axis_scale = np.array([1.0, 1.0, 1.0] + [self.params.ft_torque_scale_m] * 3)
         self._bias = rng.normal(0.0, self.params.ft_bias_sigma_n, 6) * self._axis_scale
-        self._normals = _NormalBlocks(rng)
+        self._ft_noise = FtNoise(
+            NormalBlocks(rng),
+            self.params.ft_bias_drift_n_per_sqrt_s * math.sqrt(self.control_period_s),
+            self.params.ft_noise_sigma_n,
+            self._axis_scale,
+        )
         self._filtered = self._true_wrench + self._bias
         self._zero_offset = np.zeros(6)
         self.force_mode_damping, self.force_mode_gain_scaling = 0.005, 1.0  # the URScript defaults
@@ -199,7 +215,18 @@ class SimArm:
 
     def true_tcp_pose(self) -> np.ndarray:
         """Noise-free TCP pose (6,) [m, rad rotation vector], base frame: what simulated sensors feel."""
-        return np.concatenate([self._position, self._rotvec])
+        return self._pose().copy()
+
+    def _pose(self) -> np.ndarray:
+        """The pose array itself, read only: formed once for each (position, rotation vector) pair. Both are
+        replaced, never changed in place, so their identity says whether the pose moved (the world, the F/T
+        snapshot and the sensors read it every control period)."""
+        position, rotvec, pose = self._pose_of
+        if position is not self._position or rotvec is not self._rotvec:
+            pose = np.concatenate([self._position, self._rotvec])
+            pose.flags.writeable = False
+            self._pose_of = (self._position, self._rotvec, pose)
+        return pose
 
     def true_wrench(self) -> np.ndarray:
         """The world's wrench on the tool now (6,) [N, N*m], base axes; no latency, noise, bias or filter."""
@@ -317,6 +344,11 @@ class SimArm:
         self._mode, self._path = "force", None
         self._force_command = (rotvec_to_matrix(frame[3:]), chosen, target, speed_limits)
         self._force_key = key
+        # the press's force mode is compliant along its axis only: no torque axis, no torque terms to work out
+        self._force_turns = bool(chosen[3:].any())
+        self._force_low_limits = -speed_limits
+        rotation = self._force_command[0]
+        self._force_rows = (rotation.T, chosen[:3], target[:3], self._force_low_limits[:3], speed_limits[:3])
 
     def set_ft_sign(self, sign: float) -> None:
         """A fault hook: -1 reports the negated F/T (a flipped sensor frame); force mode regulates on the same
@@ -512,12 +544,11 @@ class SimArm:
         elif self._integrated_ns + self._period_ns - self._last_write_ns > self._watchdog_ns:
             self._stop_program("watchdog: the host wrote nothing in time")
 
-    def _force_twist(self) -> np.ndarray:
-        """Velocity the force-mode admittance law asks for this period (base frame)."""
+    def _force_twist(self) -> tuple[np.ndarray, np.ndarray]:
+        """Velocity the force-mode admittance law asks for this period (base frame): (linear, angular)."""
         assert self._force_command is not None
         rotation, chosen, target, speed_limits = self._force_command
-        measured = self._ft_sign * (self._filtered - self._zero_offset)
-        applied_task = -np.concatenate([rotation.T @ measured[:3], rotation.T @ measured[3:]])
+        measured = self._measured_ft()
         scaling = self.force_mode_gain_scaling
         if self._force_gains is None or self._force_gains[0] != scaling:
             gains = scaling * np.array(
@@ -525,8 +556,17 @@ class SimArm:
             )
             self._force_gains = (scaling, gains)
         gains = self._force_gains[1]
-        twist_task = np.where(chosen, np.clip(gains * (target - applied_task), -speed_limits, speed_limits), 0.0)
-        return np.concatenate([rotation @ twist_task[:3], rotation @ twist_task[3:]])
+        if not self._force_turns:  # the torque rows would give a zero turn: only the force rows, same operations
+            # (np.dot is the same BLAS product as @ for a matrix and a vector, for a third of the call's cost)
+            rotation_t, chosen3, target3, low3, high3 = self._force_rows
+            # target - applied with applied = -(R^T m): target + R^T m, the same sum
+            limited = np.minimum(np.maximum(gains[:3] * (target3 + np.dot(rotation_t, measured[:3])), low3), high3)
+            return np.dot(rotation, np.where(chosen3, limited, 0.0)), _NO_TURN
+        applied_task = -np.concatenate([rotation.T @ measured[:3], rotation.T @ measured[3:]])
+        # np.minimum(np.maximum(...)) is what np.clip computes, without its wrapper's cost
+        limited = np.minimum(np.maximum(gains * (target - applied_task), self._force_low_limits), speed_limits)
+        twist_task = np.where(chosen, limited, 0.0)
+        return rotation @ twist_task[:3], rotation @ twist_task[3:]
 
     def _integrate_motion(self) -> None:
         self._check_watchdog()
@@ -535,23 +575,25 @@ class SimArm:
             self._step_path(self._path, dt)
             return
         if self._mode == "idle":
+            if not _moving(self._velocity) and not _moving(self._angular_velocity):
+                return  # at rest: nothing moves (the steps below would all be zero)
             step = 0.5 * self._velocity * dt
             turn = 0.5 * self._angular_velocity * dt
             self._velocity, self._angular_velocity = np.zeros(3), np.zeros(3)
         else:
             if self._mode == "force" and self._force_command is not None:
-                target, accel = self._force_twist(), self.params.force_mode_accel_m_s2
+                (linear, angular), accel = self._force_twist(), self.params.force_mode_accel_m_s2
             else:
-                target, accel = self._target_twist, self._accel_m_s2
-            self._velocity, step = _ramp(self._velocity, target[:3], accel, dt)
-            if self._angular_velocity.any() or target[3:].any():
-                self._angular_velocity, turn = _ramp(self._angular_velocity, target[3:], accel, dt)
+                linear, angular, accel = self._target_twist[:3], self._target_twist[3:], self._accel_m_s2
+            self._velocity, step = _ramp(self._velocity, linear, accel, dt)
+            if _moving(self._angular_velocity) or _moving(angular):
+                self._angular_velocity, turn = _ramp(self._angular_velocity, angular, accel, dt)
             else:
                 turn = np.zeros(3)
-            if self._mode == "stop" and not self._velocity.any() and not self._angular_velocity.any():
+            if self._mode == "stop" and not _moving(self._velocity) and not _moving(self._angular_velocity):
                 self._mode = "idle"
         self._position = self._position + step
-        if turn.any():
+        if _moving(turn):
             self._set_rotation(rotvec_to_matrix(turn) @ self._rotation)
 
     def _step_path(self, path: _Path, dt: float) -> None:
@@ -561,7 +603,12 @@ class SimArm:
             self._finish_path(path)
             return
         self._position = path.start_position + fraction * path.delta_position
-        self._set_rotation(rotvec_to_matrix(fraction * path.delta_rotvec) @ path.start_rotation)
+        if path.held_rotation is not None:
+            self._rotation, self._rotvec = path.held_rotation
+        else:
+            self._set_rotation(rotvec_to_matrix(fraction * path.delta_rotvec) @ path.start_rotation)
+            if not _moving(path.delta_rotvec):  # fraction x 0: the same matrix every period
+                path.held_rotation = (self._rotation, self._rotvec)
         self._velocity = rate * path.delta_position
         self._angular_velocity = rate * path.delta_rotvec
 
@@ -574,21 +621,23 @@ class SimArm:
 
     def _update_sensor(self) -> None:
         """One F/T sample: true wrench -> latency -> + bias + noise -> low-pass; and the protective-stop check."""
-        dt = self.control_period_s
-        self._true_wrench = np.asarray(self.world.wrench_on_tool(self.true_tcp_pose()), dtype=np.float64)
+        self._true_wrench = np.asarray(self.world.wrench_on_tool(self._pose()), dtype=np.float64)
         self._delay_line.append(self._true_wrench.copy())
         delayed = self._delay_line.popleft()
         p = self.params
-        if p.ft_bias_drift_n_per_sqrt_s > 0:
-            drift = p.ft_bias_drift_n_per_sqrt_s * math.sqrt(dt) * self._normals.take(6)
-            self._bias = self._bias + drift * self._axis_scale
+        self._bias, noise = self._ft_noise.next(self._bias)
         raw = delayed + self._bias
-        if p.ft_noise_sigma_n > 0:
-            raw = raw + p.ft_noise_sigma_n * self._normals.take(6) * self._axis_scale
+        if noise is not None:
+            raw = raw + noise
         self._filtered = self._filtered + self._filter_alpha * (raw - self._filtered)
         force = self._true_wrench[:3]
         if math.sqrt(float(force.dot(force))) > p.protective_stop_n:  # np.linalg.norm's own sum, without its checks
             self._enter_protective_stop()
+
+    def _measured_ft(self) -> np.ndarray:
+        """The F/T reading the controller reports and regulates on: sign x (filtered - zero offset)."""
+        reading = self._filtered - self._zero_offset
+        return reading if self._ft_sign == 1.0 else self._ft_sign * reading  # 1.0 x: the same numbers
 
     def _snapshot(self) -> ArmState:
         now_ns = self.clock.now_ns()
@@ -596,7 +645,7 @@ class SimArm:
             host_t_ns=now_ns,
             controller_t_s=now_ns / 1e9,
             tcp_pose=self.true_tcp_pose(),
-            tcp_force=self._ft_sign * (self._filtered - self._zero_offset),
+            tcp_force=self._measured_ft(),
             robot_mode=ROBOT_MODE_RUNNING,
             safety_mode=SAFETY_MODE_PROTECTIVE_STOP if self._protective_stop else SAFETY_MODE_NORMAL,
             protective_stop=self._protective_stop,
@@ -605,31 +654,15 @@ class SimArm:
         )
 
 
+def _moving(values: np.ndarray) -> bool:
+    """``values.any()`` for a short vector (a -0.0 is no motion either, NaN is), at a fraction of the cost of numpy's
+    reduction wrapper."""
+    return any(values.tolist())
+
+
 def _raw(values: np.ndarray) -> bytes:
     """The float64 bytes of a command argument: equal bytes, equal command."""
     return np.asarray(values, dtype=np.float64).tobytes()
-
-
-class _NormalBlocks:
-    """Standard normal draws from ``rng`` taken a block at a time (one generator call per ~1,000 control periods
-    instead of two per period). ``rng.normal(0, s, n)`` is ``s`` times the next ``n`` standard normals of the same
-    stream, so ``s * take(n)`` gives bit for bit what drawing ``n`` at a time gave; the generator must not be drawn
-    from elsewhere afterwards (the arm owns its stream)."""
-
-    BLOCK = 12_288
-
-    def __init__(self, rng: np.random.Generator) -> None:
-        self._rng = rng
-        self._block = np.empty(0)
-        self._next = 0
-
-    def take(self, n: int) -> np.ndarray:
-        if self._next + n > self._block.size:
-            self._block = np.concatenate([self._block[self._next :], self._rng.standard_normal(self.BLOCK)])
-            self._next = 0
-        out = self._block[self._next : self._next + n]
-        self._next += n
-        return out
 
 
 def _as_vector(values: np.ndarray, size: int, what: str) -> np.ndarray:

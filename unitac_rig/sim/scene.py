@@ -30,8 +30,9 @@ rebuilds only when the pose leaves the ray.
 Frames: see ``unitac_rig.rig.objects`` (rig geometry). ``wrench_on_tool`` is in base axes about the TCP and is the force
 the object exerts on the tool; taxel loads are in the sensor frame (x, y shear; z normal, pushing = +), newtons.
 
-Why one module of ~800 lines: the 2-D section, both pad models and the per-ray tables share one parameter set and
-the same geometry helpers, and the physics is easiest to check read top to bottom.
+Modules: this one holds the parameters, the scene (rays located from poses, cached) and the per-ray tables;
+:mod:`unitac_rig.sim.scene_geometry` the outline's section along a ray and the prism's bending;
+:mod:`unitac_rig.sim.scene_pads` the two pad models (section -> loads against contact depth).
 """
 
 from __future__ import annotations
@@ -40,7 +41,6 @@ import bisect
 import logging
 import math
 import threading
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -50,12 +50,13 @@ from unitac_rig.errors import ConfigError
 from unitac_rig.rig.objects import DEFAULT_OBJECT_CENTER_M, MaterialSpec, ObjectSpec
 from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
 from unitac_rig.rig.sensors import SENSORS
+from unitac_rig.sim.scene_geometry import Outline, bending_tilt_rad_per_n
+from unitac_rig.sim.scene_pads import PadTable, PillarPad, SkinPad
 
 log = logging.getLogger(__name__)
 
 RAYS_KEPT = 8  # press rays whose tables stay cached (a press, its retract, and a few neighbours)
 NO_CONTACT_MARGIN_MM = 1.0  # beyond this past the outline's reach toward the pad no ray can touch: no table is built
-TILT_ITERATIONS = 200  # fixed-point steps allowed for the object's bending tilt (38 at a 110 mm lever on TPU)
 
 
 @dataclass(frozen=True)
@@ -255,36 +256,60 @@ class PressScene:
             float(placement.standard_normal() * p.rotation_error_deg) if p.rotation_error_deg > 0 else 0.0
         )
         self.nominal_center_m = (float(object_center_m[0]), float(object_center_m[1]))  # where presses aim
+        self._wrench_key: bytes | None = None  # the pose (float64 bytes) of the last wrench_on_tool, and its answer
+        self._located_key: bytes | None = None  # the pose of the last ray lookup, and its (table, travel)
         self.center_mm = np.asarray(object_center_m, dtype=np.float64) * 1e3 + offset_mm  # where the object is
         # farthest any outline point reaches from the axis, plus room for pillar tips proud of the pad (mm)
         self._reach_mm = float(np.max(np.linalg.norm(np.asarray(obj.outer_mm), axis=1))) + 10.0
-        self._outline = _Outline(obj, self.rotation_deg + self.rotation_error_deg)
+        self._outline = Outline(obj, self.rotation_deg + self.rotation_error_deg)
         self.pad_offset_mm = p.skin_pad_offset_mm if self.kind == "skin" else p.pillar_pad_offset_mm
         pitch_tan = math.tan(math.radians(self.pad_pitch_deg))
         self.tilt_rad_per_n = bending_tilt_rad_per_n(obj, p.bending_lever_mm)
-        self._pad: _SkinPad | _PillarPad = (
-            _SkinPad(layout, p, pitch_tan, self.tilt_rad_per_n)
+        self._pad: SkinPad | PillarPad = (
+            SkinPad(layout, p, pitch_tan, self.tilt_rad_per_n)
             if self.kind == "skin"
-            else _PillarPad(layout, p, pitch_tan, self.tilt_rad_per_n)
+            else PillarPad(layout, p, pitch_tan, self.tilt_rad_per_n)
         )
         self._rays: list[_RayTable] = []  # most recent first, a few kept so alternating rays stay cheap
         self._last_rotvec: tuple[float, float, float] | None = None
         self._frame: tuple[np.ndarray, float, float, float, float, float, float] | None = None
         # how far any pad feature stands proud of the plane whose touch the outline's reach bounds (mm): pillars
         # sit at or below the centre one (recess >= 0), the skin is that plane
-        proud_mm = float(max(0.0, -np.min(self._pad.recess))) if isinstance(self._pad, _PillarPad) else 0.0
+        proud_mm = float(max(0.0, -np.min(self._pad.recess))) if isinstance(self._pad, PillarPad) else 0.0
         self._no_contact_margin_mm = NO_CONTACT_MARGIN_MM + proud_mm
         self.rays_built = 0
         self._warned_tilt = False
         self._lock = threading.Lock()  # the arm and a device thread may ask at the same time
+        self._wrench = np.zeros(6)
+        self._located: tuple[_RayTable, float] | None = None
+
+    @property
+    def center_mm(self) -> np.ndarray:
+        """Where the object's axis is (x, y) in mm, base frame (read only: set the whole, e.g. to move the object)."""
+        return self._center_mm
+
+    @center_mm.setter
+    def center_mm(self, value: np.ndarray) -> None:
+        center = np.array(value, dtype=np.float64)
+        center.flags.writeable = False  # changed only through here, which forgets the answers kept for a pose
+        self._center_mm = center
+        self._center_xy = (float(center[0]), float(center[1]))
+        self._wrench_key = self._located_key = None
 
     # ---- ContactWorld ------------------------------------------------------------------------------------
     def wrench_on_tool(self, tcp_pose: np.ndarray) -> np.ndarray:
-        """Force (N) and torque (N*m) the object exerts on the tool, base axes, about the TCP; (6,)."""
-        ray, travel = self._locate(tcp_pose)
-        if travel <= 0.0:
-            return np.zeros(6)
-        return ray.interp(ray.wrench_base, travel)
+        """Force (N) and torque (N*m) the object exerts on the tool, base axes, about the TCP; (6,).
+
+        The last answer is kept for its pose: an arm at rest asks about the same pose every control period.
+        """
+        pose = np.asarray(tcp_pose, dtype=np.float64)
+        key = pose.tobytes()
+        with self._lock:
+            if key != self._wrench_key:
+                ray, travel = self._locate_kept(pose, key)
+                self._wrench = np.zeros(6) if travel <= 0.0 else ray.interp(ray.wrench_base, travel)
+                self._wrench_key = key
+            return self._wrench.copy()
 
     def taxel_loads(self, tcp_pose: np.ndarray) -> TaxelLoads:
         """Per-taxel loads at ``tcp_pose`` in the sensor frame (N, and pillar displacements in mm)."""
@@ -336,11 +361,24 @@ class PressScene:
         Out of the object's reach, any cached table is returned with a negative travel (no contact), unless
         ``need_table`` asks for the table of that very ray.
         """
+        pose = np.asarray(tcp_pose, dtype=np.float64)
         with self._lock:
-            return self._locate_unlocked(np.asarray(tcp_pose, dtype=np.float64), need_table)
+            if need_table:
+                self._located_key = None  # it may build a table and reorder the cache
+                return self._locate_unlocked(pose, True)
+            return self._locate_kept(pose, pose.tobytes())
+
+    def _locate_kept(self, pose: np.ndarray, key: bytes) -> tuple[_RayTable, float]:
+        """:meth:`_locate_unlocked` without a table demand, the last answer kept for its pose (``key``, its float64
+        bytes): the arm and the sensors ask about the same pose in one control period."""
+        if key != self._located_key or self._located is None:
+            self._located = self._locate_unlocked(pose, False)
+            self._located_key = key
+        return self._located
 
     def _locate_unlocked(self, pose: np.ndarray, need_table: bool) -> tuple[_RayTable, float]:
-        rotvec = (float(pose[3]), float(pose[4]), float(pose[5]))
+        x_m, y_m, _, *turn = pose.tolist()  # Python floats: the same arithmetic as numpy's scalars, for less
+        rotvec = (turn[0], turn[1], turn[2])
         if rotvec != self._last_rotvec or self._frame is None:
             rot = rotvec_to_matrix(np.array(rotvec))
             if abs(rot[2, 1]) < 0.99 and not self._warned_tilt:
@@ -359,8 +397,9 @@ class PressScene:
             )  # fmt: skip
             self._last_rotvec = rotvec
         rot, xx, xy, zx, zy, psi, reach = self._frame
-        rel_x = self.center_mm[0] - pose[0] * 1e3
-        rel_y = self.center_mm[1] - pose[1] * 1e3
+        center_x, center_y = self._center_xy
+        rel_x = center_x - x_m * 1e3
+        rel_y = center_y - y_m * 1e3
         c_s = rel_x * xx + rel_y * xy - self.pad_offset_mm  # across the pad, from the pad's centre
         c_n = rel_x * zx + rel_y * zy
         p = self.params
@@ -402,567 +441,6 @@ class PressScene:
 
 
 # =================================================================================================================
-# Geometry of the cut: the outline seen from the pad
-# =================================================================================================================
-
-
-class _Section:
-    """The outline in pad coordinates for one ray: ``s`` across the pad (mm, TCP at 0), ``n`` toward the object.
-
-    ``front(s)`` is how far the outline reaches toward the pad, relative to the object centre: the surface is at
-    ``n = c_n + front(s)`` when the centre is at ``n = c_n``. ``slope`` = d front / ds, ``xi`` = distance along the
-    outline to the nearest corner (inf without corners).
-    """
-
-    def __init__(self, outline: _Outline, x_axis: np.ndarray, z_axis: np.ndarray, c_s: float) -> None:
-        self.c_s = c_s
-        self.radius = outline.radius
-        rel = outline.points
-        self.s = rel @ x_axis + c_s
-        self.n = rel @ z_axis
-        self.corner_to_start = outline.corner_to_start
-        self.corner_from_end = outline.corner_from_end
-        self.edge_len = outline.edge_len
-
-    def front(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(front, slope, xi) at pad positions ``s`` (mm); front = +inf where the outline is not in front."""
-        s = np.asarray(s, dtype=np.float64)
-        if self.radius is not None:
-            ds = s - self.c_s
-            inside = np.abs(ds) <= self.radius
-            root = np.sqrt(np.where(inside, self.radius**2 - ds**2, 1.0))
-            front = np.where(inside, -root, np.inf)
-            slope = np.where(inside & (root > 0), ds / np.where(root > 0, root, 1.0), 0.0)
-            return front, slope, np.full(s.shape, np.inf)
-        a_s, a_n = self.s, self.n
-        b_s, b_n = np.roll(a_s, -1), np.roll(a_n, -1)
-        ds_edge = b_s - a_s
-        valid = np.abs(ds_edge) > 1e-12
-        ds_edge = np.where(valid, ds_edge, 1.0)
-        t = (s[None, :] - a_s[:, None]) / ds_edge[:, None]
-        on = valid[:, None] & (t >= 0.0) & (t <= 1.0)
-        n_at = a_n[:, None] + t * (b_n - a_n)[:, None]
-        n_at = np.where(on, n_at, np.inf)
-        k = np.argmin(n_at, axis=0)
-        cols = np.arange(s.size)
-        front = n_at[k, cols]
-        slope = ((b_n - a_n) / ds_edge)[k]
-        tk = np.clip(t[k, cols], 0.0, 1.0)
-        length = self.edge_len[k]
-        xi = np.minimum(self.corner_to_start[k] + tk * length, self.corner_from_end[k] + (1.0 - tk) * length)
-        slope = np.where(np.isfinite(front), slope, 0.0)
-        return front, slope, xi
-
-    def pillar_contact(self, s_axis: float, tip_radius: float) -> tuple[float, float, float]:
-        """First contact of a hemispherical tip on axis ``s_axis`` (tip apex at n = 0 when the centre is at c_n).
-
-        Returns (c_n at touch, contact slope dn/ds of the tip at the contact point, xi at the contact);
-        c_n = -inf when the tip never meets the outline.
-        """
-        rho = tip_radius
-        if self.radius is not None:
-            ds = self.c_s - s_axis
-            reach = self.radius + rho
-            if abs(ds) >= reach:
-                return -math.inf, 0.0, math.inf
-            c_n = math.sqrt(reach**2 - ds**2) - rho
-            return c_n, -ds / (c_n + rho), math.inf
-        # candidates: outline vertices over the tip, and tangency points on each edge
-        best = (-math.inf, 0.0, math.inf)
-        a_s, a_n = self.s, self.n
-        b_s, b_n = np.roll(a_s, -1), np.roll(a_n, -1)
-        cand_s = [float(v) for v in a_s if abs(v - s_axis) < rho]
-        for i in range(a_s.size):
-            d = b_s[i] - a_s[i]
-            if abs(d) < 1e-12:
-                continue
-            m = (b_n[i] - a_n[i]) / d
-            r = -m * rho / math.sqrt(1.0 + m * m)  # tip slope -r/sqrt(rho^2-r^2) equals the edge slope
-            sc = s_axis + r
-            if min(a_s[i], b_s[i]) <= sc <= max(a_s[i], b_s[i]):
-                cand_s.append(sc)
-        if not cand_s:
-            return best
-        cs = np.array(cand_s)
-        front, _, xi = self.front(cs)
-        r = cs - s_axis
-        tip = -(rho - np.sqrt(np.maximum(rho**2 - r**2, 0.0)))
-        value = tip - front  # c_n at which this point touches
-        j = int(np.argmax(value))
-        if not np.isfinite(value[j]):
-            return best
-        rj = float(r[j])
-        slope = -rj / math.sqrt(max(rho**2 - rj**2, 1e-12))
-        return float(value[j]), slope, float(xi[j])
-
-
-class _Outline:
-    """The mounted outline (base axes, mm, relative to the object centre) and where its corners are."""
-
-    def __init__(self, obj: ObjectSpec, rotation_deg: float) -> None:
-        self.radius = obj.radius_mm
-        pts = obj.outer_rotated_mm(rotation_deg)
-        self.points = pts
-        edge = np.roll(pts, -1, axis=0) - pts
-        self.edge_len = np.linalg.norm(edge, axis=1)
-        n = len(pts)
-        corners = set(obj.corner_vertices().tolist())
-        inf = math.inf
-        to_start = np.full(n, inf)  # distance along the outline from edge i's start vertex back to a corner
-        from_end = np.full(n, inf)  # from edge i's end vertex forward to a corner
-        if corners:
-            for i in range(n):
-                dist, j = 0.0, i
-                for _ in range(n):
-                    if j in corners:
-                        break
-                    j = (j - 1) % n
-                    dist += self.edge_len[j]
-                to_start[i] = dist
-                dist, j = 0.0, (i + 1) % n
-                for _ in range(n):
-                    if j in corners:
-                        break
-                    dist += self.edge_len[j]
-                    j = (j + 1) % n
-                from_end[i] = dist
-        self.corner_to_start = to_start
-        self.corner_from_end = from_end
-
-    def section(self, x_axis: np.ndarray, z_axis: np.ndarray, c_s: float) -> _Section:
-        return _Section(self, x_axis, z_axis, c_s)
-
-    def reach_toward(self, z_axis: np.ndarray) -> float:
-        """The farthest the outline reaches toward a pad looking along ``z_axis`` (unit, base xy), from the centre
-        (mm): a bound on any section's touch distance along that direction, whatever its lateral offset."""
-        if self.radius is not None:
-            return float(self.radius)
-        return float(np.max(-(self.points @ z_axis)))
-
-
-# =================================================================================================================
-# Pads: from the section to a table of loads against contact depth
-# =================================================================================================================
-
-
-@dataclass
-class _PadTable:
-    """Loads against the pad-side contact depth ``e`` (mm past first touch, before the object's global spring)."""
-
-    depth: np.ndarray  # (m,) mm, increasing from 0
-    loads: np.ndarray  # (m, n_taxels, 3) N, sensor frame
-    displacement: np.ndarray | None  # (m, n_taxels, 3) mm
-    wrench_tool: np.ndarray  # (m, 6) N and N*m, tool axes, about the TCP
-    touch_cn: float  # object centre distance along the press at first touch (mm); -inf: never touches
-    corner_proximity: float  # 0..1, how close to a corner the contact is (stiffens the global spring)
-
-
-def _near_corner(material: MaterialSpec, xi: np.ndarray, params: SceneParams) -> np.ndarray:
-    """Local wall stiffening factor along the contact: the material's corner factor at a corner, 1 mid-wall."""
-    bump = np.exp(-np.asarray(xi) / params.corner_decay_mm)
-    return 1.0 + (material.corner_stiffness_factor - 1.0) * bump
-
-
-def _erf(x: np.ndarray) -> np.ndarray:
-    return np.frompyfunc(math.erf, 1, 1)(x).astype(np.float64)
-
-
-class _SkinPad:
-    """uSkin: Winkler skin over the whole pad, read by taxels through Gaussian spreading + cell integration.
-
-    The pad section is cut into segments at a uniform step *and* at every outline vertex, so within a segment the
-    outline is straight: the overlap is integrated exactly (a corner is found exactly where it is, whatever the
-    step). The step only sets how finely load is placed on the taxels and how a circle is approximated by chords.
-    """
-
-    WEIGHT_LOOKUP_STEP_MM = 0.01
-    HEIGHT_BINS = 200  # bins up the pad for the bending tilt's load profile (0.15 mm)
-
-    def __init__(
-        self, layout: SensorLayout, params: SceneParams, pitch_tan: float = 0.0, tilt_rad_per_n: float = 0.0
-    ) -> None:
-        self.layout = layout
-        self.params = params
-        self.pitch_tan = pitch_tan
-        self.tilt_rad_per_n = tilt_rad_per_n
-        pitch = layout.pitch_mm
-        self.half_w = half_w = (layout.cols - 1) / 2 * pitch + params.skin_margin_x_mm
-        self.half_h = half_h = (layout.rows - 1) / 2 * pitch + params.skin_margin_y_mm
-        n_steps = max(2, 2 * math.ceil(half_w / params.section_step_mm))
-        self.grid = np.linspace(-half_w, half_w, n_steps + 1)  # symmetric about the pad centre
-        self.height = 2 * half_h
-        sigma = params.skin_spread_sigma_mm
-        self.lookup_s = np.linspace(-half_w, half_w, round(2 * half_w / self.WEIGHT_LOOKUP_STEP_MM) + 1)
-        self.lookup_w = _cell_weights(self.lookup_s, layout.cols, pitch, sigma)  # (cols, n)
-        # the pad's height in bins (y up, mm): what share of a line load at each height each row reads, and how the
-        # skin spreads it onto the inner row edges (both exact for a load constant within a bin)
-        y_edges = np.linspace(-half_h, half_h, self.HEIGHT_BINS + 1)
-        self.y_mid = 0.5 * (y_edges[:-1] + y_edges[1:])
-        self.y_width = np.diff(y_edges)
-        # (rows, bins), row 0 on top; ``row_load_share`` the same for a load the same at every height (rows sum to 1)
-        self.row_bin_w = _cell_weights(-self.y_mid, layout.rows, pitch, sigma) * self.y_width
-        self.row_load_share = self.row_bin_w.sum(axis=1, keepdims=True)
-        self.row_load_share /= float(self.row_load_share.sum())
-        # skin bulge: the inner cell edges (mm) across the pad (columns) and up it (rows, row 0 on top)
-        self.col_edges = (np.arange(1, layout.cols) - layout.cols / 2) * pitch
-        # skin bulge up the pad: row r (top first) reads -kappa * (spread line load at its upper inner edge - at its
-        # lower one); the outer rows reach to infinity, where the spread load is 0. ``edge_spread`` (rows + 1, bins)
-        # takes the line load in each bin (N per mm of height) to the spread load at those edges (N/mm), top first
-        self.edge_spread = np.zeros((layout.rows + 1, self.HEIGHT_BINS))
-        if params.skin_bulge_mm > 0:
-            edges = (np.arange(1, layout.rows) - layout.rows / 2) * pitch  # inner edges, bottom first
-
-            def cdf(z: np.ndarray) -> np.ndarray:
-                return 0.5 * (1.0 + _erf(z / math.sqrt(2)))
-
-            inner = cdf((edges[:, None] - y_edges[None, :-1]) / sigma) - cdf(
-                (edges[:, None] - y_edges[None, 1:]) / sigma
-            )
-            self.edge_spread[1:-1] = inner[::-1]
-
-    def _nodes(self, section: _Section) -> np.ndarray:
-        extra = (
-            [section.c_s]
-            if section.radius is None
-            else [section.c_s - section.radius, section.c_s, section.c_s + section.radius]
-        )
-        cuts = np.concatenate([section.s, np.asarray(extra)]) if section.radius is None else np.asarray(extra)
-        cuts = cuts[(cuts > -self.half_w) & (cuts < self.half_w)]
-        return np.unique(np.concatenate([self.grid, cuts]))
-
-    def table(self, section: _Section, material: MaterialSpec) -> _PadTable:
-        p = self.params
-        layout = self.layout
-        nodes = self._nodes(section)
-        front_nodes, _, _ = section.front(nodes)
-        a, b = front_nodes[:-1], front_nodes[1:]
-        segment = np.isfinite(a) & np.isfinite(b) & (np.diff(nodes) > 1e-9)  # outline in front all along
-        if not np.any(segment):
-            return _no_contact(layout)
-        left, right = nodes[:-1][segment], nodes[1:][segment]
-        fa, fb = a[segment], b[segment]
-        length = right - left
-        mid = 0.5 * (left + right)
-        slope = (fb - fa) / length
-        _, _, xi = section.front(mid)
-        fmin = float(min(fa.min(), fb.min()))
-        gap_a, gap_b = fa - fmin, fb - fmin
-        k_skin = p.skin_foundation_n_per_mm3
-        if material.wall_foundation_n_per_mm3 is None:
-            k_eff = np.full(mid.shape, k_skin)
-        else:
-            k_wall = material.wall_foundation_n_per_mm3 * _near_corner(material, xi, p)
-            k_eff = 1.0 / (1.0 / k_skin + 1.0 / k_wall)
-        # shear follows the outline's own slope, on soft walls too: the recorded TPU sessions show uSkin lateral
-        # readings as large as PLA's (minima -1.9k..-3.1k counts against -1.2k..-3.0k), which a wall flattening the
-        # interface (tilt x k_eff / k_skin, ~0.02 on TPU) would not give
-        ratio, ratio_y = _friction_capped(
-            p.shear_projection * slope, p.shear_projection * self.pitch_tan, p.skin_friction
-        )
-        scale = k_eff * self.height * length  # N per mm of mean overlap over the segment
-
-        def force(e: float) -> float:
-            return float(np.dot(scale, _mean_positive(e - gap_a, e - gap_b)))
-
-        e_max = _depth_for_force(force, p.table_max_force_n)
-        u = np.linspace(0.0, 1.0, p.table_points)
-        depth = e_max * u**2
-        near = np.minimum(gap_a, gap_b) <= e_max  # only segments the table's deepest press reaches
-        d = depth[:, None]
-        normal_seg = scale[near] * _mean_positive(d - gap_a[near], d - gap_b[near])  # (m, n_near) N
-        shear_seg = normal_seg * ratio[near]
-        shear_y_seg = normal_seg * ratio_y[near]
-        weights = np.stack([np.interp(mid[near], self.lookup_s, w) for w in self.lookup_w])  # (cols, n_near)
-        col_n = normal_seg @ weights.T  # (m, cols)
-        col_x = shear_seg @ weights.T
-        col_y = shear_y_seg @ weights.T
-        kappa_x = p.skin_bulge_mm + material.skin_drag_mm  # the skin's bulge plus a soft wall's surface drag
-        if kappa_x > 0:
-            # the spread line load (N/mm) at each inner column edge; a column's lateral reading is -kappa times the
-            # rate its normal load would change if the column moved toward +x (outer columns reach to infinity)
-            sigma = p.skin_spread_sigma_mm
-            dist = (self.col_edges[:, None] - mid[near][None, :]) / sigma
-            line = normal_seg @ (np.exp(-0.5 * dist**2) / (sigma * math.sqrt(2 * math.pi))).T  # (m, cols - 1)
-            padded = np.pad(line, ((0, 0), (1, 1)))
-            col_x = col_x - kappa_x * (padded[:, 1:] - padded[:, :-1])
-        m = depth.size
-        cols = layout.cols
-        # everything per mm of pad height at a uniform depth; the bending tilt then makes the depth vary up the pad
-        sums = np.stack(
-            [
-                shear_seg.sum(axis=1),  # the bulge is internal to the skin: it sums to zero over the pad
-                shear_y_seg.sum(axis=1),
-                normal_seg.sum(axis=1),
-                normal_seg @ mid[near] * 1e-3,  # tau_y = sum s * p (N*m)
-                shear_y_seg @ mid[near] * 1e-3,  # tau_z = sum s * q_y
-            ],
-            axis=1,
-        )
-        line = np.concatenate([col_n, col_x, col_y, sums], axis=1) / self.height  # (m, 3 * cols + 5)
-        if self.tilt_rad_per_n > 0.0:
-            profile = _tilted_profile(depth, line, self.y_mid, self.y_width, self.tilt_rad_per_n, 3 * cols + 2)
-            row_w, edge_w, width, y = self.row_bin_w, self.edge_spread, self.y_width, self.y_mid
-        else:  # the same load at every height: the pad as one bin (a third faster, and the default)
-            profile = line[:, None, :]
-            row_w, edge_w = self.row_load_share * self.height, self.edge_spread.sum(axis=1, keepdims=True)
-            width, y = np.array([self.height]), np.zeros(1)
-        rows = np.einsum("rb,mbc->mrc", row_w, profile)  # (m, rows, channels)
-        total = np.einsum("b,mbc->mc", width, profile)
-        # the skin's bulge up the pad, from the normal load's profile up each column
-        spread = np.einsum("eb,mbc->mec", edge_w, profile[:, :, :cols])  # (m, rows + 1, cols)
-        bulge_y = -p.skin_bulge_mm * (spread[:, :-1] - spread[:, 1:])
-        loads = np.zeros((m, layout.rows, cols, 3))
-        loads[..., 2] = rows[:, :, :cols]
-        loads[..., 0] = rows[:, :, cols : 2 * cols]
-        loads[..., 1] = rows[:, :, 2 * cols : 3 * cols] + bulge_y
-        wrench = np.zeros((m, 6))
-        wrench[:, 0] = total[:, 3 * cols]
-        wrench[:, 1] = total[:, 3 * cols + 1]
-        wrench[:, 2] = -total[:, 3 * cols + 2]
-        wrench[:, 3] = -(profile[:, :, 3 * cols + 2] @ (y * width)) * 1e-3  # tau_x = sum y * fz (N*m)
-        wrench[:, 4] = total[:, 3 * cols + 3]
-        wrench[:, 5] = total[:, 3 * cols + 4]
-        contact = np.minimum(gap_a, gap_b) < p.corner_contact_depth_mm
-        proximity = float(np.max(np.exp(-xi[contact] / p.corner_decay_mm))) if np.any(contact) else 0.0
-        return _PadTable(
-            depth=depth,
-            loads=loads.reshape(m, layout.n_taxels, 3),
-            displacement=None,
-            wrench_tool=wrench,
-            touch_cn=-fmin,
-            corner_proximity=proximity,
-        )
-
-
-class _PillarPad:
-    """PapillArray: nine pillar springs with hemispherical tips, the centre one proud; each pillar its own spring."""
-
-    def __init__(
-        self, layout: SensorLayout, params: SceneParams, pitch_tan: float = 0.0, tilt_rad_per_n: float = 0.0
-    ) -> None:
-        self.layout = layout
-        self.params = params
-        self.pitch_tan = pitch_tan
-        self.tilt_rad_per_n = tilt_rad_per_n
-        xy = layout.taxel_xy_mm()
-        self.col_s = xy[: layout.cols, 0]
-        rows, cols = np.divmod(np.arange(layout.n_taxels), layout.cols)
-        mid_r, mid_c = (layout.rows - 1) / 2, (layout.cols - 1) / 2
-        ring = np.maximum(np.abs(rows - mid_r), np.abs(cols - mid_c))
-        off_axis = (rows != mid_r).astype(int) + (cols != mid_c).astype(int)
-        recess = np.where(
-            off_axis == 0, 0.0, np.where(off_axis == 1, params.pillar_edge_recess_mm, params.pillar_corner_recess_mm)
-        )
-        self.recess = recess * np.maximum(ring, 1)  # larger arrays: recess grows ring by ring
-        self.rows, self.cols = rows, cols
-        self.xy = xy
-
-    def _normal_loads(self, depth: np.ndarray, gap: np.ndarray, k: np.ndarray) -> np.ndarray:
-        """Pillar normal loads (m, n) N at each pad-side depth: k * (depth - gap), where the object's bending tilt
-        theta = tilt * P (P the pillars' total) adds -theta * y to a pillar's depth (y up, mm). Fixed point as in
-        :func:`_tilted_profile`; inf gaps (pillars that never touch) carry nothing."""
-        y = self.xy[:, 1]
-        theta = np.zeros(depth.size)
-        normal = np.zeros((depth.size, gap.size))
-        for _ in range(TILT_ITERATIONS):
-            normal = k[None, :] * np.maximum(0.0, depth[:, None] - gap[None, :] - theta[:, None] * y[None, :])
-            if self.tilt_rad_per_n <= 0.0:
-                break
-            new_theta = self.tilt_rad_per_n * normal.sum(axis=1)
-            if np.max(np.abs(new_theta - theta)) < 1e-9:
-                break
-            theta = new_theta
-        else:
-            log.warning("the object's bending tilt did not settle in %d steps; the lever is too long", TILT_ITERATIONS)
-        return normal
-
-    def table(self, section: _Section, material: MaterialSpec) -> _PadTable:
-        p = self.params
-        layout = self.layout
-        contacts = [section.pillar_contact(float(s), p.pillar_tip_radius_mm) for s in self.col_s]
-        col_cn = np.array([c[0] for c in contacts])
-        if not np.any(np.isfinite(col_cn)):
-            return _no_contact(layout)
-        col_slope = np.array([c[1] for c in contacts])
-        col_xi = np.array([c[2] for c in contacts])
-        pillar_cn = col_cn[self.cols] - self.recess  # c_n at which each pillar touches
-        touch = float(np.max(pillar_cn))
-        gap = touch - pillar_cn  # pad-side depth at which each pillar starts to load (inf: never)
-        # contact force direction: tangential/normal = the tip's slope at the contact, capped by friction
-        mu = p.pillar_friction
-        ratio, ratio_y = _friction_capped(
-            p.shear_projection * col_slope[self.cols], np.full(layout.n_taxels, p.shear_projection * self.pitch_tan), mu
-        )
-        # an off-axis contact also bends the pillar sideways: with the tip's lateral spring in the load path the
-        # pillar is softer along the press, 1/k = 1/k_axial + |ratio|^2/k_lateral (compatibility along the normal)
-        k = 1.0 / (1.0 / p.pillar_axial_n_per_mm + (ratio**2 + ratio_y**2) / p.pillar_lateral_n_per_mm)
-        if material.wall_point_stiffness_n_per_mm is not None:
-            k_wall = material.wall_point_stiffness_n_per_mm * _near_corner(material, col_xi[self.cols], p)
-            k = 1.0 / (1.0 / k + 1.0 / k_wall)
-        k_sum = float(np.sum(k[np.isfinite(gap)]))
-        finite_gap = gap[np.isfinite(gap)]
-        e_max = float(np.max(finite_gap)) + p.table_max_force_n / k_sum
-        depth = np.unique(np.concatenate([np.linspace(0.0, e_max, p.table_points), finite_gap]))
-        normal = self._normal_loads(depth, gap, k)
-        shear = normal * ratio[None, :]
-        shear_y = normal * ratio_y[None, :]
-        m = depth.size
-        loads = np.zeros((m, layout.n_taxels, 3))
-        loads[..., 0] = shear
-        loads[..., 1] = shear_y
-        loads[..., 2] = normal
-        disp = np.zeros_like(loads)
-        disp[..., 0] = shear / p.pillar_lateral_n_per_mm
-        disp[..., 1] = shear_y / p.pillar_lateral_n_per_mm
-        disp[..., 2] = normal / p.pillar_axial_n_per_mm
-        s_pos, y_pos = self.xy[:, 0], self.xy[:, 1]
-        fz = -normal  # force on the pad along tool z
-        wrench = np.zeros((m, 6))
-        wrench[:, 0] = shear.sum(axis=1)
-        wrench[:, 1] = shear_y.sum(axis=1)
-        wrench[:, 2] = fz.sum(axis=1)
-        wrench[:, 3] = fz @ y_pos * 1e-3  # tau = r x f, r = (s, y, 0) mm -> m
-        wrench[:, 4] = -(fz @ s_pos) * 1e-3
-        wrench[:, 5] = (shear_y @ s_pos - shear @ y_pos) * 1e-3
-        contact = gap < p.corner_contact_depth_mm
-        proximity = float(np.max(np.exp(-col_xi[self.cols][contact] / p.corner_decay_mm))) if np.any(contact) else 0.0
-        return _PadTable(depth, loads, disp, wrench, touch, proximity)
-
-
-def _friction_capped(ratio_x: np.ndarray, ratio_y: np.ndarray | float, mu: float) -> tuple[np.ndarray, np.ndarray]:
-    """Shear/normal ratios (x, y) with their vector length capped at the friction coefficient ``mu``."""
-    ratio_x, ratio_y = np.broadcast_arrays(np.asarray(ratio_x, dtype=np.float64), np.asarray(ratio_y, dtype=np.float64))
-    length = np.hypot(ratio_x, ratio_y)
-    shrink = np.where(length > mu, mu / np.where(length > 0, length, 1.0), 1.0)
-    return ratio_x * shrink, ratio_y * shrink
-
-
-def _mean_positive(at_a: np.ndarray, at_b: np.ndarray) -> np.ndarray:
-    """Mean over a segment of max(0, v) for v linear from ``at_a`` to ``at_b`` (exact)."""
-    hi = np.maximum(at_a, at_b)
-    lo = np.minimum(at_a, at_b)
-    crossing = hi * hi / (2.0 * np.where(hi > lo, hi - lo, 1.0))
-    return np.where(lo >= 0.0, 0.5 * (hi + lo), np.where(hi <= 0.0, 0.0, crossing))
-
-
-def _cell_weights(pos: np.ndarray, n_cells: int, pitch: float, sigma: float) -> np.ndarray:
-    """Share of a load at ``pos`` each cell reads: Gaussian spreading then cell integration (sums to 1).
-
-    Cell ``c`` is centred at ``(c - (n-1)/2) * pitch``; the outer cells reach to infinity so no load is lost.
-    """
-    centres = (np.arange(n_cells) - (n_cells - 1) / 2) * pitch
-    lo = centres - pitch / 2
-    hi = centres + pitch / 2
-    lo[0], hi[-1] = -np.inf, np.inf
-    if sigma <= 0:
-        return ((pos[None, :] >= lo[:, None]) & (pos[None, :] < hi[:, None])).astype(np.float64)
-    scale = sigma * math.sqrt(2.0)
-
-    def cdf(edge: np.ndarray) -> np.ndarray:
-        z = (edge[:, None] - pos[None, :]) / scale
-        return 0.5 * (1.0 + _erf(np.clip(z, -40.0, 40.0)))
-
-    return cdf(hi) - cdf(lo)
-
-
-def _tilted_profile(
-    depth: np.ndarray, line: np.ndarray, y: np.ndarray, width: np.ndarray, tilt_rad_per_n: float, normal: int
-) -> np.ndarray:
-    """Line quantities up the pad (m, bins, channels) when the object tilts under the press.
-
-    ``line`` (m, channels) holds what one mm of pad height carries at each uniform contact ``depth`` (mm, increasing
-    from 0); channel ``normal`` is the normal line load (N/mm). Pressing with P newtons tilts the prism by
-    ``theta = tilt_rad_per_n * P`` about the pad's x axis, so at height ``y`` (mm, up) the contact is
-    ``depth - theta * y`` deep (deeper toward the base, below). P depends on theta and theta on P: a fixed-point
-    iteration, which contracts while the tilt across the pad stays below the contact's depth: within 1e-9 rad in
-    9 / 16 / 38 steps at a 70 / 90 / 110 mm lever on the TPU square (a warning if it has not settled in
-    :data:`TILT_ITERATIONS`). Depths past the table extrapolate its last segment; a depth <= 0 carries nothing.
-    """
-    m = depth.size
-
-    def at(theta: np.ndarray, values: np.ndarray) -> np.ndarray:
-        """``values`` (m, ...) interpolated at each height's local depth: (m, bins, ...)."""
-        local = depth[:, None] - theta[:, None] * y[None, :]
-        i = np.clip(np.searchsorted(depth, local, side="right"), 1, m - 1)
-        lo, hi = depth[i - 1], depth[i]
-        frac = (local - lo) / np.where(hi > lo, hi - lo, 1.0)
-        frac = frac.reshape(frac.shape + (1,) * (values.ndim - 1))
-        inside = (local > 0.0).reshape(frac.shape)
-        return np.where(inside, values[i - 1] + frac * (values[i] - values[i - 1]), 0.0)
-
-    # the tilt from the normal channel alone, then every channel once at the settled tilt
-    theta = tilt_rad_per_n * (line[:, normal] * float(width.sum()))
-    for _ in range(TILT_ITERATIONS):
-        new_theta = tilt_rad_per_n * (at(theta, line[:, normal]) @ width)
-        if np.max(np.abs(new_theta - theta)) < 1e-9:
-            theta = new_theta
-            break
-        theta = new_theta
-    else:
-        log.warning("the object's bending tilt did not settle in %d steps; the lever is too long", TILT_ITERATIONS)
-    profile = at(theta, line)
-    return profile
-
-
-def bending_tilt_rad_per_n(obj: ObjectSpec, lever_mm: float) -> float:
-    """Tilt of the prism at the press (rad per N of press force): a cantilever of the hollow section clamped at its
-    base, loaded ``lever_mm`` above it, turns by P * L^2 / (2 E I) there. I is the mean of the wall section's two
-    principal second moments (exact for the circle, square and hexagon, whose I is the same about every axis)."""
-    if lever_mm <= 0.0:
-        return 0.0
-    e_mpa = obj.material_params.youngs_modulus_mpa
-    i_mm4 = _ring_second_moment_mm4(np.asarray(obj.outer_mm), np.asarray(obj.inner_mm))
-    return lever_mm**2 / (2.0 * e_mpa * i_mm4)
-
-
-def _ring_second_moment_mm4(outer: np.ndarray, inner: np.ndarray) -> float:
-    """Mean principal second moment of area (mm^4) of the wall between two counter-clockwise polygons, about the
-    wall's centroid (shoelace sums)."""
-
-    def moments(poly: np.ndarray) -> np.ndarray:
-        x, y = poly[:, 0], poly[:, 1]
-        xn, yn = np.roll(x, -1), np.roll(y, -1)
-        cross = x * yn - xn * y
-        area = cross.sum() / 2.0
-        sx = ((x + xn) * cross).sum() / 6.0  # first moments: area * centroid
-        sy = ((y + yn) * cross).sum() / 6.0
-        ixx = ((y * y + y * yn + yn * yn) * cross).sum() / 12.0  # about the origin: integral of y^2
-        iyy = ((x * x + x * xn + xn * xn) * cross).sum() / 12.0
-        return np.array([area, sx, sy, ixx, iyy])
-
-    area, sx, sy, ixx, iyy = moments(outer) - moments(inner)
-    cx, cy = sx / area, sy / area
-    return float(0.5 * ((ixx - area * cy * cy) + (iyy - area * cx * cx)))
-
-
-def _depth_for_force(force: Callable[[float], float], target_n: float) -> float:
-    """Smallest depth (mm) at which the monotone ``force(depth)`` reaches ``target_n``, by doubling + bisection."""
-    hi = 0.05
-    while force(hi) < target_n and hi < 200.0:
-        hi *= 2.0
-    lo = 0.0
-    for _ in range(40):
-        mid = 0.5 * (lo + hi)
-        if force(mid) < target_n:
-            lo = mid
-        else:
-            hi = mid
-    return hi
-
-
-def _no_contact(layout: SensorLayout) -> _PadTable:
-    zeros = np.zeros((2, layout.n_taxels, 3))
-    return _PadTable(
-        depth=np.array([0.0, 1.0]),
-        loads=zeros,
-        displacement=zeros.copy() if layout.has_displacement else None,
-        wrench_tool=np.zeros((2, 6)),
-        touch_cn=-math.inf,
-        corner_proximity=0.0,
-    )
-
-
-# =================================================================================================================
 # One press ray: the pad table plus the object's global spring, indexed by travel
 # =================================================================================================================
 
@@ -971,7 +449,7 @@ class _RayTable:
     """Loads and wrench against travel past first touch along one press ray (pad orientation + lateral offset)."""
 
     def __init__(
-        self, table: _PadTable, material: MaterialSpec, params: SceneParams, rot: np.ndarray, psi: float, c_s: float
+        self, table: PadTable, material: MaterialSpec, params: SceneParams, rot: np.ndarray, psi: float, c_s: float
     ) -> None:
         self.psi = psi
         self.c_s = c_s

@@ -96,7 +96,9 @@ class UskinModel:
         return self.baseline_counts + self.signal_counts(loads.forces_n)
 
     def sample(self, loads: TaxelLoads) -> SensorSample:
-        counts = self.expected_counts(loads) + self.rng.normal(0.0, self.params.noise_counts, self.layout.frame_shape)
+        # nothing pressing (the approach, the transits): the signal is zero and the expected counts the baseline
+        expected = self.expected_counts(loads) if np.count_nonzero(loads.forces_n) else self.baseline_counts
+        counts = expected + self.rng.normal(0.0, self.params.noise_counts, self.layout.frame_shape)
         return SensorSample(values=np.clip(counts, 0.0, COUNTS_MAX))
 
 
@@ -130,7 +132,7 @@ class PapillArrayModel:
 
 
 def _quantise(values: np.ndarray, step: float) -> np.ndarray:
-    return np.round(values / step) * step if step > 0 else values
+    return np.rint(values / step) * step if step > 0 else values  # np.round to 0 decimals is rint
 
 
 def model_for(layout: SensorLayout, rng: np.random.Generator | None = None) -> UskinModel | PapillArrayModel:

@@ -66,6 +66,8 @@ class SampleTimer:
             return t_ns
 
     def _on_advance(self, now_ns: int) -> None:
+        if self._next_ns > now_ns:
+            return  # nothing due (most advances: the arm's 2 ms period is shorter than a sample's)
         while not self._stop.is_set():
             t_ns = self._due(now_ns)
             if t_ns is None:

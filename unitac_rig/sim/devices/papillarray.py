@@ -11,13 +11,23 @@ A disconnect fault is an unplug: USB powers the hub, so afterwards it is back at
 from __future__ import annotations
 
 import logging
+import struct
+from dataclasses import replace
 from types import TracebackType
+from typing import Any
 
 import numpy as np
 
 from drivers.clock import Clock, MonotonicClock
 from drivers.layouts import PAPILLARRAY
-from protocols.papillarray import N_SENSOR_SLOTS, PapillArrayPacket, PillarSensorData, encode_packet
+from protocols.papillarray import (
+    N_SENSOR_SLOTS,
+    PapillArrayPacket,
+    PillarSensorData,
+    encode_body,
+    encode_packet,
+    frame_body,
+)
 from protocols.papillarray_commands import Command as HubCommandKind
 from protocols.papillarray_commands import CommandParser
 from unitac_rig.sim.devices._timing import SampleTimer
@@ -42,7 +52,105 @@ def _cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     without its axis handling: per sample, that bookkeeping cost more than the rest of the hub's arithmetic."""
     a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
     b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)
+    out = np.empty((len(a), 3))  # what np.stack([...], axis=1) builds, without its wrapper
+    out[:, 0] = a1 * b2 - a2 * b1
+    out[:, 1] = a2 * b0 - a0 * b2
+    out[:, 2] = a0 * b1 - a1 * b0
+    return out
+
+
+_F32_MAX = float(np.finfo(np.float32).max)
+_PROBE_F32 = -1.5e-3  # a float32 with no zero byte: the bytes it changes are the field's four
+_U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
+
+
+def _field(name: str, values: np.ndarray) -> dict[str, Any]:
+    return {name: values}
+
+
+class HubPacketWriter:
+    """``encode_packet`` for the hub's stream, whose packets differ only in the counter, the timestamp and one slot's
+    forces, displacements, global force and torque and slip flag: the bytes of everything else are encoded once and
+    those fields written into a copy (the same bytes as ``encode_packet``; tests compare them).
+
+    Where each field sits is found with the codec itself, by encoding the packet with that one field changed, so
+    the layout stays the codec's. A packet the stream shape does not cover (another slot's data, a value float32
+    cannot hold, NaN) goes through ``encode_packet`` as before, which also raises its errors.
+    """
+
+    def __init__(self, idle_slots: list[PillarSensorData], slot: int) -> None:
+        self.slot = slot
+        self._idle = idle_slots
+        self._n = idle_slots[slot].n_pillars
+        base = self._packet(0, 0, idle_slots[slot])
+        self._body = bytearray(encode_body(base))
+        template = bytes(self._body)
+
+        def changed(packet: PapillArrayPacket) -> np.ndarray:
+            probe = np.frombuffer(encode_body(packet), dtype=np.uint8)
+            return np.flatnonzero(probe != np.frombuffer(template, dtype=np.uint8))
+
+        zero = idle_slots[slot]
+        positions = []
+        for field in ("forces_n", "displacements_mm"):
+            for i in range(self._n):
+                for axis in range(3):
+                    values = np.array(getattr(zero, field), dtype=np.float64)
+                    values[i, axis] = _PROBE_F32
+                    positions.append(changed(self._packet(0, 0, replace(zero, **_field(field, values)))))
+        for field in ("global_force_n", "global_torque_nmm"):
+            for axis in range(3):
+                values = np.array(getattr(zero, field), dtype=np.float64)
+                values[axis] = _PROBE_F32
+                positions.append(changed(self._packet(0, 0, replace(zero, **_field(field, values)))))
+        # each float field is four bytes of the body (a codec change that broke this must change this writer too)
+        assert all(len(at) == 4 for at in positions), "the codec's float fields are not 4 bytes each"
+        self._float_pos = np.concatenate(positions)
+        self._counter_pos = int(changed(self._packet(0xFFFF_FFFF, 0, zero))[0])
+        self._time_pos = int(changed(self._packet(0, 0xFFFF_FFFF_FFFF_FFFF, zero))[0])
+        (self._active_pos,) = changed(self._packet(0, 0, replace(zero, slip_active=1)))
+
+    def _packet(self, counter: int, timestamp_us: int, sensor: PillarSensorData) -> PapillArrayPacket:
+        sensors = list(self._idle)
+        sensors[self.slot] = sensor
+        return PapillArrayPacket(counter=counter, timestamp_us=timestamp_us, sensors=sensors)
+
+    def encode(
+        self,
+        counter: int,
+        timestamp_us: int,
+        forces_n: np.ndarray,
+        displacements_mm: np.ndarray,
+        torque_nmm: np.ndarray,
+        slip_active: int,
+    ) -> bytes:
+        """The framed packet: this writer's slot reads ``forces_n`` and ``displacements_mm`` (n, 3), global force
+        their sum and global torque ``torque_nmm`` (3,); the other slots idle."""
+        force_n = np.add.reduce(forces_n, axis=0)  # forces_n.sum(axis=0), the ufunc without the method's wrapper
+        values = np.concatenate([forces_n.ravel(), displacements_mm.ravel(), force_n, torque_nmm])
+        if (
+            values.size != 6 * self._n + 6
+            or not np.maximum.reduce(np.abs(values)) <= _F32_MAX  # also for NaN
+            or not (0 <= counter < 1 << 32 and 0 <= timestamp_us < 1 << 64)
+        ):  # the codec writes it, or says why it cannot
+            sensor = replace(
+                self._idle[self.slot],
+                forces_n=forces_n,
+                displacements_mm=displacements_mm,
+                global_force_n=force_n,
+                global_torque_nmm=torque_nmm,
+                slip_active=slip_active,
+            )
+            return encode_packet(self._packet(counter, timestamp_us, sensor))
+        body = self._body
+        u8 = np.frombuffer(body, dtype=np.uint8)
+        u8[self._float_pos] = np.frombuffer(values.astype("<f4").tobytes(), dtype=np.uint8)
+        del u8  # the bytearray must not stay exported
+        _U32.pack_into(body, self._counter_pos, counter)
+        _U64.pack_into(body, self._time_pos, timestamp_us)
+        body[self._active_pos] = slip_active
+        return frame_body(bytes(body))
 
 
 class SimPapillArrayHub(SimSerialEndpoint):
@@ -82,6 +190,7 @@ class SimPapillArrayHub(SimSerialEndpoint):
         # built once, read every sample: the pillar positions and the idle slots' (encoding only reads them)
         self._positions_mm = pillar_positions_mm()
         self._idle_slots = [PillarSensorData.unloaded() for _ in range(N_SENSOR_SLOTS)]
+        self._writer = HubPacketWriter(self._idle_slots, slot)
         self._timer = SampleTimer(rate_hz, clock, self._tick, thread_name=f"sim-papillarray-{self.name}")
 
     @property
@@ -149,16 +258,15 @@ class SimPapillArrayHub(SimSerialEndpoint):
             self.faults.note_stalled()
             return
         forces = raw_forces - self._force_offset
-        sensors = list(self._idle_slots)
-        sensors[self.slot] = PillarSensorData(
-            forces_n=forces,
-            displacements_mm=raw_displacement - self._displacement_offset,
-            global_force_n=forces.sum(axis=0),
-            global_torque_nmm=_cross_rows(self._positions_mm, forces).sum(axis=0),
-            slip_active=1 if self.slip_active else 0,
+        packet = self._writer.encode(
+            counter,
+            (t_ns - self._power_on_ns) // 1000,
+            forces,
+            raw_displacement - self._displacement_offset,
+            np.add.reduce(_cross_rows(self._positions_mm, forces), axis=0),
+            1 if self.slip_active else 0,
         )
-        packet = PapillArrayPacket(counter=counter, timestamp_us=(t_ns - self._power_on_ns) // 1000, sensors=sensors)
-        self.send_to_host(encode_packet(packet), t_ns)
+        self.send_to_host(packet, t_ns)
         self.packets_sent += 1
 
     def close(self) -> None:

@@ -28,6 +28,7 @@ from protocols.xela_can import (
     encode_taxel_message,
 )
 from unitac_rig.sim.devices._timing import SampleTimer
+from unitac_rig.sim.devices.lockstep_can import LockstepCanBus
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
 from unitac_rig.sim.serial_urls import SimSerialEndpoint, unique_name
 from unitac_rig.sim.signals import SignalSource
@@ -38,6 +39,20 @@ logger = logging.getLogger(__name__)
 def counts_from_sample(values: np.ndarray) -> np.ndarray:
     """Raw counts as the controller's ADC gives them: rounded, clipped to 0..65535, int64."""
     return np.clip(np.rint(np.asarray(values, dtype=np.float64)), 0, 0xFFFF).astype(np.int64)
+
+
+def taxel_payloads(counts: np.ndarray, byte0: int = 0) -> list[bytes]:
+    """The 8-byte payload of every taxel of one sample at once: row i is
+    ``encode_taxel_message(id, *counts[i], byte0=byte0)`` (byte0, X, Y, Z big-endian u16, a zero byte).
+
+    ``counts`` (n, 3) must already be 0..65535 (:func:`counts_from_sample`). One numpy pass instead of a validated
+    encode per message: at 24 messages a sample that encoding was the largest part of the simulated uSkin.
+    """
+    rows = np.zeros((len(counts), 8), dtype=np.uint8)
+    rows[:, 0] = byte0
+    rows[:, 1:7] = np.asarray(counts, dtype=">u2").view(np.uint8).reshape(len(counts), 6)
+    blob = rows.tobytes()
+    return [blob[i : i + 8] for i in range(0, len(blob), 8)]
 
 
 class SimXelaController:
@@ -80,7 +95,10 @@ class SimXelaController:
         self.streaming = False
         self.samples_sent = 0
         self._powered_off = False
-        self._delayed: collections.deque[tuple[int, can.Message]] = collections.deque()
+        # (release time ns, arbitration id, payload): a Message is built only when it goes on the bus
+        self._delayed: collections.deque[tuple[int, int, bytes]] = collections.deque()
+        for arbitration_id in id_map.ids:  # the codec's checks of the ids and byte0, once instead of per message
+            encode_taxel_message(arbitration_id, 0, 0, 0, byte0=byte0)
         # ``bus``: an open bus on ``bus_channel`` to use instead (the fast twin's LockstepCanBus); closed with us
         if bus is None:
             bus = can.Bus(interface=interface, channel=bus_channel, receive_own_messages=False)
@@ -119,7 +137,7 @@ class SimXelaController:
         if self.faults.is_stalled(t_ns):
             self.faults.note_stalled()
             return
-        counts = counts_from_sample(self.source.sample(t_ns).values).tolist()  # Python ints, as the codec takes
+        payloads = taxel_payloads(counts_from_sample(self.source.sample(t_ns).values), self.byte0)
         release_ns = self.faults.release_t_ns(t_ns)
         order = self._send_order
         if self.send_order == "shuffled":
@@ -129,22 +147,29 @@ class SimXelaController:
         for index, arbitration_id in order:
             if index in self.missing_taxels:
                 continue
-            x, y, z = counts[index]
-            encoded = encode_taxel_message(arbitration_id, x, y, z, byte0=self.byte0)
-            payload = encoded if damage is None else damage(encoded)
+            payload = payloads[index] if damage is None else damage(payloads[index])
             if payload is None:
                 continue
             sent += 1
-            message = can.Message(arbitration_id=arbitration_id, data=payload[:8], is_extended_id=False)
-            self._delayed.append((release_ns, message))
+            self._delayed.append((release_ns, arbitration_id, payload[:8]))
         if damage is None:
             self.faults.pass_messages(sent)  # mangle's count, once per cycle
         self.samples_sent += 1
         self._send_due(t_ns)
 
     def _send_due(self, now_ns: int) -> None:
-        while self._delayed and self._delayed[0][0] <= now_ns:
-            self._bus.send(self._delayed.popleft()[1])
+        delayed = self._delayed
+        if not delayed or delayed[0][0] > now_ns:
+            return
+        due: list[tuple[int, bytes]] = []
+        while delayed and delayed[0][0] <= now_ns:
+            _, arbitration_id, payload = delayed.popleft()
+            due.append((arbitration_id, payload))
+        if isinstance(self._bus, LockstepCanBus):
+            self._bus.send_standard_frames(due)  # the receivers' Messages only, not one more to copy them from
+            return
+        for arbitration_id, payload in due:
+            self._bus.send(can.Message(arbitration_id=arbitration_id, data=payload, is_extended_id=False))
 
     def close(self) -> None:
         """Stop the sample timer and leave the bus."""

@@ -189,6 +189,17 @@ class SimSerialEndpoint:
 
     def host_read(self, generation: int, size: int, timeout_s: float | None) -> bytes:
         """pyserial read semantics: up to ``size`` bytes, waiting at most ``timeout_s`` (None: until ``size``)."""
+        if timeout_s == 0:  # a non-blocking read (a driver's poll, every control period): what is there, at once
+            self.check_disconnect()
+            with self._cond:
+                self._alive(generation)
+                self._release_due()
+                take = self.faults.chunk_size(min(len(self._ready), size))
+                if not take:
+                    return b""
+                chunk = bytes(self._ready[:take])
+                del self._ready[:take]
+                return chunk
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         out = bytearray()
         while True:

@@ -1,11 +1,10 @@
-"""The controller twin's process: a simulated UR e-Series controller on one loopback address, in real time.
+"""The controller twin: a simulated UR e-Series controller on one loopback address, in real time.
 
-Run as ``python -m unitac_rig.sim.twin.controller`` by :class:`unitac_rig.sim.twin.ControllerTwin` (its own
-process: ur_rtde's constructors hold the GIL while they handshake, so a server thread in the client's interpreter
-would never answer). The parent writes the settings as one JSON line on stdin and passes the ground-truth block as
-an inherited file descriptor; the process binds the dashboard (29999), script (30003) and RTDE (30004) ports,
-prints ``ready`` (or ``error ERRNO TEXT``) and runs until its stdin closes. Further stdin lines are test hooks
-(JSON, answered with one JSON line on stdout).
+It runs in its own process (:mod:`unitac_rig.sim.twin.process`, started by
+:class:`unitac_rig.sim.twin.ControllerTwin`: ur_rtde's constructors hold the GIL while they handshake, so a server
+thread in the client's interpreter would never answer). It binds the dashboard (29999), script (30003) and RTDE
+(30004) ports and runs until its owner's stdin closes; further stdin lines are test hooks (JSON, answered with one
+JSON line on stdout).
 
 One thread, one loop, a 2 ms cycle on the wall clock: sockets are served between cycles (RTDE inputs land in the
 register bank at once, the dashboard answers at once, a complete uploaded program starts at the next cycle), then
@@ -24,8 +23,9 @@ An emergency stop (test hook) brakes the arm, stops the program, raises bits 6, 
 at rest; after its release the dashboard must power on and release the brakes. Nothing the clients do (or fail to do:
 a dropped connection) changes what the program is executing, except through the watchdog the program armed.
 
-Why one module of ~890 lines: it is one real-time loop emulating the control script command by command; the command
-table reads best in one place (dashboard, motion, script text and ground truth live in sibling modules).
+One real-time loop emulating the control script command by command; the command table reads best in one place.
+Sibling modules hold the rest: the dashboard, the arm's motion, the script text, the contact world and its
+background table builds (:mod:`~unitac_rig.sim.twin.world`), the ground truth.
 """
 
 from __future__ import annotations
@@ -37,12 +37,9 @@ import logging
 import math
 import os
 import selectors
-import signal
 import socket
 import sys
-import threading
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -50,20 +47,22 @@ import numpy as np
 
 from protocols import rtde
 from protocols.rtde import ControllerVersion, PackageType
-from unitac_rig.rig.poses import rotvec_to_matrix
 from unitac_rig.sim.arm import SimArmParams
 from unitac_rig.sim.rtde_server import RtdeSession
 from unitac_rig.sim.twin import dashboard
 from unitac_rig.sim.twin.motion import TwinArm, pose_matrix
-from unitac_rig.sim.twin.params import DASHBOARD_PORT, RTDE_PORT, SCRIPT_PORT, SceneSpec, TwinSettings
+from unitac_rig.sim.twin.params import DASHBOARD_PORT, RTDE_PORT, SCRIPT_PORT, TwinSettings
 from unitac_rig.sim.twin.script import (
     ControlScript,
     OutputRegisters,
     ScriptError,
     is_control_script,
     register_offset_from_script,
+    take_program,
 )
 from unitac_rig.sim.twin.truth import TruthBlock, TwinTruth
+from unitac_rig.sim.twin.world import SceneWorld
+from unitac_rig.sim.twin.world import build_scene as build_scene  # where the twin's users import it from
 
 logger = logging.getLogger(__name__)
 
@@ -108,87 +107,6 @@ class _Connection:
     parser: rtde.RtdePackageParser | None = None
 
 
-class _SceneWorld:
-    """The contact world the arm presses into; rebuilt when a hook moves the object.
-
-    The scene builds a contact table the first time the pad nears the object on a new press ray (0.4-35 ms on a
-    2-core box), which would stall the controller cycle. So when a move starts toward a pose near the object, a
-    background thread builds that ray's table (:meth:`warm`) while the cycle goes on; until it is done, poses clear of
-    the object (the pad's plane more than ``_CLEAR_MARGIN_MM`` in front of the outline's farthest point) get no force
-    without asking the scene, and only a pose that could touch waits for the table.
-    """
-
-    _CLEAR_MARGIN_MM = 5.0
-
-    def __init__(self, spec: SceneSpec | None) -> None:
-        self.scene: Any = None
-        self.spec = spec
-        self.force_scale = 1.0  # a fault hook: x10 makes the contact ten times stiffer (same geometry)
-        self._radius_mm = 0.0
-        self._warming = threading.Event()
-        self.warm_builds = 0
-        if spec is not None:
-            self.rebuild(spec)
-
-    def rebuild(self, spec: SceneSpec) -> None:
-        self.spec = spec
-        self.scene = build_scene(spec)
-        self._radius_mm = float(np.max(np.linalg.norm(np.asarray(self.scene.obj.outer_mm), axis=1)))
-
-    def warm(self, pad_pose: np.ndarray) -> None:
-        """Build the contact table of the ray through ``pad_pose`` in the background (no-op while one is built)."""
-        scene = self.scene
-        if scene is None or self._warming.is_set():
-            return
-        self._warming.set()
-        threading.Thread(target=self._build, args=(scene, np.array(pad_pose)), name="twin-scene", daemon=True).start()
-
-    def _build(self, scene: Any, pad_pose: np.ndarray) -> None:
-        try:
-            scene.wrench_on_tool(pad_pose)
-            self.warm_builds += 1
-        except Exception:
-            logger.exception("building a contact table in the background failed")
-        finally:
-            self._warming.clear()
-
-    def _clear_of_object(self, pad_pose: np.ndarray) -> bool:
-        assert self.spec is not None
-        press = rotvec_to_matrix(pad_pose[3:6])[:2, 2]
-        norm = float(np.linalg.norm(press))
-        if norm < 1e-9:
-            return False
-        to_axis_mm = (np.asarray(self.spec.true_center_m) - pad_pose[:2]) * 1e3
-        return float(to_axis_mm @ (press / norm)) > self._radius_mm + self._CLEAR_MARGIN_MM
-
-    def wrench_on_tool(self, tcp_pose: np.ndarray) -> np.ndarray:
-        if self.scene is None:
-            return np.zeros(6)
-        if self._warming.is_set() and self._clear_of_object(tcp_pose):
-            return np.zeros(6)  # out of reach of the object: the scene's answer, without waiting for its lock
-        result: np.ndarray = self.scene.wrench_on_tool(tcp_pose) * self.force_scale
-        return result
-
-
-def build_scene(spec: SceneSpec) -> Any:
-    """The PressScene a :class:`SceneSpec` describes (the controller and the twin's sensors build the same one)."""
-    from pathlib import Path
-
-    from unitac_rig.rig.objects import get_object
-    from unitac_rig.sim.scene import PressScene
-
-    obj = get_object(spec.object_id, tuple(Path(p) for p in spec.objects_files))
-    assert spec.layout is not None  # filled in when the spec was made
-    return PressScene(
-        obj,
-        spec.rotation_deg,
-        spec.layout,
-        object_center_m=spec.true_center_m,
-        rng=np.random.default_rng([spec.seed, 4]),
-        pad=spec.pad,
-    )
-
-
 class Controller:
     """The whole controller: servers, safety, program, arm. Single-threaded; :meth:`run` is the loop."""
 
@@ -198,7 +116,7 @@ class Controller:
         self._truth_block = truth
         self._hooks_in = hooks_in
         self._hook_buffer = bytearray()
-        self.world = _SceneWorld(settings.scene)
+        self.world = SceneWorld(settings.scene)
         arm_params = SimArmParams(protective_stop_n=self.params.protective_stop_n)
         self.arm = TwinArm(
             self.world,
@@ -428,7 +346,7 @@ class Controller:
         connection.inbox += data
         text = connection.inbox.decode("utf-8", "replace")
         while True:
-            program, rest = _take_program(text)
+            program, rest = take_program(text)
             if program is None:
                 break
             text = rest
@@ -824,82 +742,3 @@ class Controller:
         if now - started >= 1.0:
             self.achieved_rate_hz = (self.cycles - cycles) / (now - started)
             self._rate_window = (now, self.cycles)
-
-
-def _take_program(text: str) -> tuple[str | None, str]:
-    """Split the first complete top-level program (``def``/``sec`` ... ``end`` at column 0) off ``text``."""
-    lines = text.splitlines(keepends=True)
-    start = None
-    for index, line in enumerate(lines):
-        if start is None:
-            if line.startswith(("def ", "sec ")):
-                start = index
-            continue
-        if line.rstrip("\r\n") == "end":
-            return "".join(lines[start : index + 1]), "".join(lines[index + 1 :])
-    if start is None and text.strip() and text.endswith("\n"):
-        logger.warning("script port: ignored text outside a program: %r", text[:80])
-        return None, ""
-    return None, text
-
-
-def _raise_priority() -> str:
-    """Ask for real-time scheduling as a controller has it; say what was granted (never fails)."""
-    if hasattr(os, "sched_setscheduler"):
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
-            return "SCHED_FIFO 10"
-        except (PermissionError, OSError):
-            pass
-    try:
-        os.nice(-10)
-        return "nice -10"
-    except (PermissionError, OSError):
-        return "normal (no permission for more)"
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Process entry point: settings on the first stdin line, the truth block on ``--truth-fd``."""
-    import argparse
-
-    parser = argparse.ArgumentParser(prog="python -m unitac_rig.sim.twin.controller")
-    parser.add_argument("--truth-fd", type=int, required=True)
-    args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=os.environ.get("UNITAC_TWIN_LOG", "WARNING").upper(),
-        format="controller twin %(levelname)s %(name)s: %(message)s",
-    )
-    stdin_fd = sys.stdin.fileno()
-    first = b""
-    while not first.endswith(b"\n"):
-        chunk = os.read(stdin_fd, 65536)
-        if not chunk:
-            return 1
-        first += chunk
-    line, _, extra = first.partition(b"\n")
-    settings = TwinSettings.from_json(line.decode())
-    truth = TruthBlock(args.truth_fd)
-    scheduling = _raise_priority() if settings.params.realtime_priority else "normal (not asked)"
-    sys.setswitchinterval(0.0005)  # the cycle gets the GIL back from the table-building thread within 0.5 ms
-    controller = Controller(settings, truth, hooks_in=stdin_fd)
-    controller.scheduling = scheduling
-    try:
-        controller.bind()
-    except OSError as exc:
-        print(f"error {exc.errno or 0} {exc.strerror or exc}", flush=True)  # noqa: T201 - the parent reads this
-        return 1
-    print("ready", flush=True)  # noqa: T201 - the parent reads this line
-    if extra:
-        controller._hook_bytes(extra)
-    try:
-        controller.run()
-    finally:
-        truth.close()
-    return 0
-
-
-if __name__ == "__main__":
-    # Ctrl-C in a terminal reaches the whole process group: the controller stops only when its owner closes stdin
-    # (or dies), as a robot controller does not stop because a host process was interrupted.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    sys.exit(main())

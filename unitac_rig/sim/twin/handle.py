@@ -78,7 +78,7 @@ class ControllerTwin:
         self._truth = TruthBlock(self._file.fileno())
         environment = dict(os.environ)
         environment["PYTHONPATH"] = os.pathsep.join(filter(None, [_PACKAGE_ROOT, environment.get("PYTHONPATH")]))
-        command = [sys.executable, "-m", "unitac_rig.sim.twin.controller", "--truth-fd", str(self._file.fileno())]
+        command = [sys.executable, "-m", "unitac_rig.sim.twin.process", "--truth-fd", str(self._file.fileno())]
         self._process = subprocess.Popen(
             command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, pass_fds=(self._file.fileno(),), env=environment
         )

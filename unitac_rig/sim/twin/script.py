@@ -421,3 +421,20 @@ def register_offset_from_script(text: str) -> int:
 def is_control_script(text: str) -> bool:
     """Whether an upload is ur_rtde's control script (its main-loop markers), not some other program."""
     return "def rtde_control():" in text and "NODE_CONTROL_LOOP_BEGINS" in text
+
+
+def take_program(text: str) -> tuple[str | None, str]:
+    """Split the first complete top-level program (``def``/``sec`` ... ``end`` at column 0) off ``text``."""
+    lines = text.splitlines(keepends=True)
+    start = None
+    for index, line in enumerate(lines):
+        if start is None:
+            if line.startswith(("def ", "sec ")):
+                start = index
+            continue
+        if line.rstrip("\r\n") == "end":
+            return "".join(lines[start : index + 1]), "".join(lines[index + 1 :])
+    if start is None and text.strip() and text.endswith("\n"):
+        logger.warning("script port: ignored text outside a program: %r", text[:80])
+        return None, ""
+    return None, text

@@ -19,7 +19,7 @@ from tests.robustness.robustness_helpers import one_error_line, tree_hashes
 from unitac_rig.bench.lab.damage import flip_bits
 from unitac_rig.bench.recorder import synthetic_press
 from unitac_rig.errors import DataError
-from unitac_rig.storage import recorder
+from unitac_rig.storage import recorder, reextract
 from unitac_rig.storage.checksums import seal_root
 from unitac_rig.storage.pooling import pool_sessions
 from unitac_rig.storage.press_record import PressRecord, attr_value, write_press_group
@@ -220,7 +220,7 @@ def test_extract_failing_on_a_single_file_session_leaves_it_exactly_as_it_was(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     old = write_single_file_session(tmp_path, _presses(4))
-    real, calls = recorder._reextract_copy, []
+    real, calls = reextract._reextract_copy, []
 
     def failing(path: Path, *args: object, **kwargs: object) -> object:
         calls.append(path)
@@ -228,7 +228,7 @@ def test_extract_failing_on_a_single_file_session_leaves_it_exactly_as_it_was(
             raise OSError(28, "No space left on device")
         return real(path, *args, **kwargs)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(recorder, "_reextract_copy", failing)
+    monkeypatch.setattr(reextract, "_reextract_copy", failing)
     before = tree_hashes(tmp_path)
     assert cli(["extract", str(tmp_path), "--tolerance", "0.3"]) == 1
     assert "nothing was changed" in one_error_line(capsys)

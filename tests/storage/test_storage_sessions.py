@@ -14,7 +14,7 @@ from tests.helpers import cli
 from tests.robustness.robustness_helpers import one_error_line, tree_hashes, write_synthetic_sessions
 from unitac_rig.bench.lab.damage import flip_bits_in_dataset, press_ids
 from unitac_rig.errors import DataError
-from unitac_rig.storage import recorder
+from unitac_rig.storage import reextract
 from unitac_rig.storage.recorder import SessionWriter, journal_dir, keep_aside, session_path
 
 
@@ -71,7 +71,7 @@ def test_extract_that_cannot_finish_changes_no_session(data: Path, capsys: pytes
 def test_extract_failing_while_writing_its_copies_leaves_every_file_as_it_was(
     data: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    real = recorder._reextract_copy
+    real = reextract._reextract_copy
     calls = []
 
     def failing(path: Path, *args: object, **kwargs: object) -> object:
@@ -80,7 +80,7 @@ def test_extract_failing_while_writing_its_copies_leaves_every_file_as_it_was(
             raise OSError(28, "No space left on device")
         return real(path, *args, **kwargs)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(recorder, "_reextract_copy", failing)
+    monkeypatch.setattr(reextract, "_reextract_copy", failing)
     before = tree_hashes(data)
     assert cli(["extract", str(data), "--tolerance", "0.3"]) == 1
     line = one_error_line(capsys)

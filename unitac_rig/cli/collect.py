@@ -32,7 +32,8 @@ from unitac_rig.rig.strategies import PRESS_STRATEGIES
 from unitac_rig.storage.extraction import ExtractionSettings
 from unitac_rig.storage.press_record import FINISHED_STATUSES
 from unitac_rig.storage.reader import list_sessions, press_summaries, read_session_info
-from unitac_rig.storage.recorder import reextract_sessions, session_path
+from unitac_rig.storage.recorder import session_path
+from unitac_rig.storage.reextract import reextract_sessions
 
 console = Console(stderr=False)
 

@@ -246,13 +246,7 @@ def _add_sensor(
         )
     settings = config.resolved(run)
     dataset = extension_dataset(sets, run.sensors, new_sensor)
-    for sensor in run.sensors:
-        if sensor in dataset.values and dataset.n_taxels(sensor) * 3 != run.engine.feature_dims[sensor]:
-            raise DataError(
-                f"{sensor} frames have {dataset.n_taxels(sensor)} taxels, the run was trained on "
-                f"{run.engine.feature_dims[sensor] // 3}",
-                hint="one sensor id must always mean one layout",
-            )
+    _check_layouts(run, dataset)
     test_mask = _test_mask(dataset, run.payload["split"])
     train_rows, test_rows = dataset.subset(~test_mask), dataset.subset(test_mask)
     if len(train_rows) == 0:
@@ -267,33 +261,9 @@ def _add_sensor(
     )
 
     x, present = _inputs(train_rows, engine.feature_dims, normaliser)
-    x, present = x.to(device), present.to(device)
     optimizer = engine.make_optimizer(settings["learning_rate"])
-    salt = zlib.crc32(new_sensor.encode())
-    shuffles = [np.random.default_rng([seed, 1, salt]) for seed in engine.seeds]
-    history: list[dict[str, Any]] = []
-    seconds = 0.0
-    unitac = [g.name for g in engine.groups].index(UNITAC_GROUP)
-    for epoch in range(1, settings["epochs"] + 1):
-        began = time.perf_counter()
-        n = x.shape[0]
-        order = torch.from_numpy(np.stack([rng.permutation(n) for rng in shuffles])).to(device)
-        xs, ps = x[order], present[order]
-        loss_sum = torch.zeros(engine.members, device=device)
-        for start in range(0, n, settings["batch_size"]):
-            chunk = slice(start, start + settings["batch_size"])
-            losses = engine.train_step(xs[:, chunk], optimizer, present=ps[:, chunk])
-            loss_sum += losses[unitac] * xs[:, chunk].shape[1]
-        seconds += time.perf_counter() - began
-        record = {
-            "epoch": epoch,
-            "epochs": settings["epochs"],
-            "seconds": seconds,
-            "train_loss": (loss_sum / n).cpu().tolist(),
-        }
-        history.append(record)
-        if progress is not None:
-            progress(record)
+    history = _train_new_sensor(engine, optimizer, x.to(device), present.to(device), new_sensor, settings, progress)
+    seconds = history[-1]["seconds"] if history else 0.0
     after = evaluate_new_sensor(
         engine, normaliser, test_rows, new_sensor, run.config.nmae_normaliser, run.config.ssim_range
     )
@@ -313,7 +283,8 @@ def _add_sensor(
             "train_shared_with": {s: int(train_rows.has(s).sum()) for s in run.sensors if s in train_rows.values},
             "test_shared_with": {s: int(test_rows.has(s).sum()) for s in run.sensors if s in test_rows.values},
         },
-        "metric": "NMAE and SSIM with each channel's training range, on test contacts that have both sensors",
+        "metric": f"NMAE ({run.config.nmae_normaliser}) and SSIM ({run.config.ssim_range}), the run's own readings, "
+        "on test contacts that have both sensors",
         "untrained": before,
         "trained": after,
         "train_seconds": seconds,
@@ -322,6 +293,52 @@ def _add_sensor(
     }
     complete = _write_run(run, out, engine, normaliser, dataset, test_mask, summary, history, optimizer)
     return ExtendOutcome(out, engine, normaliser, summary, complete, history)
+
+
+def _check_layouts(run: LoadedRun, dataset: PairedDataset) -> None:
+    """Refuse frames of a trained sensor whose taxel count differs from the run's (DataError)."""
+    for sensor in run.sensors:
+        if sensor in dataset.values and dataset.n_taxels(sensor) * 3 != run.engine.feature_dims[sensor]:
+            raise DataError(
+                f"{sensor} frames have {dataset.n_taxels(sensor)} taxels, the run was trained on "
+                f"{run.engine.feature_dims[sensor] // 3}",
+                hint="one sensor id must always mean one layout",
+            )
+
+
+def _train_new_sensor(
+    engine: StackedAutoencoders,
+    optimizer: torch.optim.Optimizer,
+    x: torch.Tensor,
+    present: torch.Tensor,
+    new_sensor: str,
+    settings: dict[str, Any],
+    progress: ProgressCallback | None,
+) -> list[dict[str, Any]]:
+    """Train the new sensor's layers (the rest frozen) for ``settings["epochs"]``; one history record per epoch
+    (``seconds``: training wall time so far, s). Each seed shuffles with its own stream, salted by the sensor's name."""
+    salt = zlib.crc32(new_sensor.encode())
+    shuffles = [np.random.default_rng([seed, 1, salt]) for seed in engine.seeds]
+    history: list[dict[str, Any]] = []
+    seconds = 0.0
+    unitac = [g.name for g in engine.groups].index(UNITAC_GROUP)
+    n = x.shape[0]
+    for epoch in range(1, settings["epochs"] + 1):
+        began = time.perf_counter()
+        order = torch.from_numpy(np.stack([rng.permutation(n) for rng in shuffles])).to(x.device)
+        xs, ps = x[order], present[order]
+        loss_sum = torch.zeros(engine.members, device=x.device)
+        for start in range(0, n, settings["batch_size"]):
+            chunk = slice(start, start + settings["batch_size"])
+            losses = engine.train_step(xs[:, chunk], optimizer, present=ps[:, chunk])
+            loss_sum += losses[unitac] * xs[:, chunk].shape[1]
+        seconds += time.perf_counter() - began
+        record = {"epoch": epoch, "epochs": settings["epochs"], "seconds": seconds,
+                  "train_loss": (loss_sum / n).cpu().tolist()}  # fmt: skip
+        history.append(record)
+        if progress is not None:
+            progress(record)
+    return history
 
 
 def _write_run(

@@ -56,3 +56,25 @@ def test_help_still_exits_0() -> None:
     result = _run("--help")
     assert result.returncode == 0
     assert "collect" in result.stdout
+
+
+def test_a_logged_exception_is_one_line_without_debug_and_a_traceback_with_it() -> None:
+    """Library code logs a failed retract with log.exception; the terminal shows its message, not a traceback,
+    unless --debug asks for one."""
+    import logging
+    import sys
+
+    from unitac_rig.cli.app import LOG_FORMAT, _LogLine
+
+    try:
+        raise ValueError("the wrist felt 14.2 N during a transit move")
+    except ValueError:
+        exc_info = sys.exc_info()
+    record = logging.LogRecord("unitac_rig.collection.session", logging.ERROR, __file__, 1,
+                               "retracting after press %s failed", ("rot000_ang-45",), exc_info)  # fmt: skip
+    line = _LogLine().format(record)
+    assert line == (
+        "ERROR unitac_rig.collection.session: retracting after press rot000_ang-45 failed "
+        "(the wrist felt 14.2 N during a transit move)"
+    )
+    assert "Traceback" in logging.Formatter(LOG_FORMAT).format(record)

@@ -554,3 +554,19 @@ def test_a_protective_stop_whose_safety_bits_arrive_late_is_still_named_a_protec
         with pytest.raises(ProtectiveStop) as excinfo:
             collect_session(rig, get_object("square_pla"), "uskin", tmp_path)
     assert "unlock the protective stop" in excinfo.value.one_line()
+
+
+def test_a_finished_session_leaves_the_pad_at_the_clearance_radius_ready_for_a_swap(tmp_path: Path) -> None:
+    """A campaign mounts the next sensor or object after each session: the pad must not stay 5 mm from the last
+    one. Found when the simulated campaign's irregular prism gave way to the circle, whose outline met the pad."""
+    config = few(3)
+    obj = get_object("irregular_pla")
+    with SimRig(config, seed=0) as rig:
+        outcome = collect_session(rig, obj, "uskin", tmp_path, max_presses=3)
+        assert outcome.complete == 3 and outcome.stopped is None
+        assert at_rest(rig)
+        pose = rig.sim_arm.true_tcp_pose()
+        radial_m = float(np.linalg.norm(pose[:2] - np.asarray(config.object.center_m)))
+        contact_now = float(np.linalg.norm(rig.sim_arm.true_wrench()[:3]))
+    assert radial_m >= config.object.clearance_mm / 1000.0 - 1e-4
+    assert contact_now == 0.0

@@ -15,7 +15,7 @@ from tests.helpers import cli
 from tests.learning.learning_helpers import small_sets, write_sessions
 from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.contact_geometry import GeometryConfig, geometry_for_run
-from unitac_rig.learning.data import build_paired_dataset
+from unitac_rig.learning.data import build_paired_dataset, ray_deg
 from unitac_rig.learning.paper import TABLE1_COLUMNS
 from unitac_rig.learning.report import write_report
 from unitac_rig.learning.train import TrainConfig, load_run, train
@@ -102,8 +102,11 @@ def test_geometry_writes_n_by_n_scenarios_and_the_outline_figure(run_dir: Path) 
     }
     assert data["scenarios"]["uskin_to_papillarray"]["paper_mae_mm"] == 0.637
     assert all(np.isfinite(s["mae_mm"]) for s in data["scenarios"].values())
-    # 10% of the 44 (rotation, angle) directions -> 4 held out, with their 5 forces each
-    assert len(result.test_rows) == 4 * 5
+    # 10 % of the physical rays are held out, whole: 4 rays, one of them pressed under two (rotation, angle) keys on
+    # the irregular prism (a split treats a ray as one unit), so 5 keys with their 5 forces each
+    keys = set(zip(result.rotation_deg.tolist(), result.angle_deg.tolist(), strict=True))
+    assert len({ray_deg(r, a) for r, a in keys}) == 4
+    assert len(keys) == 5 and len(result.test_rows) == 5 * 5
     assert png_path.stat().st_size > 1000
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from tests.helpers import cli
-from tests.robustness.robustness_helpers import one_error_line, tree_hashes, write_synthetic_sessions
+from tests.robustness.robustness_helpers import one_error_line, tree_hashes
 from unitac_rig.bench.lab.damage import dataset_location, flip_bits, flip_bits_in_dataset, press_ids
 from unitac_rig.storage.manifest import sha256_file
 from unitac_rig.storage.reader import session_digest, session_files
@@ -21,21 +21,6 @@ from unitac_rig.storage.recorder import journal_dir, press_dir, session_path
 
 OBJ, SENSOR = "circle_pla", "uskin"
 TRAIN_FAST = ("--no-report", "--no-baselines")
-
-
-@pytest.fixture(scope="module")
-def pristine(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Both sensors on two objects (synthetic contacts through the real recorder): enough to train on."""
-    data = tmp_path_factory.mktemp("pristine") / "data"
-    write_synthetic_sessions(data)
-    return data
-
-
-@pytest.fixture
-def data(pristine: Path, tmp_path: Path) -> Path:
-    copy = tmp_path / "data"
-    shutil.copytree(pristine, copy)
-    return copy
 
 
 def _stored(group: h5py.Group) -> dict[str, bytes]:

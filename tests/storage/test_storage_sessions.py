@@ -4,32 +4,17 @@ rig it was recorded on and refuses presses from another one; foreign or broken f
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import h5py
 import pytest
 
 from tests.helpers import cli
-from tests.robustness.robustness_helpers import one_error_line, tree_hashes, write_synthetic_sessions
+from tests.robustness.robustness_helpers import one_error_line, tree_hashes
 from unitac_rig.bench.lab.damage import flip_bits_in_dataset, press_ids
 from unitac_rig.errors import DataError
 from unitac_rig.storage import reextract
 from unitac_rig.storage.recorder import SessionWriter, journal_dir, keep_aside, session_path
-
-
-@pytest.fixture(scope="module")
-def pristine(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    data = tmp_path_factory.mktemp("pristine") / "data"
-    write_synthetic_sessions(data)
-    return data
-
-
-@pytest.fixture
-def data(pristine: Path, tmp_path: Path) -> Path:
-    copy = tmp_path / "data"
-    shutil.copytree(pristine, copy)
-    return copy
 
 
 @pytest.mark.parametrize(

@@ -69,3 +69,18 @@ def write_sessions(data_dir: Path, sets: Sequence[MatchedSet]) -> None:
                     extraction=extraction,
                 )
             )
+
+
+#: Prepended to a script run in a fresh interpreter: an import of this project fails there, so an exported model
+#: that still needs unitac_rig, drivers or protocols is caught.
+REFUSE_PROJECT_IMPORTS = """
+import sys
+
+class Refuse:
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in ("unitac_rig", "drivers", "protocols"):
+            raise ImportError("the exported model must not need " + name)
+        return None
+
+sys.meta_path.insert(0, Refuse())
+"""

@@ -17,7 +17,7 @@ from torch import nn
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
 from tests.helpers import cli
-from tests.learning.learning_helpers import small_sets
+from tests.learning.learning_helpers import REFUSE_PROJECT_IMPORTS, small_sets
 from unitac_rig.learning.data import PairedDataset, build_paired_dataset
 from unitac_rig.learning.evaluate import write_metrics
 from unitac_rig.learning.extend import ExtendConfig, add_sensor
@@ -27,16 +27,9 @@ from unitac_rig.learning.translate import Translator
 DIRECTIONS = [("uskin", "papillarray"), ("papillarray", "uskin"), ("uskin", "uskin"), ("papillarray", "papillarray")]
 
 # Runs in a fresh interpreter that can import torch and nothing of this project: a meta-path hook refuses them.
-PLAIN_TORCH = """
-import sys
-
-class Refuse:
-    def find_spec(self, name, path=None, target=None):
-        if name.split(".")[0] in ("unitac_rig", "drivers", "protocols"):
-            raise ImportError("the exported model must not need " + name)
-        return None
-
-sys.meta_path.insert(0, Refuse())
+PLAIN_TORCH = (
+    REFUSE_PROJECT_IMPORTS
+    + """
 import torch
 
 export, frames_path, out_path = sys.argv[1:4]
@@ -51,6 +44,7 @@ for source, target in [("uskin", "papillarray"), ("papillarray", "uskin"), ("usk
 torch.save(results, out_path)
 print(sorted(m for m in sys.modules if m.split(".")[0] in ("unitac_rig", "drivers", "protocols")))
 """
+)
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ import torch
 from safetensors import safe_open
 
 from tests.helpers import cli
-from tests.learning.learning_helpers import small_sets
+from tests.learning.learning_helpers import REFUSE_PROJECT_IMPORTS, small_sets
 from unitac_rig.learning.data import PairedDataset, build_paired_dataset
 from unitac_rig.learning.evaluate import write_metrics
 from unitac_rig.learning.train import TrainConfig, train
@@ -26,17 +26,6 @@ from unitac_rig.learning.translate import Translator
 DIRECTIONS = [("uskin", "papillarray"), ("papillarray", "uskin"), ("uskin", "uskin"), ("papillarray", "papillarray")]
 
 # Prepended to the card's code: a fresh interpreter that can import torch and safetensors, nothing of this project.
-REFUSE = """
-import sys
-
-class Refuse:
-    def find_spec(self, name, path=None, target=None):
-        if name.split(".")[0] in ("unitac_rig", "drivers", "protocols"):
-            raise ImportError("the exported model must not need " + name)
-        return None
-
-sys.meta_path.insert(0, Refuse())
-"""
 
 # Appended: translate the frames saved by the test with the card's networks.
 COMPARE = """
@@ -84,7 +73,7 @@ def test_the_cards_code_translates_like_translate_in_a_process_without_the_proje
 ) -> None:
     frames = {s: torch.from_numpy(pairs.values[s][:9].copy()) for s in pairs.sensors}
     torch.save(frames, tmp_path / "frames.pt")
-    script = REFUSE + _card_code(exported) + "\nimport sys\n" + COMPARE
+    script = REFUSE_PROJECT_IMPORTS + _card_code(exported) + "\nimport sys\n" + COMPARE
     done = subprocess.run(
         [sys.executable, "-I", "-c", script, str(tmp_path / "frames.pt"), str(tmp_path / "out.pt")],
         capture_output=True, text=True, timeout=300, cwd=exported,

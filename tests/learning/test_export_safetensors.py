@@ -25,8 +25,6 @@ from unitac_rig.learning.translate import Translator
 
 DIRECTIONS = [("uskin", "papillarray"), ("papillarray", "uskin"), ("uskin", "uskin"), ("papillarray", "papillarray")]
 
-# Prepended to the card's code: a fresh interpreter that can import torch and safetensors, nothing of this project.
-
 # Appended: translate the frames saved by the test with the card's networks.
 COMPARE = """
 frames = torch.load(sys.argv[1], weights_only=True)

@@ -68,6 +68,24 @@ def termination_as_interrupt(*, defer: bool = True) -> Iterator[None]:
         forget_interrupts()  # the interrupt (if any) has propagated; nothing after the scope may see it again
 
 
+@contextlib.contextmanager
+def stop_on_signals() -> Iterator[threading.Event]:
+    """An event that Ctrl-C, SIGTERM and SIGHUP set for the duration, instead of raising: a serving loop that moves
+    no arm (``twin``, ``stream``) polls it and ends cleanly, closing what it opened. The previous handlers are
+    restored after. Main thread only."""
+    stop = threading.Event()
+
+    def on_signal(signal_number: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, *TERMINATION_SIGNALS)}
+    try:
+        yield stop
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
 def termination_signal(exc: BaseException) -> int | None:
     """The signal number behind an interrupt (also when it was re-raised wrapped, as its cause), else None."""
     seen: BaseException | None = exc

@@ -12,18 +12,17 @@ from __future__ import annotations
 
 import contextlib
 import json
-import signal
 import socket
 import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 import typer
 
+from unitac_rig.cli.signals import stop_on_signals
 from unitac_rig.errors import UsageError
 
 
@@ -146,15 +145,11 @@ def stream_command(
     from unitac_rig.learning.train import load_run
 
     run_sensors = tuple(load_run(run).engine.group(UNITAC_GROUP).sensors)
-    stop = threading.Event()
-
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        stop.set()
-
-    handled = [signal.SIGINT, signal.SIGTERM] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
-    previous = {sig: signal.signal(sig, on_signal) for sig in handled}
     try:
-        with _mounted_sensor(rig_file, simulated, sensor, object_id, rate_hz, run_sensors) as (driver, name):
+        with (
+            stop_on_signals() as stop,
+            _mounted_sensor(rig_file, simulated, sensor, object_id, rate_hz, run_sensors) as (driver, name),
+        ):
             model = LiveModel(run, name, member=member, geometry=geometry)
             extra = (
                 f", geometry from the MLP trained on {model.geometry_meta['trained_on']}" if model.geometry_meta else ""
@@ -178,9 +173,6 @@ def stream_command(
     except KeyboardInterrupt:
         typer.echo("stream: stopped before the first frame", err=True)
         return
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
     summary = {"run": str(run), "sensor": name, "targets": list(model.targets), **stats.summary(), "driver": health,
                "finished_unix": time.time()}  # fmt: skip
     latency = summary["latency_ms"]

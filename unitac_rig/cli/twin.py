@@ -13,14 +13,13 @@ emergency stop), ``release`` (release it, power on and release the brakes), ``ps
 from __future__ import annotations
 
 import dataclasses
-import signal
 import sys
 import threading
 from pathlib import Path
-from types import FrameType
 
 import typer
 
+from unitac_rig.cli.signals import stop_on_signals
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.sensors import sensor_names
 
@@ -79,15 +78,9 @@ def twin(
         if config.arm is not None and config.arm.payload_kg is not None:
             params = dataclasses.replace(params, payload_kg=config.arm.payload_kg)
 
-    stop = threading.Event()
-
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        stop.set()
-
-    handled = [signal.SIGINT, signal.SIGTERM] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
-    previous = {sig: signal.signal(sig, on_signal) for sig in handled}
-    try:
-        with RigTwin(
+    with (
+        stop_on_signals() as stop,
+        RigTwin(
             object_id,
             rotation_deg=rotation,
             sensor=sensor,
@@ -96,24 +89,22 @@ def twin(
             params=params,
             placement=placement,
             sensor_options={"uskin": {"transport": uskin_via}},  # --uskin-via: which route the rig file names
-        ) as rig:
-            text = rig.rig_file(tables)
-            if write_rig is not None:
-                write_rig.write_text(text)
-            typer.echo(text)
-            sys.stdout.flush()
-            if not quiet:
-                typer.echo(
-                    f"twin: {rig.object_id} at {rig.rotation_deg:g} deg, {rig.sensor} mounted, controller on "
-                    f"{host} (pid {rig.controller.pid}, {rig.controller.status()['scheduling']}); Ctrl-C stops it; "
-                    f"{PENDANT_HELP}",
-                    err=True,
-                )
-            threading.Thread(target=_pendant, args=(rig, stop), name="twin-pendant", daemon=True).start()
-            _watch(rig, stop, quiet)
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        ) as rig,
+    ):
+        text = rig.rig_file(tables)
+        if write_rig is not None:
+            write_rig.write_text(text)
+        typer.echo(text)
+        sys.stdout.flush()
+        if not quiet:
+            typer.echo(
+                f"twin: {rig.object_id} at {rig.rotation_deg:g} deg, {rig.sensor} mounted, controller on "
+                f"{host} (pid {rig.controller.pid}, {rig.controller.status()['scheduling']}); Ctrl-C stops it; "
+                f"{PENDANT_HELP}",
+                err=True,
+            )
+        threading.Thread(target=_pendant, args=(rig, stop), name="twin-pendant", daemon=True).start()
+        _watch(rig, stop, quiet)
     if not quiet:
         typer.echo("twin: stopped", err=True)
 

@@ -34,7 +34,6 @@ import hashlib
 import json
 import logging
 import os
-import shutil
 import uuid
 import warnings
 from collections.abc import Iterator
@@ -49,6 +48,7 @@ from unitac_rig.errors import ModelError, UsageError
 from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
 from unitac_rig.learning.run import provenance
 from unitac_rig.learning.train import LoadedRun, load_run
+from unitac_rig.storage.export import publish_when_done
 
 log = logging.getLogger(__name__)
 
@@ -208,19 +208,13 @@ def export_model(run_dir: Path, out: Path, fmt: str, member: int = 0) -> dict[st
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = out.parent / f".{out.name}.export-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     staging.mkdir()  # not tempfile.mkdtemp: that is private (0700), and the export is meant to be shared
-    try:
+    with publish_when_done(staging, out):
         if fmt == "safetensors":
             from unitac_rig.learning.safetensors_export import export_into
 
             document = export_into(run, engine, staging, member)
         else:
             document = _export_into(run, engine, staging, fmt, member)
-        if out.exists():
-            out.rmdir()
-        os.replace(staging, out)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     return document
 
 

@@ -17,12 +17,13 @@ The join (which contacts every sensor recorded) is :func:`unitac_rig.storage.pai
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import shutil
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -214,6 +215,21 @@ def staging_for(out: Path) -> Path:
     return staging
 
 
+@contextlib.contextmanager
+def publish_when_done(staging: Path, out: Path) -> Iterator[Path]:
+    """Build an export in ``staging`` inside the block; when it ends, rename ``staging`` to ``out`` (an empty ``out``
+    directory is replaced), and when it raises, remove ``staging``: ``out`` is complete or absent, never half-written.
+    Every export (Parquet, LeRobot, a trained model) publishes through this."""
+    try:
+        yield staging
+        if out.exists():
+            out.rmdir()  # empty: the caller refused anything else before building
+        os.replace(staging, out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+
+
 def _prepare_out(out: Path) -> Path:
     staging = staging_for(out)
     (staging / RAW_DIR).mkdir()
@@ -232,7 +248,7 @@ def export_dataset(data_dirs: Sequence[Path], out: Path) -> ExportSummary:
     out = Path(out)
     pooled = pool_sessions([Path(d) for d in data_dirs])
     staging = _prepare_out(out)
-    try:
+    with publish_when_done(staging, out):
         provenance: list[dict[str, Any]] = []
         sets: list[MatchedSet] = []
         for item in pooled:
@@ -298,12 +314,6 @@ def export_dataset(data_dirs: Sequence[Path], out: Path) -> ExportSummary:
         (staging / CARD_NAME).write_text(render_card(document), encoding="utf-8")
         files = [PARQUET_NAME, CARD_NAME, *(entry["file"] for entry in provenance)]
         write_manifest(staging, document, files)
-        if out.exists():
-            out.rmdir()  # empty (checked above)
-        os.replace(staging, out)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     total = sum((out / rel).stat().st_size for rel in files)
     partial = tuple(f"{e['object']}/{e['sensor']} {e['finished']}/{e['planned']}" for e in incomplete)
     return ExportSummary(out, len(paired), len(paired) * len(sensors), len(provenance), len(files) + 1, total,

@@ -21,8 +21,6 @@ pairs as the Parquet export of the same data (the frames are the rows the press'
 from __future__ import annotations
 
 import json
-import os
-import shutil
 import sys
 import time
 from collections.abc import Iterator, Sequence
@@ -34,7 +32,7 @@ import numpy as np
 
 from unitac_rig.errors import DataError
 from unitac_rig.provenance import git_commit, package_version
-from unitac_rig.storage.export import staging_for
+from unitac_rig.storage.export import publish_when_done, staging_for
 from unitac_rig.storage.manifest import MANIFEST_NAME, write_manifest
 from unitac_rig.storage.pooling import pool_sessions
 from unitac_rig.storage.press_record import PressRecord
@@ -544,7 +542,7 @@ def export_lerobot(data_dirs: Sequence[Path], out: Path) -> LeRobotExportSummary
     out = Path(out)
     pooled = pool_sessions([Path(d) for d in data_dirs])
     staging = staging_for(out)
-    try:
+    with publish_when_done(staging, out):
         present = {item.info.sensor for item in pooled}
         sensors = [s for s in SENSORS if s in present] + sorted(present - set(SENSORS))  # the registry's order
         summaries = {s: _write_sensor_dataset(staging / s, s, pooled) for s in sensors}
@@ -561,12 +559,6 @@ def export_lerobot(data_dirs: Sequence[Path], out: Path) -> LeRobotExportSummary
         (staging / CARD_NAME).write_text(render_card(document), encoding="utf-8")
         files = sorted(str(p.relative_to(staging)) for p in staging.rglob("*") if p.is_file())
         write_manifest(staging, document, files)
-        if out.exists():
-            out.rmdir()
-        os.replace(staging, out)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     total = sum((out / rel).stat().st_size for rel in files)
     return LeRobotExportSummary(
         out,

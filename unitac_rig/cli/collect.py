@@ -27,7 +27,7 @@ from unitac_rig.rig.backends import open_rig
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import RigConfig, load_rig_config, parse_rig_config
 from unitac_rig.rig.objects import ObjectSpec, get_object, list_objects
-from unitac_rig.rig.sensors import sensor_layout
+from unitac_rig.rig.sensors import sensor_layout, sensor_names
 from unitac_rig.rig.strategies import PRESS_STRATEGIES
 from unitac_rig.storage.extraction import ExtractionSettings
 from unitac_rig.storage.press_record import FINISHED_STATUSES
@@ -43,6 +43,13 @@ DATA_OPTION = typer.Option(
 RIG_OPTION = typer.Option(
     None, "--rig", metavar="FILE", help="Rig file (TOML). Without one, the simulated rig is used."
 )
+
+
+def _spoken(names: list[str]) -> str:
+    """``a, b or c``: the registered names for a help line (the registries name them, this file does not)."""
+    return f"{', '.join(names[:-1])} or {names[-1]}" if len(names) > 1 else names[0]
+
+
 _PRESS = RigConfig().press  # the rig file's defaults, for the help of the options that override them
 
 
@@ -283,7 +290,7 @@ def collect(
         ..., "--object", metavar="ID", help="Object id, e.g. hex_tpu (see `unitac-rig objects`)."
     ),
     sensor: str | None = typer.Option(
-        None, "--sensor", metavar="SENSOR", show_default="detected", help="uskin or papillarray."
+        None, "--sensor", metavar="SENSOR", show_default="detected", help=f"{_spoken(sensor_names())}."
     ),
     rig_file: Path | None = RIG_OPTION,
     data: Path = DATA_OPTION,
@@ -292,7 +299,7 @@ def collect(
         "--strategy",
         metavar="NAME",
         show_default=f"the rig file's, else {_PRESS.strategy}",
-        help="guarded, two-phase or force-ramp.",
+        help=f"{_spoken(list(PRESS_STRATEGIES))}.",
     ),
     speed: float | None = typer.Option(
         None,

@@ -11,27 +11,18 @@ from __future__ import annotations
 import json
 import os
 import re
-import shutil
 import signal
 import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.helpers import console_script
 from unitac_rig.storage.reader import snapshot_session
 
 ANGLES = "3"
-
-
-def _console_script() -> str:
-    beside = Path(sys.executable).parent / "unitac-rig"
-    found = str(beside) if beside.exists() else shutil.which("unitac-rig")
-    if found is None:
-        pytest.fail("the unitac-rig console script is not installed (pip install -e .)")
-    return found
 
 
 def _env(**extra: str) -> dict[str, str]:
@@ -41,7 +32,7 @@ def _env(**extra: str) -> dict[str, str]:
 def run(*args: str, cwd: Path | None = None, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     """The console script with stdout a pipe (not a terminal), as in a log or CI."""
     return subprocess.run(
-        [_console_script(), *args], capture_output=True, text=True, timeout=600, env=env or _env(), cwd=cwd, check=False
+        [console_script(), *args], capture_output=True, text=True, timeout=600, env=env or _env(), cwd=cwd, check=False
     )
 
 
@@ -196,7 +187,7 @@ def test_6_collect_into_a_log_prints_progress_lines(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_7_ctrl_c_says_what_was_kept_and_that_the_same_command_resumes(tmp_path: Path) -> None:
-    args = [_console_script(), "collect", "--object", "hex_tpu", "--angles", "91", "--data", str(tmp_path)]
+    args = [console_script(), "collect", "--object", "hex_tpu", "--angles", "91", "--data", str(tmp_path)]
     process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
     try:
         assert process.stdout is not None

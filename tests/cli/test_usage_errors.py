@@ -4,26 +4,17 @@ traceback (and a traceback with --debug)."""
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
-
-def _console_script() -> str:
-    """The installed ``unitac-rig`` entry point of the interpreter running the tests."""
-    beside = Path(sys.executable).parent / "unitac-rig"
-    found = str(beside) if beside.exists() else shutil.which("unitac-rig")
-    if found is None:
-        pytest.fail("the unitac-rig console script is not installed (pip install -e .)")
-    return found
+from tests.helpers import console_script
 
 
 def _run(*args: str) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "COLUMNS": "80", "NO_COLOR": "1"}
-    return subprocess.run([_console_script(), *args], capture_output=True, text=True, timeout=120, env=env, check=False)
+    return subprocess.run([console_script(), *args], capture_output=True, text=True, timeout=120, env=env, check=False)
 
 
 @pytest.mark.parametrize(
@@ -62,7 +53,6 @@ def test_a_logged_exception_is_one_line_without_debug_and_a_traceback_with_it() 
     """Library code logs a failed retract with log.exception; the terminal shows its message, not a traceback,
     unless --debug asks for one."""
     import logging
-    import sys
 
     from unitac_rig.cli.app import LOG_FORMAT, _LogLine
 

@@ -175,7 +175,10 @@ def recorded_digest(data_dir: Path) -> str:
 
     for path in sorted(data_dir.glob("*.h5")):
         with h5py.File(path, "r") as f:
-            f["presses"].visititems(visit)
+            presses = f["presses"]
+            # each press by name: in the press-file layout a press is an external link, which visititems skips
+            for pid in sorted(presses):
+                presses[pid].visititems(lambda name, item, pid=pid: visit(f"{pid}/{name}", item))
     return digest.hexdigest()
 
 

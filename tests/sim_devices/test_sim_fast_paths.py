@@ -168,8 +168,10 @@ def test_the_scene_answers_a_repeated_pose_as_a_fresh_scene_does() -> None:
     pressing = poser.pose_at_travel(10.0, 1.5)
     first = kept.wrench_on_tool(pressing)
     assert np.linalg.norm(first[:3]) > 1.0
-    first[:] = 0.0  # the caller's copy: changing it changes nothing kept
+    with pytest.raises(ValueError):
+        first[:] = 0.0  # the kept answer is read only: nobody can change what the next caller is told
     again = kept.wrench_on_tool(pressing)
+    assert again is first  # the same answer, no copy (the arm then skips its own copy and force check)
     assert np.array_equal(again, fresh.wrench_on_tool(pressing))
     elsewhere = poser.pose_at_travel(10.0, 0.5)
     assert np.array_equal(kept.wrench_on_tool(elsewhere), fresh.wrench_on_tool(elsewhere))
@@ -194,3 +196,56 @@ def test_moving_the_object_changes_what_a_kept_pose_feels() -> None:
     assert not np.array_equal(kept.taxel_loads(pressing).forces_n, loads_before)
     with pytest.raises(ValueError):
         kept.center_mm[0] += 1.0  # only a whole new centre moves the object (and forgets what was kept)
+
+
+class _ConstantWorld:
+    """Answers the same array every time; ``read_only`` promises it never changes (a scene's kept answer)."""
+
+    def __init__(self, wrench: np.ndarray, *, read_only: bool) -> None:
+        self.wrench = np.array(wrench, dtype=np.float64)
+        self.wrench.flags.writeable = not read_only
+
+    def wrench_on_tool(self, tcp_pose: np.ndarray) -> np.ndarray:
+        return self.wrench
+
+
+def test_a_kept_read_only_wrench_above_the_limit_trips_the_protective_stop_every_period() -> None:
+    params = SimArmParams()
+    world = _ConstantWorld([0.0, -(params.protective_stop_n + 5.0), 0.0, 0.0, 0.0, 0.0], read_only=True)
+    arm = SimArm(world, clock=VirtualClock(), rng=np.random.default_rng(0), params=params)
+    arm.wait_period()
+    assert arm.protective_stopped and arm.read_state().protective_stop
+    arm.unlock_protective_stop()
+    assert not arm.protective_stopped
+    arm.wait_period()  # the same kept answer, still above the limit: it trips again
+    assert arm.protective_stopped
+
+
+def test_a_world_that_changes_its_writable_answer_in_place_is_felt_at_once() -> None:
+    world = _ConstantWorld(np.zeros(6), read_only=False)
+    arm = SimArm(world, clock=VirtualClock(), rng=np.random.default_rng(0), params=SimArmParams(ft_latency_s=0.0))
+    arm.wait_period()
+    assert not arm.true_wrench().any()
+    world.wrench[1] = -500.0  # the same array object, changed: a writable answer is never trusted to be kept
+    arm.wait_period()
+    assert arm.true_wrench()[1] == -500.0
+    assert arm.protective_stopped
+
+
+def test_the_state_read_is_the_last_control_periods() -> None:
+    """The snapshot is formed when first read, but shows the controller as it was after the last period: a program
+    started again between two periods is reported running from the next period on, as before the change."""
+    arm = SimArm(_NoContact(), clock=VirtualClock(), rng=np.random.default_rng(0))
+    arm.wait_period()
+    arm.stop_program("test")
+    assert not arm.read_state().program_running
+    arm.wait_period()
+    arm.reupload_script()
+    assert not arm.read_state().program_running  # still the last period's state
+    arm.wait_period()
+    state = arm.read_state()
+    assert state.program_running and state.host_t_ns == arm.clock.now_ns()
+    goal = arm.true_tcp_pose() + np.array([0.0, 0.01, 0.0, 0.0, 0.0, 0.0])
+    arm.move_linear(goal, 0.05, 0.5)
+    assert np.array_equal(arm.read_state().tcp_pose, arm.true_tcp_pose())
+    assert arm.read_state().host_t_ns == arm.clock.now_ns()

@@ -170,7 +170,8 @@ class SimArm:
         # the raw bytes of the last force_mode arguments: the host re-sends an unchanged command every period (a
         # ur_rtde loop does), and re-validating it and rebuilding its frame was a tenth of a simulated session
         self._force_key: tuple[bytes, bytes, bytes, bytes] | None = None
-        self._force_gains: tuple[float, np.ndarray] | None = None  # (gain scaling, the scaled gains)
+        # (gain scaling, the scaled gains, their force rows): rebuilt when the scaling changes
+        self._force_gains: tuple[float, np.ndarray, np.ndarray] | None = None
         self._force_turns = False  # a torque axis of the force command is compliant
         self._force_low_limits = np.zeros(6)  # -speed_limits of the force command
         # its force rows: (rotation transposed, selection, target, -limits, limits), each of the three force axes
@@ -191,6 +192,8 @@ class SimArm:
         self._kept_alive = False
 
         self._true_wrench = np.asarray(world.wrench_on_tool(self.true_tcp_pose()), dtype=np.float64)
+        self._world_answer: np.ndarray | None = None  # the world's last answer, whose copy _true_wrench is
+        self._over_force_limit = False  # the true force is above the protective-stop limit
         delay_periods = max(0, round(self.params.ft_latency_s / self.control_period_s))
         # Holds the last ``delay_periods`` true wrenches: append the new one, pop the one that is now due.
         self._delay_line: deque[np.ndarray] = deque([self._true_wrench.copy()] * delay_periods)
@@ -208,7 +211,7 @@ class SimArm:
         self._ft_sign = 1.0
         cutoff = self.params.ft_filter_cutoff_hz
         self._filter_alpha = 1.0 if cutoff is None else 1.0 - math.exp(-2 * math.pi * cutoff * self.control_period_s)
-        self._latest = self._snapshot()
+        self._latest: ArmState | None = self._snapshot()
         clock.on_advance(self._on_clock_advance)
 
     # ---- truth (for simulated sensors and tests) ------------------------------------------------------------
@@ -233,13 +236,18 @@ class SimArm:
         return self._true_wrench.copy()
 
     def latest_state(self) -> ArmState:
-        """The state after the last control period; an immutable snapshot, safe to read from another thread."""
-        return self._latest
+        """The state after the last control period: an immutable snapshot. Formed when first read after the clock
+        moved (the host reads it in some periods, not all: forming it every period was a tenth of the simulator's
+        cost), so read it from the thread that drives the clock, or between advances."""
+        latest = self._latest
+        if latest is None:
+            latest = self._latest = self._snapshot()
+        return latest
 
     # ---- Arm: state -----------------------------------------------------------------------------------------
 
     def read_state(self) -> ArmState:
-        return self._latest
+        return self.latest_state()
 
     # ---- Arm: commands --------------------------------------------------------------------------------------
 
@@ -438,6 +446,7 @@ class SimArm:
             raise ArmError("the simulated arm is closed", hint="open a new rig")
         if self._protective_stop:
             raise ProtectiveStop("cannot start the control program during a protective stop", hint=_UNLOCK_HINT)
+        self.latest_state()  # the state of the last period keeps the stopped program until the next period
         self._program_running, self._program_stop_reason = True, None
         self._watchdog_ns, self._pending_watchdog_hz = None, None
         self._note_write()
@@ -526,7 +535,7 @@ class SimArm:
             self._integrate_motion()
             self._update_sensor()
             self._integrated_ns += self._period_ns
-        self._latest = self._snapshot()
+        self._latest = None  # formed when read (latest_state)
 
     def _advance_one_period(self, *, integrate: bool) -> None:
         if integrate:
@@ -554,13 +563,14 @@ class SimArm:
             gains = scaling * np.array(
                 [self.params.force_mode_gain_m_s_per_n] * 3 + [self.params.force_mode_gain_rad_s_per_nm] * 3
             )
-            self._force_gains = (scaling, gains)
+            self._force_gains = (scaling, gains, gains[:3])
         gains = self._force_gains[1]
         if not self._force_turns:  # the torque rows would give a zero turn: only the force rows, same operations
             # (np.dot is the same BLAS product as @ for a matrix and a vector, for a third of the call's cost)
             rotation_t, chosen3, target3, low3, high3 = self._force_rows
             # target - applied with applied = -(R^T m): target + R^T m, the same sum
-            limited = np.minimum(np.maximum(gains[:3] * (target3 + np.dot(rotation_t, measured[:3])), low3), high3)
+            gains3 = self._force_gains[2]
+            limited = np.minimum(np.maximum(gains3 * (target3 + np.dot(rotation_t, measured[:3])), low3), high3)
             return np.dot(rotation, np.where(chosen3, limited, 0.0)), _NO_TURN
         applied_task = -np.concatenate([rotation.T @ measured[:3], rotation.T @ measured[3:]])
         # np.minimum(np.maximum(...)) is what np.clip computes, without its wrapper's cost
@@ -586,14 +596,14 @@ class SimArm:
             else:
                 linear, angular, accel = self._target_twist[:3], self._target_twist[3:], self._accel_m_s2
             self._velocity, step = _ramp(self._velocity, linear, accel, dt)
-            if _moving(self._angular_velocity) or _moving(angular):
+            if _moving(self._angular_velocity) or (angular is not _NO_TURN and _moving(angular)):
                 self._angular_velocity, turn = _ramp(self._angular_velocity, angular, accel, dt)
             else:
-                turn = np.zeros(3)
+                turn = _NO_TURN
             if self._mode == "stop" and not _moving(self._velocity) and not _moving(self._angular_velocity):
                 self._mode = "idle"
         self._position = self._position + step
-        if _moving(turn):
+        if turn is not _NO_TURN and _moving(turn):
             self._set_rotation(rotvec_to_matrix(turn) @ self._rotation)
 
     def _step_path(self, path: _Path, dt: float) -> None:
@@ -621,17 +631,22 @@ class SimArm:
 
     def _update_sensor(self) -> None:
         """One F/T sample: true wrench -> latency -> + bias + noise -> low-pass; and the protective-stop check."""
-        self._true_wrench = np.asarray(self.world.wrench_on_tool(self._pose()), dtype=np.float64)
-        self._delay_line.append(self._true_wrench.copy())
+        answer = self.world.wrench_on_tool(self._pose())
+        if answer is not self._world_answer or answer.flags.writeable:  # a new wrench (a read-only one is kept)
+            self._world_answer = answer
+            # replaced, never changed in place: the delay line may hold the same array
+            self._true_wrench = np.array(answer, dtype=np.float64)
+            force = self._true_wrench[:3]
+            # np.linalg.norm's own sum, without its checks
+            self._over_force_limit = math.sqrt(float(force.dot(force))) > self.params.protective_stop_n
+        self._delay_line.append(self._true_wrench)
         delayed = self._delay_line.popleft()
-        p = self.params
         self._bias, noise = self._ft_noise.next(self._bias)
         raw = delayed + self._bias
         if noise is not None:
             raw = raw + noise
         self._filtered = self._filtered + self._filter_alpha * (raw - self._filtered)
-        force = self._true_wrench[:3]
-        if math.sqrt(float(force.dot(force))) > p.protective_stop_n:  # np.linalg.norm's own sum, without its checks
+        if self._over_force_limit:
             self._enter_protective_stop()
 
     def _measured_ft(self) -> np.ndarray:
@@ -676,6 +691,8 @@ def _ramp(current: np.ndarray, target: np.ndarray, accel: float, dt: float) -> t
     """Move a velocity toward ``target`` at ``accel`` for ``dt``: -> (new velocity, exact distance covered)."""
     delta = target - current
     change = math.sqrt(float(delta.dot(delta)))  # what np.linalg.norm computes for a vector, without its checks
+    if change == 0.0:  # already there (most force-mode periods, at the speed limit): the branch below, exactly
+        return target.copy(), target * dt  # (0.5 (current + target) x 0 s adds a zero to target x dt)
     if change <= accel * dt:
         reach_s = change / accel if accel > 0 else 0.0
         distance = 0.5 * (current + target) * reach_s + target * (dt - reach_s)

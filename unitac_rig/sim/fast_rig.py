@@ -33,6 +33,7 @@ from unitac_rig.sim.fast_sensors import configured_sensors
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
 from unitac_rig.sim.scene import PressScene, SceneParams, TaxelLoads
 from unitac_rig.sim.signals import SensorSample, SignalSource
+from unitac_rig.sim.world import NO_WRENCH
 
 log = logging.getLogger(__name__)
 
@@ -125,7 +126,7 @@ class _SceneSwitch:
 
     def wrench_on_tool(self, tcp_pose: np.ndarray) -> np.ndarray:
         if self.scene is None:
-            return np.zeros(6)
+            return NO_WRENCH
         result: np.ndarray = self.scene.wrench_on_tool(tcp_pose)
         return result
 

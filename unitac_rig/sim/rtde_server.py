@@ -558,8 +558,10 @@ class SimURController:
     """RTDE server of a simulated UR controller on ``host``:``port`` (30004 by default, what ur_rtde dials).
 
     ``state_provider`` is polled ``frequency_hz`` times a second by a thread named ``sim-rtde`` and must be thread
-    safe (return an immutable snapshot, e.g. ``SimArm.latest_state``); without one the arm stands still at
-    :data:`DEFAULT_STILL_POSE` with zero force and the timestamp counts seconds since the server started.
+    safe (return an immutable snapshot: ``SimArm.latest_state`` only while nothing advances that arm's clock, since
+    it forms the snapshot on first read; the twin publishes its own through shared memory); without one the arm
+    stands still at :data:`DEFAULT_STILL_POSE` with zero force and the timestamp counts seconds since the server
+    started.
     ``frequency_hz`` is also the highest stream rate (500 Hz on e-Series); a client asking for more gets this rate.
     Names in ``registers_in_use`` are answered ``IN_USE`` in input recipes (like a running fieldbus adapter), names
     in ``outputs_not_found`` ``NOT_FOUND`` in output recipes (a controller, or a fake, that does not offer them).

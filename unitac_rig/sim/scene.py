@@ -52,6 +52,7 @@ from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
 from unitac_rig.rig.sensors import SENSORS
 from unitac_rig.sim.scene_geometry import Outline, bending_tilt_rad_per_n
 from unitac_rig.sim.scene_pads import PadTable, PillarPad, SkinPad
+from unitac_rig.sim.world import NO_WRENCH, read_only
 
 log = logging.getLogger(__name__)
 
@@ -280,7 +281,7 @@ class PressScene:
         self.rays_built = 0
         self._warned_tilt = False
         self._lock = threading.Lock()  # the arm and a device thread may ask at the same time
-        self._wrench = np.zeros(6)
+        self._wrench = NO_WRENCH
         self._located: tuple[_RayTable, float] | None = None
 
     @property
@@ -300,16 +301,17 @@ class PressScene:
     def wrench_on_tool(self, tcp_pose: np.ndarray) -> np.ndarray:
         """Force (N) and torque (N*m) the object exerts on the tool, base axes, about the TCP; (6,).
 
-        The last answer is kept for its pose: an arm at rest asks about the same pose every control period.
+        The last answer is kept for its pose (an arm at rest asks about the same pose every control period) and
+        returned read only, the same array until the wrench changes; no contact is :data:`NO_WRENCH`.
         """
         pose = np.asarray(tcp_pose, dtype=np.float64)
         key = pose.tobytes()
         with self._lock:
             if key != self._wrench_key:
                 ray, travel = self._locate_kept(pose, key)
-                self._wrench = np.zeros(6) if travel <= 0.0 else ray.interp(ray.wrench_base, travel)
+                self._wrench = NO_WRENCH if travel <= 0.0 else read_only(ray.interp(ray.wrench_base, travel))
                 self._wrench_key = key
-            return self._wrench.copy()
+            return self._wrench
 
     def taxel_loads(self, tcp_pose: np.ndarray) -> TaxelLoads:
         """Per-taxel loads at ``tcp_pose`` in the sensor frame (N, and pillar displacements in mm)."""

@@ -81,3 +81,19 @@ def test_silent_device_is_a_timeout_error(capsys: pytest.CaptureFixture[str]) ->
 def test_probe_uskin_needs_a_route(capsys: pytest.CaptureFixture[str]) -> None:
     code, _, err = run_cli(["probe", "uskin"], capsys)
     assert code == 2 and "needs --can-interface" in err
+
+
+def test_probe_of_a_xela_server_that_is_not_there_gives_up_after_its_timeout(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """--timeout bounds finding a networked sensor too, not only its frames (it waited the driver's 5 s before)."""
+    import socket
+
+    with socket.socket() as sock:  # a free port, closed again: nothing listens there
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    code, _, err = run_cli(
+        ["probe", "uskin", "--xela-server", f"ws://127.0.0.1:{port}", "--timeout", "0.4", "--frames", "2"], capsys
+    )
+    assert code == 1
+    assert f"no xela_server at ws://127.0.0.1:{port} after 0.4 s" in err and len(err.strip().splitlines()) == 1

@@ -36,7 +36,9 @@ from unitac_rig.rig.sensors import SENSORS, SensorConfigBase, SensorSpec
 
 FRAMES_OPTION = typer.Option(10, "--frames", min=1, help="How many frames to read.")
 JSON_OPTION = typer.Option(False, "--json", help="Print one JSON object per frame instead of a taxel map.")
-TIMEOUT_OPTION = typer.Option(5.0, "--timeout", min=0.1, help="Give up when the frames have not arrived (s).")
+TIMEOUT_OPTION = typer.Option(
+    5.0, "--timeout", min=0.1, help="Give up when the sensor has not answered or its frames have not arrived (s)."
+)
 SIMULATED_OPTION = typer.Option(False, "--simulated", help="Probe a simulated device with a synthetic press.")
 
 
@@ -111,6 +113,8 @@ def _print_map(console: Console, frames: list[TactileFrame], layout: SensorLayou
 
 
 def _run_probe(driver: Any, layout: SensorLayout, n_frames: int, as_json: bool, timeout_s: float) -> None:
+    if hasattr(driver, "connect_timeout_s"):  # a networked sensor (xela_server): --timeout bounds finding it too
+        driver.connect_timeout_s = timeout_s
     driver.connect()
     try:
         frames = driver.wait_frames(n_frames, timeout_s)

@@ -14,8 +14,7 @@ moment something is wrong, Ctrl-C included. ``drivers.motion.move_to`` is that l
 from __future__ import annotations
 
 from contextlib import AbstractContextManager
-from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -29,13 +28,15 @@ from drivers.errors import ArmError
 DEFAULT_WATCHDOG_HZ = 6.0
 
 
-@dataclass(frozen=True, slots=True)
-class ArmState:
-    """One state sample of the arm (500 Hz on a UR e-Series).
+class ArmState(NamedTuple):
+    """One state sample of the arm (500 Hz on a UR e-Series); immutable (``state._replace(...)`` for a changed copy).
 
     ``tcp_pose``: (6,) [x, y, z, rx, ry, rz] in m and rad (rotation vector), base frame.
     ``tcp_force``: (6,) [Fx, Fy, Fz, Tx, Ty, Tz] in N and N*m, base-frame axes, reference point the TCP
     (what RTDE's ``actual_TCP_force`` reports), after the last ``zero_ft``.
+    A named tuple, not a frozen dataclass: the host forms two every control period and reads them, and a frozen
+    dataclass's checked attribute stores made that a tenth of the simulated arm's cost. Treat its arrays as read
+    only (the simulated arm hands out read-only ones).
     """
 
     host_t_ns: int

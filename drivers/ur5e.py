@@ -51,7 +51,7 @@ import logging
 import math
 import threading
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, NoReturn
 
@@ -201,7 +201,7 @@ class UR5eArm:
         if self._closed:
             return state
         running = bool(self._call("isProgramRunning", self._control.isProgramRunning))
-        return state if running else replace(state, program_running=False)
+        return state if running else state._replace(program_running=False)
 
     # ---- commands -------------------------------------------------------------------------------------------
 

@@ -13,7 +13,6 @@ from __future__ import annotations
 import contextlib
 import math
 import signal
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -287,7 +286,7 @@ class _ScaledArm:
 
     def read_state(self) -> ArmState:
         state = self._arm.read_state()
-        return replace(state, tcp_force=np.asarray(state.tcp_force) * self._scale)
+        return state._replace(tcp_force=np.asarray(state.tcp_force) * self._scale)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._arm, name)
@@ -531,7 +530,7 @@ class _LateBitsArm:
         if rig.stopped_at_ns is None:
             rig.stopped_at_ns = rig.clock.now_ns()
         if rig.clock.now_ns() - rig.stopped_at_ns < rig.late_s * 1e9:
-            return replace(state, protective_stop=False, program_running=False)
+            return state._replace(protective_stop=False, program_running=False)
         return state
 
     def __getattr__(self, name: str) -> Any:

@@ -23,7 +23,6 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import replace
 from typing import Any, cast
 
 import numpy as np
@@ -74,7 +73,7 @@ class ZeroedArm:
 
     def read_state(self) -> ArmState:
         state = self._arm.read_state()
-        return replace(state, tcp_force=np.asarray(state.tcp_force, dtype=np.float64) - self.offset)
+        return state._replace(tcp_force=np.asarray(state.tcp_force, dtype=np.float64) - self.offset)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._arm, name)

@@ -65,6 +65,7 @@ DEFAULT_START_POSE = np.array([-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214])  # m, r
 
 _UNLOCK_HINT = "unlock the protective stop, then re-upload the control program"
 _NO_TURN = np.zeros(3)  # rad/s: the angular part of a force-mode twist with no compliant torque axis (never written)
+_NO_FT = np.zeros(6)  # placeholder of the measured-F/T cache before its first reading (never returned)
 
 
 @dataclass(frozen=True)
@@ -207,6 +208,7 @@ class SimArm:
         )
         self._filtered = self._true_wrench + self._bias
         self._zero_offset = np.zeros(6)
+        self._measured_of: tuple[np.ndarray | None, np.ndarray | None, float, np.ndarray] = (None, None, 1.0, _NO_FT)
         self.force_mode_damping, self.force_mode_gain_scaling = 0.005, 1.0  # the URScript defaults
         self._ft_sign = 1.0
         cutoff = self.params.ft_filter_cutoff_hz
@@ -217,8 +219,9 @@ class SimArm:
     # ---- truth (for simulated sensors and tests) ------------------------------------------------------------
 
     def true_tcp_pose(self) -> np.ndarray:
-        """Noise-free TCP pose (6,) [m, rad rotation vector], base frame: what simulated sensors feel."""
-        return self._pose().copy()
+        """Noise-free TCP pose (6,) [m, rad rotation vector], base frame: what simulated sensors feel. Read only
+        (the arm's own array, asked for every control period by the state and the sensors): copy it to change it."""
+        return self._pose()
 
     def _pose(self) -> np.ndarray:
         """The pose array itself, read only: formed once for each (position, rotation vector) pair. Both are
@@ -650,9 +653,18 @@ class SimArm:
             self._enter_protective_stop()
 
     def _measured_ft(self) -> np.ndarray:
-        """The F/T reading the controller reports and regulates on: sign x (filtered - zero offset)."""
-        reading = self._filtered - self._zero_offset
-        return reading if self._ft_sign == 1.0 else self._ft_sign * reading  # 1.0 x: the same numbers
+        """The F/T reading the controller reports and regulates on: sign x (filtered - zero offset); read only.
+
+        Formed once for each (filtered, zero offset, sign): force mode reads in a period the reading the state
+        reported after the last one."""
+        filtered, zero_offset, sign, reading = self._measured_of
+        if filtered is not self._filtered or zero_offset is not self._zero_offset or sign != self._ft_sign:
+            reading = self._filtered - self._zero_offset
+            if self._ft_sign != 1.0:  # 1.0 x: the same numbers
+                reading = self._ft_sign * reading
+            reading.flags.writeable = False
+            self._measured_of = (self._filtered, self._zero_offset, self._ft_sign, reading)
+        return reading
 
     def _snapshot(self) -> ArmState:
         now_ns = self.clock.now_ns()

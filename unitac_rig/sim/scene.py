@@ -309,7 +309,8 @@ class PressScene:
         with self._lock:
             if key != self._wrench_key:
                 ray, travel = self._locate_kept(pose, key)
-                self._wrench = NO_WRENCH if travel <= 0.0 else read_only(ray.interp(ray.wrench_base, travel))
+                wrench = NO_WRENCH if travel <= 0.0 else ray.interp(ray.wrench_base, travel, ray.wrench_steps)
+                self._wrench = read_only(wrench)
                 self._wrench_key = key
             return self._wrench
 
@@ -470,6 +471,10 @@ class _RayTable:
         self.wrench_base = np.concatenate([wrench[:, :3] @ rot.T, wrench[:, 3:] @ rot.T], axis=1)
         self._travel_list = travel.tolist()
         self.n_taxels = table.loads.shape[1]
+        # the differences of neighbouring rows, formed once for the tables asked about every control period or sample
+        self.wrench_steps = _row_steps(self.wrench_base)
+        self._load_steps = _row_steps(self.loads)
+        self._displacement_steps = None if self.displacement is None else _row_steps(self.displacement)
 
     def _segment(self, travel: float) -> tuple[int, float]:
         t = self._travel_list
@@ -479,17 +484,26 @@ class _RayTable:
         frac = (travel - t[i - 1]) / span if span > 0 else 0.0
         return i, frac
 
-    def interp(self, values: np.ndarray, travel: float) -> np.ndarray:
+    def interp(self, values: np.ndarray, travel: float, steps: np.ndarray | None = None) -> np.ndarray:
+        """``values`` (one row per travel) at ``travel``, linearly; ``steps``: its :func:`_row_steps` if kept."""
         i, frac = self._segment(travel)
-        return values[i - 1] + frac * (values[i] - values[i - 1])
+        step = values[i] - values[i - 1] if steps is None else steps[i - 1]
+        return values[i - 1] + frac * step
 
     def loads_at(self, travel: float) -> TaxelLoads:
         if travel <= 0.0 or not math.isfinite(self.touch_cn):
             zeros = np.zeros((self.n_taxels, 3))
             return TaxelLoads(zeros, zeros.copy() if self.has_displacement else None)
-        forces = self.interp(self.loads, travel)
-        disp = self.interp(self.displacement, travel) if self.displacement is not None else None
+        forces = self.interp(self.loads, travel, self._load_steps)
+        disp = (
+            self.interp(self.displacement, travel, self._displacement_steps) if self.displacement is not None else None
+        )
         return TaxelLoads(forces, disp)
+
+
+def _row_steps(values: np.ndarray) -> np.ndarray:
+    """``values[i + 1] - values[i]`` for every row i: what an interpolation between the two rows subtracts."""
+    return values[1:] - values[:-1]
 
 
 def _cubic_spring_deflection(force: np.ndarray, k0: float, k3: float) -> np.ndarray:

@@ -160,6 +160,78 @@ def run_session(sensor: str, object_id: str, angles: int, presses: int | None, s
     }
 
 
+def run_replay(trace: Path) -> dict[str, Any]:
+    """Replay ``trace`` (benchmarks/sim_trace.py) on the code on ``sys.path``: its CPU and the simulator's share."""
+    import sim_trace
+
+    _preload()
+    sampler = _CpuSampler()
+    marks: list[float] = []
+
+    def start() -> None:
+        sampler.__enter__()
+        marks.append(time.process_time())
+
+    try:
+        result = sim_trace.replay(trace, on_start=start)
+        cpu_s = time.process_time() - marks[0]
+    finally:
+        sampler.__exit__()
+    share = sampler.simulator / max(1, sampler.total)
+    sim_s = result["replayed_simulated_s"]
+    return {
+        **result,
+        "cpu_s": round(cpu_s, 3),
+        "simulator_share": round(share, 4),
+        "simulator_cpu_per_simulated_s": round(cpu_s * share / sim_s, 5),
+        "replay_cpu_per_simulated_s": round(cpu_s / sim_s, 5),
+    }
+
+
+def same_work(args: argparse.Namespace) -> dict[str, Any]:
+    """Per sensor: record this checkout's session as a trace, replay it on both versions in alternating rounds."""
+    result: dict[str, Any] = {}
+    here = str(Path(__file__).resolve())
+    with checkout(args.before) as before_tree, tempfile.TemporaryDirectory() as tmp:
+        for sensor in args.sensors:
+            trace = Path(tmp) / f"{sensor}.trace"
+            command = [sys.executable, str(Path(__file__).resolve().parent / "sim_trace.py"), "record", sensor]
+            command += [str(trace), args.object, str(args.angles), str(args.presses or 0), str(args.seed)]
+            subprocess.run(command, env=_env(ROOT), cwd=tmp, check=True, capture_output=True)
+            runs: dict[str, list[dict[str, Any]]] = {"before": [], "after": []}
+            for _ in range(args.pairs):
+                for version, code in (("before", before_tree), ("after", ROOT)):
+                    done = subprocess.run(
+                        [sys.executable, here, "--replay-worker", str(trace)],
+                        env=_env(code), cwd=tmp, capture_output=True, text=True,
+                    )  # fmt: skip
+                    if done.returncode != 0:
+                        raise SystemExit(f"replay on {code} failed:\n{done.stderr[-2000:]}")
+                    runs[version].append(json.loads(done.stdout.strip().splitlines()[-1]))
+            figures = ("simulator_cpu_per_simulated_s", "replay_cpu_per_simulated_s")
+            result[sensor] = {
+                version: {
+                    **{f: statistics.median(r[f] for r in rs) for f in figures},
+                    "simulated_s": rs[0]["replayed_simulated_s"],
+                    "failed_calls": rs[0]["failed_calls"],
+                    "runs": [{f: r[f] for f in (*figures, "cpu_s", "simulator_share")} for r in rs],
+                }
+                for version, rs in runs.items()
+            }
+            result[sensor]["ratios_before_over_after"] = {
+                f: round(statistics.median(b[f] / a[f] for b, a in zip(runs["before"], runs["after"], strict=True)), 2)
+                for f in figures
+            }
+            b, a = result[sensor]["before"], result[sensor]["after"]
+            print(
+                f"same work {sensor}: {a['simulated_s']:.1f} simulated s replayed; simulator "
+                f"{b['simulator_cpu_per_simulated_s']:.4f} -> {a['simulator_cpu_per_simulated_s']:.4f} CPU-s per "
+                f"simulated s ({result[sensor]['ratios_before_over_after']['simulator_cpu_per_simulated_s']}x); "
+                f"failed calls before {b['failed_calls']}, after {a['failed_calls']}"
+            )
+    return result
+
+
 def recorded_digest(data_dir: Path) -> str:
     """SHA-256 of every number the session recorded (each press's robot, tactile and extraction datasets, in name
     order): equal digests, bit-identical sessions."""
@@ -328,10 +400,27 @@ def main() -> None:
         help="only compare what a --presses session records on REF and on this checkout, bit for bit",
     )
     parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument(
+        "--same-work",
+        action="store_true",
+        help="only compare the simulators on the same work: this checkout's session replayed on both versions",
+    )
     parser.add_argument("--worker", choices=SENSORS, help=argparse.SUPPRESS)
+    parser.add_argument("--replay-worker", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         print(json.dumps(run_session(args.worker, args.object, args.angles, args.presses, args.seed)))
+        return
+    if args.replay_worker:
+        print(json.dumps(run_replay(args.replay_worker)))
+        return
+    if args.same_work:
+        doc = {"command": "python benchmarks/sim_cost.py " + " ".join(sys.argv[1:]), "before_commit": args.before}
+        doc["machine"] = {"cpus": os.cpu_count(), "load_avg": os.getloadavg()}
+        doc["presses"], doc["sensors"] = args.presses, same_work(args)
+        out = args.out.with_name("sim_same_work.json")
+        out.write_text(json.dumps(doc, indent=2) + "\n")
+        print(f"wrote {out}")
         return
 
     if args.identical:

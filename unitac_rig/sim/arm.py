@@ -175,8 +175,9 @@ class SimArm:
         self._force_gains: tuple[float, np.ndarray, np.ndarray] | None = None
         self._force_turns = False  # a torque axis of the force command is compliant
         self._force_low_limits = np.zeros(6)  # -speed_limits of the force command
-        # its force rows: (rotation transposed, selection, target, -limits, limits), each of the three force axes
-        self._force_rows: tuple[np.ndarray, ...] = (np.eye(3), *(np.zeros(3) for _ in range(4)))
+        # its force rows: (rotation transposed, selection, target, -limits, limits, the twist's), each of the three
+        # force axes; the twist's rows are the command's own, written on its selected axes only (the rest stay 0.0)
+        self._force_rows: tuple[np.ndarray, ...] = (np.eye(3), *(np.zeros(3) for _ in range(5)))
         self._path: _Path | None = None
         self._protective_stop = False
         self._program_running = True
@@ -359,7 +360,8 @@ class SimArm:
         self._force_turns = bool(chosen[3:].any())
         self._force_low_limits = -speed_limits
         rotation = self._force_command[0]
-        self._force_rows = (rotation.T, chosen[:3], target[:3], self._force_low_limits[:3], speed_limits[:3])
+        low3, high3 = self._force_low_limits[:3], speed_limits[:3]
+        self._force_rows = (rotation.T, chosen[:3], target[:3], low3, high3, np.zeros(3))
 
     def set_ft_sign(self, sign: float) -> None:
         """A fault hook: -1 reports the negated F/T (a flipped sensor frame); force mode regulates on the same
@@ -570,11 +572,13 @@ class SimArm:
         gains = self._force_gains[1]
         if not self._force_turns:  # the torque rows would give a zero turn: only the force rows, same operations
             # (np.dot is the same BLAS product as @ for a matrix and a vector, for a third of the call's cost)
-            rotation_t, chosen3, target3, low3, high3 = self._force_rows
+            rotation_t, chosen3, target3, low3, high3, twist3 = self._force_rows
             # target - applied with applied = -(R^T m): target + R^T m, the same sum
             gains3 = self._force_gains[2]
             limited = np.minimum(np.maximum(gains3 * (target3 + np.dot(rotation_t, measured[:3])), low3), high3)
-            return np.dot(rotation, np.where(chosen3, limited, 0.0)), _NO_TURN
+            # np.where(chosen3, limited, 0.0) into the command's own zeros (a third of np.where's cost)
+            np.copyto(twist3, limited, where=chosen3)
+            return np.dot(rotation, twist3), _NO_TURN
         applied_task = -np.concatenate([rotation.T @ measured[:3], rotation.T @ measured[3:]])
         # np.minimum(np.maximum(...)) is what np.clip computes, without its wrapper's cost
         limited = np.minimum(np.maximum(gains * (target - applied_task), self._force_low_limits), speed_limits)
@@ -687,8 +691,14 @@ def _moving(values: np.ndarray) -> bool:
     return any(values.tolist())
 
 
+_FLOAT64 = np.dtype(np.float64)
+
+
 def _raw(values: np.ndarray) -> bytes:
-    """The float64 bytes of a command argument: equal bytes, equal command."""
+    """The float64 bytes of a command argument: equal bytes, equal command. (A float64 array's own bytes without
+    ``np.asarray``'s dtype handling: the host re-sends force mode every control period.)"""
+    if type(values) is np.ndarray and values.dtype is _FLOAT64:
+        return values.tobytes()
     return np.asarray(values, dtype=np.float64).tobytes()
 
 

@@ -145,7 +145,7 @@ class HubPacketWriter:
             return encode_packet(self._packet(counter, timestamp_us, sensor))
         body = self._body
         u8 = np.frombuffer(body, dtype=np.uint8)
-        u8[self._float_pos] = np.frombuffer(values.astype("<f4").tobytes(), dtype=np.uint8)
+        u8[self._float_pos] = values.astype("<f4").view(np.uint8)  # the float32 fields' bytes, little-endian
         del u8  # the bytearray must not stay exported
         _U32.pack_into(body, self._counter_pos, counter)
         _U64.pack_into(body, self._time_pos, timestamp_us)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import hashlib
 import pickle
 import sys
 import tempfile
@@ -68,6 +69,7 @@ class _Recorder:
         self.events: list[tuple[Any, ...]] = []
         self.depth = 0
         self.sensors: dict[int, int] = {}  # id(driver) -> its number in the trace
+        self.path = hashlib.sha256()  # the arm's true pose after each of the host's arm calls
 
     def wrap(self, owner: str, function: Callable[..., Any], name: str) -> Callable[..., Any]:
         @functools.wraps(function)
@@ -83,6 +85,8 @@ class _Recorder:
                 result = function(target, *args, **kwargs)
             finally:
                 self.depth -= 1
+            if owner == "arm" and self.depth == 0:
+                self.path.update(target.true_tcp_pose().tobytes())
             if owner == "rig" and name == "open_sensor" and self.depth == 0:
                 self.sensors[id(result)] = len(self.sensors)
                 self.events.append(("opened", len(self.sensors) - 1, type(result).__name__, (), {}))
@@ -167,8 +171,11 @@ def record(sensor: str, object_id: str, angles: int, presses: int | None, seed: 
     ):
         outcome = collect_session(rig, get_object(object_id), sensor, Path(tmp), max_presses=presses)
     simulated_s = rig.clock.now_ns() / 1e9
+    final_pose = rig.sim_arm.true_tcp_pose().tolist()
     rig.close()
     header = {"sensor": sensor, "object": object_id, "angles": angles, "seed": seed, "simulated_s": simulated_s}
+    header["final_tcp_pose"] = final_pose
+    header["arm_path_sha256"] = recorder.path.hexdigest()
     with trace.open("wb") as f:
         pickle.dump({"header": header, "events": recorder.events}, f, protocol=pickle.HIGHEST_PROTOCOL)
     return {**header, "events": len(recorder.events), "presses_complete": outcome.complete}
@@ -212,6 +219,7 @@ def replay(trace: Path, on_start: Callable[[], None] | None = None) -> dict[str,
 
     opened: list[Any] = []
     kept_alive: list[Any] = []
+    path = hashlib.sha256()  # as the recorder's: equal on the recorded code, the replay took the recorded path
     if on_start is not None:
         on_start()
     for owner, who, name, args, kwargs in events:
@@ -236,6 +244,8 @@ def replay(trace: Path, on_start: Callable[[], None] | None = None) -> dict[str,
         except Exception as exc:  # the recorded host saw something else here; the work goes on
             failures[type(exc).__name__] = failures.get(type(exc).__name__, 0) + 1
             continue
+        if owner == "arm":
+            path.update(rig.sim_arm.true_tcp_pose().tobytes())
         if owner == "rig" and name == "open_sensor":
             opened.append(result)
         elif owner == "sensor" and name in ("poll", "poll_wait") and result:
@@ -243,8 +253,16 @@ def replay(trace: Path, on_start: Callable[[], None] | None = None) -> dict[str,
             kept.extend(result)
             del kept[:-2000]
     simulated_s = rig.clock.now_ns() / 1e9
+    final_pose = rig.sim_arm.true_tcp_pose().tolist()
     rig.close()
-    return {**header, "replayed_simulated_s": simulated_s, "events": len(events), "failed_calls": failures}
+    return {
+        **header,
+        "replayed_simulated_s": simulated_s,
+        "replayed_final_tcp_pose": final_pose,
+        "replayed_arm_path_sha256": path.hexdigest(),
+        "events": len(events),
+        "failed_calls": failures,
+    }
 
 
 def main() -> None:

@@ -64,7 +64,10 @@ SAFETY_MODE_PROTECTIVE_STOP = 3
 DEFAULT_START_POSE = np.array([-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214])  # m, rad: pad facing base +y
 
 _UNLOCK_HINT = "unlock the protective stop, then re-upload the control program"
-_NO_TURN = np.zeros(3)  # rad/s: the angular part of a force-mode twist with no compliant torque axis (never written)
+# rad/s: no rotation. The angular part of a force-mode twist with no compliant torque axis, and the angular velocity
+# of an arm that is not turning (most periods: checking this identity replaces a reduction); read only.
+_NO_TURN = np.zeros(3)
+_NO_TURN.flags.writeable = False
 _NO_FT = np.zeros(6)  # placeholder of the measured-F/T cache before its first reading (never returned)
 
 
@@ -163,7 +166,7 @@ class SimArm:
         initial.flags.writeable = False
         self._pose_of: tuple[np.ndarray, np.ndarray, np.ndarray] = (self._position, self._rotvec, initial)
         self._velocity = np.zeros(3)  # m/s, base frame
-        self._angular_velocity = np.zeros(3)  # rad/s, base frame
+        self._angular_velocity = _NO_TURN  # rad/s, base frame
         self._mode: _Mode = "idle"
         self._target_twist = np.zeros(6)
         self._accel_m_s2 = 0.0
@@ -424,8 +427,7 @@ class SimArm:
             return
         self._closed = True
         self._mode, self._force_command, self._path = "idle", None, None
-        self._velocity[:] = 0.0
-        self._angular_velocity[:] = 0.0
+        self._velocity, self._angular_velocity = np.zeros(3), _NO_TURN
         self._latest = self._snapshot()
         self.virtual_clock.remove_listener(self._on_clock_advance)
 
@@ -596,14 +598,15 @@ class SimArm:
                 return  # at rest: nothing moves (the steps below would all be zero)
             step = 0.5 * self._velocity * dt
             turn = 0.5 * self._angular_velocity * dt
-            self._velocity, self._angular_velocity = np.zeros(3), np.zeros(3)
+            self._velocity, self._angular_velocity = np.zeros(3), _NO_TURN
         else:
             if self._mode == "force" and self._force_command is not None:
                 (linear, angular), accel = self._force_twist(), self.params.force_mode_accel_m_s2
             else:
                 linear, angular, accel = self._target_twist[:3], self._target_twist[3:], self._accel_m_s2
             self._velocity, step = _ramp(self._velocity, linear, accel, dt)
-            if _moving(self._angular_velocity) or (angular is not _NO_TURN and _moving(angular)):
+            turning = self._angular_velocity is not _NO_TURN and _moving(self._angular_velocity)
+            if turning or (angular is not _NO_TURN and _moving(angular)):
                 self._angular_velocity, turn = _ramp(self._angular_velocity, angular, accel, dt)
             else:
                 turn = _NO_TURN
@@ -632,7 +635,7 @@ class SimArm:
     def _finish_path(self, path: _Path) -> None:
         self._position = path.goal[:3].copy()
         self._set_rotation(rotvec_to_matrix(path.goal[3:]), path.goal[3:])
-        self._velocity, self._angular_velocity = np.zeros(3), np.zeros(3)
+        self._velocity, self._angular_velocity = np.zeros(3), _NO_TURN
         self._mode, self._path = "idle", None
         self._latest = self._snapshot()
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
+from unitac_rig.sim.ft_noise import NormalBlocks
 from unitac_rig.sim.scene import SceneParams, TaxelLoads
 from unitac_rig.sim.signals import SensorSample
 
@@ -86,6 +87,8 @@ class UskinModel:
         mix = p.crosstalk_sd * self.rng.standard_normal((n, 3, 3))
         mix[:, np.arange(3), np.arange(3)] = 1.0
         self.crosstalk = mix  # (n, out axis, in axis)
+        # every sample's noise from here on: the same normals rng.normal drew one sample at a time, a block at once
+        self._normals = NormalBlocks(self.rng)
 
     def signal_counts(self, forces_n: np.ndarray) -> np.ndarray:
         """Noise-free counts above the baseline for taxel forces (..., n, 3) N: per-taxel gain, then cross-talk."""
@@ -98,7 +101,8 @@ class UskinModel:
     def sample(self, loads: TaxelLoads) -> SensorSample:
         # nothing pressing (the approach, the transits): the signal is zero and the expected counts the baseline
         expected = self.expected_counts(loads) if np.count_nonzero(loads.forces_n) else self.baseline_counts
-        counts = expected + self.rng.normal(0.0, self.params.noise_counts, self.layout.frame_shape)
+        noise = self.params.noise_counts * self._normals.take(3 * self.layout.n_taxels).reshape(self.layout.frame_shape)
+        counts = expected + noise  # rng.normal(0, s, shape) is s x the next standard normals, to the bit
         return SensorSample(values=np.clip(counts, 0.0, COUNTS_MAX))
 
 
@@ -118,11 +122,12 @@ class PapillArrayModel:
         self.calibration = np.asarray(p.calibration_n_per_mm, dtype=np.float64)  # (3,) N per mm, x y z
         self.offset_mm = self.rng.normal(0.0, p.offset_sd_mm, layout.frame_shape)
         self.offset_n = self.offset_mm * self.calibration  # the same offset, as the force it reads as
+        self._normals = NormalBlocks(self.rng)  # every sample's noise from here on (see UskinModel)
 
     def sample(self, loads: TaxelLoads) -> SensorSample:
         p = self.params
         shape = self.layout.frame_shape
-        error_mm = self.offset_mm + self.rng.normal(0.0, p.noise_mm, shape)
+        error_mm = self.offset_mm + p.noise_mm * self._normals.take(3 * self.layout.n_taxels).reshape(shape)
         disp = np.zeros(shape) if loads.displacement_mm is None else np.asarray(loads.displacement_mm)
         disp = disp + error_mm
         forces = np.asarray(loads.forces_n) + error_mm * self.calibration

@@ -166,6 +166,8 @@ class SimArm:
         initial.flags.writeable = False
         self._pose_of: tuple[np.ndarray, np.ndarray, np.ndarray] = (self._position, self._rotvec, initial)
         self._velocity = np.zeros(3)  # m/s, base frame
+        self._step_of: tuple[np.ndarray | None, np.ndarray] = (None, _NO_TURN)  # (velocity, its step in a period)
+        self._speed_of: tuple[np.ndarray | None, np.ndarray | None, np.ndarray] = (None, None, _NO_TURN)
         self._angular_velocity = _NO_TURN  # rad/s, base frame
         self._mode: _Mode = "idle"
         self._target_twist = np.zeros(6)
@@ -181,6 +183,7 @@ class SimArm:
         # its force rows: (rotation transposed, selection, target, -limits, limits, the twist's), each of the three
         # force axes; the twist's rows are the command's own, written on its selected axes only (the rest stay 0.0)
         self._force_rows: tuple[np.ndarray, ...] = (np.eye(3), *(np.zeros(3) for _ in range(5)))
+        self._twist_of: tuple[bytes, np.ndarray] = (b"", _NO_TURN)
         self._path: _Path | None = None
         self._protective_stop = False
         self._program_running = True
@@ -197,7 +200,7 @@ class SimArm:
         self._kept_alive = False
 
         self._true_wrench = np.asarray(world.wrench_on_tool(self.true_tcp_pose()), dtype=np.float64)
-        self._world_answer: np.ndarray | None = None  # the world's last answer, whose copy _true_wrench is
+        self._world_answer: np.ndarray | None = None  # the world's last read-only answer, whose copy _true_wrench is
         self._over_force_limit = False  # the true force is above the protective-stop limit
         delay_periods = max(0, round(self.params.ft_latency_s / self.control_period_s))
         # Holds the last ``delay_periods`` true wrenches: append the new one, pop the one that is now due.
@@ -365,6 +368,7 @@ class SimArm:
         rotation = self._force_command[0]
         low3, high3 = self._force_low_limits[:3], speed_limits[:3]
         self._force_rows = (rotation.T, chosen[:3], target[:3], low3, high3, np.zeros(3))
+        self._twist_of = (b"", _NO_TURN)  # (the twist's rows' bytes, the linear twist in base axes) of this command
 
     def set_ft_sign(self, sign: float) -> None:
         """A fault hook: -1 reports the negated F/T (a flipped sensor frame); force mode regulates on the same
@@ -580,7 +584,10 @@ class SimArm:
             limited = np.minimum(np.maximum(gains3 * (target3 + np.dot(rotation_t, measured[:3])), low3), high3)
             # np.where(chosen3, limited, 0.0) into the command's own zeros (a third of np.where's cost)
             np.copyto(twist3, limited, where=chosen3)
-            return np.dot(rotation, twist3), _NO_TURN
+            key = twist3.tobytes()
+            if key != self._twist_of[0]:  # at the speed limit the same twist comes back period after period
+                self._twist_of = (key, np.dot(rotation, twist3))
+            return self._twist_of[1], _NO_TURN
         applied_task = -np.concatenate([rotation.T @ measured[:3], rotation.T @ measured[3:]])
         # np.minimum(np.maximum(...)) is what np.clip computes, without its wrapper's cost
         limited = np.minimum(np.maximum(gains * (target - applied_task), self._force_low_limits), speed_limits)
@@ -604,7 +611,7 @@ class SimArm:
                 (linear, angular), accel = self._force_twist(), self.params.force_mode_accel_m_s2
             else:
                 linear, angular, accel = self._target_twist[:3], self._target_twist[3:], self._accel_m_s2
-            self._velocity, step = _ramp(self._velocity, linear, accel, dt)
+            self._velocity, step = self._ramp_linear(linear, accel, dt)
             turning = self._angular_velocity is not _NO_TURN and _moving(self._angular_velocity)
             if turning or (angular is not _NO_TURN and _moving(angular)):
                 self._angular_velocity, turn = _ramp(self._angular_velocity, angular, accel, dt)
@@ -615,6 +622,19 @@ class SimArm:
         self._position = self._position + step
         if turn is not _NO_TURN and _moving(turn):
             self._set_rotation(rotvec_to_matrix(turn) @ self._rotation)
+
+    def _ramp_linear(self, target: np.ndarray, accel: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`_ramp` of the linear velocity. At the target already, bit for bit (most force-mode periods, at the
+        speed limit), the same velocity array and its kept step: what _ramp answers there, without forming it again
+        (and a velocity that keeps its identity keeps the state's speed array too)."""
+        velocity = self._velocity
+        if target.tobytes() != velocity.tobytes():
+            return _ramp(velocity, target, accel, dt)
+        kept, step = self._step_of
+        if kept is not velocity:
+            step = velocity * dt  # _ramp's target x dt
+            self._step_of = (velocity, step)
+        return velocity, step
 
     def _step_path(self, path: _Path, dt: float) -> None:
         path.elapsed_s = min(path.elapsed_s + dt, path.profile.duration_s)
@@ -642,8 +662,8 @@ class SimArm:
     def _update_sensor(self) -> None:
         """One F/T sample: true wrench -> latency -> + bias + noise -> low-pass; and the protective-stop check."""
         answer = self.world.wrench_on_tool(self._pose())
-        if answer is not self._world_answer or answer.flags.writeable:  # a new wrench (a read-only one is kept)
-            self._world_answer = answer
+        if answer is not self._world_answer:  # a new wrench
+            self._world_answer = None if answer.flags.writeable else answer  # only a read-only answer is kept
             # replaced, never changed in place: the delay line may hold the same array
             self._true_wrench = np.array(answer, dtype=np.float64)
             force = self._true_wrench[:3]
@@ -683,9 +703,18 @@ class SimArm:
             robot_mode=ROBOT_MODE_RUNNING,
             safety_mode=SAFETY_MODE_PROTECTIVE_STOP if self._protective_stop else SAFETY_MODE_NORMAL,
             protective_stop=self._protective_stop,
-            tcp_speed=np.concatenate([self._velocity, self._angular_velocity]),
+            tcp_speed=self._speed(),
             program_running=self._program_running,
         )
+
+    def _speed(self) -> np.ndarray:
+        """The TCP speed (6,) [m/s, rad/s], read only; formed once for each (velocity, angular velocity) pair."""
+        velocity, angular, speed = self._speed_of
+        if velocity is not self._velocity or angular is not self._angular_velocity:
+            speed = np.concatenate([self._velocity, self._angular_velocity])
+            speed.flags.writeable = False
+            self._speed_of = (self._velocity, self._angular_velocity, speed)
+        return speed
 
 
 def _moving(values: np.ndarray) -> bool:

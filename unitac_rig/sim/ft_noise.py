@@ -42,9 +42,8 @@ class FtNoise:
         self._noise_sigma = noise_sigma if noise_sigma > 0 else None
         self._axis_scale = axis_scale
         self._per_period = 6 * ((self._drift_step is not None) + (self._noise_sigma is not None))
-        # the rows of the coming periods, split once per block (indexing an array made a view every period)
-        self._bias: list[np.ndarray] | None = None  # the bias after each coming period, (6,) each
-        self._noise: list[np.ndarray] | None = None  # (6,) each
+        self._bias: np.ndarray | None = None  # (periods, 6) bias after each coming period
+        self._noise: np.ndarray | None = None  # (periods, 6)
         self._next = 0
         self._periods = 0
 
@@ -67,8 +66,8 @@ class FtNoise:
         self._bias = self._noise = None
         if self._drift_step is not None:
             steps = self._drift_step * draws[:, :6] * self._axis_scale
-            self._bias = list(np.add.accumulate(np.concatenate([bias[None, :], steps]), axis=0)[1:])
+            self._bias = np.add.accumulate(np.concatenate([bias[None, :], steps]), axis=0)[1:]
             column = 6
         if self._noise_sigma is not None:
-            self._noise = list(self._noise_sigma * draws[:, column : column + 6] * self._axis_scale)
+            self._noise = self._noise_sigma * draws[:, column : column + 6] * self._axis_scale
         self._next, self._periods = 0, periods

@@ -75,6 +75,7 @@ class SimSerialEndpoint:
         self._ready = bytearray()
         self._generation = 0
         self._attached = False
+        self._refills = type(self).refill is not SimSerialEndpoint.refill  # pulls output made elsewhere
         register(scheme, name, self)
 
     @property
@@ -191,6 +192,9 @@ class SimSerialEndpoint:
         """pyserial read semantics: up to ``size`` bytes, waiting at most ``timeout_s`` (None: until ``size``)."""
         if timeout_s == 0:  # a non-blocking read (a driver's poll, every control period): what is there, at once
             self.check_disconnect()
+            if not (self._ready or self._pending or self._refills):  # most polls: nothing sent since the last one
+                self._alive(generation)
+                return b""
             with self._cond:
                 self._alive(generation)
                 self._release_due()

@@ -232,6 +232,43 @@ def same_work(args: argparse.Namespace) -> dict[str, Any]:
     return result
 
 
+def period_cost() -> dict[str, float]:
+    """CPU (µs) of one control period of the simulated arm alone, best of 5 runs, in free air with ``hex_tpu``
+    mounted and the host reading the state each period: at rest, and in force mode at its speed limit with the host
+    re-sending the same command each period (what the press's approach does)."""
+    import numpy as np
+
+    from unitac_rig.rig.config import parse_rig_config
+    from unitac_rig.rig.objects import get_object
+    from unitac_rig.sim.fast_rig import SimRig
+
+    rig = SimRig(parse_rig_config({}), seed=0)
+    rig.mount(get_object("hex_tpu"), 0.0, "papillarray")
+    arm = rig.sim_arm
+
+    def best_us(period: Any, n: int) -> float:
+        runs = []
+        for _ in range(5):
+            start = time.process_time()
+            for _ in range(n):
+                period()
+            runs.append((time.process_time() - start) / n * 1e6)
+        return round(min(runs), 2)
+
+    rest = best_us(lambda: (arm.wait_period(), arm.read_state()), 4000)
+    frame, selection = np.array(arm.read_state().tcp_pose), np.array([0, 0, 1.0, 0, 0, 0])
+    limits = np.array([0, 0, 0.002, 0, 0, 0])
+
+    def pulling_back() -> None:  # a set-point pulling away from the object: free air, at the speed limit
+        arm.force_mode(frame, selection, np.array([0, 0, -2.0, 0, 0, 0]), limits)
+        arm.wait_period()
+        arm.read_state()
+
+    force = best_us(pulling_back, 2000)
+    rig.close()
+    return {"rest_us": rest, "force_mode_at_speed_limit_us": force}
+
+
 def recorded_digest(data_dir: Path) -> str:
     """SHA-256 of every number the session recorded (each press's robot, tactile and extraction datasets, in name
     order): equal digests, bit-identical sessions."""
@@ -405,14 +442,28 @@ def main() -> None:
         action="store_true",
         help="only compare the simulators on the same work: this checkout's session replayed on both versions",
     )
+    parser.add_argument(
+        "--period-cost", action="store_true", help="only time one simulated control period alone, before and after"
+    )
     parser.add_argument("--worker", choices=SENSORS, help=argparse.SUPPRESS)
     parser.add_argument("--replay-worker", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--period-worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         print(json.dumps(run_session(args.worker, args.object, args.angles, args.presses, args.seed)))
         return
     if args.replay_worker:
         print(json.dumps(run_replay(args.replay_worker)))
+        return
+    if args.period_worker:
+        print(json.dumps(period_cost()))
+        return
+    if args.period_cost:
+        with checkout(args.before) as before_tree:
+            for label, code in (("before", before_tree), ("after", ROOT)):
+                command = [sys.executable, str(Path(__file__).resolve()), "--period-worker"]
+                done = subprocess.run(command, env=_env(code), capture_output=True, text=True, check=True)
+                print(f"{label} ({args.before if label == 'before' else 'this checkout'}): {done.stdout.strip()}")
         return
     if args.same_work:
         doc = {"command": "python benchmarks/sim_cost.py " + " ".join(sys.argv[1:]), "before_commit": args.before}

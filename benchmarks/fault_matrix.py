@@ -15,8 +15,10 @@ contact episode, F > 0.5 N until F < 0.2 N, whose peak reached 9 N):
 * ``first move``: the first poll of the run with v > 0.5 mm/s (the session's first motion, from the home pose);
 * ``transit``: after press 1 ended and the pad went at least 20 mm farther out than where that contact ended, the
   first poll with v > 5 mm/s moving radially inward (v_r < -0.9 v): the last leg toward press 2's stand-off;
-* ``approach``: after press 1, F < 0.2 N and 1 <= v <= 3 mm/s held for 0.3 s of controller time: press 2's free-air
-  force-mode approach (accelerations of the 10 mm/s transit legs pass this band in milliseconds);
+* ``approach``: after press 1, F < 0.2 N and v within 20 % of the rig file's ``press.fast_speed_mm_s`` (15 mm/s)
+  held for 0.1 s of controller time: press 2's free-air force-mode approach, which the default two-phase press runs
+  at that speed to first contact (the 10 mm/s legs near the object never reach the band; faster legs pass it in
+  milliseconds). Until issue 27's press it was 1-3 mm/s for 0.3 s: the guarded press's 2 mm/s approach;
 * ``press``: after press 1, a new contact with F > 5 N: press 2 in contact;
 * ``retract``: in press 2's contact, after its peak passed 9 N, v > 0.5 mm/s and F <= 0.9 x peak: force falling
   after the stop;
@@ -67,7 +69,7 @@ import h5py
 import numpy as np
 
 from unitac_rig.bench import machine_info, write_json
-from unitac_rig.rig.config import load_rig_config
+from unitac_rig.rig.config import PressConfig, load_rig_config
 from unitac_rig.sim.twin import ControllerParams, first_free_loopback
 from unitac_rig.sim.twin.rig import RigTwin
 from unitac_rig.sim.twin.truth import TwinTruth
@@ -92,6 +94,7 @@ RESUME_ATTEMPTS = 3
 PUT_BACK_RADIUS_M = 0.030
 TOOL_OFFSET = (0.0, 0.0, 0.05, 0.0, 0.0, 0.0)  # the twin's physical pad, m/rad from the flange
 MISSING_M = (1.0, 0.0)  # the object "missing": 1 m from where the rig file says
+APPROACH_MM_S = PressConfig().fast_speed_mm_s  # the two-phase press's free-air approach (the rig file's default)
 CLOSER_M = (0.0, -0.05)  # the arm approaches from -y: 50 mm closer to the arm
 EXCLUDE_PRESS_2 = {"workspace_max_m": [-0.13, 1.0, 0.6]}  # press 2 of 2 (ang+45) outside the box
 DOC_SECTION = "## Motion faults"
@@ -223,9 +226,9 @@ class MomentDetector:
             radial = float(np.asarray(t.tcp_speed[:2]) @ (rel / max(r, 1e-9))) * 1000.0
             return self.gone_out and not self.in_contact and v > 5.0 and radial < -0.9 * v
         if m == "approach":
-            if not self.in_contact and f < 0.2 and 1.0 <= v <= 3.0:
+            if not self.in_contact and f < 0.2 and abs(v - APPROACH_MM_S) <= 0.2 * APPROACH_MM_S:
                 self.band_since_s = t.controller_t_s if self.band_since_s is None else self.band_since_s
-                return t.controller_t_s - self.band_since_s >= 0.3
+                return t.controller_t_s - self.band_since_s >= 0.1
             self.band_since_s = None
             return False
         if m == "press":
@@ -576,8 +579,9 @@ def render_section(doc: dict[str, Any]) -> str:
         "Issue 26's fault matrix: every motion around the press against every single fault, run against the "
         "real-time twin (`unitac_rig/sim/twin`) with the real ur_rtde clients: `unitac-rig collect --rig <twin rig "
         "file>` unchanged, circle_pla with a PapillArray, 2 approach angles (3 for the missing object), the rig "
-        "file's defaults (25 N hard limit, 10 N stop, 2 mm/s force-mode approach, 10 mm/s near the object, 6 Hz "
-        "watchdog). Forces, rest and pose are the twin's ground truth. Made with "
+        "file's defaults (25 N hard limit, 10 N stop, the two-phase press: a 15 mm/s force-mode approach to first "
+        "contact and 2 mm/s on to the stop, 10 mm/s for position moves near the object, 6 Hz watchdog). Forces, "
+        "rest and pose are the twin's ground truth. Made with "
         "`python benchmarks/fault_matrix.py --write-docs` (JSON: docs/figures/fault_matrix.json; test: "
         "`pytest -m fault_matrix`), "
         f"{doc['finished_utc']}, {doc['machine']['cpus']} CPUs, load {doc['machine']['load_average_1min']}.",

@@ -9,23 +9,26 @@ from pathlib import Path
 
 import pytest
 
-from unitac_rig.cli.learn_train import _CONFIG_OPTIONS, TrainRequest, train_command
+from unitac_rig.cli.learn_train import TrainRequest, config_options, train_command
 from unitac_rig.errors import UsageError
+from unitac_rig.learning import config as learn_config
 from unitac_rig.learning.train import TrainConfig
 
 
 def test_every_train_option_reaches_the_request() -> None:
     options = set(inspect.signature(train_command).parameters) - {"ctx"}
     fields = {f.name for f in dataclasses.fields(TrainRequest)} - {"options"}
-    assert options == fields | set(_CONFIG_OPTIONS)
-    assert not fields & set(_CONFIG_OPTIONS)
+    generated = config_options()
+    assert options == fields | set(generated)
+    assert not fields & set(generated)
     flat = TrainConfig().to_dict()
-    for key in _CONFIG_OPTIONS.values():  # each names a real TrainConfig field
+    for option in generated.values():  # each names a real TrainConfig field
+        key = learn_config.flat_key(option.section, option.key)
         assert (key.removeprefix("shape.") in flat["shape"]) if key.startswith("shape.") else key in flat
 
 
 def test_the_request_builds_the_config_the_options_ask_for(tmp_path: Path) -> None:
-    params = {name: None for name in _CONFIG_OPTIONS} | {
+    params = {name: None for name in config_options()} | {
         "data": [tmp_path], "out": tmp_path / "run", "resume": False, "config_file": None, "partial": False,
         "from_run": None, "new_sensor": None, "epochs": 7, "seed": 3, "n_seeds": 2, "device": "cpu", "threads": 0,
         "report": False, "latent_dim": 8, "encoder_hidden": "32,16", "nmae_normaliser": "sensor_range",

@@ -1,74 +1,28 @@
 """``unitac-rig train``: the command's options, and the thin layer that turns them into a :class:`TrainRequest` and
 runs :func:`unitac_rig.learning.train.train` (or :func:`unitac_rig.learning.extend.add_sensor`) with a progress bar.
 
-Every option is one ``Annotated`` alias below (its flag, help and help panel), so the command's signature is one line
-per option and its body one call; the request object does the rest (checks, the configuration, the data).
+The options that set a training hyper-parameter are generated from the fields of
+:mod:`unitac_rig.learning.config` (flag, help, default, range and validation all come from the field); the few
+written here say where the data and the run are and how to run. Every value is checked before any work: a usage error
+(exit 2) names the option as typed, or the key of the --config file.
 """
 
 from __future__ import annotations
 
+import inspect
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from pydantic import ValidationError
+from pydantic.fields import FieldInfo
 
-from unitac_rig.cli.learn import (
-    DEVICES,
-    NMAE_NORMALISER_NAMES,
-    PREPROCESSING_NAMES,
-    RUN_MARKER,
-    SSIM_RANGE_NAMES,
-    _print_table,
-    stage_printer,
-)
+from unitac_rig.cli.learn import DEVICES, RUN_MARKER, _print_table, stage_printer
 from unitac_rig.errors import UsageError
-
-
-def _parse_seeds(seed: int, n_seeds: int) -> tuple[int, ...]:
-    if n_seeds < 1:
-        raise UsageError("--n-seeds must be at least 1")
-    return tuple(range(seed, seed + n_seeds))
-
-
-def _parse_widths(text: str, option: str) -> tuple[int, ...]:
-    """``"64,48"`` -> (64, 48); a UsageError names the option otherwise."""
-    try:
-        widths = tuple(int(part) for part in text.replace(" ", "").split(",") if part)
-    except ValueError:
-        raise UsageError(f"{option} takes comma-separated layer widths, e.g. 64,48; got {text!r}") from None
-    if not widths or min(widths) < 1:
-        raise UsageError(f"{option} takes comma-separated positive layer widths, got {text!r}")
-    return widths
-
-
-def _option_name(key: str) -> str:
-    """The command-line option of a flat TrainConfig key (``shape.latent_dim`` -> ``--latent-dim``)."""
-    return "--lr" if key == "learning_rate" else "--" + key.removeprefix("shape.").replace("_", "-")
-
-
-def training_overrides(
-    config_file: Path | None, options: dict[str, Any], seed: int | None, n_seeds: int | None
-) -> dict[str, Any]:
-    """The flat TrainConfig keys a ``train`` call sets: the --config file's, then every option given on the
-    command line over them (options left out stay None and change nothing)."""
-    from unitac_rig.learning.config import load_config
-
-    flat = load_config(config_file) if config_file is not None else {}
-    for key, value in options.items():
-        if value is None:
-            continue
-        if key in ("shape.encoder_hidden", "shape.decoder_hidden"):
-            value = _parse_widths(value, _option_name(key))
-        flat[key] = value
-    if seed is not None or n_seeds is not None:
-        first = seed if seed is not None else int(flat.get("seeds", (0,))[0])
-        flat["seeds"] = _parse_seeds(first, n_seeds if n_seeds is not None else 1)
-    return flat
-
-
-# Help headings of `train` (the options are many: grouped, as git groups its own).
-
+from unitac_rig.learning import config as train_config
+from unitac_rig.rig.config import read_toml
 
 # Help headings of `train` (the options are many: grouped, as git groups its own).
 _RUN = "Data and run"
@@ -76,22 +30,96 @@ _TRAINING = "Training"
 _MODEL = "Model (the paper's shape by default)"
 _SPLIT = "Split, preprocessing and metrics"
 _REPORT = "Evaluation and report"
+_BOUNDS = ("gt", "ge", "lt", "le")  # pydantic's (annotated_types') bound attributes
+_PANELS = {
+    "model": _MODEL,
+    "training": _TRAINING,
+    "split": _SPLIT,
+    "preprocessing": _SPLIT,
+    "metrics": _SPLIT,
+    "evaluation": _REPORT,
+}
 
 
-def check_train_arguments(
-    data: list[Path], out: Path, resume: bool, device: str, config_file: Path | None, choices: dict[str, str | None]
-) -> None:
+@dataclass(frozen=True)
+class ConfigOption:
+    """One ``train`` option generated from a field of the training configuration."""
+
+    section: str  # of the config file
+    key: str  # in that section
+    flag: str  # as typed: --lr, --baselines/--no-baselines
+    info: FieldInfo
+
+    @property
+    def name(self) -> str:
+        """The command's parameter: the flat TrainConfig key without ``shape.`` (learning_rate, latent_dim)."""
+        return train_config.flat_key(self.section, self.key).removeprefix("shape.")
+
+    def typed(self, value: Any) -> str:
+        """The option as it was typed (``--test-fraction 1.5``, ``--no-baselines``)."""
+        if isinstance(value, bool):
+            on, _, off = self.flag.partition("/")
+            return on if value or not off else off
+        return f"{self.flag} {value}"
+
+    def parameter(self) -> inspect.Parameter:
+        """The typer parameter: None unless given, help, default and range from the field."""
+        info = self.info
+        choices = typing.get_args(info.annotation) if typing.get_origin(info.annotation) is typing.Literal else ()
+        bounds = {name: getattr(m, name) for m in info.metadata for name in _BOUNDS if hasattr(m, name)}
+        default = info.default
+        paper = isinstance(info.json_schema_extra, dict) and info.json_schema_extra.get("paper")
+        if isinstance(default, bool):
+            kind: Any = bool
+            shown = self.typed(default)
+        elif isinstance(default, tuple):  # layer widths
+            kind, shown = str, ",".join(map(str, default))
+        else:
+            kind = str if choices else type(default)
+            shown = f"{default:g}" if isinstance(default, float) else str(default)
+        help_text = info.description or ""
+        if choices:
+            help_text += f" One of: {', '.join(choices)}."
+        open_bounds = [f"above {bounds['gt']:g}"] if "gt" in bounds else []
+        open_bounds += [f"below {bounds['lt']:g}"] if "lt" in bounds else []
+        if open_bounds:
+            help_text = f"{help_text.rstrip('.')} ({', '.join(open_bounds)})."
+        option = typer.Option(
+            *self.flag.split(" "),
+            metavar="W,W" if isinstance(default, tuple) else ("NAME" if choices else None),
+            min=_plain(bounds.get("ge")),
+            max=_plain(bounds.get("le")),
+            show_default=shown + (", as in the paper" if paper else ""),
+            help=help_text,
+            rich_help_panel=_PANELS[self.section],
+        )
+        return inspect.Parameter(
+            self.name, inspect.Parameter.KEYWORD_ONLY, default=None, annotation=Annotated[kind | None, option]
+        )
+
+
+def _plain(bound: Any) -> Any:
+    """0.0 -> 0 (for the help's "at least 0")."""
+    return int(bound) if isinstance(bound, float) and bound.is_integer() else bound
+
+
+def config_options() -> dict[str, ConfigOption]:
+    """Every field of the training configuration that is a ``train`` option, by parameter name."""
+    options = {}
+    for (section, key), info in train_config.fields().items():
+        extra = info.json_schema_extra if isinstance(info.json_schema_extra, dict) else {}
+        flag = extra.get("cli", "--" + train_config.flat_key(section, key).removeprefix("shape.").replace("_", "-"))
+        if flag is not None:
+            option = ConfigOption(section, key, str(flag), info)
+            options[option.name] = option
+    return options
+
+
+def check_train_arguments(data: list[Path], out: Path, resume: bool, device: str, config_file: Path | None) -> None:
     """What a ``train`` call can be refused for without torch or the data: a usage error naming the option, in
     well under a second (importing torch alone takes seconds on a loaded box)."""
     if device not in DEVICES:
         raise UsageError(f"--device {device!r} is not a device", hint=f"use one of: {', '.join(DEVICES)}")
-    for option, (value, known) in {
-        "--preprocessing": (choices.get("preprocessing"), PREPROCESSING_NAMES),
-        "--nmae-normaliser": (choices.get("nmae_normaliser"), NMAE_NORMALISER_NAMES),
-        "--ssim-range": (choices.get("ssim_range"), SSIM_RANGE_NAMES),
-    }.items():
-        if value is not None and value not in known:
-            raise UsageError(f"{option} {value!r} is not one of: {', '.join(known)}")
     for directory in data:
         if not directory.is_dir():
             raise UsageError(f"--data {directory} is not a directory", hint="pass the --data folder `collect` wrote")
@@ -104,6 +132,111 @@ def check_train_arguments(
         raise UsageError(
             f"--out {out} already holds a run", hint="pass --resume to continue it, or choose another --out"
         )
+    elif out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise UsageError(
+            f"--out {out} is not empty and holds no run", hint="a run writes a folder of its own: choose a new --out"
+        )
+
+
+@dataclass(frozen=True)
+class TrainRequest:
+    """One ``train`` call as its options gave it (None: not given): where the data and the run are, how to run, and
+    the options that set a training hyper-parameter (``options``, by parameter name)."""
+
+    data: list[Path]
+    out: Path
+    resume: bool = False
+    config_file: Path | None = None
+    partial: bool = False
+    from_run: Path | None = None
+    new_sensor: str | None = None
+    seed: int | None = None
+    n_seeds: int | None = None
+    device: str = "auto"
+    threads: int = 0
+    report: bool = True
+    options: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_params(cls, params: dict[str, Any]) -> TrainRequest:
+        """The request of a parsed command line (``typer.Context.params``)."""
+        generated = config_options()
+        options = {name: params.get(name) for name in generated}
+        own = {name: value for name, value in params.items() if name not in generated}
+        return cls(**own, options=options)
+
+    @property
+    def extends(self) -> bool:
+        """``--from RUN --new-sensor NAME``: add a sensor to a trained run."""
+        return self.from_run is not None or self.new_sensor is not None
+
+    @property
+    def epochs(self) -> int | None:
+        return self.options.get("epochs")
+
+    def check(self) -> None:
+        """What this call can be refused for before torch is imported or the data read."""
+        if self.n_seeds is not None and self.n_seeds < 1:
+            raise UsageError("--n-seeds must be at least 1")
+        if self.extends or self.resume:  # only the options given are checked (the run keeps its configuration)
+            self.settings(with_file=False)
+        else:
+            check_train_arguments(self.data, self.out, self.resume, self.device, self.config_file)
+            self.settings()
+
+    def settings(self, *, with_file: bool = True) -> train_config.ConfigFile:
+        """The complete configuration this call asks for: the defaults, then the --config file's keys, then the
+        options given. A bad value is a usage error naming the option as typed (or the file's key)."""
+        sections: dict[str, dict[str, Any]] = {}
+        if with_file and self.config_file is not None:
+            data = read_toml(self.config_file, "config file")
+            train_config.parse_config(data, source=str(self.config_file))  # the file alone names its bad key
+            sections = {name: dict(values) for name, values in data.items()}
+        generated = config_options()
+        given = {}
+        for name, value in self.options.items():
+            if value is not None:
+                option = generated[name]
+                sections.setdefault(option.section, {})[option.key] = value
+                given[option.section, option.key] = option.typed(value)
+        if self.seed is not None or self.n_seeds is not None:
+            first = self.seed if self.seed is not None else int(sections.get("training", {}).get("seeds", [0])[0])
+            sections.setdefault("training", {})["seeds"] = list(range(first, first + (self.n_seeds or 1)))
+            given["training", "seeds"] = f"--seed {first} --n-seeds {self.n_seeds or 1}"
+        try:
+            return train_config.validate(sections)
+        except ValidationError as exc:
+            error = exc.errors()[0]
+            where = tuple(str(part) for part in error["loc"][:2])
+            message = str(error["msg"]).removeprefix("Value error, ").replace("Input should be", "should be")
+            if where in given:
+                raise UsageError(f"{given[where]}: {message}") from None
+            raise UsageError(f"{self.config_file}: {'.'.join(where)}: {message}") from None
+
+    def train_config(self) -> Any:
+        """The TrainConfig of a new run (defaults, then the --config file, then the options), or None to resume
+        (which refuses every option but --epochs: the run keeps its stored configuration)."""
+        from unitac_rig.learning.train import TrainConfig
+
+        if self.resume:
+            generated = config_options()
+            given = [generated[k].flag for k, v in self.options.items() if v is not None and k != "epochs"] + [
+                name
+                for name, v in (("--config", self.config_file), ("--seed", self.seed), ("--n-seeds", self.n_seeds))
+                if v is not None
+            ]
+            if given:
+                raise UsageError(
+                    f"--resume continues a run with its stored configuration; drop {', '.join(sorted(given))}",
+                    hint="only --epochs (to extend the budget) goes with --resume",
+                )
+            return None
+        settings = self.settings()
+        flat = {
+            train_config.flat_key(section, key): getattr(getattr(settings, section), key)
+            for section, key in train_config.fields()
+        }
+        return TrainConfig().updated(flat)
 
 
 _Data = Annotated[
@@ -116,21 +249,10 @@ _Data = Annotated[
     ),
 ]
 _Out = Annotated[
-    Path,
-    typer.Option(
-        "--out",
-        metavar="RUN",
-        help="Run directory to create (or to continue with --resume).",
-        rich_help_panel=_RUN,
-    ),
+    Path, typer.Option("--out", metavar="RUN", help="New run directory (or the run to --resume).", rich_help_panel=_RUN)
 ]
 _Resume = Annotated[
-    bool,
-    typer.Option(
-        "--resume",
-        help="Continue the run in --out from its last checkpoint.",
-        rich_help_panel=_RUN,
-    ),
+    bool, typer.Option("--resume", help="Continue the run in --out from its last checkpoint.", rich_help_panel=_RUN)
 ]
 _ConfigFile = Annotated[
     Path | None,
@@ -153,10 +275,7 @@ _Partial = Annotated[
 _FromRun = Annotated[
     Path | None,
     typer.Option(
-        "--from",
-        metavar="RUN",
-        help="A trained run to add --new-sensor to (it is not modified).",
-        rich_help_panel=_RUN,
+        "--from", metavar="RUN", help="A trained run to add --new-sensor to (it is not modified).", rich_help_panel=_RUN
     ),
 ]
 _NewSensor = Annotated[
@@ -166,16 +285,6 @@ _NewSensor = Annotated[
         metavar="SENSOR",
         help="With --from: train only this sensor's encoder and output layer (docs/learning.md).",
         rich_help_panel=_RUN,
-    ),
-]
-_Epochs = Annotated[
-    int | None,
-    typer.Option(
-        "--epochs",
-        min=1,
-        show_default="1000, as in the paper",
-        help="Training epochs; with --resume, the new total.",
-        rich_help_panel=_TRAINING,
     ),
 ]
 _Seed = Annotated[
@@ -197,283 +306,20 @@ _NSeeds = Annotated[
         rich_help_panel=_TRAINING,
     ),
 ]
-_LearningRate = Annotated[
-    float | None,
-    typer.Option(
-        "--lr",
-        show_default="5e-4, as in the paper",
-        help="Adam learning rate.",
-        rich_help_panel=_TRAINING,
-    ),
-]
-_BatchSize = Annotated[
-    int | None,
-    typer.Option(
-        "--batch-size",
-        min=1,
-        show_default="64, as in the paper",
-        help="Batch size.",
-        rich_help_panel=_TRAINING,
-    ),
-]
-_Device = Annotated[
-    str,
-    typer.Option(
-        "--device",
-        metavar="NAME",
-        help="auto, cpu or cuda.",
-        rich_help_panel=_TRAINING,
-    ),
-]
+_Device = Annotated[str, typer.Option("--device", metavar="NAME", help="auto, cpu or cuda.", rich_help_panel=_TRAINING)]
 _Threads = Annotated[
     int,
     typer.Option(
-        "--threads",
-        min=0,
-        help="CPU threads (0: one, fastest for these small layers).",
-        rich_help_panel=_TRAINING,
-    ),
-]
-_Dropout = Annotated[
-    float | None,
-    typer.Option(
-        "--dropout",
-        show_default="0.007",
-        help="Dropout after every layer.",
-        rich_help_panel=_MODEL,
-    ),
-]
-_EncoderHidden = Annotated[
-    str | None,
-    typer.Option(
-        "--encoder-hidden",
-        metavar="W,W",
-        show_default="64,48",
-        help="Encoder hidden widths.",
-        rich_help_panel=_MODEL,
-    ),
-]
-_LatentDim = Annotated[
-    int | None,
-    typer.Option(
-        "--latent-dim",
-        min=1,
-        show_default="16",
-        help="Latent size.",
-        rich_help_panel=_MODEL,
-    ),
-]
-_DecoderHidden = Annotated[
-    str | None,
-    typer.Option(
-        "--decoder-hidden",
-        metavar="W,W",
-        show_default="64,96",
-        help="Decoder hidden widths.",
-        rich_help_panel=_MODEL,
-    ),
-]
-_AlignWeight = Annotated[
-    float | None,
-    typer.Option(
-        "--align-weight",
-        show_default="0",
-        help="Weight of a scale-free latent alignment term (beyond the paper).",
-        rich_help_panel=_MODEL,
-    ),
-]
-_SplitSeed = Annotated[
-    int | None,
-    typer.Option(
-        "--split-seed",
-        show_default="0",
-        help="Seed of the test/validation split.",
-        rich_help_panel=_SPLIT,
-    ),
-]
-_TestFraction = Annotated[
-    float | None,
-    typer.Option(
-        "--test-fraction",
-        show_default="0.1",
-        help="Share of directions held out for test.",
-        rich_help_panel=_SPLIT,
-    ),
-]
-_ValFraction = Annotated[
-    float | None,
-    typer.Option(
-        "--val-fraction",
-        show_default="0.1",
-        help="Share of directions for validation.",
-        rich_help_panel=_SPLIT,
-    ),
-]
-_Preprocessing = Annotated[
-    str | None,
-    typer.Option(
-        "--preprocessing",
-        metavar="NAME",
-        show_default="sensor_scale",
-        help="channel_z, sensor_minmax, sensor_scale or raw.",
-        rich_help_panel=_SPLIT,
-    ),
-]
-_NmaeNormaliser = Annotated[
-    str | None,
-    typer.Option(
-        "--nmae-normaliser",
-        metavar="NAME",
-        show_default="channel_range",
-        help="channel_range, sensor_range, channel_std or frame_range.",
-        rich_help_panel=_SPLIT,
-    ),
-]
-_SsimRange = Annotated[
-    str | None,
-    typer.Option(
-        "--ssim-range",
-        metavar="NAME",
-        show_default="sensor_range",
-        help="SSIM data range: channel_range, sensor_range or z_range.",
-        rich_help_panel=_SPLIT,
-    ),
-]
-_Baselines = Annotated[
-    bool | None,
-    typer.Option(
-        "--baselines/--no-baselines",
-        show_default="--baselines",
-        help="Also train per-sensor autoencoders.",
-        rich_help_panel=_REPORT,
-    ),
-]
-_EvalEvery = Annotated[
-    int | None,
-    typer.Option(
-        "--eval-every",
-        min=1,
-        show_default="1",
-        help="Epochs between validation evaluations.",
-        rich_help_panel=_REPORT,
-    ),
-]
-_CheckpointEvery = Annotated[
-    int | None,
-    typer.Option(
-        "--checkpoint-every",
-        min=1,
-        show_default="50",
-        help="Epochs between checkpoints.",
-        rich_help_panel=_REPORT,
-    ),
-]
-_TsneContacts = Annotated[
-    int | None,
-    typer.Option(
-        "--tsne-contacts",
-        min=0,
-        show_default="600",
-        help="Test contacts kept for the t-SNE.",
-        rich_help_panel=_REPORT,
+        "--threads", min=0, help="CPU threads (0: one, fastest for these small layers).", rich_help_panel=_TRAINING
     ),
 ]
 _Report = Annotated[
     bool,
-    typer.Option(
-        "--report/--no-report",
-        help="Write metrics.json, report.md and figures.",
-        rich_help_panel=_REPORT,
-    ),
+    typer.Option("--report/--no-report", help="Write metrics.json, report.md and figures.", rich_help_panel=_REPORT),
 ]
 
-# the options that set a TrainConfig field, by flat TrainConfig key (``shape.`` for the model's)
-_CONFIG_OPTIONS = {
-    "split_seed": "split_seed",
-    "learning_rate": "learning_rate",
-    "batch_size": "batch_size",
-    "dropout": "shape.dropout",
-    "encoder_hidden": "shape.encoder_hidden",
-    "latent_dim": "shape.latent_dim",
-    "decoder_hidden": "shape.decoder_hidden",
-    "align_weight": "shape.align_weight",
-    "test_fraction": "test_fraction",
-    "val_fraction": "val_fraction",
-    "preprocessing": "preprocessing",
-    "nmae_normaliser": "nmae_normaliser",
-    "ssim_range": "ssim_range",
-    "baselines": "baselines",
-    "eval_every": "eval_every",
-    "checkpoint_every": "checkpoint_every",
-    "tsne_contacts": "tsne_contacts",
-}
 
-
-@dataclass(frozen=True)
-class TrainRequest:
-    """One ``train`` call as its options gave it (None: not given): where the data and the run are, how to run, and
-    the TrainConfig keys it sets (``options``)."""
-
-    data: list[Path]
-    out: Path
-    resume: bool = False
-    config_file: Path | None = None
-    partial: bool = False
-    from_run: Path | None = None
-    new_sensor: str | None = None
-    epochs: int | None = None
-    seed: int | None = None
-    n_seeds: int | None = None
-    device: str = "auto"
-    threads: int = 0
-    report: bool = True
-    options: dict[str, Any] = field(default_factory=dict)  # flat TrainConfig key -> value given (or None)
-
-    @classmethod
-    def from_params(cls, params: dict[str, Any]) -> TrainRequest:
-        """The request of a parsed command line (``typer.Context.params``)."""
-        options = {key: params.get(name) for name, key in _CONFIG_OPTIONS.items()}
-        own = {name: value for name, value in params.items() if name not in _CONFIG_OPTIONS}
-        return cls(**own, options=options)
-
-    @property
-    def extends(self) -> bool:
-        """``--from RUN --new-sensor NAME``: add a sensor to a trained run."""
-        return self.from_run is not None or self.new_sensor is not None
-
-    def check(self) -> None:
-        """What this call can be refused for before torch is imported or the data read."""
-        learning_rate = self.options.get("learning_rate")
-        if learning_rate is not None and not learning_rate > 0:
-            raise UsageError(f"--lr must be positive, got {learning_rate:g}")
-        if not self.extends:
-            choices = {k: self.options.get(k) for k in ("preprocessing", "nmae_normaliser", "ssim_range")}
-            check_train_arguments(self.data, self.out, self.resume, self.device, self.config_file, choices)
-
-    def train_config(self) -> Any:
-        """The TrainConfig of a new run (defaults, then the --config file, then the options), or None to resume
-        (which refuses every option but --epochs: the run keeps its stored configuration)."""
-        from unitac_rig.learning.train import TrainConfig
-
-        if self.resume:
-            given = [_option_name(k) for k, v in self.options.items() if v is not None] + [
-                name
-                for name, v in (("--config", self.config_file), ("--seed", self.seed), ("--n-seeds", self.n_seeds))
-                if v is not None
-            ]
-            if given:
-                raise UsageError(
-                    f"--resume continues a run with its stored configuration; drop {', '.join(sorted(given))}",
-                    hint="only --epochs (to extend the budget) goes with --resume",
-                )
-            return None
-        flat = training_overrides(self.config_file, self.options, self.seed, self.n_seeds)
-        if self.epochs is not None:
-            flat["epochs"] = self.epochs
-        return TrainConfig().updated(flat)
-
-
-def train_command(
+def _train(
     ctx: typer.Context,
     data: _Data,
     out: _Out,
@@ -482,35 +328,37 @@ def train_command(
     partial: _Partial = False,
     from_run: _FromRun = None,
     new_sensor: _NewSensor = None,
-    epochs: _Epochs = None,
     seed: _Seed = None,
     n_seeds: _NSeeds = None,
-    learning_rate: _LearningRate = None,
-    batch_size: _BatchSize = None,
     device: _Device = "auto",
     threads: _Threads = 0,
-    dropout: _Dropout = None,
-    encoder_hidden: _EncoderHidden = None,
-    latent_dim: _LatentDim = None,
-    decoder_hidden: _DecoderHidden = None,
-    align_weight: _AlignWeight = None,
-    split_seed: _SplitSeed = None,
-    test_fraction: _TestFraction = None,
-    val_fraction: _ValFraction = None,
-    preprocessing: _Preprocessing = None,
-    nmae_normaliser: _NmaeNormaliser = None,
-    ssim_range: _SsimRange = None,
-    baselines: _Baselines = None,
-    eval_every: _EvalEvery = None,
-    checkpoint_every: _CheckpointEvery = None,
-    tsne_contacts: _TsneContacts = None,
     report: _Report = True,
+    **options: Any,
 ) -> None:
     """Train UniTac-NV (and the baselines) on paired data; writes RUN/checkpoint.pt, config.toml, metrics.json,
     report.md and figures."""
     request = TrainRequest.from_params(ctx.params)
     request.check()
     run_train(ctx, request)
+
+
+def build_train_command() -> Any:
+    """``train`` as typer reads it: the options written above, then one per training configuration field."""
+
+    def train_command(ctx: typer.Context, **params: Any) -> None:
+        _train(ctx, **params)
+
+    own = [p for p in inspect.signature(_train, eval_str=True).parameters.values() if p.kind != p.VAR_KEYWORD]
+    own = own[:1] + [p.replace(kind=p.KEYWORD_ONLY) for p in own[1:]]
+    generated = [option.parameter() for option in config_options().values()]
+    ordered = own[:-1] + generated + own[-1:]  # --report last, after the evaluation options
+    train_command.__signature__ = inspect.Signature(ordered)  # type: ignore[attr-defined]
+    train_command.__annotations__ = {p.name: p.annotation for p in ordered}
+    train_command.__doc__ = _train.__doc__
+    return train_command
+
+
+train_command = build_train_command()
 
 
 def run_train(ctx: typer.Context, request: TrainRequest) -> None:

@@ -1,43 +1,31 @@
-"""Training configuration files: every hyper-parameter of the model, the training, the split, the preprocessing and
-the metrics in one TOML file, validated (unknown keys refused) and saved with each run as ``RUN/config.toml``.
+"""Training options: every hyper-parameter of the model, the training, the split, the preprocessing and the metrics,
+defined once here (default, description, bounds) and read three ways: a TOML file (``train --config``, saved with
+each run as ``RUN/config.toml``), the options of ``unitac-rig train`` (generated from these fields by
+:mod:`unitac_rig.cli.learn_train`: flag, help, default and range all come from the field), and the flat keyword
+arguments of :class:`unitac_rig.learning.train.TrainConfig`.
 
-The file has sections; every key is optional and a missing key keeps the default of
-:class:`unitac_rig.learning.train.TrainConfig` (the paper's values where the paper gives one)::
+The file has the sections below; every key is optional and a missing key keeps the field's default (the paper's value
+where the paper gives one)::
 
     [model]                       # one encoder per sensor, one shared decoder (paper II-A)
     encoder_hidden = [64, 48]
     latent_dim = 16
-    decoder_hidden = [64, 96]
-    dropout = 0.007
-    align_weight = 0.0            # beyond the paper: weight of a scale-free latent alignment term in the loss
-
     [training]
     epochs = 1000
-    batch_size = 64
-    learning_rate = 5e-4
     seeds = [0, 1, 2, 3, 4]       # model seeds (initialisation, shuffling, dropout), trained together
-    baselines = true              # also train one autoencoder per sensor
-
     [split]
-    seed = 0                      # which approach directions are test / validation data (apart from model seeds)
     test_fraction = 0.1
-    val_fraction = 0.1
     unseen_objects = ["irregular_pla"]   # default: the object catalogue decides
-
     [evaluation]
-    eval_every = 5                # epochs between validation evaluations (per-epoch curves)
-    checkpoint_every = 50
-    tsne_contacts = 600
-
+    eval_every = 1
     [preprocessing]
-    scaling = "sensor_scale"      # channel_z | sensor_minmax | sensor_scale | raw
-
+    scaling = "sensor_scale"
     [metrics]
-    nmae_normaliser = "channel_range"  # channel_range | sensor_range | channel_std | frame_range
-    ssim_range = "sensor_range"        # channel_range | sensor_range | z_range
+    nmae_normaliser = "channel_range"
 
-This module only validates and translates between the sectioned file and the flat keyword arguments of
-``TrainConfig``; the defaults live in ``TrainConfig`` alone.
+A field's ``json_schema_extra`` says how the rest of the program names it: ``key`` (its flat ``TrainConfig`` key when
+that is not the field's own name; ``shape.<field>`` for the model's), ``cli`` (its ``train`` option when that is not
+``--<key>``; ``None``: no option), ``paper`` (the default is the paper's value).
 """
 
 from __future__ import annotations
@@ -45,9 +33,10 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
+from pydantic.fields import FieldInfo
 
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.config import describe_validation_error, read_toml
@@ -56,47 +45,94 @@ CONFIG_TOML = "config.toml"
 _HINT = "see docs/learning.md (Training configuration) for every key"
 
 
+def _widths(value: Any) -> Any:
+    """``"64,48"`` (as typed on the command line) -> [64, 48]; anything else is left to pydantic."""
+    if isinstance(value, str):
+        try:
+            return [int(part) for part in value.replace(" ", "").split(",") if part]
+        except ValueError:
+            raise ValueError(f"takes comma-separated layer widths, e.g. 64,48; got {value!r}") from None
+    return value
+
+
+Widths = Annotated[tuple[Annotated[int, Field(ge=1)], ...], BeforeValidator(_widths), Field(min_length=1)]
+
+
+def _field(default: Any, description: str, **extra: Any) -> Any:
+    """A field with its description and how the rest of the program names it (``key``, ``cli``, ``paper``); the
+    bounds (``ge``, ``gt``, ``lt``...) are pydantic's own keywords."""
+    bounds = {k: extra.pop(k) for k in ("ge", "gt", "le", "lt", "min_length") if k in extra}
+    return Field(default, description=description, json_schema_extra=extra or None, **bounds)
+
+
 class _Section(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
 class ModelSection(_Section):
-    encoder_hidden: list[int] | None = Field(default=None, min_length=1)
-    latent_dim: int | None = Field(default=None, ge=1)
-    decoder_hidden: list[int] | None = Field(default=None, min_length=1)
-    dropout: float | None = Field(default=None, ge=0.0, lt=1.0)
-    align_weight: float | None = Field(default=None, ge=0.0)
+    encoder_hidden: Widths = _field((64, 48), "Encoder hidden widths.", key="shape.encoder_hidden", paper=True)
+    latent_dim: int = _field(16, "Latent size.", key="shape.latent_dim", paper=True, ge=1)
+    decoder_hidden: Widths = _field((64, 96), "Decoder hidden widths.", key="shape.decoder_hidden", paper=True)
+    dropout: float = _field(0.007, "Dropout after every layer.", key="shape.dropout", paper=True, ge=0.0, lt=1.0)
+    align_weight: float = _field(
+        0.0, "Weight of a scale-free latent alignment term (beyond the paper).", key="shape.align_weight", ge=0.0
+    )
 
 
 class TrainingSection(_Section):
-    epochs: int | None = Field(default=None, ge=1)
-    batch_size: int | None = Field(default=None, ge=1)
-    learning_rate: float | None = Field(default=None, gt=0.0)
-    seeds: list[int] | None = Field(default=None, min_length=1)
-    baselines: bool | None = None
+    epochs: int = _field(1000, "Training epochs; with --resume, the new total.", paper=True, ge=1)
+    batch_size: int = _field(64, "Batch size.", paper=True, ge=1)
+    learning_rate: float = _field(5e-4, "Adam learning rate.", cli="--lr", paper=True, gt=0.0)
+    seeds: tuple[int, ...] = _field(
+        (0,), "Model seeds (initialisation, shuffling, dropout), trained together.", cli=None, min_length=1
+    )
+    baselines: bool = _field(True, "Also train per-sensor autoencoders.", cli="--baselines/--no-baselines")
+
+    @field_validator("seeds")
+    @classmethod
+    def _distinct(cls, seeds: tuple[int, ...]) -> tuple[int, ...]:
+        if len(set(seeds)) != len(seeds):
+            raise ValueError(f"seeds must differ, got {list(seeds)}")
+        return seeds
 
 
 class SplitSection(_Section):
-    seed: int | None = None
-    test_fraction: float | None = Field(default=None, gt=0.0, lt=1.0)
-    val_fraction: float | None = Field(default=None, ge=0.0, lt=1.0)
-    unseen_objects: list[str] | None = None
-    mode: Literal["random", "blocked"] | None = None
+    seed: int = _field(0, "Seed of the test/validation split.", key="split_seed")
+    mode: Literal["random", "blocked"] = _field(
+        "random", "Test directions: the paper's random ones, or blocked rays.", key="split_mode"
+    )
+    test_fraction: float = _field(0.1, "Share of directions held out for test.", gt=0.0, lt=1.0)
+    val_fraction: float = _field(0.1, "Share of directions for validation.", ge=0.0, lt=1.0)
+    unseen_objects: tuple[str, ...] | None = _field(
+        None, "Objects held out of training entirely (default: the object catalogue decides).", cli=None
+    )
+
+    @field_validator("val_fraction")
+    @classmethod
+    def _room_for_training(cls, value: float, info: ValidationInfo) -> float:
+        test = info.data.get("test_fraction")  # absent when it failed its own check
+        if test is not None and not value < 1.0 - test:
+            raise ValueError(f"must be below 1 - test fraction = {1.0 - test:g} (training needs directions)")
+        return value
 
 
 class EvaluationSection(_Section):
-    eval_every: int | None = Field(default=None, ge=1)
-    checkpoint_every: int | None = Field(default=None, ge=1)
-    tsne_contacts: int | None = Field(default=None, ge=0)
+    eval_every: int = _field(1, "Epochs between validation evaluations.", ge=1)
+    checkpoint_every: int = _field(50, "Epochs between checkpoints.", ge=1)
+    tsne_contacts: int = _field(600, "Test contacts kept for the t-SNE.", ge=0)
 
 
 class PreprocessingSection(_Section):
-    scaling: Literal["channel_z", "sensor_minmax", "sensor_scale", "raw"] | None = None
+    scaling: Literal["channel_z", "sensor_minmax", "sensor_scale", "raw"] = _field(
+        "sensor_scale", "How frames are scaled for the network.", key="preprocessing", cli="--preprocessing"
+    )
 
 
 class MetricsSection(_Section):
-    nmae_normaliser: Literal["channel_range", "sensor_range", "channel_std", "frame_range"] | None = None
-    ssim_range: Literal["channel_range", "sensor_range", "z_range"] | None = None
+    nmae_normaliser: Literal["channel_range", "sensor_range", "channel_std", "frame_range"] = _field(
+        "channel_range", "What the NMAE divides by."
+    )
+    ssim_range: Literal["channel_range", "sensor_range", "z_range"] = _field("sensor_range", "SSIM data range.")
 
 
 class ConfigFile(_Section):
@@ -110,44 +146,44 @@ class ConfigFile(_Section):
     metrics: MetricsSection = MetricsSection()
 
 
-# (section, key in the file) -> TrainConfig field ("shape." for ModelShape fields)
-_FIELDS: dict[tuple[str, str], str] = {
-    ("model", "encoder_hidden"): "shape.encoder_hidden",
-    ("model", "latent_dim"): "shape.latent_dim",
-    ("model", "decoder_hidden"): "shape.decoder_hidden",
-    ("model", "dropout"): "shape.dropout",
-    ("model", "align_weight"): "shape.align_weight",
-    ("training", "epochs"): "epochs",
-    ("training", "batch_size"): "batch_size",
-    ("training", "learning_rate"): "learning_rate",
-    ("training", "seeds"): "seeds",
-    ("training", "baselines"): "baselines",
-    ("split", "seed"): "split_seed",
-    ("split", "test_fraction"): "test_fraction",
-    ("split", "val_fraction"): "val_fraction",
-    ("split", "unseen_objects"): "unseen_objects",
-    ("split", "mode"): "split_mode",
-    ("evaluation", "eval_every"): "eval_every",
-    ("evaluation", "checkpoint_every"): "checkpoint_every",
-    ("evaluation", "tsne_contacts"): "tsne_contacts",
-    ("preprocessing", "scaling"): "preprocessing",
-    ("metrics", "nmae_normaliser"): "nmae_normaliser",
-    ("metrics", "ssim_range"): "ssim_range",
-}
+def fields() -> dict[tuple[str, str], FieldInfo]:
+    """Every option, by (section, key in the file), in the file's order."""
+    return {
+        (section, key): info
+        for section, holder in ConfigFile.model_fields.items()
+        for key, info in holder.annotation.model_fields.items()  # type: ignore[union-attr]
+    }
+
+
+def flat_key(section: str, key: str) -> str:
+    """The ``TrainConfig`` key of a field of the file (``shape.<field>`` for the model's)."""
+    extra = fields()[section, key].json_schema_extra
+    return str(extra.get("key", key)) if isinstance(extra, dict) else key
+
+
+def defaults() -> dict[str, Any]:
+    """Every field's default as flat ``TrainConfig`` keys: what a run trains with when nothing is set."""
+    return {flat_key(*where): info.default for where, info in fields().items()}
+
+
+def validate(sections: Mapping[str, Mapping[str, Any]]) -> ConfigFile:
+    """The complete configuration of sectioned values (missing keys: the defaults); pydantic's ValidationError
+    names the first bad (section, key)."""
+    return ConfigFile.model_validate({name: dict(values) for name, values in sections.items()})
 
 
 def parse_config(data: Mapping[str, Any], source: str = "config") -> dict[str, Any]:
-    """Validate a sectioned config (a parsed TOML file) and return the keys it sets as flat ``TrainConfig`` field
-    names (``shape.<field>`` for the model's widths, latent size and dropout). ConfigError names the first bad key."""
+    """Validate a sectioned config (a parsed TOML file) and return the keys it sets as flat ``TrainConfig`` keys.
+    ConfigError names the first bad key."""
     try:
         parsed = ConfigFile.model_validate(dict(data))
     except ValidationError as exc:
         raise ConfigError(describe_validation_error(exc, source), hint=_HINT) from exc
     flat: dict[str, Any] = {}
-    for (section, key), name in _FIELDS.items():
-        value = getattr(getattr(parsed, section), key)
-        if value is not None:
-            flat[name] = tuple(value) if isinstance(value, list) else value
+    for section in parsed.model_fields_set:
+        values = getattr(parsed, section)
+        for key in values.model_fields_set:
+            flat[flat_key(section, key)] = getattr(values, key)
     return flat
 
 
@@ -157,13 +193,13 @@ def load_config(path: Path) -> dict[str, Any]:
 
 
 def sectioned(flat: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
-    """A complete flat ``TrainConfig.to_dict()`` (with its nested ``shape``) as the file's sections; ``None``
-    values (e.g. unseen objects left to the catalogue) are left out, as TOML has no null."""
+    """Flat ``TrainConfig`` keys (or a ``TrainConfig.to_dict()`` with its nested ``shape``) as the file's sections;
+    ``None`` values (e.g. unseen objects left to the catalogue) are left out, as TOML has no null."""
     values = dict(flat)
-    shape = dict(values.pop("shape", {}))
+    values.update({f"shape.{k}": v for k, v in dict(values.pop("shape", None) or {}).items()})
     out: dict[str, dict[str, Any]] = {}
-    for (section, key), name in _FIELDS.items():
-        value = shape.get(name[6:]) if name.startswith("shape.") else values.get(name)
+    for section, key in fields():
+        value = values.get(flat_key(section, key))
         if value is not None:
             out.setdefault(section, {})[key] = list(value) if isinstance(value, tuple) else value
     return out

@@ -30,12 +30,12 @@ from typing import Any
 
 import numpy as np
 
+from unitac_rig.bench.lab.pooled_geometry import pooled_geometry
 from unitac_rig.learning.contact_geometry import run_geometry
 from unitac_rig.learning.data import build_paired_dataset, load_sets
 from unitac_rig.learning.engine import UNITAC_GROUP
 from unitac_rig.learning.evaluate import evaluate_run
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM
-from unitac_rig.learning.pooled_geometry import pooled_geometry
 from unitac_rig.learning.run import checkpoint_path
 from unitac_rig.learning.train import TrainConfig, load_run, load_test_set, train
 from unitac_rig.plotting import new_figure, save_figure

@@ -23,11 +23,11 @@ from typing import Any
 
 import numpy as np
 
+from unitac_rig.bench.lab.cross_geometry import cross_sensor_geometry
+from unitac_rig.bench.lab.pooled_geometry import pooled_geometry
 from unitac_rig.learning.contact_geometry import GeometryConfig, geometry_for_run
-from unitac_rig.learning.cross_geometry import cross_sensor_geometry
 from unitac_rig.learning.data import PairedDataset
 from unitac_rig.learning.evaluate import evaluate_run
-from unitac_rig.learning.pooled_geometry import pooled_geometry
 from unitac_rig.learning.report import write_report
 from unitac_rig.learning.run import checkpoint_path, load_test_set, save_test_set
 from unitac_rig.learning.train import TrainConfig, load_run, train

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import hashlib
 import importlib
 import json
 import os
@@ -130,7 +129,6 @@ def run_session(sensor: str, object_id: str, angles: int, presses: int | None, s
         sim_s = rig.clock.now_ns() / 1e9
         rig.close()
         (summary,) = inspect_dataset(Path(tmp))["sessions"]
-        recorded = recorded_digest(Path(tmp))
     share = sampler.simulator / max(1, sampler.total)
     presses_done = max(1, outcome.complete + outcome.failed)
     return {
@@ -156,80 +154,7 @@ def run_session(sensor: str, object_id: str, angles: int, presses: int | None, s
         "targets_missed": summary["targets_missed"],
         "match_error_median_n": summary["match_error_n"]["median"],
         "peak_force_median_n": summary["peak_force_n"]["median"],
-        "recorded_sha256": recorded,
     }
-
-
-def run_replay(trace: Path) -> dict[str, Any]:
-    """Replay ``trace`` (benchmarks/sim_trace.py) on the code on ``sys.path``: its CPU and the simulator's share."""
-    import sim_trace
-
-    _preload()
-    sampler = _CpuSampler()
-    marks: list[float] = []
-
-    def start() -> None:
-        sampler.__enter__()
-        marks.append(time.process_time())
-
-    try:
-        result = sim_trace.replay(trace, on_start=start)
-        cpu_s = time.process_time() - marks[0]
-    finally:
-        sampler.__exit__()
-    share = sampler.simulator / max(1, sampler.total)
-    sim_s = result["replayed_simulated_s"]
-    return {
-        **result,
-        "cpu_s": round(cpu_s, 3),
-        "simulator_share": round(share, 4),
-        "simulator_cpu_per_simulated_s": round(cpu_s * share / sim_s, 5),
-        "replay_cpu_per_simulated_s": round(cpu_s / sim_s, 5),
-    }
-
-
-def same_work(args: argparse.Namespace) -> dict[str, Any]:
-    """Per sensor: record this checkout's session as a trace, replay it on both versions in alternating rounds."""
-    result: dict[str, Any] = {}
-    here = str(Path(__file__).resolve())
-    with checkout(args.before) as before_tree, tempfile.TemporaryDirectory() as tmp:
-        for sensor in args.sensors:
-            trace = Path(tmp) / f"{sensor}.trace"
-            command = [sys.executable, str(Path(__file__).resolve().parent / "sim_trace.py"), "record", sensor]
-            command += [str(trace), args.object, str(args.angles), str(args.presses or 0), str(args.seed)]
-            subprocess.run(command, env=_env(ROOT), cwd=tmp, check=True, capture_output=True)
-            runs: dict[str, list[dict[str, Any]]] = {"before": [], "after": []}
-            for _ in range(args.pairs):
-                for version, code in (("before", before_tree), ("after", ROOT)):
-                    done = subprocess.run(
-                        [sys.executable, here, "--replay-worker", str(trace)],
-                        env=_env(code), cwd=tmp, capture_output=True, text=True,
-                    )  # fmt: skip
-                    if done.returncode != 0:
-                        raise SystemExit(f"replay on {code} failed:\n{done.stderr[-2000:]}")
-                    runs[version].append(json.loads(done.stdout.strip().splitlines()[-1]))
-            figures = ("simulator_cpu_per_simulated_s", "replay_cpu_per_simulated_s")
-            result[sensor] = {
-                version: {
-                    **{f: statistics.median(r[f] for r in rs) for f in figures},
-                    "simulated_s": rs[0]["replayed_simulated_s"],
-                    "failed_calls": rs[0]["failed_calls"],
-                    "runs": [{f: r[f] for f in (*figures, "cpu_s", "simulator_share")} for r in rs],
-                }
-                for version, rs in runs.items()
-            }
-            result[sensor]["ratios_before_over_after"] = {
-                f: round(statistics.median(b[f] / a[f] for b, a in zip(runs["before"], runs["after"], strict=True)), 2)
-                for f in figures
-            }
-            b, a = result[sensor]["before"], result[sensor]["after"]
-            print(
-                f"same work {sensor}: {a['simulated_s']:.1f} simulated s replayed; simulator "
-                f"{b['simulator_cpu_per_simulated_s']:.4f} -> {a['simulator_cpu_per_simulated_s']:.4f} CPU-s per "
-                f"simulated s ({result[sensor]['ratios_before_over_after']['simulator_cpu_per_simulated_s']}x); "
-                f"failed calls before {b['failed_calls']}, after {a['failed_calls']}"
-            )
-    return result
 
 
 def period_cost() -> dict[str, float]:
@@ -267,28 +192,6 @@ def period_cost() -> dict[str, float]:
     force = best_us(pulling_back, 2000)
     rig.close()
     return {"rest_us": rest, "force_mode_at_speed_limit_us": force}
-
-
-def recorded_digest(data_dir: Path) -> str:
-    """SHA-256 of every number the session recorded (each press's robot, tactile and extraction datasets, in name
-    order): equal digests, bit-identical sessions."""
-    import h5py
-    import numpy as np
-
-    digest = hashlib.sha256()
-
-    def visit(name: str, item: Any) -> None:
-        if isinstance(item, h5py.Dataset) and item.dtype.kind in "fiub":
-            digest.update(name.encode())
-            digest.update(np.ascontiguousarray(item[()]).tobytes())
-
-    for path in sorted(data_dir.glob("*.h5")):
-        with h5py.File(path, "r") as f:
-            presses = f["presses"]
-            # each press by name: in the press-file layout a press is an external link, which visititems skips
-            for pid in sorted(presses):
-                presses[pid].visititems(lambda name, item, pid=pid: visit(f"{pid}/{name}", item))
-    return digest.hexdigest()
 
 
 # ---- the driver: versions in subprocesses --------------------------------------------------------------------------
@@ -389,25 +292,6 @@ def campaign_estimate(code: Path, args: argparse.Namespace) -> dict[str, Any]:
     return {"presses": presses, "cpu_by_object": per_object, "cpu_s": round(total, 1)}
 
 
-def compare_recordings(args: argparse.Namespace) -> dict[str, Any]:
-    """Whether a seeded session records the same numbers on ``args.identical`` and on this checkout, per sensor."""
-    result: dict[str, Any] = {}
-    with checkout(args.identical) as reference:
-        for sensor in args.sensors:
-            ref, now = (
-                measure(code, sensor, args.object, args.angles, args.presses, args.seed) for code in (reference, ROOT)
-            )
-            same = ref["recorded_sha256"] == now["recorded_sha256"]
-            print(
-                f"{sensor}: {'bit-identical' if same else 'DIFFERENT'} recordings ({now['presses_complete']} presses, "
-                f"sha256 {now['recorded_sha256'][:16]} here, {ref['recorded_sha256'][:16]} on {args.identical}); "
-                f"median peak {ref['peak_force_median_n']} -> {now['peak_force_median_n']} N, targets matched "
-                f"{ref['targets_matched']} -> {now['targets_matched']}"
-            )
-            result[sensor] = {"bit_identical": same, "reference": ref, "this_checkout": now}
-    return result
-
-
 def _print(label: str, s: dict[str, Any]) -> None:
     print(
         f"{label:6s} {s['sensor']:11s} {s['cpu_s']:7.2f} CPU-s / {s['simulated_s']:7.1f} simulated s = "
@@ -431,29 +315,15 @@ def main() -> None:
         "--campaign-presses", type=int, default=0, help="estimate the campaign from this many presses per object"
     )
     parser.add_argument("--full", action="store_true", help="also run the whole campaign on each version (long)")
-    parser.add_argument(
-        "--identical",
-        metavar="REF",
-        help="only compare what a --presses session records on REF and on this checkout, bit for bit",
-    )
     parser.add_argument("--out", type=Path, default=OUT)
-    parser.add_argument(
-        "--same-work",
-        action="store_true",
-        help="only compare the simulators on the same work: this checkout's session replayed on both versions",
-    )
     parser.add_argument(
         "--period-cost", action="store_true", help="only time one simulated control period alone, before and after"
     )
     parser.add_argument("--worker", choices=SENSORS, help=argparse.SUPPRESS)
-    parser.add_argument("--replay-worker", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--period-worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         print(json.dumps(run_session(args.worker, args.object, args.angles, args.presses, args.seed)))
-        return
-    if args.replay_worker:
-        print(json.dumps(run_replay(args.replay_worker)))
         return
     if args.period_worker:
         print(json.dumps(period_cost()))
@@ -464,22 +334,6 @@ def main() -> None:
                 command = [sys.executable, str(Path(__file__).resolve()), "--period-worker"]
                 done = subprocess.run(command, env=_env(code), capture_output=True, text=True, check=True)
                 print(f"{label} ({args.before if label == 'before' else 'this checkout'}): {done.stdout.strip()}")
-        return
-    if args.same_work:
-        doc = {"command": "python benchmarks/sim_cost.py " + " ".join(sys.argv[1:]), "before_commit": args.before}
-        doc["machine"] = {"cpus": os.cpu_count(), "load_avg": os.getloadavg()}
-        doc["presses"], doc["sensors"] = args.presses, same_work(args)
-        out = args.out.with_name("sim_same_work.json")
-        out.write_text(json.dumps(doc, indent=2) + "\n")
-        print(f"wrote {out}")
-        return
-
-    if args.identical:
-        compared = {"command": "python benchmarks/sim_cost.py " + " ".join(sys.argv[1:]), "reference": args.identical}
-        compared["sensors"] = compare_recordings(args)
-        out = args.out.with_name("sim_identical.json")
-        out.write_text(json.dumps(compared, indent=2) + "\n")
-        print(f"wrote {out}")
         return
     with checkout(args.before) as before_tree:
         trees = {"before": before_tree, "after": ROOT}

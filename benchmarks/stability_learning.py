@@ -23,13 +23,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-from unitac_rig.learning.contact_geometry import GeometryConfig
-from unitac_rig.learning.stability import (
+from unitac_rig.bench.lab.stability import (
     DEFAULT_GEOMETRY_FOLDS,
     FACE_DISTANCE_MM,
     STABILITY_JSON,
     stability_report,
 )
+from unitac_rig.learning.contact_geometry import GeometryConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 

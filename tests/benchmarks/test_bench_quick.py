@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from unitac_rig.bench.press_scoring import CAMPAIGN_PRESSES, nearest_rank, pareto_front, transit_time_s
+from unitac_rig.bench.press_benchmark import CAMPAIGN_PRESSES, nearest_rank, pareto_front, transit_time_s
 from unitac_rig.cli import main
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

@@ -6,7 +6,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from unitac_rig.bench.press_scoring import (
+from unitac_rig.bench.press_benchmark import (
     CAMPAIGN_PRESSES,
     GOAL_MEDIAN_ERROR_N,
     GOAL_TIME_FRACTION,

@@ -12,19 +12,21 @@ import numpy as np
 import pytest
 
 from tests.learning.learning_helpers import small_sets
-from unitac_rig.errors import DataError, UsageError
-from unitac_rig.learning.contact_geometry import GeometryConfig
-from unitac_rig.learning.data import build_paired_dataset
-from unitac_rig.learning.evaluate import evaluate_run, write_metrics
-from unitac_rig.learning.paper import PAPER_TABLE1
-from unitac_rig.learning.stability import (
+from unitac_rig.bench.lab.stability import (
+    CORNERS_PNG,
+    MATERIALS_PNG,
+    SEEDS_PNG,
     _direction_folds,
     feature_at_point,
     feature_of_press,
     outline_features,
     stability_report,
 )
-from unitac_rig.learning.stability_figures import CORNERS_PNG, MATERIALS_PNG, SEEDS_PNG
+from unitac_rig.errors import DataError, UsageError
+from unitac_rig.learning.contact_geometry import GeometryConfig
+from unitac_rig.learning.data import build_paired_dataset
+from unitac_rig.learning.evaluate import evaluate_run, write_metrics
+from unitac_rig.learning.paper import PAPER_TABLE1
 from unitac_rig.learning.train import TrainConfig, load_run, load_test_set, train
 from unitac_rig.rig.objects import get_object
 

@@ -581,3 +581,9 @@ def _train_new_sensor(
             console.print(f"report: {path}")
         else:
             console.print("no test contact was recorded by every sensor: no report.md (see extension.json)")
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``train`` to the root app. Today ``cli/learn.py``'s ``register`` adds it, so the two modules import each
+    other; naming this module in ``cli/app.py``'s COMMAND_MODULES instead ends that cycle."""
+    app.command("train")(train_command)

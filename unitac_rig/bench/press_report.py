@@ -107,22 +107,6 @@ def _front_panel(
     ax.legend(fontsize=8, loc="best")
 
 
-def _best_variant(variants: list[dict[str, Any]]) -> dict[str, Any]:
-    """The variant whose fastest setting at the goal error is fastest (else the lowest median error anywhere)."""
-
-    def key(variant: dict[str, Any]) -> tuple[float, float]:
-        reaching = [
-            r["campaign_h"]
-            for r in variant["rows"]
-            if is_finite_number(r["median_abs_error_n"]) and r["median_abs_error_n"] <= GOAL_MEDIAN_ERROR_N
-        ]
-        best_error = min(inf_if_missing(r["median_abs_error_n"]) for r in variant["rows"])
-        return (min(reaching) if reaching else math.inf, best_error)
-
-    best: dict[str, Any] = min(variants, key=key)
-    return best
-
-
 def summary_lines(doc: dict[str, Any]) -> list[str]:
     """A plain-text table per variant and the goal verdict."""
 

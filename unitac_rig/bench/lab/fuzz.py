@@ -26,28 +26,75 @@ import contextlib
 import gc
 import time
 import tracemalloc
+from collections import Counter
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from unitac_rig.bench.lab.fuzz_base import (
-    HANG_MS,
-    MAX_MEMORY_GROWTH_BYTES,
-    MEMORY_SHARE,
-    MIN_MEMORY_INPUTS,
-    Case,
-    Report,
-    Rng,
-    Target,
-)
 from unitac_rig.bench.lab.fuzz_targets import (
+    Case,
     PapillArrayCommandTarget,
     PapillArrayTarget,
+    Rng,
     RtdeTarget,
+    Target,
     XelaCanTarget,
     XelaWsTarget,
 )
+
+HANG_MS = 50.0
+MEMORY_SHARE = 0.05  # of the inputs fed back to back to one long-lived decoder under tracemalloc
+MIN_MEMORY_INPUTS = 200
+MAX_MEMORY_GROWTH_BYTES = 256 * 1024  # a decoder that keeps more than this after thousands of inputs is leaking
+EXAMPLES_KEPT = 5
+
+
+@dataclass
+class Report:
+    """What one target did with its inputs."""
+
+    target: str
+    description: str
+    inputs: int = 0
+    kinds: Counter[str] = field(default_factory=Counter)
+    crashes: int = 0
+    hangs: int = 0
+    wrong_decodes: int = 0
+    valid_embedded: int = 0  # valid packets/messages placed among garbage and damage
+    valid_recovered: int = 0
+    driver_inputs: int = 0  # inputs also run through the driver's decode path
+    cpu_s: float = 0.0
+    cpu_ms: list[float] = field(default_factory=list, repr=False)
+    memory: dict[str, int] = field(default_factory=dict)
+    examples: list[dict[str, Any]] = field(default_factory=list)
+
+    def note(self, finding: str, index: int, case: Case, detail: str) -> None:
+        if len(self.examples) < EXAMPLES_KEPT:
+            self.examples.append({"finding": finding, "input": index, "kind": case.kind, "detail": detail[:300]})
+
+    def as_dict(self) -> dict[str, Any]:
+        cpu = np.array(self.cpu_ms) if self.cpu_ms else np.zeros(1)
+        return {
+            "target": self.target,
+            "description": self.description,
+            "inputs": self.inputs,
+            "kinds": dict(sorted(self.kinds.items())),
+            "crashes": self.crashes,
+            "hangs": self.hangs,
+            "wrong_decodes": self.wrong_decodes,
+            "valid_embedded": self.valid_embedded,
+            "valid_recovered": self.valid_recovered,
+            "driver_inputs": self.driver_inputs,
+            "cpu_s": round(self.cpu_s, 2),
+            "cpu_ms_median": round(float(np.median(cpu)), 4),
+            "cpu_ms_p99": round(float(np.percentile(cpu, 99)), 3),
+            "cpu_ms_max": round(float(cpu.max()), 3),
+            "memory": self.memory,
+            "examples": self.examples,
+        }
+
 
 # ---- the campaign -----------------------------------------------------------------------------------------------
 

@@ -1,17 +1,20 @@
 """The fuzz campaign's targets (see unitac_rig/bench/lab/fuzz.py): one per wire codec, each also driving its driver's
-decode path where there is one.
+decode path where there is one, and what they share: one input (:class:`Case`), the :class:`Target` interface and the
+input generators.
 
-Why one module of ~730 lines: five targets of about 130 lines each (input kinds, the check, the long-lived stream),
-alike in shape, read side by side.
+Why one module of ~870 lines: five targets of about 130 lines each (input kinds, the check, the long-lived stream),
+alike in shape, read side by side, after the interface and generators they all use.
 """
 
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
 import math
 import struct
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import can
@@ -60,16 +63,107 @@ from protocols.rtde import (
 from protocols.xela_can import USPA46_ID_MAP, FrameAssembler
 from protocols.xela_ws import MAX_COUNT, MAX_SERVER_TIME_S, XelaDataMessage, XelaSensorData, decode_message
 from protocols.xela_ws import encode_data_message as encode_xela_message
-from unitac_rig.bench.lab.fuzz_base import (
-    Case,
-    Rng,
-    Target,
-    in_order,
-    mutate_bytes,
-    random_bytes,
-    random_chunks,
-    run_chunks,
-)
+
+Rng = np.random.Generator
+
+
+@dataclass
+class Case:
+    """One fuzz input: its kind, the data, and what a correct decoder must give back (target-specific)."""
+
+    kind: str
+    data: Any
+    expected: Any = None
+
+
+class Target:
+    """A codec under fuzz: ``draw`` builds one input, ``check`` runs it and returns (wrong decodes, valid placed,
+    valid recovered), raising whatever the code under test raises; ``stream`` builds a long-lived consumer for the
+    memory phase."""
+
+    name = ""
+    description = ""
+    allowed: tuple[type[BaseException], ...] = (ProtocolError,)
+
+    def draw(self, rng: Rng) -> Case:
+        raise NotImplementedError
+
+    def check(self, case: Case, rng: Rng) -> tuple[int, int, int]:
+        raise NotImplementedError
+
+    def stream(self) -> Callable[[Case], None]:
+        raise NotImplementedError
+
+
+# ---- shared generators ------------------------------------------------------------------------------------------
+
+
+def random_bytes(rng: Rng, n: int) -> bytes:
+    return rng.integers(0, 256, n, dtype=np.uint8).tobytes()
+
+
+def random_chunks(rng: Rng, data: bytes) -> list[bytes]:
+    """``data`` cut at random sizes: 1 byte, 7 bytes, USB packets, random, or whole."""
+    mode = int(rng.integers(0, 5))
+    if mode == 0 or len(data) < 2:
+        return [data]
+    if mode == 1:
+        size = [1, 7, 64][int(rng.integers(0, 3))]
+        return [data[i : i + size] for i in range(0, len(data), size)]
+    cuts = np.sort(
+        rng.choice(np.arange(1, len(data)), size=min(len(data) - 1, int(rng.integers(1, 40))), replace=False)
+    )
+    bounds = [0, *cuts.tolist(), len(data)]
+    return [data[a:b] for a, b in itertools.pairwise(bounds)]
+
+
+def flip_bits(rng: Rng, data: bytes, n: int) -> bytes:
+    out = bytearray(data)
+    for _ in range(n):
+        if out:
+            out[int(rng.integers(0, len(out)))] ^= 1 << int(rng.integers(0, 8))
+    return bytes(out)
+
+
+def mutate_bytes(rng: Rng, data: bytes) -> bytes:
+    """A few random edits: bit flips, byte overwrites, cuts, duplications, insertions."""
+    out = bytearray(data)
+    for _ in range(int(rng.integers(1, 6))):
+        op = int(rng.integers(0, 5))
+        at = int(rng.integers(0, len(out) + 1))
+        if op == 0 and out:
+            out[min(at, len(out) - 1)] ^= 1 << int(rng.integers(0, 8))
+        elif op == 1 and out:
+            out[min(at, len(out) - 1)] = int(rng.integers(0, 256))
+        elif op == 2:
+            del out[at : at + int(rng.integers(1, 16))]
+        elif op == 3:
+            out[at:at] = out[at : at + int(rng.integers(1, 16))]
+        else:
+            out[at:at] = random_bytes(rng, int(rng.integers(1, 16)))
+    return bytes(out)
+
+
+def run_chunks(feed: Callable[[bytes], list[Any]], chunks: list[bytes]) -> list[Any]:
+    out: list[Any] = []
+    for chunk in chunks:
+        out += feed(chunk)
+    return out
+
+
+def in_order(expected: list[Any], got: list[Any], same: Callable[[Any, Any], bool]) -> int:
+    """How many of ``expected`` appear in ``got`` in order (extra items in ``got`` allowed)."""
+    found = 0
+    it = iter(got)
+    for want in expected:
+        for item in it:
+            if same(want, item):
+                found += 1
+                break
+        else:
+            break
+    return found
+
 
 # ---- XELA uSkin CAN ---------------------------------------------------------------------------------------------
 

@@ -45,6 +45,11 @@ def seen_dataset() -> PairedDataset:
     return directions_dataset({o: [(0, a) for a in SEEN_ANGLES] for o in ("circle_pla", "hex_tpu")})
 
 
+def asymmetric_dataset() -> PairedDataset:
+    """Two objects the catalogue does not know, so no symmetry folds their rays."""
+    return directions_dataset({o: [(0, a) for a in SEEN_ANGLES] for o in ("blob_a", "blob_b")})
+
+
 def _angles(dataset: PairedDataset, mask: np.ndarray, object_id: str) -> set[int]:
     return set(np.round(dataset.angle_deg[mask & (dataset.object_id == object_id)]).astype(int).tolist())
 
@@ -52,9 +57,9 @@ def _angles(dataset: PairedDataset, mask: np.ndarray, object_id: str) -> set[int
 @pytest.mark.parametrize("seed", range(6))
 @pytest.mark.parametrize("gap", [2, 5])
 def test_the_blocked_split_leaves_no_test_angle_within_the_gap_of_a_training_angle(seed: int, gap: int) -> None:
-    dataset = seen_dataset()
+    dataset = asymmetric_dataset()
     split = split_by_direction(dataset, seed, 0.1, (), val_fraction=0.1, mode="blocked", gap_deg=gap)
-    for object_id in ("circle_pla", "hex_tpu"):
+    for object_id in ("blob_a", "blob_b"):
         test = _angles(dataset, split.test_mask, object_id)
         train = _angles(dataset, split.train_mask, object_id)
         val = _angles(dataset, split.validation_mask, object_id)  # the validation block and the guard bands
@@ -163,3 +168,22 @@ def test_the_config_file_selects_the_blocked_split() -> None:
     config = TrainConfig().updated(parse_config({"split": {"mode": "blocked"}}))
     assert config.split_mode == "blocked"
     assert TrainConfig().split_mode == "random"  # the paper's split stays the default (Table I comparable)
+
+
+def test_a_resumed_blocked_run_keeps_its_split_mode_and_gap(tmp_path: Path) -> None:
+    """Issue 38: resuming rebuilt the split without its mode and gap, so a blocked run resumed (as results_full's
+    probe-then-train always does) recorded ``mode: random, gap_deg: 0`` though its masks were blocked."""
+    from tests.learning.learning_helpers import small_sets
+    from unitac_rig.learning.data import build_paired_dataset
+    from unitac_rig.learning.train import TrainConfig, load_run, train
+
+    pairs = build_paired_dataset(small_sets())
+    config = TrainConfig(epochs=1, seeds=(0,), tsne_contacts=30, split_mode="blocked")
+    run_dir = tmp_path / "run"
+    first = train(pairs, run_dir, config, device="cpu")
+    assert first.split.mode == "blocked"
+    resumed = train(pairs, run_dir, resume=True, epochs=2, device="cpu")
+    record = load_run(run_dir).payload["split"]
+    assert (resumed.split.mode, resumed.split.gap_deg) == ("blocked", 3.0)
+    assert (record["mode"], record["gap_deg"], record["not_held_out"]) == ("blocked", 3.0, ["circle_pla"])
+    assert np.array_equal(resumed.split.test_mask, first.split.test_mask)

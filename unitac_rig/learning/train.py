@@ -446,6 +446,9 @@ def _stored_split(payload: Mapping[str, Any]) -> Split:
         None if val_mask is None else np.asarray(val_mask, dtype=bool),
         float(info.get("val_fraction", 0.0)),
         {k: [tuple(d) for d in v] for k, v in info.get("val_directions", {}).items()},
+        str(info.get("mode", "random")),
+        float(info.get("gap_deg", 0.0)),
+        tuple(info.get("not_held_out", ())),
     )
 
 

@@ -29,7 +29,14 @@ from unitac_rig.learning.engine import ModelShape, StackedAutoencoders, default_
 from unitac_rig.learning.evaluate import Evaluator
 from unitac_rig.learning.evaluate import direction_name as direction_name  # where reports look for it
 from unitac_rig.learning.metrics import NMAE_NORMALISERS, SSIM_RANGES
-from unitac_rig.learning.run import checkpoint_path, load_checkpoint, provenance, save_checkpoint, save_test_set
+from unitac_rig.learning.run import (
+    checkpoint_path,
+    load_checkpoint,
+    provenance,
+    save_checkpoint,
+    save_test_set,
+    save_training_pairs,
+)
 from unitac_rig.learning.run import load_test_set as load_test_set  # where reports and geometry look for it
 
 log = logging.getLogger(__name__)
@@ -360,6 +367,7 @@ def _start_run(
     )
     run_dir.mkdir(parents=True, exist_ok=True)
     save_test_set(run_dir, test_rows)
+    save_training_pairs(run_dir, train_rows)
     readable = {
         "config": config.to_dict(),
         "split": split.to_dict(),

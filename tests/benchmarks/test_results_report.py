@@ -28,6 +28,9 @@ def json_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     base = TrainConfig().updated({"epochs": 2, "eval_every": 1, "tsne_contacts": 10})
     for protocol in ("random", "blocked"):
         run_dir = root / "runs" / protocol / "split-1"
+        if protocol == "blocked":  # as results_full does: a 1-epoch probe, then resumed to the full run
+            probe = split_config(base.updated({"epochs": 1}), protocol, 1, 2)
+            train_split(dataset, run_dir, probe, log=lambda message: None)
         train_split(dataset, run_dir, split_config(base, protocol, 1, 2), log=lambda message: None)
         for member in range(2):
             geometry_member(run_dir, protocol, member, ceiling=member == 0, epochs=3)
@@ -65,3 +68,41 @@ def test_the_pages_no_latent_number_is_the_mean_over_the_json_members(json_dir: 
     doc = json.loads((json_dir / "random" / "split-1.json").read_text(encoding="utf-8"))
     values = np.array([m["cross_sensor"]["no_latent_mm"] for m in doc["geometry"]["members"]])
     assert f"| no latent (the training rays' mean profile) | {values.mean():.3f} ± {values.std():.3f} | – |" in page
+
+
+def test_the_blocked_json_records_its_mode_and_gap_after_the_resumed_run(json_dir: Path) -> None:
+    """Issue 38: results_full resumes every run after its probe, and the resumed run recorded random, 0."""
+    doc = json.loads((json_dir / "blocked" / "split-1.json").read_text(encoding="utf-8"))
+    assert doc["history"][-1]["epoch"] == 2
+    assert (doc["split"]["mode"], doc["split"]["gap_deg"]) == ("blocked", 3.0)
+    assert doc["split"]["not_held_out"] == ["circle_pla"]
+    assert "circle_pla" not in doc["metrics"]["table1"]  # a circle cannot be held out by angle
+
+
+def test_table_one_carries_the_simple_baselines_and_the_paired_comparison(json_dir: Path) -> None:
+    import run_results
+
+    results = run_results.load_results(json_dir)
+    page = run_results.render(results, {})
+    doc = json.loads((json_dir / "random" / "split-1.json").read_text(encoding="utf-8"))
+    simple = doc["metrics"]["simple_baselines"]["table1"]["all_seen"]
+    assert set(simple) == {
+        "pca_uskin",
+        "pca_papillarray",
+        "ridge_uskin_to_papillarray",
+        "nn_uskin_to_papillarray",
+        "ridge_papillarray_to_uskin",
+        "nn_papillarray_to_uskin",
+    }
+    for reading in doc["readings"].values():  # under every metric reading too
+        assert set(reading["simple_baselines"]["all_seen"]) == set(simple)
+    assert "### Simple baselines (random split)" in page and "### Simple baselines (blocked split)" in page
+    # the paired row of p -> u against the ridge map: the mean over the two members of (baseline - ours)
+    ours = np.array(doc["metrics"]["table1_members"]["all_seen"]["papillarray_to_uskin"]["nmae"])
+    difference = simple["ridge_papillarray_to_uskin"]["nmae"] - ours
+    wins = int((difference > 0).sum())
+    assert (
+        f"| all_seen | papillarray → uskin | ridge papillarray → uskin | {difference.mean():+.4f} | {wins} of 2 |"
+        in page
+    )
+    assert "matched / unmatched L1" in page and "so it is not the claim" in page

@@ -61,6 +61,7 @@ def main() -> None:
     parser.add_argument("--splits", type=int, default=5, help="split seeds 0..N-1, one run each")
     parser.add_argument("--epochs", type=int, default=1000)
     parser.add_argument("--eval-every", type=int, default=10, help="epochs between validation evaluations")
+    parser.add_argument("--patience", type=int, default=100, help="stop after this many epochs without progress")
     parser.add_argument("--config", type=Path, default=None, help="TOML training config (docs/learning.md)")
     parser.add_argument("--ceiling-members", type=int, default=1, help="members per split that run the ceiling")
     parser.add_argument("--report-only", action="store_true", help="only render the page from the JSON")
@@ -75,7 +76,9 @@ def main() -> None:
         from results_stages import export_split, geometry_member, split_config, train_split
 
         flat = load_config(args.config) if args.config else {}
-        base = TrainConfig().updated({"eval_every": args.eval_every, **flat, "epochs": args.epochs})
+        base = TrainConfig().updated(
+            {"eval_every": args.eval_every, "patience": args.patience, **flat, "epochs": args.epochs}
+        )
         dataset = build_paired_dataset(load_sets(args.data))
         print(f"{len(dataset)} pairs, sensors {dataset.sensors}, objects {dataset.objects}", flush=True)
         for protocol in protocols:
@@ -400,7 +403,7 @@ def render(results: dict[str, list[dict[str, Any]]], figures: dict[str, dict[str
         f"{', '.join(sensors)}, objects {', '.join(summary.get('objects', []))} ({summary.get('rows')} joined "
         f"contacts). Per protocol {len(splits0)} splits x {len(config.seeds)} model seeds (split K trains seeds "
         f"K·{len(config.seeds)} to K·{len(config.seeds)}+{len(config.seeds) - 1}), each run training UniTac-NV and "
-        f"both per-sensor baselines together; {first['epochs']} epochs, batch {config.batch_size}, Adam lr "
+        f"both per-sensor baselines together; {epochs_text(results)}, batch {config.batch_size}, Adam lr "
         f"{config.learning_rate}, dropout {shape.dropout}, widths {list(shape.encoder_hidden)} / "
         f"{shape.latent_dim} / {list(shape.decoder_hidden)}. unitac-rig {prov.get('package_version')}, commit "
         f"`{str(prov.get('git_commit', ''))[:12]}`.",
@@ -423,6 +426,19 @@ def render(results: dict[str, list[dict[str, Any]]], figures: dict[str, dict[str
         lines += ["", *render_section(json.loads(beyond.read_text(encoding="utf-8")))]
     lines.append(END)
     return "\n".join(lines)
+
+
+def epochs_text(results: dict[str, list[dict[str, Any]]]) -> str:
+    """The epochs each run reached (early stopping) against the most it was allowed."""
+    reached = [int(s["metrics"]["epochs"]) for splits in results.values() for s in splits]
+    stop = next(iter(results.values()))[0]["metrics"].get("early_stopping", {})
+    cap, patience = stop.get("max_epochs"), stop.get("patience", 0)
+    if not patience:
+        return f"{', '.join(str(e) for e in reached)} epochs (no early stopping)"
+    return (
+        f"at most {cap} epochs, stopped after {patience} epochs without a better validation NMAE (mean over "
+        f"UniTac-NV's directions): epochs reached per run {', '.join(str(e) for e in reached)}"
+    )
 
 
 def protocol_section(protocol: str, splits: list[dict[str, Any]], figures: dict[str, str]) -> list[str]:

@@ -17,6 +17,7 @@ The file has sections; every key is optional and a missing key keeps the default
     learning_rate = 5e-4
     seeds = [0, 1, 2, 3, 4]       # model seeds (initialisation, shuffling, dropout), trained together
     baselines = true              # also train one autoencoder per sensor
+    patience = 0                  # stop after this many epochs without a better validation NMAE (0: never)
 
     [split]
     seed = 0                      # which approach directions are test / validation data (apart from model seeds)
@@ -74,6 +75,12 @@ class TrainingSection(_Section):
     learning_rate: float | None = Field(default=None, gt=0.0)
     seeds: list[int] | None = Field(default=None, min_length=1)
     baselines: bool | None = None
+    patience: int | None = Field(
+        default=None,
+        ge=0,
+        description="early stopping: epochs without a better validation NMAE (mean over UniTac-NV's directions, "
+        "seen validation contacts) before training stops; 0 never stops before `epochs`, which stays the maximum",
+    )
 
 
 class SplitSection(_Section):
@@ -122,6 +129,7 @@ _FIELDS: dict[tuple[str, str], str] = {
     ("training", "learning_rate"): "learning_rate",
     ("training", "seeds"): "seeds",
     ("training", "baselines"): "baselines",
+    ("training", "patience"): "patience",
     ("split", "seed"): "split_seed",
     ("split", "test_fraction"): "test_fraction",
     ("split", "val_fraction"): "val_fraction",

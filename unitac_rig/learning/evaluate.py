@@ -326,7 +326,12 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
             "note": "first_epoch values are the test rows scored once after epoch 1 (per member); they are never "
             "used for a choice",
         },
-        "epochs": int(run.payload["epoch"]),
+        "epochs": int(run.payload["epoch"]),  # the epoch reached: config.epochs, or where early stopping stopped
+        "early_stopping": {
+            "patience": int(config.patience),
+            "max_epochs": int(config.epochs),
+            **dict(run.payload.get("early_stop") or {}),
+        },
         "train_seconds": float(run.payload["train_seconds"]),
         "seed": run.engine.seeds[0],
         "seeds": list(run.engine.seeds),

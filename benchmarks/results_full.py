@@ -20,9 +20,9 @@ Stages, each in parallel processes (``--jobs``, one torch thread each: the layer
         [--splits 5] [--seeds 5] [--angles N] [--protocol random --protocol blocked] [--ceiling-members 1]
         [--patience 100]
 
-OUT gets ``results/<protocol>/split-<K>.json`` (commit as docs/results/), ``figures/`` (docs/figures/),
-``results.md`` (docs/results.md: the repo's page with the generated block replaced), ``timings.json`` and
-``logs/``. Tiny check on a small machine: ``--angles 5 --splits 1 --seeds 2 --epochs 2 --jobs 2``.
+OUT gets ``results/<protocol>/split-<K>.json`` and ``results/collection.json`` (commit as docs/results/),
+``figures/`` (docs/figures/), ``results.md`` (docs/results.md: the repo's page with the generated block replaced),
+``timings.json`` and ``logs/``. Tiny check on a small machine: ``--angles 5 --splits 1 --seeds 2 --epochs 2 --jobs 2``.
 """
 
 from __future__ import annotations
@@ -44,6 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 ROOT = Path(__file__).resolve().parent.parent
 SENSORS = ("uskin", "papillarray")
 PROBE_EPOCHS = 2
+COLLECTION_JSON = "collection.json"  # run_results reads it beside the protocols' folders
 EVAL_OVERHEAD = 1.25  # validation every 10 epochs, checkpoints and the process's start, on top of training time
 PATIENCE = 100  # epochs without a better validation NMAE before a run stops (train.TrainConfig.patience)
 GEOMETRY_RESERVE_S = 160.0  # wall seconds kept for stages 4-5 at full size on 16 cores (estimate: docs/learning.md)
@@ -84,6 +85,7 @@ def main() -> None:
 
     data = args.work / "data"
     collect(data, args.angles, args.jobs, logs)
+    write_collection(data, args.out / "results" / COLLECTION_JSON)
     mark("collected")
     dataset_dir = args.work / "dataset"
     save_dataset(data, dataset_dir)
@@ -147,6 +149,18 @@ def collect(data: Path, angles: int | None, jobs: int, logs: Path) -> None:
         raise SystemExit(f"collection failed for {', '.join(failed)}: see {logs}")
 
 
+def write_collection(data: Path, target: Path) -> None:
+    """The collection's statistics (``unitac-rig inspect --json``: per session presses, matched targets, match
+    error, peak force; per object the joined pairs) as committed JSON, so the page's collection line has a source."""
+    from unitac_rig.storage.summary import inspect_dataset
+
+    report = inspect_dataset(data)
+    for session in report["sessions"]:
+        session.pop("writer", None)  # who holds the write lease now: nobody, and nothing the page needs
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+
+
 def save_dataset(data: Path, target: Path) -> None:
     """Join the sessions once; every worker reads the joined contacts back (``load_test_set``) in a second."""
     from unitac_rig.learning.data import build_paired_dataset, load_sets
@@ -203,7 +217,8 @@ def render(out: Path, runs: Path) -> None:
         shutil.copyfile(ROOT / "docs" / "results.md", page)
     results = run_results.load_results(out / "results")
     figures = run_results.draw_figures(results, out / "figures", runs)
-    run_results.write_results(page, run_results.render(results, figures))
+    collection = run_results.load_collection(out / "results")
+    run_results.write_results(page, run_results.render(results, figures, collection))
 
 
 if __name__ == "__main__":

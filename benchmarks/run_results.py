@@ -96,7 +96,7 @@ def main() -> None:
         print(f"no split JSON under {args.json}: results.md not written")
         return
     figures = draw_figures(results, args.docs / "figures", args.out)
-    write_results(args.docs / "results.md", render(results, figures))
+    write_results(args.docs / "results.md", render(results, figures, load_collection(args.json)))
     print(f"wrote {args.docs / 'results.md'}")
 
 
@@ -131,6 +131,50 @@ def load_results(folder: Path) -> dict[str, list[dict[str, Any]]]:
         if splits:
             out[protocol] = splits
     return out
+
+
+def load_collection(folder: Path) -> dict[str, Any] | None:
+    """``collection.json`` beside the protocols' folders (results_full writes it), or None."""
+    path = folder / "collection.json"
+    return json.loads(path.read_text(encoding="utf-8")) if path.exists() else None
+
+
+def collection_line(collection: dict[str, Any] | None) -> list[str]:
+    """The collection's statistics from its JSON; without one, a line saying there is none."""
+    if not collection:
+        return [
+            "",
+            "Collection statistics: no `docs/results/collection.json` was committed with these runs, so the page "
+            "states none (results_full.py writes it from `unitac-rig inspect` since issue 38).",
+        ]
+    sessions = collection["sessions"]
+
+    def span(values: list[float], digits: int) -> str:
+        return f"{min(values):.{digits}f}-{max(values):.{digits}f}"
+
+    matched = sum(s["targets_matched"] for s in sessions)
+    missed = sum(s["targets_missed"] for s in sessions)
+    errors = [s["match_error_n"] for s in sessions if s["match_error_n"]["median"] is not None]
+    peaks = [s["peak_force_n"] for s in sessions if s["peak_force_n"]["median"] is not None]
+    pairs = collection.get("pairs", {})
+    text = (
+        f"Collection (`docs/results/collection.json`): {len(sessions)} sessions, "
+        f"{sum(s['presses_complete'] for s in sessions)} of {sum(s['presses_planned'] for s in sessions)} presses "
+        f"complete, {matched} of {matched + missed} force targets matched"
+    )
+    if errors:
+        text += (
+            f"; force-matching error per session median {span([1000 * e['median'] for e in errors], 0)} mN, p95 "
+            f"{span([1000 * e['p95'] for e in errors], 0)} mN"
+        )
+    if peaks:
+        text += (
+            f"; press peak force median {span([p['median'] for p in peaks], 1)} N, max "
+            f"{span([p['max'] for p in peaks], 1)} N"
+        )
+    if pairs:
+        text += "; joined pairs per object: " + ", ".join(f"{o} {n}" for o, n in pairs.items())
+    return ["", text + "."]
 
 
 # ---- aggregation ---------------------------------------------------------------------------------------------
@@ -385,7 +429,11 @@ def plot_validation_nmae(splits: list[dict[str, Any]], path: Path) -> Path:
 # ---- the page ------------------------------------------------------------------------------------------------
 
 
-def render(results: dict[str, list[dict[str, Any]]], figures: dict[str, dict[str, str]]) -> str:
+def render(
+    results: dict[str, list[dict[str, Any]]],
+    figures: dict[str, dict[str, str]],
+    collection: dict[str, Any] | None = None,
+) -> str:
     """The generated block: a header, then per protocol the claims, Table I, the readings, alignment and
     geometry, then the beyond-the-paper section and the figures."""
     splits0 = next(iter(results.values()))
@@ -416,6 +464,7 @@ def render(results: dict[str, list[dict[str, Any]]], figures: dict[str, dict[str
         "Every number on this page is computed from the per-split JSON files in `docs/results/` "
         "(`python benchmarks/run_results.py --report-only` redraws it from them alone). Made by "
         "`python benchmarks/results_full.py` (collection, both protocols, geometry; see docs/learning.md).",
+        *collection_line(collection),
     ]
     for protocol, splits in results.items():
         lines += protocol_section(protocol, splits, figures.get(protocol, {}))
@@ -527,7 +576,8 @@ def protocol_section(protocol: str, splits: list[dict[str, Any]], figures: dict[
         "",
         f"### Latent alignment ({protocol} split; test contacts, after epoch 1 → at the end, mean over all members)",
         "",
-        "| contacts | matched L1 (paper's) | matched / unmatched L1 | sensor mixing (10 NN) | perfect mixing |",
+        "| contacts | matched L1 (paper's; moves with the latents' scale) | matched / unmatched L1 (scale-free: the "
+        "claim) | sensor mixing (10 NN) | perfect mixing |",
         "|---|---|---|---|---|",
     ]
     for subset in ("all", "seen", "unseen"):

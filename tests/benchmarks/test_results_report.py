@@ -106,3 +106,25 @@ def test_table_one_carries_the_simple_baselines_and_the_paired_comparison(json_d
         in page
     )
     assert "matched / unmatched L1" in page and "so it is not the claim" in page
+
+
+def test_the_collection_line_comes_from_its_json_or_says_there_is_none(json_dir: Path) -> None:
+    import run_results
+
+    results = run_results.load_results(json_dir)
+    assert "no `docs/results/collection.json`" in run_results.render(results, {}, None)
+    session = {
+        "presses_planned": 130,
+        "presses_complete": 130,
+        "targets_matched": 3249,
+        "targets_missed": 1,
+        "match_error_n": {"median": 0.013, "p95": 0.027, "max": 0.05},
+        "peak_force_n": {"median": 11.0, "max": 11.7},
+    }
+    other = {**session, "targets_missed": 0, "match_error_n": {"median": 0.082, "p95": 0.256, "max": 0.3}}
+    page = run_results.render(results, {}, {"sessions": [session, other], "pairs": {"hex_pla": 2275}})
+    assert (
+        "2 sessions, 260 of 260 presses complete, 6498 of 6499 force targets matched; force-matching error per "
+        "session median 13-82 mN, p95 27-256 mN; press peak force median 11.0-11.0 N, max 11.7-11.7 N; joined pairs "
+        "per object: hex_pla 2275." in page
+    )

@@ -313,6 +313,13 @@ def alignment_lines(metrics: dict[str, Any]) -> list[str]:
             for m in shown
         ]
         lines.append(f"| {subset} | " + " | ".join(cells) + " |")
+    if any("latent_ratio" in entry for entry in per_subset.values()):
+        lines += [
+            "",
+            "Read the alignment by the scale-free ratio (matched / unmatched L1, 1 = chance): the raw matched-latent "
+            "L1 (the paper's measure) moves with the latents' scale, so it falls when the latents merely contract "
+            "and can rise while matched contacts draw closer than unmatched ones.",
+        ]
     tsne = metrics.get("tsne_mixing")
     if tsne:
         lines += [

@@ -483,6 +483,8 @@ def epochs_text(results: dict[str, list[dict[str, Any]]]) -> str:
     stop = next(iter(results.values()))[0]["metrics"].get("early_stopping", {})
     cap, patience = stop.get("max_epochs"), stop.get("patience", 0)
     if not patience:
+        if len(set(reached)) == 1:
+            return f"{reached[0]} epochs (every run; no early stopping)"
         return f"{', '.join(str(e) for e in reached)} epochs (no early stopping)"
     return (
         f"at most {cap} epochs, stopped after {patience} epochs without a better validation NMAE (mean over "

@@ -331,6 +331,30 @@ def alignment_lines(metrics: dict[str, Any]) -> list[str]:
     return lines
 
 
+def simple_baseline_lines(metrics: dict[str, Any]) -> list[str]:
+    """Table I's simple baselines (fitted on the run's training contacts), with each one's UniTac-NV column."""
+    simple = metrics.get("simple_baselines")
+    if not simple:
+        return []
+    columns = list(simple["compared_with"])
+    lines = [
+        "",
+        f"## Simple baselines: {' / '.join(m.label for m in frame_metrics())} on the same test contacts",
+        "",
+        f"Fitted on the run's {simple['train_rows']} training contacts: "
+        + "; ".join(f"{k}: {v}" for k, v in simple["definition"].items())
+        + f" (PCA k = {simple['pca_components']}). Compare each with UniTac-NV's column: "
+        + ", ".join(f"{c} with {simple['compared_with'][c].replace('_to_', ' → ')}" for c in columns)
+        + ".",
+        "",
+        "| row | " + " | ".join(c.replace("_to_", " → ") for c in columns) + " |",
+        "|---|" + "---|" * len(columns),
+    ]
+    for row, cells in simple["table1"].items():
+        lines.append(f"| {row} | " + " | ".join(_cell(cells.get(c)) for c in columns) + " |")
+    return lines
+
+
 def render_markdown(metrics: dict[str, Any], run: LoadedRun, figures: dict[str, str], geometry: dict | None) -> str:
     sensors = tuple(metrics["sensors"])
     table = metrics["table1"]
@@ -370,6 +394,7 @@ def render_markdown(metrics: dict[str, Any], run: LoadedRun, figures: dict[str, 
         lines.append(f"| {row} | {metrics['test_rows'][row]} | {ours} |")
         if row in PAPER_TABLE1:
             lines.append("| *paper* | | " + " | ".join(_paper_cell(row, c) for c in columns) + " |")
+    lines += simple_baseline_lines(metrics)
     lines += alignment_lines(metrics)
     if geometry:
         lines += [

@@ -128,3 +128,16 @@ def test_the_collection_line_comes_from_its_json_or_says_there_is_none(json_dir:
         "session median 13-82 mN, p95 27-256 mN; press peak force median 11.0-11.0 N, max 11.7-11.7 N; joined pairs "
         "per object: hex_pla 2275." in page
     )
+
+
+def test_the_halving_verdict_does_not_call_a_ceiling_a_bound_when_a_strict_method_beats_it() -> None:
+    import run_results
+
+    summary = {
+        "ceiling": {"raw_uskin": {"test_mm": 0.55}, "raw_papillarray": {"test_mm": 0.2}},
+        "methods": {"cca": {"uskin_to_papillarray": 0.4, "papillarray_to_uskin": 0.276}},
+    }
+    verdict = run_results.halving_verdict(summary)
+    assert "For papillarray → uskin a strict cross-sensor method reads below the ceiling" in verdict
+    assert "leaves room to halve the paper's error for uskin → papillarray" in verdict
+    assert "rules out" not in verdict

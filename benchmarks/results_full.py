@@ -10,17 +10,19 @@ Stages, each in parallel processes (``--jobs``, one torch thread each: the layer
 2. a 2-epoch probe of every run measures the seconds per epoch under the real load; the epochs then trained are
    ``--epochs`` or, when that would overrun ``--budget-s``, the most (a multiple of 10) that fit, and the page says
    how many were trained;
-3. every run resumed to those epochs;
+3. every run resumed to those epochs, or until ``--patience`` epochs pass without a better validation NMAE (the
+   epoch reached is in each split's JSON);
 4. per member: the paper's geometry heads, the pooled same-sensor head, the strict cross-sensor methods (the tuned
    ceiling on ``--ceiling-members`` members per split);
 5. per split: report, Table I under every metric reading, one JSON; then the page from the JSON.
 
     python benchmarks/results_full.py OUT [--work DIR] [--jobs 16] [--budget-s 500] [--epochs 1000]
         [--splits 5] [--seeds 5] [--angles N] [--protocol random --protocol blocked] [--ceiling-members 1]
+        [--patience 100]
 
-OUT gets ``results/<protocol>/split-<K>.json`` (commit as docs/results/), ``figures/`` (docs/figures/),
-``results.md`` (docs/results.md: the repo's page with the generated block replaced), ``timings.json`` and
-``logs/``. Tiny check on a small machine: ``--angles 5 --splits 1 --seeds 2 --epochs 2 --jobs 2``.
+OUT gets ``results/<protocol>/split-<K>.json`` and ``results/collection.json`` (commit as docs/results/),
+``figures/`` (docs/figures/), ``results.md`` (docs/results.md: the repo's page with the generated block replaced),
+``timings.json`` and ``logs/``. Tiny check on a small machine: ``--angles 5 --splits 1 --seeds 2 --epochs 2 --jobs 2``.
 """
 
 from __future__ import annotations
@@ -42,7 +44,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 ROOT = Path(__file__).resolve().parent.parent
 SENSORS = ("uskin", "papillarray")
 PROBE_EPOCHS = 2
+COLLECTION_JSON = "collection.json"  # run_results reads it beside the protocols' folders
 EVAL_OVERHEAD = 1.25  # validation every 10 epochs, checkpoints and the process's start, on top of training time
+PATIENCE = 100  # epochs without a better validation NMAE before a run stops (train.TrainConfig.patience)
 GEOMETRY_RESERVE_S = 160.0  # wall seconds kept for stages 4-5 at full size on 16 cores (estimate: docs/learning.md)
 
 
@@ -53,6 +57,12 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
     parser.add_argument("--budget-s", type=float, default=500.0, help="wall seconds for everything")
     parser.add_argument("--epochs", type=int, default=1000, help="at most this many (fewer if the budget says so)")
+    parser.add_argument(
+        "--patience",
+        type=int,
+        default=PATIENCE,
+        help="stop a run after this many epochs without a better validation NMAE",
+    )
     parser.add_argument("--splits", type=int, default=5)
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--angles", type=int, default=None, help="approach angles per sweep (default: the rig's 91)")
@@ -75,6 +85,7 @@ def main() -> None:
 
     data = args.work / "data"
     collect(data, args.angles, args.jobs, logs)
+    write_collection(data, args.out / "results" / COLLECTION_JSON)
     mark("collected")
     dataset_dir = args.work / "dataset"
     save_dataset(data, dataset_dir)
@@ -83,7 +94,9 @@ def main() -> None:
     pool = ProcessPoolExecutor(max_workers=args.jobs, mp_context=multiprocessing.get_context("spawn"))
     with pool:
         probes = list(
-            pool.map(_train_task, [(dataset_dir, args.work, p, k, args.seeds, PROBE_EPOCHS) for p, k in runs])
+            pool.map(
+                _train_task, [(dataset_dir, args.work, p, k, args.seeds, PROBE_EPOCHS, args.patience) for p, k in runs]
+            )
         )
         per_epoch = max(probes) * EVAL_OVERHEAD
         mark("probe trained")
@@ -93,7 +106,8 @@ def main() -> None:
         epochs = max(PROBE_EPOCHS, min(args.epochs, fitting))
         timings.update(seconds_per_epoch=round(per_epoch, 3), epochs=epochs, epochs_asked=args.epochs)
         print(f"{per_epoch:.2f} s per epoch per run: training {epochs} epochs ({args.epochs} asked)", flush=True)
-        list(pool.map(_train_task, [(dataset_dir, args.work, p, k, args.seeds, epochs) for p, k in runs]))
+        tasks = [(dataset_dir, args.work, p, k, args.seeds, epochs, args.patience) for p, k in runs]
+        list(pool.map(_train_task, tasks))
         mark("trained")
         geometry_members = min(args.seeds, args.geometry_members or args.seeds)
         tasks = [(args.work, p, k, m, m < args.ceiling_members) for p, k in runs for m in range(geometry_members)]
@@ -135,6 +149,18 @@ def collect(data: Path, angles: int | None, jobs: int, logs: Path) -> None:
         raise SystemExit(f"collection failed for {', '.join(failed)}: see {logs}")
 
 
+def write_collection(data: Path, target: Path) -> None:
+    """The collection's statistics (``unitac-rig inspect --json``: per session presses, matched targets, match
+    error, peak force; per object the joined pairs) as committed JSON, so the page's collection line has a source."""
+    from unitac_rig.storage.summary import inspect_dataset
+
+    report = inspect_dataset(data)
+    for session in report["sessions"]:
+        session.pop("writer", None)  # who holds the write lease now: nobody, and nothing the page needs
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+
+
 def save_dataset(data: Path, target: Path) -> None:
     """Join the sessions once; every worker reads the joined contacts back (``load_test_set``) in a second."""
     from unitac_rig.learning.data import build_paired_dataset, load_sets
@@ -146,9 +172,10 @@ def save_dataset(data: Path, target: Path) -> None:
     print(f"{len(dataset)} pairs, objects {', '.join(dataset.objects)}", flush=True)
 
 
-def _train_task(task: tuple[Path, Path, str, int, int, int]) -> float:
-    """Train (or resume) one split's run to ``epochs``; returns its training seconds per epoch."""
-    dataset_dir, work, protocol, split, seeds, epochs = task
+def _train_task(task: tuple[Path, Path, str, int, int, int, int]) -> float:
+    """Train (or resume) one split's run to ``epochs`` (fewer where early stopping ends it); returns its training
+    seconds per epoch."""
+    dataset_dir, work, protocol, split, seeds, epochs, patience = task
     from results_stages import split_config, train_split
 
     from unitac_rig.learning.run import load_test_set
@@ -157,7 +184,8 @@ def _train_task(task: tuple[Path, Path, str, int, int, int]) -> float:
     run_dir = work / "runs" / protocol / f"split-{split}"
     # validation every 10 epochs, at most about 25 times a run: curves enough, and evaluation stays under a tenth
     every = max(10, epochs // 250 * 10)
-    config = split_config(TrainConfig().updated({"eval_every": every, "epochs": epochs}), protocol, split, seeds)
+    base = TrainConfig().updated({"eval_every": every, "epochs": epochs, "patience": patience})
+    config = split_config(base, protocol, split, seeds)
     train_split(load_test_set(dataset_dir), run_dir, config, log=lambda message: None)
     payload = load_run(run_dir).payload
     return float(payload["train_seconds"]) / max(1, int(payload["epoch"]))
@@ -189,7 +217,8 @@ def render(out: Path, runs: Path) -> None:
         shutil.copyfile(ROOT / "docs" / "results.md", page)
     results = run_results.load_results(out / "results")
     figures = run_results.draw_figures(results, out / "figures", runs)
-    run_results.write_results(page, run_results.render(results, figures))
+    collection = run_results.load_collection(out / "results")
+    run_results.write_results(page, run_results.render(results, figures, collection))
 
 
 if __name__ == "__main__":

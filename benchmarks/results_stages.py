@@ -27,9 +27,9 @@ from unitac_rig.bench.lab.cross_geometry import cross_sensor_geometry
 from unitac_rig.bench.lab.pooled_geometry import pooled_geometry
 from unitac_rig.learning.contact_geometry import GeometryConfig, geometry_for_run
 from unitac_rig.learning.data import PairedDataset
-from unitac_rig.learning.evaluate import evaluate_run
+from unitac_rig.learning.evaluate import evaluate_run, simple_predictions
 from unitac_rig.learning.report import write_report
-from unitac_rig.learning.run import checkpoint_path, load_test_set, save_test_set
+from unitac_rig.learning.run import TRAINING_PAIRS, checkpoint_path, load_test_set
 from unitac_rig.learning.train import TrainConfig, load_run, train
 
 PROTOCOLS = {"random": "random", "blocked": "blocked"}  # protocol name -> TrainConfig.split_mode
@@ -41,7 +41,7 @@ READINGS = (
     ("channel_std", "z_range"),
     ("frame_range", "sensor_range"),
 )
-SEEN_PAIRS = "seen_pairs"  # folder in a run: the seen objects' training pairs (for the linear map and the CCA)
+SEEN_PAIRS = TRAINING_PAIRS  # folder in a run: the seen objects' training pairs (the linear map, the CCA, baselines)
 MEMBER_JSON = "geometry_member_{}.json"
 DIGITS = 6  # significant digits kept in the committed JSON
 
@@ -73,14 +73,7 @@ def train_split(dataset: PairedDataset, run_dir: Path, config: TrainConfig, log:
             log(f"{run_dir}: resuming at epoch {done} to {config.epochs}")
             train(dataset, run_dir, None, resume=True, epochs=config.epochs)
     else:
-        train(dataset, run_dir, config)
-        run = load_run(run_dir)
-        train_rows = ~np.asarray(run.payload["test_mask"], dtype=bool)
-        val = run.payload.get("val_mask")
-        if val is not None:
-            train_rows &= ~np.asarray(val, dtype=bool)
-        (run_dir / SEEN_PAIRS).mkdir(exist_ok=True)
-        save_test_set(run_dir / SEEN_PAIRS, dataset.subset(train_rows))
+        train(dataset, run_dir, config)  # keeps the training pairs in RUN/seen_pairs (run.save_training_pairs)
     return time.perf_counter() - began
 
 
@@ -128,13 +121,16 @@ def export_split(run_dir: Path, protocol: str, target: Path, figures: bool = Tru
         geometry_for_run(run_dir, config=GeometryConfig(split_mode=GEOMETRY_MODE[protocol]))
     metrics = json.loads((run_dir / "metrics.json").read_text(encoding="utf-8"))
     readings = {}
+    simple = simple_predictions(run_dir, run, test)  # fitted once, scored under every reading
     for nmae, ssim in READINGS:
-        scored = evaluate_run(run.scored_under(nmae, ssim), test)
+        scored = evaluate_run(run.scored_under(nmae, ssim), test, simple)
         readings[f"{nmae}|{ssim}"] = {
             "nmae_normaliser": nmae,
             "ssim_range": ssim,
             "table1_members": scored.get("table1_members") or _as_members(scored["table1"]),
         }
+        if "simple_baselines" in scored:
+            readings[f"{nmae}|{ssim}"]["simple_baselines"] = scored["simple_baselines"]["table1"]
     members = [
         json.loads((run_dir / MEMBER_JSON.format(m)).read_text(encoding="utf-8"))
         for m in range(run.engine.members)
@@ -145,7 +141,9 @@ def export_split(run_dir: Path, protocol: str, target: Path, figures: bool = Tru
         "split_seed": int(run.config.split_seed),
         "config": run.config.to_dict(),
         "summary": run.payload.get("dataset_summary", {}),
-        "split": {k: v for k, v in run.payload["split"].items() if k in ("mode", "gap_deg", "test_directions")},
+        "split": {
+            k: v for k, v in run.payload["split"].items() if k in ("mode", "gap_deg", "test_directions", "not_held_out")
+        },
         "metrics": {k: v for k, v in metrics.items() if k not in ("config",)},
         "readings": readings,
         "history": compact_history(run.history),

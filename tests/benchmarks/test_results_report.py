@@ -28,6 +28,9 @@ def json_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     base = TrainConfig().updated({"epochs": 2, "eval_every": 1, "tsne_contacts": 10})
     for protocol in ("random", "blocked"):
         run_dir = root / "runs" / protocol / "split-1"
+        if protocol == "blocked":  # as results_full does: a 1-epoch probe, then resumed to the full run
+            probe = split_config(base.updated({"epochs": 1}), protocol, 1, 2)
+            train_split(dataset, run_dir, probe, log=lambda message: None)
         train_split(dataset, run_dir, split_config(base, protocol, 1, 2), log=lambda message: None)
         for member in range(2):
             geometry_member(run_dir, protocol, member, ceiling=member == 0, epochs=3)
@@ -65,3 +68,76 @@ def test_the_pages_no_latent_number_is_the_mean_over_the_json_members(json_dir: 
     doc = json.loads((json_dir / "random" / "split-1.json").read_text(encoding="utf-8"))
     values = np.array([m["cross_sensor"]["no_latent_mm"] for m in doc["geometry"]["members"]])
     assert f"| no latent (the training rays' mean profile) | {values.mean():.3f} ± {values.std():.3f} | – |" in page
+
+
+def test_the_blocked_json_records_its_mode_and_gap_after_the_resumed_run(json_dir: Path) -> None:
+    """Issue 38: results_full resumes every run after its probe, and the resumed run recorded random, 0."""
+    doc = json.loads((json_dir / "blocked" / "split-1.json").read_text(encoding="utf-8"))
+    assert doc["history"][-1]["epoch"] == 2
+    assert (doc["split"]["mode"], doc["split"]["gap_deg"]) == ("blocked", 3.0)
+    assert doc["split"]["not_held_out"] == ["circle_pla"]
+    assert "circle_pla" not in doc["metrics"]["table1"]  # a circle cannot be held out by angle
+
+
+def test_table_one_carries_the_simple_baselines_and_the_paired_comparison(json_dir: Path) -> None:
+    import run_results
+
+    results = run_results.load_results(json_dir)
+    page = run_results.render(results, {})
+    doc = json.loads((json_dir / "random" / "split-1.json").read_text(encoding="utf-8"))
+    simple = doc["metrics"]["simple_baselines"]["table1"]["all_seen"]
+    assert set(simple) == {
+        "pca_uskin",
+        "pca_papillarray",
+        "ridge_uskin_to_papillarray",
+        "nn_uskin_to_papillarray",
+        "ridge_papillarray_to_uskin",
+        "nn_papillarray_to_uskin",
+    }
+    for reading in doc["readings"].values():  # under every metric reading too
+        assert set(reading["simple_baselines"]["all_seen"]) == set(simple)
+    assert "### Simple baselines (random split)" in page and "### Simple baselines (blocked split)" in page
+    # the paired row of p -> u against the ridge map: the mean over the two members of (baseline - ours)
+    ours = np.array(doc["metrics"]["table1_members"]["all_seen"]["papillarray_to_uskin"]["nmae"])
+    difference = simple["ridge_papillarray_to_uskin"]["nmae"] - ours
+    wins = int((difference > 0).sum())
+    assert (
+        f"| all_seen | papillarray → uskin | ridge papillarray → uskin | {difference.mean():+.4f} | {wins} of 2 |"
+        in page
+    )
+    assert "matched / unmatched L1" in page and "so it is not the claim" in page
+
+
+def test_the_collection_line_comes_from_its_json_or_says_there_is_none(json_dir: Path) -> None:
+    import run_results
+
+    results = run_results.load_results(json_dir)
+    assert "no `docs/results/collection.json`" in run_results.render(results, {}, None)
+    session = {
+        "presses_planned": 130,
+        "presses_complete": 130,
+        "targets_matched": 3249,
+        "targets_missed": 1,
+        "match_error_n": {"median": 0.013, "p95": 0.027, "max": 0.05},
+        "peak_force_n": {"median": 11.0, "max": 11.7},
+    }
+    other = {**session, "targets_missed": 0, "match_error_n": {"median": 0.082, "p95": 0.256, "max": 0.3}}
+    page = run_results.render(results, {}, {"sessions": [session, other], "pairs": {"hex_pla": 2275}})
+    assert (
+        "2 sessions, 260 of 260 presses complete, 6498 of 6499 force targets matched; force-matching error per "
+        "session median 13-82 mN, p95 27-256 mN; press peak force median 11.0-11.0 N, max 11.7-11.7 N; joined pairs "
+        "per object: hex_pla 2275." in page
+    )
+
+
+def test_the_halving_verdict_does_not_call_a_ceiling_a_bound_when_a_strict_method_beats_it() -> None:
+    import run_results
+
+    summary = {
+        "ceiling": {"raw_uskin": {"test_mm": 0.55}, "raw_papillarray": {"test_mm": 0.2}},
+        "methods": {"cca": {"uskin_to_papillarray": 0.4, "papillarray_to_uskin": 0.276}},
+    }
+    verdict = run_results.halving_verdict(summary)
+    assert "For papillarray → uskin a strict cross-sensor method reads below the ceiling" in verdict
+    assert "leaves room to halve the paper's error for uskin → papillarray" in verdict
+    assert "rules out" not in verdict

@@ -70,6 +70,9 @@ def test_report_writes_markdown_beside_the_paper_and_figures(run_dir: Path, tmp_
     report = write_report(run_dir)
     text = report.read_text()
     assert "| *paper* |" in text and "0.318 / 0.581" in text  # the paper's irregular papillarray -> uskin
+    simple = json.loads((run_dir / "metrics.json").read_text())["simple_baselines"]["table1"]
+    cell = simple["all_seen"]["ridge_papillarray_to_uskin"]
+    assert "## Simple baselines" in text and f"{cell['nmae']:.3f} / {cell['ssim']:.3f}" in text
     for name in ("curves.png", "tsne.png", "reconstructions_seen.png", "reconstructions_unseen.png"):
         assert (run_dir / "figures" / name).stat().st_size > 1000
 

@@ -4,6 +4,7 @@ geometry splits seeded apart from the model seeds. Hand-worked cases on small sy
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +46,11 @@ def seen_dataset() -> PairedDataset:
     return directions_dataset({o: [(0, a) for a in SEEN_ANGLES] for o in ("circle_pla", "hex_tpu")})
 
 
+def asymmetric_dataset() -> PairedDataset:
+    """Two objects the catalogue does not know, so no symmetry folds their rays."""
+    return directions_dataset({o: [(0, a) for a in SEEN_ANGLES] for o in ("blob_a", "blob_b")})
+
+
 def _angles(dataset: PairedDataset, mask: np.ndarray, object_id: str) -> set[int]:
     return set(np.round(dataset.angle_deg[mask & (dataset.object_id == object_id)]).astype(int).tolist())
 
@@ -52,9 +58,9 @@ def _angles(dataset: PairedDataset, mask: np.ndarray, object_id: str) -> set[int
 @pytest.mark.parametrize("seed", range(6))
 @pytest.mark.parametrize("gap", [2, 5])
 def test_the_blocked_split_leaves_no_test_angle_within_the_gap_of_a_training_angle(seed: int, gap: int) -> None:
-    dataset = seen_dataset()
+    dataset = asymmetric_dataset()
     split = split_by_direction(dataset, seed, 0.1, (), val_fraction=0.1, mode="blocked", gap_deg=gap)
-    for object_id in ("circle_pla", "hex_tpu"):
+    for object_id in ("blob_a", "blob_b"):
         test = _angles(dataset, split.test_mask, object_id)
         train = _angles(dataset, split.train_mask, object_id)
         val = _angles(dataset, split.validation_mask, object_id)  # the validation block and the guard bands
@@ -163,3 +169,53 @@ def test_the_config_file_selects_the_blocked_split() -> None:
     config = TrainConfig().updated(parse_config({"split": {"mode": "blocked"}}))
     assert config.split_mode == "blocked"
     assert TrainConfig().split_mode == "random"  # the paper's split stays the default (Table I comparable)
+
+
+def test_a_resumed_blocked_run_keeps_its_split_mode_and_gap(tmp_path: Path) -> None:
+    """Issue 38: resuming rebuilt the split without its mode and gap, so a blocked run resumed (as results_full's
+    probe-then-train always does) recorded ``mode: random, gap_deg: 0`` though its masks were blocked."""
+    from tests.learning.learning_helpers import small_sets
+    from unitac_rig.learning.data import build_paired_dataset
+    from unitac_rig.learning.train import TrainConfig, load_run, train
+
+    pairs = build_paired_dataset(small_sets())
+    config = TrainConfig(epochs=1, seeds=(0,), tsne_contacts=30, split_mode="blocked")
+    run_dir = tmp_path / "run"
+    first = train(pairs, run_dir, config, device="cpu")
+    assert first.split.mode == "blocked"
+    resumed = train(pairs, run_dir, resume=True, epochs=2, device="cpu")
+    record = load_run(run_dir).payload["split"]
+    assert (resumed.split.mode, resumed.split.gap_deg) == ("blocked", 3.0)
+    assert (record["mode"], record["gap_deg"], record["not_held_out"]) == ("blocked", 3.0, ["circle_pla"])
+    assert np.array_equal(resumed.split.test_mask, first.split.test_mask)
+
+
+def test_training_stops_when_validation_stops_improving_and_records_the_epoch(tmp_path: Path) -> None:
+    """Issue 38: --epochs is the most; with ``patience`` the run stops after that many epochs without a better
+    validation NMAE. A learning rate too small to move a weight leaves the validation NMAE where epoch 1 left it,
+    so a patience of 3 stops at epoch 4, and the checkpoint and metrics.json say so."""
+    from tests.learning.learning_helpers import small_sets
+    from unitac_rig.learning.data import build_paired_dataset
+    from unitac_rig.learning.evaluate import write_metrics
+    from unitac_rig.learning.train import TrainConfig, load_run, train
+
+    pairs = build_paired_dataset(small_sets())
+    frozen = TrainConfig(epochs=50, seeds=(0,), tsne_contacts=30, learning_rate=1e-30, patience=3)
+    outcome = train(pairs, tmp_path / "stops", frozen, device="cpu")
+    assert outcome.epochs_done == 4 and [h["epoch"] for h in outcome.history] == [1, 2, 3, 4]
+    assert "test" in outcome.history[-1]  # the stopping epoch is scored as the last one
+    payload = load_run(tmp_path / "stops").payload
+    assert payload["epoch"] == 4 and payload["early_stop"]["stopped_epoch"] == 4
+    metrics = write_metrics(tmp_path / "stops")
+    assert metrics["epochs"] == 4
+    assert metrics["early_stopping"] == {
+        "patience": 3,
+        "max_epochs": 50,
+        "best_val_nmae": payload["early_stop"]["best_val_nmae"],
+        "best_epoch": 1,
+        "stopped_epoch": 4,
+    }
+    resumed = train(pairs, tmp_path / "stops", resume=True, epochs=60, device="cpu")  # a stopped run stays stopped
+    assert resumed.epochs_done == 4
+    without = train(pairs, tmp_path / "runs_on", replace(frozen, patience=0, epochs=6), device="cpu")
+    assert without.epochs_done == 6

@@ -13,6 +13,7 @@ where the paper gives one)::
     [training]
     epochs = 1000
     seeds = [0, 1, 2, 3, 4]       # model seeds (initialisation, shuffling, dropout), trained together
+    patience = 0                  # stop after this many epochs without a better validation NMAE (0: never)
     [split]
     test_fraction = 0.1
     unseen_objects = ["irregular_pla"]   # default: the object catalogue decides
@@ -87,6 +88,11 @@ class TrainingSection(_Section):
         (0,), "Model seeds (initialisation, shuffling, dropout), trained together.", cli=None, min_length=1
     )
     baselines: bool = _field(True, "Also train per-sensor autoencoders.", cli="--baselines/--no-baselines")
+    patience: int = _field(
+        0,
+        "Stop after this many epochs without a better validation NMAE (0: never); --epochs stays the maximum.",
+        ge=0,
+    )
 
     @field_validator("seeds")
     @classmethod

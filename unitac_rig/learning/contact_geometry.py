@@ -44,7 +44,7 @@ import torch
 from torch import nn
 
 from unitac_rig.errors import DataError, ModelError, UsageError
-from unitac_rig.learning.data import DEFAULT_GAP_DEG, PairedDataset, hold_out_rays
+from unitac_rig.learning.data import DEFAULT_GAP_DEG, PairedDataset, hold_out_rays, object_symmetry
 from unitac_rig.learning.engine import UNITAC_GROUP
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM
 from unitac_rig.learning.run import safe_torch_load
@@ -363,6 +363,7 @@ def geometry_split(
         gap_deg=config.gap_deg,
         centres_deg=centres,
         stream=3,
+        symmetry=object_symmetry(object_id) if config.split_mode == "blocked" else None,
     )
     test = np.isin(rays, list(held.test)) & valid
     val = np.isin(rays, list(held.val)) & valid

@@ -13,7 +13,7 @@ import logging
 import zlib
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 import numpy as np
 
@@ -36,14 +36,20 @@ __all__ = [
     "Split",
     "build_paired_dataset",
     "default_unseen_objects",
+    "fold_ray",
+    "folded_distance_deg",
     "held_out_directions",
     "join_key",
     "load_sets",
     "object_shape_material",
+    "object_symmetry",
     "sensor_order",
     "split_by_direction",
     "validation_directions",
 ]
+
+if TYPE_CHECKING:  # the catalogue is imported lazily (it pulls in the rig's geometry)
+    from unitac_rig.rig.objects import Symmetry
 
 log = logging.getLogger(__name__)
 
@@ -87,6 +93,9 @@ class Split:
     val_directions: dict[str, list[tuple[int, int]]] = field(default_factory=dict)
     mode: str = "random"  # SPLIT_MODES
     gap_deg: float = 0.0  # blocked: the guard band around held-out rays (its rows are validation rows)
+    # blocked: seen objects whose cross-section looks the same at every angle (a circle): no angle can be held out,
+    # so they are not in the seen-object test (every row trains)
+    not_held_out: tuple[str, ...] = ()
 
     @property
     def validation_mask(self) -> np.ndarray:
@@ -106,6 +115,7 @@ class Split:
             "val_directions": {k: [list(d) for d in v] for k, v in self.val_directions.items()},
             "mode": self.mode,
             "gap_deg": self.gap_deg,
+            "not_held_out": list(self.not_held_out),
         }
 
 
@@ -168,14 +178,17 @@ def arc_order(rays: Collection[int]) -> tuple[list[int], bool]:
     return order, max(gaps) <= 2 * min(gaps)
 
 
+_Ray = TypeVar("_Ray", int, float)  # a ray (whole degrees) or a folded ray
+
+
 def pick_block(
-    order: Sequence[int],
+    order: Sequence[_Ray],
     ring: bool,
     size: int,
     rng: np.random.Generator,
-    avoid: Collection[int] = (),
+    avoid: Collection[_Ray] = (),
     centre_deg: float | None = None,
-) -> list[int]:
+) -> list[_Ray]:
     """One contiguous block of ``size`` rays along ``order`` that holds none of ``avoid``: a seeded one, or the one
     whose middle ray is nearest ``centre_deg``. Raises DataError when no such block exists."""
     n = len(order)
@@ -194,6 +207,45 @@ def within_gap(rays: Collection[int], held: Collection[int], gap_deg: float) -> 
     """The rays (not held) within ``gap_deg`` of a held one: the guard band that neither trains nor tests."""
     held_set = set(held)
     return {r for r in rays if r not in held_set and any(ray_distance_deg(r, h) <= gap_deg for h in held_set)}
+
+
+def object_symmetry(object_id: str) -> Symmetry:
+    """The catalogue's symmetry of an object's cross-section (:attr:`unitac_rig.rig.objects.ObjectSpec.symmetry`);
+    an object the catalogue does not know (imported or synthetic data) is taken as having none."""
+    from unitac_rig.rig.objects import Symmetry, get_object
+
+    try:
+        return get_object(object_id).symmetry
+    except UnitacError:
+        return Symmetry(order=1)
+
+
+def fold_ray(ray: float, symmetry: Symmetry) -> float:
+    """A ray (deg, CAD frame) folded by the cross-section's symmetry: every ray a turn or a mirror of the outline
+    maps onto it has the same folded value. Rotational order n: the angle modulo ``360 / n`` from a mirror line;
+    with mirrors, the distance to the nearest mirror line, in ``[0, 180 / n]``; no symmetry: the ray itself."""
+    if symmetry.continuous:
+        return 0.0
+    period = 360.0 / symmetry.order
+    t = (float(ray) - (symmetry.mirror_axis_deg or 0.0)) % period
+    return round(min(t, period - t) if symmetry.mirror_axis_deg is not None else t, 6)
+
+
+def folded_distance_deg(a: float, b: float, symmetry: Symmetry) -> float:
+    """The smallest angle between ray ``a`` and any image of ray ``b`` under the symmetry (deg): 0 when the outline
+    looks the same from both. On folded values: plain difference with mirrors (an interval), ring distance
+    without."""
+    if symmetry.continuous:
+        return 0.0
+    return _folded_value_distance(fold_ray(a, symmetry), fold_ray(b, symmetry), symmetry)
+
+
+def _folded_value_distance(fa: float, fb: float, symmetry: Symmetry) -> float:
+    d = abs(fa - fb)
+    if symmetry.mirror_axis_deg is not None:
+        return d
+    period = 360.0 / symmetry.order
+    return min(d % period, period - d % period)
 
 
 @dataclass(frozen=True)
@@ -216,6 +268,7 @@ def hold_out_rays(
     gap_deg: float = DEFAULT_GAP_DEG,
     centres_deg: Sequence[float] = (),
     stream: int = 0,
+    symmetry: Symmetry | None = None,
 ) -> RayHoldOut:
     """Test, validation and guard rays of one object, seeded by (``seed``, the object id, ``stream``).
 
@@ -224,17 +277,21 @@ def hold_out_rays(
     :func:`validation_directions` (stream 0). ``blocked``: one contiguous block of rays for test and one for
     validation, with every other ray within ``gap_deg`` of either a guard ray (held out of training, scored on
     neither side), so no training ray lies within ``gap_deg`` of a test or validation ray. ``corner``: as blocked,
-    the test block centred on one of ``centres_deg`` (a corner's ray), chosen by the seed."""
+    the test block centred on one of ``centres_deg`` (a corner's ray), chosen by the seed.
+
+    ``symmetry`` (blocked only): the cross-section's symmetry. The blocks are then drawn in the folded angle
+    (:func:`fold_ray`) and the gap measured there (:func:`folded_distance_deg`), so no training ray is within
+    ``gap_deg`` of a turned or mirrored image of a test ray. A continuous symmetry (a circle) cannot be held out by
+    angle: nothing is held out (every ray trains), and :func:`split_by_direction` lists the object as such."""
     if mode not in (*SPLIT_MODES, "corner"):
         raise DataError(f"unknown split mode {mode!r}", hint=f"use one of {', '.join((*SPLIT_MODES, 'corner'))}")
     units = sorted(set(int(r) % 360 for r in rays))
     empty = RayHoldOut(frozenset(), frozenset(), frozenset())
     if len(units) < 2:
         return empty
-    n_test = min(len(units) - 1, max(1, round(test_fraction * len(units))))
-    n_val = min(len(units) - 1 - n_test, max(1, round(val_fraction * len(units)))) if val_fraction > 0 else 0
     key = [seed, zlib.crc32(object_id.encode())] + ([stream] if stream else [])
     if mode == "random":
+        n_test, n_val = _block_sizes(len(units), test_fraction, val_fraction)
         rng = np.random.default_rng(key)
         test = {units[int(i)] for i in rng.choice(len(units), size=n_test, replace=False)}
         rest = [u for u in units if u not in test]
@@ -244,6 +301,9 @@ def hold_out_rays(
             val = {rest[int(i)] for i in val_rng.choice(len(rest), size=min(n_val, len(rest) - 1), replace=False)}
         return RayHoldOut(frozenset(test), frozenset(val), frozenset())
     rng = np.random.default_rng([*key, 2])
+    if mode == "blocked" and symmetry is not None and (symmetry.order != 1 or symmetry.mirror_axis_deg is not None):
+        return _folded_blocks(units, object_id, symmetry, rng, test_fraction, val_fraction, gap_deg)
+    n_test, n_val = _block_sizes(len(units), test_fraction, val_fraction)
     order, ring = arc_order(units)
     centre = None
     if mode == "corner":
@@ -259,6 +319,69 @@ def hold_out_rays(
     if not set(units) - test - val - guard:
         raise DataError(f"{object_id}: the blocked split leaves no approach direction to train on")
     return RayHoldOut(frozenset(test), frozenset(val), frozenset(guard))
+
+
+def _block_sizes(n_units: int, test_fraction: float, val_fraction: float) -> tuple[int, int]:
+    """(test, validation) units: the fractions of ``n_units``, at least one each (validation only when asked),
+    always leaving one."""
+    n_test = min(n_units - 1, max(1, round(test_fraction * n_units)))
+    n_val = min(n_units - 1 - n_test, max(1, round(val_fraction * n_units))) if val_fraction > 0 else 0
+    return n_test, n_val
+
+
+def _folded_blocks(
+    units: Sequence[int],
+    object_id: str,
+    symmetry: Symmetry,
+    rng: np.random.Generator,
+    test_fraction: float,
+    val_fraction: float,
+    gap_deg: float,
+) -> RayHoldOut:
+    """The blocked split in the folded angle: contiguous blocks of folded values (the fractions count distinct
+    folded values), every ray of a held folded value held, the guard band every other ray within ``gap_deg`` of a
+    held one in folded distance."""
+    if symmetry.continuous:
+        return RayHoldOut(frozenset(), frozenset(), frozenset())
+    folded = {u: fold_ray(u, symmetry) for u in units}
+    values = sorted(set(folded.values()))
+    if len(values) < 2:
+        return RayHoldOut(frozenset(), frozenset(), frozenset())
+    n_test, n_val = _block_sizes(len(values), test_fraction, val_fraction)
+    if symmetry.mirror_axis_deg is not None:  # folded values lie on an interval [0, 180 / n]
+        order, ring = values, False
+    else:  # on a ring of 360 / n: start after the widest gap, wrap when the values cover it evenly
+        period = 360.0 / symmetry.order
+        gaps = [((values[(i + 1) % len(values)] - values[i]) % period) or period for i in range(len(values))]
+        widest = int(np.argmax(gaps))
+        order, ring = values[widest + 1 :] + values[: widest + 1], max(gaps) <= 2 * min(gaps)
+
+    test_values = set(pick_block(order, ring, n_test, rng))
+    guard_values = _within_folded_gap(values, test_values, symmetry, gap_deg)
+    val_values: set[float] = set()
+    if n_val > 0:
+        val_values = set(pick_block(order, ring, n_val, rng, avoid=test_values | guard_values))
+        guard_values |= _within_folded_gap(values, val_values, symmetry, gap_deg) - test_values
+    held = test_values | val_values | guard_values
+    if not set(values) - held:
+        raise DataError(f"{object_id}: the folded blocked split leaves no approach direction to train on")
+    return RayHoldOut(
+        frozenset(u for u in units if folded[u] in test_values),
+        frozenset(u for u in units if folded[u] in val_values),
+        frozenset(u for u in units if folded[u] in guard_values),
+    )
+
+
+def _within_folded_gap(
+    values: Collection[float], held: Collection[float], symmetry: Symmetry, gap_deg: float
+) -> set[float]:
+    """The folded values (not held) within ``gap_deg`` of a held one, distances in folded space."""
+    held_set = set(held)
+    return {
+        v
+        for v in values
+        if v not in held_set and any(_folded_value_distance(v, h, symmetry) <= gap_deg + 1e-9 for h in held_set)
+    }
 
 
 def split_by_direction(
@@ -279,7 +402,11 @@ def split_by_direction(
     (:func:`hold_out_rays`): a test of extrapolation to approach directions the model never saw near, not of
     interpolation between 1-degree neighbours. The guard band's contacts (within ``gap_deg`` of a held-out ray)
     are added to the validation rows, so they are never trained on. A unit is a physical ray
-    (:func:`ray_deg`): two (rotation, angle) keys of one ray are always on the same side."""
+    (:func:`ray_deg`): two (rotation, angle) keys of one ray are always on the same side. The blocks and the gap
+    are in the angle folded by each object's symmetry (:func:`fold_ray`, from the catalogue): a square's ray and
+    the same ray turned by 90 deg or mirrored press the same geometry, so they go to the same side. An object that
+    looks the same at every angle (a circle) cannot be held out by angle: it trains on every ray, is not in the
+    seen-object test and is listed in ``Split.not_held_out``."""
     if mode not in SPLIT_MODES:
         raise DataError(f"unknown split mode {mode!r}", hint=f"use one of {', '.join(SPLIT_MODES)}")
     if not 0.0 < test_fraction < 1.0:
@@ -293,6 +420,7 @@ def split_by_direction(
     val_mask = np.zeros(len(dataset), dtype=bool)
     test_directions: dict[str, list[tuple[int, int]]] = {}
     val_directions: dict[str, list[tuple[int, int]]] = {}
+    not_held_out: list[str] = []
     for object_id in dataset.objects:
         rows = dataset.object_id == object_id
         if object_id in unseen:
@@ -300,7 +428,12 @@ def split_by_direction(
             continue
         directions = list(zip(rotation[rows].tolist(), angle[rows].tolist(), strict=True))
         rays = [ray_deg(r, a) for r, a in directions]
-        held = hold_out_rays(rays, object_id, seed, test_fraction, val_fraction, mode=mode, gap_deg=gap_deg)
+        symmetry = object_symmetry(object_id) if mode == "blocked" else None
+        if symmetry is not None and symmetry.continuous:
+            not_held_out.append(object_id)
+        held = hold_out_rays(
+            rays, object_id, seed, test_fraction, val_fraction, mode=mode, gap_deg=gap_deg, symmetry=symmetry
+        )
         in_test = np.array([r in held.test for r in rays], dtype=bool)
         in_val = np.array([r in held.val or r in held.guard for r in rays], dtype=bool)
         test_directions[object_id] = sorted(set(d for d, t in zip(directions, in_test, strict=True) if t))
@@ -324,6 +457,7 @@ def split_by_direction(
         val_directions,
         mode,
         float(gap_deg) if mode != "random" else 0.0,
+        tuple(not_held_out),
     )
 
 

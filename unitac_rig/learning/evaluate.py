@@ -25,7 +25,8 @@ from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders, baseli
 from unitac_rig.learning.metric_table import METRICS, alignment_metrics, frame_metrics
 from unitac_rig.learning.metrics import FrameScoring, LatentPairs, latent_l1_per_pair
 from unitac_rig.learning.paper import TABLE1_ROWS
-from unitac_rig.learning.run import load_test_set
+from unitac_rig.learning.run import load_test_set, load_training_pairs
+from unitac_rig.learning.simple_baselines import SimplePredictions, baseline_columns, predict_simple_baselines
 
 if TYPE_CHECKING:  # train.py imports this module: its run record is only a type here
     from unitac_rig.learning.train import LoadedRun
@@ -142,6 +143,11 @@ class Evaluator:
         """What a frame metric needs to score reconstructions of ``sensor``'s frames."""
         return FrameScoring(self.targets[sensor], self.stats(sensor), self.options)
 
+    def score_frames(self, sensor: str, estimate: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Every frame metric of ``estimate`` (members, M, n_taxels, 3) in sensor units against ``sensor``'s true
+        frames: {metric name: (members, M)}."""
+        return self._scores(sensor, estimate.to(self.device, torch.float32))
+
     def _scores(self, sensor: str, estimate: torch.Tensor) -> dict[str, torch.Tensor]:
         scoring = self.scoring(sensor)
         try:
@@ -251,8 +257,28 @@ def _mean_over_members(values: Any) -> float | None:
     return None if values is None else float(np.mean(values))
 
 
-def evaluate_run(run: LoadedRun, test: PairedDataset) -> dict[str, Any]:
-    """The metrics.json content (without writing it)."""
+def simple_baseline_table(
+    evaluator: Evaluator, rows: list[tuple[str, np.ndarray]], predictions: SimplePredictions
+) -> dict[str, Any]:
+    """The simple baselines' Table I (row -> column -> frame metric, one value: they are deterministic) under the
+    evaluator's metric options, with what they chose on the training rows."""
+    scores = {
+        column: evaluator.score_frames(target, torch.from_numpy(frames)[None])
+        for column, (target, frames) in predictions.frames.items()
+    }
+    table = {
+        row: {
+            column: {name: float(values[0, torch.from_numpy(mask)].mean()) for name, values in metrics.items()}
+            for column, metrics in scores.items()
+        }
+        for row, mask in rows
+    }
+    return {"table1": table, "compared_with": baseline_columns(evaluator.sensors), **predictions.info()}
+
+
+def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions | None = None) -> dict[str, Any]:
+    """The metrics.json content (without writing it); with ``simple`` (:func:`simple_predictions`) also the simple
+    baselines' Table I (``simple_baselines``)."""
     config = run.config
     evaluator = Evaluator.for_run(run, test)
     scores, distance = evaluator.per_frame(run.engine)
@@ -300,7 +326,12 @@ def evaluate_run(run: LoadedRun, test: PairedDataset) -> dict[str, Any]:
             "note": "first_epoch values are the test rows scored once after epoch 1 (per member); they are never "
             "used for a choice",
         },
-        "epochs": int(run.payload["epoch"]),
+        "epochs": int(run.payload["epoch"]),  # the epoch reached: config.epochs, or where early stopping stopped
+        "early_stopping": {
+            "patience": int(config.patience),
+            "max_epochs": int(config.epochs),
+            **dict(run.payload.get("early_stop") or {}),
+        },
         "train_seconds": float(run.payload["train_seconds"]),
         "seed": run.engine.seeds[0],
         "seeds": list(run.engine.seeds),
@@ -322,10 +353,21 @@ def evaluate_run(run: LoadedRun, test: PairedDataset) -> dict[str, Any]:
     variants = next((h["val_metric_variants"] for h in reversed(history) if "val_metric_variants" in h), None)
     if variants:
         result["validation_metric_variants"] = variants
+    if simple is not None:
+        result["simple_baselines"] = simple_baseline_table(evaluator, table_rows(test, run.unseen_objects), simple)
     if members > 1:
         result["table1_std"] = table_std
         result["table1_members"] = table_members
     return result
+
+
+def simple_predictions(run_dir: Path, run: LoadedRun, test: PairedDataset) -> SimplePredictions | None:
+    """The simple baselines fitted on the run's kept training pairs (``RUN/seen_pairs``) and predicting ``test``;
+    None for a run that kept none (from before issue 38)."""
+    train = load_training_pairs(run_dir)
+    if train is None:
+        return None
+    return predict_simple_baselines(train, test, run.normaliser, run.config.shape.latent_dim)
 
 
 def write_metrics(run_dir: Path, run: LoadedRun | None = None, test: PairedDataset | None = None) -> dict[str, Any]:
@@ -335,6 +377,6 @@ def write_metrics(run_dir: Path, run: LoadedRun | None = None, test: PairedDatas
 
         run = load_run(run_dir)
     test = test or load_test_set(run_dir)
-    metrics = evaluate_run(run, test)
+    metrics = evaluate_run(run, test, simple_predictions(run_dir, run, test))
     (Path(run_dir) / METRICS_JSON).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
     return metrics

@@ -313,6 +313,13 @@ def alignment_lines(metrics: dict[str, Any]) -> list[str]:
             for m in shown
         ]
         lines.append(f"| {subset} | " + " | ".join(cells) + " |")
+    if any("latent_ratio" in entry for entry in per_subset.values()):
+        lines += [
+            "",
+            "Read the alignment by the scale-free ratio (matched / unmatched L1, 1 = chance): the raw matched-latent "
+            "L1 (the paper's measure) moves with the latents' scale, so it falls when the latents merely contract "
+            "and can rise while matched contacts draw closer than unmatched ones.",
+        ]
     tsne = metrics.get("tsne_mixing")
     if tsne:
         lines += [
@@ -321,6 +328,30 @@ def alignment_lines(metrics: dict[str, Any]) -> list[str]:
             f"neighbours {tsne['first_epoch']['mixing']:.3f} after epoch 1 and {tsne['last_epoch']['mixing']:.3f} at "
             f"the end (perfect mixing {tsne['last_epoch']['mixing_expected']:.3f}).",
         ]
+    return lines
+
+
+def simple_baseline_lines(metrics: dict[str, Any]) -> list[str]:
+    """Table I's simple baselines (fitted on the run's training contacts), with each one's UniTac-NV column."""
+    simple = metrics.get("simple_baselines")
+    if not simple:
+        return []
+    columns = list(simple["compared_with"])
+    lines = [
+        "",
+        f"## Simple baselines: {' / '.join(m.label for m in frame_metrics())} on the same test contacts",
+        "",
+        f"Fitted on the run's {simple['train_rows']} training contacts: "
+        + "; ".join(f"{k}: {v}" for k, v in simple["definition"].items())
+        + f" (PCA k = {simple['pca_components']}). Compare each with UniTac-NV's column: "
+        + ", ".join(f"{c} with {simple['compared_with'][c].replace('_to_', ' → ')}" for c in columns)
+        + ".",
+        "",
+        "| row | " + " | ".join(c.replace("_to_", " → ") for c in columns) + " |",
+        "|---|" + "---|" * len(columns),
+    ]
+    for row, cells in simple["table1"].items():
+        lines.append(f"| {row} | " + " | ".join(_cell(cells.get(c)) for c in columns) + " |")
     return lines
 
 
@@ -363,6 +394,7 @@ def render_markdown(metrics: dict[str, Any], run: LoadedRun, figures: dict[str, 
         lines.append(f"| {row} | {metrics['test_rows'][row]} | {ours} |")
         if row in PAPER_TABLE1:
             lines.append("| *paper* | | " + " | ".join(_paper_cell(row, c) for c in columns) + " |")
+    lines += simple_baseline_lines(metrics)
     lines += alignment_lines(metrics)
     if geometry:
         lines += [

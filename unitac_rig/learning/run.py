@@ -32,6 +32,7 @@ from unitac_rig.provenance import git_commit, package_version
 CHECKPOINT_NAME = "checkpoint.pt"
 TEST_SET_NAME = "test_set.npz"
 CHECKPOINT_FORMAT = "unitac-rig/unitac-nv-run"
+TRAINING_PAIRS = "seen_pairs"  # folder in a run: its complete training pairs (the simple baselines, linear maps)
 CHECKPOINT_VERSION = 3  # 3: the model's state_dict; 2: one tensor per layer; 1: one flat parameter vector (both read)
 
 
@@ -218,6 +219,20 @@ def save_test_set(run_dir: Path, test: PairedDataset) -> None:
     tmp = Path(run_dir) / (TEST_SET_NAME + ".tmp.npz")
     np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
     os.replace(tmp, _test_subset_path(run_dir))
+
+
+def save_training_pairs(run_dir: Path, train: PairedDataset) -> None:
+    """The run's training contacts that have every sensor's frame (``RUN/seen_pairs/``): what the simple baselines
+    and the geometry study's linear maps fit on, so they see exactly the rows the model trained on."""
+    folder = Path(run_dir) / TRAINING_PAIRS
+    folder.mkdir(parents=True, exist_ok=True)
+    save_test_set(folder, train.subset(train.complete_rows()))
+
+
+def load_training_pairs(run_dir: Path) -> PairedDataset | None:
+    """The pairs :func:`save_training_pairs` kept; None for a run from before they were kept."""
+    folder = Path(run_dir) / TRAINING_PAIRS
+    return load_test_set(folder) if _test_subset_path(folder).is_file() else None
 
 
 def load_test_set(run_dir: Path) -> PairedDataset:

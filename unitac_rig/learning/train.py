@@ -29,7 +29,14 @@ from unitac_rig.learning.engine import ModelShape, StackedAutoencoders, default_
 from unitac_rig.learning.evaluate import Evaluator
 from unitac_rig.learning.evaluate import direction_name as direction_name  # where reports look for it
 from unitac_rig.learning.metrics import NMAE_NORMALISERS, SSIM_RANGES
-from unitac_rig.learning.run import checkpoint_path, load_checkpoint, provenance, save_checkpoint, save_test_set
+from unitac_rig.learning.run import (
+    checkpoint_path,
+    load_checkpoint,
+    provenance,
+    save_checkpoint,
+    save_test_set,
+    save_training_pairs,
+)
 from unitac_rig.learning.run import load_test_set as load_test_set  # where reports and geometry look for it
 
 log = logging.getLogger(__name__)
@@ -42,6 +49,7 @@ _LEGACY_DEFAULTS: dict[str, Any] = {
     "preprocessing": "channel_z",
     "nmae_normaliser": "channel_range",
     "ssim_range": "channel_range",
+    "patience": 0,
 }
 
 
@@ -68,8 +76,13 @@ class TrainConfig:
     preprocessing: str = "sensor_scale"  # data.PREPROCESSING
     nmae_normaliser: str = "channel_range"  # metrics.NMAE_NORMALISERS; why this default: docs/learning.md
     ssim_range: str = "sensor_range"  # metrics.SSIM_RANGES
+    # early stopping: epochs without a better validation NMAE (mean over UniTac-NV's directions and members, seen
+    # validation contacts, checked at every validation evaluation) before training stops; 0: run all ``epochs``
+    patience: int = 0
 
     def __post_init__(self) -> None:
+        if self.patience < 0:
+            raise UsageError(f"patience must be 0 (off) or a number of epochs, got {self.patience}")
         if self.epochs < 1 or self.batch_size < 1 or self.eval_every < 1 or self.checkpoint_every < 1:
             raise UsageError("epochs, batch size, eval interval and checkpoint interval must be at least 1")
         if not self.seeds:
@@ -198,6 +211,7 @@ class _Run:
     epoch: int = 0  # epochs done
     seconds: float = 0.0  # training wall time so far (evaluation excluded)
     first_latents: dict[str, np.ndarray] | None = None  # UniTac-NV latents of the t-SNE rows after epoch 1
+    early_stop: dict[str, Any] = field(default_factory=dict)  # best_val_nmae, best_epoch, stopped_epoch (or None)
 
     def checkpoint(self) -> dict[str, Any]:
         """The checkpoint payload: tensors and plain Python values only (numpy arrays as tensors)."""
@@ -220,6 +234,7 @@ class _Run:
                 None if self.first_latents is None else {s: torch.from_numpy(z) for s, z in self.first_latents.items()}
             ),
             "provenance": provenance(),
+            "early_stop": self.early_stop,
         }
 
 
@@ -243,13 +258,14 @@ def _train(
     options = {"nmae_normaliser": run.config.nmae_normaliser, "ssim_range": run.config.ssim_range}
     evaluator = Evaluator(test_rows, run.normaliser, run.split.unseen_objects, device, **options)
     validator = Evaluator(val_rows, run.normaliser, (), device, **options) if len(val_rows) else None
-    while run.epoch < run.config.epochs:
+    while run.epoch < run.config.epochs and run.early_stop.get("stopped_epoch") is None:
         record = _train_epoch(run, train_x, train_present)
         done, last = run.epoch, run.epoch == run.config.epochs
         # per-epoch curves (and any choice made from them) use validation rows; the test rows are scored only
         # after epoch 1 and after the last epoch, for the report's "from epoch 1 to the end" comparisons
         if validator is not None and (done % run.config.eval_every == 0 or last or done == 1):
             record["val"] = validator.summary(run.engine)
+            last = _early_stop(run, record["val"]) or last
             if last:
                 record["val_metric_variants"] = validator.metric_variants(run.engine)
         if last or done == 1:
@@ -262,8 +278,29 @@ def _train(
         if done % run.config.checkpoint_every == 0 or last:
             save_checkpoint(run.run_dir, run.checkpoint())
     return TrainOutcome(
-        run.run_dir, run.engine, run.normaliser, run.split, run.config, run.history, run.seconds, run.config.epochs
+        run.run_dir, run.engine, run.normaliser, run.split, run.config, run.history, run.seconds, run.epoch
     )
+
+
+def _early_stop(run: _Run, val: Mapping[str, Any]) -> bool:
+    """Track the best validation NMAE (mean over UniTac-NV's directions and members, seen contacts); True when
+    ``config.patience`` epochs have passed without a better one (recorded as ``stopped_epoch``)."""
+    subset = val.get("seen") or val.get("all") or {}
+    values = [np.mean(cell["nmae"]) for column, cell in subset.items() if "_to_" in column and isinstance(cell, dict)]
+    if not values:
+        return False
+    nmae = float(np.mean(values))
+    if nmae < run.early_stop.get("best_val_nmae", np.inf):
+        run.early_stop.update(best_val_nmae=nmae, best_epoch=run.epoch)
+    run.early_stop.setdefault("stopped_epoch", None)
+    patience = run.config.patience
+    if patience and run.epoch - int(run.early_stop["best_epoch"]) >= patience and run.epoch < run.config.epochs:
+        run.early_stop["stopped_epoch"] = run.epoch
+        log.info(
+            "early stop at epoch %d: no better validation NMAE since epoch %d", run.epoch, run.early_stop["best_epoch"]
+        )
+        return True
+    return False
 
 
 def _training_inputs(
@@ -360,6 +397,7 @@ def _start_run(
     )
     run_dir.mkdir(parents=True, exist_ok=True)
     save_test_set(run_dir, test_rows)
+    save_training_pairs(run_dir, train_rows)
     readable = {
         "config": config.to_dict(),
         "split": split.to_dict(),
@@ -405,6 +443,7 @@ def _resume_run(dataset: PairedDataset, run_dir: Path, epochs: int | None, devic
         epoch=int(payload["epoch"]),
         seconds=float(payload["train_seconds"]),
         first_latents=payload.get("latents_first_epoch"),
+        early_stop=dict(payload.get("early_stop") or {}),
     )
     optimizer_state = payload["optimizer"]
     if int(payload["version"]) < 2:  # one flat parameter then
@@ -446,6 +485,9 @@ def _stored_split(payload: Mapping[str, Any]) -> Split:
         None if val_mask is None else np.asarray(val_mask, dtype=bool),
         float(info.get("val_fraction", 0.0)),
         {k: [tuple(d) for d in v] for k, v in info.get("val_directions", {}).items()},
+        str(info.get("mode", "random")),
+        float(info.get("gap_deg", 0.0)),
+        tuple(info.get("not_held_out", ())),
     )
 
 

@@ -42,6 +42,8 @@ log = logging.getLogger(__name__)
 CIRCLE_POLYGON_VERTICES = 720  # 0.5 deg steps: a 25 mm circle deviates from its polygon by 0.24 um
 DEFAULT_OBJECT_CENTER_M = (-0.15, 0.625)  # authors' prism centre in the UR5e base frame [S: 0_data_preprocessing.py]
 CORNER_MAX_INTERIOR_DEG = 170.0  # vertices sharper than this count as corners (stiff, line loads)
+SYMMETRY_TOLERANCE_MM = 0.05  # an outline maps onto itself when every vertex lands this close to its boundary
+MAX_SYMMETRY_ORDER = 24  # rotational orders tried; beyond this an outline is treated as having none (order 1)
 
 
 @dataclass(frozen=True)
@@ -151,9 +153,71 @@ class ObjectSpec:
             return np.zeros(0, dtype=int)
         return np.flatnonzero(interior_angles_deg(self.outer_mm) < CORNER_MAX_INTERIOR_DEG)
 
+    @functools.cached_property
+    def symmetry(self) -> Symmetry:
+        """The cross-section's symmetry about the prism axis, derived from its outlines (:func:`outline_symmetry`):
+        two approach rays a symmetry maps onto each other press the same geometry."""
+        if self.radius_mm is not None:
+            return Symmetry(order=0, mirror_axis_deg=0.0)
+        return outline_symmetry((self.outer_mm, self.inner_mm))
+
     def outer_rotated_mm(self, rotation_deg: float) -> np.ndarray:
         """The outer outline turned by ``rotation_deg`` as mounted (base-frame axes, mm, relative to the centre)."""
         return self.outer_mm @ _rotation_2d(rotation_deg).T
+
+
+@dataclass(frozen=True)
+class Symmetry:
+    """A cross-section's symmetry group about the prism axis (the point every press aims at).
+
+    ``order``: turning the outline by ``360 / order`` deg maps it onto itself (1: no rotational symmetry; 0: every
+    angle, a circle). ``mirror_axis_deg``: the direction (CAD frame, deg) of one mirror line through the axis, or
+    None without mirror symmetry (with ``order`` n there are then n mirror lines, ``180 / n`` deg apart)."""
+
+    order: int
+    mirror_axis_deg: float | None = None
+
+    @property
+    def continuous(self) -> bool:
+        return self.order == 0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"order": self.order, "mirror_axis_deg": self.mirror_axis_deg}
+
+
+def outline_symmetry(outlines: Sequence[np.ndarray], tolerance_mm: float = SYMMETRY_TOLERANCE_MM) -> Symmetry:
+    """The largest rotational order (up to 24) and a mirror line of closed polygons about the origin: a turn or a
+    reflection is a symmetry when every vertex of every outline, mapped, lies within ``tolerance_mm`` of that
+    outline's boundary and back. Mirror lines through the origin pass through a vertex or an edge's midpoint, so
+    those directions are the candidates."""
+    polygons = [np.asarray(p, dtype=np.float64) for p in outlines if len(p)]
+
+    def maps_onto_itself(matrix: np.ndarray) -> bool:
+        for polygon in polygons:
+            mapped = polygon @ matrix.T
+            if _boundary_distance(polygon, mapped).max() > tolerance_mm:
+                return False
+            if _boundary_distance(mapped, polygon).max() > tolerance_mm:
+                return False
+        return True
+
+    order = max(n for n in range(1, MAX_SYMMETRY_ORDER + 1) if maps_onto_itself(_rotation_2d(360.0 / n)))
+    outer = polygons[0]
+    candidates = np.concatenate([outer, 0.5 * (outer + np.roll(outer, -1, axis=0))])
+    for phi in sorted({round(math.degrees(math.atan2(z, x)) % (180.0 / order), 6) for x, z in candidates}):
+        c, s = math.cos(math.radians(2 * phi)), math.sin(math.radians(2 * phi))
+        if maps_onto_itself(np.array([[c, s], [s, -c]])):
+            return Symmetry(order=order, mirror_axis_deg=float(phi))
+    return Symmetry(order=order)
+
+
+def _boundary_distance(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Each point's distance to the closed polygon's boundary (mm)."""
+    a = polygon[None, :, :]
+    e = np.roll(polygon, -1, axis=0)[None, :, :] - a
+    d = points[:, None, :] - a
+    t = np.clip(np.sum(d * e, axis=2) / np.maximum(np.sum(e * e, axis=2), 1e-18), 0.0, 1.0)
+    return np.min(np.linalg.norm(d - t[..., None] * e, axis=2), axis=1)
 
 
 def pad_side_direction(angle_deg: float, rotation_deg: float) -> np.ndarray:

@@ -15,16 +15,16 @@ only in what they are fed:
 
 Beside them, on the same split and test rays: the same-sensor heads (A's latents, tested on A's), the no-latent
 baseline (the training rays' mean profile, whatever the contact) and the ceiling: per-sensor heads on the sensor's
-own latents and on its raw (normalised) frames, their dropout, learning rate and epochs chosen on validation rays of
-the unseen object only. Costs are process CPU seconds of each head's fit (heads fitted together are charged equal
-shares) plus its method's own preparation (the CCA or ridge fit, the translation).
+own latents and on its raw (normalised) frames. Every head, the ceiling's included, has one recipe (the paper's
+learning rate, epochs and per-sensor dropout, :class:`GeometryConfig`) and the same training rays (issue 38: a
+ceiling tuned apart measured its recipe, not its input). Costs are process CPU seconds of each head's fit (heads
+fitted together are charged equal shares) plus its method's own preparation (the CCA or ridge fit, the translation).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -45,10 +45,6 @@ from unitac_rig.learning.engine import UNITAC_GROUP
 from unitac_rig.learning.train import LoadedRun
 
 METHODS = ("paper", "translated", "linear_map", "cca")
-CEILING_DROPOUTS = (0.0, 0.1, 0.2, 0.3)
-CEILING_EVERY = 10  # epochs between validation scores of the ceiling heads
-CEILING_LEARNING_RATE = 5e-4  # ten times the paper's: its 5e-5 has not converged in 80 epochs on these latents
-CEILING_VAL_FRACTION = 0.1  # of the object's rays, taken from the training side, for the ceiling's choices
 RIDGE = 1e-3  # ridge / CCA regulariser, relative to the latents' mean variance
 SEEN_PAIRS_MAX = 4000  # seen-object pairs the linear map and the CCA are fitted on (a seeded subsample)
 
@@ -124,11 +120,11 @@ def cross_sensor_geometry(
     ceiling: bool = True,
     object_id: str | None = None,
 ) -> dict[str, Any]:
-    """Every cross-sensor method, the same-sensor heads, the no-latent baseline and (with ``ceiling``) the tuned
-    per-sensor ceiling, for one member on one geometry split (``split_seed``). The methods train on the split's
-    training rays (the paper's heads among them: the same heads as :func:`run_geometry` on that split); the ceiling
-    holds ``CEILING_VAL_FRACTION`` of the rays (or ``config.val_fraction``) out of them as validation rays for its
-    choices; the test rays are the same for all. ``seen``: paired frames of the seen objects for the linear map and
+    """Every cross-sensor method, the same-sensor heads, the no-latent baseline and (with ``ceiling``) the
+    per-sensor ceiling, for one member on one geometry split (``split_seed``). Every head, the ceiling's included,
+    has one recipe (``config``: the paper's) and trains on the split's training rays (the paper's heads among them:
+        the same heads as :func:`run_geometry` on that split); the test rays are the same for all. ``seen``: paired
+    frames of the seen objects for the linear map and
     the CCA (default: the seen objects' test contacts in ``test_set``). Returns JSON-ready numbers (mm, seconds)."""
     config = config or GeometryConfig()
     object_id, rows = geometry_object(run, test_set, object_id)
@@ -166,9 +162,7 @@ def cross_sensor_geometry(
         "methods": methods,
     }
     if ceiling:
-        tuning = replace(config, val_fraction=config.val_fraction or CEILING_VAL_FRACTION)
-        tuning_split = geometry_split(subset, valid, object_id, split_seed, tuning, outline)
-        result["ceiling"] = _ceiling(run, subset, latents, truth, tuning_split, config, seed)
+        result["ceiling"] = _ceiling(run, subset, latents, truth, split, config, seed)
     return result
 
 
@@ -218,43 +212,29 @@ def _ceiling(
     config: GeometryConfig,
     seed: int,
 ) -> dict[str, Any]:
-    """Per sensor, the best same-sensor head on its latents and on its raw (normalised) frames: dropout (of
-    ``CEILING_DROPOUTS``) and epochs (every ``CEILING_EVERY`` up to 1.5x the paper's) chosen by the validation rays'
-    error at learning rate ``CEILING_LEARNING_RATE``; the test error is read at that choice. All heads train in one
-    stacked fit, inputs zero-padded to the widest (a zero input feeds nothing forward and gets no gradient)."""
-    if not split.val.any():
-        return {}
+    """Per sensor, a same-sensor head on its latents and one on its raw (normalised) frames, trained with the one
+    recipe every head here has (``config``: the paper's learning rate, epochs and the sensor's dropout) on the same
+    training rays as the methods, scored on the same test rays. All heads train in one stacked fit, inputs
+    zero-padded to the widest (a zero input feeds nothing forward and gets no gradient)."""
     inputs = {f"latent_{s}": latents[s] for s in run.sensors}
     inputs |= {f"raw_{s}": run.normaliser.normalise(s, subset.values[s]) for s in run.sensors}
     width = max(x.shape[1] for x in inputs.values())
     padded = {k: np.pad(x, ((0, 0), (0, width - x.shape[1]))).astype(np.float32) for k, x in inputs.items()}
-    heads = [(k, d) for k in padded for d in CEILING_DROPOUTS]
-    best: dict[str, dict[str, Any]] = {k: {"val_mm": np.inf} for k in padded}
-    val_in = np.stack([padded[k][split.val] for k, _ in heads])
-    test_in = np.stack([padded[k][split.test] for k, _ in heads])
-
-    def score(epoch: int, model: StackedProfileMLP) -> None:
-        if epoch % CEILING_EVERY:
-            return
-        val = np.abs(_predict(model, val_in) - truth[split.val]).mean(axis=(1, 2))
-        test = np.abs(_predict(model, test_in) - truth[split.test]).mean(axis=(1, 2))
-        for h, (key, dropout) in enumerate(heads):
-            if val[h] < best[key]["val_mm"]:
-                best[key].update(val_mm=float(val[h]), test_mm=float(test[h]), dropout=dropout, epochs=epoch)
-
-    tuned = replace(config, epochs=max(CEILING_EVERY, 3 * config.epochs // 2), learning_rate=CEILING_LEARNING_RATE)
+    keys = list(padded)
+    dropouts = [config.dropout_for(k.split("_", 1)[1]) for k in keys]
     began = time.process_time()
-    fit_single_thread(
-        [padded[k][split.train] for k, _ in heads],
-        truth[split.train],
-        tuned,
-        [d for _, d in heads],
-        seed,
-        on_epoch=score,
-    )
-    seconds = (time.process_time() - began) / len(padded)
+    model = fit_single_thread([padded[k][split.train] for k in keys], truth[split.train], config, dropouts, seed)
+    seconds = (time.process_time() - began) / len(keys)
+    predicted = _predict(model, np.stack([padded[k][split.test] for k in keys]))
     return {
-        k: {**v, "learning_rate": CEILING_LEARNING_RATE, "seconds": seconds, "contacts_val": int(split.val.sum())}
-        for k, v in best.items()
-        if "test_mm" in v  # scored at least once (always, with CEILING_EVERY epochs or more)
+        key: {
+            "test_mm": _mae(predicted[h], truth[split.test]),
+            "learning_rate": config.learning_rate,
+            "dropout": dropouts[h],
+            "epochs": config.epochs,
+            "seconds": seconds,
+            "contacts_train": int(split.train.sum()),
+            "contacts_val": 0,
+        }
+        for h, key in enumerate(keys)
     }

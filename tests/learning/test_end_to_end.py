@@ -4,6 +4,7 @@ through the Python API and the CLI, on synthetic contacts written as real sessio
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ from drivers.layouts import PAPILLARRAY, USKIN
 from tests.helpers import cli
 from tests.learning.learning_helpers import small_sets, write_sessions
 from unitac_rig.errors import DataError, ModelError, UsageError
+from unitac_rig.learning import report as report_module
 from unitac_rig.learning.contact_geometry import GeometryConfig, geometry_for_run
 from unitac_rig.learning.data import build_paired_dataset, ray_deg
 from unitac_rig.learning.paper import TABLE1_COLUMNS
@@ -177,3 +179,21 @@ def test_three_sensors_train_and_translate(tmp_path: Path) -> None:
     assert out.shape == (2, 24, 3)
     write_report(tmp_path / "run3")  # no registered layout for fakepad: that figure is skipped, the rest drawn
     assert "fakepad → uskin" in (tmp_path / "run3" / "report.md").read_text()
+
+
+def test_an_interrupted_report_leaves_metrics_and_report_as_they_were(
+    run_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    run = tmp_path / "copy"
+    shutil.copytree(run_dir, run)
+    write_report(run, figures=False)
+    before = {name: (run / name).read_bytes() for name in ("metrics.json", "report.md")}
+
+    def interrupted(*args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(report_module, "plot_curves", interrupted)  # Ctrl-C while the figures are drawn
+    with pytest.raises(KeyboardInterrupt):
+        write_report(run, nmae_normaliser="sensor_range")  # other numbers: metrics.json would change
+    assert {name: (run / name).read_bytes() for name in before} == before
+    assert not [p.name for p in run.iterdir() if p.name.endswith(".tmp")]

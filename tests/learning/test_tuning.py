@@ -177,10 +177,13 @@ def test_cli_takes_a_config_file_and_options_over_it_and_saves_both_with_the_run
 
 
 def test_invalid_options_are_usage_errors() -> None:
-    with pytest.raises(UsageError, match="unknown preprocessing"):
+    # checked by the config's own fields, named as in a config file
+    with pytest.raises(UsageError, match=r"preprocessing\.scaling: Input should be 'channel_z'"):
         TrainConfig(preprocessing="zscore")
-    with pytest.raises(UsageError, match="validation fraction"):
+    with pytest.raises(UsageError, match=r"split\.val_fraction: must be below 1 - test fraction = 0\.5"):
         TrainConfig(test_fraction=0.5, val_fraction=0.5)
+    with pytest.raises(UsageError, match=r"model\.latent_dim: Input should be greater than or equal to 1"):
+        TrainConfig().updated({"shape.latent_dim": 0})
     with pytest.raises(UsageError, match="unknown training option"):
         TrainConfig().updated({"shape.width": 3})
 

@@ -2,7 +2,7 @@
 defined once here (default, description, bounds) and read three ways: a TOML file (``train --config``, saved with
 each run as ``RUN/config.toml``), the options of ``unitac-rig train`` (generated from these fields by
 :mod:`unitac_rig.cli.learn_train`: flag, help, default and range all come from the field), and the flat keyword
-arguments of :class:`unitac_rig.learning.train.TrainConfig`.
+arguments of :class:`TrainConfig` (its defaults and its validation are these fields').
 
 The file has the sections below; every key is optional and a missing key keeps the field's default (the paper's value
 where the paper gives one)::
@@ -33,14 +33,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, replace
+from dataclasses import fields as dataclass_fields
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
 from pydantic.fields import FieldInfo
 
-from unitac_rig.errors import ConfigError
+from unitac_rig.errors import ConfigError, ModelError, UsageError
 from unitac_rig.rig.config import describe_validation_error, read_toml
+
+if TYPE_CHECKING:  # the model's module imports torch; the CLI reads these fields before it may
+    from unitac_rig.learning.network import ModelShape
 
 CONFIG_TOML = "config.toml"
 _HINT = "see docs/learning.md (Training configuration) for every key"
@@ -234,3 +239,85 @@ def to_toml(flat: Mapping[str, Any]) -> str:
         lines += ["", f"[{section}]"]
         lines += [f"{key} = {_toml_value(value)}" for key, value in keys.items()]
     return "\n".join(lines) + "\n"
+
+
+_DEFAULTS = defaults()
+
+
+def _default_shape() -> ModelShape:
+    from unitac_rig.learning.network import ModelShape
+
+    return ModelShape(**{k.removeprefix("shape."): v for k, v in _DEFAULTS.items() if k.startswith("shape.")})
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """What a run trains, as flat keyword arguments (``shape`` the model's): the fields above, their defaults (the
+    paper's where it gives one; the other choices and their reasons are in docs/learning.md) and their bounds, so a
+    ``TrainConfig`` built in Python is checked as a config file or the command line is."""
+
+    epochs: int = _DEFAULTS["epochs"]
+    batch_size: int = _DEFAULTS["batch_size"]
+    learning_rate: float = _DEFAULTS["learning_rate"]
+    seeds: tuple[int, ...] = _DEFAULTS["seeds"]
+    split_seed: int = _DEFAULTS["split_seed"]  # which directions are test / validation data; apart from the seeds
+    split_mode: str = _DEFAULTS["split_mode"]
+    test_fraction: float = _DEFAULTS["test_fraction"]
+    val_fraction: float = _DEFAULTS["val_fraction"]
+    baselines: bool = _DEFAULTS["baselines"]
+    shape: ModelShape = field(default_factory=_default_shape)
+    eval_every: int = _DEFAULTS["eval_every"]  # epoch 1 and the last epoch are always evaluated
+    checkpoint_every: int = _DEFAULTS["checkpoint_every"]  # the last epoch is always saved
+    unseen_objects: tuple[str, ...] | None = _DEFAULTS["unseen_objects"]  # None: the object catalogue decides
+    tsne_contacts: int = _DEFAULTS["tsne_contacts"]
+    preprocessing: str = _DEFAULTS["preprocessing"]
+    nmae_normaliser: str = _DEFAULTS["nmae_normaliser"]
+    ssim_range: str = _DEFAULTS["ssim_range"]
+    patience: int = _DEFAULTS["patience"]  # epochs without a better validation NMAE before stopping; 0: never
+
+    def __post_init__(self) -> None:
+        try:
+            validate(sectioned(self.to_dict()))
+        except ValidationError as exc:
+            raise UsageError(describe_validation_error(exc, "training options"), hint=_HINT) from exc
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["seeds"] = list(self.seeds)
+        d["shape"] = self.shape.to_dict()
+        d["unseen_objects"] = None if self.unseen_objects is None else list(self.unseen_objects)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> TrainConfig:
+        """The config a checkpoint stored (every key: a run's config is written whole); ModelError when one is
+        missing or unknown."""
+        names = {f.name for f in dataclass_fields(cls)}
+        if set(d) != names:
+            odd = sorted(names.symmetric_difference(d))
+            raise ModelError(f"the stored training config does not match this unitac-rig's ({', '.join(odd)})")
+        from unitac_rig.learning.network import ModelShape
+
+        kwargs = dict(d)
+        kwargs["seeds"] = tuple(int(s) for s in kwargs["seeds"])
+        kwargs["shape"] = ModelShape.from_dict(kwargs["shape"])
+        if kwargs["unseen_objects"] is not None:
+            kwargs["unseen_objects"] = tuple(kwargs["unseen_objects"])
+        return cls(**kwargs)
+
+    def updated(self, flat: Mapping[str, Any]) -> TrainConfig:
+        """A copy with ``flat`` applied: ``TrainConfig`` field names, ``shape.<field>`` for the model's (what
+        :func:`parse_config` returns, or CLI options)."""
+        shape = {k[6:]: v for k, v in flat.items() if k.startswith("shape.")}
+        top = {k: v for k, v in flat.items() if not k.startswith("shape.")}
+        unknown = set(top) - set(self.to_dict()) | set(shape) - set(self.shape.to_dict())
+        if unknown:
+            raise UsageError(f"unknown training option(s) {', '.join(sorted(unknown))}")
+        if "seeds" in top:
+            top["seeds"] = tuple(int(s) for s in top["seeds"])
+        if top.get("unseen_objects") is not None:
+            top["unseen_objects"] = tuple(top["unseen_objects"])
+        for key in ("encoder_hidden", "decoder_hidden"):
+            if key in shape:
+                shape[key] = tuple(int(w) for w in shape[key])
+        return replace(self, **top, shape=replace(self.shape, **shape))

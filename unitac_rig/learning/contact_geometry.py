@@ -47,8 +47,7 @@ from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.data import DEFAULT_GAP_DEG, PairedDataset, hold_out_rays, object_symmetry
 from unitac_rig.learning.engine import UNITAC_GROUP
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM
-from unitac_rig.learning.run import safe_torch_load
-from unitac_rig.learning.train import LoadedRun, load_run, load_test_set
+from unitac_rig.learning.run import LoadedRun, computing_on, load_run, load_test_set, safe_torch_load
 
 log = logging.getLogger(__name__)
 
@@ -385,13 +384,9 @@ def member_latents(run: LoadedRun, member: int, frames: dict[str, np.ndarray]) -
 
 
 def fit_single_thread(*args: Any, **kwargs: Any) -> StackedProfileMLP:
-    """:func:`fit_profile_mlps` on one thread (tiny layers: one thread is fastest, see train.default_threads)."""
-    previous_threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    """:func:`fit_profile_mlps` on one CPU thread (tiny layers: one thread is fastest, see run.default_threads)."""
+    with computing_on("cpu", 1):
         return fit_profile_mlps(*args, **kwargs)
-    finally:
-        torch.set_num_threads(previous_threads)
 
 
 def run_geometry(

@@ -11,10 +11,9 @@ With several members (seeds) the table holds the mean over members, ``table1_std
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import torch
@@ -25,13 +24,17 @@ from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders, baseli
 from unitac_rig.learning.metric_table import METRICS, alignment_metrics, frame_metrics
 from unitac_rig.learning.metrics import FrameScoring, LatentPairs, latent_l1_per_pair
 from unitac_rig.learning.paper import TABLE1_ROWS
-from unitac_rig.learning.run import load_test_set, load_training_pairs
+from unitac_rig.learning.run import (
+    METRICS_JSON,
+    LoadedRun,
+    load_run,
+    load_test_set,
+    load_training_pairs,
+    metrics_text,
+    save_run_files,
+)
 from unitac_rig.learning.simple_baselines import SimplePredictions, baseline_columns, predict_simple_baselines
 
-if TYPE_CHECKING:  # train.py imports this module: its run record is only a type here
-    from unitac_rig.learning.train import LoadedRun
-
-METRICS_JSON = "metrics.json"
 ALL_SEEN = "all_seen"
 
 
@@ -370,13 +373,16 @@ def simple_predictions(run_dir: Path, run: LoadedRun, test: PairedDataset) -> Si
     return predict_simple_baselines(train, test, run.normaliser, run.config.shape.latent_dim)
 
 
-def write_metrics(run_dir: Path, run: LoadedRun | None = None, test: PairedDataset | None = None) -> dict[str, Any]:
-    """Evaluate the run in ``run_dir`` (read from disk unless given) and write ``RUN/metrics.json``."""
-    if run is None:
-        from unitac_rig.learning.train import load_run  # train.py imports this module
-
-        run = load_run(run_dir)
+def run_metrics(run_dir: Path, run: LoadedRun | None = None, test: PairedDataset | None = None) -> dict[str, Any]:
+    """``metrics.json``'s content for the run in ``run_dir`` (read from disk unless given): :func:`evaluate_run` with
+    the simple baselines fitted on the run's training pairs."""
+    run = run or load_run(run_dir)
     test = test or load_test_set(run_dir)
-    metrics = evaluate_run(run, test, simple_predictions(run_dir, run, test))
-    (Path(run_dir) / METRICS_JSON).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
+    return evaluate_run(run, test, simple_predictions(run_dir, run, test))
+
+
+def write_metrics(run_dir: Path, run: LoadedRun | None = None, test: PairedDataset | None = None) -> dict[str, Any]:
+    """Evaluate the run in ``run_dir`` (:func:`run_metrics`) and write ``RUN/metrics.json`` (atomically)."""
+    metrics = run_metrics(run_dir, run, test)
+    save_run_files(run_dir, {METRICS_JSON: metrics_text(metrics)})
     return metrics

@@ -43,8 +43,16 @@ from unitac_rig.learning.data import (
 )
 from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
 from unitac_rig.learning.metrics import nmae_per_frame, nmae_scale, ssim_per_frame, ssim_scale
-from unitac_rig.learning.run import checkpoint_path, provenance, save_checkpoint, save_test_set
-from unitac_rig.learning.train import LoadedRun, default_threads, load_run, resolve_device
+from unitac_rig.learning.run import (
+    LoadedRun,
+    checkpoint_path,
+    computing_on,
+    load_run,
+    provenance,
+    save_checkpoint,
+    save_test_set,
+    tsne_rows,
+)
 from unitac_rig.storage.reader import MatchedSet
 
 log = logging.getLogger(__name__)
@@ -220,14 +228,8 @@ def add_sensor(
         )
     if checkpoint_path(out).exists():
         raise UsageError(f"{out} already holds a run", hint="choose another --out")
-    torch_device = resolve_device(device)
-    previous_threads = torch.get_num_threads()
-    if torch_device.type == "cpu":
-        torch.set_num_threads(threads or default_threads())
-    try:
+    with computing_on(device, threads) as torch_device:
         return _add_sensor(base_run, sets, new_sensor, out, config or ExtendConfig(), torch_device, progress)
-    finally:
-        torch.set_num_threads(previous_threads)
 
 
 def _add_sensor(
@@ -354,7 +356,6 @@ def _write_run(
 ) -> int:
     """The extended run: checkpoint (the trained run's config, split and history, the grown engine, the merged
     normaliser, ``extension``), extension.json, config.json and the complete test contacts."""
-    from unitac_rig.learning.train import _tsne_rows
 
     sensors = engine.sensors
     complete = dataset.subset(test_mask & dataset.complete_rows())
@@ -395,7 +396,7 @@ def _write_run(
         "epoch": int(base["epoch"]),
         "history": base["history"],
         "train_seconds": float(base["train_seconds"]),
-        "tsne_rows": torch.from_numpy(_tsne_rows(ordered.object_id, tsne_contacts, int(base["split"]["seed"]))),
+        "tsne_rows": torch.from_numpy(tsne_rows(ordered.object_id, tsne_contacts, int(base["split"]["seed"]))),
         "latents_first_epoch": None,
         "provenance": provenance(),
         "extension": {**summary, "history": history},

@@ -23,12 +23,12 @@ from unitac_rig.learning.evaluate import (
     Evaluator,
     direction_name,
     metric_description,
-    write_metrics,
+    run_metrics,
 )
 from unitac_rig.learning.metric_table import alignment_metrics, frame_metrics
 from unitac_rig.learning.metrics import latent_mixing
 from unitac_rig.learning.paper import PAPER_TABLE1
-from unitac_rig.learning.train import LoadedRun, load_run, load_test_set
+from unitac_rig.learning.run import LoadedRun, load_run, load_test_set, metrics_text, read_metrics, save_run_files
 from unitac_rig.plotting import draw_taxel_map, new_figure, save_figure
 
 log = logging.getLogger(__name__)
@@ -432,12 +432,10 @@ def write_report(
     run = (run or load_run(run_dir)).scored_under(nmae_normaliser, ssim_range)
     test = test or load_test_set(run_dir)
     stage(f"scoring {len(test)} test contacts (metrics.json)")
-    previous = run_dir / METRICS_JSON
-    kept = json.loads(previous.read_text(encoding="utf-8")).get("tsne_mixing") if previous.exists() else None
-    metrics = write_metrics(run_dir, run, test)
+    kept = (read_metrics(run_dir) or {}).get("tsne_mixing")
+    metrics = run_metrics(run_dir, run, test)  # written with report.md at the end: an interrupted report keeps both
     if kept and not figures:  # the t-SNE is only recomputed with the figures
         metrics["tsne_mixing"] = kept
-        previous.write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
     drawn: dict[str, str] = {}
     if figures:
         fig_dir = run_dir / FIGURES
@@ -462,7 +460,6 @@ def write_report(
                 "first_epoch": embedding_mixing(embeddings["first"], len(sensors)),
                 "last_epoch": embedding_mixing(embeddings["last"], len(sensors)),
             }
-            (run_dir / METRICS_JSON).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
         stage("drawing example reconstructions")
         scores, _ = evaluator.per_frame(run.engine.member(0, groups=[UNITAC_GROUP]))
         cross = [direction_name(a, b) for a in run.sensors for b in run.sensors if a != b]
@@ -493,10 +490,10 @@ def write_report(
         drawn["contact geometry"] = f"{FIGURES}/geometry.png"
     geometry_path = run_dir / GEOMETRY_JSON
     geometry = json.loads(geometry_path.read_text(encoding="utf-8")) if geometry_path.exists() else None
-    report = run_dir / REPORT_MD
-    stage("writing report.md")
-    report.write_text(render_markdown(metrics, run, drawn, geometry), encoding="utf-8")
-    return report
+    stage("writing metrics.json and report.md")
+    text = render_markdown(metrics, run, drawn, geometry)
+    save_run_files(run_dir, {METRICS_JSON: metrics_text(metrics), REPORT_MD: text})
+    return run_dir / REPORT_MD
 
 
 def _rel(path: Path, root: Path) -> str:

@@ -1,24 +1,28 @@
 """A training run on disk: ``RUN/checkpoint.pt`` (everything needed to resume, evaluate or translate), the test rows
-in ``RUN/test_set.npz``, plus human-readable ``config.json``, ``metrics.json``, ``report.md`` and ``figures/*.png``.
+in ``RUN/test_set.npz``, the training pairs in ``RUN/seen_pairs/``, plus human-readable ``config.json``,
+``config.toml``, ``metrics.json``, ``report.md`` and ``figures/*.png``; and :func:`load_run`, a run read back.
 
-The checkpoint holds the model configuration, every member's parameters, the optimizer state and random streams,
-the normalisation statistics, the split, the dataset's content hash, the per-epoch history, and provenance
-(package version, git commit, torch version). It is written atomically (temporary file, then rename).
+The checkpoint (one format, :data:`CHECKPOINT_VERSION`; any other is refused) holds the model configuration, the
+model's ``state_dict``, the optimizer state and random streams, the normalisation statistics, the split, the
+dataset's content hash, the per-epoch history, and provenance (package version, git commit, torch version). It and
+the text files are written atomically (temporary file, then rename): an interrupted write leaves the old file.
 
 Every checkpoint is read with ``torch.load(..., weights_only=True)`` (:func:`safe_torch_load`): unpickling may only
-build tensors, plain Python containers and numbers, and plain numeric numpy arrays (version 1 stored a few), so a run
-directory from someone else cannot run code on the machine that opens it. A file that needs anything else is refused
-with a :class:`ModelError` naming what it holds, before any of it is built.
+build tensors and plain Python containers and numbers, so a run directory from someone else cannot run code on the
+machine that opens it. A file that needs anything else is refused with a :class:`ModelError` naming what it holds,
+before any of it is built.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import pickle
 import re
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,14 +30,17 @@ import numpy as np
 import torch
 
 from unitac_rig.errors import ModelError, UsageError
-from unitac_rig.learning.data import PairedDataset
+from unitac_rig.learning.config import TrainConfig
+from unitac_rig.learning.data import Normaliser, PairedDataset
+from unitac_rig.learning.engine import StackedAutoencoders
 from unitac_rig.provenance import git_commit, package_version
 
 CHECKPOINT_NAME = "checkpoint.pt"
 TEST_SET_NAME = "test_set.npz"
 CHECKPOINT_FORMAT = "unitac-rig/unitac-nv-run"
+CHECKPOINT_VERSION = 3  # the model's state_dict; the only version read
 TRAINING_PAIRS = "seen_pairs"  # folder in a run: its complete training pairs (the simple baselines, linear maps)
-CHECKPOINT_VERSION = 3  # 3: the model's state_dict; 2: one tensor per layer; 1: one flat parameter vector (both read)
+METRICS_JSON = "metrics.json"
 
 
 def checkpoint_path(run_dir: Path) -> Path:
@@ -74,42 +81,26 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any]:
             "`unitac-rig export-model`",
         )
     version = payload.get("version")
-    if not isinstance(version, int) or version < 1:
+    if version != CHECKPOINT_VERSION:
+        newer = isinstance(version, int) and version > CHECKPOINT_VERSION
         raise ModelError(
-            f"{path} is a unitac-rig checkpoint of an unknown version ({version!r})",
-            hint="retrain with `unitac-rig train`",
-        )
-    if version > CHECKPOINT_VERSION:
-        raise ModelError(
-            f"{path} was written by a newer unitac-rig (checkpoint version {version})", hint="upgrade unitac-rig"
+            f"{path} is a unitac-rig checkpoint of version {version!r}; this unitac-rig reads version "
+            f"{CHECKPOINT_VERSION} only",
+            hint="upgrade unitac-rig" if newer else "retrain with `unitac-rig train`",
         )
     check_finite(payload, path)
     return payload
 
 
-def _numpy_array_globals() -> list[Any]:
-    """What unpickling a plain numeric/bool/str numpy array needs (numpy's documented reconstruct path). An object
-    array would still need its elements' classes, which stay forbidden."""
-    dtypes = [type(np.dtype(code)) for code in "?bBhHiIlLqQefdgFDGU"]
-    return [np._core.multiarray._reconstruct, np.ndarray, np.dtype, *dtypes]  # type: ignore[attr-defined]
-
-
-@contextmanager
-def _allow_numpy_arrays() -> Iterator[None]:
-    with torch.serialization.safe_globals(_numpy_array_globals()):
-        yield
-
-
 def safe_torch_load(path: Path, *, what: str) -> Any:
-    """``torch.load(path, weights_only=True)`` on the CPU, numeric numpy arrays allowed; a :class:`ModelError` that
+    """``torch.load(path, weights_only=True)`` on the CPU; a :class:`ModelError` that
     says what the file is and what to do when it holds anything else, is damaged or is not a torch file at all.
 
     ``what`` names the file in messages ("checkpoint", "geometry estimator").
     """
     path = Path(path)
     try:
-        with _allow_numpy_arrays():
-            return torch.load(path, map_location="cpu", weights_only=True)
+        return torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
         unsafe = _unsafe_globals(path) or sorted(set(re.findall(r"GLOBAL ([\w.]+)", str(exc))))
         if unsafe:
@@ -117,8 +108,8 @@ def safe_torch_load(path: Path, *, what: str) -> Any:
             raise ModelError(
                 f"{path} was not loaded: this {what} holds pickled Python objects ({listed}), not only tensors and "
                 "plain values, and unpickling them could run code",
-                hint="it is an old unitac-rig file (from before checkpoint version 2) or not one of ours: retrain "
-                "with this unitac-rig, or ask its author for a fresh run",
+                hint="it is not one of this unitac-rig's files: retrain with this unitac-rig, or ask its author "
+                "for a fresh run",
             ) from exc
         # never torch's own text here: it advises loading with weights_only=False, i.e. switching the safety off
         raise ModelError(
@@ -135,11 +126,9 @@ def safe_torch_load(path: Path, *, what: str) -> Any:
 def _unsafe_globals(path: Path) -> list[str]:
     """The classes and functions a file's pickle would import, read from its opcodes (nothing is executed)."""
     try:
-        names = torch.serialization.get_unsafe_globals_in_checkpoint(path)
+        return sorted(torch.serialization.get_unsafe_globals_in_checkpoint(path))
     except Exception:  # a legacy (non-zip) or damaged file: no listing, the caller says so without it
         return []
-    allowed = {f"{g.__module__}.{g.__qualname__}" for g in _numpy_array_globals()}
-    return sorted(n for n in names if n not in allowed)
 
 
 def _first_line(exc: BaseException) -> str:
@@ -158,8 +147,6 @@ def check_finite(payload: dict[str, Any], path: Path) -> None:
     def walk(value: Any, where: str) -> None:
         if isinstance(value, torch.Tensor):
             bad = value.is_floating_point() and not bool(torch.isfinite(value).all())
-        elif isinstance(value, np.ndarray):
-            bad = value.dtype.kind == "f" and not bool(np.isfinite(value).all())
         elif isinstance(value, float):
             bad = not np.isfinite(value)
         elif isinstance(value, dict):
@@ -180,7 +167,7 @@ def check_finite(payload: dict[str, Any], path: Path) -> None:
 
     engine = payload.get("engine")
     if isinstance(engine, dict):
-        walk({k: engine[k] for k in ("state_dict", "parameters", "theta") if k in engine}, "engine")
+        walk(engine.get("state_dict"), "engine")
     walk(payload.get("normaliser"), "normaliser")
 
 
@@ -251,3 +238,135 @@ def load_test_set(run_dir: Path) -> PairedDataset:
             force_n={s: data[f"force_n__{s}"] for s in sensors},
             simulated=bool(data["simulated"]),
         )
+
+
+def save_run_files(run_dir: Path, texts: Mapping[str, str]) -> None:
+    """Write the run's text files (name -> text) together: each beside its file first, then each renamed over the
+    old one (microseconds apart), so an interruption (a Ctrl-C during a report's minutes, a crash) leaves every one
+    as it was and the run's files in agreement. The one writer of ``metrics.json``."""
+    staged: list[tuple[Path, Path]] = []
+    try:
+        for name, text in texts.items():
+            final = Path(run_dir) / name
+            tmp = final.with_name(f".{final.name}.{os.getpid()}.tmp")
+            staged.append((tmp, final))
+            tmp.write_text(text, encoding="utf-8")
+        for tmp, final in staged:
+            os.replace(tmp, final)
+    finally:
+        for tmp, _ in staged:
+            tmp.unlink(missing_ok=True)  # only when a write failed or was interrupted
+
+
+def metrics_text(metrics: Mapping[str, Any]) -> str:
+    """``metrics.json``'s text."""
+    return json.dumps(metrics, indent=2) + "\n"
+
+
+def read_metrics(run_dir: Path) -> dict[str, Any] | None:
+    """The run's ``metrics.json``; None before a run was scored."""
+    path = Path(run_dir) / METRICS_JSON
+    return json.loads(path.read_text(encoding="utf-8")) if path.is_file() else None
+
+
+def tsne_rows(object_ids: np.ndarray, wanted: int, seed: int) -> np.ndarray:
+    """Up to ``wanted`` test rows whose latents a run keeps for the t-SNE, the same number from every object (the
+    unseen object would swamp a plain random pick: it is most of the test set)."""
+    rng = np.random.default_rng([seed, 3])
+    objects = sorted(set(object_ids.tolist()))
+    per_object = max(1, wanted // max(1, len(objects)))
+    picked = []
+    for object_id in objects:
+        rows = np.flatnonzero(object_ids == object_id)
+        picked.append(rng.choice(rows, size=min(per_object, rows.size), replace=False))
+    return np.sort(np.concatenate(picked)) if picked else np.zeros(0, dtype=int)
+
+
+def resolve_device(name: str) -> torch.device:
+    """``auto`` -> CUDA when available, else CPU; ``cuda`` without a GPU is a UsageError."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise UsageError("--device cuda asked for, but torch sees no CUDA device", hint="use --device cpu or auto")
+    if name not in ("cpu", "cuda"):
+        raise UsageError(f"unknown device {name!r}", hint="use auto, cpu or cuda")
+    return torch.device(name)
+
+
+def default_threads() -> int:
+    """CPU threads for training: one. The matrices are tiny (64 x 99), so a second OpenMP thread costs more in
+    synchronisation than it saves, and on a shared 2-core box it can be many times slower (benchmarks/)."""
+    return 1
+
+
+@contextmanager
+def computing_on(device: str, threads: int | None = None) -> Iterator[torch.device]:
+    """The torch device ``device`` names (:func:`resolve_device`), with ``threads`` CPU threads (default:
+    :func:`default_threads`) for the block when it is the CPU; torch's thread count is restored after."""
+    torch_device = resolve_device(device)
+    previous_threads = torch.get_num_threads()
+    if torch_device.type == "cpu":
+        torch.set_num_threads(threads or default_threads())
+    try:
+        yield torch_device
+    finally:
+        torch.set_num_threads(previous_threads)
+
+
+def readable(payload: dict[str, Any]) -> dict[str, Any]:
+    """The checkpoint with its stored tensors of rows and latents as numpy arrays."""
+    out = dict(payload)
+    out["test_mask"] = payload["test_mask"].numpy()
+    if payload.get("val_mask") is not None:
+        out["val_mask"] = payload["val_mask"].numpy()
+    out["tsne_rows"] = payload["tsne_rows"].numpy()
+    first = payload.get("latents_first_epoch")
+    out["latents_first_epoch"] = None if first is None else {s: z.numpy() for s, z in first.items()}
+    return out
+
+
+@dataclass
+class LoadedRun:
+    """A finished (or paused) run read back from disk."""
+
+    run_dir: Path
+    payload: dict[str, Any]
+    config: TrainConfig
+    engine: StackedAutoencoders
+    normaliser: Normaliser
+
+    @property
+    def sensors(self) -> tuple[str, ...]:
+        return self.engine.sensors
+
+    @property
+    def history(self) -> list[dict[str, Any]]:
+        return list(self.payload["history"])
+
+    @property
+    def unseen_objects(self) -> tuple[str, ...]:
+        return tuple(self.payload["split"]["unseen_objects"])
+
+    def scored_under(self, nmae_normaliser: str | None = None, ssim_range: str | None = None) -> LoadedRun:
+        """This run with other metric options (they change no weight, only how reports score it); ``None`` keeps
+        the run's own."""
+        if nmae_normaliser is None and ssim_range is None:
+            return self
+        config = replace(
+            self.config,
+            nmae_normaliser=nmae_normaliser or self.config.nmae_normaliser,
+            ssim_range=ssim_range or self.config.ssim_range,
+        )
+        return replace(self, config=config)
+
+
+def load_run(run_dir: Path, device: str = "cpu") -> LoadedRun:
+    """A run read back for evaluation, reports and translation (its arrays as numpy)."""
+    try:
+        payload = readable(load_checkpoint(run_dir))
+        config = TrainConfig.from_dict(payload["config"])
+        engine = StackedAutoencoders.from_state(payload["engine"], resolve_device(device))
+        normaliser = Normaliser.from_dict(payload["normaliser"])
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ModelError(f"checkpoint in {run_dir} is incomplete ({exc})", hint="retrain") from exc
+    return LoadedRun(Path(run_dir), payload, config, engine, normaliser)

@@ -5,8 +5,9 @@ The loop has no per-sample Python: the training rows sit on the device as one te
 shuffled index per epoch (one gather), and batches are slices of it; see :mod:`unitac_rig.learning.engine` for the
 step itself.
 
-Why one module of ~530 lines: one run's life (start, resume, epoch, evaluation, checkpoint) shares the ``_Run``
-record. The scoring of a model on a set of rows is :class:`unitac_rig.learning.evaluate.Evaluator`.
+One run's life (start, resume, epoch, evaluation, checkpoint) shares the ``_Run`` record. What a run trains is
+:class:`unitac_rig.learning.config.TrainConfig`, its folder and checkpoint :mod:`unitac_rig.learning.run`, the scoring
+of a model on a set of rows :class:`unitac_rig.learning.evaluate.Evaluator`.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import json
 import logging
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -23,136 +24,27 @@ import numpy as np
 import torch
 
 from unitac_rig.errors import DataError, ModelError, UsageError
-from unitac_rig.learning.config import CONFIG_TOML, to_toml
-from unitac_rig.learning.data import PREPROCESSING, Normaliser, PairedDataset, Split, split_by_direction
-from unitac_rig.learning.engine import ModelShape, StackedAutoencoders, default_groups
+from unitac_rig.learning.config import CONFIG_TOML, TrainConfig, to_toml
+from unitac_rig.learning.data import Normaliser, PairedDataset, Split, split_by_direction
+from unitac_rig.learning.engine import StackedAutoencoders, default_groups
 from unitac_rig.learning.evaluate import Evaluator
-from unitac_rig.learning.evaluate import direction_name as direction_name  # where reports look for it
-from unitac_rig.learning.metrics import NMAE_NORMALISERS, SSIM_RANGES
 from unitac_rig.learning.run import (
+    LoadedRun,
     checkpoint_path,
+    computing_on,
     load_checkpoint,
+    load_run,
+    load_test_set,
     provenance,
+    readable,
+    resolve_device,
     save_checkpoint,
     save_test_set,
     save_training_pairs,
+    tsne_rows,
 )
-from unitac_rig.learning.run import load_test_set as load_test_set  # where reports and geometry look for it
 
 log = logging.getLogger(__name__)
-
-
-# What runs from before the validation split and the preprocessing / metric options did (their checkpoints lack
-# these keys).
-_LEGACY_DEFAULTS: dict[str, Any] = {
-    "val_fraction": 0.0,
-    "preprocessing": "channel_z",
-    "nmae_normaliser": "channel_range",
-    "ssim_range": "channel_range",
-    "patience": 0,
-}
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    """What a run trains; the defaults are the paper's (Adam 5e-4, batch 64, 1000 epochs, dropout 0.007) where the
-    paper gives a value. Where it is silent (validation split, preprocessing constants, metric normalisers) the
-    choice and its reason are in docs/learning.md. Files: :mod:`unitac_rig.learning.config`."""
-
-    epochs: int = 1000
-    batch_size: int = 64
-    learning_rate: float = 5e-4
-    seeds: tuple[int, ...] = (0,)
-    split_seed: int = 0  # which directions are test / validation data; apart from the model seeds
-    split_mode: str = "random"  # data.SPLIT_MODES: the paper's random directions, or blocked rays (docs/learning.md)
-    test_fraction: float = 0.1
-    val_fraction: float = 0.1  # of each seen object's directions, taken from the training side (paper: none)
-    baselines: bool = True
-    shape: ModelShape = field(default_factory=ModelShape)
-    eval_every: int = 1  # epochs between validation evaluations (epoch 1 and the last epoch are always evaluated)
-    checkpoint_every: int = 50  # epochs between checkpoints (the last epoch is always saved)
-    unseen_objects: tuple[str, ...] | None = None  # None: the object catalogue decides (irregular prism)
-    tsne_contacts: int = 600  # test contacts whose latents are kept for the t-SNE figures
-    preprocessing: str = "sensor_scale"  # data.PREPROCESSING
-    nmae_normaliser: str = "channel_range"  # metrics.NMAE_NORMALISERS; why this default: docs/learning.md
-    ssim_range: str = "sensor_range"  # metrics.SSIM_RANGES
-    # early stopping: epochs without a better validation NMAE (mean over UniTac-NV's directions and members, seen
-    # validation contacts, checked at every validation evaluation) before training stops; 0: run all ``epochs``
-    patience: int = 0
-
-    def __post_init__(self) -> None:
-        if self.patience < 0:
-            raise UsageError(f"patience must be 0 (off) or a number of epochs, got {self.patience}")
-        if self.epochs < 1 or self.batch_size < 1 or self.eval_every < 1 or self.checkpoint_every < 1:
-            raise UsageError("epochs, batch size, eval interval and checkpoint interval must be at least 1")
-        if not self.seeds:
-            raise UsageError("give at least one seed")
-        if len(set(self.seeds)) != len(self.seeds):
-            raise UsageError(f"seeds must differ, got {list(self.seeds)}")
-        if not self.learning_rate > 0.0:
-            raise UsageError(f"the learning rate must be positive, got {self.learning_rate}")
-        for name, value, known in (
-            ("preprocessing", self.preprocessing, PREPROCESSING),
-            ("NMAE normaliser", self.nmae_normaliser, NMAE_NORMALISERS),
-            ("SSIM range", self.ssim_range, SSIM_RANGES),
-        ):
-            if value not in known:
-                raise UsageError(f"unknown {name} {value!r}", hint=f"use one of {', '.join(known)}")
-        if not 0.0 <= self.val_fraction < 1.0 - self.test_fraction:
-            raise UsageError(
-                f"the validation fraction must be in [0, {1.0 - self.test_fraction:g}), got {self.val_fraction}"
-            )
-
-    def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["seeds"] = list(self.seeds)
-        d["shape"] = self.shape.to_dict()
-        d["unseen_objects"] = None if self.unseen_objects is None else list(self.unseen_objects)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> TrainConfig:
-        """A stored config; keys a run from before the tuning options lacks take what that run did."""
-        kwargs = {**_LEGACY_DEFAULTS, **d}
-        kwargs["seeds"] = tuple(int(s) for s in kwargs["seeds"])
-        kwargs["shape"] = ModelShape.from_dict(kwargs["shape"])
-        if kwargs.get("unseen_objects") is not None:
-            kwargs["unseen_objects"] = tuple(kwargs["unseen_objects"])
-        return cls(**kwargs)
-
-    def updated(self, flat: Mapping[str, Any]) -> TrainConfig:
-        """A copy with ``flat`` applied: ``TrainConfig`` field names, ``shape.<field>`` for the model's (what
-        :func:`unitac_rig.learning.config.parse_config` returns, or CLI options)."""
-        shape = {k[6:]: v for k, v in flat.items() if k.startswith("shape.")}
-        top = {k: v for k, v in flat.items() if not k.startswith("shape.")}
-        unknown = set(top) - set(self.to_dict()) | set(shape) - set(self.shape.to_dict())
-        if unknown:
-            raise UsageError(f"unknown training option(s) {', '.join(sorted(unknown))}")
-        if "seeds" in top:
-            top["seeds"] = tuple(int(s) for s in top["seeds"])
-        if top.get("unseen_objects") is not None:
-            top["unseen_objects"] = tuple(top["unseen_objects"])
-        for key in ("encoder_hidden", "decoder_hidden"):
-            if key in shape:
-                shape[key] = tuple(int(w) for w in shape[key])
-        return replace(self, **top, shape=replace(self.shape, **shape))
-
-
-def resolve_device(name: str) -> torch.device:
-    """``auto`` -> CUDA when available, else CPU; ``cuda`` without a GPU is a UsageError."""
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if name == "cuda" and not torch.cuda.is_available():
-        raise UsageError("--device cuda asked for, but torch sees no CUDA device", hint="use --device cpu or auto")
-    if name not in ("cpu", "cuda"):
-        raise UsageError(f"unknown device {name!r}", hint="use auto, cpu or cuda")
-    return torch.device(name)
-
-
-def default_threads() -> int:
-    """CPU threads for training: one. The matrices are tiny (64 x 99), so a second OpenMP thread costs more in
-    synchronisation than it saves, and on a shared 2-core box it can be many times slower (benchmarks/)."""
-    return 1
 
 
 @dataclass
@@ -182,15 +74,8 @@ def train(
     progress: ProgressCallback | None = None,
 ) -> TrainOutcome:
     """Train (or resume) a run in ``run_dir``. ``epochs`` on resume extends or keeps the stored budget."""
-    run_dir = Path(run_dir)
-    torch_device = resolve_device(device)
-    previous_threads = torch.get_num_threads()
-    if torch_device.type == "cpu":
-        torch.set_num_threads(threads or default_threads())
-    try:
-        return _train(dataset, run_dir, config, torch_device, resume, epochs, progress)
-    finally:
-        torch.set_num_threads(previous_threads)
+    with computing_on(device, threads) as torch_device:
+        return _train(dataset, Path(run_dir), config, torch_device, resume, epochs, progress)
 
 
 @dataclass
@@ -393,7 +278,7 @@ def _start_run(
         engine=engine,
         optimizer=engine.make_optimizer(config.learning_rate),
         shuffle_rngs=[np.random.default_rng([seed, 1]) for seed in config.seeds],
-        tsne_rows=_tsne_rows(test_rows.object_id, config.tsne_contacts, config.split_seed),
+        tsne_rows=tsne_rows(test_rows.object_id, config.tsne_contacts, config.split_seed),
     )
     run_dir.mkdir(parents=True, exist_ok=True)
     save_test_set(run_dir, test_rows)
@@ -412,7 +297,7 @@ def _start_run(
 
 def _resume_run(dataset: PairedDataset, run_dir: Path, epochs: int | None, device: torch.device) -> _Run:
     """The run in ``run_dir`` as its last checkpoint left it; ``epochs`` extends (never shortens) its budget."""
-    payload = _readable(load_checkpoint(run_dir))
+    payload = readable(load_checkpoint(run_dir))
     if payload.get("extension"):
         raise UsageError(
             f"{run_dir} added a sensor to a trained run: it is trained in one go and cannot be resumed",
@@ -445,11 +330,8 @@ def _resume_run(dataset: PairedDataset, run_dir: Path, epochs: int | None, devic
         first_latents=payload.get("latents_first_epoch"),
         early_stop=dict(payload.get("early_stop") or {}),
     )
-    optimizer_state = payload["optimizer"]
-    if int(payload["version"]) < 2:  # one flat parameter then
-        optimizer_state = engine.optimizer_state_from_flat(optimizer_state)
     try:
-        run.optimizer.load_state_dict(optimizer_state)
+        run.optimizer.load_state_dict(payload["optimizer"])
     except (ValueError, KeyError, RuntimeError) as exc:
         raise ModelError(f"optimizer state in {run_dir} does not fit the model", hint="retrain") from exc
     if len(run.shuffle_rngs) != engine.members:
@@ -491,77 +373,15 @@ def _stored_split(payload: Mapping[str, Any]) -> Split:
     )
 
 
-def _readable(payload: dict[str, Any]) -> dict[str, Any]:
-    """The checkpoint with its arrays as numpy, whether stored as tensors (version 2) or as numpy (version 1)."""
-    out = dict(payload)
-    out["test_mask"] = _numpy(payload["test_mask"])
-    if payload.get("val_mask") is not None:
-        out["val_mask"] = _numpy(payload["val_mask"])
-    out["tsne_rows"] = _numpy(payload.get("tsne_rows", np.zeros(0, dtype=np.int64)))
-    first = payload.get("latents_first_epoch")
-    out["latents_first_epoch"] = None if first is None else {s: _numpy(z) for s, z in first.items()}
-    return out
-
-
-def _numpy(value: Any) -> np.ndarray:
-    return value.numpy() if isinstance(value, torch.Tensor) else np.asarray(value)
-
-
-def _tsne_rows(object_ids: np.ndarray, wanted: int, seed: int) -> np.ndarray:
-    """Up to ``wanted`` test rows, the same number from every object (the unseen object would swamp a plain
-    random pick: it is most of the test set)."""
-    rng = np.random.default_rng([seed, 3])
-    objects = sorted(set(object_ids.tolist()))
-    per_object = max(1, wanted // max(1, len(objects)))
-    picked = []
-    for object_id in objects:
-        rows = np.flatnonzero(object_ids == object_id)
-        picked.append(rng.choice(rows, size=min(per_object, rows.size), replace=False))
-    return np.sort(np.concatenate(picked)) if picked else np.zeros(0, dtype=int)
-
-
-@dataclass
-class LoadedRun:
-    """A finished (or paused) run read back from disk."""
-
-    run_dir: Path
-    payload: dict[str, Any]
-    config: TrainConfig
-    engine: StackedAutoencoders
-    normaliser: Normaliser
-
-    @property
-    def sensors(self) -> tuple[str, ...]:
-        return self.engine.sensors
-
-    @property
-    def history(self) -> list[dict[str, Any]]:
-        return list(self.payload["history"])
-
-    @property
-    def unseen_objects(self) -> tuple[str, ...]:
-        return tuple(self.payload["split"]["unseen_objects"])
-
-    def scored_under(self, nmae_normaliser: str | None = None, ssim_range: str | None = None) -> LoadedRun:
-        """This run with other metric options (they change no weight, only how reports score it); ``None`` keeps
-        the run's own."""
-        if nmae_normaliser is None and ssim_range is None:
-            return self
-        config = replace(
-            self.config,
-            nmae_normaliser=nmae_normaliser or self.config.nmae_normaliser,
-            ssim_range=ssim_range or self.config.ssim_range,
-        )
-        return replace(self, config=config)
-
-
-def load_run(run_dir: Path, device: str = "cpu") -> LoadedRun:
-    """A run read back for evaluation, reports and translation (its arrays as numpy)."""
-    try:
-        payload = _readable(load_checkpoint(run_dir))
-        config = TrainConfig.from_dict(payload["config"])
-        engine = StackedAutoencoders.from_state(payload["engine"], resolve_device(device))
-        normaliser = Normaliser.from_dict(payload["normaliser"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ModelError(f"checkpoint in {run_dir} is incomplete ({exc})", hint="retrain") from exc
-    return LoadedRun(Path(run_dir), payload, config, engine, normaliser)
+# what callers outside the learning room (the CLI, export, live, benchmarks) import from here; each is defined once,
+# in config.py (TrainConfig) or run.py (the rest)
+__all__ = [
+    "LoadedRun",
+    "TrainConfig",
+    "TrainOutcome",
+    "load_run",
+    "load_test_set",
+    "resolve_device",
+    "train",
+    "trained_on_partial_join",
+]

@@ -20,7 +20,7 @@ import torch
 from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.data import Normaliser
 from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
-from unitac_rig.learning.train import load_run
+from unitac_rig.learning.run import load_run
 
 
 class Translator:

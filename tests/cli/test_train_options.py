@@ -48,7 +48,7 @@ def test_changing_a_fields_default_and_description_changes_the_help(monkeypatch:
 
 
 def test_the_configs_defaults_are_the_trainers() -> None:
-    """Until TrainConfig takes its defaults from the config's fields, the two must agree."""
+    """TrainConfig takes its defaults from the config's fields: one list of training options."""
     flat = TrainConfig().to_dict()
     flat.update({f"shape.{k}": v for k, v in flat.pop("shape").items()})
     assert {k: list(v) if isinstance(v, tuple) else v for k, v in train_config.defaults().items()} == {

@@ -296,14 +296,8 @@ class TrainConfig:
         if set(d) != names:
             odd = sorted(names.symmetric_difference(d))
             raise ModelError(f"the stored training config does not match this unitac-rig's ({', '.join(odd)})")
-        from unitac_rig.learning.network import ModelShape
-
-        kwargs = dict(d)
-        kwargs["seeds"] = tuple(int(s) for s in kwargs["seeds"])
-        kwargs["shape"] = ModelShape.from_dict(kwargs["shape"])
-        if kwargs["unseen_objects"] is not None:
-            kwargs["unseen_objects"] = tuple(kwargs["unseen_objects"])
-        return cls(**kwargs)
+        flat = {k: v for k, v in d.items() if k != "shape"}
+        return cls().updated(flat | {f"shape.{k}": v for k, v in d["shape"].items()})
 
     def updated(self, flat: Mapping[str, Any]) -> TrainConfig:
         """A copy with ``flat`` applied: ``TrainConfig`` field names, ``shape.<field>`` for the model's (what

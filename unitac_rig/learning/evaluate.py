@@ -30,7 +30,6 @@ from unitac_rig.learning.run import (
     load_run,
     load_test_set,
     load_training_pairs,
-    metrics_text,
     save_run_files,
 )
 from unitac_rig.learning.simple_baselines import SimplePredictions, baseline_columns, predict_simple_baselines
@@ -384,5 +383,5 @@ def run_metrics(run_dir: Path, run: LoadedRun | None = None, test: PairedDataset
 def write_metrics(run_dir: Path, run: LoadedRun | None = None, test: PairedDataset | None = None) -> dict[str, Any]:
     """Evaluate the run in ``run_dir`` (:func:`run_metrics`) and write ``RUN/metrics.json`` (atomically)."""
     metrics = run_metrics(run_dir, run, test)
-    save_run_files(run_dir, {METRICS_JSON: metrics_text(metrics)})
+    save_run_files(run_dir, {METRICS_JSON: metrics})
     return metrics

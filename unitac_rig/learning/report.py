@@ -28,7 +28,7 @@ from unitac_rig.learning.evaluate import (
 from unitac_rig.learning.metric_table import alignment_metrics, frame_metrics
 from unitac_rig.learning.metrics import latent_mixing
 from unitac_rig.learning.paper import PAPER_TABLE1
-from unitac_rig.learning.run import LoadedRun, load_run, load_test_set, metrics_text, read_metrics, save_run_files
+from unitac_rig.learning.run import LoadedRun, load_run, load_test_set, read_metrics, save_run_files
 from unitac_rig.plotting import draw_taxel_map, new_figure, save_figure
 
 log = logging.getLogger(__name__)
@@ -492,7 +492,7 @@ def write_report(
     geometry = json.loads(geometry_path.read_text(encoding="utf-8")) if geometry_path.exists() else None
     stage("writing metrics.json and report.md")
     text = render_markdown(metrics, run, drawn, geometry)
-    save_run_files(run_dir, {METRICS_JSON: metrics_text(metrics), REPORT_MD: text})
+    save_run_files(run_dir, {METRICS_JSON: metrics, REPORT_MD: text})
     return run_dir / REPORT_MD
 
 

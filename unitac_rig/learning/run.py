@@ -240,27 +240,23 @@ def load_test_set(run_dir: Path) -> PairedDataset:
         )
 
 
-def save_run_files(run_dir: Path, texts: Mapping[str, str]) -> None:
-    """Write the run's text files (name -> text) together: each beside its file first, then each renamed over the
-    old one (microseconds apart), so an interruption (a Ctrl-C during a report's minutes, a crash) leaves every one
-    as it was and the run's files in agreement. The one writer of ``metrics.json``."""
+def save_run_files(run_dir: Path, contents: Mapping[str, str | Mapping[str, Any]]) -> None:
+    """Write the run's text files (name -> text, or a mapping written as JSON) together: each beside its file first,
+    then each renamed over the old one (microseconds apart), so an interruption (a Ctrl-C during a report's minutes,
+    a crash) leaves every one as it was and the run's files in agreement. The one writer of ``metrics.json``."""
     staged: list[tuple[Path, Path]] = []
     try:
-        for name, text in texts.items():
+        for name, content in contents.items():
             final = Path(run_dir) / name
             tmp = final.with_name(f".{final.name}.{os.getpid()}.tmp")
             staged.append((tmp, final))
+            text = content if isinstance(content, str) else json.dumps(content, indent=2) + "\n"
             tmp.write_text(text, encoding="utf-8")
         for tmp, final in staged:
             os.replace(tmp, final)
     finally:
         for tmp, _ in staged:
             tmp.unlink(missing_ok=True)  # only when a write failed or was interrupted
-
-
-def metrics_text(metrics: Mapping[str, Any]) -> str:
-    """``metrics.json``'s text."""
-    return json.dumps(metrics, indent=2) + "\n"
 
 
 def read_metrics(run_dir: Path) -> dict[str, Any] | None:

@@ -146,9 +146,6 @@ def test_members_are_independent_and_state_round_trips() -> None:
     assert next_masks is not None and restored_masks is not None
     assert all(torch.equal(next_masks[k], restored_masks[k]) for k in next_masks)  # dropout streams continue
 
-    version_1 = {k: v for k, v in together.state().items() if k != "state_dict"}
-    version_1["theta"] = together.theta  # checkpoints before the autograd engine kept one flat vector
-    assert torch.equal(StackedAutoencoders.from_state(version_1).theta, together.theta)
 
 
 def test_the_model_is_an_nn_module_with_a_standard_state_dict() -> None:

@@ -567,8 +567,7 @@ class StackedAutoencoders(nn.Module):
 
     @classmethod
     def from_state(cls, state: Mapping[str, Any], device: torch.device | str = "cpu") -> StackedAutoencoders:
-        """The model a :meth:`state` describes; also reads the per-layer ``parameters`` of checkpoint version 2 and
-        the flat ``theta`` of version 1."""
+        """The model a :meth:`state` describes."""
         engine = cls(
             state["feature_dims"],
             [GroupSpec.from_dict(g) for g in state["groups"]],
@@ -578,19 +577,7 @@ class StackedAutoencoders(nn.Module):
             initialise=False,
             frozen=[str(k) for k in state.get("frozen", ())],
         )
-        if "state_dict" in state:
-            tensors = dict(state["state_dict"])
-        elif "parameters" in state:  # version 2: {layer key: {"weight", "bias"}} and the streams beside them
-            tensors = {"_extra_state": state.get("dropout_rng")}
-            for key in engine._layers:
-                layer = state["parameters"].get(key)
-                if layer is None:
-                    raise ModelError(f"checkpoint has no parameters for layer {key}", hint="the file is damaged")
-                tensors |= {f"layers.{key}.weight": layer["weight"], f"layers.{key}.bias": layer["bias"]}
-        else:  # version 1: one flat vector
-            names = [name for name, _ in engine.named_parameters()]
-            tensors = dict(zip(names, engine.split_flat(torch.as_tensor(state["theta"])), strict=True))
-            tensors["_extra_state"] = state.get("dropout_rng")
+        tensors = dict(state["state_dict"])
         try:
             engine.load_state_dict({k: torch.as_tensor(v) if k != "_extra_state" else v for k, v in tensors.items()})
         except (RuntimeError, TypeError, ValueError) as exc:
@@ -607,14 +594,6 @@ class StackedAutoencoders(nn.Module):
                 generator.set_state(torch.as_tensor(rng_state))
         else:
             log.warning("the dropout streams restart from the seeds: the checkpoint's were drawn elsewhere")
-
-    def split_flat(self, flat: torch.Tensor) -> list[torch.Tensor]:
-        """A flat vector in :attr:`theta`'s layout cut into tensors shaped like :meth:`parameters`."""
-        shapes = [p.shape for p in self.parameters()]
-        sizes = [math.prod(s) for s in shapes]
-        if flat.numel() != sum(sizes):
-            raise ModelError("checkpoint parameters do not match the model they describe", hint="the file is damaged")
-        return [part.reshape(s) for part, s in zip(torch.split(flat.reshape(-1), sizes), shapes, strict=True)]
 
     def member(self, index: int, groups: Sequence[str] | None = None) -> StackedAutoencoders:
         """A one-member copy of member ``index`` (optionally only some groups), e.g. for inference."""
@@ -699,15 +678,3 @@ class StackedAutoencoders(nn.Module):
                 weight, bias = pick(self.weights[key]), pick(self.biases[key])
                 out[f"{part}/{index}"] = (weight[member].cpu().numpy().copy(), bias[member, 0].cpu().numpy().copy())
         return out
-
-    def optimizer_state_from_flat(self, flat_state: Mapping[str, Any]) -> dict[str, Any]:
-        """An Adam ``state_dict`` of checkpoint version 1 (one flat parameter) for this model's parameter list."""
-        (moments,) = flat_state["state"].values()
-        group = dict(flat_state["param_groups"][0])
-        n = len(list(self.parameters()))
-        group["params"] = list(range(n))
-        exp_avg, exp_avg_sq = self.split_flat(moments["exp_avg"]), self.split_flat(moments["exp_avg_sq"])
-        state = {
-            i: {"step": moments["step"].clone(), "exp_avg": exp_avg[i], "exp_avg_sq": exp_avg_sq[i]} for i in range(n)
-        }
-        return {"state": state, "param_groups": [group]}

@@ -147,7 +147,6 @@ def test_members_are_independent_and_state_round_trips() -> None:
     assert all(torch.equal(next_masks[k], restored_masks[k]) for k in next_masks)  # dropout streams continue
 
 
-
 def test_the_model_is_an_nn_module_with_a_standard_state_dict() -> None:
     engine = StackedAutoencoders(TWO_SENSORS, default_groups(list(TWO_SENSORS), True), [0, 1], ModelShape())
     assert isinstance(engine, nn.Module)

@@ -3,7 +3,7 @@ paper's random split and the blocked split (splits x model seeds each), run ever
 JSON, the figures and the results page under OUT. Nothing else goes to OUT (the data and the runs stay in --work).
 
 Stages, each in parallel processes (``--jobs``, one torch thread each: the layers are tiny, see
-``train.default_threads``):
+``run.default_threads``):
 
 1. collect: one ``unitac-rig collect`` per (object, sensor) on the simulated rig (seed 0; the placement is drawn per
    object and shared by both sensors' sessions, as ``campaign`` does); reused when the session is complete;

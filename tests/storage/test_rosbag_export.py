@@ -14,7 +14,7 @@ from rosbags.typesys import Stores, get_typestore
 from tests.helpers import cli
 from tests.robustness.robustness_helpers import write_synthetic_sessions
 from unitac_rig.storage.reader import list_sessions, read_presses
-from unitac_rig.storage.rosbag import _quaternions
+from unitac_rig.storage.rosbag import quaternions
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +74,7 @@ def test_each_session_is_an_mcap_bag_with_every_sample_at_its_own_stamp(bags: Pa
 
 def test_a_rotation_vector_becomes_the_same_rotation_as_a_quaternion() -> None:
     rotvec = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, np.pi / 2], [np.pi, 0.0, 0.0]])
-    q = _quaternions(rotvec)
+    q = quaternions(rotvec)
     np.testing.assert_allclose(q[0], [0, 0, 0, 1], atol=1e-12)
     np.testing.assert_allclose(q[1], [0, 0, np.sqrt(0.5), np.sqrt(0.5)], atol=1e-12)
     np.testing.assert_allclose(q[2], [1, 0, 0, 0], atol=1e-12)

@@ -48,7 +48,7 @@ class RosbagExportSummary:
     bytes: int
 
 
-def _quaternions(rotvec: np.ndarray) -> np.ndarray:
+def quaternions(rotvec: np.ndarray) -> np.ndarray:
     """(K, 3) rotation vectors (rad) -> (K, 4) unit quaternions x, y, z, w."""
     angle = np.linalg.norm(rotvec, axis=1)
     half = 0.5 * angle
@@ -96,7 +96,7 @@ def write_session_bag(session: Path, bag: Path, typestore: Any) -> dict[str, int
             robot_ns = np.round(np.asarray(rec.robot_t_s, np.float64) * 1e9).astype(np.int64)
             force = np.asarray(rec.robot_force, np.float64).reshape(-1, 6)
             pose = np.asarray(rec.robot_pose, np.float64).reshape(-1, 6)
-            quat = _quaternions(pose[:, 3:])
+            quat = quaternions(pose[:, 3:])
             frame_ns = np.round(np.asarray(rec.tactile_t_s, np.float64) * 1e9).astype(np.int64)
             tared = np.asarray(rec.tactile_values, np.float32) - np.asarray(rec.tare_baseline, np.float32)[None]
             # the press's arm samples and frames merged in time order (MCAP needs no order; a player does)

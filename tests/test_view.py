@@ -82,3 +82,23 @@ def test_view_stream_simulated_logs_live_frames(tmp_path: Path) -> None:
     assert cli(["view", "--stream", "--simulated", "--frames", "40", "--tare-frames", "10", "--save", str(rrd)]) == 0
     logged = _rows(rrd)
     assert _count(logged["/tactile/papillarray/frame"]) == 40
+
+
+def test_view_is_in_the_help_at_80_columns() -> None:
+    import subprocess
+    import sys
+
+    def help_of(*args: str) -> str:
+        done = subprocess.run([sys.executable, "-m", "unitac_rig", *args, "--help"], capture_output=True, text=True,
+                              timeout=120)  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        return done.stdout
+
+    root = help_of()
+    group = root[root.index("Look at and share data") :].split("\n\n")[0]
+    assert "view" in group
+    text = help_of("view")
+    assert all(len(line) <= 80 for line in text.splitlines()) and "(default" not in text, text
+    for option in ("--stream", "--simulated", "--save PATH", "--frames N"):
+        assert option in text
+    assert "rosbag2" in help_of("export") and "--push-to-hub REPO" in help_of("export-model")

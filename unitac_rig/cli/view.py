@@ -14,7 +14,9 @@ def view_command(
     stream: bool = typer.Option(False, "--stream", help="Show a live sensor instead (with --simulated or --rig)."),
     simulated: bool = typer.Option(False, "--simulated", help="With --stream: start the real-time twin here."),
     rig_file: Path = typer.Option(None, "--rig", help="With --stream: rig file with the mounted sensor."),
-    sensor: str = typer.Option(None, "--sensor", help="With --stream: the sensor (default: detected/papillarray)."),
+    sensor: str = typer.Option(
+        None, "--sensor", help="With --stream: the sensor (else detected; --simulated: papillarray)."
+    ),
     object_id: str = typer.Option("circle_pla", "--object", help="With --stream --simulated: the object."),
     frames: int = typer.Option(None, "--frames", help="With --stream: stop after this many frames."),
     duration: float = typer.Option(None, "--duration", help="With --stream: stop after this many seconds."),

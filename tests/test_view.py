@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from tests.helpers import cli
-from tests.robustness.robustness_helpers import write_synthetic_sessions
 from unitac_rig.storage.reader import read_presses
 
 rr = pytest.importorskip("rerun")
@@ -40,8 +39,9 @@ def _column(batches: list, suffix: str) -> list:
 
 @pytest.fixture(scope="module")
 def session(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A simulated-rig session at 3 angles (real streams: a tare, arm poses, force-matched frames)."""
     data = tmp_path_factory.mktemp("view") / "data"
-    write_synthetic_sessions(data, objects=("circle_pla",))
+    assert cli(["collect", "--object", "circle_pla", "--data", str(data), "--angles", "3", "--no-live"]) == 0
     return next(data.glob("circle_pla__uskin*.h5"))
 
 

@@ -12,16 +12,15 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
 from tests.helpers import cli
-from tests.robustness.robustness_helpers import write_synthetic_sessions
 from unitac_rig.storage.reader import list_sessions, read_presses
 from unitac_rig.storage.rosbag import quaternions
 
 
 @pytest.fixture(scope="module")
 def pristine(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One object, both sensors (the two sessions hold 24k arm samples and 88 frames)."""
+    """A simulated-rig session at 3 angles (real streams: a tare, arm poses, device counters)."""
     data = tmp_path_factory.mktemp("rosbag") / "data"
-    write_synthetic_sessions(data, objects=("circle_pla",))
+    assert cli(["collect", "--object", "circle_pla", "--data", str(data), "--angles", "3", "--no-live"]) == 0
     return data
 
 
@@ -59,6 +58,7 @@ def test_each_session_is_an_mcap_bag_with_every_sample_at_its_own_stamp(bags: Pa
         assert [t for t, _ in frames] == sorted(np.round(frame_t * 1e9).astype(np.int64).tolist())
         first = presses[0]
         k = int(np.argmin(first.tactile_t_s))
+        assert np.abs(first.tare_baseline).max() > 0  # so the comparison below tells tared from raw
         expected = np.asarray(first.tactile_values[k], np.float32) - np.asarray(first.tare_baseline, np.float32)
         t0 = round(float(first.tactile_t_s[k]) * 1e9)
         message = next(m for t, m in frames if t == t0)
@@ -70,6 +70,12 @@ def test_each_session_is_an_mcap_bag_with_every_sample_at_its_own_stamp(bags: Pa
         wrench_t, wrench = got["/arm/wrench"][0]
         assert wrench.header.frame_id == "base"  # type: ignore[attr-defined]
         assert wrench_t == round(float(np.min(robot_t)) * 1e9)
+        pose_t, pose = got["/arm/tcp_pose"][0]
+        earliest = min(presses, key=lambda p: float(np.min(p.robot_t_s)))
+        j = int(np.argmin(earliest.robot_t_s))
+        position = pose.pose.position  # type: ignore[attr-defined]
+        assert pose_t == wrench_t and [position.x, position.y, position.z] == list(earliest.robot_pose[j][:3])
+        assert np.abs(earliest.robot_pose[j][:3]).max() > 0
 
 
 def test_a_rotation_vector_becomes_the_same_rotation_as_a_quaternion() -> None:

@@ -598,12 +598,17 @@ def export_lerobot(data_dirs: Sequence[Path], out: Path) -> LeRobotExportSummary
 
 
 def size_category(n: int) -> str:
-    """The Hub's ``size_categories`` bucket of ``n`` rows (frames)."""
-    for bound, name in ((1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K"), (1_000_000, "100K<n<1M"),
-                        (10_000_000, "1M<n<10M"), (100_000_000, "10M<n<100M")):  # fmt: skip
-        if n < bound:
-            return name
-    return "100M<n<1B"
+    """The Hub's ``size_categories`` bucket of ``n`` rows (frames): by the number of digits."""
+    names = ("n<1K", "1K<n<10K", "10K<n<100K", "100K<n<1M", "1M<n<10M", "10M<n<100M", "100M<n<1B")
+    return names[min(len(names) - 1, max(0, len(str(max(n, 1))) - 3))]
+
+
+def _load_and_cite(loading: list[str]) -> list[str]:
+    """A card's guarded loading code (``loading``: the lines after the import) and the paper's citation."""
+    return ["```python", TORCHVISION_GUARD.rstrip(), "", *loading, "```", "",
+            "The `except` branch is for torch's CPU build beside PyPI's torchvision (a CUDA build, whose extension "
+            "then fails with `operator torchvision::nms does not exist`); these datasets hold no images, so no "
+            "torchvision op is called.", "", "## Citation", "", "```bibtex", CITATION, "```", ""]  # fmt: skip
 
 
 def render_sensor_card(sensor: str, d: dict[str, Any], doc: dict[str, Any]) -> str:
@@ -630,28 +635,18 @@ def render_sensor_card(sensor: str, d: dict[str, Any], doc: dict[str, Any]) -> s
         f"({d['episodes']}), one row per tactile frame ({d['frames']}, {d['fps']} fps nominal), with the wrist "
         f"wrench and TCP pose sampled at that frame. Objects: {', '.join(d['objects'])}.",
         "",
-        "## Load it",
-        "",
-        "```python",
-        TORCHVISION_GUARD.rstrip(),
-        "",
-        f'ds = LeRobotDataset("local/{sensor}", root=".")  # or the Hub repository id of this dataset',
-        f'frame = ds[0]["observation.tactile.{sensor}"]  # ({layout["n_taxels"]}, 3), tare-subtracted',
-        "```",
-        "",
-        "The `except` branch is for torch's CPU build beside PyPI's (CUDA) torchvision; no torchvision op is used.",
         "Every feature's dtype, shape, names, `unit` and `description` are in `meta/info.json`; per-episode press "
         "metadata, force matching (`extraction/*`) and per-episode statistics (`stats/*`) are columns of "
         "`meta/episodes/`.",
         "",
-        "## Citation",
+        "## Load it",
         "",
-        "The protocol and model this data is for:",
-        "",
-        "```bibtex",
-        CITATION,
-        "```",
-        "",
+        *_load_and_cite(
+            [
+                f'ds = LeRobotDataset("local/{sensor}", root=".")  # or this dataset\'s Hub repository id',
+                f'frame = ds[0]["observation.tactile.{sensor}"]  # ({layout["n_taxels"]}, 3), tared',
+            ]
+        ),
         f"Exported by unitac-rig {doc['exported_by']['package_version']}; the export's `{MANIFEST_NAME}` lists "
         "every file with its SHA-256.",
         "",
@@ -697,15 +692,8 @@ def render_card(doc: dict[str, Any]) -> str:
         "In this folder (each `<sensor>/` folder is a complete dataset with its own card; on the Hub, pass its "
         "repository id instead of `local/...` and drop `root`):",
         "",
-        "```python",
-        TORCHVISION_GUARD.rstrip(),
-        "",
-        *(f'{s} = LeRobotDataset("local/{s}", root="{s}")' for s in datasets),
-        "```",
-        "",
-        "The `except` branch is for torch's CPU build beside PyPI's torchvision (a CUDA build, whose extension then "
-        "fails with `operator torchvision::nms does not exist`); these datasets hold no images, so no torchvision op "
-        "is called. With the full lerobot package: `from lerobot.datasets.lerobot_dataset import LeRobotDataset`.",
+        *_load_and_cite([f'{s} = LeRobotDataset("local/{s}", root="{s}")' for s in datasets]),
+        "With the full lerobot package: `from lerobot.datasets.lerobot_dataset import LeRobotDataset`.",
         "",
         "Every feature's dtype, shape, names, `unit` and `description` are in `<sensor>/meta/info.json`; per-episode "
         "press metadata (object, rotation, angle, status, tare baseline, and the force-matching `extraction/*`) are "
@@ -720,12 +708,6 @@ def render_card(doc: dict[str, Any]) -> str:
         "LeRobot turns `delta_timestamps` into row offsets with `fps`, so a delta lands on the row that far back, "
         "which is that far back in time within the sensor's jitter.",
         "- There is no `action`: the press is a scripted force-terminated move (see the episode's `unitac/*` columns).",
-        "",
-        "## Citation",
-        "",
-        "```bibtex",
-        CITATION,
-        "```",
         "",
         f"Exported by unitac-rig {doc['exported_by']['package_version']}; `{MANIFEST_NAME}` lists every file with its "
         "SHA-256 (`unitac-rig verify .`).",

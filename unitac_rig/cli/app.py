@@ -41,12 +41,13 @@ COMMAND_MODULES = (
     "unitac_rig.cli.bench",  # bench ...
     "unitac_rig.cli.twin",  # twin (the real-time twin of the rig)
     "unitac_rig.cli.stream",  # stream (a trained run on the live sensor)
+    "unitac_rig.cli.view",  # view (a session or a live sensor in Rerun)
 )
 
 # The root help lists the commands under these headings, in this order (a command not named here is listed last).
 COMMAND_GROUPS = {
     "Collect data": ("collect", "campaign", "extract", "objects"),
-    "Look at and share data": ("inspect", "export", "verify", "import-unitac-nv"),
+    "Look at and share data": ("inspect", "view", "export", "verify", "import-unitac-nv"),
     "Learn": ("train", "report", "translate", "geometry", "export-model"),
     "Devices and the simulated rig": ("probe", "twin", "bench"),
 }

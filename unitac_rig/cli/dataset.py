@@ -143,17 +143,28 @@ def export(
     data: list[Path] = typer.Argument(..., help="Dataset directories to pool (each one a collect/campaign --data)."),
     out: Path = typer.Option(..., "--out", help="New directory to write the export into (must not hold files)."),
     fmt: str = typer.Option(
-        "parquet", "--format", help="parquet (the paired dataset) or lerobot (every press, LeRobotDataset v3)."
+        "parquet",
+        "--format",
+        help="parquet (the paired dataset), lerobot (every press, LeRobotDataset v3) or rosbag2 "
+        "(each session as a ROS 2 bag, MCAP).",
     ),
 ) -> None:
     """Write the force-matched paired dataset as Parquet, the raw sessions, a dataset card and manifest.json
     (--format lerobot: one LeRobotDataset v3 per sensor, a press per episode, see docs/dataset.md)."""
-    if fmt not in ("parquet", "lerobot"):
-        raise UsageError(f"--format {fmt}: unknown export format", hint="use parquet or lerobot")
+    if fmt not in ("parquet", "lerobot", "rosbag2"):
+        raise UsageError(f"--format {fmt}: unknown export format", hint="use parquet, lerobot or rosbag2")
     if out.exists() and (not out.is_dir() or any(out.iterdir())):  # a usage error like export-model's: exit 2
         raise UsageError(f"--out {out} already exists and is not an empty directory", hint="choose a new --out")
     if fmt == "lerobot":
         _export_lerobot(data, out)
+        return
+    if fmt == "rosbag2":
+        from unitac_rig.storage.rosbag import export_rosbag2
+
+        bags = export_rosbag2(data, out)
+        for name, topics in bags.bags.items():
+            console.print(f"{out / name}: " + ", ".join(f"{t} {n}" for t, n in topics.items()), soft_wrap=True)
+        console.print(f"{len(bags.bags)} bags (MCAP), {bags.bytes / 1e6:.1f} MB; open with ros2 bag info or Foxglove")
         return
     from unitac_rig.storage.export import export_dataset
 

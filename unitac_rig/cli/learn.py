@@ -312,13 +312,19 @@ def export_model_command(
     ),
     out: Path = typer.Option(..., "--out", help="New directory for the networks, config/model.json and README.md."),
     member: int = typer.Option(0, "--member", help="Which seed of a multi-seed run (index)."),
+    push_to_hub: str | None = typer.Option(
+        None, "--push-to-hub", metavar="REPO", help="Then upload it to this Hugging Face Hub model repo (safetensors)."
+    ),
 ) -> None:
     """Write each sensor's encoder and decoder (normaliser folded in: sensor units in and out) with a model card."""
     from rich.console import Console
 
+    from unitac_rig.errors import UsageError
     from unitac_rig.learning.export import CARD_NAME, MODEL_JSON, export_model
     from unitac_rig.learning.safetensors_export import CONFIG_NAME
 
+    if push_to_hub is not None and fmt != "safetensors":
+        raise UsageError("--push-to-hub uploads the Hub layout only", hint="drop --format or use --format safetensors")
     document = export_model(run, out, fmt, member)
     console = Console()
     console.print(f"exported {run} (member {member}, seed {document['seed']}) as {fmt} -> {out}")
@@ -329,6 +335,10 @@ def export_model_command(
         )
     config = CONFIG_NAME if fmt == "safetensors" else MODEL_JSON
     console.print(f"  {config}, {CARD_NAME} (model card: data hash, metrics, intended use, limits, loading)")
+    if push_to_hub is not None:
+        from unitac_rig.learning.safetensors_export import push_to_hub as push
+
+        console.print(f"pushed to https://huggingface.co/{push_to_hub}: {push(out, push_to_hub)}")
 
 
 def register(app: typer.Typer) -> None:

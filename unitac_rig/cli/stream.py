@@ -155,7 +155,7 @@ def stream_command(
                 f", geometry from the MLP trained on {model.geometry_meta['trained_on']}" if model.geometry_meta else ""
             )
             typer.echo(
-                f"stream: {name} -> latent {model.encoder.weights[-1].shape[1]}, "
+                f"stream: {name} -> latent {model.latent_dim}, "
                 f"{', '.join(model.targets) or 'no other sensor'}{extra}; taring on {tare_frames} frames "
                 "(keep the pad unloaded)",
                 err=True,

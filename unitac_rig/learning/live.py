@@ -1,9 +1,11 @@
 """The trained model on live frames: ``unitac-rig stream`` reads the mounted sensor and emits, per frame, its latent,
 the frame translated into every other sensor of the run, and the contact-geometry estimate when the run has one.
 
-:class:`LiveModel` is one member of a run flattened into float32 numpy layers (the normaliser folded in as for
-``export-model``, :func:`unitac_rig.learning.export.encoder_module`), because a frame at 1 kHz leaves no room for
-torch's per-call overhead on networks this small: a batch of one goes through a handful of (64 x 27) matmuls.
+:class:`LiveModel` runs one member of a run as the very module ``export-model`` writes
+(:class:`unitac_rig.learning.network.UniTacNV`, the normaliser folded in), and the geometry head as the same
+:func:`unitac_rig.learning.network.mlp`, under ``torch.inference_mode`` on one thread. That costs torch's per-call
+overhead over the numpy layers it replaced (one PapillArray frame's latent, uSkin translation and geometry: 264 us
+against 85 us at load 20 on 2 cores), for one forward shared with ``export-model``.
 
 :func:`stream_frames` is the loop: tare on the first frames (the pad unloaded), then for every frame the sensor
 delivers (all of them, in order: none is skipped to catch up) one JSON line handed to ``write``, and the latency
@@ -21,32 +23,12 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+import torch
+from torch import nn
 
 from drivers.frames import TactileFrame
 from unitac_rig.errors import ModelError, UsageError
-
-
-class _Layers:
-    """An MLP as float32 (W (in, out), b) pairs, ReLU between layers: ``y = relu(x @ W + b) ...``."""
-
-    def __init__(self, weights: list[np.ndarray], biases: list[np.ndarray]) -> None:
-        self.weights = [np.ascontiguousarray(w, dtype=np.float32) for w in weights]
-        self.biases = [np.ascontiguousarray(b, dtype=np.float32).reshape(-1) for b in biases]
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        last = len(self.weights) - 1
-        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            x = x @ w + b
-            if i < last:
-                np.maximum(x, 0.0, out=x)
-        return x
-
-
-def _from_sequential(module: Any) -> _Layers:
-    from torch import nn
-
-    linears = [m for m in module if isinstance(m, nn.Linear)]
-    return _Layers([m.weight.detach().numpy().T for m in linears], [m.bias.detach().numpy() for m in linears])
+from unitac_rig.learning.network import mlp
 
 
 @dataclass
@@ -61,7 +43,7 @@ class LiveModel:
 
     def __init__(self, run_dir: Path, sensor: str, member: int = 0, geometry: bool = True) -> None:
         from unitac_rig.learning.engine import UNITAC_GROUP
-        from unitac_rig.learning.export import decoder_module, encoder_module
+        from unitac_rig.learning.safetensors_export import hub_model
         from unitac_rig.learning.train import load_run
 
         run = load_run(Path(run_dir))
@@ -78,13 +60,9 @@ class LiveModel:
         self.member = member
         self.targets = tuple(s for s in sensors if s != sensor)
         self.n_taxels = engine.feature_dims[sensor] // 3
-        norm = run.normaliser
-        self.encoder = _from_sequential(encoder_module(engine, norm.mean[sensor], norm.std[sensor], sensor, member))
-        self.decoders = {
-            t: _from_sequential(decoder_module(engine, norm.mean[t], norm.std[t], t, member)) for t in self.targets
-        }
-        self.taxels = {t: engine.feature_dims[t] // 3 for t in self.targets}
-        self.geometry: _Layers | None = None
+        self.model = hub_model(run, member)
+        self.latent_dim = self.model.latent_dim
+        self.geometry: nn.Sequential | None = None
         self.geometry_meta: dict[str, Any] | None = None
         if geometry:
             self._load_geometry(run, member)
@@ -104,17 +82,26 @@ class LiveModel:
             )
         chosen = self.sensor if self.sensor in estimator.train_sensors else estimator.train_sensors[0]
         k = estimator.train_sensors.index(chosen)
-        self.geometry = _Layers([w[k].numpy() for w in estimator.weights], [b[k, 0].numpy() for b in estimator.biases])
+        widths = [int(estimator.weights[0][k].shape[0]), *(int(w[k].shape[1]) for w in estimator.weights)]
+        head = mlp(widths)
+        with torch.no_grad():
+            for linear, w, b in zip(
+                [m for m in head if isinstance(m, nn.Linear)], estimator.weights, estimator.biases, strict=True
+            ):
+                linear.weight.copy_(w[k].T.to(torch.float32))
+                linear.bias.copy_(b[k, 0].reshape(-1).to(torch.float32))
+        self.geometry = head.eval()
         self.geometry_meta = {"trained_on": chosen, "offsets_mm": list(estimator.meta["offsets_mm"]),
                               "object": estimator.meta.get("object")}  # fmt: skip
 
     def __call__(self, frames: np.ndarray) -> LiveOutput:
         """``frames`` (B, n_taxels, 3) of the mounted sensor -> latents, translations and geometry."""
-        x = np.ascontiguousarray(frames, dtype=np.float32).reshape(len(frames), -1)
-        latent = self.encoder(x)
-        translated = {t: d(latent).reshape(len(frames), self.taxels[t], 3) for t, d in self.decoders.items()}
-        geometry = self.geometry(latent) if self.geometry is not None else None
-        return LiveOutput(latent, translated, geometry)
+        x = torch.from_numpy(np.ascontiguousarray(frames, dtype=np.float32))
+        with torch.inference_mode():
+            latent = self.model.encode(x, self.sensor)
+            translated = {t: self.model.decode(latent, t).numpy() for t in self.targets}
+            geometry = self.geometry(latent).numpy() if self.geometry is not None else None
+        return LiveOutput(latent.numpy(), translated, geometry)
 
 
 class LiveSensor(Protocol):
@@ -210,7 +197,28 @@ def stream_frames(
     clock_ns: Callable[[], int] = time.monotonic_ns,
 ) -> StreamStats:
     """Tare on the first ``tare_frames`` valid frames (median, as a press's tare), then emit every frame until
-    ``max_frames`` were emitted, ``duration_s`` passed since the first emitted frame, or ``should_stop()``."""
+    ``max_frames`` were emitted, ``duration_s`` passed since the first emitted frame, or ``should_stop()``.
+
+    Runs torch on one thread: layers this small gain nothing from more, and on a busy 2-core box two threads made a
+    10-frame batch 50x slower (17 ms against 0.36 ms, load 20)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return _stream(sensor, model, write, tare_frames, max_frames, duration_s, should_stop, clock_ns)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _stream(
+    sensor: LiveSensor,
+    model: LiveModel,
+    write: Callable[[bytes], None],
+    tare_frames: int,
+    max_frames: int | None,
+    duration_s: float | None,
+    should_stop: Callable[[], bool],
+    clock_ns: Callable[[], int],
+) -> StreamStats:
     stats = StreamStats()
     tare: list[np.ndarray] = []
     baseline: np.ndarray | None = None

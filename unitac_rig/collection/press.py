@@ -108,18 +108,22 @@ def zero_wrist(
     *,
     check_unloaded: bool = True,
     check_s: float | None = None,
+    reference: np.ndarray | None = None,
 ) -> tuple[list[TactileFrame], np.ndarray]:
     """Zero the wrist F/T at rest after settling, refusing when the pad is loaded; -> (frames of both windows,
     wrenches (K, 6) of the ``settle_s`` window after the zero, whose mean is the host-side offset left over: a zero
     from one noisy sample is off). ``check_s``: the window before the zero (None: ``settle_s``).
 
-    The unloaded check uses the mean force since the previous zero (a UR's F/T drifts by well under
-    ``UNLOADED_FORCE_N`` between presses), so the session's first zero (``check_unloaded=False``) relies on the
-    stand-off being clear of the object by construction. After zeroing, the window's mean must be near zero.
+    The unloaded check compares the mean wrench with ``reference`` (6,), an unloaded reading (the session's first
+    zero passes the free reading its back-off found, collection/wrist.py); without one, with the controller's zero,
+    which the last zero set on an unloaded pad (a UR's F/T drifts by well under ``UNLOADED_FORCE_N`` between
+    presses). ``check_unloaded=False`` skips it: only for a caller that proved the pad free itself. After zeroing,
+    the window's mean must be near zero.
     """
     wait_until_at_rest(arm)
     before, mean_wrench = settle_frames(arm, sensor, settle_s if check_s is None else check_s)
-    mean_force = float(np.linalg.norm(mean_wrench[:3]))
+    loaded = mean_wrench[:3] if reference is None else mean_wrench[:3] - np.asarray(reference, dtype=np.float64)[:3]
+    mean_force = float(np.linalg.norm(loaded))
     if check_unloaded and mean_force > UNLOADED_FORCE_N:
         raise SafetyLimit(
             f"wrist reads {mean_force:.2f} N at {where}: the pad is touching something, refusing to zero the F/T",

@@ -278,19 +278,20 @@ def retract_from_object(
     near_speed = near_speed_m_s(limits, transit_speed_m_s)
     if back_m > 2e-4:
         target = np.concatenate([here[:3] - tool_z(here) * back_m, here[3:]])
-        here = _move_within_limits(arm, here, target, near_speed, limits, moved)
+        here = move_within_limits(arm, here, target, near_speed, limits, moved)
     radius = float(np.linalg.norm(here[:2] - center))
     if to_clearance and radius < clearance_m - 2e-4:
         outward = (here[:2] - center) / radius if radius > 1e-6 else -np.asarray(plan.direction)[:2]
         target = np.concatenate([center + outward * clearance_m, here[2:]])
-        _move_within_limits(arm, here, target, transit_speed_m_s, limits, moved)
+        move_within_limits(arm, here, target, transit_speed_m_s, limits, moved)
     return moved
 
 
-def _move_within_limits(
+def move_within_limits(
     arm: Arm, here: np.ndarray, target: np.ndarray, speed_m_s: float, limits: LimitsConfig, moved: list[np.ndarray]
 ) -> np.ndarray:
-    """A guarded move toward ``target``, shortened to the last point inside the workspace and reach; -> the end."""
+    """A guarded move toward ``target``, shortened to the last point inside the workspace and reach; -> the end
+    (``here`` when it cannot move at all). The end is appended to ``moved``."""
     fraction = _inside_fraction(here, target, limits)
     end = np.concatenate([here[:3] + fraction * (target[:3] - here[:3]), target[3:]])
     if float(np.linalg.norm(end[:3] - here[:3])) < 2e-4:

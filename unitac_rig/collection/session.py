@@ -5,8 +5,9 @@ already finished in the session file (complete or failed) are skipped, so the sa
 a Ctrl-C, a termination signal or a protective stop. Library code: no printing; progress goes through callbacks the
 CLI renders.
 
-Before the first motion the whole plan is checked: every stand-off, clearance and retract waypoint of every press
-and rotation against the workspace box and the arm's reach (one line names the first outside).
+Before the first motion the whole plan is checked: the arm's start pose, every stand-off (the confirmed one too),
+clearance and retract waypoint and the whole press travel of every press and rotation against the workspace box and
+the arm's reach (one line names the first outside).
 
 When the session stops instead of carrying on blind: a protective stop (the operator must clear it on the pendant),
 the controller's program stopping (the watchdog after a host stall), a lost robot state stream, a hard force limit,
@@ -92,6 +93,7 @@ class SessionOutcome:
     # the wrist reading (6,) right after the session's last unloaded zero (collection/wrist.py): what "unloaded"
     # reads, to say the load every way out of a fault leaves on the pad
     wrist_zero: np.ndarray | None = None
+    last_reason: str | None = None  # how the last press of this run ended ("aborted: no_contact", ...)
 
     @property
     def finished(self) -> bool:
@@ -164,7 +166,8 @@ def collect_session(
     # rewriting the session file on resume) run kept alive, or the controller stops the program under them.
     try:
         arm = rig.arm
-        check_session_plan(arm.read_state().tcp_pose, todo, config.object.clearance_mm / 1000.0, config.limits)
+        check_session_plan(arm.read_state().tcp_pose, todo, config.object.clearance_mm / 1000.0, config.limits,
+                           confirmed_standoff_mm(config))  # fmt: skip
         with _kept_alive(arm):  # python-can's slcan alone waits 2 s after opening the port
             sensor = rig.open_sensor(sensor_name)
     except BaseException:
@@ -190,6 +193,8 @@ def collect_session(
         except BaseException as exc:
             _say_load_left(rig, exc, outcome)
             raise
+        if outcome.stopped is None and outcome.complete == 0 and outcome.failed + outcome.aborted > 0:
+            outcome.stopped = _pressed_nothing(config, obj, outcome)
         if outcome.stopped is not None:
             outcome.stopped += load_left_note(rig.arm, outcome.wrist_zero)
     finally:
@@ -241,6 +246,7 @@ def _press_all(
                 on_press(PressDone(outcome.already_done + index + 1, outcome.planned, record, matched))
         if record is not None:
             outcome.failure_streak = outcome.failure_streak + 1 if record.status != "complete" else 0
+            outcome.last_reason = record_reason(record)
         if outcome.failure_streak >= limit:
             outcome.stopped = _failed_in_a_row(config, obj, plan, record)
             break
@@ -258,8 +264,9 @@ def _say_load_left(rig: Rig, exc: BaseException, outcome: SessionOutcome) -> Non
         return
     if isinstance(exc, UnitacError) and exc.args and isinstance(exc.args[0], str):
         exc.args = (exc.args[0] + note, *exc.args[1:])
-    else:
-        log.warning("the session stopped (%s)%s", type(exc).__name__, note)
+    else:  # Ctrl-C and the signals taken like it: the CLI adds it to the line saying what was kept
+        exc.load_note = note  # type: ignore[attr-defined]
+        log.info("the session stopped (%s)%s", type(exc).__name__, note)
     if outcome.stopped is not None:
         outcome.stopped += note
 
@@ -288,6 +295,15 @@ def session_attrs(
         "git_commit": git_commit(),
         "created_unix": time.time(),
     }
+
+
+def _pressed_nothing(config: RigConfig, obj: ObjectSpec, outcome: SessionOutcome) -> str:
+    """Why a run whose presses all ended without completing is a failure, not a finished session (one line)."""
+    return (
+        f"no press completed ({outcome.failed} failed, {outcome.aborted} aborted; the last {outcome.last_reason}): "
+        f"is {obj.id} mounted at object.center_m = {list(config.object.center_m)}, press_height_m = "
+        f"{config.object.press_height_m} as the rig file says?"
+    )
 
 
 def _failed_in_a_row(config: RigConfig, obj: ObjectSpec, plan: PressPlan, record: PressRecord | None) -> str:
@@ -550,9 +566,10 @@ def _save(
         record.attrs.setdefault("sensor_health", sensor.health().as_dict())
     except DeviceError as exc:
         log.info("no sensor health for press %s: %s", record.press_id, exc)
-    record.extraction = extract_press(
-        record.robot_t_s, record.press_force_n, record.tactile_t_s, record.tactile_valid, settings
-    )
+    if record.reason != "off_axis":  # a press off the object's face never feeds extraction (collection/streams.py)
+        record.extraction = extract_press(
+            record.robot_t_s, record.press_force_n, record.tactile_t_s, record.tactile_valid, settings
+        )
     writer.write_press(record)
     if "ft_zero_offset" in record.attrs:  # the press zeroed an unloaded wrist (zero_wrist refuses a loaded one)
         outcome.wrist_zero = np.asarray(record.attrs["ft_zero_offset"], dtype=np.float64)
@@ -593,7 +610,7 @@ def dry_run(
     outcome = DryRunOutcome()
     speed = config.press.transit_speed_mm_s / 1000.0
     clearance = config.object.clearance_mm / 1000.0
-    check_session_plan(arm.read_state().tcp_pose, plans, clearance, config.limits)
+    check_session_plan(arm.read_state().tcp_pose, plans, clearance, config.limits, confirmed_standoff_mm(config))
     for index, plan in enumerate(plans):
         here = arm.read_state().tcp_pose
         outcome.waypoints += len(clearance_waypoints(here, plan, clearance))

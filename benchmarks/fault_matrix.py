@@ -609,8 +609,10 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
     runs = [(r, x) for r in doc["rows"] for x in [*(r.get("early_fault_runs") or []), r["fault_run"],
                                                   *(r.get("resume_runs") or [])]]  # fmt: skip
     worst_row, worst = max(runs, key=lambda rx: rx[1]["peak_n"])
-    spontaneous = [(r, x) for r, x in runs if _watchdog_ended(x) and not (x is r["fault_run"] and _injected_stop(r))]
-    rerun = [r["row"] for r in doc["rows"] if r.get("rerun")]
+    every_stop = [(r, x) for r, x in runs if _watchdog_ended(x) and not (x is r["fault_run"] and _injected_stop(r))]
+    spontaneous = [(r, x) for r, x in every_stop if not r.get("ran")]  # at the main run's load
+    elsewhere = len(every_stop) - len(spontaneous)  # in rows run on their own, at the loads they name
+    rerun = [r["row"] + (f" ({r['ran']})" if r.get("ran") else "") for r in doc["rows"] if r.get("rerun")]
     note = (
         []
         if not rerun
@@ -631,6 +633,11 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
             if not spontaneous
             else "; each ended with its one line and the arm at rest, and the same command "
             "resumed (rows marked *(n runs)*)."
+        )
+        + (
+            ""
+            if not elsewhere
+            else f" {elsewhere} more in the rows run on their own, at the loads they name, each ended the same way."
         ),
         "",
     ]
@@ -751,7 +758,10 @@ def merge_rows(doc: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, Any
     by_id = {r["row"]: r for r in doc["rows"]} | {r["row"]: {**r, "rerun": True} for r in rows}
     order = [s.row for s in scenarios()]
     doc["rows"] = sorted(by_id.values(), key=lambda r: order.index(r["row"]) if r["row"] in order else len(order))
+    when, machine = doc.get("finished_utc"), doc.get("machine")
     _summarise(doc)
+    if when is not None and machine is not None:  # the header keeps the main run's time and load; each row run on
+        doc.update(finished_utc=when, machine=machine)  # its own says its own (``ran``)
     return doc
 
 
@@ -793,6 +803,8 @@ def main() -> None:
         root = args.workdir or Path(tmp)
         for k, scenario in enumerate(chosen):
             record = run_scenario(scenario, root / scenario.row)
+            record["ran"] = (f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load "
+                             f"{machine_info()['load_average_1min']}")  # fmt: skip
             rows.append(record)
             bad = [name for name, ok in record["criteria"].items() if ok is False]
             fr = record["fault_run"]

@@ -262,13 +262,14 @@ def _run_session(
             on_tick=panel.on_tick if panel else None,
             ask_operator=ask, max_presses=max_presses,
         )  # fmt: skip
-    except KeyboardInterrupt:  # Ctrl-C, SIGTERM, SIGHUP: the arm has stopped; say what is kept and how to go on
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM, SIGHUP: the arm has stopped; say what is kept and how to go on
         if panel is not None:
             with contextlib.suppress(OSError):
                 panel.live.stop()
             panel = None
         with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone
-            typer.echo(f"{_kept_line(data_dir, obj.id, sensor)}; run the same command again to resume", err=True)
+            load = getattr(exc, "load_note", "")  # the load the pad is left under (collection/session.py)
+            typer.echo(f"{_kept_line(data_dir, obj.id, sensor)}{load}; run the same command again to resume", err=True)
         raise
     finally:
         if panel is not None:

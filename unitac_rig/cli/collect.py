@@ -16,6 +16,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 from rich.text import Text
 
+from unitac_rig.cli.paths import path_text, require_data_folder, require_directory
 from unitac_rig.cli.signals import termination_as_interrupt
 from unitac_rig.collection.sensor_choice import choose_sensor, collection_order, session_complete
 from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session, dry_run
@@ -38,7 +39,11 @@ from unitac_rig.storage.reextract import reextract_sessions
 console = Console(stderr=False)
 
 DATA_OPTION = typer.Option(
-    Path("data"), "--data", metavar="DIR", help="Dataset directory (one HDF5 file per object and sensor)."
+    Path("data"),
+    "--data",
+    metavar="DIR",
+    help="Dataset directory (one HDF5 file per object and sensor).",
+    parser=path_text,
 )
 RIG_OPTION = typer.Option(
     None, "--rig", metavar="FILE", help="Rig file (TOML). Without one, the simulated rig is used."
@@ -329,6 +334,7 @@ def collect(
     SIGTERM and SIGHUP stop the arm and keep what was recorded, like Ctrl-C.
     """
     _check_counts(seed=seed, max_presses=max_presses)
+    require_data_folder(data)
     config = _configure(rig_file, strategy, speed, angles, None)
     obj = get_object(object_id, extra_files=config.object.objects_files)
     if rotation is not None and rotation not in obj.rotations_deg:
@@ -386,6 +392,7 @@ def campaign(
 ) -> None:
     """Every object with every sensor: unattended on the simulated rig, operator-guided on hardware."""
     _check_counts(seed=seed)
+    require_data_folder(data)
     config = _configure(rig_file, None, None, angles, None)
     catalogue = list_objects(extra_files=config.object.objects_files)
     if objects:
@@ -450,7 +457,7 @@ class CampaignProgress:
 
 
 def extract(
-    data: Path = typer.Argument(..., help="Dataset directory."),
+    data: Path = typer.Argument(..., help="Dataset directory.", parser=path_text),
     tolerance: float = typer.Option(0.5, "--tolerance", help="Largest matching error that still counts, N."),
     smoothing: int = typer.Option(15, "--smoothing", help="Moving-average window on the wrist force, samples."),
     latency: float = typer.Option(0.0, "--latency", help="Tactile latency to subtract from frame times, s."),
@@ -464,6 +471,7 @@ def extract(
     options = {"tolerance_n": "--tolerance", "smoothing_samples": "--smoothing", "tactile_latency_s": "--latency"}
     for name, why in settings.problems():
         raise UsageError(f"{options.get(name, name)} {why}")
+    require_directory(data, "DATA", hint="pass the --data folder you collected into")
     sessions = list_sessions(data)
     if not sessions:
         raise UsageError(f"no session files in {data}")

@@ -7,6 +7,7 @@ ellipsis (long values fold onto a second line). The full numbers are in ``inspec
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -18,11 +19,13 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
+from unitac_rig.cli.paths import path_text, require_directory, require_writable_output
 from unitac_rig.cli.signals import termination_as_interrupt
 from unitac_rig.errors import DataError, UsageError
 from unitac_rig.interrupts import raise_if_interrupted
 
 console = Console()
+_DATA_HINT = "pass the --data folder you collected into"
 
 
 def _num(value: float | None, fmt: str, scale: float = 1.0) -> str:
@@ -117,7 +120,7 @@ def _refresh_until_interrupted(frame: Callable[[], RenderableType], interval: fl
 
 
 def inspect(
-    data: Path = typer.Argument(..., help="Dataset directory."),
+    data: Path = typer.Argument(..., help="Dataset directory.", parser=path_text),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
     watch: bool = typer.Option(
         False, "--watch", help="Refresh until Ctrl-C; safe while a collection writes the directory."
@@ -128,10 +131,13 @@ def inspect(
     from unitac_rig.storage.summary import inspect_dataset
 
     if watch:
-        if interval <= 0:
-            raise UsageError(f"--interval must be positive, got {interval:g}")
+        if not (math.isfinite(interval) and interval > 0):
+            raise UsageError(f"--interval must be a positive number of seconds, got {interval:g}")
+        if data.exists() and not data.is_dir():  # a folder not created yet is waited for
+            require_directory(data, "DATA")
         _watch(data, interval, as_json)
         return
+    require_directory(data, "DATA", hint=_DATA_HINT)
     report = inspect_dataset(data)
     if as_json:
         typer.echo(json.dumps(report, indent=1))
@@ -140,8 +146,12 @@ def inspect(
 
 
 def export(
-    data: list[Path] = typer.Argument(..., help="Dataset directories to pool (each one a collect/campaign --data)."),
-    out: Path = typer.Option(..., "--out", help="New directory to write the export into (must not hold files)."),
+    data: list[Path] = typer.Argument(
+        ..., help="Dataset directories to pool (each one a collect/campaign --data).", parser=path_text
+    ),
+    out: Path = typer.Option(
+        ..., "--out", help="New directory to write the export into (must not hold files).", parser=path_text
+    ),
     fmt: str = typer.Option(
         "parquet", "--format", help="parquet (the paired dataset) or lerobot (every press, LeRobotDataset v3)."
     ),
@@ -152,6 +162,9 @@ def export(
         raise UsageError(f"--format {fmt}: unknown export format", hint="use parquet or lerobot")
     if out.exists() and (not out.is_dir() or any(out.iterdir())):  # a usage error like export-model's: exit 2
         raise UsageError(f"--out {out} already exists and is not an empty directory", hint="choose a new --out")
+    for folder in data:
+        require_directory(folder, "DATA", hint=_DATA_HINT)
+    require_writable_output(out, "--out")
     if fmt == "lerobot":
         _export_lerobot(data, out)
         return
@@ -186,12 +199,15 @@ def _export_lerobot(data: list[Path], out: Path) -> None:
 
 
 def verify(
-    directory: Path = typer.Argument(..., metavar="DIR", help="An export directory (holds manifest.json)."),
+    directory: Path = typer.Argument(
+        ..., metavar="DIR", help="An export directory (holds manifest.json).", parser=path_text
+    ),
 ) -> None:
     """Check every file of an export against manifest.json (size and SHA-256); exit 1 at the first mismatch or at
     a file the manifest does not list."""
     from unitac_rig.storage.manifest import verify_manifest
 
+    require_directory(directory, "DIR", hint="pass a directory written by `unitac-rig export`")
     report = verify_manifest(directory)
     console.print(f"ok: {report.files} files, {report.bytes / 1e6:.1f} MB match {directory / 'manifest.json'}")
 

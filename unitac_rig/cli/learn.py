@@ -28,6 +28,22 @@ def stage_printer(console: Any) -> Any:
     return on_stage
 
 
+def kept_run_line(run: Path, data: list[Path]) -> str:
+    """What an interrupted ``train`` kept (its checkpoint's epoch, read back from disk) and the command that goes
+    on from there."""
+    import shlex
+
+    from unitac_rig.learning.run import checkpoint_path, load_checkpoint
+
+    if not checkpoint_path(run).is_file():
+        return "train: interrupted before the first checkpoint, nothing kept; run the same command to start again"
+    payload = load_checkpoint(run)
+    planned = payload.get("config", {}).get("epochs", "?")
+    command = " ".join(["unitac-rig train", *(f"--data {shlex.quote(str(d))}" for d in data),
+                        f"--out {shlex.quote(str(run))}", "--resume"])  # fmt: skip
+    return f"train: interrupted; kept epoch {payload.get('epoch', '?')}/{planned} in {run}; go on with: {command}"
+
+
 def report_command(
     run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Redraw the figures too."),

@@ -483,11 +483,15 @@ def extract(
     tolerance: float = typer.Option(0.5, "--tolerance", help="Largest matching error that still counts, N."),
     smoothing: int = typer.Option(15, "--smoothing", help="Moving-average window on the wrist force, samples."),
     latency: float = typer.Option(0.0, "--latency", help="Tactile latency to subtract from frame times, s."),
+    force: bool = typer.Option(
+        False, "--force", help="Apply settings that lose more than half of the matched targets (refused otherwise)."
+    ),
 ) -> None:
     """Recompute the force-matched frames of every session from the raw streams with other settings.
 
     All or nothing: the settings are checked first, every session is verified (and repaired from its journal), and
-    no file changes until every new one is written.
+    no file changes until every new one is written. Settings that would keep under half of today's matched targets
+    (the count `inspect` shows) change nothing without --force.
     """
     settings = ExtractionSettings(tolerance_n=tolerance, smoothing_samples=smoothing, tactile_latency_s=latency)
     options = {"tolerance_n": "--tolerance", "smoothing_samples": "--smoothing", "tactile_latency_s": "--latency"}
@@ -497,8 +501,32 @@ def extract(
     sessions = list_sessions(data)
     if not sessions:
         raise UsageError(f"no session files in {data}")
-    for path, presses, matched in reextract_sessions([info.path for info in sessions], settings):
-        console.print(f"{path.name}: {presses} presses re-extracted, {matched} targets matched")
+    before = _matched_targets(data)
+    typed = f"--tolerance {tolerance:g} --smoothing {smoothing} --latency {latency:g}"
+
+    def accept(results: list[tuple[Path, int, int]]) -> None:
+        kept, had = sum(r[2] for r in results), sum(before.get(r[0].name, 0) for r in results)
+        if not force and had and kept < LOSS_REFUSED * had:
+            raise UsageError(
+                f"{typed} would keep {kept} of the {had} matched targets (drop {had - kept}, "
+                f"{100 * (had - kept) / had:.0f} %); nothing was changed",
+                hint="pass --force to extract with these settings anyway",
+            )
+
+    for path, presses, matched in reextract_sessions([info.path for info in sessions], settings, accept):
+        was = before.get(path.name)
+        change = f" (was {was})" if was is not None and was != matched else ""
+        console.print(f"{path.name}: {presses} presses re-extracted, {matched} targets matched{change}")
+
+
+LOSS_REFUSED = 0.5  # extract refuses (without --force) settings that keep under this share of the matched targets
+
+
+def _matched_targets(data: Path) -> dict[str, int]:
+    """Matched targets of complete presses per session file, as ``inspect`` counts them."""
+    from unitac_rig.storage.summary import inspect_dataset
+
+    return {s["file"]: int(s["targets_matched"]) for s in inspect_dataset(data)["sessions"]}
 
 
 def objects_cmd(

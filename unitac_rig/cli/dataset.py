@@ -60,6 +60,7 @@ def inspect_tables(report: dict[str, Any], data: Path) -> RenderableType:
         notes.append("* simulated rig")
     unverified = [s for s in sessions if s.get("integrity", "verified") != "verified"]
     notes.extend(f"{s['object']}/{s['sensor']}: {s['integrity']}" for s in unverified)
+    notes.extend(_resume_note(data, s) for s in sessions if _unfinished(s) and not s.get("writer"))
     writers = [s for s in sessions if s.get("writer")]
     if writers:
         notes.append(
@@ -74,6 +75,49 @@ def inspect_tables(report: dict[str, Any], data: Path) -> RenderableType:
     heading = Text("pairs joined across sensors on (rotation, angle, target)", style="italic")
     notes_text = Text("\n".join(notes), style="dim")
     return Group(Text(f"sessions in {data}", style="italic"), table, notes_text, Text(""), heading, pairs)
+
+
+def _unfinished(session: dict[str, Any]) -> bool:
+    """Fewer presses finished (complete or failed) than the session planned: an interrupted collection."""
+    return session["presses_complete"] + session["presses_failed"] < session["presses_planned"]
+
+
+def _resume_note(data: Path, session: dict[str, Any]) -> str:
+    """``hex_tpu/uskin: incomplete (13 of 91 presses finished); resume: unitac-rig collect ...``: the command that
+    plans the same presses again (the angle count it was collected with; the rig file when not simulated)."""
+    import shlex
+
+    from unitac_rig.storage.reader import read_session_info
+
+    finished = session["presses_complete"] + session["presses_failed"]
+    command = ["unitac-rig collect", f"--object {session['object']}", f"--sensor {session['sensor']}",
+               f"--data {shlex.quote(str(data))}"]  # fmt: skip
+    try:  # verified already by inspect in this process: only the attributes are read again
+        attrs = read_session_info(data / session["file"]).attrs
+        angles = attrs.get("config", {}).get("press", {}).get("angle_count")
+        rotations = attrs.get("rotations_deg") or []
+    except Exception:  # the file's damage is reported in its integrity note
+        angles, rotations = None, []
+    if angles is not None:
+        command.append(f"--angles {angles}")
+    if len(rotations) == 1 and len(_catalogue_rotations(session["object"])) != 1:  # collect --rotation R
+        command.append(f"--rotation {float(rotations[0]):g}")
+    if not session["simulated"]:
+        command.append("--rig RIG.toml")
+    return (
+        f"{session['object']}/{session['sensor']}: incomplete ({finished} of {session['presses_planned']} presses "
+        f"finished); resume: {' '.join(command)}"
+    )
+
+
+def _catalogue_rotations(object_id: str) -> tuple[float, ...]:
+    """The rotations the catalogue sweeps ``object_id`` at (none known for an object from another file)."""
+    from unitac_rig.rig.objects import get_object
+
+    try:
+        return tuple(get_object(object_id).rotations_deg)
+    except UsageError:
+        return ()
 
 
 def _watch(data: Path, interval: float, as_json: bool) -> None:

@@ -138,7 +138,13 @@ def stream_command(
     summary_path: Path = typer.Option(None, "--summary", help="Also write the summary (JSON) here."),
     geometry: bool = typer.Option(True, "--geometry/--no-geometry", help="Add the run's geometry estimate."),
 ) -> None:
-    """Stream the mounted sensor through the run live: latent, translations (and geometry) per frame, JSON lines."""
+    """Stream the mounted sensor through the run live: latent, translations (and geometry) per frame, JSON lines.
+
+    Each line also carries the tared frame, its time on the monotonic (host_t_ns) and the wall clock (unix_t_ns),
+    and "warmup": true on the backlog of the first lines (docs/use-your-model-on-the-robot.md). The summary
+    (stderr, --summary) gives the rate achieved, with a warning under 90 % of --rate. Ctrl-C ends the stream
+    after its summary, exit 130.
+    """
     from unitac_rig.learning.live import LiveModel, live_sensor, stream_frames
 
     if (rig_file is None) == (not simulated):

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from drivers.frames import TactileFrame
-from tests.helpers import console_script
+from tests.helpers import cli, console_script
 from tests.learning.learning_helpers import small_sets, write_sessions
 from tests.twin.twin_helpers import wait_until
 from unitac_rig.cli.learn import kept_run_line
@@ -103,7 +103,7 @@ def test_ctrl_c_in_the_train_command_exits_130_with_the_kept_epoch(data_dir: Pat
 
 
 def test_ctrl_c_during_the_report_leaves_metrics_and_report_as_they_were(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from unitac_rig.learning import report
 
@@ -119,6 +119,12 @@ def test_ctrl_c_during_the_report_leaves_metrics_and_report_as_they_were(
     monkeypatch.setattr(report, "tsne_embeddings", interrupted)  # Ctrl-C in the slowest step
     with pytest.raises(KeyboardInterrupt):
         report.write_report(out, nmae_normaliser="frame_range")  # other numbers than before
+    assert {name: (out / name).read_bytes() for name in before} == before
+    capsys.readouterr()
+    assert cli(["report", str(out), "--nmae-normaliser", "frame_range"]) == 130
+    err = capsys.readouterr().err
+    assert f"report: interrupted; {out}/metrics.json and report.md are as they were" in err
+    assert f"write them with: unitac-rig report {out}" in err
     assert {name: (out / name).read_bytes() for name in before} == before
     assert not [p.name for p in out.iterdir() if p.name.endswith(".tmp")]
 

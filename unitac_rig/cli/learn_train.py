@@ -21,6 +21,7 @@ from unitac_rig.cli.learn import (
     SSIM_RANGE_NAMES,
     _print_table,
     kept_run_line,
+    report_interrupted_line,
     stage_printer,
 )
 from unitac_rig.cli.pace import Pace
@@ -551,7 +552,11 @@ def run_train(ctx: typer.Context, request: TrainRequest) -> None:
         raise
     console.print(f"trained {outcome.epochs_done} epochs in {outcome.train_seconds:.1f} s -> {request.out}")
     if request.report:
-        path = write_report(request.out, run=load_run(request.out), on_stage=stage_printer(console))
+        try:
+            path = write_report(request.out, run=load_run(request.out), on_stage=stage_printer(console))
+        except KeyboardInterrupt:  # the run is trained and checkpointed: only its report is missing
+            typer.echo(report_interrupted_line(request.out), err=True)
+            raise
         _print_table(console, request.out)
         console.print(f"report: {path}")
 

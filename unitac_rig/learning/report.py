@@ -463,25 +463,25 @@ def write_report(
     report = run_dir / REPORT_MD
     stage("writing metrics.json and report.md")
     text = render_markdown(metrics, run, drawn, geometry)
-    # both files are written aside first, then each renamed over the old one (microseconds apart): a Ctrl-C or a
-    # crash during the minutes before leaves the run's metrics.json and report.md as they were, in agreement
+    _write_together({previous: json.dumps(metrics, indent=2) + "\n", report: text})
+    return report
+
+
+def _write_together(texts: dict[Path, str]) -> None:
+    """Each text written beside its file first, then each renamed over the old one (microseconds apart): a Ctrl-C
+    or a crash during the minutes of a report leaves the run's metrics.json and report.md as they were, in
+    agreement."""
     staged: list[tuple[Path, Path]] = []
     try:
-        staged.append((_staged(previous, json.dumps(metrics, indent=2) + "\n"), previous))
-        staged.append((_staged(report, text), report))
+        for path, text in texts.items():
+            tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+            staged.append((tmp, path))
+            tmp.write_text(text, encoding="utf-8")
         for tmp, final in staged:
             os.replace(tmp, final)
     finally:
         for tmp, _ in staged:
             tmp.unlink(missing_ok=True)  # only when a write failed or was interrupted
-    return report
-
-
-def _staged(path: Path, text: str) -> Path:
-    """``text`` written beside ``path`` under a temporary name (renamed over ``path`` by the caller)."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    return tmp
 
 
 def _rel(path: Path, root: Path) -> str:

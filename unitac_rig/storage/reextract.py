@@ -95,13 +95,11 @@ def _reextract_session(path: Path, settings: ExtractionSettings, copies: list[tu
 
 
 def reextract_sessions(
-    paths: list[Path],
-    settings: ExtractionSettings,
-    accept: Callable[[list[tuple[Path, int, int]]], None] | None = None,
+    paths: list[Path], settings: ExtractionSettings, accept: Callable[[list[tuple[Path, int, int]]], None] | None = None
 ) -> list[tuple[Path, int, int]]:
     """Recompute the force-matched extraction of every press of every session in ``paths`` with ``settings``: all
-    or nothing. Returns (session file, presses, targets matched in complete presses) per session. ``accept`` sees
-    those results once every copy is built, before anything is renamed: an exception from it changes nothing.
+    or nothing. Returns (session file, presses, targets matched in complete presses) per session, which ``accept``
+    sees before anything is renamed (an exception from it changes nothing).
 
     1. Every session's lease is taken (a session being collected refuses the whole run), then every session and
        journal is verified and repaired from the other copy (a press damaged in both refuses the whole run);

@@ -345,8 +345,8 @@ def collect(
     SIGTERM and SIGHUP stop the arm and keep what was recorded, like Ctrl-C.
     """
     _check_counts(seed=seed, max_presses=max_presses)
-    require_data_folder(data)
     config = _configure(rig_file, strategy, speed, angles, None)
+    require_data_folder(data)
     obj = get_object(object_id, extra_files=config.object.objects_files)
     if rotation is not None and rotation not in obj.rotations_deg:
         raise UsageError(
@@ -403,8 +403,8 @@ def campaign(
 ) -> None:
     """Every object with every sensor: unattended on the simulated rig, operator-guided on hardware."""
     _check_counts(seed=seed)
-    require_data_folder(data)
     config = _configure(rig_file, None, None, angles, None)
+    require_data_folder(data)
     catalogue = list_objects(extra_files=config.object.objects_files)
     if objects:
         wanted = [o.strip() for o in objects.split(",") if o.strip()]

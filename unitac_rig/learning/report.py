@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -22,8 +23,8 @@ from unitac_rig.learning.evaluate import (
     PREPROCESSING_TEXT,
     Evaluator,
     direction_name,
+    evaluate_run,
     metric_description,
-    write_metrics,
 )
 from unitac_rig.learning.metric_table import alignment_metrics, frame_metrics
 from unitac_rig.learning.metrics import latent_mixing
@@ -434,10 +435,9 @@ def write_report(
     stage(f"scoring {len(test)} test contacts (metrics.json)")
     previous = run_dir / METRICS_JSON
     kept = json.loads(previous.read_text(encoding="utf-8")).get("tsne_mixing") if previous.exists() else None
-    metrics = write_metrics(run_dir, run, test)
+    metrics = evaluate_run(run, test)  # written with report.md at the end: an interrupted report changes neither
     if kept and not figures:  # the t-SNE is only recomputed with the figures
         metrics["tsne_mixing"] = kept
-        previous.write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
     drawn: dict[str, str] = {}
     if figures:
         fig_dir = run_dir / FIGURES
@@ -462,7 +462,6 @@ def write_report(
                 "first_epoch": embedding_mixing(embeddings["first"], len(sensors)),
                 "last_epoch": embedding_mixing(embeddings["last"], len(sensors)),
             }
-            (run_dir / METRICS_JSON).write_text(json.dumps(metrics, indent=2) + "\n", encoding="utf-8")
         stage("drawing example reconstructions")
         scores, _ = evaluator.per_frame(run.engine.member(0, groups=[UNITAC_GROUP]))
         cross = [direction_name(a, b) for a in run.sensors for b in run.sensors if a != b]
@@ -494,9 +493,27 @@ def write_report(
     geometry_path = run_dir / GEOMETRY_JSON
     geometry = json.loads(geometry_path.read_text(encoding="utf-8")) if geometry_path.exists() else None
     report = run_dir / REPORT_MD
-    stage("writing report.md")
-    report.write_text(render_markdown(metrics, run, drawn, geometry), encoding="utf-8")
+    stage("writing metrics.json and report.md")
+    text = render_markdown(metrics, run, drawn, geometry)
+    _write_together({previous: json.dumps(metrics, indent=2) + "\n", report: text})
     return report
+
+
+def _write_together(texts: dict[Path, str]) -> None:
+    """Each text written beside its file first, then each renamed over the old one (microseconds apart): a Ctrl-C
+    or a crash during the minutes of a report leaves the run's metrics.json and report.md as they were, in
+    agreement."""
+    staged: list[tuple[Path, Path]] = []
+    try:
+        for path, text in texts.items():
+            tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+            staged.append((tmp, path))
+            tmp.write_text(text, encoding="utf-8")
+        for tmp, final in staged:
+            os.replace(tmp, final)
+    finally:
+        for tmp, _ in staged:
+            tmp.unlink(missing_ok=True)  # only when a write failed or was interrupted
 
 
 def _rel(path: Path, root: Path) -> str:

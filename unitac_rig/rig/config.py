@@ -317,14 +317,36 @@ class RigConfig(_Strict):
         return _arc(self.press)
 
 
-def describe_validation_error(err: ValidationError, source: str) -> str:
-    """The first pydantic error as one line naming the field: ``rig.toml: press.speed_mm_s: ...``."""
+def describe_validation_error(err: ValidationError, source: str, model: type[BaseModel] | None = None) -> str:
+    """The first pydantic error as one line naming the field: ``rig.toml: press.speed_mm_s: ...``; an unknown key
+    of ``model`` (the model validated) names the known key it most resembles."""
     first = err.errors()[0]
     where = ".".join(str(p) for p in first["loc"])
     message = str(first["msg"]).removeprefix("Value error, ")
     if first["type"] == "extra_forbidden":
         message = "unknown key (a typo?)"
+        near = _nearest_key(model, first["loc"]) if model is not None else None
+        if near is not None:
+            message = f"unknown key (did you mean {near}?)"
     return f"{source}: {where}: {message}" if where else f"{source}: {message}"
+
+
+def _nearest_key(model: type[BaseModel], loc: tuple[int | str, ...]) -> str | None:
+    """The field of ``model`` at ``loc[:-1]`` whose name is closest to the unknown ``loc[-1]`` (difflib), if any."""
+    import difflib
+    import typing
+
+    for part in loc[:-1]:
+        field = model.model_fields.get(str(part))
+        if field is None:
+            return None
+        nested = [a for a in (field.annotation, *typing.get_args(field.annotation)) if isinstance(a, type)]
+        models = [a for a in nested if issubclass(a, BaseModel)]
+        if not models:
+            return None
+        model = models[0]
+    close = difflib.get_close_matches(str(loc[-1]), list(model.model_fields), n=1, cutoff=0.6)
+    return close[0] if close else None
 
 
 MAX_TOML_BYTES = 1 << 20  # a rig or object file is a few kB; a bigger one is the wrong file
@@ -368,4 +390,6 @@ def parse_rig_config(data: dict[str, object], source: str = "rig file") -> RigCo
     try:
         return RigConfig.model_validate(data)
     except ValidationError as exc:
-        raise ConfigError(describe_validation_error(exc, source), hint="see docs/rig-file.md for every field") from exc
+        raise ConfigError(
+            describe_validation_error(exc, source, RigConfig), hint="see docs/rig-file.md for every field"
+        ) from exc

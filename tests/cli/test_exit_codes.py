@@ -9,10 +9,12 @@ from __future__ import annotations
 import os
 import subprocess
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 
-from tests.helpers import console_script
+from tests.helpers import cli, console_script
 
 
 def _run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
@@ -118,3 +120,19 @@ def test_a_rig_file_without_an_arm_says_so_instead_of_no_rig_file(tmp_path: Path
     text = " ".join(result.stdout.split())
     assert f"SIMULATED RIG (rig file {rig} has no [arm])" in text
     assert "no rig file given" not in text
+
+
+def test_a_collect_that_pressed_nothing_is_a_runtime_failure(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 37: the object is not where the rig file says (1 m away): no press completes, and `collect` exits 1
+    (a runtime failure, resumable), never 0, with one line saying why."""
+    from unitac_rig.sim.fast_rig import SimRig
+
+    mount = SimRig.mount
+
+    def misplaced(self: SimRig, obj: Any, rotation_deg: float, sensor_name: str) -> None:
+        mount(self, obj, rotation_deg, sensor_name)
+        self.world.scene.center_mm = self.world.scene.center_mm + np.array([0.0, 1000.0])
+
+    monkeypatch.setattr(SimRig, "mount", misplaced)
+    code = cli(["collect", "--object", "circle_pla", "--data", str(tmp_path / "data"), "--angles", "2"])
+    assert code == 1

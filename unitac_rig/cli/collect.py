@@ -24,7 +24,7 @@ from unitac_rig.collection.sensor_choice import choose_sensor, collection_order,
 from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session, dry_run
 from unitac_rig.collection.streams import TickInfo
 from unitac_rig.collection.transit import PressPlan
-from unitac_rig.errors import ConfigError, UsageError
+from unitac_rig.errors import ConfigError, SessionStopped, UsageError
 from unitac_rig.interrupts import immediate_interrupts
 from unitac_rig.rig.backends import open_rig
 from unitac_rig.rig.base import Rig
@@ -375,7 +375,7 @@ def collect(
         chosen = choice.name
         outcome = _run_session(rig, obj, chosen, data, rotations, live, max_presses)
     if outcome.stopped:
-        raise UsageError(f"session stopped early: {outcome.stopped}", hint="rerun the same command to resume")
+        raise SessionStopped(f"session stopped early: {outcome.stopped}", hint="rerun the same command to resume")
 
 
 def _ask_operator(rig: Rig, message: str) -> None:
@@ -440,7 +440,9 @@ def campaign(
                 outcome = _run_session(rig, obj, sensor, data, None, live, None)
                 progress.finished(obj.id, sensor, outcome)
                 if outcome.stopped:
-                    raise UsageError(f"campaign stopped: {outcome.stopped}", hint="rerun the same command to resume")
+                    raise SessionStopped(
+                        f"campaign stopped: {outcome.stopped}", hint="rerun the same command to resume"
+                    )
     console.print(f"campaign done in {spoken_duration(time.monotonic() - started)} wall time -> {data}")
 
 

@@ -40,4 +40,4 @@ class SceneSensorSource:
         """The reading at device time ``t_ns`` (the scene is quasi-static: only the current pose matters)."""
         loads = self.scene.taxel_loads(np.asarray(self.pose_provider(), dtype=np.float64))
         self.samples += 1
-        return self.model.sample(loads)
+        return self.model.sample(loads, t_ns)

@@ -55,7 +55,7 @@ class UskinParams:
     # counts RMS over a 1000 s session, the size of the recorded sessions' midpoint shifts ((max + min) / 2 grew
     # with session length, -133..+1209 counts over 648-1142 s; authors' dataset_info.json, docs/simulator.md)
     gain_axis_sd: float = 0.08  # [S] each taxel-axis its own gain error of sd 8 %: the median per-axis error of
-    # a calibrated 3-axis tactile array (2-38 %, median 8 %: Sensors 16:819, 2016, Table 1), on top of the
+    # a calibrated 3-axis tactile array (2-38 %, median 8.6 %: Sensors 16(6):819, 2016, Table 1), on top of the
     # per-taxel gain_sd_fraction
     neighbour_crosstalk: float = 0.016  # [D] a Hall chip reads a neighbour magnet one pitch away at ~1.6 % of its
     # own (point dipole, magnet 3 mm above the chip, 7.25 mm pitch): each taxel reads 1.6 % of its 4 neighbours
@@ -93,7 +93,7 @@ class PapillArrayParams:
     drift_mm_per_sqrt_s: float = 0.0006  # [I] each tip's zero a random walk: ~0.02 mm RMS over 1000 s, the size of
     # the unbiased offsets above ("temperature variations can cause drift", PTS spec 4.3)
     gain_sd: float = 0.05  # [I] each pillar-axis's factory calibration off by sd 5 % (a calibrated 3-axis array's
-    # errors: median 8 %, Sensors 16:819, 2016, Table 1; the PapillArray's resolution 0.05 N, spec Table 4.2)
+    # errors: median 8.6 %, Sensors 16(6):819, 2016, Table 1; the PapillArray's resolution 0.05 N, spec Table 4.2)
     axis_crosstalk_sd: float = 0.03  # [I] each pillar's force axes mix by sd 3 % through its calibration
 
 

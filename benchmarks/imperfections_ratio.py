@@ -1,0 +1,77 @@
+"""The unseen/seen NMAE ratio per Table I column of trained runs, beside the paper's (issue 38's held-out check).
+
+    python benchmarks/imperfections_ratio.py LABEL=RUN [LABEL=RUN ...] [--out docs/figures/imperfections_ratio.json]
+
+Each RUN is a ``unitac-rig train`` run directory (its ``metrics.json``), e.g. one trained on a campaign of the
+realistic twin (``unitac-rig campaign --angles 9``) and one on the clean twin (``--imperfections none``). The check:
+every column's ratio (unseen irregular prism / all seen objects) within a factor 1.5 of the paper's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from unitac_rig.bench import write_json
+from unitac_rig.learning.paper import PAPER_TABLE1
+
+COLUMNS = (
+    "ae_uskin",
+    "ae_papillarray",
+    "uskin_to_uskin",
+    "uskin_to_papillarray",
+    "papillarray_to_papillarray",
+    "papillarray_to_uskin",
+)
+SEEN, UNSEEN = "all_seen", "irregular_pla"
+FACTOR = 1.5  # the issue's tolerance on each column's ratio
+
+
+def paper_ratios() -> dict[str, float]:
+    return {c: PAPER_TABLE1[UNSEEN][c][0] / PAPER_TABLE1[SEEN][c][0] for c in COLUMNS}
+
+
+def run_ratios(metrics: dict[str, Any]) -> dict[str, Any]:
+    """Seen and unseen NMAE per column of one run's metrics.json, their ratio, and whether it is within FACTOR."""
+    table = metrics["table1"]
+    paper = paper_ratios()
+    out: dict[str, Any] = {}
+    for c in COLUMNS:
+        seen, unseen = table[SEEN][c]["nmae"], table[UNSEEN][c]["nmae"]
+        ratio = unseen / seen
+        out[c] = {
+            "seen_nmae": seen,
+            "unseen_nmae": unseen,
+            "ratio": ratio,
+            "paper_ratio": paper[c],
+            "within": bool(1 / FACTOR <= ratio / paper[c] <= FACTOR),
+        }
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("runs", nargs="+", metavar="LABEL=RUN")
+    parser.add_argument("--out", type=Path, default=None, help="write the table as JSON here")
+    args = parser.parse_args()
+    doc: dict[str, Any] = {"what": "unseen/seen NMAE ratio per Table I column (issue 38)", "runs": {}}
+    for item in args.runs:
+        label, _, run = item.partition("=")
+        metrics = json.loads((Path(run) / "metrics.json").read_text())
+        ratios = run_ratios(metrics)
+        doc["runs"][label] = {"epochs": metrics.get("epochs"), "seed": metrics.get("seed"), "columns": ratios}
+        print(f"{label} ({metrics.get('epochs')} epochs, seed {metrics.get('seed')})")
+        for c, r in ratios.items():
+            mark = "" if r["within"] else " *"
+            print(
+                f"  {c:28s} seen {r['seen_nmae']:.4f} unseen {r['unseen_nmae']:.4f}"
+                f" ratio {r['ratio']:.2f} (paper {r['paper_ratio']:.2f}){mark}"
+            )
+    if args.out is not None:
+        print(f"wrote {write_json(doc, args.out)}")
+
+
+if __name__ == "__main__":
+    main()

@@ -83,10 +83,14 @@ def test_creep_under_a_constant_load_rises_by_the_cited_fraction_with_its_time_c
     assert readings[1.0] == pytest.approx(np.full(9, 2.0 * (1 + 0.03 * (1 - math.exp(-1.0)))), rel=1e-9)
     assert readings[10.0] == pytest.approx(np.full(9, 2.06), rel=1e-4)
     memory = ElastomerMemory(1, full_scale_n=15.0, creep_fraction=0.03, creep_tau_s=1.0)
-    memory.factor(np.array([2.0]), 0)
-    memory.factor(np.array([2.0]), int(50e9))  # fully crept
-    memory.factor(np.array([0.0]), int(51e9))  # one tau unloaded: the retarded part is down to 1/e
-    assert memory.retarded_n[0] == pytest.approx(2.0 * math.exp(-1.0))
+    load = np.array([[0.5, 0.0, 2.0]])
+    memory.read(0, load[:, 2], load)
+    memory.read(int(50e9), load[:, 2], load)  # fully crept
+    (residual,) = memory.read(int(51e9), np.zeros(1), np.zeros((1, 3)))  # one tau unloaded: 1/e of it is left
+    assert residual == pytest.approx(0.03 * load * math.exp(-1.0))
+    # a taxel whose normal load has almost gone reads its recovering creep, bounded, not its shear blown up
+    (tiny,) = memory.read(int(51.01e9), np.array([1e-9]), np.array([[0.3, 0.0, 1e-9]]))
+    assert np.abs(tiny).max() < 0.31
 
 
 def test_gain_spread_has_the_cited_spread_and_is_fixed_per_sensor_seed() -> None:

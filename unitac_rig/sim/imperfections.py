@@ -99,17 +99,16 @@ def as_imperfections(value: Imperfections | str | None) -> Imperfections:
 
 
 class ElastomerMemory:
-    """Hysteresis and creep of an elastomer, per taxel: the load its transducer reads from the load applied (N).
-
-    Both act on each taxel's whole load vector through one factor set by its normal load ``f`` (N):
+    """Hysteresis and creep of an elastomer, per taxel: what its transducer reads from the load applied.
 
     * hysteresis: the reading lags the load, low while loading, high while unloading, by
-      ``d * H(f)``, ``H(f) = (h * FS / 2) * 4u(1 - u)``, ``u = min(f / FS, 1)``; ``d`` moves from -1 (loading) to
-      +1 (unloading) as the load falls by ``2 * switch * FS`` (and back as it rises). So the loading and unloading
-      curves differ by ``h * FS`` at half scale and meet at zero and full scale (the datasheet definition);
-    * creep: a retarded part ``z`` follows the load with time constant ``tau`` (s), ``dz/dt = (f - z) / tau``, and
-      adds ``c * z``: under a constant load the reading rises by ``c`` of it (63 % of that after ``tau``), and it
-      recovers as fast once unloaded.
+      ``d * H(f)``, ``H(f) = (h * FS / 2) * 4u(1 - u)``, ``u = min(f / FS, 1)``, ``f`` the taxel's normal load (N);
+      ``d`` moves from -1 (loading) to +1 (unloading) as the load falls by ``2 * switch * FS`` (and back as it
+      rises). So the loading and unloading curves differ by ``h * FS`` at half scale and meet at zero and full scale
+      (the datasheet definition). It scales the taxel's whole reading by ``1 + d * H(f) / f = 1 + 2 d h (1 - u)``;
+    * creep: a retarded copy ``z`` of each quantity follows it with time constant ``tau`` (s),
+      ``dz/dt = (q - z) / tau``, and adds ``c * z``: under a constant load the reading rises by ``c`` of it (63 % of
+      that after ``tau``), and once unloaded the remainder fades as fast (the skin recovering).
     """
 
     def __init__(
@@ -131,27 +130,32 @@ class ElastomerMemory:
         self.creep_tau_s = creep_tau_s
         self.direction = np.full(n_taxels, -1.0)  # -1: on the loading branch, +1: on the unloading branch
         self.previous_n = np.zeros(n_taxels)
-        self.retarded_n = np.zeros(n_taxels)  # z, the creep state (N)
+        self.retarded: list[np.ndarray] = []  # z of each quantity read, in its units
         self.t_ns: int | None = None
 
-    def factor(self, normal_n: np.ndarray, t_ns: int) -> np.ndarray:
-        """The factor (n,) each taxel's load is read with at ``t_ns`` given its normal load (n,) N; advances the
-        state (call once per sample, in time order)."""
+    def read(self, t_ns: int, normal_n: np.ndarray, *quantities: np.ndarray) -> list[np.ndarray]:
+        """Each of ``quantities`` ((n, 3) per taxel: forces in N, tip displacements in mm) as read at ``t_ns``, the
+        hysteresis set by each taxel's normal load ``normal_n`` (n,) N; advances the state (once per sample, in time
+        order, always the same quantities)."""
         f = np.maximum(np.asarray(normal_n, dtype=np.float64), 0.0)
-        extra = np.zeros_like(f)
+        out = [np.asarray(q, dtype=np.float64) for q in quantities]
         if self.hysteresis_fraction > 0:
             fs = self.full_scale_n
             self.direction = np.clip(self.direction - (f - self.previous_n) / (self.switch_fraction * fs), -1.0, 1.0)
             u = np.minimum(f / fs, 1.0)
-            extra += self.direction * (self.hysteresis_fraction * fs / 2.0) * 4.0 * u * (1.0 - u)
+            factor = 1.0 + self.direction * 2.0 * self.hysteresis_fraction * (1.0 - u)
+            out = [q * factor[:, None] for q in out]
         self.previous_n = f
         if self.creep_fraction > 0:
             dt = 0.0 if self.t_ns is None else max(0.0, (t_ns - self.t_ns) * 1e-9)
-            self.retarded_n = f + (self.retarded_n - f) * math.exp(-dt / self.creep_tau_s)
-            extra += self.creep_fraction * self.retarded_n
+            decay = math.exp(-dt / self.creep_tau_s)
+            if not self.retarded:
+                self.retarded = [np.zeros_like(q, dtype=np.float64) for q in quantities]
+            for i, q in enumerate(quantities):
+                self.retarded[i] = q + (self.retarded[i] - q) * decay
+                out[i] = out[i] + self.creep_fraction * self.retarded[i]
         self.t_ns = t_ns
-        safe = np.where(f > 0, f, 1.0)
-        return np.where(f > 0, 1.0 + extra / safe, 1.0)
+        return out
 
 
 class RandomWalk:

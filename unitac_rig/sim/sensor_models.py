@@ -167,8 +167,9 @@ class UskinModel:
         previous sample). Samples must come in time order: the elastomer and the drift carry state."""
         t_ns = self._clock(t_ns)
         if self.elastomer is not None:
-            factor = self.elastomer.factor(np.asarray(loads.forces_n)[:, 2], t_ns)
-            loads = TaxelLoads(np.asarray(loads.forces_n) * factor[:, None], loads.displacement_mm)
+            forces = np.asarray(loads.forces_n)
+            (read,) = self.elastomer.read(t_ns, forces[:, 2], forces)
+            loads = TaxelLoads(read, loads.displacement_mm)
         # nothing pressing (the approach, the transits): the signal is zero and the expected counts the baseline
         expected = self.expected_counts(loads) if np.count_nonzero(loads.forces_n) else self.baseline_counts
         noise = self.params.noise_counts * self._normals.take(3 * self.layout.n_taxels).reshape(self.layout.frame_shape)
@@ -240,9 +241,10 @@ class PapillArrayModel:
         forces_true = np.asarray(loads.forces_n)
         disp_true = None if loads.displacement_mm is None else np.asarray(loads.displacement_mm)
         if self.elastomer is not None:
-            factor = self.elastomer.factor(forces_true[:, 2], self._t_ns)[:, None]
-            forces_true = forces_true * factor
-            disp_true = None if disp_true is None else disp_true * factor
+            if disp_true is None:
+                (forces_true,) = self.elastomer.read(self._t_ns, forces_true[:, 2], forces_true)
+            else:
+                forces_true, disp_true = self.elastomer.read(self._t_ns, forces_true[:, 2], forces_true, disp_true)
         error_mm = self.offset_mm + p.noise_mm * self._normals.take(3 * self.layout.n_taxels).reshape(shape)
         if self.drift is not None:
             error_mm = error_mm + self.drift.step(self._t_ns, self._normals.take(3 * self.layout.n_taxels))

@@ -28,7 +28,7 @@ from unitac_rig.sim.imperfections import (
 )
 from unitac_rig.sim.scene import TaxelLoads
 from unitac_rig.sim.sensor_models import PapillArrayModel, PapillArrayParams, UskinModel, UskinParams
-from unitac_rig.storage.reader import read_presses
+from unitac_rig.storage.reader import read_presses, read_session_info
 from unitac_rig.storage.recorder import session_path
 
 QUIET_USKIN = UskinParams(noise_counts=0.0)
@@ -177,8 +177,10 @@ def _session_hashes(
         data = tmp_path / f"{imperfections}-{seed}"
         with SimRig(config, seed=seed, imperfections=imperfections) as rig:
             collect_session(rig, get_object("hex_pla"), sensor, data)
+        path = session_path(data, "hex_pla", sensor)
+        assert read_session_info(path).attrs["sim_imperfections"] == imperfections  # which twin recorded it
         digest = hashlib.sha256()
-        for record in read_presses(session_path(data, "hex_pla", sensor)):
+        for record in read_presses(path):
             for values in (
                 record.tactile_values,
                 record.tactile_displacement_mm,

@@ -15,7 +15,10 @@ drawn once from ``rng``; noise is drawn from the same generator per sample, so a
 
 from __future__ import annotations
 
+import inspect
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -256,6 +259,16 @@ class PapillArrayModel:
         return SensorSample(
             values=_quantise(forces, p.force_quantum_n), displacement_mm=_quantise(disp, p.displacement_quantum_mm)
         )
+
+
+def timed_sampler(model: Any) -> Callable[[TaxelLoads, int], SensorSample]:
+    """``model.sample`` as ``f(loads, t_ns)``: the device time goes to a model that takes it (these ones: the
+    elastomer's creep and the drift need it), a model that does not (a sensor's own, registered outside this
+    package) is called with the loads alone."""
+    sample = model.sample
+    if "t_ns" in inspect.signature(sample).parameters:
+        return lambda loads, t_ns: sample(loads, t_ns=t_ns)
+    return lambda loads, t_ns: sample(loads)
 
 
 def _quantise(values: np.ndarray, step: float) -> np.ndarray:

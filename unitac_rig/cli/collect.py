@@ -329,6 +329,9 @@ def collect(
         None, "--rotation", metavar="DEG", show_default="every rotation", help="Sweep this object rotation only."
     ),
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed (runs are deterministic per seed)."),
+    imperfections: str = typer.Option(
+        "all", "--imperfections", help="Simulated rig: the real sensors' imperfections it has ('none': the clean twin)."
+    ),
     angles: int | None = typer.Option(
         None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
     ),
@@ -360,13 +363,13 @@ def collect(
         )
     rotations = [rotation] if rotation is not None else None
     if dry_run_only:
-        with termination_as_interrupt(), open_rig(config, seed=seed) as rig:
+        with termination_as_interrupt(), open_rig(config, seed=seed, imperfections=imperfections) as rig:
             visited = dry_run(rig, obj, rotations=rotations, on_standoff=_show_standoff)
         console.print(
             f"dry run: {visited.standoffs} stand-offs and {visited.waypoints} waypoints visited, nothing pressed"
         )
         return
-    with termination_as_interrupt(), open_rig(config, seed=seed) as rig:
+    with termination_as_interrupt(), open_rig(config, seed=seed, imperfections=imperfections) as rig:
         choice = choose_sensor(rig, obj.id, sensor, data)
         if choice.how == "detected":
             console.print(f"detected mounted sensor: [bold]{choice.name}[/]")
@@ -394,6 +397,9 @@ def campaign(
     rig_file: Path | None = RIG_OPTION,
     data: Path = DATA_OPTION,
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed."),
+    imperfections: str = typer.Option(
+        "all", "--imperfections", help="Simulated rig: the real sensors' imperfections it has ('none': the clean twin)."
+    ),
     angles: int | None = typer.Option(
         None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
     ),
@@ -415,7 +421,7 @@ def campaign(
             f"[bold yellow]SIMULATED RIG[/] ({_why_simulated(rig_file)}): running the whole campaign unattended."
         )
     started = time.monotonic()
-    with termination_as_interrupt(), open_rig(config, seed=seed) as rig:
+    with termination_as_interrupt(), open_rig(config, seed=seed, imperfections=imperfections) as rig:
         sensors = collection_order(rig)
         progress = CampaignProgress(
             [(obj.id, sensor, len(obj.rotations_deg) * config.press.angle_count) for sensor in sensors

@@ -281,10 +281,13 @@ def session_attrs(
 ) -> dict[str, Any]:
     """The session file's root attributes: what was planned, with which rig, settings and code."""
     config = rig.config
+    imperfections = getattr(rig, "imperfections", None)  # the simulated rig's (sim/imperfections.py)
+    twin = {"sim_imperfections": imperfections.text} if rig.simulated and imperfections is not None else {}
     return {
         "object": obj.id,
         "sensor": sensor_name,
         "simulated": rig.simulated,
+        **twin,
         "rig": config.name,
         "config": config.model_dump(mode="json"),
         "object_spec": {"id": obj.id, "shape": obj.shape, "material": obj.material, "outer_mm": obj.outer_mm},

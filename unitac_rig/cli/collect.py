@@ -330,7 +330,11 @@ def collect(
     ),
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed (runs are deterministic per seed)."),
     imperfections: str = typer.Option(
-        "all", "--imperfections", help="Simulated rig: the real sensors' imperfections it has ('none': the clean twin)."
+        "all",
+        "--imperfections",
+        metavar="LIST",
+        help="Simulated rig: which real-sensor imperfections it has: all, none (the clean twin), all,-creep, or "
+        "names from hysteresis, creep, drift, gain_spread, crosstalk, print_tolerance, mount_offset.",
     ),
     angles: int | None = typer.Option(
         None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
@@ -398,7 +402,11 @@ def campaign(
     data: Path = DATA_OPTION,
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed."),
     imperfections: str = typer.Option(
-        "all", "--imperfections", help="Simulated rig: the real sensors' imperfections it has ('none': the clean twin)."
+        "all",
+        "--imperfections",
+        metavar="LIST",
+        help="Simulated rig: which real-sensor imperfections it has: all, none (the clean twin), all,-creep, or "
+        "names from hysteresis, creep, drift, gain_spread, crosstalk, print_tolerance, mount_offset.",
     ),
     angles: int | None = typer.Option(
         None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."

@@ -329,6 +329,20 @@ def test_an_asynchronous_move_is_polled_and_stop_ends_it_with_stop_l() -> None:
         assert not arm.move_running()
 
 
+def test_a_move_that_arrives_before_its_progress_word_ends_is_ended_so_nothing_stays_commanded() -> None:
+    """The pose can show the move over while the control client's progress word still shows it running; a move
+    left "running" kept the watchdog tight through the host's work at rest, which tripped it ~0.17 s after every
+    session's last retract (issue 37). move_to ends it (stopL), and the watchdog is back at its rest window."""
+    control = FakeControl()
+    receive = FakeReceive()
+    with UR5eArm("ur", control=control, receive=receive, watchdog_hz=8.0) as arm:
+        receive.pose = list(POSE)
+        control.move_periods = 1000  # the word shows the move long after the arm is on its target
+        move_to(arm, POSE, 0.05, 0.5)
+        assert "stopL" in control.commands()
+        assert [args for name, args in control.calls if name == "setWatchdog"][-1] == (REST_WATCHDOG_HZ,)
+
+
 class DocumentedStatus:
     """A progress status with only the methods hardware-facts documents (isAsyncOperationRunning, progress)."""
 

@@ -1,6 +1,6 @@
 """Issue 37: does anything but a host fault stop the controller's program, on a loaded box?
 
-    python benchmarks/control_loop_load.py [--sessions 30] [--angles 3] [--kills 2] [--no-campaign]
+    python benchmarks/control_loop_load.py [--sessions 30] [--angles 3] [--dry-runs 3] [--kills 2] [--no-campaign]
 
 The box is loaded first: two busy processes per core and a writer that writes 1 MiB and fsyncs, in a loop. Then:
 
@@ -11,6 +11,7 @@ The box is loaded first: two busy processes per core and a writer that writes 1 
 * **sessions**: ``unitac-rig collect --rig`` against the real-time twin (``RigTwin``, circle_pla, PapillArray), each
   into a fresh data directory; the twin's watchdog trips counted per session (none is injected, so every trip is
   one no fault caused), with the exit status.
+* **dry runs**: ``collect --rig --dry-run``, likewise.
 * **campaign**: ``unitac-rig campaign --rig`` with two objects (the operator's Enter fed on stdin).
 * **host death**: a collect killed (SIGKILL) or frozen (SIGSTOP) the moment the twin's true force reaches 5 N; the
   controller time from the host's last RTDE write to the arm at rest (the bound is 0.25 s).
@@ -143,9 +144,12 @@ def gil_starvation(seconds: float, scratch: Path) -> dict[str, dict[str, float]]
     return result
 
 
+HOST_PREFIX: list[str] = []  # e.g. chrt -f 5: the collecting process under real-time scheduling (--host-fifo)
+
+
 def collect_cmd(rig_file: Path, data: Path, angles: int) -> list[str]:
-    return [sys.executable, "-m", "unitac_rig", "collect", "--rig", str(rig_file), "--object", "circle_pla",
-            "--angles", str(angles), "--data", str(data), "--no-live"]  # fmt: skip
+    return [*HOST_PREFIX, sys.executable, "-m", "unitac_rig", "collect", "--rig", str(rig_file), "--object",
+            "circle_pla", "--angles", str(angles), "--data", str(data), "--no-live"]  # fmt: skip
 
 
 def _run(rig: RigTwin, cmd: list[str], stdin: str | None = None) -> dict[str, Any]:
@@ -163,7 +167,7 @@ def _run(rig: RigTwin, cmd: list[str], stdin: str | None = None) -> dict[str, An
         "last_error": rig.controller.status().get("last_error") if trips else None,
         "twin_worst_lateness_ms": round(1e3 * after.worst_lateness_s, 1),  # the twin's own scheduling, not the host's
         "twin_late_cycles": after.late_cycles,
-        "tail": (proc.stdout + proc.stderr).strip().splitlines()[-1:] if proc.returncode or trips else [],
+        "tail": (proc.stdout + proc.stderr).strip().splitlines()[-6:] if proc.returncode or trips else [],
     }
 
 
@@ -180,11 +184,35 @@ def sessions(count: int, angles: int, scratch: Path, host: str) -> list[dict[str
     return runs
 
 
+def dry_runs(count: int, angles: int, scratch: Path, host: str) -> list[dict[str, Any]]:
+    """``collect --rig --dry-run``: every stand-off and clearance waypoint, nothing pressed or recorded."""
+    runs = []
+    with RigTwin("circle_pla", sensor="papillarray", host=host, seed=5) as rig:
+        rig_file = scratch / "dry.toml"
+        rig_file.write_text(rig.rig_file())
+        for index in range(count):
+            run = _run(rig, [*collect_cmd(rig_file, scratch / f"dry{index}", angles), "--dry-run"])
+            print(f"dry run {index + 1}/{count}: {run}", flush=True)
+            runs.append(run)
+    return runs
+
+
+def _only_sensor(rig_text: str, sensor: str) -> str:
+    """The rig file without the other sensors' tables (a campaign collects with every sensor the file names)."""
+    kept, skipping = [], False
+    for line in rig_text.splitlines():
+        if line.startswith("["):
+            skipping = line.startswith("[sensors.") and not line.startswith(f"[sensors.{sensor}]")
+        if not skipping:
+            kept.append(line)
+    return "\n".join(kept) + "\n"
+
+
 def campaign(angles: int, scratch: Path, host: str) -> dict[str, Any]:
     with RigTwin("circle_pla", sensor="papillarray", host=host, seed=4) as rig:
         rig_file = scratch / "campaign.toml"
-        rig_file.write_text(rig.rig_file())
-        cmd = [sys.executable, "-m", "unitac_rig", "campaign", "--rig", str(rig_file), "--objects",
+        rig_file.write_text(_only_sensor(rig.rig_file(), "papillarray"))  # the twin serves the mounted one only
+        cmd = [*HOST_PREFIX, sys.executable, "-m", "unitac_rig", "campaign", "--rig", str(rig_file), "--objects",
                "circle_pla,circle_tpu", "--angles", str(angles), "--data", str(scratch / "campaign"),
                "--no-live"]  # fmt: skip
         run = _run(rig, cmd, stdin="\n" * 8)  # mount the sensor, then each object
@@ -238,9 +266,14 @@ def main() -> None:
     parser.add_argument("--angles", type=int, default=3)
     parser.add_argument("--kills", type=int, default=2, help="runs of each of kill -9 and SIGSTOP")
     parser.add_argument("--no-campaign", action="store_true")
+    parser.add_argument("--dry-runs", type=int, default=3)
+    parser.add_argument("--host-fifo", type=int, default=0, help="run each collect under chrt -f N (0: as is)")
+    parser.add_argument("--out", type=Path, default=OUT)
     parser.add_argument("--gil-seconds", type=float, default=10.0)
     args = parser.parse_args()
-    result: dict[str, Any] = {"args": vars(args)}
+    if args.host_fifo:
+        HOST_PREFIX[:] = ["chrt", "-f", str(args.host_fifo)]
+    result: dict[str, Any] = {"args": {k: str(v) for k, v in vars(args).items()}}
     with tempfile.TemporaryDirectory() as tmp, loaded_box(Path(tmp)) as load_processes:
         scratch = Path(tmp)
         result["load_processes"] = load_processes
@@ -248,6 +281,7 @@ def main() -> None:
         print(f"GIL: {result['gil']}", flush=True)
         host = first_free_loopback(220, 239)
         result["sessions"] = sessions(args.sessions, args.angles, scratch, host)
+        result["dry_runs"] = dry_runs(args.dry_runs, args.angles, scratch, host)
         if not args.no_campaign:
             result["campaign"] = campaign(args.angles, scratch, host)
         result["host_death"] = [
@@ -255,10 +289,12 @@ def main() -> None:
         ]
         print(f"host death: {result['host_death']}", flush=True)
         result["machine"] = machine_info()  # the load average with the load still on
-    runs = result["sessions"] + ([result["campaign"]] if "campaign" in result else [])
+    runs = result["sessions"] + result["dry_runs"] + ([result["campaign"]] if "campaign" in result else [])
     result["summary"] = {
         "sessions": len(result["sessions"]),
         "sessions_exit_0": sum(r["exit"] == 0 for r in result["sessions"]),
+        "dry_runs": len(result["dry_runs"]),
+        "dry_runs_exit_0": sum(r["exit"] == 0 for r in result["dry_runs"]),
         "runs_with_a_watchdog_trip": sum(r["watchdog_trips"] > 0 for r in runs),
         "worst_rest_after_last_write_s": max(
             (d["rest_after_last_write_s"] for d in result["host_death"] if "rest_after_last_write_s" in d),
@@ -266,7 +302,7 @@ def main() -> None:
         ),
     }
     print(result["summary"], flush=True)
-    write_json(result, OUT)
+    write_json(result, args.out)
 
 
 if __name__ == "__main__":

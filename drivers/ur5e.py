@@ -137,7 +137,7 @@ class UR5eArm:
 
     ``control`` / ``receive``: objects with RTDEControlInterface / RTDEReceiveInterface's methods (injected in
     tests); connected to ``host`` if None. ``control_period_s`` = 1 / ``frequency_hz`` (2 ms at 500 Hz).
-    ``watchdog_hz``: the RTDE watchdog armed at connect (None: none, for read-mostly tools only).
+    ``watchdog_hz``: the RTDE watchdog while a motion is commanded (None: none, for read-mostly tools only).
     ``expected_tcp_offset`` ((6,) m, rad, from the flange) and ``expected_payload_kg``: what the rig file says is set
     on the pendant; the connection is refused with ArmError when the controller reports something else.
     Raises DeviceNotFound with what to check when either interface cannot connect, ProtectiveStop when the arm is in

@@ -160,8 +160,8 @@ def test_collect_runs_through_the_hardware_path_against_the_twin(tmp_path: Path)
 
 def test_the_arms_control_loop_asks_for_real_time_scheduling_and_gives_it_back() -> None:
     """Issue 37: at load ~20 on 2 cores a normal-priority host stalled 168 ms mid-motion in 10 of 30 twin sessions
-    (the watchdog stopped the program); under SCHED_FIFO in none of 11 runs. The hardware rig asks for it where it
-    may, for the thread that drives the arm, and gives the thread back as it was at close."""
+    (the watchdog stopped the program). The hardware rig asks for SCHED_FIFO where it may, for the thread that drives
+    the arm, and gives the thread back as it was at close."""
     seen: dict[str, object] = {}
 
     def probe() -> None:  # may this machine's threads be real-time at all?

@@ -26,8 +26,8 @@ def ask_realtime() -> tuple[int, int] | None:
 
     Why: the RTDE watchdog (6 Hz) stops the program when the loop deciding a motion writes nothing for 167 ms. On a
     2-core box at load ~20 a process of normal priority, even one that only sleeps, saw 160 ms wake-up gaps, and 10
-    of 30 twin sessions were stopped mid-motion; under SCHED_FIFO none of 8 sessions, 2 dry runs and a campaign was
-    (docs/real-rig.md, "Safety"). New threads inherit the policy on Linux."""
+    of 30 twin sessions were stopped mid-motion (docs/real-rig.md, "Safety"). New threads inherit the policy on
+    Linux."""
     if not hasattr(os, "sched_setscheduler"):
         return None
     try:

@@ -162,8 +162,9 @@ def collect_session(
     if not todo:
         return outcome
 
-    # Once the arm is connected its watchdog must be fed: the slow steps before the first press (opening a port,
-    # rewriting the session file on resume) run kept alive, or the controller stops the program under them.
+    # At rest the driver holds the watchdog at a 10 s window (drivers/ur5e.py), so set-up cannot trip it; the slow
+    # steps before the first press (opening a port, rewriting the session file on resume) still run kept alive, for
+    # one that takes longer than that (a slow disk, a device that does not answer).
     try:
         arm = rig.arm
         check_session_plan(arm.read_state().tcp_pose, todo, config.object.clearance_mm / 1000.0, config.limits,

@@ -44,14 +44,19 @@ each run; the pad unloaded (F < 1 N) at the end where the host could act (not af
 the 167 ms watchdog period or a protective stop: the controller stopped the program and the host can move nothing);
 a failed run ends with one clear line (the last stderr line ``error: ...``, no traceback; not after SIGKILL); every
 press recorded before the fault is still there, with the same status, after the resume; and the resume finishes the
-session where the fault was cleared. Writes the JSON (``--out``); ``--write-docs`` renders the table into
-docs/reliability.md's "## Motion faults" section. The full matrix takes about an hour on a loaded 2-core box;
-``--quick`` runs six rows (about 5 min).
+session where the fault was cleared. Issue 37's rows (``--issue-37``): the object 20 mm to the side with the pad a
+2 mm disc (the twin's rim contact, sim/scene_disc.py), the object 15 mm closer with the host killed at first contact
+and the same command run again before the object is moved, and the host under CPU and disk load; their added
+criteria: no true peak above 15 N where no fault is injected during contact, a resume that meets the fault adds no
+force to what the fault left, and no exit 0 with nothing pressed. Writes the JSON (``--out``); ``--write-docs``
+renders the table into docs/reliability.md's "## Motion faults" section. The full matrix takes about an hour on a
+loaded 2-core box; ``--quick`` runs six rows (about 5 min).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import os
@@ -61,6 +66,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -98,6 +104,9 @@ APPROACH_MM_S = PressConfig().fast_speed_mm_s  # the two-phase press's free-air 
 CLOSER_M = (0.0, -0.05)  # the arm approaches from -y: 50 mm closer to the arm
 EXCLUDE_PRESS_2 = {"workspace_max_m": [-0.13, 1.0, 0.6]}  # press 2 of 2 (ang+45) outside the box
 DOC_SECTION = "## Motion faults"
+STRICT_PEAK_N = 15.0  # issue 37: every true peak at most this where no fault is injected during contact, N
+LOAD_BUSY_PER_CPU = 2  # the host-load row: busy processes per CPU, besides a writer doing fsync
+CLOSER_15_M = (0.0, -0.015)  # the arm approaches from -y: 15 mm closer (the stand-off lies 7 mm inside the object)
 MOTIONS = ("first move", "transit", "approach", "press", "retract", "back-off", "resume")
 
 
@@ -118,6 +127,11 @@ class Scenario:
     inject: str = ""  # "", "stall", "kill", "pstop", "remove"
     stall_s: float = 0.0
     clearable: bool = True  # False: the same command again meets the same fault (a rig file refusing the plan)
+    disc_pad_mm: float | None = None  # the pad as a disc of this radius against the object's cylinder (rim contact)
+    load: bool = False  # the host under load while the faulted run runs (LOAD_BUSY_PER_CPU busy processes per CPU
+    # and a writer doing fsync)
+    uncleared_resume: bool = False  # the same command once more before the fault is cleared (a resume that meets it)
+    strict_peak: bool = False  # issue 37: the true peak stays <= STRICT_PEAK_N (no fault injected during contact)
 
     @property
     def base(self) -> str:
@@ -167,6 +181,14 @@ def scenarios() -> list[Scenario]:
         ),
     ]
     rows += session
+    rows += [  # issue 37: the faults an independent controller found
+        Scenario("side-20mm-disc", "object 20 mm to the side, the pad a 2 mm disc (rim contact)", "session", angles=3,
+                 placement_m=(0.02, 0.0), disc_pad_mm=2.0, strict_peak=True),
+        Scenario("resume-double-fault", "object 15 mm closer AND host death at first contact, resumed before the "
+                 "object is moved", "first contact", placement_m=CLOSER_15_M, inject="kill", uncleared_resume=True),
+        Scenario("host-load", "host under CPU and disk load (2 busy processes per CPU, a writer doing fsync)",
+                 "session", load=True, strict_peak=True),
+    ]  # fmt: skip
     for motion in MOTIONS:
         for stall in (0.1, 0.5, 2.0):
             rows.append(Scenario(f"stall-{stall:g}s-{_slug(motion)}", f"host stall {stall:g} s", motion,
@@ -176,6 +198,7 @@ def scenarios() -> list[Scenario]:
     return rows
 
 
+NEW_ROWS_37 = ("side-20mm-disc", "resume-double-fault", "host-load")
 QUICK_ROWS = ("misplaced-y-minus", "stall-0.5s-press", "kill-retract", "pstop-transit", "ft-sign", "double-fault")
 
 
@@ -412,6 +435,8 @@ def run_scenario(scenario: Scenario, workdir: Path) -> dict[str, Any]:
             rig.set_placement_error(*scenario.placement_m)
         if scenario.base == "abort":
             rig.set_placement_error(*CLOSER_M)
+        if scenario.disc_pad_mm is not None:
+            rig.controller.set_disc_pad(scenario.disc_pad_mm)
         if scenario.contact_scale != 1.0:
             rig.controller.set_contact_scale(scenario.contact_scale)
         if scenario.ft_sign != 1.0:
@@ -419,12 +444,18 @@ def run_scenario(scenario: Scenario, workdir: Path) -> dict[str, Any]:
         before = recorded_presses(data)
         detector = MomentDetector(scenario.motion, rig.placement.center_m) if scenario.inject else None
         early: list[RunResult] = []  # faulted runs a host-starved watchdog stopped before the moment came
-        for attempt in range(1, RESUME_ATTEMPTS + 1):
-            fault = run_collect(rig, full, faulted, scenario=scenario, detector=detector,
-                                stderr_path=workdir / f"fault-{attempt}.stderr")  # fmt: skip
-            if not (detector is not None and fault.moment is None and _stopped_by_watchdog(fault)):
-                break
-            early.append(fault)  # the same command again, the same detector (it remembers press 1)
+        with host_load(scenario.load, workdir):
+            for attempt in range(1, RESUME_ATTEMPTS + 1):
+                fault = run_collect(rig, full, faulted, scenario=scenario, detector=detector,
+                                    stderr_path=workdir / f"fault-{attempt}.stderr")  # fmt: skip
+                if not (fault.moment is None and _stopped_by_watchdog(fault)):
+                    break
+                # the same command again, the same detector (it remembers press 1); a condition of the whole session
+                # (no detector) meets it again too, as an operator who reruns the command would
+                early.append(fault)
+        uncleared: RunResult | None = None
+        if scenario.uncleared_resume:  # what an operator who reruns at once meets: the fault still in place
+            uncleared = run_collect(rig, full, faulted, detector=None, stderr_path=workdir / "uncleared.stderr")
         after_fault = recorded_presses(data)
         resumes: list[RunResult] = []
         final = after_fault
@@ -445,6 +476,7 @@ def run_scenario(scenario: Scenario, workdir: Path) -> dict[str, Any]:
         "base_run": None if base is None else dataclasses.asdict(base),
         "early_fault_runs": [dataclasses.asdict(r) for r in early],
         "fault_run": dataclasses.asdict(fault), "resume_run": None if resume is None else dataclasses.asdict(resume),
+        "uncleared_run": None if uncleared is None else dataclasses.asdict(uncleared),
         "resume_runs": [dataclasses.asdict(r) for r in resumes],
         "expected_presses": scenario.angles, "recorded_before": before, "recorded_after_fault": after_fault,
         "recorded_final": final, "seconds": round(time.monotonic() - started, 1),
@@ -452,6 +484,27 @@ def run_scenario(scenario: Scenario, workdir: Path) -> dict[str, Any]:
     record["criteria"] = criteria(record)
     record["pass"] = all(v for v in record["criteria"].values() if v is not None)
     return record
+
+
+@contextlib.contextmanager
+def host_load(on: bool, workdir: Path) -> Iterator[None]:
+    """While on: ``LOAD_BUSY_PER_CPU`` busy processes per CPU and one writing 1 MB blocks with fsync (the issue's
+    "two busy processes per core plus a writer doing fsync"); all ended after."""
+    procs: list[subprocess.Popen[bytes]] = []
+    if on:
+        busy = [sys.executable, "-c", "while True: pass"]
+        target = workdir / "load.bin"
+        writer = [sys.executable, "-c", "import os\nwhile True:\n"
+                  f"    f = os.open({str(target)!r}, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)\n"
+                  "    os.write(f, os.urandom(1 << 20)); os.fsync(f); os.close(f)"]  # fmt: skip
+        procs = [subprocess.Popen(busy) for _ in range(LOAD_BUSY_PER_CPU * (os.cpu_count() or 1))]
+        procs.append(subprocess.Popen(writer))
+    try:
+        yield
+    finally:
+        for proc in procs:
+            proc.kill()
+            proc.wait()
 
 
 def _stopped_by_watchdog(run: RunResult) -> bool:
@@ -494,6 +547,9 @@ def criteria(record: dict[str, Any]) -> dict[str, bool | None]:
     fault, resume = record["fault_run"], record["resume_run"]
     runs = [r for r in (record["base_run"], *record.get("early_fault_runs", []), fault) if r is not None]
     runs += list(record.get("resume_runs", []))
+    uncleared = record.get("uncleared_run")
+    if uncleared is not None:
+        runs.append(uncleared)
     lost = [pid for pid, status in record["recorded_after_fault"].items()
             if pid not in record["recorded_final"]
             or (status in FINISHED_STATUSES and record["recorded_final"][pid] != status)]  # fmt: skip
@@ -515,6 +571,17 @@ def criteria(record: dict[str, Any]) -> dict[str, bool | None]:
         "nothing_recorded_lost": not lost,
         "resume_completes": None if resume is None
         else resume["exit_code"] == 0 and len(finished) == record["expected_presses"],
+        # issue 37: no true peak above 15 N where no fault is injected during contact
+        "peak_within_15_n": max(r["peak_n"] for r in runs) <= STRICT_PEAK_N
+        if record["scenario"].get("strict_peak") else None,
+        # issue 37: a resume that meets the fault still in place (the pad left loaded, the object closer) adds no
+        # force to what the fault left, and never goes past 15 N because of it
+        "uncleared_resume_adds_nothing": None if uncleared is None
+        else uncleared["peak_n"] <= max(STRICT_PEAK_N, fault["end_force_n"] + 1.0),
+        # issue 37: no exit 0 with nothing pressed
+        "no_exit_0_with_nothing_pressed": not any(
+            r["exit_code"] == 0 and not any(s == "complete" for s in record["recorded_final"].values()) for r in runs
+        ),
     }  # fmt: skip
 
 
@@ -542,8 +609,10 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
     runs = [(r, x) for r in doc["rows"] for x in [*(r.get("early_fault_runs") or []), r["fault_run"],
                                                   *(r.get("resume_runs") or [])]]  # fmt: skip
     worst_row, worst = max(runs, key=lambda rx: rx[1]["peak_n"])
-    spontaneous = [(r, x) for r, x in runs if _watchdog_ended(x) and not (x is r["fault_run"] and _injected_stop(r))]
-    rerun = [r["row"] for r in doc["rows"] if r.get("rerun")]
+    every_stop = [(r, x) for r, x in runs if _watchdog_ended(x) and not (x is r["fault_run"] and _injected_stop(r))]
+    spontaneous = [(r, x) for r, x in every_stop if not r.get("ran")]  # at the main run's load
+    elsewhere = len(every_stop) - len(spontaneous)  # in rows run on their own, at the loads they name
+    rerun = [r["row"] + (f" ({r['ran']})" if r.get("ran") else "") for r in doc["rows"] if r.get("rerun")]
     note = (
         []
         if not rerun
@@ -564,6 +633,11 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
             if not spontaneous
             else "; each ended with its one line and the arm at rest, and the same command "
             "resumed (rows marked *(n runs)*)."
+        )
+        + (
+            ""
+            if not elsewhere
+            else f" {elsewhere} more in the rows run on their own, at the loads they name, each ended the same way."
         ),
         "",
     ]
@@ -614,7 +688,9 @@ def render_section(doc: dict[str, Any]) -> str:
         "it (`program stopped`, `protective stop`) and says the same command resumes; every press "
         "recorded before the fault still there with its status; the same command, run again after the fault is "
         "cleared (object back, stiffness and sign restored, protective stop unlocked, TCP corrected), finishes "
-        "the session (all presses complete or failed). *end N*: the true force when the faulted run ended.",
+        "the session (all presses complete or failed). Issue 37's rows add: no true peak above 15 N where no fault is "
+        "injected during contact; a resume run before the fault is cleared adds no force to what the fault left; no "
+        "exit 0 with nothing pressed. *end N*: the true force when the faulted run ended.",
         "",
         "| fault | motion | moment (v mm/s, F N) | peak N fault / resume | end N | exit | last line of the faulted run "
         "| runs the watchdog ended, fault / resume | recorded / expected | resume | verdict |",
@@ -682,7 +758,10 @@ def merge_rows(doc: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, Any
     by_id = {r["row"]: r for r in doc["rows"]} | {r["row"]: {**r, "rerun": True} for r in rows}
     order = [s.row for s in scenarios()]
     doc["rows"] = sorted(by_id.values(), key=lambda r: order.index(r["row"]) if r["row"] in order else len(order))
+    when, machine = doc.get("finished_utc"), doc.get("machine")
     _summarise(doc)
+    if when is not None and machine is not None:  # the header keeps the main run's time and load; each row run on
+        doc.update(finished_utc=when, machine=machine)  # its own says its own (``ran``)
     return doc
 
 
@@ -695,6 +774,7 @@ def _summarise(doc: dict[str, Any]) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help=f"only the rows {', '.join(QUICK_ROWS)}")
+    parser.add_argument("--issue-37", action="store_true", help=f"only the rows {', '.join(NEW_ROWS_37)}")
     parser.add_argument("--only", nargs="*", default=None, help="only these rows (by id)")
     parser.add_argument("--out", type=Path, default=Path("docs/figures/fault_matrix.json"), help="the JSON")
     parser.add_argument("--write-docs", action="store_true", help="render the table into docs/reliability.md")
@@ -712,15 +792,19 @@ def main() -> None:
         chosen = [s for s in chosen if s.row in QUICK_ROWS]
     if args.only:
         chosen = [s for s in chosen if s.row in args.only]
+    if args.issue_37:
+        chosen = [s for s in chosen if s.row in NEW_ROWS_37]
     rows: list[dict[str, Any]] = []
     doc: dict[str, Any] = {
         "benchmark": "fault_matrix", "object": OBJECT, "sensor": SENSOR, "hard_limit_n": HARD_LIMIT_N,
-        "quick": bool(args.quick or args.only), "planned": len(chosen), "rows": rows,
+        "quick": bool(args.quick or args.only or args.issue_37), "planned": len(chosen), "rows": rows,
     }  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="fault_matrix_") as tmp:
         root = args.workdir or Path(tmp)
         for k, scenario in enumerate(chosen):
             record = run_scenario(scenario, root / scenario.row)
+            record["ran"] = (f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load "
+                             f"{machine_info()['load_average_1min']}")  # fmt: skip
             rows.append(record)
             bad = [name for name, ok in record["criteria"].items() if ok is False]
             fr = record["fault_run"]

@@ -2,7 +2,8 @@
 
 The measuring code is unitac_rig/bench/lab/fidelity.py; the recorded numbers it compares against are carried there.
 
-    python benchmarks/fidelity.py [--quick] [--angles N] [--seed S] [--out docs/figures] [--keep DIR]
+    python benchmarks/fidelity.py [--quick] [--angles N] [--seed S] [--imperfections all|none|...] [--out docs/figures]
+        [--keep DIR]
 
 Collects every object with a recorded session (circle, hexagon, square; PLA and TPU) with both sensors on the fast
 simulated rig through the normal collection code, prints the table (simulated, recorded in brackets, * = outside
@@ -29,6 +30,9 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0, help="simulated rig seed")
     parser.add_argument("--out", type=Path, default=default_out_dir(), help="folder for the JSON and PNG")
     parser.add_argument("--keep", type=Path, default=None, help="keep the session files in this folder")
+    parser.add_argument(
+        "--imperfections", default="all", help="the twin's imperfections (sim/imperfections.py; 'none': clean twin)"
+    )
     args = parser.parse_args()
     angles = QUICK_ANGLES if args.quick else args.angles
     doc = run_fidelity(
@@ -37,6 +41,7 @@ def main() -> None:
         data_dir=args.keep,
         on_session=lambda obj, sensor, s: print(f"{obj} {sensor}: {s:.0f} s", flush=True),
         ablation=not args.quick,
+        imperfections=args.imperfections,
     )
     for line in summary_lines(doc):
         print(line)

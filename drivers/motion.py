@@ -134,6 +134,8 @@ def move_to(
                 break
         else:
             raise ArmError(f"a move to {np.round(target[:3], 4).tolist()} m did not finish within {budget_s:.1f} s")
+        if not finished:
+            _end_arrived_move(arm)
         if not _on_target(state, target):  # whatever ended it, nothing may go on moving
             off_mm = 1000 * float(np.linalg.norm(np.asarray(state.tcp_pose[:3]) - target[:3]))
             raise ArmError(f"a move ended {off_mm:.1f} mm from its target {np.round(target[:3], 4).tolist()} m")
@@ -141,6 +143,18 @@ def move_to(
         stop_arm(arm)
         raise
     return state
+
+
+def _end_arrived_move(arm: Arm) -> None:
+    """A move that arrived by the pose while the controller's progress word still shows it: wait a few periods for
+    the word, then stop it. Either way the driver sees the motion over, so nothing stays commanded (and a UR's
+    watchdog leaves its tight window: a move left "running" kept it tight through the host's work at rest, which
+    tripped it ~0.17 s after every session's last retract, issue 37)."""
+    for _ in range(ARRIVED_PERIODS):
+        arm.wait_period()
+        if not arm.move_running():
+            return
+    arm.stop()
 
 
 def guarded_move(

@@ -9,10 +9,17 @@ the twin cannot reach).
 Safety (what a real controller does when the host misbehaves, ``hardware-facts`` 3.8, and what this class adds):
 
 * the controller executes the last command until told otherwise: ur_rtde's speed and force threads run forever,
-  even after the host dies. The one thing that stops them is the **RTDE watchdog**, armed at connect
-  (``setWatchdog``): the program stops when the host writes nothing for 1 / ``watchdog_hz``. Every control period
-  (``wait_period``) feeds it; while the host does non-motion work at rest, :meth:`UR5eArm.keep_alive` kicks it from
-  a thread;
+  even after the host dies. The one thing that stops them is the **RTDE watchdog** (``setWatchdog``): the program
+  stops when the host writes nothing for 1 / ``watchdog_hz``. It is held at ``watchdog_hz`` **only while a motion is
+  commanded** (a speedL, force mode or asynchronous moveL not yet seen to end or stopped), and fed then only by the
+  loop that decides the motion (``wait_period``, or the motion command itself): a host that freezes or dies
+  mid-motion stops the arm 1 / ``watchdog_hz`` after its last decision. As the arm comes to rest (``stop``, the
+  move's end, ``force_mode_stop``) and at connect it is set to ``REST_WATCHDOG_HZ`` instead (URScript has no way to
+  remove a watchdog but stopping the program; setting it again on the same register replaces its frequency): with
+  nothing commanded nothing moves, so set-up work, writing a press or a session's end (git, HDF5, fsync, a loaded
+  box) can take seconds without the controller stopping the program under it. No thread has to win the GIL in
+  time for that; :meth:`UR5eArm.keep_alive` still kicks from a thread for the operator's waits, which can outlast
+  even the rest window;
 * a period that sent speedL or forceMode is **not** also kicked: ur_rtde sends those without waiting, and
   ``kickWatchdog`` writes 0 to the same command register, which the script reads once per 2 ms cycle. Sent right
   after, the kick can land in the same cycle and the script never sees the command (the last write wins). The
@@ -27,8 +34,8 @@ Safety (what a real controller does when the host misbehaves, ``hardware-facts``
   and a second Ctrl-C during them is held until they are done. When the receive side has lost the controller (no
   new state for ``STALL_TIMEOUT_S``) they send none of them: ur_rtde's blocking commands to a vanished controller
   return only after ~301 s each, and the watchdog stops the program anyway;
-* the watchdog is armed again as each motion starts: ur_rtde reconnects by itself after a network error and
-  uploads its script again, and a fresh script has no watchdog;
+* the watchdog is armed (at ``watchdog_hz``) again as each motion starts: ur_rtde reconnects by itself after a
+  network error and uploads its script again, and a fresh script has no watchdog;
 * after a protective or emergency stop the controller refuses everything: commands are refused up front with
   :class:`~drivers.errors.ProtectiveStop` (what to do on the pendant in the hint), and a program that stopped (the
   watchdog, the pendant) gives :class:`~drivers.errors.ControlScriptStopped`;
@@ -40,7 +47,7 @@ Gotchas: ur_rtde's Python constructors hold the GIL until the handshake finishes
 process would deadlock, hence the twins' server processes); the C++ library prints to file descriptor 2 itself
 (e.g. ``connect: Connection refused``), so the constructors run with fd 2 routed to the log.
 
-Why one module of ~640 lines: every ur_rtde control call the project makes goes through the same error mapping and
+Why one module of ~670 lines: every ur_rtde control call the project makes goes through the same error mapping and
 safety checks here (watchdog, stops, TCP/payload read-back).
 """
 
@@ -75,6 +82,9 @@ logger = logging.getLogger(__name__)
 FORCE_MODE_TYPE = 2  # URScript force_mode type 2: the task frame is used as given
 SPEED_TIME_LIMIT_PERIODS = 4  # speedL's t: a few control periods (see the module docstring for what it does not do)
 KEEP_ALIVE_KICK_S = 0.02  # keep_alive's kicker thread writes at 50 Hz, far above any sensible watchdog frequency
+# The watchdog's frequency while no motion is commanded (Hz): 10 s. At rest it guards nothing that moves; it only
+# ends a program whose host went away. Long enough that no set-up or save step on a loaded PC reaches it.
+REST_WATCHDOG_HZ = 0.1
 MAX_TOOL_SPEED_M_S = 3.0  # ur_rtde refuses faster tool speeds (hardware-facts 3.4)
 MAX_TOOL_ACCEL_M_S2 = 150.0  # ... and larger tool accelerations
 TCP_TOLERANCE_M = 0.001  # read-back TCP offset must match the rig file within 1 mm ...
@@ -127,7 +137,7 @@ class UR5eArm:
 
     ``control`` / ``receive``: objects with RTDEControlInterface / RTDEReceiveInterface's methods (injected in
     tests); connected to ``host`` if None. ``control_period_s`` = 1 / ``frequency_hz`` (2 ms at 500 Hz).
-    ``watchdog_hz``: the RTDE watchdog armed at connect (None: none, for read-mostly tools only).
+    ``watchdog_hz``: the RTDE watchdog while a motion is commanded (None: none, for read-mostly tools only).
     ``expected_tcp_offset`` ((6,) m, rad, from the flange) and ``expected_payload_kg``: what the rig file says is set
     on the pendant; the connection is refused with ArmError when the controller reports something else.
     Raises DeviceNotFound with what to check when either interface cannot connect, ProtectiveStop when the arm is in
@@ -153,6 +163,7 @@ class UR5eArm:
         self.host = host
         self.control_period_s = 1.0 / frequency_hz
         self._watchdog_hz = watchdog_hz
+        self._watchdog_set_hz: float | None = None  # the frequency last set on the controller
         self._closed = False
         self._in_force_mode = False
         self._speeding = False
@@ -178,7 +189,7 @@ class UR5eArm:
             raise
         try:
             self._check_setup(expected_tcp_offset, expected_payload_kg)
-            self._rearm_watchdog()
+            self._rest_watchdog(always=True)
         except BaseException:
             self.close()
             raise
@@ -237,6 +248,7 @@ class UR5eArm:
         elif operation == move.operation_before or running:
             return True
         self._move = None
+        self._rest_watchdog()
         return False
 
     def speed_linear(self, twist: np.ndarray, accel_m_s2: float) -> None:
@@ -284,8 +296,11 @@ class UR5eArm:
         finally:
             self._in_force_mode = self._speeding = False
             self._move = None
-        if refused and not self._stopped_anyway():
-            raise ArmError(f"the UR at {self.host} refused {', '.join(refused)}", hint=STOPPED_HINT)
+        if refused:
+            if not self._stopped_anyway():
+                raise ArmError(f"the UR at {self.host} refused {', '.join(refused)}", hint=STOPPED_HINT)
+            return  # stopped by the controller: its program is not running, nothing to relax
+        self._rest_watchdog()
 
     def zero_ft(self) -> None:
         self._require_ready("zeroFtSensor")
@@ -329,8 +344,11 @@ class UR5eArm:
         self._check_open()
         ok = self._call("forceModeStop", self._control.forceModeStop)
         self._in_force_mode = False
-        if ok is False and not self._stopped_anyway():
-            raise ArmError(f"the UR at {self.host} refused forceModeStop", hint=STOPPED_HINT)
+        if ok is False:
+            if not self._stopped_anyway():
+                raise ArmError(f"the UR at {self.host} refused forceModeStop", hint=STOPPED_HINT)
+            return
+        self._rest_watchdog()
 
     def wait_period(self) -> None:
         """Feed the watchdog, then pace the loop at the RTDE frequency with ur_rtde's initPeriod/waitPeriod.
@@ -352,13 +370,16 @@ class UR5eArm:
     def keep_alive(self) -> Iterator[None]:
         """Kick the watchdog from a thread at 50 Hz while the host does non-motion work with the arm at rest.
 
-        A motion still commanded is stopped first. Inside, this object refuses every command (ur_rtde's client must
-        not be used from two threads). If the process dies, the thread dies with it and the watchdog stops the
-        program as usual.
+        A motion still commanded is stopped first, and the watchdog is at its rest window inside (a kick starved of
+        the GIL by this process's own work cannot trip it). Inside, this object refuses every command (ur_rtde's
+        client must not be used from two threads). If the process dies, the thread dies with it and the watchdog
+        stops the program as usual.
         """
         self._check_open()
         if self._in_force_mode or self._speeding or self._move is not None:
-            self.stop()
+            self.stop()  # which sets the rest window
+        elif self._kicker is None:
+            self._rest_watchdog()
         if self._watchdog_hz is None or self._kicker is not None:
             yield
             return
@@ -525,12 +546,28 @@ class UR5eArm:
             return False
 
     def _rearm_watchdog(self) -> None:
-        """Arm the watchdog again as a motion starts (one ~5 ms round trip). ur_rtde reconnects by itself after a
-        network error and uploads its script again, and a fresh script has no watchdog: so no motion starts
-        unguarded after such a reconnect."""
+        """Arm the watchdog at ``watchdog_hz`` as a motion starts (one ~5 ms round trip), every time: ur_rtde
+        reconnects by itself after a network error and uploads its script again, and a fresh script has no
+        watchdog, so no motion starts unguarded after such a reconnect."""
         if self._watchdog_hz is not None:
-            ok = self._call("setWatchdog", self._control.setWatchdog, float(self._watchdog_hz))
-            self._expect_ok("setWatchdog", ok)
+            self._set_watchdog(self._watchdog_hz)
+
+    def _rest_watchdog(self, *, always: bool = False) -> None:
+        """Set the watchdog to the rest window once nothing is commanded (see the module docstring); a no-op while
+        any motion is still commanded, and when it is at the rest window already (unless ``always``)."""
+        if self._watchdog_hz is None or self._in_force_mode or self._speeding or self._move is not None:
+            return
+        if self._controller_lost():
+            return  # setWatchdog would wait ur_rtde's 300 s for an answer; the armed watchdog stops the program
+        rest_hz = min(REST_WATCHDOG_HZ, self._watchdog_hz)
+        if always or self._watchdog_set_hz != rest_hz:
+            self._set_watchdog(rest_hz)
+
+    def _set_watchdog(self, frequency_hz: float) -> None:
+        self._watchdog_set_hz = None  # unknown until the controller confirmed it
+        ok = self._call("setWatchdog", self._control.setWatchdog, float(frequency_hz))
+        self._expect_ok("setWatchdog", ok)
+        self._watchdog_set_hz = frequency_hz
 
     def _lost_hint(self) -> str:
         if self._watchdog_hz is None:

@@ -18,6 +18,7 @@ __all__ = [
     "ProtectiveStop",
     "ProtocolError",
     "SafetyLimit",
+    "SessionStopped",
     "UnitacError",
     "UsageError",
     "with_press_record",
@@ -38,6 +39,11 @@ class DataError(UnitacError):
 
 class SafetyLimit(UnitacError):
     """A force, travel or workspace limit stopped the motion."""
+
+
+class SessionStopped(UnitacError):
+    """A session or campaign ended before its plan was done (nothing pressed, failures in a row): a runtime failure
+    (exit 1), resumable by the same command."""
 
 
 class ModelError(UnitacError):

@@ -25,7 +25,7 @@ from drivers.errors import (
     RobotStateLost,
 )
 from drivers.motion import move_to
-from drivers.ur5e import KEEP_ALIVE_KICK_S, UR5eArm
+from drivers.ur5e import KEEP_ALIVE_KICK_S, REST_WATCHDOG_HZ, UR5eArm
 from drivers.ur5e_receive import STALL_TIMEOUT_S, UR5eReceiver
 from tests.arm.arm_fakes import FakeControl, FakeReceive
 from unitac_rig.sim.rtde_server import SimURController, start_on_free_loopback
@@ -129,10 +129,10 @@ def test_control_connection_failure_closes_the_receive_side() -> None:
     assert receive.disconnects == 1
 
 
-def test_connect_arms_the_watchdog_and_every_period_kicks_it() -> None:
+def test_connect_arms_the_watchdog_at_its_rest_window_and_every_period_kicks_it() -> None:
     control = FakeControl()
     with UR5eArm("ur", control=control, receive=FakeReceive(), watchdog_hz=8.0) as arm:
-        assert control.calls[0] == ("setWatchdog", (8.0,))
+        assert control.calls[0] == ("setWatchdog", (REST_WATCHDOG_HZ,))  # nothing is commanded yet
         arm.wait_period()
         arm.wait_period()
     kicks_and_waits = [n for n in control.names() if n in ("kickWatchdog", "waitPeriod")]
@@ -320,13 +320,27 @@ def test_an_asynchronous_move_is_polled_and_stop_ends_it_with_stop_l() -> None:
         receive.pose = list(POSE)
         state = move_to(arm, POSE, 0.05, 0.5)  # the fake reports the arm on the target; progress 0, 0, 0 then -2
         assert np.allclose(state.tcp_pose, POSE)
-        assert control.commands()[-1] == "moveL"
+        assert control.commands()[-2:] == ["moveL", "setWatchdog"]  # the move is over: the rest window
         control.move_periods = 1000
         arm.start_move_linear(POSE + np.array([0, 0, 0.05, 0, 0, 0]), 0.05, 0.5)
         assert arm.move_running()
         arm.stop()
-        assert control.commands()[-2:] == ["stopL", "speedStop"]
+        assert control.commands()[-3:] == ["stopL", "speedStop", "setWatchdog"]
         assert not arm.move_running()
+
+
+def test_a_move_that_arrives_before_its_progress_word_ends_is_ended_so_nothing_stays_commanded() -> None:
+    """The pose can show the move over while the control client's progress word still shows it running; a move
+    left "running" kept the watchdog tight through the host's work at rest, which tripped it ~0.17 s after every
+    session's last retract (issue 37). move_to ends it (stopL), and the watchdog is back at its rest window."""
+    control = FakeControl()
+    receive = FakeReceive()
+    with UR5eArm("ur", control=control, receive=receive, watchdog_hz=8.0) as arm:
+        receive.pose = list(POSE)
+        control.move_periods = 1000  # the word shows the move long after the arm is on its target
+        move_to(arm, POSE, 0.05, 0.5)
+        assert "stopL" in control.commands()
+        assert [args for name, args in control.calls if name == "setWatchdog"][-1] == (REST_WATCHDOG_HZ,)
 
 
 class DocumentedStatus:
@@ -487,9 +501,44 @@ def test_the_watchdog_is_armed_again_as_each_motion_starts_but_not_every_period(
     assert names == [
         "setWatchdog",
         "setWatchdog", "speedL", "speedL", "speedL",
+        "setWatchdog",  # stop: the rest window
         "setWatchdog", "forceMode", "forceMode",
+        "setWatchdog",
         "setWatchdog", "moveL",
     ]  # fmt: skip
+
+
+def test_the_watchdog_is_tight_exactly_while_a_motion_is_commanded() -> None:
+    """Issue 37: a watchdog held tight at rest tripped under set-up work and ~0.17 s after every session's last
+    retract. It is at ``watchdog_hz`` from each motion's start to its end (stop, the move seen over,
+    forceModeStop), at the rest window otherwise; a move's end does not relax it while a speed command still runs."""
+    control = FakeControl()
+
+    def watchdog() -> float:
+        return [args[0] for name, args in control.calls if name == "setWatchdog"][-1]  # type: ignore[return-value]
+
+    with UR5eArm("ur", control=control, receive=FakeReceive(), watchdog_hz=8.0) as arm:
+        assert watchdog() == REST_WATCHDOG_HZ
+        arm.start_move_linear(np.array([0.1, 0.2, 0.3, 0, 0, 0]), 0.05, 0.5)
+        assert watchdog() == 8.0
+        assert arm.move_running() and watchdog() == 8.0
+        control.stop_moves()
+        assert not arm.move_running() and watchdog() == REST_WATCHDOG_HZ  # the move is over
+        arm.force_mode(np.zeros(6), np.array([0, 0, 1, 0, 0, 0]), np.array([0, 0, 5.0, 0, 0, 0]), np.full(6, 0.02))
+        assert watchdog() == 8.0
+        arm.force_mode_stop()
+        assert watchdog() == REST_WATCHDOG_HZ
+        arm.speed_linear(np.array([0, 0, 0.005, 0, 0, 0]), 0.5)
+        arm.force_mode(np.zeros(6), np.array([0, 0, 1, 0, 0, 0]), np.array([0, 0, 5.0, 0, 0, 0]), np.full(6, 0.02))
+        arm.force_mode_stop()
+        assert watchdog() == 8.0  # the speed command still runs
+        arm.stop()
+        assert watchdog() == REST_WATCHDOG_HZ
+        sets = len([n for n in control.names() if n == "setWatchdog"])
+        arm.stop()
+        with arm.keep_alive():
+            pass
+        assert len([n for n in control.names() if n == "setWatchdog"]) == sets  # at rest already: no round trip
 
 
 def test_an_earlier_moves_finish_signal_cannot_end_the_next_move() -> None:

@@ -8,8 +8,10 @@ Loopback addresses 127.0.0.160-179 belong to these tests; every test closes its 
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -135,6 +137,51 @@ def test_the_watchdog_stops_a_speed_command_when_the_host_stops_writing(twin: Co
         with pytest.raises(ControlScriptStopped) as excinfo:
             arm.speed_linear(np.zeros(6), 0.5)
         assert "167 ms" in (excinfo.value.hint or "")
+    with connect(twin) as arm:
+        home(arm)
+
+
+def _busy_host(seconds: float, scratch: Path) -> None:
+    """What a session does at rest, at its worst: CPU work that holds the GIL, and a file written and fsynced."""
+    end = time.monotonic() + seconds
+    with open(scratch, "wb") as handle:
+        while time.monotonic() < end:
+            sum(i * i for i in range(20_000))
+            handle.write(b"\0" * 65536)
+            handle.flush()
+            os.fsync(handle.fileno())
+
+
+def test_set_up_work_before_the_first_motion_and_after_the_last_cannot_trip_the_watchdog(
+    twin: ControllerTwin, tmp_path: Path
+) -> None:
+    """Issue 37: the watchdog armed tight at connect stopped the program under a session's set-up (git, session
+    file, journal) before the first press, and ~0.17 s after every session's last retract. With nothing commanded it
+    is at its rest window: 0.6 s of blocking work (3.6 watchdog periods) trips nothing, before or after a motion."""
+    with connect(twin, watchdog_hz=WATCHDOG_HZ) as arm:
+        trips = twin.truth().watchdog_trips
+        _busy_host(0.6, tmp_path / "setup.bin")  # nothing kicks: no keep_alive, no wait_period
+        assert twin.truth().watchdog_trips == trips and twin.truth().program_running
+        move_to(arm, START + np.array([0.0, -0.005, 0.0, 0, 0, 0]), 0.05, 0.5)
+        home(arm)  # the last retract of a session ...
+        _busy_host(0.6, tmp_path / "end.bin")  # ... then the session file, the journal, the sensor's disconnect
+        assert twin.truth().watchdog_trips == trips and twin.truth().program_running
+    assert twin.truth().watchdog_trips == trips  # and closing stops the program without a trip
+
+
+def test_a_host_stall_in_a_motion_that_follows_the_rest_window_still_trips_the_watchdog(twin: ControllerTwin) -> None:
+    """The rest window must end where motion starts: a speed command after a rest (a keep_alive, a finished move)
+    runs under the tight watchdog again, so a host that stops deciding stops the arm 1 / 6 Hz later."""
+    with connect(twin, watchdog_hz=WATCHDOG_HZ) as arm:
+        home(arm)
+        with arm.keep_alive():
+            pass  # the watchdog is at its rest window here
+        trips = twin.truth().watchdog_trips
+        arm.speed_linear(np.array([0.0, -0.01, 0.0, 0, 0, 0]), 0.5)
+        time.sleep(0.6)
+        truth = twin.truth()
+        assert truth.watchdog_trips == trips + 1 and not truth.program_running and truth.at_rest
+        assert START[1] - twin.true_pad_pose()[1] < 0.01 * (1.0 / WATCHDOG_HZ + 0.03)
     with connect(twin) as arm:
         home(arm)
 

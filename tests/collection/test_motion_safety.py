@@ -158,15 +158,18 @@ def test_a_session_whose_plus_45_press_leaves_the_workspace_is_refused_before_an
     assert not session_path(tmp_path, "circle_pla", "uskin").exists()  # nothing recorded, no empty file
 
 
-def test_the_plan_check_covers_every_press_and_its_retract() -> None:
+def test_the_plan_check_covers_every_press_its_travel_its_retract_and_the_start_pose() -> None:
     config = few(5)
     obj = get_object("irregular_pla")
     plans = plan_presses(obj, config, obj.rotations_deg)
     here = plans[0].start_pose
-    checked = check_session_plan(here, plans, 0.09, config.limits)
-    expected = sum(
-        len(clearance_waypoints(prev, plan, 0.09)) + 1
-        for prev, plan in zip([here] + [p.start_pose for p in plans[:-1]], plans, strict=True)
+    checked = check_session_plan(here, plans, 0.09, config.limits, confirmed_standoff_mm=5.0)
+    expected = (
+        1
+        + sum(  # the start pose; per press its waypoints, the confirmed stand-off, the travel end, the retract
+            len(clearance_waypoints(prev, plan, 0.09)) + 3
+            for prev, plan in zip([here] + [p.start_pose for p in plans[:-1]], plans, strict=True)
+        )
     )
     assert checked == expected
 

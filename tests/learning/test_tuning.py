@@ -172,7 +172,7 @@ def test_cli_takes_a_config_file_and_options_over_it_and_saves_both_with_the_run
 
     bad = tmp_path / "bad.toml"
     bad.write_text("[training]\nlearnig_rate = 0.1\n", encoding="utf-8")
-    assert cli(["train", "--data", str(data), "--out", str(tmp_path / "r2"), "--config", str(bad)]) == 1
+    assert cli(["train", "--data", str(data), "--out", str(tmp_path / "r2"), "--config", str(bad)]) == 2
     assert "training.learnig_rate: unknown key" in capsys.readouterr().err
 
 

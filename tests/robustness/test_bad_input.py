@@ -15,7 +15,6 @@ import pytest
 from tests.helpers import cli
 from tests.robustness.robustness_helpers import few_angles, one_error_line, tree_hashes, write_synthetic_sessions
 from unitac_rig.collection.session import collect_session
-from unitac_rig.errors import UsageError
 from unitac_rig.rig.config import parse_rig_config
 from unitac_rig.rig.hardware import HardwareRig
 from unitac_rig.rig.objects import get_object
@@ -56,9 +55,10 @@ def test_unknown_object_and_sensor(data: Path, capsys: pytest.CaptureFixture[str
     assert "unknown sensor 'gelsight'" in one_error_line(capsys)
 
 
-def test_debug_shows_the_traceback_instead(data: Path) -> None:
-    with pytest.raises(UsageError, match="unknown object"):
-        cli(["--debug", "collect", "--object", "cube_wood", "--data", str(data), "--no-live"])
+def test_debug_shows_the_traceback_instead(data: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli(["--debug", "collect", "--object", "cube_wood", "--data", str(data), "--no-live"]) == 2  # as without
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "UsageError" in err and "unknown object" in err
 
 
 @pytest.mark.parametrize(
@@ -78,13 +78,13 @@ def test_a_malformed_or_contradictory_rig_file_names_the_field(
 ) -> None:
     rig_file = tmp_path / "rig.toml"
     rig_file.write_text(rig_text)
-    assert cli(_collect(data, "--rig", str(rig_file))) == 1
+    assert cli(_collect(data, "--rig", str(rig_file))) == 2  # the user's file: a usage error
     line = one_error_line(capsys)
     assert str(rig_file) in line and expected in line
 
 
 def test_a_missing_rig_file(data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert cli(_collect(data, "--rig", str(tmp_path / "nope.toml"))) == 1
+    assert cli(_collect(data, "--rig", str(tmp_path / "nope.toml"))) == 2
     assert "does not exist" in one_error_line(capsys)
 
 

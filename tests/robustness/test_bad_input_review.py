@@ -40,7 +40,7 @@ def test_a_rig_file_value_that_is_not_a_number_or_not_possible_is_one_line(
 ) -> None:
     rig = tmp_path / "rig.toml"
     rig.write_text(text)
-    assert cli([*COLLECT, "--rig", str(rig), "--data", str(tmp_path / "data")]) == 1
+    assert cli([*COLLECT, "--rig", str(rig), "--data", str(tmp_path / "data")]) == 2
     assert expected in one_error_line(capsys)
     assert not (tmp_path / "data").exists()
 
@@ -50,11 +50,11 @@ def test_a_rig_file_that_is_not_utf8_text_or_is_a_directory_is_one_line(
 ) -> None:
     binary = tmp_path / "rig.toml"
     binary.write_bytes(b"\xff\xfename = 'x'\n")
-    assert cli([*COLLECT, "--rig", str(binary), "--data", str(tmp_path / "data")]) == 1
+    assert cli([*COLLECT, "--rig", str(binary), "--data", str(tmp_path / "data")]) == 2
     assert "not UTF-8 text" in one_error_line(capsys)
     folder = tmp_path / "folder.toml"
     folder.mkdir()
-    assert cli([*COLLECT, "--rig", str(folder), "--data", str(tmp_path / "data")]) == 1
+    assert cli([*COLLECT, "--rig", str(folder), "--data", str(tmp_path / "data")]) == 2
     assert "is a directory, not a TOML file" in one_error_line(capsys)
     assert not (tmp_path / "data").exists()
 

@@ -123,6 +123,75 @@ def test_stats_are_lerobots_over_every_frame_as_written(exported: Path) -> None:
         assert "annotation.object" not in stats  # strings have no stats (as in LeRobot)
 
 
+def test_each_episode_carries_its_own_stats_as_lerobots_writer_does(exported: Path) -> None:
+    for sensor in SENSORS:
+        df = _frames(exported / sensor)
+        episodes = pd.read_parquet(exported / sensor / "meta/episodes/chunk-000/file-000.parquet")
+        key = f"observation.tactile.{sensor}"
+        for _, ep in episodes.iterrows():
+            rows = df[df["episode_index"] == ep["episode_index"]]
+            wrench = np.stack(rows["observation.wrench"]).astype(np.float64)
+            assert np.allclose(ep["stats/observation.wrench/mean"], wrench.mean(axis=0))
+            assert np.allclose(ep["stats/observation.wrench/max"], wrench.max(axis=0))
+            channels = np.stack([np.stack(f) for f in rows[key]]).reshape(-1, 3).astype(np.float64)
+            assert np.allclose(ep[f"stats/{key}/std"], channels.std(axis=0))
+            assert list(ep[f"stats/{key}/count"]) == [len(rows)] == [ep["length"]]
+            assert list(ep["stats/frame_index/max"]) == [len(rows) - 1]
+
+
+def _front_matter(card: str) -> dict[str, object]:
+    import yaml
+
+    assert card.startswith("---\n")
+    loaded = yaml.safe_load(card[4:].partition("\n---\n")[0])
+    assert isinstance(loaded, dict)
+    return loaded
+
+
+def test_each_sensor_folder_is_a_hub_dataset_with_its_own_card(exported: Path) -> None:
+    manifest = json.loads((exported / "manifest.json").read_text())
+    listed = json.dumps(manifest)
+    for sensor in SENSORS:
+        card = (exported / sensor / "README.md").read_text()
+        meta = _front_matter(card)
+        frames = len(_frames(exported / sensor))
+        assert meta["license"] == "cc-by-4.0" and meta["task_categories"] == ["robotics"]
+        assert meta["size_categories"] == [lerobot.size_category(frames)] == ["n<1K" if frames < 1000 else "1K<n<10K"]
+        assert sensor in meta["tags"] and "LeRobot" in meta["tags"]
+        assert "@inproceedings{hou2025unitacnv" in card and "IROS" in card and "2506.19699" in card
+        assert f"{sensor}/README.md" in listed  # in the manifest: verify checks it
+        assert "torchvision::nms" not in card or "except RuntimeError" in card
+        assert "except RuntimeError" in _code(card)  # the loading code survives a CUDA torchvision over a CPU torch
+    top = _front_matter((exported / "README.md").read_text())
+    assert top["license"] == "cc-by-4.0" and top["size_categories"]
+    assert "except RuntimeError" in _code((exported / "README.md").read_text())
+
+
+def _code(card: str) -> str:
+    import re
+
+    blocks = re.findall(r"```python\n(.*?)```", card, flags=re.S)
+    assert len(blocks) == 1
+    return str(blocks[0])
+
+
+@pytest.mark.lerobot
+def test_each_sensor_cards_code_loads_its_dataset_with_lerobot(exported: Path, tmp_path: Path) -> None:
+    python = _lerobot_python()
+    if python is None:
+        pytest.skip("no lerobot-dataset environment: .ci/run builds .venv-lerobot (or set UNITAC_LEROBOT_PYTHON)")
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "HF_HOME": str(tmp_path / "hf"), "PYTHONNOUSERSITE": "1"}
+    env.pop("PYTHONPATH", None)
+    for sensor in SENSORS:
+        code = _code((exported / sensor / "README.md").read_text()) + "\nprint(len(ds), tuple(frame.shape))\n"
+        done = subprocess.run([str(python), "-I", "-c", code], env=env, cwd=exported / sensor, capture_output=True,
+                              text=True, timeout=600)  # fmt: skip
+        assert done.returncode == 0, done.stderr[-3000:]
+        n_taxels = {"uskin": 24, "papillarray": 9}[sensor]
+        assert done.stdout.split()[-2:] == [f"({n_taxels},", "3)"]
+        assert int(done.stdout.split()[0]) == len(_frames(exported / sensor))
+
+
 def test_round_trip_gives_the_pairs_of_the_parquet_export(data: Path, exported: Path) -> None:
     parquet = data.parent / "parquet-export"
     assert cli(["export", str(data), "--out", str(parquet)]) == 0

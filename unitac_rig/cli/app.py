@@ -1,8 +1,8 @@
 """The ``unitac-rig`` command line.
 
 Each area registers its own commands from a ``cli_*`` module, so this file stays a short table of contents.
-Errors from the project's exception tree become one clear line and exit code 1 (2 for usage errors);
-``--debug`` shows the traceback instead.
+Errors from the project's exception tree become one clear line and exit code 1 (2 for usage and configuration
+errors); ``--debug`` shows the traceback instead, with the same exit code.
 """
 
 from __future__ import annotations
@@ -12,13 +12,15 @@ import importlib
 import logging
 import signal
 import sys
+import traceback
+from typing import NoReturn
 
 import typer
 
 from protocols.errors import UnitacError
 from unitac_rig.cli.help import use_plain_help
 from unitac_rig.cli.signals import last_termination_signal, termination_signal
-from unitac_rig.errors import UsageError
+from unitac_rig.errors import ConfigError, UsageError
 from unitac_rig.provenance import package_version
 
 app = typer.Typer(
@@ -41,12 +43,13 @@ COMMAND_MODULES = (
     "unitac_rig.cli.bench",  # bench ...
     "unitac_rig.cli.twin",  # twin (the real-time twin of the rig)
     "unitac_rig.cli.stream",  # stream (a trained run on the live sensor)
+    "unitac_rig.cli.view",  # view (a session or a live sensor in Rerun)
 )
 
 # The root help lists the commands under these headings, in this order (a command not named here is listed last).
 COMMAND_GROUPS = {
     "Collect data": ("collect", "campaign", "extract", "objects"),
-    "Look at and share data": ("inspect", "export", "verify", "import-unitac-nv"),
+    "Look at and share data": ("inspect", "view", "export", "verify", "import-unitac-nv"),
     "Learn": ("train", "report", "translate", "geometry", "export-model"),
     "Devices and the simulated rig": ("probe", "twin", "bench"),
 }
@@ -96,7 +99,9 @@ use_plain_help(app, COMMAND_GROUPS)
 def main(argv: list[str] | None = None) -> None:
     """Console entry point: run the app, mapping every error to one line and a non-zero exit.
 
-    Usage errors (unknown command or option, missing or bad value) exit 2, other project errors 1, Ctrl-C 130,
+    Usage errors (unknown command or option, missing or bad value, a path that is not what the option needs, a rig
+    or configuration file that does not validate) exit 2, also with ``--debug`` (which shows the traceback), and
+    so does no command at all (the help is printed); other project errors 1, Ctrl-C 130,
     SIGTERM / SIGHUP during a collection 143 / 129 (after the same clean stop as Ctrl-C).
     Only names typer itself exports are used here: typer 0.29 dropped its click dependency, so importing click
     (which is not declared) broke this very path on a fresh install.
@@ -106,19 +111,17 @@ def main(argv: list[str] | None = None) -> None:
     try:
         result = app(args=args, standalone_mode=False)
     except UnitacError as exc:
-        if debug:
-            raise
-        typer.secho(f"error: {exc.one_line()}", err=True, fg=typer.colors.RED)
-        sys.exit(2 if isinstance(exc, UsageError) else 1)
+        _fail(debug, f"error: {exc.one_line()}", 2 if isinstance(exc, (UsageError, ConfigError)) else 1)
     except typer.Exit as exc:
         sys.exit(exc.exit_code)
     except (KeyboardInterrupt, typer.Abort) as exc:
         _interrupted(termination_signal(exc))
     except typer.TyperException as exc:  # typer's usage errors: unknown command/option, bad or missing value
-        if debug:
-            raise
-        typer.secho(f"error: {_usage_line(exc)}", err=True, fg=typer.colors.RED)
-        sys.exit(getattr(exc, "exit_code", 2))
+        if type(exc).__name__ == "NoArgsIsHelpError":  # `unitac-rig` (or a command group) alone: its help, exit 2
+            ctx = getattr(exc, "ctx", None)
+            typer.echo(ctx.get_help() if ctx is not None else _usage_line(exc))
+            sys.exit(2)
+        _fail(debug, f"error: {_usage_line(exc)}", getattr(exc, "exit_code", 2))
     except Exception as exc:
         if debug:
             raise
@@ -134,6 +137,16 @@ def main(argv: list[str] | None = None) -> None:
         if result == 130:
             _interrupted(last_termination_signal())
         sys.exit(result)
+
+
+def _fail(debug: bool, line: str, code: int) -> NoReturn:
+    """End a failed command with ``code``: one red line, or with ``--debug`` the traceback (the same exit code,
+    so a script sees the same status either way)."""
+    if debug:
+        traceback.print_exc()
+    else:
+        typer.secho(line, err=True, fg=typer.colors.RED)
+    sys.exit(code)
 
 
 def hoist_debug(args: list[str]) -> list[str]:

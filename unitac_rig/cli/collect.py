@@ -12,16 +12,19 @@ import typer
 from pydantic import ValidationError
 from rich.console import Console, Group
 from rich.live import Live
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table
 from rich.text import Text
 
+from unitac_rig.cli.pace import spoken_duration
+from unitac_rig.cli.paths import path_text, require_data_folder, require_directory
 from unitac_rig.cli.signals import termination_as_interrupt
 from unitac_rig.collection.sensor_choice import choose_sensor, collection_order, session_complete
 from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session, dry_run
 from unitac_rig.collection.streams import TickInfo
 from unitac_rig.collection.transit import PressPlan
-from unitac_rig.errors import ConfigError, UsageError
+from unitac_rig.errors import ConfigError, SessionStopped, UsageError
 from unitac_rig.interrupts import immediate_interrupts
 from unitac_rig.rig.backends import open_rig
 from unitac_rig.rig.base import Rig
@@ -38,7 +41,11 @@ from unitac_rig.storage.reextract import reextract_sessions
 console = Console(stderr=False)
 
 DATA_OPTION = typer.Option(
-    Path("data"), "--data", metavar="DIR", help="Dataset directory (one HDF5 file per object and sensor)."
+    Path("data"),
+    "--data",
+    metavar="DIR",
+    help="Dataset directory (one HDF5 file per object and sensor).",
+    parser=path_text,
 )
 RIG_OPTION = typer.Option(
     None, "--rig", metavar="FILE", help="Rig file (TOML). Without one, the simulated rig is used."
@@ -61,6 +68,11 @@ OVERRIDE_OPTIONS = {
     "object.standoff_mm": "--standoff",
 }
 PROGRESS_EVERY_S = 10.0  # without a terminal (a log, nohup, CI): a progress line at most this often, s
+
+
+def _why_simulated(rig_file: Path | None) -> str:
+    """Why the rig is the simulated one: no rig file, or a rig file without an [arm] table."""
+    return "no rig file given" if rig_file is None else escape(f"rig file {rig_file} has no [arm]")  # rich markup
 
 
 def _check_counts(**options: int | None) -> None:
@@ -201,7 +213,7 @@ class ProgressLines:
         self._last_line = now
         r = done.record
         pace = (now - self.started) / max(done.index - self.first_index, 1)
-        left = "" if last else f", about {_duration(pace * (done.planned - done.index))} left"
+        left = "" if last else f", about {spoken_duration(pace * (done.planned - done.index))} left"
         console.print(
             f"{self.title}: press {done.index}/{done.planned} {r.status}, peak "
             f"{r.attrs.get('peak_force_n', 0):.2f} N, {done.matched}/25 targets matched{left}",
@@ -210,23 +222,27 @@ class ProgressLines:
         )
 
 
-def _duration(seconds: float) -> str:
-    """``45 s``, ``12 min``, ``1 h 05 min``: a time left, rounded as a person would say it."""
-    if seconds < 90:
-        return f"{seconds:.0f} s"
-    minutes = round(seconds / 60)
-    return f"{minutes} min" if minutes < 60 else f"{minutes // 60} h {minutes % 60:02d} min"
+def _finished_presses(data_dir: Path, object_id: str, sensor: str) -> tuple[int, int] | None:
+    """(finished, planned) presses of a session, read back from its file; None when there is no readable file."""
+    path = session_path(data_dir, object_id, sensor)
+    if not path.exists():
+        return None
+    try:
+        finished = sum(p["status"] in FINISHED_STATUSES for p in press_summaries(path))
+        planned = len(read_session_info(path).attrs.get("planned_presses", []))
+    except Exception:  # the file is mid-recovery: the journal keeps what was pressed, the next collect repairs it
+        return None
+    return finished, planned
 
 
 def _kept_line(data_dir: Path, object_id: str, sensor: str) -> str:
     """What an interrupted session kept, read back from its file: ``kept 12/91 presses in data/...``."""
-    path = session_path(data_dir, object_id, sensor)
-    try:
-        finished = sum(p["status"] in FINISHED_STATUSES for p in press_summaries(path))
-        planned = len(read_session_info(path).attrs.get("planned_presses", []))
-    except Exception:  # nothing written yet, or the file is mid-recovery: the journal keeps what was pressed
+    counts = _finished_presses(data_dir, object_id, sensor)
+    if counts is None:  # nothing written yet, or the file is mid-recovery: the journal keeps what was pressed
         return f"{object_id} / {sensor}: the presses recorded so far are kept under {data_dir}"
-    return f"{object_id} / {sensor}: kept {finished}/{planned} presses in {path}"
+    return (
+        f"{object_id} / {sensor}: kept {counts[0]}/{counts[1]} presses in {session_path(data_dir, object_id, sensor)}"
+    )
 
 
 def _run_session(
@@ -262,13 +278,14 @@ def _run_session(
             on_tick=panel.on_tick if panel else None,
             ask_operator=ask, max_presses=max_presses,
         )  # fmt: skip
-    except KeyboardInterrupt:  # Ctrl-C, SIGTERM, SIGHUP: the arm has stopped; say what is kept and how to go on
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM, SIGHUP: the arm has stopped; say what is kept and how to go on
         if panel is not None:
             with contextlib.suppress(OSError):
                 panel.live.stop()
             panel = None
         with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone
-            typer.echo(f"{_kept_line(data_dir, obj.id, sensor)}; run the same command again to resume", err=True)
+            load = getattr(exc, "load_note", "")  # the load the pad is left under (collection/session.py)
+            typer.echo(f"{_kept_line(data_dir, obj.id, sensor)}{load}; run the same command again to resume", err=True)
         raise
     finally:
         if panel is not None:
@@ -312,6 +329,13 @@ def collect(
         None, "--rotation", metavar="DEG", show_default="every rotation", help="Sweep this object rotation only."
     ),
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed (runs are deterministic per seed)."),
+    imperfections: str = typer.Option(
+        "all",
+        "--imperfections",
+        metavar="LIST",
+        help="Simulated rig: which real-sensor imperfections it has: all, none (the clean twin), all,-creep, or "
+        "names from hysteresis, creep, drift, gain_spread, crosstalk, print_tolerance, mount_offset.",
+    ),
     angles: int | None = typer.Option(
         None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
     ),
@@ -330,6 +354,7 @@ def collect(
     """
     _check_counts(seed=seed, max_presses=max_presses)
     config = _configure(rig_file, strategy, speed, angles, None)
+    require_data_folder(data)
     obj = get_object(object_id, extra_files=config.object.objects_files)
     if rotation is not None and rotation not in obj.rotations_deg:
         raise UsageError(
@@ -338,17 +363,17 @@ def collect(
         )
     if config.simulated:
         console.print(
-            "[bold yellow]SIMULATED RIG[/] (no rig file given): every device is simulated, no hardware moves."
+            f"[bold yellow]SIMULATED RIG[/] ({_why_simulated(rig_file)}): every device is simulated, no hardware moves."
         )
     rotations = [rotation] if rotation is not None else None
     if dry_run_only:
-        with termination_as_interrupt(), open_rig(config, seed=seed) as rig:
+        with termination_as_interrupt(), open_rig(config, seed=seed, imperfections=imperfections) as rig:
             visited = dry_run(rig, obj, rotations=rotations, on_standoff=_show_standoff)
         console.print(
             f"dry run: {visited.standoffs} stand-offs and {visited.waypoints} waypoints visited, nothing pressed"
         )
         return
-    with termination_as_interrupt(), open_rig(config, seed=seed) as rig:
+    with termination_as_interrupt(), open_rig(config, seed=seed, imperfections=imperfections) as rig:
         choice = choose_sensor(rig, obj.id, sensor, data)
         if choice.how == "detected":
             console.print(f"detected mounted sensor: [bold]{choice.name}[/]")
@@ -357,7 +382,7 @@ def collect(
         chosen = choice.name
         outcome = _run_session(rig, obj, chosen, data, rotations, live, max_presses)
     if outcome.stopped:
-        raise UsageError(f"session stopped early: {outcome.stopped}", hint="rerun the same command to resume")
+        raise SessionStopped(f"session stopped early: {outcome.stopped}", hint="rerun the same command to resume")
 
 
 def _ask_operator(rig: Rig, message: str) -> None:
@@ -376,6 +401,13 @@ def campaign(
     rig_file: Path | None = RIG_OPTION,
     data: Path = DATA_OPTION,
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed."),
+    imperfections: str = typer.Option(
+        "all",
+        "--imperfections",
+        metavar="LIST",
+        help="Simulated rig: which real-sensor imperfections it has: all, none (the clean twin), all,-creep, or "
+        "names from hysteresis, creep, drift, gain_spread, crosstalk, print_tolerance, mount_offset.",
+    ),
     angles: int | None = typer.Option(
         None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
     ),
@@ -387,19 +419,27 @@ def campaign(
     """Every object with every sensor: unattended on the simulated rig, operator-guided on hardware."""
     _check_counts(seed=seed)
     config = _configure(rig_file, None, None, angles, None)
+    require_data_folder(data)
     catalogue = list_objects(extra_files=config.object.objects_files)
     if objects:
         wanted = [o.strip() for o in objects.split(",") if o.strip()]
         catalogue = [get_object(o, extra_files=config.object.objects_files) for o in wanted]
     if config.simulated:
-        console.print("[bold yellow]SIMULATED RIG[/]: running the whole campaign unattended.")
+        console.print(
+            f"[bold yellow]SIMULATED RIG[/] ({_why_simulated(rig_file)}): running the whole campaign unattended."
+        )
     started = time.monotonic()
-    with termination_as_interrupt(), open_rig(config, seed=seed) as rig:
+    with termination_as_interrupt(), open_rig(config, seed=seed, imperfections=imperfections) as rig:
         sensors = collection_order(rig)
         progress = CampaignProgress(
             [(obj.id, sensor, len(obj.rotations_deg) * config.press.angle_count) for sensor in sensors
              for obj in catalogue]
         )  # fmt: skip
+        for obj in catalogue:  # presses finished by earlier runs count as done from the first line on
+            for sensor in sensors:
+                counts = _finished_presses(data, obj.id, sensor)
+                if counts is not None:
+                    progress.found(obj.id, sensor, counts[0])
         for sensor in sensors:
             if not rig.simulated:
                 _ask_operator(rig, f"Mount the {sensor} on the arm, then press Enter")
@@ -414,8 +454,10 @@ def campaign(
                 outcome = _run_session(rig, obj, sensor, data, None, live, None)
                 progress.finished(obj.id, sensor, outcome)
                 if outcome.stopped:
-                    raise UsageError(f"campaign stopped: {outcome.stopped}", hint="rerun the same command to resume")
-    console.print(f"campaign done in {_duration(time.monotonic() - started)} wall time -> {data}")
+                    raise SessionStopped(
+                        f"campaign stopped: {outcome.stopped}", hint="rerun the same command to resume"
+                    )
+    console.print(f"campaign done in {spoken_duration(time.monotonic() - started)} wall time -> {data}")
 
 
 class CampaignProgress:
@@ -428,6 +470,10 @@ class CampaignProgress:
         self.done: dict[tuple[str, str], int] = {}
         self.pressed_now = 0  # presses finished by this run
         self.started = time.monotonic()
+
+    def found(self, obj: str, sensor: str, finished: int) -> None:
+        """``finished`` presses of this session were recorded by an earlier run."""
+        self.done[(obj, sensor)] = min(finished, self.planned[(obj, sensor)])
 
     def skipped(self, obj: str, sensor: str) -> None:
         self.done[(obj, sensor)] = self.planned[(obj, sensor)]
@@ -443,32 +489,61 @@ class CampaignProgress:
         text = f"campaign: session {index}/{len(keys)} ({obj} / {sensor}), {presses}/{self.total_presses} presses done"
         if self.pressed_now:
             pace = (time.monotonic() - self.started) / self.pressed_now
-            text += f", about {_duration(pace * (self.total_presses - presses))} left"
+            text += f", about {spoken_duration(pace * (self.total_presses - presses))} left"
         else:
             text += ", time left known after the first session"
         return text
 
 
 def extract(
-    data: Path = typer.Argument(..., help="Dataset directory."),
+    data: Path = typer.Argument(..., help="Dataset directory.", parser=path_text),
     tolerance: float = typer.Option(0.5, "--tolerance", help="Largest matching error that still counts, N."),
     smoothing: int = typer.Option(15, "--smoothing", help="Moving-average window on the wrist force, samples."),
     latency: float = typer.Option(0.0, "--latency", help="Tactile latency to subtract from frame times, s."),
+    force: bool = typer.Option(
+        False, "--force", help="Apply settings that lose more than half of the matched targets (refused otherwise)."
+    ),
 ) -> None:
     """Recompute the force-matched frames of every session from the raw streams with other settings.
 
     All or nothing: the settings are checked first, every session is verified (and repaired from its journal), and
-    no file changes until every new one is written.
+    no file changes until every new one is written. Settings that would keep under half of today's matched targets
+    (the count `inspect` shows) change nothing without --force.
     """
     settings = ExtractionSettings(tolerance_n=tolerance, smoothing_samples=smoothing, tactile_latency_s=latency)
     options = {"tolerance_n": "--tolerance", "smoothing_samples": "--smoothing", "tactile_latency_s": "--latency"}
     for name, why in settings.problems():
         raise UsageError(f"{options.get(name, name)} {why}")
+    require_directory(data, "DATA", hint="pass the --data folder you collected into")
     sessions = list_sessions(data)
     if not sessions:
         raise UsageError(f"no session files in {data}")
-    for path, presses, matched in reextract_sessions([info.path for info in sessions], settings):
-        console.print(f"{path.name}: {presses} presses re-extracted, {matched} targets matched")
+    before = _matched_targets(data)
+    typed = f"--tolerance {tolerance:g} --smoothing {smoothing} --latency {latency:g}"
+
+    def accept(results: list[tuple[Path, int, int]]) -> None:
+        kept, had = sum(r[2] for r in results), sum(before.get(r[0].name, 0) for r in results)
+        if not force and had and kept < LOSS_REFUSED * had:
+            raise UsageError(
+                f"{typed} would keep {kept} of the {had} matched targets (drop {had - kept}, "
+                f"{100 * (had - kept) / had:.0f} %); nothing was changed",
+                hint="pass --force to extract with these settings anyway",
+            )
+
+    for path, presses, matched in reextract_sessions([info.path for info in sessions], settings, accept):
+        was = before.get(path.name)
+        change = f" (was {was})" if was is not None and was != matched else ""
+        console.print(f"{path.name}: {presses} presses re-extracted, {matched} targets matched{change}")
+
+
+LOSS_REFUSED = 0.5  # extract refuses (without --force) settings that keep under this share of the matched targets
+
+
+def _matched_targets(data: Path) -> dict[str, int]:
+    """Matched targets of complete presses per session file, as ``inspect`` counts them."""
+    from unitac_rig.storage.summary import inspect_dataset
+
+    return {s["file"]: int(s["targets_matched"]) for s in inspect_dataset(data)["sessions"]}
 
 
 def objects_cmd(

@@ -7,6 +7,7 @@ ellipsis (long values fold onto a second line). The full numbers are in ``inspec
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -18,11 +19,13 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
+from unitac_rig.cli.paths import path_text, require_directory, require_writable_output
 from unitac_rig.cli.signals import termination_as_interrupt
 from unitac_rig.errors import DataError, UsageError
 from unitac_rig.interrupts import raise_if_interrupted
 
 console = Console()
+_DATA_HINT = "pass the --data folder you collected into"
 
 
 def _num(value: float | None, fmt: str, scale: float = 1.0) -> str:
@@ -57,6 +60,7 @@ def inspect_tables(report: dict[str, Any], data: Path) -> RenderableType:
         notes.append("* simulated rig")
     unverified = [s for s in sessions if s.get("integrity", "verified") != "verified"]
     notes.extend(f"{s['object']}/{s['sensor']}: {s['integrity']}" for s in unverified)
+    notes.extend(_resume_note(data, s) for s in sessions if _unfinished(s) and not s.get("writer"))
     writers = [s for s in sessions if s.get("writer")]
     if writers:
         notes.append(
@@ -71,6 +75,49 @@ def inspect_tables(report: dict[str, Any], data: Path) -> RenderableType:
     heading = Text("pairs joined across sensors on (rotation, angle, target)", style="italic")
     notes_text = Text("\n".join(notes), style="dim")
     return Group(Text(f"sessions in {data}", style="italic"), table, notes_text, Text(""), heading, pairs)
+
+
+def _unfinished(session: dict[str, Any]) -> bool:
+    """Fewer presses finished (complete or failed) than the session planned: an interrupted collection."""
+    return session["presses_complete"] + session["presses_failed"] < session["presses_planned"]
+
+
+def _resume_note(data: Path, session: dict[str, Any]) -> str:
+    """``hex_tpu/uskin: incomplete (13 of 91 presses finished); resume: unitac-rig collect ...``: the command that
+    plans the same presses again (the angle count it was collected with; the rig file when not simulated)."""
+    import shlex
+
+    from unitac_rig.storage.reader import read_session_info
+
+    finished = session["presses_complete"] + session["presses_failed"]
+    command = ["unitac-rig collect", f"--object {session['object']}", f"--sensor {session['sensor']}",
+               f"--data {shlex.quote(str(data))}"]  # fmt: skip
+    try:  # verified already by inspect in this process: only the attributes are read again
+        attrs = read_session_info(data / session["file"]).attrs
+        angles = attrs.get("config", {}).get("press", {}).get("angle_count")
+        rotations = attrs.get("rotations_deg") or []
+    except Exception:  # the file's damage is reported in its integrity note
+        angles, rotations = None, []
+    if angles is not None:
+        command.append(f"--angles {angles}")
+    if len(rotations) == 1 and len(_catalogue_rotations(session["object"])) != 1:  # collect --rotation R
+        command.append(f"--rotation {float(rotations[0]):g}")
+    if not session["simulated"]:
+        command.append("--rig RIG.toml")
+    return (
+        f"{session['object']}/{session['sensor']}: incomplete ({finished} of {session['presses_planned']} presses "
+        f"finished); resume: {' '.join(command)}"
+    )
+
+
+def _catalogue_rotations(object_id: str) -> tuple[float, ...]:
+    """The rotations the catalogue sweeps ``object_id`` at (none known for an object from another file)."""
+    from unitac_rig.rig.objects import get_object
+
+    try:
+        return tuple(get_object(object_id).rotations_deg)
+    except UsageError:
+        return ()
 
 
 def _watch(data: Path, interval: float, as_json: bool) -> None:
@@ -117,7 +164,7 @@ def _refresh_until_interrupted(frame: Callable[[], RenderableType], interval: fl
 
 
 def inspect(
-    data: Path = typer.Argument(..., help="Dataset directory."),
+    data: Path = typer.Argument(..., help="Dataset directory.", parser=path_text),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
     watch: bool = typer.Option(
         False, "--watch", help="Refresh until Ctrl-C; safe while a collection writes the directory."
@@ -128,10 +175,13 @@ def inspect(
     from unitac_rig.storage.summary import inspect_dataset
 
     if watch:
-        if interval <= 0:
-            raise UsageError(f"--interval must be positive, got {interval:g}")
+        if not (math.isfinite(interval) and interval > 0):
+            raise UsageError(f"--interval must be a positive number of seconds, got {interval:g}")
+        if data.exists() and not data.is_dir():  # a folder not created yet is waited for
+            require_directory(data, "DATA")
         _watch(data, interval, as_json)
         return
+    require_directory(data, "DATA", hint=_DATA_HINT)
     report = inspect_dataset(data)
     if as_json:
         typer.echo(json.dumps(report, indent=1))
@@ -140,20 +190,38 @@ def inspect(
 
 
 def export(
-    data: list[Path] = typer.Argument(..., help="Dataset directories to pool (each one a collect/campaign --data)."),
-    out: Path = typer.Option(..., "--out", help="New directory to write the export into (must not hold files)."),
+    data: list[Path] = typer.Argument(
+        ..., help="Dataset directories to pool (each one a collect/campaign --data).", parser=path_text
+    ),
+    out: Path = typer.Option(
+        ..., "--out", help="New directory to write the export into (must not hold files).", parser=path_text
+    ),
     fmt: str = typer.Option(
-        "parquet", "--format", help="parquet (the paired dataset) or lerobot (every press, LeRobotDataset v3)."
+        "parquet",
+        "--format",
+        help="parquet (the paired dataset), lerobot (every press, LeRobotDataset v3) or rosbag2 "
+        "(each session as a ROS 2 bag, MCAP).",
     ),
 ) -> None:
     """Write the force-matched paired dataset as Parquet, the raw sessions, a dataset card and manifest.json
     (--format lerobot: one LeRobotDataset v3 per sensor, a press per episode, see docs/dataset.md)."""
-    if fmt not in ("parquet", "lerobot"):
-        raise UsageError(f"--format {fmt}: unknown export format", hint="use parquet or lerobot")
+    if fmt not in ("parquet", "lerobot", "rosbag2"):
+        raise UsageError(f"--format {fmt}: unknown export format", hint="use parquet, lerobot or rosbag2")
     if out.exists() and (not out.is_dir() or any(out.iterdir())):  # a usage error like export-model's: exit 2
         raise UsageError(f"--out {out} already exists and is not an empty directory", hint="choose a new --out")
+    for folder in data:
+        require_directory(folder, "DATA", hint=_DATA_HINT)
+    require_writable_output(out, "--out")
     if fmt == "lerobot":
         _export_lerobot(data, out)
+        return
+    if fmt == "rosbag2":
+        from unitac_rig.storage.rosbag import export_rosbag2
+
+        bags = export_rosbag2(data, out)
+        for name, topics in bags.bags.items():
+            console.print(f"{out / name}: " + ", ".join(f"{t} {n}" for t, n in topics.items()), soft_wrap=True)
+        console.print(f"{len(bags.bags)} bags (MCAP), {bags.bytes / 1e6:.1f} MB; open with ros2 bag info or Foxglove")
         return
     from unitac_rig.storage.export import export_dataset
 
@@ -186,12 +254,15 @@ def _export_lerobot(data: list[Path], out: Path) -> None:
 
 
 def verify(
-    directory: Path = typer.Argument(..., metavar="DIR", help="An export directory (holds manifest.json)."),
+    directory: Path = typer.Argument(
+        ..., metavar="DIR", help="An export directory (holds manifest.json).", parser=path_text
+    ),
 ) -> None:
     """Check every file of an export against manifest.json (size and SHA-256); exit 1 at the first mismatch or at
     a file the manifest does not list."""
     from unitac_rig.storage.manifest import verify_manifest
 
+    require_directory(directory, "DIR", hint="pass a directory written by `unitac-rig export`")
     report = verify_manifest(directory)
     console.print(f"ok: {report.files} files, {report.bytes / 1e6:.1f} MB match {directory / 'manifest.json'}")
 

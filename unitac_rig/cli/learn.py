@@ -28,6 +28,33 @@ def stage_printer(console: Any) -> Any:
     return on_stage
 
 
+def kept_run_line(run: Path, data: list[Path]) -> str:
+    """What an interrupted ``train`` kept (its checkpoint's epoch, read back from disk) and the command that goes
+    on from there."""
+    import shlex
+
+    from unitac_rig.learning.run import checkpoint_path, load_checkpoint
+
+    if not checkpoint_path(run).is_file():
+        return "train: interrupted before the first checkpoint, nothing kept; run the same command to start again"
+    payload = load_checkpoint(run)
+    planned = payload.get("config", {}).get("epochs", "?")
+    command = " ".join(["unitac-rig train", *(f"--data {shlex.quote(str(d))}" for d in data),
+                        f"--out {shlex.quote(str(run))}", "--resume"])  # fmt: skip
+    return f"train: interrupted; kept epoch {payload.get('epoch', '?')}/{planned} in {run}; go on with: {command}"
+
+
+def report_interrupted_line(run: Path) -> str:
+    """What an interrupted report kept: the run as it was (its metrics.json and report.md are written together at
+    the end), and the command that writes them."""
+    import shlex
+
+    return (
+        f"report: interrupted; {run}/metrics.json and report.md are as they were; "
+        f"write them with: unitac-rig report {shlex.quote(str(run))}"
+    )
+
+
 def report_command(
     run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Redraw the figures too."),
@@ -45,9 +72,13 @@ def report_command(
 
     _require_run(run)
     console = Console()
-    path = write_report(
-        run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range, on_stage=stage_printer(console)
-    )
+    try:
+        on_stage = stage_printer(console)
+        path = write_report(run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range,
+                            on_stage=on_stage)  # fmt: skip
+    except KeyboardInterrupt:
+        typer.echo(report_interrupted_line(run), err=True)
+        raise
     _print_table(console, run)
     console.print(f"report: {path}")
 
@@ -312,13 +343,19 @@ def export_model_command(
     ),
     out: Path = typer.Option(..., "--out", help="New directory for the networks, config/model.json and README.md."),
     member: int = typer.Option(0, "--member", help="Which seed of a multi-seed run (index)."),
+    push_to_hub: str | None = typer.Option(
+        None, "--push-to-hub", metavar="REPO", help="Then upload it to this Hugging Face Hub model repo (safetensors)."
+    ),
 ) -> None:
     """Write each sensor's encoder and decoder (normaliser folded in: sensor units in and out) with a model card."""
     from rich.console import Console
 
+    from unitac_rig.errors import UsageError
     from unitac_rig.learning.export import CARD_NAME, MODEL_JSON, export_model
     from unitac_rig.learning.safetensors_export import CONFIG_NAME
 
+    if push_to_hub is not None and fmt != "safetensors":
+        raise UsageError("--push-to-hub uploads the Hub layout only", hint="drop --format or use --format safetensors")
     document = export_model(run, out, fmt, member)
     console = Console()
     console.print(f"exported {run} (member {member}, seed {document['seed']}) as {fmt} -> {out}")
@@ -329,6 +366,10 @@ def export_model_command(
         )
     config = CONFIG_NAME if fmt == "safetensors" else MODEL_JSON
     console.print(f"  {config}, {CARD_NAME} (model card: data hash, metrics, intended use, limits, loading)")
+    if push_to_hub is not None:
+        from unitac_rig.learning.safetensors_export import push_to_hub as push
+
+        console.print(f"pushed to https://huggingface.co/{push_to_hub}: {push(out, push_to_hub)}")
 
 
 def register(app: typer.Typer) -> None:

@@ -19,7 +19,17 @@ import typer
 from pydantic import ValidationError
 from pydantic.fields import FieldInfo
 
-from unitac_rig.cli.learn import DEVICES, RUN_MARKER, _print_table, stage_printer
+from unitac_rig.cli.learn import (
+    DEVICES,
+    RUN_MARKER,
+    _print_table,
+    kept_run_line,
+    report_interrupted_line,
+    stage_printer,
+)
+from unitac_rig.cli.pace import Pace
+from unitac_rig.cli.paths import require_writable_output
+from unitac_rig.cli.signals import termination_as_interrupt
 from unitac_rig.errors import UsageError
 from unitac_rig.learning import config as train_config
 from unitac_rig.rig.config import read_toml
@@ -136,6 +146,8 @@ def check_train_arguments(data: list[Path], out: Path, resume: bool, device: str
         raise UsageError(
             f"--out {out} is not empty and holds no run", hint="a run writes a folder of its own: choose a new --out"
         )
+    else:
+        require_writable_output(out, "--out")  # /proc/x or a read-only disk: refused before minutes of training
 
 
 @dataclass(frozen=True)
@@ -376,22 +388,31 @@ def run_train(ctx: typer.Context, request: TrainRequest) -> None:
     console = Console()
     dataset = _paired_dataset(request, console)
     total = request.epochs if config is None else config.epochs
-    with _progress(console, "[bold]train") as progress:
-        task = progress.add_task("train", total=total, status="")
-        outcome = train(
-            dataset,
-            request.out,
-            config,
-            device=request.device,
-            threads=request.threads or None,
-            resume=request.resume,
-            epochs=request.epochs if request.resume else None,
-            progress=_epoch_printer(console, progress, task, total),
-        )
-        progress.update(task, total=outcome.epochs_done)
+    try:
+        # Ctrl-C / SIGTERM wait for the end of the epoch (train() then checkpoints it); a second one stops at once
+        with _progress(console, "[bold]train") as progress, termination_as_interrupt():
+            task = progress.add_task("train", total=total, status="")
+            outcome = train(
+                dataset,
+                request.out,
+                config,
+                device=request.device,
+                threads=request.threads or None,
+                resume=request.resume,
+                epochs=request.epochs if request.resume else None,
+                progress=_epoch_printer(console, progress, task, total),
+            )
+            progress.update(task, total=outcome.epochs_done)
+    except KeyboardInterrupt:
+        typer.echo(kept_run_line(request.out, request.data), err=True)
+        raise
     console.print(f"trained {outcome.epochs_done} epochs in {outcome.train_seconds:.1f} s -> {request.out}")
     if request.report:
-        path = write_report(request.out, run=load_run(request.out), on_stage=stage_printer(console))
+        try:
+            path = write_report(request.out, run=load_run(request.out), on_stage=stage_printer(console))
+        except KeyboardInterrupt:  # the run is trained and checkpointed: only its report is missing
+            typer.echo(report_interrupted_line(request.out), err=True)
+            raise
         _print_table(console, request.out)
         console.print(f"report: {path}")
 
@@ -434,9 +455,10 @@ def _epoch_printer(console: Any, progress: Any, task: Any, total: int | None) ->
     directions and the latent alignment), and a line every few seconds when the output is a log."""
     from unitac_rig.learning.metric_table import METRICS, frame_metrics
 
-    primary, lines = frame_metrics()[0], EveryFewSeconds()
+    primary, lines, pace = frame_metrics()[0], EveryFewSeconds(), Pace()
 
     def on_epoch(record: dict[str, Any]) -> None:
+        pace.update(record["epoch"])
         status = ""
         scored = record.get("val") or record.get("test") or {}
         seen = scored.get("seen") or scored.get("all")
@@ -449,7 +471,9 @@ def _epoch_printer(console: Any, progress: Any, task: Any, total: int | None) ->
                 status += f" (ratio {seen['latent_ratio'][0]:.2f})"
         progress.update(task, completed=record["epoch"], status=status)
         if not console.is_terminal and lines.due(last=record["epoch"] == total):
-            console.print(f"train: epoch {record['epoch']}/{total} {status}".rstrip(), soft_wrap=True)
+            left = pace.left_text(total) if total else ""  # at this run's pace (the bar shows its own)
+            line = f"train: epoch {record['epoch']}/{total} {status}".rstrip() + (f", {left}" if left else "")
+            console.print(line, soft_wrap=True)
 
     return on_epoch
 

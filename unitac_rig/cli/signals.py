@@ -68,14 +68,25 @@ def termination_as_interrupt(*, defer: bool = True) -> Iterator[None]:
         forget_interrupts()  # the interrupt (if any) has propagated; nothing after the scope may see it again
 
 
+class StopRequest(threading.Event):
+    """Set by the first Ctrl-C, SIGTERM or SIGHUP; ``signal_number`` says which (None while unset)."""
+
+    signal_number: int | None = None
+
+
 @contextlib.contextmanager
-def stop_on_signals() -> Iterator[threading.Event]:
+def stop_on_signals() -> Iterator[StopRequest]:
     """An event that Ctrl-C, SIGTERM and SIGHUP set for the duration, instead of raising: a serving loop that moves
-    no arm (``twin``, ``stream``) polls it and ends cleanly, closing what it opened. The previous handlers are
-    restored after. Main thread only."""
-    stop = threading.Event()
+    no arm (``twin``, ``stream``) polls it and ends cleanly, closing what it opened, and may then end the command
+    as interrupted (``raise interrupt_for(stop.signal_number)``: exit 130, or 128 + the signal). The previous
+    handlers are restored after. Main thread only."""
+    stop = StopRequest()
 
     def on_signal(signal_number: int, frame: FrameType | None) -> None:
+        if stop.signal_number is None:
+            stop.signal_number = signal_number
+            if signal_number != signal.SIGINT:
+                _received.append(signal_number)  # the CLI's exit status names it (see app.main)
         stop.set()
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, *TERMINATION_SIGNALS)}

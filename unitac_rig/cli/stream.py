@@ -5,7 +5,9 @@ Reads the sensor the rig file names (``--rig``; detected when the file lists sev
 one JSON line per frame to stdout, or to the one client of ``--listen 127.0.0.1:PORT``: the frame's latent, the frame
 translated into every other sensor of the run, and the contact-geometry estimate when the run has a fitted one
 (``unitac-rig geometry RUN``). Until Ctrl-C, ``--frames`` or ``--duration``; then a summary (frames, device-counter
-gaps, latency from the frame's host timestamp to the line written) on stderr and in ``--summary``.
+gaps, the rate achieved, latency from the frame's host timestamp to the line written, the warm-up backlog apart) on
+stderr and in ``--summary``. Ctrl-C (or SIGTERM / SIGHUP) still writes the summary, then exits 130 (143 / 129).
+The fields of a line are documented in docs/use-your-model-on-the-robot.md.
 """
 
 from __future__ import annotations
@@ -24,6 +26,9 @@ import typer
 
 from unitac_rig.cli.signals import stop_on_signals
 from unitac_rig.errors import UsageError
+from unitac_rig.interrupts import interrupt_for
+
+RATE_WARNING = 0.9  # warn when the steady-state rate falls below this share of --rate
 
 
 def _listen_address(text: str) -> tuple[str, int]:
@@ -133,7 +138,13 @@ def stream_command(
     summary_path: Path = typer.Option(None, "--summary", help="Also write the summary (JSON) here."),
     geometry: bool = typer.Option(True, "--geometry/--no-geometry", help="Add the run's geometry estimate."),
 ) -> None:
-    """Stream the mounted sensor through the run live: latent, translations (and geometry) per frame, JSON lines."""
+    """Stream the mounted sensor through the run live: latent, translations (and geometry) per frame, JSON lines.
+
+    Each line also carries the tared frame, its time on the monotonic (host_t_ns) and the wall clock (unix_t_ns),
+    and "warmup": true on the backlog of the first lines (docs/use-your-model-on-the-robot.md). The summary
+    (stderr, --summary) gives the rate achieved, with a warning under 90 % of --rate. Ctrl-C ends the stream
+    after its summary, exit 130.
+    """
     from unitac_rig.learning.live import LiveModel, live_sensor, stream_frames
 
     if (rig_file is None) == (not simulated):
@@ -155,7 +166,7 @@ def stream_command(
                 f", geometry from the MLP trained on {model.geometry_meta['trained_on']}" if model.geometry_meta else ""
             )
             typer.echo(
-                f"stream: {name} -> latent {model.encoder.weights[-1].shape[1]}, "
+                f"stream: {name} -> latent {model.latent_dim}, "
                 f"{', '.join(model.targets) or 'no other sensor'}{extra}; taring on {tare_frames} frames "
                 "(keep the pad unloaded)",
                 err=True,
@@ -171,19 +182,41 @@ def stream_command(
                     ) from None
             health = driver.health().as_dict() if hasattr(driver, "health") else {}
     except KeyboardInterrupt:
-        typer.echo("stream: stopped before the first frame", err=True)
-        return
+        typer.echo("stream: stopped before the first frame, nothing written; run the same command to start", err=True)
+        raise
     summary = {"run": str(run), "sensor": name, "targets": list(model.targets), **stats.summary(), "driver": health,
-               "finished_unix": time.time()}  # fmt: skip
-    latency = summary["latency_ms"]
-    typer.echo(
-        f"stream: {summary['frames_out']} frames in {summary['seconds']:.1f} s, {summary['seq_gaps']} lost by the "
-        f"device counter; latency (host ms, frame stamped -> line written) median "
-        f"{_ms(latency['median'])}, p99 {_ms(latency['p99'])}, max {_ms(latency['max'])}",
-        err=True,
-    )
+               "asked_rate_hz": rate_hz, "finished_unix": time.time()}  # fmt: skip
+    for line in summary_lines(summary):
+        typer.echo(line, err=True)
     if summary_path is not None:
         summary_path.write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+    if stop.signal_number is not None:
+        kept = f"; the summary is in {summary_path}" if summary_path is not None else ""
+        lines = summary["frames_out"]
+        typer.echo(f"stream: stopped after {lines} lines{kept}; run the same command to go on", err=True)
+        raise interrupt_for(stop.signal_number)
+
+
+def summary_lines(summary: dict[str, Any]) -> list[str]:
+    """The summary on stderr: frames, the rate achieved (a warning under 90 % of ``--rate``), the steady-state
+    latency, and the warm-up backlog apart."""
+    latency, warmup, rate = summary["latency_ms"], summary["warmup"], summary["rate_hz"]
+    asked = summary.get("asked_rate_hz")
+    rate_text = "-" if rate is None else f"{rate:.0f} Hz"
+    lines = [
+        f"stream: {summary['frames_out']} frames in {summary['seconds']:.1f} s at {rate_text}"
+        + (f" (asked {asked} Hz)" if asked else "")
+        + f", {summary['seq_gaps']} lost by the device counter; latency after the warm-up (host ms, frame stamped "
+        f"-> line written) median {_ms(latency['median'])}, p99 {_ms(latency['p99'])}, max {_ms(latency['max'])}",
+        f'stream: warm-up backlog {warmup["frames"]} lines in {warmup["seconds"]:.2f} s (marked "warmup": true), '
+        f"latency max {_ms(warmup['latency_ms']['max'])} ms",
+    ]
+    if asked and rate is not None and rate < RATE_WARNING * asked:
+        lines.append(
+            f"warning: the sensor delivered {rate:.0f} Hz, {100 * rate / asked:.0f} % of the {asked} Hz asked (the "
+            "device, its link or this host cannot keep up; see the driver's health in --summary)"
+        )
+    return lines
 
 
 def _ms(value: float | None) -> str:

@@ -33,7 +33,7 @@ from drivers.frames import TactileFrame
 from drivers.motion import move_to, stop_arm, wait_until_at_rest
 from drivers.sensor import TactileSensor
 from unitac_rig.collection.strategy import PressContext, press_strategy
-from unitac_rig.collection.streams import PressStreams, TickInfo, TravelLimit
+from unitac_rig.collection.streams import OffAxisLimit, PressStreams, TickInfo, TravelLimit
 from unitac_rig.collection.transit import (
     TRANSIT_ACCEL_M_S2,
     UNLOADED_FORCE_N,
@@ -108,18 +108,22 @@ def zero_wrist(
     *,
     check_unloaded: bool = True,
     check_s: float | None = None,
+    reference: np.ndarray | None = None,
 ) -> tuple[list[TactileFrame], np.ndarray]:
     """Zero the wrist F/T at rest after settling, refusing when the pad is loaded; -> (frames of both windows,
     wrenches (K, 6) of the ``settle_s`` window after the zero, whose mean is the host-side offset left over: a zero
     from one noisy sample is off). ``check_s``: the window before the zero (None: ``settle_s``).
 
-    The unloaded check uses the mean force since the previous zero (a UR's F/T drifts by well under
-    ``UNLOADED_FORCE_N`` between presses), so the session's first zero (``check_unloaded=False``) relies on the
-    stand-off being clear of the object by construction. After zeroing, the window's mean must be near zero.
+    The unloaded check compares the mean wrench with ``reference`` (6,), an unloaded reading (the session's first
+    zero passes the free reading its back-off found, collection/wrist.py); without one, with the controller's zero,
+    which the last zero set on an unloaded pad (a UR's F/T drifts by well under ``UNLOADED_FORCE_N`` between
+    presses). ``check_unloaded=False`` skips it: only for a caller that proved the pad free itself. After zeroing,
+    the window's mean must be near zero.
     """
     wait_until_at_rest(arm)
     before, mean_wrench = settle_frames(arm, sensor, settle_s if check_s is None else check_s)
-    mean_force = float(np.linalg.norm(mean_wrench[:3]))
+    loaded = mean_wrench[:3] if reference is None else mean_wrench[:3] - np.asarray(reference, dtype=np.float64)[:3]
+    mean_force = float(np.linalg.norm(loaded))
     if check_unloaded and mean_force > UNLOADED_FORCE_N:
         raise SafetyLimit(
             f"wrist reads {mean_force:.2f} N at {where}: the pad is touching something, refusing to zero the F/T",
@@ -190,8 +194,8 @@ def run_press(
         streams.phase = "retract"
         _retract(arm, streams, plan, press)
     except TravelLimit as exc:
-        status, reason = "failed", "travel"
-        streams.event("stop", f"travel limit: {exc}")
+        status, reason = "failed", "off_axis" if isinstance(exc, OffAxisLimit) else "travel"
+        streams.event("stop", f"{reason.replace('_', '-')} limit: {exc}")
         stop_arm(arm)
         _retract_quietly(arm, streams, plan, press)
     except (SafetyLimit, ProtectiveStop, DeviceError, KeyboardInterrupt) as exc:
@@ -262,6 +266,22 @@ def _retract(arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfi
     streams.hold(0.02)
 
 
+PEAK_WINDOW = 10  # the recorded peak is of |mean wrench| over this many readings (20 ms at 500 Hz)
+
+
+def peak_force_magnitude_n(robot_force: np.ndarray) -> float:
+    """The press's peak |F| (N) over all three force axes, of the wrench's moving mean over ``PEAK_WINDOW``
+    readings: a UR's filtered reading still has ~0.4 N of noise per axis, whose extremes would add ~1.2 N to a peak
+    of single readings; 20 ms is short against a press's stop and dwell (hundreds of ms), so the true peak is kept."""
+    forces = np.asarray(robot_force, dtype=np.float64).reshape(-1, 6)[:, :3]
+    if not forces.size:
+        return 0.0
+    window = min(PEAK_WINDOW, len(forces))
+    sums = np.cumsum(np.vstack([np.zeros(3), forces]), axis=0)
+    means = (sums[window:] - sums[:-window]) / window
+    return float(np.linalg.norm(means, axis=1).max())
+
+
 def contact_travel_mm(contact_pose: np.ndarray | None, plan: PressPlan) -> float:
     """Travel (mm) from the stand-off to where the press first felt the object (NaN: never): the stand-off distance
     when the object stands where the rig file says."""
@@ -299,7 +319,8 @@ def _to_record(
             if f.displacement_mm is not None:
                 disp[i] = f.displacement_mm
     pf = np.asarray(streams.press_force)
-    peak = float(pf.max()) if pf.size else 0.0
+    robot_force = np.asarray(streams.robot_force).reshape(-1, 6)
+    peak = peak_force_magnitude_n(robot_force)
     t = np.asarray(streams.robot_t)
     return PressRecord(
         press_id=plan.press_id,
@@ -308,7 +329,7 @@ def _to_record(
         status=status,
         reason=reason,
         robot_t_s=t,
-        robot_force=np.asarray(streams.robot_force).reshape(-1, 6),
+        robot_force=robot_force,
         robot_pose=np.asarray(streams.robot_pose).reshape(-1, 6),
         press_force_n=pf,
         tactile_t_s=np.array([f.host_t_ns / 1e9 for f in frames]),
@@ -328,7 +349,8 @@ def _to_record(
             "force_setpoint_n": press.threshold_n + press.setpoint_margin_n,
             "stop_samples": press.stop_samples,
             "contact_threshold_n": streams.contact_threshold_n,
-            "peak_force_n": peak,
+            "peak_force_n": peak,  # |F| over every force axis: what the wrist felt
+            "peak_press_force_n": float(pf.max()) if pf.size else 0.0,  # along the press axis only
             "overshoot_n": peak - press.threshold_n,
             "max_host_gap_s": streams.max_gap_s,
             "duration_s": float(t[-1] - t[0]) if t.size else 0.0,

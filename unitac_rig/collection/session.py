@@ -5,8 +5,9 @@ already finished in the session file (complete or failed) are skipped, so the sa
 a Ctrl-C, a termination signal or a protective stop. Library code: no printing; progress goes through callbacks the
 CLI renders.
 
-Before the first motion the whole plan is checked: every stand-off, clearance and retract waypoint of every press
-and rotation against the workspace box and the arm's reach (one line names the first outside).
+Before the first motion the whole plan is checked: the arm's start pose, every stand-off (the confirmed one too),
+clearance and retract waypoint and the whole press travel of every press and rotation against the workspace box and
+the arm's reach (one line names the first outside).
 
 When the session stops instead of carrying on blind: a protective stop (the operator must clear it on the pendant),
 the controller's program stopping (the watchdog after a host stall), a lost robot state stream, a hard force limit,
@@ -48,7 +49,8 @@ from unitac_rig.collection.transit import (
     transit_guard,
     with_standoff,
 )
-from unitac_rig.errors import CarriesPressRecord, SafetyLimit
+from unitac_rig.collection.wrist import Unloaded, load_left_note, read_zero, unload_wrist, write_zero
+from unitac_rig.errors import CarriesPressRecord, SafetyLimit, UnitacError
 from unitac_rig.interrupts import acknowledged_interrupts, raise_if_interrupted
 from unitac_rig.provenance import git_commit, package_version
 from unitac_rig.rig.base import Rig
@@ -88,6 +90,10 @@ class SessionOutcome:
     stopped: str | None = None  # why the session ended early, if it did
     recovery_notes: list[str] = field(default_factory=list)
     failure_streak: int = 0  # presses in a row so far that did not complete
+    # the wrist reading (6,) right after the session's last unloaded zero (collection/wrist.py): what "unloaded"
+    # reads, to say the load every way out of a fault leaves on the pad
+    wrist_zero: np.ndarray | None = None
+    last_reason: str | None = None  # how the last press of this run ended ("aborted: no_contact", ...)
 
     @property
     def finished(self) -> bool:
@@ -149,17 +155,20 @@ def collect_session(
     done = writer.finished_press_ids()
     outcome = SessionOutcome(obj.id, sensor_name, writer.path, planned=len(plans), recovery_notes=writer.recovery_notes)
     outcome.already_done = sum(p.press_id in done for p in plans)
+    outcome.wrist_zero = read_zero(writer.journal)  # a resume after a crash: the last unloaded zero it knew
     todo = [p for p in plans if p.press_id not in done]
     if max_presses is not None:
         todo = todo[:max_presses]
     if not todo:
         return outcome
 
-    # Once the arm is connected its watchdog must be fed: the slow steps before the first press (opening a port,
-    # rewriting the session file on resume) run kept alive, or the controller stops the program under them.
+    # At rest the driver holds the watchdog at a 10 s window (drivers/ur5e.py), so set-up cannot trip it; the slow
+    # steps before the first press (opening a port, rewriting the session file on resume) still run kept alive, for
+    # one that takes longer than that (a slow disk, a device that does not answer).
     try:
         arm = rig.arm
-        check_session_plan(arm.read_state().tcp_pose, todo, config.object.clearance_mm / 1000.0, config.limits)
+        check_session_plan(arm.read_state().tcp_pose, todo, config.object.clearance_mm / 1000.0, config.limits,
+                           confirmed_standoff_mm(config))  # fmt: skip
         with _kept_alive(arm):  # python-can's slcan alone waits 2 s after opening the port
             sensor = rig.open_sensor(sensor_name)
     except BaseException:
@@ -170,50 +179,97 @@ def collect_session(
             with _kept_alive(arm):
                 writer.update_root_attrs({"sensor_identity": sensor.identity(), "layout": sensor.layout.name})
             rig.mount(obj, todo[0].rotation_deg, sensor_name)
-            tare = _first_move_and_tare(rig, sensor, todo[0])
+            tare = _first_move_and_tare(rig, sensor, todo[0], outcome)
             with _kept_alive(arm):  # republishes the session file (moves a single-file session's presses out first)
                 writer.update_root_attrs({"session_tare": tare})
-        except BaseException:
+                outcome.wrist_zero = np.asarray(tare["ft_zero_offset"], dtype=np.float64)
+                write_zero(writer.journal, outcome.wrist_zero)
+        except BaseException as exc:
             writer.discard_if_unused()  # nor may an arm or sensor that fails before the first press
+            _say_load_left(rig, exc, outcome)
             raise
-        current_rotation: float | None = None
-        previous: PressPlan | None = None
-        stop = False
-        confirmed = False  # a press has found the object where the rig file says (since the last turn)
-        limit = config.limits.max_failed_in_a_row
-        for index, plan in enumerate(todo):
-            raise_if_interrupted()
-            if plan.rotation_deg != current_rotation:
-                confirmed = False  # the placement is unknown again after the object is turned
-                if previous is not None:  # out to the clearance radius before anyone turns the object by hand
-                    _retract_from_object(rig, previous)
-                rig.mount(obj, plan.rotation_deg, sensor_name)
-                if ask_operator is not None and not rig.simulated and len(rotations) > 1:
-                    with rig.arm.keep_alive():
-                        ask_operator(f"Turn {obj.id} to {plan.rotation_deg:g} deg on its mount, then press Enter.")
-                current_rotation = plan.rotation_deg
-            if confirmed:  # the object stands where measured: a shorter free-air approach (and return to it)
-                plan = with_standoff(plan, confirmed_standoff_mm(config))
-            record, stop = _one_press(rig, sensor, plan, writer, extraction, outcome, on_tick,
-                                      moves_limits(config, confirmed))  # fmt: skip
-            previous = plan
-            confirmed = confirmed or (record is not None and placement_confirmed(record, config))
-            if on_press is not None and record is not None:
-                matched = 0 if record.extraction is None else record.extraction.n_matched
-                with rig.arm.keep_alive():
-                    on_press(PressDone(outcome.already_done + index + 1, outcome.planned, record, matched))
-            if record is not None:
-                outcome.failure_streak = outcome.failure_streak + 1 if record.status != "complete" else 0
-            if outcome.failure_streak >= limit:
-                outcome.stopped = _failed_in_a_row(config, obj, plan, record)
-                break
-            if stop:
-                break
-        if previous is not None and not stop:  # the stops above retracted already
-            _retract(rig, previous)  # out to the clearance radius: the operator swaps the sensor or object next
+        try:
+            _press_all(rig, obj, sensor, sensor_name, todo, writer, extraction, outcome, on_press, on_tick,
+                       ask_operator, len(rotations))  # fmt: skip
+        except BaseException as exc:
+            _say_load_left(rig, exc, outcome)
+            raise
+        if outcome.stopped is None and outcome.complete == 0 and outcome.failed + outcome.aborted > 0:
+            outcome.stopped = _pressed_nothing(config, obj, outcome)
+        if outcome.stopped is not None:
+            outcome.stopped += load_left_note(rig.arm, outcome.wrist_zero)
     finally:
         sensor.disconnect()
     return outcome
+
+
+def _press_all(
+    rig: Rig,
+    obj: ObjectSpec,
+    sensor: TactileSensor,
+    sensor_name: str,
+    todo: list[PressPlan],
+    writer: SessionWriter,
+    extraction: ExtractionSettings,
+    outcome: SessionOutcome,
+    on_press: Callable[[PressDone], None] | None,
+    on_tick: Callable[[TickInfo], None] | None,
+    ask_operator: Callable[[str], None] | None,
+    n_rotations: int,
+) -> None:
+    """Every press of ``todo`` in order, the object turned between rotations; stops as :func:`collect_session` says."""
+    config = rig.config
+    current_rotation: float | None = None
+    previous: PressPlan | None = None
+    stop = False
+    confirmed = False  # a press has found the object where the rig file says (since the last turn)
+    limit = config.limits.max_failed_in_a_row
+    for index, plan in enumerate(todo):
+        raise_if_interrupted()
+        if plan.rotation_deg != current_rotation:
+            confirmed = False  # the placement is unknown again after the object is turned
+            if previous is not None:  # out to the clearance radius before anyone turns the object by hand
+                _retract_from_object(rig, previous)
+            rig.mount(obj, plan.rotation_deg, sensor_name)
+            if ask_operator is not None and not rig.simulated and n_rotations > 1:
+                with rig.arm.keep_alive():
+                    ask_operator(f"Turn {obj.id} to {plan.rotation_deg:g} deg on its mount, then press Enter.")
+            current_rotation = plan.rotation_deg
+        if confirmed:  # the object stands where measured: a shorter free-air approach (and return to it)
+            plan = with_standoff(plan, confirmed_standoff_mm(config))
+        record, stop = _one_press(rig, sensor, plan, writer, extraction, outcome, on_tick,
+                                  moves_limits(config, confirmed))  # fmt: skip
+        previous = plan
+        confirmed = confirmed or (record is not None and placement_confirmed(record, config))
+        if on_press is not None and record is not None:
+            matched = 0 if record.extraction is None else record.extraction.n_matched
+            with rig.arm.keep_alive():
+                on_press(PressDone(outcome.already_done + index + 1, outcome.planned, record, matched))
+        if record is not None:
+            outcome.failure_streak = outcome.failure_streak + 1 if record.status != "complete" else 0
+            outcome.last_reason = record_reason(record)
+        if outcome.failure_streak >= limit:
+            outcome.stopped = _failed_in_a_row(config, obj, plan, record)
+            break
+        if stop:
+            break
+    if previous is not None and not stop:  # the stops above retracted already
+        _retract(rig, previous)  # out to the clearance radius: the operator swaps the sensor or object next
+
+
+def _say_load_left(rig: Rig, exc: BaseException, outcome: SessionOutcome) -> None:
+    """Add the load the pad is left under to a fault's one line (a project error's message; else the log), so every
+    way out of a fault says whether the pad still presses on something."""
+    note = load_left_note(rig.arm, outcome.wrist_zero)
+    if not note:
+        return
+    if isinstance(exc, UnitacError) and exc.args and isinstance(exc.args[0], str):
+        exc.args = (exc.args[0] + note, *exc.args[1:])
+    else:  # Ctrl-C and the signals taken like it: the CLI adds it to the line saying what was kept
+        exc.load_note = note  # type: ignore[attr-defined]
+        log.info("the session stopped (%s)%s", type(exc).__name__, note)
+    if outcome.stopped is not None:
+        outcome.stopped += note
 
 
 def session_attrs(
@@ -226,10 +282,13 @@ def session_attrs(
 ) -> dict[str, Any]:
     """The session file's root attributes: what was planned, with which rig, settings and code."""
     config = rig.config
+    imperfections = getattr(rig, "imperfections", None)  # the simulated rig's (sim/imperfections.py)
+    twin = {"sim_imperfections": imperfections.text} if rig.simulated and imperfections is not None else {}
     return {
         "object": obj.id,
         "sensor": sensor_name,
         "simulated": rig.simulated,
+        **twin,
         "rig": config.name,
         "config": config.model_dump(mode="json"),
         "object_spec": {"id": obj.id, "shape": obj.shape, "material": obj.material, "outer_mm": obj.outer_mm},
@@ -242,6 +301,15 @@ def session_attrs(
     }
 
 
+def _pressed_nothing(config: RigConfig, obj: ObjectSpec, outcome: SessionOutcome) -> str:
+    """Why a run whose presses all ended without completing is a failure, not a finished session (one line)."""
+    return (
+        f"no press completed ({outcome.failed} failed, {outcome.aborted} aborted; the last {outcome.last_reason}): "
+        f"is {obj.id} mounted at object.center_m = {list(config.object.center_m)}, press_height_m = "
+        f"{config.object.press_height_m} as the rig file says?"
+    )
+
+
 def _failed_in_a_row(config: RigConfig, obj: ObjectSpec, plan: PressPlan, record: PressRecord | None) -> str:
     """Why the session stopped after ``limits.max_failed_in_a_row`` presses in a row did not complete."""
     limit = config.limits.max_failed_in_a_row
@@ -252,11 +320,16 @@ def _failed_in_a_row(config: RigConfig, obj: ObjectSpec, plan: PressPlan, record
     )
 
 
-def _first_move_and_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> dict[str, Any]:
+def _first_move_and_tare(rig: Rig, sensor: TactileSensor, first: PressPlan, outcome: SessionOutcome) -> dict[str, Any]:
     """:func:`session_tare`, retracting from where the arm is if the first move or the zero is aborted (the pad
-    touched something on the way: the object is not where the rig file says)."""
+    touched something on the way: the object is not where the rig file says). A pad found loaded at the start is
+    noted in ``outcome.recovery_notes``."""
     try:
-        return session_tare(rig, sensor, first)
+        free = unload_wrist(rig.arm, rig.config.limits, zero=outcome.wrist_zero)
+        outcome.wrist_zero = free.free_reading  # what unloaded reads now, for the load a fault leaves
+        if free.was_loaded:
+            outcome.recovery_notes.append(free.describe())
+        return session_tare(rig, sensor, first, free=free)
     except KeyboardInterrupt:
         with acknowledged_interrupts():
             _retract(rig, first, to_clearance=False)
@@ -308,16 +381,24 @@ def record_reason(record: PressRecord | None) -> str:
     return "not recorded" if record is None else f"{record.status}: {record.reason}"
 
 
-def session_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> dict[str, Any]:
+def session_tare(
+    rig: Rig, sensor: TactileSensor, first: PressPlan, *, zero: np.ndarray | None = None, free: Unloaded | None = None
+) -> dict[str, Any]:
     """Zero the wrist F/T and tare the sensor (device bias where it has one) at the first stand-off pose.
 
-    The stand-off is clear of the object by construction (the object's outline plus the stand-off gap), so this is
-    the one moment the session can assume the pad is unloaded without a previous zero to check against.
+    Never on a loaded wrist: before any motion toward the object the pad backs off along its axis until the reading
+    stops changing (:func:`~unitac_rig.collection.wrist.unload_wrist`; ``zero`` is the session's remembered unloaded
+    reading, None on a first session; ``free``: what a back-off the caller ran found), and the zero at the stand-off
+    is refused when the reading there is more than ``UNLOADED_FORCE_N`` off the free one (the object stands closer
+    than the rig file says). The dict holds the tare, ``ft_zero_offset`` (the reading after the zero: the new
+    unloaded zero) and ``unloaded_at_start_n`` (the load found at the start, 0 when none).
     """
     config = rig.config
+    free = free if free is not None else unload_wrist(rig.arm, config.limits, zero=zero)
     move_clear(rig.arm, first, config.object.clearance_mm / 1000.0, config.press.transit_speed_mm_s / 1000.0,
                config.limits)  # fmt: skip
-    frames, _ = zero_wrist(rig.arm, sensor, 0.3, f"the first stand-off ({first.press_id})", check_unloaded=False)
+    frames, wrenches = zero_wrist(rig.arm, sensor, 0.3, f"the first stand-off ({first.press_id})",
+                                  reference=free.free_reading)  # fmt: skip
     with rig.arm.keep_alive():  # a device bias waits for the sensor to settle; the arm rests meanwhile
         record = sensor.tare(frames)
     sensor.poll()  # frames from during a device bias are not kept
@@ -327,6 +408,9 @@ def session_tare(rig: Rig, sensor: TactileSensor, first: PressPlan) -> dict[str,
         "spread": record.spread,
         "baseline": np.asarray(record.baseline).tolist(),
         "host_t_s": record.host_t_ns / 1e9,
+        "ft_zero_offset": wrenches.mean(axis=0).tolist(),
+        "unloaded_at_start_n": free.load_n if free.was_loaded else 0.0,
+        "unloaded_note": free.describe() if free.was_loaded else "",
     }
 
 
@@ -486,10 +570,14 @@ def _save(
         record.attrs.setdefault("sensor_health", sensor.health().as_dict())
     except DeviceError as exc:
         log.info("no sensor health for press %s: %s", record.press_id, exc)
-    record.extraction = extract_press(
-        record.robot_t_s, record.press_force_n, record.tactile_t_s, record.tactile_valid, settings
-    )
+    if record.reason != "off_axis":  # a press off the object's face never feeds extraction (collection/streams.py)
+        record.extraction = extract_press(
+            record.robot_t_s, record.press_force_n, record.tactile_t_s, record.tactile_valid, settings
+        )
     writer.write_press(record)
+    if "ft_zero_offset" in record.attrs:  # the press zeroed an unloaded wrist (zero_wrist refuses a loaded one)
+        outcome.wrist_zero = np.asarray(record.attrs["ft_zero_offset"], dtype=np.float64)
+        write_zero(writer.journal, outcome.wrist_zero)
     if record.status == "complete":
         outcome.complete += 1
     elif record.status == "failed":
@@ -526,7 +614,7 @@ def dry_run(
     outcome = DryRunOutcome()
     speed = config.press.transit_speed_mm_s / 1000.0
     clearance = config.object.clearance_mm / 1000.0
-    check_session_plan(arm.read_state().tcp_pose, plans, clearance, config.limits)
+    check_session_plan(arm.read_state().tcp_pose, plans, clearance, config.limits, confirmed_standoff_mm(config))
     for index, plan in enumerate(plans):
         here = arm.read_state().tcp_pose
         outcome.waypoints += len(clearance_waypoints(here, plan, clearance))

@@ -33,7 +33,7 @@ from drivers.arm import Arm
 from drivers.errors import ProtectiveStop
 from drivers.motion import DEFAULT_SETTLE_S, force_limits, guarded_move, press_frame, stop_arm
 from unitac_rig.collection.streams import PressStreams
-from unitac_rig.collection.transit import PressPlan
+from unitac_rig.collection.transit import PressPlan, backstop_m
 from unitac_rig.errors import ConfigError, SafetyLimit
 from unitac_rig.rig.config import LimitsConfig, PressConfig
 from unitac_rig.rig.lazy import load
@@ -93,7 +93,7 @@ class PressContext:
         self.press, self.limits = press, limits
         self.contact_threshold_n = streams.contact_threshold_n
         self.control_period_s = arm.control_period_s
-        self.backstop_m = plan.contact_distance_m + (limits.max_travel_after_contact_mm + 5.0) / 1000.0
+        self.backstop_m = backstop_m(plan, limits)
         # Set-points in the controller's zero (see PressStreams), kept under the hard limit whatever the offset.
         offset = streams.offset_along_press_n
         self._below_limit_n = limits.hard_force_n - HARD_LIMIT_CLEARANCE_N

@@ -31,6 +31,7 @@ TRANSIT_ACCEL_M_S2 = 0.5
 ON_PLANE_M = 0.001  # the arm counts as on the press plane within 1 mm of its height
 ON_RAY_DEG = 3.0  # ... and on a press ray within 3 degrees of it
 ARC_STEP_DEG = 30.0  # crossings at the clearance radius are split into steps of at most this (chords stay outside)
+BACKSTOP_EXTRA_MM = 5.0  # a press's travel budget from the stand-off: the contact distance + max travel + this, mm
 SHOULDER_HEIGHT_M = 0.1625  # UR5e base-to-shoulder height: the reach sphere's centre is (0, 0, this) [UR5e datasheet]
 
 
@@ -226,15 +227,40 @@ def retract_waypoint(plan: PressPlan, clearance_m: float) -> np.ndarray:
     return np.concatenate([position, np.asarray(plan.start_pose[3:], dtype=np.float64)])
 
 
-def check_session_plan(here: np.ndarray, plans: list[PressPlan], clearance_m: float, limits: LimitsConfig) -> int:
-    """Check every waypoint of a whole session before its first motion: the first move from ``here``, every
-    clearance waypoint and stand-off of every press and rotation, and where each press's retract would end.
-    Straight moves between checked points stay inside (the workspace box and the reach sphere are convex).
-    Raises SafetyLimit naming the first waypoint outside; -> the number of waypoints checked."""
-    pose, checked = np.asarray(here, dtype=np.float64), 0
+def backstop_m(plan: PressPlan, limits: LimitsConfig) -> float:
+    """A press's travel budget from its stand-off (m): the expected contact distance + ``limits.max_travel_after_
+    contact_mm`` + ``BACKSTOP_EXTRA_MM``; the strategy's last move may go ``max_travel_after_contact_mm`` beyond."""
+    return plan.contact_distance_m + (limits.max_travel_after_contact_mm + BACKSTOP_EXTRA_MM) / 1000.0
+
+
+def press_travel_end(plan: PressPlan, limits: LimitsConfig) -> np.ndarray:
+    """The farthest pose (6,) a press can reach from its stand-off: the backstop plus one more travel budget."""
+    reach_m = backstop_m(plan, limits) + limits.max_travel_after_contact_mm / 1000.0
+    position = np.asarray(plan.start_pose[:3], dtype=np.float64) + np.asarray(plan.direction) * reach_m
+    return np.concatenate([position, np.asarray(plan.start_pose[3:], dtype=np.float64)])
+
+
+def check_session_plan(
+    here: np.ndarray,
+    plans: list[PressPlan],
+    clearance_m: float,
+    limits: LimitsConfig,
+    confirmed_standoff_mm: float | None = None,
+) -> int:
+    """Check every pose a session can reach before its first motion: where the arm is now (an arm outside the box
+    is refused before it moves), the first move from ``here``, every clearance waypoint and stand-off of every press
+    and rotation, the shorter stand-off once the placement is confirmed (``confirmed_standoff_mm``), the whole press
+    travel (:func:`press_travel_end`), and where each press's retract would end. Straight moves between checked
+    points stay inside (the workspace box and the reach sphere are convex). Raises SafetyLimit naming the first pose
+    outside; -> the number of poses checked."""
+    pose, checked = np.asarray(here, dtype=np.float64), 1
+    check_waypoint(pose, limits, "the arm's start pose (where it is now, before any motion)")
     for index, plan in enumerate(plans):
         waypoints = clearance_waypoints(pose, plan, clearance_m)
         named = [("clearance waypoint", p) for p in waypoints[:-1]] + [("stand-off pose", waypoints[-1])]
+        if confirmed_standoff_mm is not None:
+            named.append(("confirmed stand-off pose", with_standoff(plan, confirmed_standoff_mm).start_pose))
+        named.append(("press travel end", press_travel_end(plan, limits)))
         named.append(("retract waypoint", retract_waypoint(plan, clearance_m)))
         for what, waypoint in named:
             check_waypoint(waypoint, limits, f"session plan (press {index + 1} of {len(plans)}): the {what} of press "
@@ -278,19 +304,20 @@ def retract_from_object(
     near_speed = near_speed_m_s(limits, transit_speed_m_s)
     if back_m > 2e-4:
         target = np.concatenate([here[:3] - tool_z(here) * back_m, here[3:]])
-        here = _move_within_limits(arm, here, target, near_speed, limits, moved)
+        here = move_within_limits(arm, here, target, near_speed, limits, moved)
     radius = float(np.linalg.norm(here[:2] - center))
     if to_clearance and radius < clearance_m - 2e-4:
         outward = (here[:2] - center) / radius if radius > 1e-6 else -np.asarray(plan.direction)[:2]
         target = np.concatenate([center + outward * clearance_m, here[2:]])
-        _move_within_limits(arm, here, target, transit_speed_m_s, limits, moved)
+        move_within_limits(arm, here, target, transit_speed_m_s, limits, moved)
     return moved
 
 
-def _move_within_limits(
+def move_within_limits(
     arm: Arm, here: np.ndarray, target: np.ndarray, speed_m_s: float, limits: LimitsConfig, moved: list[np.ndarray]
 ) -> np.ndarray:
-    """A guarded move toward ``target``, shortened to the last point inside the workspace and reach; -> the end."""
+    """A guarded move toward ``target``, shortened to the last point inside the workspace and reach; -> the end
+    (``here`` when it cannot move at all). The end is appended to ``moved``."""
     fraction = _inside_fraction(here, target, limits)
     end = np.concatenate([here[:3] + fraction * (target[:3] - here[:3]), target[3:]])
     if float(np.linalg.norm(end[:3] - here[:3])) < 2e-4:

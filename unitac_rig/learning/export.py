@@ -124,6 +124,12 @@ def _quiet_exporters() -> Iterator[None]:
     loggers = [logging.getLogger(n) for n in names]
     levels = [lg.level for lg in loggers]
     try:
+        import tqdm  # torch.onnx shows a tqdm bar when tqdm is installed (huggingface_hub brings it): its monitor
+
+        tqdm.tqdm.monitor_interval = 0  # thread would outlive the export for the rest of the process
+    except ImportError:
+        pass
+    try:
         for lg in loggers:
             lg.setLevel(logging.ERROR)
         with warnings.catch_warnings():
@@ -286,7 +292,7 @@ def _metrics_lines(metrics: dict[str, Any] | None) -> list[str]:
         values = [cells.get(c) for c in columns]
         rendered = ["–" if v is None else f"{v['nmae']:.3f} / {v['ssim']:.3f}" for v in values]
         lines.append(f"| {row} | " + " | ".join(rendered) + " |")
-    options = [f"{k}: {metrics[k]}" for k in ("nmae_normaliser", "ssim_range", "preprocessing") if k in metrics]
+    options = [f"{k}: {_words(metrics[k])}" for k in ("nmae_normaliser", "ssim_range", "preprocessing") if k in metrics]
     lines += ["", "NMAE is the mean absolute error over a training range (docs/learning.md, Metrics)."]
     if options:
         lines.append("Metric settings: " + "; ".join(options) + ".")
@@ -294,6 +300,17 @@ def _metrics_lines(metrics: dict[str, Any] | None) -> list[str]:
     if latent is not None:
         lines.append(f"Mean L1 distance between two sensors' latents of the same contact: {latent:.3f}.")
     return lines
+
+
+def _words(value: Any) -> str:
+    """A metric setting as prose, never a Python repr: a document's ``text`` when it has one, else its items."""
+    if isinstance(value, dict):
+        if isinstance(value.get("text"), str):
+            return value["text"]
+        return ", ".join(f"{k} {_words(v)}" for k, v in value.items())
+    if isinstance(value, list | tuple):
+        return ", ".join(_words(v) for v in value)
+    return str(value)
 
 
 def run_fields(payload: dict[str, Any], engine: StackedAutoencoders, member: int) -> dict[str, Any]:

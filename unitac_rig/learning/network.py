@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import torch
+from huggingface_hub import PyTorchModelHubMixin
 from torch import nn
 
 from unitac_rig.errors import ModelError
@@ -97,9 +98,11 @@ def default_groups(sensors: Sequence[str], baselines: bool) -> list[GroupSpec]:
     return groups
 
 
-def _plain_mlp(widths: Sequence[int], dropout: float, *, hidden: bool) -> nn.Sequential:
-    """Linear layers with ReLU between them (after the last too when ``hidden``) and ``nn.Dropout`` after every
-    layer (when ``dropout`` > 0), as :meth:`StackedAutoencoders._mlp` runs them."""
+def mlp(widths: Sequence[int], dropout: float = 0.0, *, hidden: bool = False) -> nn.Sequential:
+    """THE multilayer perceptron of this package: ``nn.Linear`` layers of ``widths``, ReLU between them (after the
+    last too when ``hidden``) and ``nn.Dropout`` after every layer (when ``dropout`` > 0), as
+    :meth:`StackedAutoencoders._mlp` runs them for every member at once. The trainer's per-seed network, the
+    exported model, ``stream`` and the geometry head's live forward are all built by it."""
     modules: list[nn.Module] = []
     for i in range(len(widths) - 1):
         modules.append(nn.Linear(widths[i], widths[i + 1]))
@@ -130,9 +133,9 @@ class Autoencoder(nn.Module):
         self.feature_dims = {s: int(feature_dims[s]) for s in spec.sensors}
         latent, trunk = shape.latent_dim, [shape.latent_dim, *shape.decoder_hidden]
         self.encoders = nn.ModuleDict(
-            {s: _plain_mlp([d, *shape.encoder_hidden, latent], p, hidden=False) for s, d in self.feature_dims.items()}
+            {s: mlp([d, *shape.encoder_hidden, latent], p, hidden=False) for s, d in self.feature_dims.items()}
         )
-        self.decoder = _plain_mlp(trunk, p, hidden=True)
+        self.decoder = mlp(trunk, p, hidden=True)
         self.heads = nn.ModuleList(
             nn.Linear(trunk[-1], sum(self.feature_dims[s] for s in head)) for head in self.output_heads
         )
@@ -189,5 +192,47 @@ class Autoencoder(nn.Module):
         return nn.Sequential(*hidden, out)
 
 
-def _linears(mlp: nn.Module) -> list[nn.Linear]:
-    return [m for m in mlp.modules() if isinstance(m, nn.Linear)]
+def _linears(module: nn.Module) -> list[nn.Linear]:
+    return [m for m in module.modules() if isinstance(m, nn.Linear)]
+
+
+class UniTacNV(nn.Module, PyTorchModelHubMixin, library_name="unitac-rig", pipeline_tag="feature-extraction",
+               tags=["tactile", "robotics", "cross-sensor", "unitac-nv"]):  # fmt: skip
+    """One member of a trained UniTac-NV model as ``export-model`` writes it: per sensor an encoder (frames (B,
+    n_taxels, 3) in the sensor's units -> latent) and a decoder (latent -> that sensor's frames), each a plain
+    :func:`mlp` with the normaliser folded into its first/last layer, so nothing happens outside the networks.
+
+    ``UniTacNV.from_pretrained(folder_or_repo)`` (huggingface_hub's mixin) rebuilds it from ``config.json``'s
+    ``sensors`` (each sensor's ``n_taxels``, ``encoder_widths``, ``decoder_widths``) and loads ``model.safetensors``;
+    ``stream`` runs the same module on live frames.
+    """
+
+    def __init__(self, sensors: dict[str, dict[str, Any]], latent_dim: int) -> None:
+        super().__init__()
+        self.latent_dim = int(latent_dim)
+        self.n_taxels = {s: int(spec["n_taxels"]) for s, spec in sensors.items()}
+        self.encoders = nn.ModuleDict({s: mlp(spec["encoder_widths"]) for s, spec in sensors.items()})
+        self.decoders = nn.ModuleDict({s: mlp(spec["decoder_widths"]) for s, spec in sensors.items()})
+        self.eval()
+
+    @property
+    def sensors(self) -> tuple[str, ...]:
+        return tuple(self.encoders)
+
+    def _known(self, sensor: str) -> None:
+        if sensor not in self.encoders:
+            raise ModelError(f"this model knows no sensor {sensor!r}", hint=f"it has {', '.join(self.sensors)}")
+
+    def encode(self, frames: torch.Tensor, sensor: str) -> torch.Tensor:
+        """Frames (B, n_taxels, 3) of ``sensor``, tare-subtracted, its units -> latents (B, latent_dim)."""
+        self._known(sensor)
+        return self.encoders[sensor](frames.reshape(frames.shape[0], -1))
+
+    def decode(self, latent: torch.Tensor, sensor: str) -> torch.Tensor:
+        """Latents (B, latent_dim) -> frames (B, n_taxels, 3) of ``sensor`` in its units."""
+        self._known(sensor)
+        return self.decoders[sensor](latent).reshape(latent.shape[0], self.n_taxels[sensor], 3)
+
+    def forward(self, frames: torch.Tensor, source: str, target: str) -> torch.Tensor:
+        """``source`` frames (B, n_taxels, 3) -> the same contacts as ``target`` frames."""
+        return self.decode(self.encode(frames, source), target)

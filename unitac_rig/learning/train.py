@@ -24,6 +24,7 @@ import numpy as np
 import torch
 
 from unitac_rig.errors import DataError, ModelError, UsageError
+from unitac_rig.interrupts import raise_if_interrupted
 from unitac_rig.learning.config import CONFIG_TOML, TrainConfig, to_toml
 from unitac_rig.learning.data import Normaliser, PairedDataset, Split, split_by_direction
 from unitac_rig.learning.engine import StackedAutoencoders, default_groups
@@ -160,8 +161,15 @@ def _train(
         run.history.append(record)
         if progress is not None:
             progress(record)
-        if done % run.config.checkpoint_every == 0 or last:
+        saved = done % run.config.checkpoint_every == 0 or last
+        if saved:
             save_checkpoint(run.run_dir, run.checkpoint())
+        try:
+            raise_if_interrupted()  # a Ctrl-C the CLI deferred to here, between two epochs
+        except KeyboardInterrupt:
+            if not saved:  # keep this finished epoch: --resume goes on from it, nothing is lost
+                save_checkpoint(run.run_dir, run.checkpoint())
+            raise
     return TrainOutcome(
         run.run_dir, run.engine, run.normaliser, run.split, run.config, run.history, run.seconds, run.epoch
     )

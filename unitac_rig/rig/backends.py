@@ -27,8 +27,10 @@ def backend_class(name: str) -> type[Rig]:
     return cls
 
 
-def open_rig(config: RigConfig, *, seed: int = 0) -> Rig:
-    """The hardware rig the config describes, or the simulated rig when it names no arm."""
+def open_rig(config: RigConfig, *, seed: int = 0, imperfections: str | None = None) -> Rig:
+    """The hardware rig the config describes, or the simulated rig when it names no arm. ``imperfections``: which
+    of the real sensors' imperfections the simulated rig has (sim/imperfections.py; None: all, "none": the clean
+    twin); hardware has its own."""
     if config.simulated:
-        return backend_class("sim")(config, seed=seed)  # type: ignore[call-arg]
+        return backend_class("sim")(config, seed=seed, imperfections=imperfections)  # type: ignore[call-arg]
     return backend_class("hardware")(config)  # type: ignore[call-arg]

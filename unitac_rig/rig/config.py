@@ -28,6 +28,16 @@ from unitac_rig.errors import ConfigError
 from unitac_rig.rig.sensors import SENSORS, SensorConfigBase, parse_sensor_config
 from unitac_rig.rig.strategies import known_strategy
 
+# Physical ceilings of the limits (docs/real-rig.md, "Limits with physical ceilings"): a limit above what the hardware
+# can measure or survive is refused, naming the field. The figures are public (hardware-facts 2.6, 3.6).
+WRIST_FORCE_RANGE_N = 50.0  # UR5e built-in F/T force range +-50 N: a force limit above it can never trip
+WRIST_TORQUE_RANGE_NM = 10.0  # ... torque range +-10 N*m
+REDUCED_SPEED_MM_S = 250.0  # ISO 10218-1 reduced speed (teach mode, collaborative work): no tool speed above it
+NEAR_STIFFNESS_N_PER_MM = 10.0  # the contact stiffness the near speed is sized for (a printed prism with a pad)
+DOUBLE_FAULT_BOUND_N = 25.0  # what a host frozen at an unexpected contact may reach there: the default hard limit,
+# and the trueness of a UR's own TCP-force safety limit (hardware-facts 3.6), below which the controller cannot help
+MIN_STANDOFF_FLOOR_MM = 2.0  # no position move may end closer to the object than this, mm
+
 
 class _Strict(BaseModel):
     # allow_inf_nan=False: every number in the rig file is finite. A NaN or inf limit would switch its check off
@@ -201,6 +211,32 @@ class LimitsConfig(_Strict):
     workspace_min_m: tuple[float, float, float] = (-0.6, 0.2, 0.0)
     workspace_max_m: tuple[float, float, float] = (0.4, 1.0, 0.6)
 
+    @model_validator(mode="after")
+    def _physical_ceilings(self) -> LimitsConfig:
+        """Refuse limits past what the hardware can read or survive (the module's ceilings)."""
+        ceilings = (
+            ("hard_force_n", self.hard_force_n, WRIST_FORCE_RANGE_N, "N, the UR5e wrist F/T's force range: a limit "
+             "the wrist cannot read never trips"),
+            ("hard_torque_nm", self.hard_torque_nm, WRIST_TORQUE_RANGE_NM, "N*m, the UR5e wrist F/T's torque range"),
+            ("max_speed_mm_s", self.max_speed_mm_s, REDUCED_SPEED_MM_S, "mm/s, the ISO 10218-1 reduced speed"),
+            ("move_force_n", self.move_force_n, self.hard_force_n, "N, limits.hard_force_n"),
+        )  # fmt: skip
+        for name, value, ceiling, what in ceilings:
+            if value > ceiling:
+                raise ValueError(f"{name} = {value:g} is above {ceiling:g} {what}")
+        if self.min_standoff_mm < MIN_STANDOFF_FLOOR_MM:
+            raise ValueError(
+                f"min_standoff_mm = {self.min_standoff_mm:g} is below {MIN_STANDOFF_FLOOR_MM:g} mm: the wrist "
+                "is zeroed at the stand-off, which must stay clear of the object"
+            )
+        return self
+
+    def near_speed_ceiling_mm_s(self, watchdog_hz: float) -> float:
+        """The fastest near speed (mm/s) whose double fault (a host frozen at an unexpected contact: the move runs
+        on for one watchdog period) stays under ``DOUBLE_FAULT_BOUND_N`` on a ``NEAR_STIFFNESS_N_PER_MM`` contact:
+        (25 N - move_force_n) x watchdog_hz / stiffness (12 mm/s with the defaults)."""
+        return max(DOUBLE_FAULT_BOUND_N - self.move_force_n, 0.0) * watchdog_hz / NEAR_STIFFNESS_N_PER_MM
+
 
 class RigConfig(_Strict):
     """A whole rig. ``arm`` absent and no sensors means the simulated rig."""
@@ -262,6 +298,14 @@ class RigConfig(_Strict):
                     f"arm.{' and arm.'.join(missing)} must be set for a real arm (what the teach pendant says; "
                     "they are read back and checked at connect), or set arm.unchecked_tool = true to run unchecked"
                 )
+        watchdog_hz = DEFAULT_WATCHDOG_HZ if self.arm is None else self.arm.watchdog_hz
+        near_ceiling = self.limits.near_speed_ceiling_mm_s(watchdog_hz)
+        if self.limits.near_speed_mm_s > near_ceiling:
+            raise ValueError(
+                f"limits.near_speed_mm_s = {self.limits.near_speed_mm_s:g} is above {near_ceiling:.1f} mm/s: a host "
+                f"frozen at an unexpected contact runs on for 1/{watchdog_hz:g} s, past {DOUBLE_FAULT_BOUND_N:g} N "
+                f"on a {NEAR_STIFFNESS_N_PER_MM:g} N/mm object (docs/real-rig.md)"
+            )
         if self.limits.near_speed_mm_s > self.limits.max_speed_mm_s:
             raise ValueError(
                 f"limits.near_speed_mm_s = {self.limits.near_speed_mm_s} exceeds limits.max_speed_mm_s = "
@@ -273,14 +317,36 @@ class RigConfig(_Strict):
         return _arc(self.press)
 
 
-def describe_validation_error(err: ValidationError, source: str) -> str:
-    """The first pydantic error as one line naming the field: ``rig.toml: press.speed_mm_s: ...``."""
+def describe_validation_error(err: ValidationError, source: str, model: type[BaseModel] | None = None) -> str:
+    """The first pydantic error as one line naming the field: ``rig.toml: press.speed_mm_s: ...``; an unknown key
+    of ``model`` (the model validated) names the known key it most resembles."""
     first = err.errors()[0]
     where = ".".join(str(p) for p in first["loc"])
     message = str(first["msg"]).removeprefix("Value error, ")
     if first["type"] == "extra_forbidden":
         message = "unknown key (a typo?)"
+        near = _nearest_key(model, first["loc"]) if model is not None else None
+        if near is not None:
+            message = f"unknown key (did you mean {near}?)"
     return f"{source}: {where}: {message}" if where else f"{source}: {message}"
+
+
+def _nearest_key(model: type[BaseModel], loc: tuple[int | str, ...]) -> str | None:
+    """The field of ``model`` at ``loc[:-1]`` whose name is closest to the unknown ``loc[-1]`` (difflib), if any."""
+    import difflib
+    import typing
+
+    for part in loc[:-1]:
+        field = model.model_fields.get(str(part))
+        if field is None:
+            return None
+        nested = [a for a in (field.annotation, *typing.get_args(field.annotation)) if isinstance(a, type)]
+        models = [a for a in nested if issubclass(a, BaseModel)]
+        if not models:
+            return None
+        model = models[0]
+    close = difflib.get_close_matches(str(loc[-1]), list(model.model_fields), n=1, cutoff=0.6)
+    return close[0] if close else None
 
 
 MAX_TOML_BYTES = 1 << 20  # a rig or object file is a few kB; a bigger one is the wrong file
@@ -324,4 +390,6 @@ def parse_rig_config(data: dict[str, object], source: str = "rig file") -> RigCo
     try:
         return RigConfig.model_validate(data)
     except ValidationError as exc:
-        raise ConfigError(describe_validation_error(exc, source), hint="see docs/rig-file.md for every field") from exc
+        raise ConfigError(
+            describe_validation_error(exc, source, RigConfig), hint="see docs/rig-file.md for every field"
+        ) from exc

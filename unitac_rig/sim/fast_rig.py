@@ -15,6 +15,7 @@ import itertools
 import logging
 import zlib
 from collections.abc import Mapping
+from dataclasses import fields, is_dataclass, replace
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
@@ -31,7 +32,17 @@ from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation
 from unitac_rig.rig.sensors import SENSORS, SensorSpec, sensor_layout
 from unitac_rig.sim.fast_sensors import configured_sensors
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
+from unitac_rig.sim.imperfections import (
+    CLEAN,
+    Imperfections,
+    as_imperfections,
+    mount_offset_mm,
+    mount_seed,
+    print_seed,
+    printed_object,
+)
 from unitac_rig.sim.scene import PressScene, SceneParams, TaxelLoads
+from unitac_rig.sim.sensor_models import timed_sampler
 from unitac_rig.sim.signals import SensorSample, SignalSource
 from unitac_rig.sim.world import NO_WRENCH
 
@@ -46,7 +57,10 @@ class SensorOutputModel(Protocol):
 
     layout: SensorLayout
 
-    def sample(self, loads: TaxelLoads) -> SensorSample: ...
+    def sample(self, loads: TaxelLoads) -> SensorSample:
+        """The reading for ``loads``; a model may also take the device time as ``t_ns`` (ns; the built-in ones do,
+        for the elastomer's creep and the drift: :func:`~unitac_rig.sim.sensor_models.timed_sampler`)."""
+        ...
 
 
 @runtime_checkable
@@ -102,11 +116,24 @@ def seeded_scene(
     params: SceneParams | None = None,
     object_center_m: tuple[float, float] = DEFAULT_OBJECT_CENTER_M,
     shared_placement: bool = True,
+    imperfections: Imperfections = CLEAN,
 ) -> PressScene:
     """The scene the simulated rig presses for this object, rotation and sensor, its errors seeded as
     :func:`placement_seed` and :func:`scene_seed` say. ``shared_placement`` False draws the centring error from the
-    session's own generator (the rig before the placement was shared; benchmarks compare the two)."""
+    session's own generator (the rig before the placement was shared; benchmarks compare the two).
+    ``imperfections``: with ``print_tolerance`` the object is one print of it (seeded per object,
+    sim/imperfections.py), with ``mount_offset`` the pad sits off the tool axis by a seeded amount per session."""
     placement = np.random.default_rng(placement_seed(seed, obj.id, rotation_deg)) if shared_placement else None
+    if imperfections.print_tolerance:
+        obj = printed_object(obj, np.random.default_rng(print_seed(seed, obj.id)))
+    if imperfections.mount_offset:
+        params = params or SceneParams()
+        extra_mm = mount_offset_mm(np.random.default_rng(mount_seed(seed, obj.id, sensor, rotation_deg)))
+        params = replace(
+            params,
+            skin_pad_offset_mm=params.skin_pad_offset_mm + extra_mm,
+            pillar_pad_offset_mm=params.pillar_pad_offset_mm + extra_mm,
+        )
     return PressScene(
         obj,
         rotation_deg,
@@ -138,6 +165,7 @@ class _SensorFeed:
         self.rig = rig
         self.sensor = sensor
         self.model = model
+        self._sample = timed_sampler(model)
 
     def sample(self, t_ns: int) -> SensorSample:
         scene = self.rig.world.scene
@@ -146,7 +174,7 @@ class _SensorFeed:
             loads = TaxelLoads(np.zeros(shape), np.zeros(shape) if self.model.layout.has_displacement else None)
         else:
             loads = scene.taxel_loads(self.rig.sim_arm.true_tcp_pose())
-        return self.model.sample(loads)
+        return self._sample(loads, t_ns)
 
 
 class SimRig(Rig):
@@ -161,11 +189,14 @@ class SimRig(Rig):
         seed: int = 0,
         faults: FaultPlan | None = None,
         sensor_options: Mapping[str, Mapping[str, Any]] | None = None,
+        imperfections: Imperfections | str | None = None,
     ) -> None:
         """``faults`` damages every simulated sensor transport. ``sensor_options`` sets each sensor's simulation
         options by name (its simulated side's fields, sim/fast_sensors.py): e.g. ``{"uskin": {"transport": "slcan"}}``
         (python-can's own slcan client on a ``simslcan://`` serial URL instead of the in-process CAN bus),
-        ``{"papillarray": {"rate_hz": 1000}}``."""
+        ``{"papillarray": {"rate_hz": 1000}}``. ``imperfections`` (sim/imperfections.py): which of the real
+        sensors' and rig's imperfections the twin has, every one by default; ``"none"`` is the clean twin. A
+        sensor's own ``imperfections`` option, where given, wins for its output model."""
         from unitac_rig.sim.arm import SimArm
 
         self.config = config
@@ -177,8 +208,9 @@ class SimRig(Rig):
         self._instance = next(_instance_ids)
         home = self._home_pose()
         self.sim_arm = SimArm(self.world, clock=self.clock, rng=np.random.default_rng([seed, 1]), start_pose=home)
+        self.imperfections = as_imperfections(imperfections)
         self._simulated: dict[str, SimulatedSensor] = {
-            name: _simulated_sensor(SENSORS[name], device)
+            name: _simulated_sensor(SENSORS[name], self._with_imperfections(device, (sensor_options or {}).get(name)))
             for name, device in configured_sensors(sensor_options).items()
         }
         self._models = {
@@ -189,6 +221,14 @@ class SimRig(Rig):
         self._devices: list[Any] = []
         self._object: ObjectSpec | None = None
         self._rotation = 0.0
+
+    def _with_imperfections(self, device: Any, options: Mapping[str, Any] | None) -> Any:
+        """``device`` with the rig's imperfections, where it has that option and its own options do not set it."""
+        if "imperfections" in (options or {}) or not (is_dataclass(device) and not isinstance(device, type)):
+            return device
+        if "imperfections" not in {f.name for f in fields(device)}:
+            return device
+        return replace(device, imperfections=self.imperfections.text)
 
     def _home_pose(self) -> np.ndarray:
         placement = self.config.object
@@ -207,7 +247,12 @@ class SimRig(Rig):
         self._object, self._rotation = obj, rotation_deg
         self.mounted_sensor = sensor_name
         self.world.scene = seeded_scene(
-            obj, rotation_deg, sensor_name, seed=self.seed, object_center_m=self.config.object.center_m
+            obj,
+            rotation_deg,
+            sensor_name,
+            seed=self.seed,
+            object_center_m=self.config.object.center_m,
+            imperfections=self.imperfections,
         )
 
     def open_sensor(self, name: str) -> TactileSensor:

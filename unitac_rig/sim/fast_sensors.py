@@ -10,7 +10,10 @@ Each one serves three places, so none of them names a sensor:
 * ``unitac-rig probe <sensor> --simulated`` calls ``probe`` for a device streaming a synthetic press.
 
 An object's dataclass fields other than ``rng_stream`` are its simulation options (``SimRig(sensor_options=...)``,
-``RigTwin(sensor_options=...)``; :func:`~unitac_rig.sim.fast_rig.with_options`). A new sensor's simulated side can
+``RigTwin(sensor_options=...)``; :func:`~unitac_rig.sim.fast_rig.with_options`). Both sensors' ``imperfections``
+option says which of the real sensor's imperfections its output model has (sim/imperfections.py: ``"all"``, the
+default, ``"none"`` for the clean twin, ``"all,-creep"``, ...; ``SimRig(imperfections=...)`` sets it for every
+sensor at once). A new sensor's simulated side can
 live anywhere under ``unitac_rig.sim`` (or in a test): it has to fit :class:`~unitac_rig.sim.fast_rig.SimulatedSensor`,
 and :class:`~unitac_rig.sim.twin.rig.TwinSensor` / ``probe`` where it is to be served there.
 """
@@ -29,6 +32,7 @@ import numpy as np
 from drivers.sensor import TactileSensor
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.sensors import SENSORS, get_sensor
+from unitac_rig.sim.imperfections import Imperfections
 from unitac_rig.sim.sensor_models import PapillArrayModel, UskinModel
 from unitac_rig.sim.signals import SignalSource
 
@@ -93,15 +97,17 @@ class SimulatedUskin:
     transport: str | None = None
     slcan_port: int = 30101  # the socket:// serial URL of the SLCAN adapter on the real-time twin
     xela_server_port: int = 5000  # xela_server's own default port
+    imperfections: str = "all"  # which of the real sensor's imperfections the model has (sim/imperfections.py)
 
     def __post_init__(self) -> None:
         if self.transport is not None and self.transport not in USKIN_TRANSPORTS:
             raise UsageError(
                 f"unknown uSkin transport {self.transport!r}", hint=f"use one of: {', '.join(USKIN_TRANSPORTS)}"
             )
+        Imperfections.parse(self.imperfections)  # an unknown name is a usage error before anything starts
 
     def model(self, rng: np.random.Generator) -> UskinModel:
-        return UskinModel(rng=rng)
+        return UskinModel(rng=rng, imperfections=Imperfections.parse(self.imperfections))
 
     def open(self, rig: SimRig, feed: SignalSource) -> TactileSensor:
         import can
@@ -188,6 +194,7 @@ class SimulatedPapillArray:
     rng_stream: int = 3
     rate_hz: int = 100
     twin_port: int = 30100
+    imperfections: str = "all"  # which of the real sensor's imperfections the model has (sim/imperfections.py)
 
     def __post_init__(self) -> None:
         from protocols.papillarray_commands import VALID_RATES_HZ
@@ -196,9 +203,10 @@ class SimulatedPapillArray:
             raise UsageError(
                 f"the PapillArray samples at {', '.join(map(str, sorted(VALID_RATES_HZ)))} Hz, not {self.rate_hz}"
             )
+        Imperfections.parse(self.imperfections)
 
     def model(self, rng: np.random.Generator) -> PapillArrayModel:
-        return PapillArrayModel(rng=rng)
+        return PapillArrayModel(rng=rng, imperfections=Imperfections.parse(self.imperfections))
 
     def open(self, rig: SimRig, feed: SignalSource) -> TactileSensor:
         from drivers.papillarray import PapillArrayDriver

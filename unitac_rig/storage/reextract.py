@@ -8,6 +8,7 @@ import contextlib
 import json
 import os
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import h5py
@@ -61,7 +62,8 @@ def _reextract_copy(path: Path, settings: ExtractionSettings) -> tuple[Path, int
 def _reextract_session(path: Path, settings: ExtractionSettings, copies: list[tuple[Path, Path]]) -> tuple[int, int]:
     """Private copies of every press file of the session file ``path`` with the extraction recomputed, and of the
     session file linking them: appended to ``copies`` as (copy, where it goes), the session file last. Presses
-    stored inside the session file (older layout) are copied out into press files first. Returns (presses, matched).
+    stored inside the session file (older layout) are copied out into press files first. Returns (presses, targets
+    matched in complete presses: the count ``inspect`` shows and training uses).
     """
     folder = press_dir(path)
     folder.mkdir(exist_ok=True)
@@ -71,6 +73,7 @@ def _reextract_session(path: Path, settings: ExtractionSettings, copies: list[tu
         root = {key: f.attrs[key] for key in f.attrs if key != ROOT_ATTR}
         stored = session_layout(f)[0]
         for pid, group in iter_press_groups(f):
+            complete = group.attrs.get("status") in ("complete", b"complete")
             if pid in stored:
                 tmp, n = _reextract_copy(path.parent / stored[pid], settings)
             else:  # the single-file layout: the group is copied out into a press file of its own first
@@ -85,15 +88,18 @@ def _reextract_session(path: Path, settings: ExtractionSettings, copies: list[tu
             copies.append((tmp, target))
             links[pid] = f"{folder.name}/{target.name}"
             presses += 1
-            matched += n
+            matched += n if complete else 0
     root["extraction_settings"] = json.dumps(settings.to_dict())
     copies.append((write_session_file(path, root, links), path))
     return presses, matched
 
 
-def reextract_sessions(paths: list[Path], settings: ExtractionSettings) -> list[tuple[Path, int, int]]:
+def reextract_sessions(
+    paths: list[Path], settings: ExtractionSettings, accept: Callable[[list[tuple[Path, int, int]]], None] | None = None
+) -> list[tuple[Path, int, int]]:
     """Recompute the force-matched extraction of every press of every session in ``paths`` with ``settings``: all
-    or nothing. Returns (session file, presses, targets matched) per session.
+    or nothing. Returns (session file, presses, targets matched in complete presses) per session, which ``accept``
+    sees before anything is renamed (an exception from it changes nothing).
 
     1. Every session's lease is taken (a session being collected refuses the whole run), then every session and
        journal is verified and repaired from the other copy (a press damaged in both refuses the whole run);
@@ -160,6 +166,8 @@ def reextract_sessions(paths: list[Path], settings: ExtractionSettings) -> list[
                 tmp.write_text(json.dumps(data, default=json_default, indent=1))
                 copies.append((tmp, header_path))
             results.append((path, presses, matched))
+        if accept is not None:
+            accept(results)
         for tmp, target in copies:  # the commit
             os.replace(tmp, target)
         copies.clear()

@@ -179,10 +179,13 @@ def compare(object_id: str, uskin: dict[str, Any], papillarray: dict[str, Any]) 
     }
 
 
-def collect_object(object_id: str, sensor: str, data_dir: Path, *, config: RigConfig, seed: int) -> dict[str, Any]:
-    """Collect one session of ``object_id`` with ``sensor`` on a fresh simulated rig; its pooled statistics."""
+def collect_object(
+    object_id: str, sensor: str, data_dir: Path, *, config: RigConfig, seed: int, imperfections: str = "all"
+) -> dict[str, Any]:
+    """Collect one session of ``object_id`` with ``sensor`` on a fresh simulated rig (with ``imperfections``,
+    sim/imperfections.py: "all" the realistic twin, "none" the clean one); its pooled statistics."""
     obj = get_object(object_id)
-    with SimRig(config, seed=seed) as rig:
+    with SimRig(config, seed=seed, imperfections=imperfections) as rig:
         collect_session(rig, obj, sensor, data_dir)
     return pooled_statistics(session_path(data_dir, object_id, sensor))
 
@@ -195,11 +198,13 @@ def run_fidelity(
     data_dir: Path | None = None,
     on_session: Callable[[str, str, float], None] | None = None,
     ablation: bool = False,
+    imperfections: str = "all",
 ) -> dict[str, Any]:
     """Collect every object with both sensors (``angles`` approach angles) and compare with :data:`RECORDED`.
 
     ``data_dir`` keeps the session files (a temporary folder otherwise); ``on_session(object, sensor, seconds)`` is
-    called after each session (the script prints progress); ``ablation`` adds :func:`run_ablation`'s table.
+    called after each session (the script prints progress); ``ablation`` adds :func:`run_ablation`'s table;
+    ``imperfections``: the twin's (sim/imperfections.py), recorded in the result.
     """
     import time
 
@@ -211,7 +216,9 @@ def run_fidelity(
             per_sensor = {}
             for sensor in SENSORS:
                 t0 = time.perf_counter()
-                per_sensor[sensor] = collect_object(object_id, sensor, root, config=config, seed=seed)
+                per_sensor[sensor] = collect_object(
+                    object_id, sensor, root, config=config, seed=seed, imperfections=imperfections
+                )
                 if on_session is not None:
                     on_session(object_id, sensor, time.perf_counter() - t0)
             results[object_id] = compare(object_id, per_sensor["uskin"], per_sensor["papillarray"])
@@ -223,6 +230,7 @@ def run_fidelity(
             "seed": seed,
             "rotations": "each object's catalogue rotations",
             "press": "rig defaults (guarded press)",
+            "imperfections": imperfections,
         },
         "targets": {
             "rel_tolerance": REL_TOLERANCE,

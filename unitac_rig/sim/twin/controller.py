@@ -652,6 +652,11 @@ class Controller:
                 return {"ok": False, "error": "the twin has no scene"}
             dx, dy = (float(v) for v in request["error_m"])
             self.world.rebuild(dataclasses.replace(spec, placement_error_m=(dx, dy)))
+            if self.world.disc is not None:  # the disc follows the object
+                self.world.set_disc_pad(self.world.disc.pad_radius_m * 1000.0)
+        elif op == "disc_pad":
+            radius = request.get("radius_mm")
+            self.world.set_disc_pad(None if radius is None else float(radius))
         elif op == "contact_scale":
             self.world.force_scale = float(request["scale"])
         elif op == "ft_sign":

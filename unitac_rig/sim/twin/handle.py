@@ -206,6 +206,11 @@ class ControllerTwin:
         """Move the object by (dx, dy) m from where the rig file says it stands (the controller's scene only)."""
         self._hook("placement_error", error_m=[dx_m, dy_m])
 
+    def set_disc_pad(self, radius_mm: float | None) -> None:
+        """The pad as a disc of ``radius_mm`` against the object's circumscribed cylinder (10 N/mm, sim/scene_disc.py:
+        an object to the side meets the rim, a contact force off the press axis); None: the press scene again."""
+        self._hook("disc_pad", radius_mm=radius_mm)
+
     def set_contact_scale(self, scale: float) -> None:
         """Scale every contact force the controller's scene answers (10: a ten times stiffer object; 0.1: softer)."""
         self._hook("contact_scale", scale=scale)

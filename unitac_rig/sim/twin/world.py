@@ -33,6 +33,9 @@ class SceneWorld:
         self.scene: Any = None
         self.spec = spec
         self.force_scale = 1.0  # a fault hook: x10 makes the contact ten times stiffer (same geometry)
+        # a fault hook: the pad as a disc of this radius against the object's circumscribed cylinder (the rim
+        # contact an object standing to the side gives, sim/scene_disc.py) instead of the press scene; None: off
+        self.disc: Any = None
         self._radius_mm = 0.0
         self._warming = threading.Event()
         self.warm_builds = 0
@@ -70,7 +73,23 @@ class SceneWorld:
         to_axis_mm = (np.asarray(self.spec.true_center_m) - pad_pose[:2]) * 1e3
         return float(to_axis_mm @ (press / norm)) > self._radius_mm + self._CLEAR_MARGIN_MM
 
+    def set_disc_pad(self, pad_radius_mm: float | None, stiffness_n_per_mm: float = 10.0) -> None:
+        """Switch the disc-pad contact on (the pad's radius, mm, and the contact's stiffness, N/mm) or off (None)."""
+        if pad_radius_mm is None or self.spec is None:
+            self.disc = None
+            return
+        from unitac_rig.sim.scene_disc import DiscPadOnCylinder
+
+        self.disc = DiscPadOnCylinder(
+            self.spec.true_center_m,
+            radius_mm=self._radius_mm,
+            stiffness_n_per_mm=stiffness_n_per_mm,
+            pad_radius_mm=pad_radius_mm,
+        )
+
     def wrench_on_tool(self, tcp_pose: np.ndarray) -> np.ndarray:
+        if self.disc is not None:
+            return np.asarray(self.disc.wrench_on_tool(tcp_pose)) * self.force_scale
         if self.scene is None:
             return np.zeros(6)
         if self._warming.is_set() and self._clear_of_object(tcp_pose):

@@ -1,0 +1,206 @@
+"""The twin's imperfections (sim/imperfections.py): each does what its figure says on a case worked by hand, each
+is a switch, the clean twin is the twin as it was before them, and every draw is fixed by the seed."""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from drivers.layouts import USKIN
+from unitac_rig.collection.session import collect_session
+from unitac_rig.errors import UsageError
+from unitac_rig.rig.config import parse_rig_config
+from unitac_rig.rig.objects import get_object
+from unitac_rig.sim.fast_rig import SimRig, seeded_scene
+from unitac_rig.sim.imperfections import (
+    CLEAN,
+    REALISTIC,
+    ElastomerMemory,
+    Imperfections,
+    mount_offset_mm,
+    mount_seed,
+    print_seed,
+    printed_object,
+)
+from unitac_rig.sim.scene import TaxelLoads
+from unitac_rig.sim.sensor_models import PapillArrayModel, PapillArrayParams, UskinModel, UskinParams
+from unitac_rig.storage.reader import read_presses, read_session_info
+from unitac_rig.storage.recorder import session_path
+
+QUIET_USKIN = UskinParams(noise_counts=0.0)
+QUIET_PILLARS = PapillArrayParams(noise_mm=0.0, offset_sd_mm=0.0, force_quantum_n=0.0, displacement_quantum_mm=0.0)
+
+
+def _uniform(n: int, z: float) -> TaxelLoads:
+    forces = np.zeros((n, 3))
+    forces[:, 2] = z
+    return TaxelLoads(forces, np.zeros((n, 3)))
+
+
+def test_switches_parse_from_words_and_unknown_names_are_usage_errors() -> None:
+    assert Imperfections.parse("all") == REALISTIC and Imperfections.parse("none") == CLEAN
+    no_creep = Imperfections.parse("all,-creep")
+    assert not no_creep.creep and no_creep.hysteresis and no_creep.print_tolerance
+    only = Imperfections.parse("hysteresis,drift")
+    assert only.hysteresis and only.drift and not only.creep and not only.mount_offset
+    for value in (REALISTIC, CLEAN, no_creep, only):
+        assert Imperfections.parse(value.text) == value
+    with pytest.raises(UsageError, match="unknown imperfection"):
+        Imperfections.parse("all,-wobble")
+    with pytest.raises(UsageError):
+        SimRig(parse_rig_config({}), imperfections="hysteresis,bogus")
+
+
+def test_hysteresis_loading_and_unloading_differ_by_the_cited_fraction_of_full_scale() -> None:
+    """uSkin: full scale 3 N a taxel, hysteresis 5 %: at 1.5 N the unloading curve reads 0.15 N (of load) above
+    the loading one, and both meet at 0 and at full scale."""
+    model = UskinModel(QUIET_USKIN, np.random.default_rng(1), imperfections=Imperfections.parse("hysteresis"))
+    per_newton = model.signal_counts(_uniform(24, 1.0).forces_n)[:, 2]  # counts per N of each taxel
+    up = np.linspace(0.0, 3.0, 301)
+    readings = {}
+    for branch, ramp in (("loading", up), ("unloading", up[::-1])):
+        for z in ramp:
+            counts = model.sample(_uniform(24, float(z))).values[:, 2] - model.baseline_counts[:, 2]
+            readings[(branch, round(float(z), 2))] = counts / per_newton  # as load, N
+    gap = readings[("unloading", 1.5)] - readings[("loading", 1.5)]
+    assert gap == pytest.approx(np.full(24, 0.05 * 3.0), abs=1e-9)
+    assert readings[("loading", 1.5)] == pytest.approx(np.full(24, 1.5 - 0.075), abs=1e-9)
+    assert readings[("unloading", 3.0)] == pytest.approx(readings[("loading", 3.0)], abs=1e-9)
+    assert readings[("unloading", 0.0)] == pytest.approx(np.zeros(24), abs=1e-9)
+
+
+def test_creep_under_a_constant_load_rises_by_the_cited_fraction_with_its_time_constant() -> None:
+    """PapillArray: creep 3 %, tau 1 s: a constant 2 N reads 2 N at once, 2 x (1 + 0.03 (1 - 1/e)) after 1 s and
+    2 x 1.03 after 10 s; unloaded, the memory fades with the same time constant."""
+    model = PapillArrayModel(QUIET_PILLARS, np.random.default_rng(2), imperfections=Imperfections.parse("creep"))
+    loads = _uniform(9, 2.0)
+    readings = {t: model.sample(loads, t_ns=int(t * 1e9)).values[:, 2] for t in np.arange(0.0, 10.01, 0.01)}
+    assert readings[0.0] == pytest.approx(np.full(9, 2.0))
+    assert readings[1.0] == pytest.approx(np.full(9, 2.0 * (1 + 0.03 * (1 - math.exp(-1.0)))), rel=1e-9)
+    assert readings[10.0] == pytest.approx(np.full(9, 2.06), rel=1e-4)
+    memory = ElastomerMemory(1, full_scale_n=15.0, creep_fraction=0.03, creep_tau_s=1.0)
+    load = np.array([[0.5, 0.0, 2.0]])
+    memory.read(0, load[:, 2], load)
+    memory.read(int(50e9), load[:, 2], load)  # fully crept
+    (residual,) = memory.read(int(51e9), np.zeros(1), np.zeros((1, 3)))  # one tau unloaded: 1/e of it is left
+    assert residual == pytest.approx(0.03 * load * math.exp(-1.0))
+    # a taxel whose normal load has almost gone reads its recovering creep, bounded, not its shear blown up
+    (tiny,) = memory.read(int(51.01e9), np.array([1e-9]), np.array([[0.3, 0.0, 1e-9]]))
+    assert np.abs(tiny).max() < 0.31
+
+
+def test_gain_spread_has_the_cited_spread_and_is_fixed_per_sensor_seed() -> None:
+    """uSkin: each taxel-axis's gain is off by sd 8 % on top of today's per-taxel spread; the same seed gives the
+    same gains and keeps today's baselines, a new seed new gains."""
+    clean = UskinModel(rng=np.random.default_rng(7))
+    spread = UskinModel(rng=np.random.default_rng(7), imperfections=Imperfections.parse("gain_spread"))
+    assert np.array_equal(clean.baseline_counts, spread.baseline_counts)
+    ratio = spread.gain_counts_per_n / clean.gain_counts_per_n
+    assert np.std(ratio - 1.0) == pytest.approx(0.08, rel=0.25)  # 72 draws
+    assert np.mean(np.std(ratio, axis=1)) > 0.04  # each axis its own: a taxel's three gains differ
+    again = UskinModel(rng=np.random.default_rng(7), imperfections=Imperfections.parse("gain_spread"))
+    assert np.array_equal(again.gain_counts_per_n, spread.gain_counts_per_n)
+    other = UskinModel(rng=np.random.default_rng(8), imperfections=Imperfections.parse("gain_spread"))
+    assert not np.allclose(other.gain_counts_per_n, spread.gain_counts_per_n)
+    pillars = PapillArrayModel(rng=np.random.default_rng(7), imperfections=Imperfections.parse("gain_spread"))
+    assert pillars.force_map is not None
+    gains = pillars.force_map[:, np.arange(3), np.arange(3)]
+    assert np.std(gains - 1.0) == pytest.approx(0.05, rel=0.35)  # 27 draws
+
+
+def test_uskin_crosstalk_reads_its_four_neighbours_at_the_dipole_share() -> None:
+    """A load on one taxel alone: its 4 neighbours one pitch away read 1.6 % of its counts, the others nothing."""
+    params = UskinParams(noise_counts=0.0, gain_sd_fraction=0.0, crosstalk_sd=0.0)
+    model = UskinModel(params, np.random.default_rng(3), imperfections=Imperfections.parse("crosstalk"))
+    centre = 8  # row 1, column 2 of the 4 x 6 layout: four neighbours
+    forces = np.zeros((24, 3))
+    forces[centre, 2] = 1.0
+    signal = model.sample(TaxelLoads(forces)).values[:, 2] - model.baseline_counts[:, 2]
+    xy = USKIN.taxel_xy_mm()
+    distance = np.linalg.norm(xy - xy[centre], axis=1)
+    neighbours = (distance > 0) & (distance < 1.2 * np.min(distance[distance > 0]))
+    assert neighbours.sum() == 4
+    assert signal[neighbours] == pytest.approx(np.full(4, 0.016 * signal[centre]))
+    assert signal[~neighbours & (distance > 0)] == pytest.approx(np.zeros(19), abs=1e-9)
+
+
+def test_drift_is_a_random_walk_of_the_cited_rate_and_starts_at_zero() -> None:
+    """uSkin: 10 counts/sqrt(s): after 100 s unloaded, the channels have wandered ~100 counts RMS."""
+    model = UskinModel(QUIET_USKIN, np.random.default_rng(4), imperfections=Imperfections.parse("drift"))
+    idle = _uniform(24, 0.0)
+    first = model.sample(idle, t_ns=0).values
+    assert np.array_equal(first, model.baseline_counts)
+    for k in range(1, 10_001):
+        last = model.sample(idle, t_ns=k * 10_000_000).values
+    assert np.sqrt(np.mean((last - model.baseline_counts) ** 2)) == pytest.approx(100.0, rel=0.25)
+
+
+def test_print_tolerance_is_one_print_per_object_of_the_cited_size() -> None:
+    """A print's outline is off by sd 0.1 mm (2 sigma = the +-0.2 mm FDM figure), the same print for every sensor
+    and rotation; a circle stays a circle."""
+    circle = get_object("circle_pla")
+    offsets = [printed_object(circle, np.random.default_rng(print_seed(s, circle.id))).radius_mm for s in range(300)]
+    assert np.std(np.array(offsets) - circle.radius_mm) == pytest.approx(0.1, rel=0.2)
+    square = get_object("square_pla")
+    a = seeded_scene(square, 0.0, "uskin", seed=5, imperfections=REALISTIC)
+    b = seeded_scene(square, 90.0, "papillarray", seed=5, imperfections=REALISTIC)
+    assert np.array_equal(a.obj.outer_mm, b.obj.outer_mm)
+    assert not np.array_equal(a.obj.outer_mm, square.outer_mm)
+    assert np.abs(a.obj.outer_mm - square.outer_mm).max() < 1.0
+    assert np.array_equal(seeded_scene(square, 0.0, "uskin", seed=5).obj.outer_mm, square.outer_mm)
+
+
+def test_mount_offset_moves_the_pad_by_the_cited_spread_per_session() -> None:
+    """Each session's mount puts the pad off the tool axis by its own seeded draw of sd 0.2 mm (the M3 clearance
+    and the printed adapter), on top of the scene's fitted offset."""
+    hexagon = get_object("hex_pla")
+    for seed in range(3):
+        on = seeded_scene(hexagon, 0.0, "uskin", seed=seed, imperfections=Imperfections.parse("mount_offset"))
+        off = seeded_scene(hexagon, 0.0, "uskin", seed=seed)
+        draw = mount_offset_mm(np.random.default_rng(mount_seed(seed, hexagon.id, "uskin", 0.0)))
+        assert on.pad_offset_mm - off.pad_offset_mm == pytest.approx(draw) and draw != 0.0
+    draws = [mount_offset_mm(np.random.default_rng(mount_seed(s, hexagon.id, "uskin", 0.0))) for s in range(400)]
+    assert np.std(draws) == pytest.approx(0.2, rel=0.15)
+
+
+def _session_hashes(
+    tmp_path: Path, imperfections: str, sensors: tuple[str, ...] = ("uskin", "papillarray")
+) -> dict[str, str]:
+    config = parse_rig_config({"press": {"angle_count": 2}})
+    out = {}
+    seed = 3
+    for sensor in sensors:
+        data = tmp_path / f"{imperfections}-{seed}"
+        with SimRig(config, seed=seed, imperfections=imperfections) as rig:
+            collect_session(rig, get_object("hex_pla"), sensor, data)
+        path = session_path(data, "hex_pla", sensor)
+        assert read_session_info(path).attrs["sim_imperfections"] == imperfections  # which twin recorded it
+        digest = hashlib.sha256()
+        for record in read_presses(path):
+            for values in (
+                record.tactile_values,
+                record.tactile_displacement_mm,
+                record.press_force_n,
+                record.robot_force,
+            ):
+                if values is not None:
+                    digest.update(np.ascontiguousarray(values, dtype=np.float64).tobytes())
+        out[sensor] = digest.hexdigest()
+    return out
+
+
+def test_the_clean_twin_records_what_the_twin_recorded_before_the_imperfections(tmp_path: Path) -> None:
+    """Seed 3, hex_pla, 2 angles, both sensors: the recorded tactile streams, press forces and wrist wrenches hash
+    as they did at commit 11dc7c9 (before sim/imperfections.py); the realistic twin records something else."""
+    clean = _session_hashes(tmp_path, "none")
+    assert clean == {
+        "uskin": "d7da4249286f893b4628b709aa505ea572a72aecec4f80c01204ee75f894157e",
+        "papillarray": "831f2df39314fa561f6cd43eba492c8db789aa611add91cf5df75a1c3db6ea5d",
+    }
+    realistic = _session_hashes(tmp_path, "all", ("papillarray",))
+    assert realistic["papillarray"] != clean["papillarray"]
+    assert _session_hashes(tmp_path / "again", "all", ("papillarray",)) == realistic  # deterministic per seed

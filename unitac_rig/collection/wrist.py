@@ -1,0 +1,191 @@
+"""Never zero a loaded wrist: the session's last unloaded zero, kept across a crash, and a guarded back-off that
+proves the pad is free before the session zeroes the wrist F/T.
+
+Why: ``zeroFtSensor`` taken while the pad presses on something makes that load read as zero, and the press then adds
+its full threshold on top (an independent controller measured 27.9-30.2 N true for a "10.8 N" press after a resume
+with the pad left touching). Two checks, both before any motion toward the object:
+
+* the **remembered zero**: the mean wrench read right after the last zero the session knows was unloaded (the
+  session's first zero, and every press's own zero, which refuses a loaded pad), written next to the session's
+  journal (``_wrist_zero.json``) so that a resume after ``kill -9`` has it. The controller keeps its F/T zero while
+  the host is gone, so the reading now minus the remembered one is the load now (a controller restart loses the zero;
+  the back-off below still tells a load from a changed zero);
+* the **back-off probe** (physics, needs no remembered zero): a translation does not change the gravity and payload
+  part of a wrist reading, only contact does. So the arm backs along the pad's axis (tool -z, away from whatever the
+  pad presses) in :data:`UNLOAD_STEP_MM` steps, guarded (the force may fall, not grow) and clipped to the workspace,
+  and reads the mean wrench after each step at rest. While a step changes |F| by more than
+  :data:`PROBE_CHANGE_N` the pad was still loaded; the first step that changes nothing proves it free. The load the
+  arm was under is how much the reading fell. Not free after :data:`UNLOAD_MAX_MM`: refused with one line giving the
+  measured load.
+
+The threshold: the mean of a 0.1 s window of a UR's filtered wrist reading scatters by ~0.12 N (0.4 N per sample,
+correlated over ~8 ms), so two windows differ by ~0.17 N (1 sigma) and 0.5 N is ~3 sigma: a false "loaded" costs one
+more step; a contact softer than 0.5 N per 3 mm (0.17 N/mm, far below the softest catalogue object) would go unseen.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from drivers.arm import Arm
+from drivers.motion import wait_until_at_rest
+from unitac_rig.collection.transit import UNLOADED_FORCE_N, move_within_limits
+from unitac_rig.errors import SafetyLimit
+from unitac_rig.rig.config import LimitsConfig
+from unitac_rig.rig.poses import tool_z
+
+log = logging.getLogger(__name__)
+
+ZERO_FILE = "_wrist_zero.json"  # in the session's journal directory: the last unloaded zero's reading
+UNLOAD_STEP_MM = 3.0  # each back-off step, mm
+UNLOAD_MAX_MM = 45.0  # give up (refuse) when the reading still falls after this much back-off, mm
+UNLOAD_WINDOW_S = 0.1  # the mean wrench is read over this window at rest, s
+PROBE_CHANGE_N = 0.5  # a step that changes the mean |F| by less than this found the pad free, N
+UNLOAD_SPEED_MM_S = 10.0  # back-off speed (away from the object: the near speed's default), mm/s
+
+
+def read_zero(journal: Path) -> np.ndarray | None:
+    """The remembered unloaded reading (6,) [N, N*m], None when the session has none (or it cannot be read)."""
+    try:
+        data = json.loads((Path(journal) / ZERO_FILE).read_text())
+        wrench = np.asarray(data["wrench"], dtype=np.float64)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return wrench if wrench.shape == (6,) and np.all(np.isfinite(wrench)) else None
+
+
+def write_zero(journal: Path, wrench: np.ndarray) -> None:
+    """Remember ``wrench`` (6,) as the session's last unloaded reading (atomic replace; best effort: a full disk must
+    not stop a session, the back-off probe does not need it)."""
+    path = Path(journal) / ZERO_FILE
+    tmp = path.with_suffix(".tmp")
+    try:
+        tmp.write_text(json.dumps({"wrench": [float(v) for v in np.asarray(wrench).ravel()]}))
+        os.replace(tmp, path)
+    except OSError as exc:
+        log.warning("cannot remember the wrist's unloaded zero in %s: %s", path, exc)
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def mean_wrench(arm: Arm, seconds: float = UNLOAD_WINDOW_S) -> np.ndarray:
+    """The mean wrench (6,) over ``seconds`` of control periods (the arm at rest), N and N*m."""
+    readings = []
+    for _ in range(max(1, round(seconds / arm.control_period_s))):
+        arm.wait_period()
+        readings.append(np.asarray(arm.read_state().tcp_force, dtype=np.float64))
+    return np.mean(readings, axis=0)
+
+
+def force_n(wrench: np.ndarray, reference: np.ndarray | None = None) -> float:
+    """|F| (N) of ``wrench`` minus ``reference`` (6,) (an unloaded reading; None: the controller's zero)."""
+    w = np.asarray(wrench, dtype=np.float64)[:3]
+    if reference is not None:
+        w = w - np.asarray(reference, dtype=np.float64)[:3]
+    return float(np.linalg.norm(w))
+
+
+@dataclass(frozen=True)
+class Unloaded:
+    """What the back-off found: the load the pad was under (N, how much |F| fell), how far it backed (mm), the
+    reading at the free pose (6,), and whether the remembered zero disagreed (N off it at the start, NaN: none)."""
+
+    load_n: float
+    backed_mm: float
+    free_reading: np.ndarray
+    off_zero_n: float
+
+    @property
+    def was_loaded(self) -> bool:
+        return self.load_n > PROBE_CHANGE_N
+
+    def describe(self) -> str:
+        return (
+            f"the pad was loaded with {self.load_n:.1f} N at the start (the wrist reading fell that much while the arm "
+            f"backed {self.backed_mm:.0f} mm along the pad's axis); unloaded before zeroing the wrist"
+        )
+
+
+def unload_wrist(arm: Arm, limits: LimitsConfig, *, zero: np.ndarray | None = None) -> Unloaded:
+    """Back the pad off along its axis until a step changes nothing (see the module docstring); -> what it found.
+
+    Raises SafetyLimit (one line with the measured load) when the reading still falls after ``UNLOAD_MAX_MM``, or
+    when the arm cannot back off (the workspace edge) while the remembered zero says the pad is loaded.
+    """
+    wait_until_at_rest(arm)
+    first = mean_wrench(arm)
+    off_zero = math.nan if zero is None else force_n(first, zero)
+    previous, backed_mm = first, 0.0
+    speed = min(UNLOAD_SPEED_MM_S, limits.near_speed_mm_s) / 1000.0
+    while True:
+        here = np.asarray(arm.read_state().tcp_pose, dtype=np.float64)
+        target = np.concatenate([here[:3] - tool_z(here) * UNLOAD_STEP_MM / 1000.0, here[3:]])
+        end = move_within_limits(arm, here, target, speed, limits, [])
+        step_mm = 1000.0 * float(np.linalg.norm(end[:3] - here[:3]))
+        if step_mm < 0.2:  # at the workspace's edge: the remembered zero alone decides
+            if not math.isnan(off_zero) and off_zero > UNLOADED_FORCE_N:
+                raise SafetyLimit(
+                    f"the wrist reads {off_zero:.1f} N off the last unloaded zero and the arm cannot back off along "
+                    "the pad's axis (workspace edge): refusing to zero a loaded wrist",
+                    hint="move the pad clear of the object (freedrive on the pendant), then run the same command",
+                )
+            log.warning("cannot back off to check the wrist is unloaded (workspace edge); %s", _zero_note(off_zero))
+            break
+        backed_mm += step_mm
+        wait_until_at_rest(arm)
+        now = mean_wrench(arm)
+        change = force_n(now, previous)
+        previous = now
+        if change < PROBE_CHANGE_N:
+            break
+        if backed_mm >= UNLOAD_MAX_MM:
+            raise SafetyLimit(
+                f"the pad is still loaded after backing {backed_mm:.0f} mm along its axis: the wrist reading fell by "
+                f"{force_n(first, now):.1f} N and still falls ({change:.1f} N in the last step); refusing to zero it",
+                hint="move the pad clear of the object (freedrive on the pendant), then run the same command",
+            )
+    result = Unloaded(force_n(first, previous), backed_mm, previous, off_zero)
+    if result.was_loaded:
+        log.warning("%s", result.describe())
+    elif not math.isnan(off_zero) and off_zero > UNLOADED_FORCE_N:
+        log.warning(
+            "the wrist reads %.1f N off the session's last unloaded zero, but backing off changes nothing: the "
+            "controller's F/T zero changed (a restart or a zero from the pendant), not a load",
+            off_zero,
+        )
+    return result
+
+
+def _zero_note(off_zero: float) -> str:
+    return "no remembered zero" if math.isnan(off_zero) else f"{off_zero:.1f} N off the remembered zero"
+
+
+def load_left_n(arm: Arm, zero: np.ndarray | None) -> float | None:
+    """|F| (N) the pad is left under now, against the unloaded reading ``zero`` (6,); None when the arm cannot be read
+    or no zero is known. One filtered reading: it works with the program stopped (nothing else can be asked then)."""
+    if zero is None:
+        return None
+    try:
+        return force_n(np.asarray(arm.read_state().tcp_force, dtype=np.float64), zero)
+    except Exception as exc:  # the arm is gone (a lost stream): say nothing rather than mask what happened
+        log.info("cannot read the load left on the pad: %s", exc)
+        return None
+
+
+def load_left_note(arm: Arm, zero: np.ndarray | None) -> str:
+    """``"; the pad is left under X N"`` (or ``"; the pad is left unloaded (X N)"``), empty when unknown: appended to
+    every way out of a fault, so the operator knows whether the pad still presses on something."""
+    load = load_left_n(arm, zero)
+    if load is None:
+        return ""
+    if load <= UNLOADED_FORCE_N:
+        return f"; the pad is left unloaded ({load:.1f} N on the wrist)"
+    return f"; the pad is left loaded: {load:.1f} N on the wrist"

@@ -365,19 +365,22 @@ def _restored_rng(state: Mapping[str, Any]) -> np.random.Generator:
 
 def _stored_split(payload: Mapping[str, Any]) -> Split:
     info = payload["split"]
-    val_mask = payload.get("val_mask")
+
+    def directions(key: str) -> dict[str, Any]:
+        return {k: [tuple(d) for d in v] for k, v in info[key].items()}
+
     return Split(
         np.asarray(payload["test_mask"], dtype=bool),
         int(info["seed"]),
         float(info["test_fraction"]),
         tuple(info["unseen_objects"]),
-        {k: [tuple(d) for d in v] for k, v in info["test_directions"].items()},
-        None if val_mask is None else np.asarray(val_mask, dtype=bool),
-        float(info.get("val_fraction", 0.0)),
-        {k: [tuple(d) for d in v] for k, v in info.get("val_directions", {}).items()},
-        str(info.get("mode", "random")),
-        float(info.get("gap_deg", 0.0)),
-        tuple(info.get("not_held_out", ())),
+        directions("test_directions"),
+        np.asarray(payload["val_mask"], dtype=bool),
+        float(info["val_fraction"]),
+        directions("val_directions"),
+        str(info["mode"]),
+        float(info["gap_deg"]),
+        tuple(info["not_held_out"]),
     )
 
 

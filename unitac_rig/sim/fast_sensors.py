@@ -25,22 +25,33 @@ import dataclasses
 import itertools
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
+from drivers.clock import VirtualClock
 from drivers.sensor import TactileSensor
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.sensors import SENSORS, get_sensor
+from unitac_rig.sim.faults import FaultPlan
 from unitac_rig.sim.imperfections import Imperfections
 from unitac_rig.sim.sensor_models import PapillArrayModel, UskinModel
 from unitac_rig.sim.signals import SignalSource
 
-if TYPE_CHECKING:
-    from unitac_rig.sim.fast_rig import SimRig
-
 _Device = TypeVar("_Device")
 Serve = Callable[[_Device], _Device]  # keeps a simulated device running until the twin closes; returns it
+
+
+class LockstepHost(Protocol):
+    """What a simulated sensor's ``open`` uses of the fast twin (:class:`~unitac_rig.sim.fast_rig.SimRig`): its
+    virtual clock, its fault injector, a fresh bus channel, and ``serve`` (run a device in lockstep, return it)."""
+
+    clock: VirtualClock
+    faults: FaultPlan | None
+
+    def new_channel(self) -> str: ...
+
+    def serve(self, device: _Device) -> _Device: ...
 
 
 def with_options(device: _Device, sensor: str, options: Mapping[str, Any] | None) -> _Device:
@@ -109,7 +120,7 @@ class SimulatedUskin:
     def model(self, rng: np.random.Generator) -> UskinModel:
         return UskinModel(rng=rng, imperfections=Imperfections.parse(self.imperfections))
 
-    def open(self, rig: SimRig, feed: SignalSource) -> TactileSensor:
+    def open(self, rig: LockstepHost, feed: SignalSource) -> TactileSensor:
         import can
 
         from drivers.uskin import UskinCanDriver
@@ -208,7 +219,7 @@ class SimulatedPapillArray:
     def model(self, rng: np.random.Generator) -> PapillArrayModel:
         return PapillArrayModel(rng=rng, imperfections=Imperfections.parse(self.imperfections))
 
-    def open(self, rig: SimRig, feed: SignalSource) -> TactileSensor:
+    def open(self, rig: LockstepHost, feed: SignalSource) -> TactileSensor:
         from drivers.papillarray import PapillArrayDriver
         from unitac_rig.sim.devices.papillarray import SimPapillArrayHub
 

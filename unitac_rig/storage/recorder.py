@@ -37,6 +37,7 @@ kill's leftover) is only deleted when a later command opens the session for writ
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import errno
 import itertools
 import json
@@ -44,6 +45,7 @@ import logging
 import os
 import shutil
 import time
+import uuid
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Literal
@@ -52,7 +54,15 @@ import h5py
 
 from unitac_rig.errors import DataError
 from unitac_rig.storage.checksums import ROOT_ATTR, check_press_group, check_root, seal_root
-from unitac_rig.storage.integrity import READABLE_SCHEMA_VERSIONS, SCHEMA_VERSION, check_session
+from unitac_rig.storage.extraction import ExtractionSettings, extract_press
+from unitac_rig.storage.integrity import (
+    IDENTITY_KEYS,
+    PRESS_DIR_SUFFIX,
+    READABLE_SCHEMA_VERSIONS,
+    SCHEMA_VERSION,
+    check_session,
+    press_identity_problem,
+)
 from unitac_rig.storage.lease import SessionLease, lease_holder
 from unitac_rig.storage.manifest import sha256_file
 from unitac_rig.storage.press_record import (
@@ -60,6 +70,7 @@ from unitac_rig.storage.press_record import (
     PressRecord,
     as_str,
     attr_value,
+    decode_attr,
     json_default,
     read_press_group,
     record_nbytes,
@@ -71,8 +82,6 @@ log = logging.getLogger(__name__)
 
 #: root attributes that say which rig recorded a session: a session is never continued from another one
 RIG_IDENTITY_KEYS = ("simulated", "rig", "source")
-#: the folder of a session's press files: ``<object>__<sensor>.presses`` beside the session file
-PRESS_DIR_SUFFIX = ".presses"
 #: the group that holds the press in a press file and in a journal entry
 PRESS_GROUP = "press"
 #: room claimed per press link when the session file is republished (an external link and its name), bytes
@@ -106,9 +115,10 @@ def private_copy_path(path: Path) -> Path:
 
 
 def remove_stale_copies(path: Path, journal: Path) -> None:
-    """Delete private copies of the session file, its press files and its journal entries left by a killed writer or
-    ``extract`` (call only while holding the session's lease)."""
+    """Delete private copies of the session file, its press files, its journal entries and journal header left by a
+    killed writer or ``extract`` (call only while holding the session's lease: no live process writes them then)."""
     leftovers = [*path.parent.glob(f".{path.name}.*.tmp"), *journal.glob(".*.h5.*.tmp"), *journal.glob("*.h5.tmp"),
+                 *journal.glob("._session.json.*.tmp"), *journal.glob("_session.tmp"),
                  *press_dir(path).glob(".*.tmp")]  # fmt: skip
     for leftover in leftovers:
         leftover.unlink(missing_ok=True)
@@ -277,16 +287,73 @@ def write_journal_entry(journal: Path, rec: PressRecord) -> Path:
     return final
 
 
-def _journal_check(path: Path) -> tuple[str, str]:
-    """(state, status or detail) of a journal entry: ``ok``/``unsealed`` with the press status, or ``damaged``."""
+def _journal_check(path: Path, identity: Mapping[str, str] | None = None) -> tuple[str, str]:
+    """(state, status or detail) of a journal entry: ``ok``/``unsealed`` with the press status, or ``damaged``
+    (content, or with ``identity``: not the press of that session its name says)."""
+    entry = journal_entry_check(path, identity or {})
+    return (entry.state, entry.status) if entry.state != "damaged" else ("damaged", entry.detail)
+
+
+@dataclasses.dataclass(frozen=True)
+class JournalEntry:
+    """What one journal entry holds: ``state`` ``ok``/``unsealed``/``damaged`` (why: ``detail``), the press status,
+    the press it really holds (``holds``: another id when two entries were swapped) and its extraction settings."""
+
+    state: str
+    detail: str = ""
+    status: str = ""
+    holds: str | None = None
+    settings: dict[str, Any] | None = None
+
+
+def journal_entry_check(path: Path, identity: Mapping[str, str]) -> JournalEntry:
+    """Verify the journal entry ``path`` (``<press_id>.h5``) against its checksums and, when ``identity`` (the
+    session's object, sensor, session id) is given, that it holds that session's press of its name."""
     try:
         with h5py.File(path, "r") as jf:
-            result = check_press_group(jf["press"])
+            group = jf[PRESS_GROUP]
+            result = check_press_group(group)
             if result.damaged:
-                return "damaged", result.detail
-            return result.state, as_str(jf["press"].attrs["status"])
+                return JournalEntry("damaged", result.detail)
+            holds = as_str(group.attrs.get("press_id", ""))
+            settings = _group_settings(group)
+            status = as_str(group.attrs["status"])
+            if identity:
+                wrong = press_identity_problem(group, holds, dict(identity), None)
+                if wrong:
+                    return JournalEntry("damaged", wrong)
+            if holds != path.stem:
+                return JournalEntry("damaged", f"it holds press {holds}, not {path.stem}", status, holds, settings)
+            return JournalEntry(result.state, "", status, holds, settings)
     except Exception as exc:  # a torn file does not open; damaged metadata raises anything
-        return "damaged", f"unreadable ({' '.join(str(exc).split())[:160]})"
+        return JournalEntry("damaged", f"unreadable ({' '.join(str(exc).split())[:160]})")
+
+
+def _group_settings(group: h5py.Group) -> dict[str, Any] | None:
+    """The extraction settings a press group was extracted with (None: no extraction)."""
+    if "extraction" not in group:
+        return None
+    return _settings_of(group["extraction"].attrs["settings"])
+
+
+def _settings_of(value: Any) -> dict[str, Any] | None:
+    """Extraction settings as stored in a session's root attributes, a journal header or a press (JSON text or a
+    dict), as plain JSON values (tuples as lists), so two copies of the same settings compare equal."""
+    if value is None:
+        return None
+    if isinstance(value, bytes | str):
+        try:
+            value = json.loads(as_str(value))
+        except ValueError:
+            return None
+    return json.loads(json.dumps(value, default=json_default)) if isinstance(value, dict) else None
+
+
+def _reextracted(rec: PressRecord, settings: Mapping[str, Any]) -> PressRecord:
+    """``rec`` with its extraction recomputed under ``settings`` (the raw streams are unchanged)."""
+    extraction = extract_press(rec.robot_t_s, rec.press_force_n, rec.tactile_t_s, rec.tactile_valid,
+                               ExtractionSettings.from_dict(dict(settings)))  # fmt: skip
+    return dataclasses.replace(rec, extraction=extraction)
 
 
 def _describe_rig(attrs: Mapping[str, Any]) -> str:
@@ -394,22 +461,34 @@ class SessionWriter:
         log.info("%s", text)  # collect prints the notes; a reader's repair logs them as warnings
 
     def _write_journal_header(self) -> None:
+        """Check the journal header against this writer's session, or write it: from the session file's verified
+        root when a header went missing beside an existing session (noted), else new, with a new session id."""
         header = self.journal / "_session.json"
-        if header.exists():
-            existing = self._journal_header()
-            for key in ("object", "sensor"):
-                if existing.get(key) != self.root_attrs.get(key):
-                    raise DataError(
-                        f"{self.path.name}: the journal belongs to {key}={existing.get(key)!r}, "
-                        f"not {self.root_attrs.get(key)!r}"
-                    )
-            note = check_same_rig(existing, self.root_attrs, self.path)
-            if note:
-                self._note(note)
-            return
-        tmp = header.with_suffix(".tmp")
-        tmp.write_text(json.dumps(self.root_attrs, default=json_default, indent=1))
-        os.replace(tmp, header)
+        if not header.exists():
+            rebuilt = _root_as_header(self.path)
+            if rebuilt is not None:
+                self._note(f"the journal header {header.name} was missing; rewritten from {self.path.name}")
+            attrs = rebuilt if rebuilt is not None else dict(self.root_attrs)
+            attrs.setdefault("session_id", uuid.uuid4().hex)  # names this session in every press it records
+            _write_header(self.journal, attrs)
+        existing = self._journal_header()
+        for key in ("object", "sensor"):
+            if existing.get(key) != self.root_attrs.get(key):
+                raise DataError(
+                    f"{self.path.name}: the journal belongs to {key}={existing.get(key)!r}, "
+                    f"not {self.root_attrs.get(key)!r}"
+                )
+        note = check_same_rig(existing, self.root_attrs, self.path)
+        if note:
+            self._note(note)
+        # a session begun before session ids (schema 2 or older) stays as it was: its presses carry no identity
+        self.identity = {key: str(existing[key]) for key in IDENTITY_KEYS} if "session_id" in existing else {}
+
+    def _stamped(self, rec: PressRecord) -> PressRecord:
+        """``rec`` carrying this session's identity in its attributes (under its seal once written)."""
+        if all(rec.attrs.get(key) == value for key, value in self.identity.items()):
+            return rec
+        return dataclasses.replace(rec, attrs={**rec.attrs, **self.identity})
 
     def _journal_header(self) -> dict[str, Any]:
         return read_journal_header(self.journal)
@@ -522,18 +601,32 @@ class SessionWriter:
             self._root, self._links, self._groups = self._header_root(), {}, []
             self._publish()
             check = check_session(self.path)
+        if check.root_problem:
+            self._root = self._header_root(check.version or SCHEMA_VERSION)
+        # the session file's extraction settings are the newer side: extract renames it before the journal's copies
+        settings = _settings_of(self._root.get("extraction_settings"))
         restore: list[PressRecord] = []
-        journal_fix: list[str] = []
+        journal_fix: dict[str, str] = {}  # press id -> why its journal entry is rewritten from the session file
         lost: dict[str, str] = {}  # press id -> why it cannot be repaired
         broken_entries: list[Path] = []
         journal = self._journal_press_files()
+        entries = {pid: journal_entry_check(path, self.identity) for pid, path in journal.items()}
+        # an intact entry under another press's name (two entries swapped): still a good copy of the press it holds
+        spare = {e.holds: journal[pid] for pid, e in entries.items() if e.holds and e.holds != pid and e.status}
         for pid, path in journal.items():
-            state, detail = _journal_check(path)
+            entry = entries[pid]
+            state, detail = entry.state, entry.detail
             if pid in check.statuses:  # intact in the session
                 if state == "damaged":
-                    journal_fix.append(pid)
-                elif check.statuses[pid] not in FINISHED_STATUSES and detail != check.statuses[pid]:
+                    journal_fix[pid] = f"was damaged ({detail})"
+                elif check.statuses[pid] not in FINISHED_STATUSES and entry.status != check.statuses[pid]:
                     restore.append(self._read_journal(path))  # e.g. aborted in the session, finished in the journal
+                elif settings is not None and entry.settings is not None and entry.settings != settings:
+                    journal_fix[pid] = "held an older extraction than the session file"
+                continue
+            if state == "damaged" and pid in spare:
+                restore.append(self._read_journal(spare[pid]))
+                journal_fix[pid] = f"was damaged ({detail})"
                 continue
             if state == "damaged":
                 if pid in check.damaged:
@@ -544,8 +637,16 @@ class SessionWriter:
                 continue
             restore.append(self._read_journal(path))
         for pid, what in check.damaged.items():
-            if pid not in journal:
+            if pid in journal:
+                continue
+            if pid in spare:
+                restore.append(self._read_journal(spare[pid]))
+                journal_fix[pid] = "was missing"
+            else:
                 lost[pid] = f"{what}, and it has no journal copy"
+        for pid in check.statuses:
+            if pid not in journal and pid not in journal_fix and check.version and check.version >= 2:
+                journal_fix[pid] = "was missing (the press had no repair copy)"
         if lost and self.unrepairable == "refuse":
             pid, why = next(iter(lost.items()))
             more = f" (and {len(lost) - 1} more presses)" if len(lost) > 1 else ""
@@ -564,16 +665,18 @@ class SessionWriter:
                 elif pid in self._groups:  # the older layout: the damaged version of the whole file survives
                     session_aside = session_aside or keep_aside(self.path, move=False)
                     kept_as[pid] = session_aside.name
-            for entry in broken_entries:
-                keep_aside(entry, move=True)
+            for entry_path in broken_entries:
+                keep_aside(entry_path, move=True)
+        restore = [self._stamped(r) for r in restore]
+        if settings is not None:  # a journal copy older than the session's extraction is re-extracted
+            restore = [_reextracted(r, settings) if r.extraction is not None and _settings_of(
+                       r.extraction.settings.to_dict()) != settings else r for r in restore]  # fmt: skip
         gone = set(check.half_written) | set(lost) | set(check.damaged) | {rec.press_id for rec in restore}
         for pid in gone:
             self._links.pop(pid, None)
         self._groups = [pid for pid in self._groups if pid not in gone]
         for rec in restore:
             self._links[rec.press_id] = self._new_press_file(rec.press_id, writing(rec))
-        if check.root_problem:
-            self._root = self._header_root(check.version or SCHEMA_VERSION)
         if gone or check.root_problem:
             self._publish()
         for pid, why in lost.items():
@@ -581,15 +684,32 @@ class SessionWriter:
             self._note(f"press {pid} was damaged ({why}): dropped, it will be pressed again{aside}")
         if check.root_problem:
             self._note(f"{self.path.name}: {check.root_problem}; rewritten from the journal header")
-        for pid in journal_fix:
-            with h5py.File(self.path, "r") as f:
-                rec = read_press_group(f["presses"][pid])
+        restored = {rec.press_id: rec for rec in restore}
+        for pid, why in journal_fix.items():
+            if pid in restored:
+                rec = restored[pid]
+            else:
+                with h5py.File(self.path, "r") as f:
+                    rec = self._stamped(read_press_group(f["presses"][pid]))
             write_journal_entry(self.journal, rec)
-            self._note(f"journal entry {pid}.h5 was damaged; rewritten from the session file")
+            self._note(
+                f"journal entry {pid}.h5 {why}; rewritten from the {'journal' if pid in restored else 'session file'}"
+            )
+        self._align_header(settings)
         self.recovery_notes.extend(f"press {pid} was half written; dropped" for pid in check.half_written)
         for rec in restore:
             what = "damaged in the session file; replaced by" if rec.press_id in check.damaged else "restored from"
             self._note(f"press {rec.press_id} ({rec.status}) {what} the journal")
+
+    def _align_header(self, settings: dict[str, Any] | None) -> None:
+        """The journal header's extraction settings follow the session file's (a kill between extract's renames)."""
+        if settings is None:
+            return
+        header = self._journal_header()
+        if _settings_of(header.get("extraction_settings")) != settings:
+            header["extraction_settings"] = settings
+            _write_header(self.journal, header)
+            self._note("the journal header held an older extraction than the session file; brought in step")
 
     def _remove_unlinked_press_files(self) -> None:
         """Delete press files the published session file does not link: versions superseded by an earlier command
@@ -638,9 +758,7 @@ class SessionWriter:
         if serial is not None and recorded is None:
             attrs = {**attrs, "sensor_serial": str(serial)}  # the first serial a driver reported stays the session's
         header.update(attrs)
-        tmp = self.journal / "_session.tmp"
-        tmp.write_text(json.dumps(header, default=json_default, indent=1))
-        os.replace(tmp, self.journal / "_session.json")
+        _write_header(self.journal, header)
 
         for key, value in attrs.items():
             self._root[key] = attr_value(value)
@@ -655,6 +773,7 @@ class SessionWriter:
         nbytes = record_nbytes(rec)
         self._room(tmp, 2 * nbytes, f"press {rec.press_id}")  # the journal entry and the press file
         try:
+            rec = self._stamped(rec)
             write_journal_entry(self.journal, rec)
             self._presses_written += 1
             # durable from here on: a failure below only delays the press file and its link to the next open
@@ -687,6 +806,30 @@ class SessionWriter:
                 folder.rmdir()  # only when empty
             except OSError:
                 break
+
+
+def _write_header(journal: Path, attrs: Mapping[str, Any]) -> None:
+    """Write ``journal/_session.json`` atomically (private name, rename)."""
+    header = journal / "_session.json"
+    tmp = private_copy_path(header)
+    try:
+        tmp.write_text(json.dumps(dict(attrs), default=json_default, indent=1))
+        os.replace(tmp, header)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _root_as_header(path: Path) -> dict[str, Any] | None:
+    """A session file's root attributes as a journal header, when the file's root is intact and sealed (None
+    otherwise): how a deleted ``_session.json`` is rebuilt."""
+    try:
+        with h5py.File(path, "r") as f:
+            if check_root(f).state != "ok":
+                return None
+            attrs = {k: decode_attr(v) for k, v in f.attrs.items() if k not in (ROOT_ATTR, "schema_version")}
+    except Exception:
+        return None
+    return attrs if "object" in attrs and "sensor" in attrs else None
 
 
 def read_journal_header(journal: Path) -> dict[str, Any]:

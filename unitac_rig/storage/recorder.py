@@ -46,7 +46,7 @@ import os
 import shutil
 import time
 import uuid
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, Literal
 
@@ -61,6 +61,7 @@ from unitac_rig.storage.integrity import (
     READABLE_SCHEMA_VERSIONS,
     SCHEMA_VERSION,
     check_session,
+    file_stamp,
     press_identity_problem,
 )
 from unitac_rig.storage.lease import SessionLease, lease_holder
@@ -119,6 +120,7 @@ def remove_stale_copies(path: Path, journal: Path) -> None:
     killed writer or ``extract`` (call only while holding the session's lease: no live process writes them then)."""
     leftovers = [*path.parent.glob(f".{path.name}.*.tmp"), *journal.glob(".*.h5.*.tmp"), *journal.glob("*.h5.tmp"),
                  *journal.glob("._session.json.*.tmp"), *journal.glob("_session.tmp"),
+                 *journal.glob("._verified.json.*.tmp"),
                  *press_dir(path).glob(".*.tmp")]  # fmt: skip
     for leftover in leftovers:
         leftover.unlink(missing_ok=True)
@@ -327,6 +329,38 @@ def journal_entry_check(path: Path, identity: Mapping[str, str]) -> JournalEntry
             return JournalEntry(result.state, "", status, holds, settings)
     except Exception as exc:  # a torn file does not open; damaged metadata raises anything
         return JournalEntry("damaged", f"unreadable ({' '.join(str(exc).split())[:160]})")
+
+
+def journal_problems(
+    path: Path, presses: Iterable[str], identity: Mapping[str, str], trusted: Mapping[str, str]
+) -> tuple[dict[str, str], dict[str, str]]:
+    """For a reader: which of the session file ``path``'s intact ``presses`` have lost their repair copy (journal
+    entry missing, damaged, holding another press) and whether the journal header is missing, as (what -> why,
+    entry name -> stamp of the entries verified intact). ``trusted`` (entry name -> stamp) are not read again.
+    Nothing when the session has no journal folder (an export's copy, files copied without ``.journal/``)."""
+    journal = journal_dir(Path(path).parent, *Path(path).stem.split("__", 1))
+    problems: dict[str, str] = {}
+    good: dict[str, str] = {}
+    if not journal.is_dir():
+        return problems, good
+    if not (journal / "_session.json").is_file():
+        problems["_session.json"] = "the journal header _session.json is missing"
+    for pid in presses:
+        entry = journal / f"{pid}.h5"
+        try:
+            stamp = file_stamp(entry)
+        except OSError:
+            problems[pid] = f"press {pid} has lost its repair copy: its journal entry {entry.name} is missing"
+            continue
+        if trusted.get(entry.name) == stamp:
+            good[entry.name] = stamp
+            continue
+        checked = journal_entry_check(entry, identity)
+        if checked.state == "damaged":
+            problems[pid] = f"press {pid} has lost its repair copy: its journal entry is damaged ({checked.detail})"
+        else:
+            good[entry.name] = stamp
+    return problems, good
 
 
 def _group_settings(group: h5py.Group) -> dict[str, Any] | None:
@@ -669,8 +703,13 @@ class SessionWriter:
                 keep_aside(entry_path, move=True)
         restore = [self._stamped(r) for r in restore]
         if settings is not None:  # a journal copy older than the session's extraction is re-extracted
-            restore = [_reextracted(r, settings) if r.extraction is not None and _settings_of(
-                       r.extraction.settings.to_dict()) != settings else r for r in restore]  # fmt: skip
+            stale = {
+                r.press_id
+                for r in restore
+                if r.extraction is not None and _settings_of(r.extraction.settings.to_dict()) != settings
+            }
+            restore = [_reextracted(r, settings) if r.press_id in stale else r for r in restore]
+            journal_fix.update({pid: "held an older extraction than the session file" for pid in stale})
         gone = set(check.half_written) | set(lost) | set(check.damaged) | {rec.press_id for rec in restore}
         for pid in gone:
             self._links.pop(pid, None)
@@ -798,7 +837,7 @@ class SessionWriter:
         self.path.unlink(missing_ok=True)
         with contextlib.suppress(OSError):
             self.press_dir.rmdir()  # only when empty
-        for leftover in ("_session.json", "_session.tmp"):
+        for leftover in ("_session.json", "_session.tmp", "_verified.json"):
             (self.journal / leftover).unlink(missing_ok=True)
         self._lease.release(unlink=True)
         for folder in (self.journal, self.journal.parent, self.data_dir):
@@ -847,6 +886,15 @@ def read_journal_header(journal: Path) -> dict[str, Any]:
     return data
 
 
+def session_header(path: Path) -> dict[str, Any] | None:
+    """The journal header of the session file ``path``; when the header is gone but its journal folder is there,
+    the session file's verified root attributes (what the writer rewrites the header from); None: no journal."""
+    journal = Path(path).parent / ".journal" / Path(path).stem
+    if (journal / "_session.json").is_file():
+        return read_journal_header(journal)
+    return _root_as_header(Path(path)) if journal.is_dir() else None
+
+
 def repair_session(path: Path, problem: str) -> list[str]:
     """Repair a damaged session file from its journal for a reader (never drops a press); returns what was done.
 
@@ -855,8 +903,8 @@ def repair_session(path: Path, problem: str) -> list[str]:
     """
     path = Path(path)
     journal = path.parent / ".journal" / path.stem
-    header = journal / "_session.json"
-    if not header.is_file():
+    attrs = session_header(path)
+    if attrs is None:
         raise DataError(
             f"{problem}; there is no journal to repair it from (.journal/{path.stem})",
             hint="restore the file from a backup, or move it aside and collect the session again",
@@ -869,7 +917,6 @@ def repair_session(path: Path, problem: str) -> list[str]:
             hint="rerun when that collection has finished (collect repairs it from the journal when it next opens "
             "the session)",
         )
-    attrs = read_journal_header(journal)
     object_id, sensor = str(attrs["object"]), str(attrs["sensor"])
     if session_path(path.parent, object_id, sensor) != path:
         raise DataError(f"{path} and its journal header name another session ({object_id}/{sensor})")

@@ -27,8 +27,8 @@ from unitac_rig.storage.recorder import (
     ensure_room,
     press_dir,
     private_copy_path,
-    read_journal_header,
     session_bytes,
+    session_header,
     session_layout,
     write_session_file,
 )
@@ -116,14 +116,13 @@ def reextract_sessions(paths: list[Path], settings: ExtractionSettings) -> list[
         plans: list[tuple[Path, list[Path]]] = []
         for path in paths:
             journal = path.parent / ".journal" / path.stem
-            if (journal / "_session.json").is_file():
+            if journal.is_dir():  # a journal without its header too: the writer below rebuilds the header
                 lease = SessionLease(journal, path.stem)
                 lease.acquire(wait_s=0.5, hint=hint)
                 leases.append(lease)
         for path in paths:
-            journal = path.parent / ".journal" / path.stem
-            if (journal / "_session.json").is_file():
-                header = read_journal_header(journal)
+            header = session_header(path)
+            if header is not None:
                 writer = SessionWriter(path.parent, str(header["object"]), str(header["sensor"]), header,
                                        unrepairable="refuse")  # fmt: skip
                 writers.append(writer)

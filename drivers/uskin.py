@@ -260,6 +260,9 @@ class UskinCanDriver(PumpedSensor):
             if message is None:
                 if self._serial_bytes_waiting():
                     continue  # an slcan reply line ("z", OK) made recv() return None with frames still queued
+                drained = self._assembler.flush(self.clock.now_ns())  # the quiet ends a waiting frame
+                if drained is not None:
+                    frames.append(self._frame(drained))
                 break
             timeout = 0.0
             if message.is_error_frame or message.is_remote_frame or message.is_extended_id:

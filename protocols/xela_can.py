@@ -376,17 +376,21 @@ class FrameAssembler:
             position is not None and self._prev_index is not None and position[index] <= position[self._prev_index]
         )
         self._prev_index = index
-        marked = after_pause or wrapped or index == self._cycle_start_index
+        # a cycle start the receive times show now (or the configured first id): what proves a boundary. The learned
+        # order only closes frames: it was learned from receive times that may have lied (a host reading in offset
+        # bursts teaches a rotated order), so a boundary the timing does not show now proves nothing.
+        timed = after_pause or index == self._cycle_start_index
+        marked = timed or wrapped
         emitted: AssembledFrame | None = None
         if self._pending is not None:  # the message after a complete frame decides whether it was one cycle
             pending, self._pending = self._pending, None
-            ends = marked or _pause_around(gap, pending.max_gap_ns)
+            ends = timed or _pause_around(gap, pending.max_gap_ns)
             emitted = self._finish(pending, one_cycle=ends, complete=True)
         elif self._n_seen > 0 and (self._seen[index] or marked):
             pause_alone = after_pause and not (self._seen[index] or wrapped or index == self._cycle_start_index)
             short = 2 * self._n_seen < self._n
             starts = self._start_marked or _pause_around(self._gap_before, self._max_gap_ns)
-            ends = marked or _pause_around(gap, self._max_gap_ns)
+            ends = timed or _pause_around(gap, self._max_gap_ns)
             emitted = self._finish(self._close(), one_cycle=starts and ends, complete=False)
             self._short_pause_closes = self._short_pause_closes + 1 if pause_alone and short else 0
             if self._short_pause_closes >= SHORT_PAUSE_CLOSES:  # pauses no longer mark cycles: learn again
@@ -397,7 +401,7 @@ class FrameAssembler:
         if gap is not None and self._learn_pauses and self.pause_threshold_ns is None:
             self._learn(gap)
         if self._n_seen == 0:
-            self._start_marked = marked
+            self._start_marked = timed
             self._gap_before = gap
             self._max_gap_ns = 0
         elif gap is not None:
@@ -426,11 +430,31 @@ class FrameAssembler:
         starts = self._start_marked or _pause_around(self._gap_before, self._max_gap_ns)
         snapshot = self._close()
         if self._n == 1 or (starts and self._position is not None):
+            # the timing shows this frame's start, and it holds every place of the learned order once, in order, with
+            # no pause inside (a pause would have closed it): its end is the order's last place
             return self._finish(snapshot, one_cycle=True, complete=True)
         if starts:
             self._pending = snapshot
             return emitted
         return self._finish(snapshot, one_cycle=False, complete=True)
+
+    def flush(self, now_ns: int) -> AssembledFrame | None:
+        """Call when the transport is drained (a receive found nothing) at ``now_ns``: a complete frame waiting for
+        the next message to show the pause after it comes out now when the quiet since its last message is that
+        pause (the learned pause, or :data:`BURST_GAP_RATIO` times its own gaps). A quiet seen on a drained
+        transport is a real one on the bus, whatever the receive times of the messages before it were."""
+        pending = self._pending
+        if pending is None:
+            return None
+        quiet = now_ns - pending.t_ns
+        needed = (
+            self.pause_threshold_ns if self.pause_threshold_ns is not None else BURST_GAP_RATIO * pending.max_gap_ns
+        )
+        if quiet <= 0 or quiet < needed:
+            return None
+        self._pending = None
+        self._prev_t_ns = now_ns  # the next message's gap counts from here: the quiet is already spent
+        return self._finish(pending, one_cycle=True, complete=True)
 
     def _learn(self, gap: int) -> None:
         """Collect one cycle's worth of gaps; a window with one clear pause counts toward learning the threshold."""

@@ -139,3 +139,22 @@ def test_extract_killed_between_renames_never_restores_an_older_extraction(
         header = json.loads((journal_dir(data, OBJ, SENSOR) / "_session.json").read_text())
         assert header["extraction_settings"] == new
     assert _journal_intact(data)
+
+
+def test_pairs_join_only_within_one_rig_and_say_why_not() -> None:
+    """Two rigs' sessions in one folder (another rig's uSkin beside this rig's PapillArray): no pair is joined
+    across them; the refusal names both sessions and their rigs."""
+    import dataclasses
+
+    from drivers.layouts import PAPILLARRAY, USKIN
+    from unitac_rig.errors import DataError
+    from unitac_rig.learning.synthetic_data import synthetic_matched_sets
+    from unitac_rig.storage.paired import build_paired_dataset
+
+    sets = synthetic_matched_sets(("circle_pla",), (USKIN, PAPILLARRAY), angles_deg=(0.0, 9.0), targets_n=(4.0, 6.0))
+    same = [dataclasses.replace(s, rig="simulated: lab-a") for s in sets]
+    assert len(build_paired_dataset(same)) > 0
+    mixed = [dataclasses.replace(s, rig=f"hardware: lab-{'a' if s.sensor == 'uskin' else 'b'}") for s in sets]
+    with pytest.raises(DataError, match="pairs join only within one rig") as refused:
+        build_paired_dataset(mixed)
+    assert "hardware: lab-a" in str(refused.value) and "hardware: lab-b" in str(refused.value)

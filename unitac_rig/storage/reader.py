@@ -74,6 +74,7 @@ class MatchedSet:
     values: np.ndarray
     force_n: np.ndarray
     error_n: np.ndarray
+    rig: str = ""  # which rig recorded it (:func:`rig_label`); "" when the session does not say
 
     def __len__(self) -> int:
         return int(self.target_n.size)
@@ -277,6 +278,17 @@ def press_summaries(path: Path) -> list[dict[str, Any]]:
     return out
 
 
+def rig_label(attrs: dict[str, Any]) -> str:
+    """Which rig recorded a session, from its root attributes: ``imported: <source>``, ``simulated: <rig name>`` or
+    ``hardware: <rig name>``; "" when it does not say (written by a script). Pairs join only within one label."""
+    if attrs.get("source"):
+        return f"imported: {attrs['source']}"
+    if "simulated" not in attrs and "rig" not in attrs:
+        return ""
+    kind = "simulated" if attrs.get("simulated") else "hardware"
+    return f"{kind}: {attrs.get('rig') or '?'}"
+
+
 def load_matched_set(path: Path) -> MatchedSet:
     info = read_session_info(path)
     rot, ang, tgt, vals, force, err = [], [], [], [], [], []
@@ -313,6 +325,7 @@ def load_matched_set(path: Path) -> MatchedSet:
         values=cat(vals, (n_taxels, 3)).astype(np.float32),
         force_n=cat(force),
         error_n=cat(err),
+        rig=rig_label(info.attrs),
     )
 
 

@@ -158,3 +158,22 @@ def test_pairs_join_only_within_one_rig_and_say_why_not() -> None:
     with pytest.raises(DataError, match="pairs join only within one rig") as refused:
         build_paired_dataset(mixed)
     assert "hardware: lab-a" in str(refused.value) and "hardware: lab-b" in str(refused.value)
+
+
+def test_temporary_files_of_killed_processes_are_removed_by_the_next_run(data: Path, tmp_path: Path) -> None:
+    """What kill -9 leaves (a journal header's private copy, a press file's, a half-built export) is gone after the
+    next extract or export; a live export's staging folder is left alone."""
+    from unitac_rig.storage.export import remove_dead_staging
+
+    journal = journal_dir(data, OBJ, SENSOR)
+    leftovers = [journal / "._session.json.4194305.tmp", journal / "._verified.json.4194305.tmp"]
+    for leftover in leftovers:
+        leftover.write_text("{}")
+    assert cli(["extract", str(data), "--tolerance", "0.45"]) == 0
+    assert not any(p.exists() for p in leftovers)
+    dead = tmp_path / ".export.partial-4194305"  # above any pid_max: no such process
+    live = tmp_path / f".other.partial-{os.getpid()}"
+    for folder in (dead, live):
+        (folder / "raw").mkdir(parents=True)
+    assert remove_dead_staging(tmp_path) == [dead]
+    assert not dead.exists() and live.is_dir()

@@ -287,22 +287,24 @@ class FrameAssembler:
       :data:`SHORT_PAUSE_CLOSES` frames in a row cut by a pause with under half the taxels (the messages became
       evenly spaced) do, and learning starts over.
     * a **learned send order**: once :data:`ORDER_LEARN_FRAMES` proven frames in a row came in the same order, a
-      message whose place in that order is not after the previous message's marks a cycle start. It does not depend
-      on the receive times. :data:`FORGET_AFTER_FRAMES` frames in a row with none valid forget it.
+      message whose place in that order is not after the previous message's closes the open frame. It closes frames
+      only, it proves nothing: it was learned from receive times, and a host reading in offset bursts teaches a
+      rotated order (6..23, 0..5) that would make every later frame of an evenly spaced backlog read mix two cycles.
+      A frame is proven only by a pause the receive times show now, or by ``cycle_start_id``.
+      :data:`FORGET_AFTER_FRAMES` frames in a row with none valid forget it.
     * ``cycle_start_id``: for firmware known to send a given id first.
 
-    A complete frame is one cycle when a mark opened it and the message after it carries a mark too (a frame that
-    began at a mark and holds every taxel with nothing marked inside could otherwise still end in the next cycle's
-    first message); so without a learned order a frame comes out when the next message arrives. With a learned order
-    a complete marked frame holds every place of the order once, in order, so the next message is bound to be
-    marked and the frame comes out at once. Frames that cannot be proven (the first ones, before a pause or an order
-    is learned; every frame of a stream with neither, unless ``cycle_start_id`` is set) are flagged in every taxel
-    and counted in ``unproven_frames``.
+    A complete frame is one cycle when a pause (or the first id) opened it and the message after it shows one too (a
+    frame that began at a mark and holds every taxel with nothing marked inside could otherwise still end in the next
+    cycle's first message); so without a learned order a frame comes out when the next message arrives, or at
+    :meth:`flush` once the quiet after it is a pause. With a learned order a complete frame opened by a pause holds
+    every place of the order once, in order, with no pause inside, so it comes out at once. Frames that cannot be
+    proven (the first ones, before a pause is learned; every frame while the receive times show no pause, unless
+    ``cycle_start_id`` is set) are flagged in every taxel and counted in ``unproven_frames``.
 
-    What this cannot catch: a cycle boundary with no mark at all, inside a frame that is complete and marked at both
-    ends. With a learned order that takes the bus losing one cycle's worth of messages in a row across the boundary;
-    with pauses alone (a board that changes its order every cycle), a host whose receive times show the pause
-    consistently in the wrong place, which no wire without a counter can reveal.
+    What this cannot catch: a host whose receive times show the pause consistently in the wrong place, which no wire
+    without a counter can reveal (it looks like a board sending in a rotated order); only ``cycle_start_id`` rules it
+    out.
 
     Unknown ids are counted and ignored; payloads too short to decode or carrying the sentinel count as invalid
     reports and flag their taxel. ``stale_after_ns`` bounds how old a value in an emitted frame can be.

@@ -144,8 +144,19 @@ def verified_session(path: Path) -> Verified:
     if not check.needs_repair and issues and lease_holder(journal) is not None:
         for issue in issues.values():  # the collection writing it now recreates it when it next opens the session
             log.warning("%s: %s (the session is being written now; rerun later to restore it)", path, issue)
-    elif check.needs_repair or issues:
-        problem = check.first_problem() if check.needs_repair else f"{path}: {next(iter(issues.values()))}"
+    elif issues and not check.needs_repair:  # the data is intact: a journal that cannot be mended never blocks it
+        try:
+            repairs = tuple(repair_session(path, f"{path}: {next(iter(issues.values()))}"))
+        except DataError as exc:
+            log.warning("%s: %s; the journal could not be mended: %s", path, "; ".join(issues.values()), exc)
+        for note in repairs:
+            log.warning("%s: %s", path, note)
+        check = check_session(path, known)
+        issues, good = _journal_issues(path, check, stored_journal)
+        for issue in issues.values() if repairs else ():
+            log.warning("%s: %s", path, issue)
+    elif check.needs_repair:
+        problem = check.first_problem()
         repairs = tuple(repair_session(path, problem))
         for note in repairs:
             log.warning("%s: %s", path, note)

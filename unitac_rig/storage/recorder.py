@@ -345,6 +345,8 @@ def journal_problems(
         return problems, good
     if not (journal / "_session.json").is_file():
         problems["_session.json"] = "the journal header _session.json is missing"
+    elif unreadable := _unreadable_header(journal):
+        problems["_session.json"] = f"the journal header is damaged: {unreadable}"
     for pid in presses:
         entry = journal / f"{pid}.h5"
         try:
@@ -884,6 +886,15 @@ def read_journal_header(journal: Path) -> dict[str, Any]:
             hint="restore it from a backup, or move the session aside and collect into a new --data directory",
         ) from exc
     return data
+
+
+def _unreadable_header(journal: Path) -> str | None:
+    """Why ``journal/_session.json`` cannot be read (None when it reads)."""
+    try:
+        read_journal_header(journal)
+    except DataError as exc:
+        return str(exc)
+    return None
 
 
 def session_header(path: Path) -> dict[str, Any] | None:

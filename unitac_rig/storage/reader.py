@@ -32,6 +32,7 @@ from unitac_rig.storage.integrity import (
     check_session,
     press_seal,
 )
+from unitac_rig.storage.journal import journal_problems
 from unitac_rig.storage.lease import lease_holder
 from unitac_rig.storage.press_record import (
     PressRecord,
@@ -41,7 +42,7 @@ from unitac_rig.storage.press_record import (
     read_extraction,
     read_press_group,
 )
-from unitac_rig.storage.recorder import journal_problems, private_copy_path, repair_session, session_layout
+from unitac_rig.storage.recorder import private_copy_path, repair_session, session_layout
 from unitac_rig.storage.trust import load_trust, save_trust
 
 log = logging.getLogger(__name__)

@@ -40,29 +40,41 @@ import contextlib
 import dataclasses
 import errno
 import itertools
-import json
 import logging
 import os
 import shutil
 import time
 import uuid
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Literal
 
 import h5py
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.checksums import ROOT_ATTR, check_press_group, check_root, seal_root
-from unitac_rig.storage.extraction import ExtractionSettings, extract_press
+from unitac_rig.storage.checksums import ROOT_ATTR, check_root, seal_root
 from unitac_rig.storage.integrity import (
     IDENTITY_KEYS,
     PRESS_DIR_SUFFIX,
     READABLE_SCHEMA_VERSIONS,
     SCHEMA_VERSION,
+    SessionCheck,
     check_session,
-    file_stamp,
-    press_identity_problem,
+)
+from unitac_rig.storage.journal import (
+    PRESS_GROUP,
+    journal_dir,
+    journal_entry_check,
+    private_copy_path,
+    read_journal_header,
+    reextracted,
+    root_as_header,
+    session_header,
+    session_path,
+    session_stem,
+    settings_of,
+    write_header,
+    write_journal_entry,
 )
 from unitac_rig.storage.lease import SessionLease, lease_holder
 from unitac_rig.storage.manifest import sha256_file
@@ -71,8 +83,6 @@ from unitac_rig.storage.press_record import (
     PressRecord,
     as_str,
     attr_value,
-    decode_attr,
-    json_default,
     read_press_group,
     record_nbytes,
     write_press_group,
@@ -83,36 +93,14 @@ log = logging.getLogger(__name__)
 
 #: root attributes that say which rig recorded a session: a session is never continued from another one
 RIG_IDENTITY_KEYS = ("simulated", "rig", "source")
-#: the group that holds the press in a press file and in a journal entry
-PRESS_GROUP = "press"
 #: room claimed per press link when the session file is republished (an external link and its name), bytes
 LINK_BYTES = 256
-
-
-def session_stem(object_id: str, sensor: str) -> str:
-    return f"{object_id}__{sensor}"
-
-
-def session_path(data_dir: Path, object_id: str, sensor: str) -> Path:
-    return Path(data_dir) / f"{session_stem(object_id, sensor)}.h5"
-
-
-def journal_dir(data_dir: Path, object_id: str, sensor: str) -> Path:
-    return Path(data_dir) / ".journal" / session_stem(object_id, sensor)
 
 
 def press_dir(path: Path) -> Path:
     """The folder holding the press files of the session file ``path`` (``<object>__<sensor>.presses``)."""
     path = Path(path)
     return path.with_name(f"{path.stem}{PRESS_DIR_SUFFIX}")
-
-
-def private_copy_path(path: Path) -> Path:
-    """Where a process builds the next version of ``path`` before renaming it over ``path``.
-
-    Hidden and ending in ``.tmp``, so no session glob (``*__*.h5``) ever lists it; the pid keeps two processes apart.
-    """
-    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
 
 
 def remove_stale_copies(path: Path, journal: Path) -> None:
@@ -230,19 +218,6 @@ def ensure_room(path: Path, extra_bytes: int) -> None:
                 path.unlink(missing_ok=True)
 
 
-def _fsync_dir(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
 def keep_aside(path: Path, *, move: bool) -> Path:
     """Give the current version of ``path`` a new, unused name beside it (``<stem>.broken-<time>[-n]<suffix>``) and
     return it; never overwrites: a second one in the same second gets ``-2``, and so on.
@@ -270,126 +245,6 @@ def keep_aside(path: Path, *, move: bool) -> Path:
             path.unlink()
         return target
     raise AssertionError("unreachable")
-
-
-def write_journal_entry(journal: Path, rec: PressRecord) -> Path:
-    """Make ``rec`` durable as ``journal/<press_id>.h5``: temporary name, fsync, atomic rename, fsync the folder."""
-    final = journal / f"{rec.press_id}.h5"
-    tmp = journal / f"{rec.press_id}.h5.tmp"
-    try:
-        with h5py.File(tmp, "w") as jf:
-            write_press_group(jf, rec, name="press")
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, final)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    _fsync_dir(journal)
-    return final
-
-
-def _journal_check(path: Path, identity: Mapping[str, str] | None = None) -> tuple[str, str]:
-    """(state, status or detail) of a journal entry: ``ok``/``unsealed`` with the press status, or ``damaged``
-    (content, or with ``identity``: not the press of that session its name says)."""
-    entry = journal_entry_check(path, identity or {})
-    return (entry.state, entry.status) if entry.state != "damaged" else ("damaged", entry.detail)
-
-
-@dataclasses.dataclass(frozen=True)
-class JournalEntry:
-    """What one journal entry holds: ``state`` ``ok``/``unsealed``/``damaged`` (why: ``detail``), the press status,
-    the press it really holds (``holds``: another id when two entries were swapped) and its extraction settings."""
-
-    state: str
-    detail: str = ""
-    status: str = ""
-    holds: str | None = None
-    settings: dict[str, Any] | None = None
-
-
-def journal_entry_check(path: Path, identity: Mapping[str, str]) -> JournalEntry:
-    """Verify the journal entry ``path`` (``<press_id>.h5``) against its checksums and, when ``identity`` (the
-    session's object, sensor, session id) is given, that it holds that session's press of its name."""
-    try:
-        with h5py.File(path, "r") as jf:
-            group = jf[PRESS_GROUP]
-            result = check_press_group(group)
-            if result.damaged:
-                return JournalEntry("damaged", result.detail)
-            holds = as_str(group.attrs.get("press_id", ""))
-            settings = _group_settings(group)
-            status = as_str(group.attrs["status"])
-            if identity:
-                wrong = press_identity_problem(group, holds, dict(identity), None)
-                if wrong:
-                    return JournalEntry("damaged", wrong)
-            if holds != path.stem:
-                return JournalEntry("damaged", f"it holds press {holds}, not {path.stem}", status, holds, settings)
-            return JournalEntry(result.state, "", status, holds, settings)
-    except Exception as exc:  # a torn file does not open; damaged metadata raises anything
-        return JournalEntry("damaged", f"unreadable ({' '.join(str(exc).split())[:160]})")
-
-
-def journal_problems(
-    path: Path, presses: Iterable[str], identity: Mapping[str, str], trusted: Mapping[str, str]
-) -> tuple[dict[str, str], dict[str, str]]:
-    """For a reader: which of the session file ``path``'s intact ``presses`` have lost their repair copy (journal
-    entry missing, damaged, holding another press) and whether the journal header is missing, as (what -> why,
-    entry name -> stamp of the entries verified intact). ``trusted`` (entry name -> stamp) are not read again.
-    Nothing when the session has no journal folder (an export's copy, files copied without ``.journal/``)."""
-    journal = journal_dir(Path(path).parent, *Path(path).stem.split("__", 1))
-    problems: dict[str, str] = {}
-    good: dict[str, str] = {}
-    if not journal.is_dir():
-        return problems, good
-    if not (journal / "_session.json").is_file():
-        problems["_session.json"] = "the journal header _session.json is missing"
-    elif unreadable := _unreadable_header(journal):
-        problems["_session.json"] = f"the journal header is damaged: {unreadable}"
-    for pid in presses:
-        entry = journal / f"{pid}.h5"
-        try:
-            stamp = file_stamp(entry)
-        except OSError:
-            problems[pid] = f"press {pid} has lost its repair copy: its journal entry {entry.name} is missing"
-            continue
-        if trusted.get(entry.name) == stamp:
-            good[entry.name] = stamp
-            continue
-        checked = journal_entry_check(entry, identity)
-        if checked.state == "damaged":
-            problems[pid] = f"press {pid} has lost its repair copy: its journal entry is damaged ({checked.detail})"
-        else:
-            good[entry.name] = stamp
-    return problems, good
-
-
-def _group_settings(group: h5py.Group) -> dict[str, Any] | None:
-    """The extraction settings a press group was extracted with (None: no extraction)."""
-    if "extraction" not in group:
-        return None
-    return _settings_of(group["extraction"].attrs["settings"])
-
-
-def _settings_of(value: Any) -> dict[str, Any] | None:
-    """Extraction settings as stored in a session's root attributes, a journal header or a press (JSON text or a
-    dict), as plain JSON values (tuples as lists), so two copies of the same settings compare equal."""
-    if value is None:
-        return None
-    if isinstance(value, bytes | str):
-        try:
-            value = json.loads(as_str(value))
-        except ValueError:
-            return None
-    return json.loads(json.dumps(value, default=json_default)) if isinstance(value, dict) else None
-
-
-def _reextracted(rec: PressRecord, settings: Mapping[str, Any]) -> PressRecord:
-    """``rec`` with its extraction recomputed under ``settings`` (the raw streams are unchanged)."""
-    extraction = extract_press(rec.robot_t_s, rec.press_force_n, rec.tactile_t_s, rec.tactile_valid,
-                               ExtractionSettings.from_dict(dict(settings)))  # fmt: skip
-    return dataclasses.replace(rec, extraction=extraction)
 
 
 def _describe_rig(attrs: Mapping[str, Any]) -> str:
@@ -501,12 +356,12 @@ class SessionWriter:
         root when a header went missing beside an existing session (noted), else new, with a new session id."""
         header = self.journal / "_session.json"
         if not header.exists():
-            rebuilt = _root_as_header(self.path)
+            rebuilt = root_as_header(self.path)
             if rebuilt is not None:
                 self._note(f"the journal header {header.name} was missing; rewritten from {self.path.name}")
             attrs = rebuilt if rebuilt is not None else dict(self.root_attrs)
             attrs.setdefault("session_id", uuid.uuid4().hex)  # names this session in every press it records
-            _write_header(self.journal, attrs)
+            write_header(self.journal, attrs)
         existing = self._journal_header()
         for key in ("object", "sensor"):
             if existing.get(key) != self.root_attrs.get(key):
@@ -640,12 +495,77 @@ class SessionWriter:
         if check.root_problem:
             self._root = self._header_root(check.version or SCHEMA_VERSION)
         # the session file's extraction settings are the newer side: extract renames it before the journal's copies
-        settings = _settings_of(self._root.get("extraction_settings"))
+        settings = settings_of(self._root.get("extraction_settings"))
+        journal = self._journal_press_files()
+        restore, journal_fix, lost, broken_entries = self._triage(check, journal, settings)
+        if lost and self.unrepairable == "refuse":
+            pid, why = next(iter(lost.items()))
+            more = f" (and {len(lost) - 1} more presses)" if len(lost) > 1 else ""
+            raise DataError(
+                f"{self.path}: press {pid} is damaged: {why}{more}",
+                hint="run `unitac-rig collect` for this session to drop it and press it again (the damaged copies "
+                "are kept aside), or restore the file from a backup",
+            )
+        kept_as: dict[str, str] = {}
+        if lost:
+            session_aside: Path | None = None
+            for pid in lost:
+                ours = pid in self._links and self._press_file(pid).parent == self.press_dir  # never a file elsewhere
+                if ours and self._press_file(pid).is_file():
+                    kept_as[pid] = keep_aside(self._press_file(pid), move=True).name
+                elif pid in self._groups:  # the older layout: the damaged version of the whole file survives
+                    session_aside = session_aside or keep_aside(self.path, move=False)
+                    kept_as[pid] = session_aside.name
+            for entry_path in broken_entries:
+                keep_aside(entry_path, move=True)
+        restore = [self._stamped(r) for r in restore]
+        if settings is not None:  # a journal copy older than the session's extraction is re-extracted
+            stale = {
+                r.press_id
+                for r in restore
+                if r.extraction is not None and settings_of(r.extraction.settings.to_dict()) != settings
+            }
+            restore = [reextracted(r, settings) if r.press_id in stale else r for r in restore]
+            journal_fix.update({pid: "held an older extraction than the session file" for pid in stale})
+        gone = set(check.half_written) | set(lost) | set(check.damaged) | {rec.press_id for rec in restore}
+        for pid in gone:
+            self._links.pop(pid, None)
+        self._groups = [pid for pid in self._groups if pid not in gone]
+        for rec in restore:
+            self._links[rec.press_id] = self._new_press_file(rec.press_id, writing(rec))
+        if gone or check.root_problem:
+            self._publish()
+        for pid, why in lost.items():
+            aside = f" (the damaged copy is kept as {kept_as[pid]})" if pid in kept_as else ""
+            self._note(f"press {pid} was damaged ({why}): dropped, it will be pressed again{aside}")
+        if check.root_problem:
+            self._note(f"{self.path.name}: {check.root_problem}; rewritten from the journal header")
+        restored = {rec.press_id: rec for rec in restore}
+        for pid, why in journal_fix.items():
+            if pid in restored:
+                rec = restored[pid]
+            else:
+                with h5py.File(self.path, "r") as f:
+                    rec = self._stamped(read_press_group(f["presses"][pid]))
+            write_journal_entry(self.journal, rec)
+            self._note(
+                f"journal entry {pid}.h5 {why}; rewritten from the {'journal' if pid in restored else 'session file'}"
+            )
+        self._align_header(settings)
+        self.recovery_notes.extend(f"press {pid} was half written; dropped" for pid in check.half_written)
+        for rec in restore:
+            what = "damaged in the session file; replaced by" if rec.press_id in check.damaged else "restored from"
+            self._note(f"press {rec.press_id} ({rec.status}) {what} the journal")
+
+    def _triage(
+        self, check: SessionCheck, journal: dict[str, Path], settings: dict[str, Any] | None
+    ) -> tuple[list[PressRecord], dict[str, str], dict[str, str], list[Path]]:
+        """What the session and journal need: (presses to restore from the journal, press id -> why its journal
+        entry is rewritten, press id -> why it cannot be repaired, journal entries damaged with their press)."""
         restore: list[PressRecord] = []
         journal_fix: dict[str, str] = {}  # press id -> why its journal entry is rewritten from the session file
         lost: dict[str, str] = {}  # press id -> why it cannot be repaired
         broken_entries: list[Path] = []
-        journal = self._journal_press_files()
         entries = {pid: journal_entry_check(path, self.identity) for pid, path in journal.items()}
         # an intact entry under another press's name (two entries swapped): still a good copy of the press it holds
         spare = {e.holds: journal[pid] for pid, e in entries.items() if e.holds and e.holds != pid and e.status}
@@ -683,73 +603,16 @@ class SessionWriter:
         for pid in check.statuses:
             if pid not in journal and pid not in journal_fix and check.version and check.version >= 2:
                 journal_fix[pid] = "was missing (the press had no repair copy)"
-        if lost and self.unrepairable == "refuse":
-            pid, why = next(iter(lost.items()))
-            more = f" (and {len(lost) - 1} more presses)" if len(lost) > 1 else ""
-            raise DataError(
-                f"{self.path}: press {pid} is damaged: {why}{more}",
-                hint="run `unitac-rig collect` for this session to drop it and press it again (the damaged copies "
-                "are kept aside), or restore the file from a backup",
-            )
-        kept_as: dict[str, str] = {}
-        if lost:
-            session_aside: Path | None = None
-            for pid in lost:
-                ours = pid in self._links and self._press_file(pid).parent == self.press_dir  # never a file elsewhere
-                if ours and self._press_file(pid).is_file():
-                    kept_as[pid] = keep_aside(self._press_file(pid), move=True).name
-                elif pid in self._groups:  # the older layout: the damaged version of the whole file survives
-                    session_aside = session_aside or keep_aside(self.path, move=False)
-                    kept_as[pid] = session_aside.name
-            for entry_path in broken_entries:
-                keep_aside(entry_path, move=True)
-        restore = [self._stamped(r) for r in restore]
-        if settings is not None:  # a journal copy older than the session's extraction is re-extracted
-            stale = {
-                r.press_id
-                for r in restore
-                if r.extraction is not None and _settings_of(r.extraction.settings.to_dict()) != settings
-            }
-            restore = [_reextracted(r, settings) if r.press_id in stale else r for r in restore]
-            journal_fix.update({pid: "held an older extraction than the session file" for pid in stale})
-        gone = set(check.half_written) | set(lost) | set(check.damaged) | {rec.press_id for rec in restore}
-        for pid in gone:
-            self._links.pop(pid, None)
-        self._groups = [pid for pid in self._groups if pid not in gone]
-        for rec in restore:
-            self._links[rec.press_id] = self._new_press_file(rec.press_id, writing(rec))
-        if gone or check.root_problem:
-            self._publish()
-        for pid, why in lost.items():
-            aside = f" (the damaged copy is kept as {kept_as[pid]})" if pid in kept_as else ""
-            self._note(f"press {pid} was damaged ({why}): dropped, it will be pressed again{aside}")
-        if check.root_problem:
-            self._note(f"{self.path.name}: {check.root_problem}; rewritten from the journal header")
-        restored = {rec.press_id: rec for rec in restore}
-        for pid, why in journal_fix.items():
-            if pid in restored:
-                rec = restored[pid]
-            else:
-                with h5py.File(self.path, "r") as f:
-                    rec = self._stamped(read_press_group(f["presses"][pid]))
-            write_journal_entry(self.journal, rec)
-            self._note(
-                f"journal entry {pid}.h5 {why}; rewritten from the {'journal' if pid in restored else 'session file'}"
-            )
-        self._align_header(settings)
-        self.recovery_notes.extend(f"press {pid} was half written; dropped" for pid in check.half_written)
-        for rec in restore:
-            what = "damaged in the session file; replaced by" if rec.press_id in check.damaged else "restored from"
-            self._note(f"press {rec.press_id} ({rec.status}) {what} the journal")
+        return restore, journal_fix, lost, broken_entries
 
     def _align_header(self, settings: dict[str, Any] | None) -> None:
         """The journal header's extraction settings follow the session file's (a kill between extract's renames)."""
         if settings is None:
             return
         header = self._journal_header()
-        if _settings_of(header.get("extraction_settings")) != settings:
+        if settings_of(header.get("extraction_settings")) != settings:
             header["extraction_settings"] = settings
-            _write_header(self.journal, header)
+            write_header(self.journal, header)
             self._note("the journal header held an older extraction than the session file; brought in step")
 
     def _remove_unlinked_press_files(self) -> None:
@@ -799,7 +662,7 @@ class SessionWriter:
         if serial is not None and recorded is None:
             attrs = {**attrs, "sensor_serial": str(serial)}  # the first serial a driver reported stays the session's
         header.update(attrs)
-        _write_header(self.journal, header)
+        write_header(self.journal, header)
 
         for key, value in attrs.items():
             self._root[key] = attr_value(value)
@@ -847,63 +710,6 @@ class SessionWriter:
                 folder.rmdir()  # only when empty
             except OSError:
                 break
-
-
-def _write_header(journal: Path, attrs: Mapping[str, Any]) -> None:
-    """Write ``journal/_session.json`` atomically (private name, rename)."""
-    header = journal / "_session.json"
-    tmp = private_copy_path(header)
-    try:
-        tmp.write_text(json.dumps(dict(attrs), default=json_default, indent=1))
-        os.replace(tmp, header)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def _root_as_header(path: Path) -> dict[str, Any] | None:
-    """A session file's root attributes as a journal header, when the file's root is intact and sealed (None
-    otherwise): how a deleted ``_session.json`` is rebuilt."""
-    try:
-        with h5py.File(path, "r") as f:
-            if check_root(f).state != "ok":
-                return None
-            attrs = {k: decode_attr(v) for k, v in f.attrs.items() if k not in (ROOT_ATTR, "schema_version")}
-    except Exception:
-        return None
-    return attrs if "object" in attrs and "sensor" in attrs else None
-
-
-def read_journal_header(journal: Path) -> dict[str, Any]:
-    """A journal's ``_session.json`` (the session's root attributes); DataError when it is unreadable."""
-    header = journal / "_session.json"
-    try:
-        data = json.loads(header.read_text())
-        if not isinstance(data, dict) or "object" not in data or "sensor" not in data:
-            raise ValueError("not a session header")
-    except (OSError, ValueError, RecursionError) as exc:
-        raise DataError(
-            f"{header} is unreadable ({exc})",
-            hint="restore it from a backup, or move the session aside and collect into a new --data directory",
-        ) from exc
-    return data
-
-
-def _unreadable_header(journal: Path) -> str | None:
-    """Why ``journal/_session.json`` cannot be read (None when it reads)."""
-    try:
-        read_journal_header(journal)
-    except DataError as exc:
-        return str(exc)
-    return None
-
-
-def session_header(path: Path) -> dict[str, Any] | None:
-    """The journal header of the session file ``path``; when the header is gone but its journal folder is there,
-    the session file's verified root attributes (what the writer rewrites the header from); None: no journal."""
-    journal = Path(path).parent / ".journal" / Path(path).stem
-    if (journal / "_session.json").is_file():
-        return read_journal_header(journal)
-    return _root_as_header(Path(path)) if journal.is_dir() else None
 
 
 def repair_session(path: Path, problem: str) -> list[str]:

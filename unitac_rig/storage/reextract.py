@@ -17,13 +17,13 @@ from unitac_rig.errors import DataError
 from unitac_rig.storage.checksums import ROOT_ATTR
 from unitac_rig.storage.extraction import Extraction, ExtractionSettings
 from unitac_rig.storage.integrity import check_session
+from unitac_rig.storage.journal import journal_check
 from unitac_rig.storage.lease import SessionLease
 from unitac_rig.storage.manifest import sha256_file
 from unitac_rig.storage.press_record import iter_press_groups, json_default, reseal_extraction, write_extraction
 from unitac_rig.storage.recorder import (
     PRESS_GROUP,
     SessionWriter,
-    _journal_check,
     ensure_room,
     press_dir,
     private_copy_path,
@@ -126,7 +126,7 @@ def reextract_sessions(paths: list[Path], settings: ExtractionSettings) -> list[
                 writer = SessionWriter(path.parent, str(header["object"]), str(header["sensor"]), header,
                                        unrepairable="refuse")  # fmt: skip
                 writers.append(writer)
-                entries = [p for p in writer._journal_press_files().values() if _journal_check(p)[0] != "damaged"]
+                entries = [p for p in writer._journal_press_files().values() if journal_check(p)[0] != "damaged"]
             else:
                 check = check_session(path)
                 if check.needs_repair:

@@ -635,3 +635,20 @@ def test_taxel_message_round_trip(x: int, y: int, z: int, byte0: int) -> None:
 def test_invalid_taxels_of_a_whole_frame_follow_the_message_rule() -> None:
     values = np.array([[0xF9FF, 0, 0], [0xFA00, 5, 5], [0, 0, 0], [0, 0, 1], [0xFFFF, 0xFFFF, 0xFFFF]])
     assert invalid_taxels(values).tolist() == [False, True, True, False, True]
+
+
+def test_a_drained_transports_quiet_ends_a_waiting_frame_only_once_it_is_a_pause() -> None:
+    """Without a learned order a whole cycle waits for the next message to show the pause after it; a receive that
+    finds nothing (``flush``) lets it out as soon as the quiet since its last message is a pause, never earlier."""
+    rng = np.random.default_rng(4)
+    assembler = FrameAssembler(ID_ORDER_46)
+    for cycle in range(WARM_UP):
+        _send_cycle(assembler, cycle=cycle, t0_ns=cycle * 10 * MS, order=list(rng.permutation(24)))
+    assert assembler.send_order is None and assembler.pause_threshold_ns is not None
+    c = WARM_UP
+    (_previous,) = _send_cycle(assembler, cycle=c, t0_ns=c * 10 * MS, order=list(rng.permutation(24)))
+    last_ns = c * 10 * MS + 23 * 100_000
+    assert assembler.flush(last_ns + 200_000) is None  # 0.2 ms of quiet: could be a gap inside a cycle
+    frame = assembler.flush(last_ns + assembler.pause_threshold_ns)
+    assert frame is not None and frame.valid and _cycles_in(frame) == {c}
+    assert assembler.flush(last_ns + 20 * MS) is None  # nothing waits any more

@@ -117,6 +117,11 @@ def open_can_bus(interface: str, channel: str, bitrate: int = 1_000_000, **optio
         raise DeviceNotFound(f"cannot open CAN {interface} channel {channel!r}: {exc}", hint=hint) from exc
 
 
+def _is_slcan(bus: Any) -> bool:
+    """True for python-can's serial slcan bus (ASCII lines over a serial port, without a checksum)."""
+    return type(bus).__name__.lower().startswith("slcan")
+
+
 class UskinCanDriver(PumpedSensor):
     """uSPa46 over raw CAN: sends the start command on connect, assembles per-taxel messages into frames.
 
@@ -260,6 +265,9 @@ class UskinCanDriver(PumpedSensor):
             if message is None:
                 if self._serial_bytes_waiting():
                     continue  # an slcan reply line ("z", OK) made recv() return None with frames still queued
+                drained = self._assembler.flush(self.clock.now_ns())  # the quiet ends a waiting frame
+                if drained is not None:
+                    frames.append(self._frame(drained))
                 break
             timeout = 0.0
             if message.is_error_frame or message.is_remote_frame or message.is_extended_id:
@@ -288,6 +296,9 @@ class UskinCanDriver(PumpedSensor):
             "transport": f"can:{getattr(self.bus, 'channel_info', type(self.bus).__name__)}",
             "controller_id": self.controller_id,
             "id_map": self.id_map.name,
+            # what a frame's `valid` can rest on: the CAN CRC on a native interface; over python-can's slcan the
+            # serial ASCII lines carry no checksum, so a damaged digit that still parses is not caught
+            "wire_checksum": "none (slcan serial lines)" if _is_slcan(self.bus) else "CAN CRC",
         }
 
 

@@ -287,22 +287,24 @@ class FrameAssembler:
       :data:`SHORT_PAUSE_CLOSES` frames in a row cut by a pause with under half the taxels (the messages became
       evenly spaced) do, and learning starts over.
     * a **learned send order**: once :data:`ORDER_LEARN_FRAMES` proven frames in a row came in the same order, a
-      message whose place in that order is not after the previous message's marks a cycle start. It does not depend
-      on the receive times. :data:`FORGET_AFTER_FRAMES` frames in a row with none valid forget it.
+      message whose place in that order is not after the previous message's closes the open frame. It closes frames
+      only, it proves nothing: it was learned from receive times, and a host reading in offset bursts teaches a
+      rotated order (6..23, 0..5) that would make every later frame of an evenly spaced backlog read mix two cycles.
+      A frame is proven only by a pause the receive times show now, or by ``cycle_start_id``.
+      :data:`FORGET_AFTER_FRAMES` frames in a row with none valid forget it.
     * ``cycle_start_id``: for firmware known to send a given id first.
 
-    A complete frame is one cycle when a mark opened it and the message after it carries a mark too (a frame that
-    began at a mark and holds every taxel with nothing marked inside could otherwise still end in the next cycle's
-    first message); so without a learned order a frame comes out when the next message arrives. With a learned order
-    a complete marked frame holds every place of the order once, in order, so the next message is bound to be
-    marked and the frame comes out at once. Frames that cannot be proven (the first ones, before a pause or an order
-    is learned; every frame of a stream with neither, unless ``cycle_start_id`` is set) are flagged in every taxel
-    and counted in ``unproven_frames``.
+    A complete frame is one cycle when a pause (or the first id) opened it and the message after it shows one too (a
+    frame that began at a mark and holds every taxel with nothing marked inside could otherwise still end in the next
+    cycle's first message); so without a learned order a frame comes out when the next message arrives, or at
+    :meth:`flush` once the quiet after it is a pause. With a learned order a complete frame opened by a pause holds
+    every place of the order once, in order, with no pause inside, so it comes out at once. Frames that cannot be
+    proven (the first ones, before a pause is learned; every frame while the receive times show no pause, unless
+    ``cycle_start_id`` is set) are flagged in every taxel and counted in ``unproven_frames``.
 
-    What this cannot catch: a cycle boundary with no mark at all, inside a frame that is complete and marked at both
-    ends. With a learned order that takes the bus losing one cycle's worth of messages in a row across the boundary;
-    with pauses alone (a board that changes its order every cycle), a host whose receive times show the pause
-    consistently in the wrong place, which no wire without a counter can reveal.
+    What this cannot catch: a host whose receive times show the pause consistently in the wrong place, which no wire
+    without a counter can reveal (it looks like a board sending in a rotated order); only ``cycle_start_id`` rules it
+    out.
 
     Unknown ids are counted and ignored; payloads too short to decode or carrying the sentinel count as invalid
     reports and flag their taxel. ``stale_after_ns`` bounds how old a value in an emitted frame can be.
@@ -376,17 +378,21 @@ class FrameAssembler:
             position is not None and self._prev_index is not None and position[index] <= position[self._prev_index]
         )
         self._prev_index = index
-        marked = after_pause or wrapped or index == self._cycle_start_index
+        # a cycle start the receive times show now (or the configured first id): what proves a boundary. The learned
+        # order only closes frames: it was learned from receive times that may have lied (a host reading in offset
+        # bursts teaches a rotated order), so a boundary the timing does not show now proves nothing.
+        timed = after_pause or index == self._cycle_start_index
+        marked = timed or wrapped
         emitted: AssembledFrame | None = None
         if self._pending is not None:  # the message after a complete frame decides whether it was one cycle
             pending, self._pending = self._pending, None
-            ends = marked or _pause_around(gap, pending.max_gap_ns)
+            ends = timed or _pause_around(gap, pending.max_gap_ns)
             emitted = self._finish(pending, one_cycle=ends, complete=True)
         elif self._n_seen > 0 and (self._seen[index] or marked):
             pause_alone = after_pause and not (self._seen[index] or wrapped or index == self._cycle_start_index)
             short = 2 * self._n_seen < self._n
             starts = self._start_marked or _pause_around(self._gap_before, self._max_gap_ns)
-            ends = marked or _pause_around(gap, self._max_gap_ns)
+            ends = timed or _pause_around(gap, self._max_gap_ns)
             emitted = self._finish(self._close(), one_cycle=starts and ends, complete=False)
             self._short_pause_closes = self._short_pause_closes + 1 if pause_alone and short else 0
             if self._short_pause_closes >= SHORT_PAUSE_CLOSES:  # pauses no longer mark cycles: learn again
@@ -397,7 +403,7 @@ class FrameAssembler:
         if gap is not None and self._learn_pauses and self.pause_threshold_ns is None:
             self._learn(gap)
         if self._n_seen == 0:
-            self._start_marked = marked
+            self._start_marked = timed
             self._gap_before = gap
             self._max_gap_ns = 0
         elif gap is not None:
@@ -426,11 +432,31 @@ class FrameAssembler:
         starts = self._start_marked or _pause_around(self._gap_before, self._max_gap_ns)
         snapshot = self._close()
         if self._n == 1 or (starts and self._position is not None):
+            # the timing shows this frame's start, and it holds every place of the learned order once, in order, with
+            # no pause inside (a pause would have closed it): its end is the order's last place
             return self._finish(snapshot, one_cycle=True, complete=True)
         if starts:
             self._pending = snapshot
             return emitted
         return self._finish(snapshot, one_cycle=False, complete=True)
+
+    def flush(self, now_ns: int) -> AssembledFrame | None:
+        """Call when the transport is drained (a receive found nothing) at ``now_ns``: a complete frame waiting for
+        the next message to show the pause after it comes out now when the quiet since its last message is that
+        pause (the learned pause, or :data:`BURST_GAP_RATIO` times its own gaps). A quiet seen on a drained
+        transport is a real one on the bus, whatever the receive times of the messages before it were."""
+        pending = self._pending
+        if pending is None:
+            return None
+        quiet = now_ns - pending.t_ns
+        needed = (
+            self.pause_threshold_ns if self.pause_threshold_ns is not None else BURST_GAP_RATIO * pending.max_gap_ns
+        )
+        if quiet <= 0 or quiet < needed:
+            return None
+        self._pending = None
+        self._prev_t_ns = now_ns  # the next message's gap counts from here: the quiet is already spent
+        return self._finish(pending, one_cycle=True, complete=True)
 
     def _learn(self, gap: int) -> None:
         """Collect one cycle's worth of gaps; a window with one clear pause counts toward learning the threshold."""

@@ -318,3 +318,10 @@ def test_slcan_serial_side_defaults_to_the_kits_3_mbaud_with_rts_cts_unless_the_
             bus.shutdown()
     finally:
         adapter.close()
+
+
+@pytest.mark.parametrize(("transport", "checksum"), [("virtual", "CAN CRC"), ("slcan", "none (slcan serial lines)")])
+def test_the_driver_says_whether_its_wire_carries_a_checksum(transport: str, checksum: str) -> None:
+    """Over slcan the ASCII lines carry no checksum: the session's sensor identity records what `valid` rests on."""
+    with can_rig(transport, VirtualClock(), UskinPressSource()) as (driver, _, _):
+        assert driver.identity()["wire_checksum"] == checksum

@@ -12,7 +12,6 @@ from protocols.errors import ProtocolError
 from protocols.xela_can import (
     LEARN_CYCLES,
     ORDER_LEARN_FRAMES,
-    SHORT_PAUSE_CLOSES,
     START_STREAM_PAYLOAD,
     STOP_STREAM_PAYLOAD,
     USPA44_ID_MAP,
@@ -414,9 +413,9 @@ def test_a_stream_joined_mid_cycle_in_a_new_order_every_cycle_is_one_cycle_per_f
     assert all(frame.valid and _cycles_in(frame) == {cycle} for cycle, frame in zip(range(10, 20), last, strict=True))
 
 
-def test_a_learned_order_keeps_frames_whole_when_the_host_shows_no_pauses() -> None:
-    """The send order is on the wire, not in the receive times: once learned, bursts read back to back (every gap
-    the same) still give one valid frame per cycle, and a lost first message still flags only its own frame."""
+def test_a_learned_order_alone_proves_nothing_when_the_host_shows_no_pauses() -> None:
+    """Bursts read back to back (every gap the same): the learned order still closes frames, but it was learned from
+    receive times, so without a pause the timing shows now no frame is proven: every one is flagged, none valid."""
     assembler = _warmed_up(USPA46_ID_MAP, order=list(range(24)))
     frames = []
     t_ns = WARM_UP * 10 * MS
@@ -427,12 +426,14 @@ def test_a_learned_order_keeps_frames_whole_when_the_host_shows_no_pauses() -> N
             t_ns += 100_000
             if frame is not None:
                 frames.append(frame)
-    assert [_cycles_in(frame) for frame in frames if frame.valid] == [{WARM_UP + k} for k in (0, 1, 3, 4, 5)]
+    first, *rest = frames  # the first still follows the warm-up's pause: a whole cycle
+    assert first.valid and len(_cycles_in(first)) == 1
+    assert rest and not any(frame.valid for frame in rest)
 
 
-def test_a_learned_pause_is_dropped_when_the_messages_become_evenly_spaced() -> None:
+def test_evenly_spaced_messages_drop_the_learned_pause_and_prove_no_frame() -> None:
     """A controller that stops sending bursts (every message 4 ms apart, each gap longer than the learned pause
-    threshold) costs a few broken frames; then the learned send order alone marks the cycles."""
+    threshold): pause learning starts over, and nothing proves a frame meanwhile (none valid, none mixed)."""
     assembler = _warmed_up(USPA46_ID_MAP, order=list(range(24)))
     frames = []
     t_ns = WARM_UP * 10 * MS
@@ -444,8 +445,75 @@ def test_a_learned_pause_is_dropped_when_the_messages_become_evenly_spaced() -> 
             if frame is not None:
                 frames.append(frame)
     assert assembler.pause_threshold_ns is None
-    assert sum(not frame.valid for frame in frames) <= SHORT_PAUSE_CLOSES + 1
-    assert all(frame.valid and len(_cycles_in(frame)) == 1 for frame in frames[-4:])
+    assert frames and not any(frame.valid for frame in frames)
+
+
+def _feed(assembler: FrameAssembler, messages: list[tuple[int, int, int]]) -> list:
+    """Feed (cycle, taxel index, receive time ns) messages; return the frames that came out."""
+    out = []
+    for cycle, index, t_ns in messages:
+        arbitration_id = assembler.id_map.ids[index]
+        frame = assembler.add(arbitration_id, encode_taxel_message(arbitration_id, *_counts(cycle, index)), t_ns)
+        if frame is not None:
+            out.append(frame)
+    return out
+
+
+def test_offset_bursts_then_a_backlog_read_never_give_a_valid_mixed_frame() -> None:
+    """The review's reproducer: the board sends 0..23 every 10 ms; for 7 cycles the host reads in bursts that end 6
+    taxels late (receive-time pauses before taxel 6), so it learns the order (6..23, 0..5); then it reads a backlog
+    (every message 0.1 ms apart). Before, 188 of 188 later frames were valid while mixing two cycles. Now none is
+    valid until the receive times show real pauses again, and then every valid frame is one cycle."""
+    assembler = FrameAssembler(ID_ORDER_46)
+    stream = [(cycle, index) for cycle in range(200) for index in range(24)]
+    t_ns, messages = 0, []
+    for n, (cycle, index) in enumerate(stream):
+        if n < 7 * 24 + 6:  # 7 offset bursts (6..23 of one cycle, 0..5 of the next): the pause falls before taxel 6
+            t_ns += 7 * MS if index == 6 else 100_000
+        elif n < 7 * 24 + 6 + 100 * 24:  # the backlog: evenly spaced
+            t_ns += 100_000
+        else:  # the host keeps up again: the pause is before taxel 0, where the cycle starts
+            t_ns += 7 * MS if index == 0 else 100_000
+        messages.append((cycle, index, t_ns))
+    lying = _feed(assembler, messages[: 7 * 24 + 6])
+    assert assembler.send_order is not None and assembler.send_order[0] == 6  # it learned the rotated order
+    later = _feed(assembler, messages[7 * 24 + 6 :])
+    assert len(later) >= 188
+    mixed_valid = [f for f in later if f.valid and len(_cycles_in(f)) > 1]
+    assert mixed_valid == []
+    assert sum(f.valid for f in later[-20:]) >= 18  # recovered: the true order, frames valid again
+    assert all(len(_cycles_in(f)) == 1 for f in later[-20:] if f.valid)
+    assert lying  # (the offset bursts themselves cannot be told from a board sending 6..23, 0..5: docs/real-rig.md)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    order=st.permutations(list(range(24))),
+    regimes=st.lists(st.sampled_from(["burst", "even", "jitter"]), min_size=8, max_size=30),
+    lost=st.sets(st.integers(0, 30 * 24 - 1), max_size=40),
+    seed=st.integers(0, 2**16),
+)
+def test_property_no_valid_frame_mixes_cycles_whatever_receive_timing_hides(
+    order: list[int], regimes: list[str], lost: set[int], seed: int
+) -> None:
+    """Whatever the board's order, lost messages, and whether the host's receive times show the pauses (bursts),
+    hide them (an even backlog read) or jitter: a frame flagged valid holds one cycle, in every taxel."""
+    rng = np.random.default_rng(seed)
+    assembler = FrameAssembler(ID_ORDER_46)
+    t_ns, messages, n = 0, [], 0
+    for cycle, regime in enumerate(regimes):
+        for place, index in enumerate(order):
+            n += 1
+            if regime == "burst":
+                t_ns += 7 * MS if place == 0 else 100_000
+            elif regime == "even":
+                t_ns += 100_000
+            else:
+                t_ns += int(rng.integers(20_000, 600_000))
+            if n - 1 not in lost:
+                messages.append((cycle, index, t_ns))
+    frames = _feed(assembler, messages)
+    assert all(len(_cycles_in(f)) == 1 for f in frames if f.valid)
 
 
 def test_sentinel_flags_the_taxel_and_keeps_its_last_good_value() -> None:
@@ -567,3 +635,20 @@ def test_taxel_message_round_trip(x: int, y: int, z: int, byte0: int) -> None:
 def test_invalid_taxels_of_a_whole_frame_follow_the_message_rule() -> None:
     values = np.array([[0xF9FF, 0, 0], [0xFA00, 5, 5], [0, 0, 0], [0, 0, 1], [0xFFFF, 0xFFFF, 0xFFFF]])
     assert invalid_taxels(values).tolist() == [False, True, True, False, True]
+
+
+def test_a_drained_transports_quiet_ends_a_waiting_frame_only_once_it_is_a_pause() -> None:
+    """Without a learned order a whole cycle waits for the next message to show the pause after it; a receive that
+    finds nothing (``flush``) lets it out as soon as the quiet since its last message is a pause, never earlier."""
+    rng = np.random.default_rng(4)
+    assembler = FrameAssembler(ID_ORDER_46)
+    for cycle in range(WARM_UP):
+        _send_cycle(assembler, cycle=cycle, t0_ns=cycle * 10 * MS, order=list(rng.permutation(24)))
+    assert assembler.send_order is None and assembler.pause_threshold_ns is not None
+    c = WARM_UP
+    (_previous,) = _send_cycle(assembler, cycle=c, t0_ns=c * 10 * MS, order=list(rng.permutation(24)))
+    last_ns = c * 10 * MS + 23 * 100_000
+    assert assembler.flush(last_ns + 200_000) is None  # 0.2 ms of quiet: could be a gap inside a cycle
+    frame = assembler.flush(last_ns + assembler.pause_threshold_ns)
+    assert frame is not None and frame.valid and _cycles_in(frame) == {c}
+    assert assembler.flush(last_ns + 20 * MS) is None  # nothing waits any more

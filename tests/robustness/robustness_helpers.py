@@ -9,6 +9,7 @@ import pytest
 
 from unitac_rig.rig.config import parse_rig_config
 from unitac_rig.storage.lease import LEASE_NAME
+from unitac_rig.storage.trust import TRUST_NAME
 
 FEW_ANGLES = {"press": {"angle_count": 3}}
 
@@ -42,7 +43,7 @@ def tree_hashes(root: Path) -> dict[str, str]:
     return {
         str(path.relative_to(root)): hashlib.sha256(path.read_bytes()).hexdigest()
         for path in sorted(root.rglob("*"))
-        if path.is_file() and path.name != LEASE_NAME
+        if path.is_file() and path.name not in (LEASE_NAME, TRUST_NAME)  # the lease, the readers' cache: no data
     }
 
 

@@ -157,9 +157,12 @@ def test_a_single_file_session_still_reads_everywhere_and_pools_with_its_press_f
     assert _same_presses(read_presses(old), read_presses(new))
     assert np.array_equal(load_matched_set(old).values, load_matched_set(new).values)
     assert read_session_info(old).integrity == "verified"
-    assert session_digest(old) == session_digest(new)  # the same content in either layout
-    (pooled,) = pool_sessions([tmp_path / "old", tmp_path / "new"])
-    assert pooled.also_in == (tmp_path / "new",)
+    # the same presses, but a schema-3 session carries its identity (session id) in every press: another session
+    assert session_digest(old) != session_digest(new)
+    (tmp_path / "snap").mkdir()
+    snapshot_session(new, tmp_path / "snap" / new.name)  # one self-contained file: the same content
+    (pooled,) = pool_sessions([tmp_path / "new", tmp_path / "snap"])
+    assert pooled.also_in == (tmp_path / "snap",)
     snapshot_session(old, tmp_path / "copy.h5")
     assert (tmp_path / "copy.h5").read_bytes() == old.read_bytes()  # a single file is shipped byte for byte
     assert cli(["inspect", str(tmp_path / "old"), "--json"]) == 0

@@ -8,7 +8,10 @@ hex}``. An array's digest covers its dtype, shape and bytes as written (events: 
 are computed from the in-memory arrays when the press is first written (to the journal) and verified whenever a copy
 is read; a copy is only ever made from a verified read, so the digests of a press never change after recording,
 except the extraction's (``unitac-rig extract`` verifies the raw arrays, then recomputes the extraction and seals it
-again). A session file's root carries ``attrs_sha256`` over its root attributes (schema version 2 on).
+again). A session file's root carries ``attrs_sha256`` over its root attributes (schema version 2 on) and, from
+schema version 3 on, over the sorted list of its press ids, so a press link removed, added or renamed is damage too.
+A press's identity (object, sensor, session id, press id, angle) is in its attributes, so its seal covers it; the
+checks that a press is in its right place are :func:`unitac_rig.storage.integrity.press_identity_problem`'s.
 """
 
 from __future__ import annotations
@@ -166,19 +169,31 @@ def root_attr_items(f: h5py.File) -> list[tuple[str, Any]]:
     return [(k, v) for k, v in f.attrs.items() if k not in _UNSEALED_ATTRS]
 
 
+def _root_sealed_items(f: h5py.File) -> list[tuple[str, Any]]:
+    """What a root seal covers: the root attributes and, from schema version 3 on, the sorted press ids."""
+    items = root_attr_items(f)
+    version = dict(items).get("schema_version")
+    if version is not None and int(version) >= 3:
+        presses = f.get("presses")
+        items.append((" presses", sorted(presses) if presses is not None else []))
+    return items
+
+
 def seal_root(f: h5py.File) -> None:
-    f.attrs[ROOT_ATTR] = attrs_digest(root_attr_items(f))
+    f.attrs[ROOT_ATTR] = attrs_digest(_root_sealed_items(f))
 
 
 def check_root(f: h5py.File) -> PressCheck:
-    """Verify a session file's root attributes against ``attrs_sha256`` (``unsealed`` when it has none)."""
+    """Verify a session file's root attributes (and press list) against ``attrs_sha256`` (``unsealed`` when it has
+    none: the caller decides whether a file of its version must have one)."""
     try:
-        expected = f.attrs.get(ROOT_ATTR)
-        if expected is None:
+        names = list(f.attrs)
+        if ROOT_ATTR not in names:
             return PressCheck("unsealed")
+        expected = f.attrs[ROOT_ATTR]
         expected = expected.decode() if isinstance(expected, bytes) else str(expected)
-        if attrs_digest(root_attr_items(f)) != expected:
-            return PressCheck("damaged", "its root attributes differ from their checksum")
+        if attrs_digest(_root_sealed_items(f)) != expected:
+            return PressCheck("damaged", "its root attributes or press list differ from their checksum")
     except Exception as exc:
         return PressCheck("damaged", f"its root attributes are unreadable ({_short(exc)})")
     return PressCheck("ok")

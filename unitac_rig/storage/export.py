@@ -208,11 +208,36 @@ def staging_for(out: Path) -> Path:
             hint="choose a new --out directory (an export is never merged into another one)",
         )
     out.parent.mkdir(parents=True, exist_ok=True)
+    remove_dead_staging(out.parent)
     staging = out.parent / f".{out.name}.partial-{os.getpid()}"
     if staging.exists():
         shutil.rmtree(staging)
     staging.mkdir(parents=True)
     return staging
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: it exists, run by someone else
+        return True
+    return True
+
+
+def remove_dead_staging(folder: Path) -> list[Path]:
+    """Remove the half-built exports (``.<out>.partial-<pid>``) in ``folder`` whose process is gone (killed during
+    an export): a staging folder never outlives the process that built it by more than the next export's start.
+    Returns what was removed."""
+    removed = []
+    for staging in folder.glob(".*.partial-*"):
+        pid = staging.name.rsplit("-", 1)[-1]
+        if staging.is_dir() and pid.isdigit() and not _pid_alive(int(pid)):
+            shutil.rmtree(staging, ignore_errors=True)
+            removed.append(staging)
+            log.info("removed %s, left by an export that was killed (pid %s)", staging, pid)
+    return removed
 
 
 @contextlib.contextmanager

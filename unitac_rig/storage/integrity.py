@@ -11,13 +11,75 @@ import os
 from collections.abc import Container
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import h5py
 
 from unitac_rig.storage.checksums import PRESS_ATTR, PressCheck, check_press_group, check_root
 
-SCHEMA_VERSION = 2  # 2: SHA-256 checksums on every press and on the root attributes
-READABLE_SCHEMA_VERSIONS = (1, 2)  # 1: no checksums (read and resumed, reported as not verified)
+#: 2: SHA-256 checksums on every press and on the root attributes; 3: every press carries its identity
+#: (IDENTITY_KEYS, press id, angle) under its seal and the root seal covers the list of presses
+SCHEMA_VERSION = 3
+READABLE_SCHEMA_VERSIONS = (1, 2, 3)  # 1: no checksums (read and resumed, reported as not verified)
+#: what names the session a press belongs to: in the session's root attributes and in every press's (schema 3 on)
+IDENTITY_KEYS = ("object", "sensor", "session_id")
+PRESS_DIR_SUFFIX = ".presses"  # a session's press files: ``<object>__<sensor>.presses/<press_id>-<sha12>.h5``
+
+
+def _text(value: Any) -> str:
+    return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def canonical_press_id(rotation_deg: float, angle_deg: float) -> str:
+    """Stable, sortable name of a press: ``rot090_ang-12``."""
+    return f"rot{round(rotation_deg) % 360:03d}_ang{round(angle_deg):+03d}"
+
+
+def press_identity_problem(group: h5py.Group, pid: str, identity: dict[str, str], link: str | None) -> str | None:
+    """Why the press group stored as ``pid`` (through the press file ``link``, relative to the session's folder;
+    None for a group inside the file) is not that press of the session ``identity`` names, or None when it is.
+
+    The group's attributes are under its seal, so once its checksums match they say truly which press this is; a
+    press intact but in the wrong place (another object's or sensor's file copied over it, two press files or
+    journal entries swapped) is caught here."""
+    try:
+        attrs = {key: _text(group.attrs[key]) for key in (*IDENTITY_KEYS, "press_id") if key in group.attrs}
+        rotation, angle = float(group.attrs["rotation_deg"]), float(group.attrs["angle_deg"])
+    except Exception as exc:
+        return f"its identity attributes are unreadable ({_one_line(exc)})"
+    for key, expected in identity.items():
+        if key not in attrs:
+            return f"it carries no {key} (a press of a session written before identities were sealed)"
+        if attrs[key] != expected:
+            return f"it is a press of {key} {attrs[key]!r}, not of {expected!r}: in the wrong place"
+    if attrs.get("press_id") != pid:
+        return f"it holds press {attrs.get('press_id')!r}, not {pid}: in the wrong place"
+    made = canonical_press_id(rotation, angle)
+    if pid != made and not pid.startswith(f"{made}_"):  # repeats of one pose carry a suffix
+        return f"its rotation {rotation:g} and angle {angle:g} do not make press id {pid}"
+    if link is not None:
+        target = Path(link)
+        stem = f"{identity['object']}__{identity['sensor']}" if "object" in identity and "sensor" in identity else None
+        if stem is not None and target.parent.name != f"{stem}{PRESS_DIR_SUFFIX}":
+            return f"its link points into {target.parent}, not into {stem}{PRESS_DIR_SUFFIX}"
+        if not (target.name.startswith(f"{pid}-") and target.suffix == ".h5"):
+            return f"its link names the file {target.name}, not a file of press {pid}"
+    return None
+
+
+def root_identity(f: h5py.File, path: Path) -> tuple[dict[str, str], str | None]:
+    """(the session identity a schema-3 file's verified root names, why it does not fit the file's name or None)."""
+    try:
+        identity = {key: _text(f.attrs[key]) for key in IDENTITY_KEYS if key in f.attrs}
+    except Exception as exc:
+        return {}, f"its identity attributes are unreadable ({_one_line(exc)})"
+    missing = [key for key in IDENTITY_KEYS if key not in identity]
+    if missing:
+        return identity, f"its root attributes carry no {', '.join(missing)}"
+    expected = f"{identity['object']}__{identity['sensor']}.h5"
+    if Path(path).name != expected and ".broken-" not in Path(path).name:
+        return identity, f"it holds the session {expected}, not {Path(path).name}: in the wrong place"
+    return identity, None
 
 
 @dataclass
@@ -90,10 +152,16 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
             return check
         if not check.readable_version:
             return check  # another format: not ours to judge (the readers say which version it is)
+        identity: dict[str, str] = {}
         if check.version >= 2:
             root = check_root(f)
             if root.damaged:
                 check.root_problem = root.detail
+            elif root.state == "unsealed":  # a damaged attribute heap can hide the seal: never "unsealed" here
+                check.root_problem = "its root seal (attrs_sha256) is missing or unreadable"
+            elif check.version >= 3:
+                identity, problem = root_identity(f, path)
+                check.root_problem = problem
         try:
             presses = f["presses"]
             names = sorted(presses)
@@ -121,6 +189,8 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
                 check.damaged[pid] = "it has no checksums in a file whose presses all carry them"
             elif result.damaged:
                 check.damaged[pid] = result.detail
+            elif identity and (wrong := press_identity_problem(g, pid, identity, _link_name(presses, pid))):
+                check.damaged[pid] = wrong
             else:
                 try:
                     status = g.attrs["status"]
@@ -143,11 +213,24 @@ def press_seal(path: Path, presses: h5py.Group, pid: str) -> str | None:
         seal = raw.decode() if isinstance(raw, bytes) else str(raw)
         link = presses.get(pid, getlink=True)
         if isinstance(link, h5py.ExternalLink):
-            st = os.stat(Path(path).parent / str(link.filename))
-            seal += f"|{link.filename}|{st.st_ino}|{st.st_size}|{st.st_mtime_ns}"
+            seal += f"|{link.filename}|{file_stamp(Path(path).parent / str(link.filename))}"
+        else:  # a group inside the session file (older layout): trusted only while that file is unchanged
+            seal += f"|.|{file_stamp(Path(path))}"
     except Exception:  # damaged metadata raises anything: the press is then read in full
         return None
     return seal
+
+
+def _link_name(presses: h5py.Group, pid: str) -> str | None:
+    link = presses.get(pid, getlink=True)
+    return str(link.filename) if isinstance(link, h5py.ExternalLink) else None
+
+
+def file_stamp(path: Path) -> str:
+    """A file's identity and version: device, inode, size, mtime and ctime (ns). Any write, copy or rename-over
+    changes it (ctime cannot be set back by ``touch``), so a result remembered for one stamp holds only for it."""
+    st = os.stat(path)
+    return f"{st.st_dev}:{st.st_ino}:{st.st_size}:{st.st_mtime_ns}:{st.st_ctime_ns}"
 
 
 def _missing_press_file(path: Path, presses: h5py.Group, pid: str) -> str | None:

@@ -147,6 +147,7 @@ def build_paired_dataset(
     two of them, with ``partial``).
     """
     chosen = _chosen_sensors(sets, sensors)
+    _one_rig(sets, chosen)
     best, n_taxels = _best_rows(sets, chosen)
     keys = _shared_keys(best, chosen, partial)
     shared = set(keys)
@@ -176,6 +177,23 @@ def build_paired_dataset(
         dropped_per_sensor=dropped,
         present=has_frame,
     )
+
+
+def _one_rig(sets: Sequence[MatchedSet], chosen: tuple[str, ...]) -> None:
+    """Pairs join only within one rig: two sensors recorded on different rigs (another arm, F/T, mount, or the
+    simulator beside hardware) saw different contacts under the same (rotation, angle, target). DataError naming two
+    sessions of different rigs; sets that do not say which rig recorded them are not checked."""
+    seen: dict[str, MatchedSet] = {}
+    for matched in sets:
+        if matched.sensor in chosen and matched.rig:
+            seen.setdefault(matched.rig, matched)
+    if len(seen) > 1:
+        (rig_a, a), (rig_b, b) = list(seen.items())[:2]
+        raise DataError(
+            f"pairs join only within one rig: {a.object_id}/{a.sensor} was recorded on {rig_a}, "
+            f"{b.object_id}/{b.sensor} on {rig_b}",
+            hint="keep each rig's sessions in their own --data directory and train or export one rig at a time",
+        )
 
 
 def _chosen_sensors(sets: Sequence[MatchedSet], sensors: Sequence[str] | None) -> tuple[str, ...]:

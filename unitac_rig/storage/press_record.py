@@ -20,13 +20,12 @@ import numpy as np
 
 from unitac_rig.storage.checksums import array_digest, seal_press_group, sealed_arrays
 from unitac_rig.storage.extraction import Extraction, ExtractionSettings
+from unitac_rig.storage.integrity import IDENTITY_KEYS, canonical_press_id
 
 FINISHED_STATUSES = ("complete", "failed")  # never redone on resume; "aborted" presses are redone
 
 
-def press_id(rotation_deg: float, angle_deg: float) -> str:
-    """Stable, sortable name of a press: ``rot090_ang-12``."""
-    return f"rot{round(rotation_deg) % 360:03d}_ang{round(angle_deg):+03d}"
+press_id = canonical_press_id  # the press's name, ``rot090_ang-12``: where every reader expects it
 
 
 @dataclass
@@ -185,7 +184,7 @@ def _frames_dataset(group: h5py.Group, name: str, frames: np.ndarray) -> None:
 
 def read_press_group(g: h5py.Group) -> PressRecord:
     attrs = {k: decode_attr(v) for k, v in g.attrs.items()}
-    for key in ("press_id", "rotation_deg", "angle_deg", "status", "reason", "write_complete"):
+    for key in ("press_id", "rotation_deg", "angle_deg", "status", "reason", "write_complete", *IDENTITY_KEYS):
         attrs.pop(key, None)
     tac = g["tactile"]
     ex = read_extraction(g)

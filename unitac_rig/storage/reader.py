@@ -25,12 +25,15 @@ from unitac_rig.errors import DataError
 from unitac_rig.rig.sensors import SENSORS
 from unitac_rig.storage.checksums import attrs_digest, content_seal, root_attr_items
 from unitac_rig.storage.integrity import (
+    IDENTITY_KEYS,
     READABLE_SCHEMA_VERSIONS,
     SCHEMA_VERSION,
     SessionCheck,
     check_session,
     press_seal,
 )
+from unitac_rig.storage.journal import journal_problems
+from unitac_rig.storage.lease import lease_holder
 from unitac_rig.storage.press_record import (
     PressRecord,
     as_str,
@@ -40,6 +43,7 @@ from unitac_rig.storage.press_record import (
     read_press_group,
 )
 from unitac_rig.storage.recorder import private_copy_path, repair_session, session_layout
+from unitac_rig.storage.trust import load_trust, save_trust
 
 log = logging.getLogger(__name__)
 
@@ -71,6 +75,7 @@ class MatchedSet:
     values: np.ndarray
     force_n: np.ndarray
     error_n: np.ndarray
+    rig: str = ""  # which rig recorded it (:func:`rig_label`); "" when the session does not say
 
     def __len__(self) -> int:
         return int(self.target_n.size)
@@ -116,8 +121,10 @@ def _version_key(path: Path) -> tuple[Any, ...] | None:
 
 
 def verified_session(path: Path) -> Verified:
-    """Verify every press of ``path`` against its checksums (once per file version per process), repair it from
-    the journal when it is damaged, and raise a DataError naming the file and press when it cannot be repaired.
+    """Verify every press of ``path`` against its checksums and identity (once per file version: what an earlier
+    process verified and has not changed since is trusted, :mod:`unitac_rig.storage.trust`), and that each press
+    still has its repair copy in the journal; repair from the journal what is damaged or missing, and raise a
+    DataError naming the file and press when it cannot be repaired.
 
     A file without checksums (schema 1) is read unverified and says so (a warning, and ``integrity`` in
     ``inspect`` and export manifests); a file of another schema version is left to the caller's version check.
@@ -128,11 +135,28 @@ def verified_session(path: Path) -> Verified:
         cached = _VERIFIED.get(key) if key else None
     if cached is not None:
         return cached
+    stored, stored_journal = load_trust(path)
     with _VERIFIED_GUARD:
-        known = set(_PRESSES_OK.get(str(path.resolve()), ()))
+        known = set(_PRESSES_OK.get(str(path.resolve()), ())) | stored
     check = check_session(path, known)
     repairs: tuple[str, ...] = ()
-    if check.needs_repair:
+    issues, good = ({}, {}) if check.needs_repair else _journal_issues(path, check, stored_journal)
+    journal = path.parent / ".journal" / path.stem
+    if not check.needs_repair and issues and lease_holder(journal) is not None:
+        for issue in issues.values():  # the collection writing it now recreates it when it next opens the session
+            log.warning("%s: %s (the session is being written now; rerun later to restore it)", path, issue)
+    elif issues and not check.needs_repair:  # the data is intact: a journal that cannot be mended never blocks it
+        try:
+            repairs = tuple(repair_session(path, f"{path}: {next(iter(issues.values()))}"))
+        except DataError as exc:
+            log.warning("%s: %s; the journal could not be mended: %s", path, "; ".join(issues.values()), exc)
+        for note in repairs:
+            log.warning("%s: %s", path, note)
+        check = check_session(path, known)
+        issues, good = _journal_issues(path, check, stored_journal)
+        for issue in issues.values() if repairs else ():
+            log.warning("%s: %s", path, issue)
+    elif check.needs_repair:
         problem = check.first_problem()
         repairs = tuple(repair_session(path, problem))
         for note in repairs:
@@ -140,17 +164,30 @@ def verified_session(path: Path) -> Verified:
         check = check_session(path, known)
         if check.needs_repair:
             raise DataError(check.first_problem(), hint="restore the file from a backup")
+        issues, good = _journal_issues(path, check, stored_journal)
+        for issue in issues.values():
+            log.warning("%s: %s", path, issue)
     if check.unsealed and str(path) not in _WARNED_UNSEALED:
         _WARNED_UNSEALED.add(str(path))
         log.warning("%s: %s: read without verification", path, check.describe())
     result = Verified(check, repairs)
     seals = _press_seals(path, check.verified)
+    save_trust(path, seals, good)
     key = _version_key(path)
     with _VERIFIED_GUARD:
         _PRESSES_OK.setdefault(str(path.resolve()), set()).update(seals)
         if key is not None:
             _VERIFIED[key] = result
     return result
+
+
+def _journal_issues(path: Path, check: SessionCheck, trusted: dict[str, str]) -> tuple[dict[str, str], dict[str, str]]:
+    """:func:`journal_problems` for an intact session file: its identity (schema 3) from its verified root."""
+    identity: dict[str, str] = {}
+    if check.version is not None and check.version >= 3:
+        with h5py.File(path, "r") as f:
+            identity = {k: as_str(f.attrs[k]) for k in IDENTITY_KEYS}
+    return journal_problems(path, sorted(check.statuses), identity, trusted)
 
 
 def _press_seals(path: Path, pids: list[str]) -> set[tuple[str, str]]:
@@ -205,7 +242,31 @@ def list_sessions(data_dir: Path) -> list[SessionInfo]:
     if not data_dir.is_dir():
         raise DataError(f"{data_dir} is not a directory", hint="pass the --data directory you collected into")
     paths = sorted(p for p in data_dir.glob("*__*.h5") if ".broken-" not in p.name)
-    return [read_session_info(p) for p in paths]
+    paths += _rebuild_vanished(data_dir, paths)
+    return [read_session_info(p) for p in sorted(paths)]
+
+
+def _rebuild_vanished(data_dir: Path, present: list[Path]) -> list[Path]:
+    """Session files that are gone while the journal still holds their presses: rebuilt from the journal (a
+    warning says so) or refused in one line, never left out (a vanished session would drop all its pairs)."""
+    rebuilt: list[Path] = []
+    names = {p.name for p in present}
+    for journal in sorted((data_dir / ".journal").glob("*__*")):
+        path = data_dir / f"{journal.name}.h5"
+        entries = [p for p in journal.glob("*.h5") if ".broken-" not in p.name]
+        if path.name in names or not entries or not journal.is_dir():
+            continue
+        if lease_holder(journal) is not None:
+            log.info("%s: being created by a collection now; not listed yet", path)
+            continue
+        problem = (
+            f"{path}: the session file is missing, but its journal .journal/{journal.name} holds {len(entries)} presses"
+        )
+        for note in repair_session(path, problem):
+            log.warning("%s: %s", path, note)
+        log.warning("%s was missing; rebuilt from its journal (%d presses)", path, len(entries))
+        rebuilt.append(path)
+    return rebuilt
 
 
 def read_presses(path: Path, *, with_streams: bool = True) -> list[PressRecord]:
@@ -227,6 +288,17 @@ def press_summaries(path: Path) -> list[dict[str, Any]]:
             item["robot_samples"] = int(g["robot/t_s"].shape[0])
             out.append(item)
     return out
+
+
+def rig_label(attrs: dict[str, Any]) -> str:
+    """Which rig recorded a session, from its root attributes: ``imported: <source>``, ``simulated: <rig name>`` or
+    ``hardware: <rig name>``; "" when it names no rig (written by a script). Pairs join only within one label."""
+    if attrs.get("source"):
+        return f"imported: {attrs['source']}"
+    if not attrs.get("rig"):  # a script's session names no rig: it cannot be told apart, so it is not checked
+        return ""
+    kind = "simulated" if attrs.get("simulated") else "hardware"
+    return f"{kind}: {attrs['rig']}"
 
 
 def load_matched_set(path: Path) -> MatchedSet:
@@ -265,6 +337,7 @@ def load_matched_set(path: Path) -> MatchedSet:
         values=cat(vals, (n_taxels, 3)).astype(np.float32),
         force_n=cat(force),
         error_n=cat(err),
+        rig=rig_label(info.attrs),
     )
 
 

@@ -37,13 +37,14 @@ kill's leftover) is only deleted when a later command opens the session for writ
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import errno
 import itertools
-import json
 import logging
 import os
 import shutil
 import time
+import uuid
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Literal
@@ -51,8 +52,30 @@ from typing import Any, Literal
 import h5py
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.checksums import ROOT_ATTR, check_press_group, check_root, seal_root
-from unitac_rig.storage.integrity import READABLE_SCHEMA_VERSIONS, SCHEMA_VERSION, check_session
+from unitac_rig.storage.checksums import ROOT_ATTR, check_root, seal_root
+from unitac_rig.storage.integrity import (
+    IDENTITY_KEYS,
+    PRESS_DIR_SUFFIX,
+    READABLE_SCHEMA_VERSIONS,
+    SCHEMA_VERSION,
+    SessionCheck,
+    check_session,
+)
+from unitac_rig.storage.journal import (
+    PRESS_GROUP,
+    journal_dir,
+    journal_entry_check,
+    private_copy_path,
+    read_journal_header,
+    reextracted,
+    root_as_header,
+    session_header,
+    session_path,
+    session_stem,
+    settings_of,
+    write_header,
+    write_journal_entry,
+)
 from unitac_rig.storage.lease import SessionLease, lease_holder
 from unitac_rig.storage.manifest import sha256_file
 from unitac_rig.storage.press_record import (
@@ -60,7 +83,6 @@ from unitac_rig.storage.press_record import (
     PressRecord,
     as_str,
     attr_value,
-    json_default,
     read_press_group,
     record_nbytes,
     write_press_group,
@@ -71,24 +93,8 @@ log = logging.getLogger(__name__)
 
 #: root attributes that say which rig recorded a session: a session is never continued from another one
 RIG_IDENTITY_KEYS = ("simulated", "rig", "source")
-#: the folder of a session's press files: ``<object>__<sensor>.presses`` beside the session file
-PRESS_DIR_SUFFIX = ".presses"
-#: the group that holds the press in a press file and in a journal entry
-PRESS_GROUP = "press"
 #: room claimed per press link when the session file is republished (an external link and its name), bytes
 LINK_BYTES = 256
-
-
-def session_stem(object_id: str, sensor: str) -> str:
-    return f"{object_id}__{sensor}"
-
-
-def session_path(data_dir: Path, object_id: str, sensor: str) -> Path:
-    return Path(data_dir) / f"{session_stem(object_id, sensor)}.h5"
-
-
-def journal_dir(data_dir: Path, object_id: str, sensor: str) -> Path:
-    return Path(data_dir) / ".journal" / session_stem(object_id, sensor)
 
 
 def press_dir(path: Path) -> Path:
@@ -97,18 +103,12 @@ def press_dir(path: Path) -> Path:
     return path.with_name(f"{path.stem}{PRESS_DIR_SUFFIX}")
 
 
-def private_copy_path(path: Path) -> Path:
-    """Where a process builds the next version of ``path`` before renaming it over ``path``.
-
-    Hidden and ending in ``.tmp``, so no session glob (``*__*.h5``) ever lists it; the pid keeps two processes apart.
-    """
-    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
-
-
 def remove_stale_copies(path: Path, journal: Path) -> None:
-    """Delete private copies of the session file, its press files and its journal entries left by a killed writer or
-    ``extract`` (call only while holding the session's lease)."""
+    """Delete private copies of the session file, its press files, its journal entries and journal header left by a
+    killed writer or ``extract`` (call only while holding the session's lease: no live process writes them then)."""
     leftovers = [*path.parent.glob(f".{path.name}.*.tmp"), *journal.glob(".*.h5.*.tmp"), *journal.glob("*.h5.tmp"),
+                 *journal.glob("._session.json.*.tmp"), *journal.glob("_session.tmp"),
+                 *journal.glob("._verified.json.*.tmp"),
                  *press_dir(path).glob(".*.tmp")]  # fmt: skip
     for leftover in leftovers:
         leftover.unlink(missing_ok=True)
@@ -218,19 +218,6 @@ def ensure_room(path: Path, extra_bytes: int) -> None:
                 path.unlink(missing_ok=True)
 
 
-def _fsync_dir(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
 def keep_aside(path: Path, *, move: bool) -> Path:
     """Give the current version of ``path`` a new, unused name beside it (``<stem>.broken-<time>[-n]<suffix>``) and
     return it; never overwrites: a second one in the same second gets ``-2``, and so on.
@@ -258,35 +245,6 @@ def keep_aside(path: Path, *, move: bool) -> Path:
             path.unlink()
         return target
     raise AssertionError("unreachable")
-
-
-def write_journal_entry(journal: Path, rec: PressRecord) -> Path:
-    """Make ``rec`` durable as ``journal/<press_id>.h5``: temporary name, fsync, atomic rename, fsync the folder."""
-    final = journal / f"{rec.press_id}.h5"
-    tmp = journal / f"{rec.press_id}.h5.tmp"
-    try:
-        with h5py.File(tmp, "w") as jf:
-            write_press_group(jf, rec, name="press")
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, final)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    _fsync_dir(journal)
-    return final
-
-
-def _journal_check(path: Path) -> tuple[str, str]:
-    """(state, status or detail) of a journal entry: ``ok``/``unsealed`` with the press status, or ``damaged``."""
-    try:
-        with h5py.File(path, "r") as jf:
-            result = check_press_group(jf["press"])
-            if result.damaged:
-                return "damaged", result.detail
-            return result.state, as_str(jf["press"].attrs["status"])
-    except Exception as exc:  # a torn file does not open; damaged metadata raises anything
-        return "damaged", f"unreadable ({' '.join(str(exc).split())[:160]})"
 
 
 def _describe_rig(attrs: Mapping[str, Any]) -> str:
@@ -394,22 +352,34 @@ class SessionWriter:
         log.info("%s", text)  # collect prints the notes; a reader's repair logs them as warnings
 
     def _write_journal_header(self) -> None:
+        """Check the journal header against this writer's session, or write it: from the session file's verified
+        root when a header went missing beside an existing session (noted), else new, with a new session id."""
         header = self.journal / "_session.json"
-        if header.exists():
-            existing = self._journal_header()
-            for key in ("object", "sensor"):
-                if existing.get(key) != self.root_attrs.get(key):
-                    raise DataError(
-                        f"{self.path.name}: the journal belongs to {key}={existing.get(key)!r}, "
-                        f"not {self.root_attrs.get(key)!r}"
-                    )
-            note = check_same_rig(existing, self.root_attrs, self.path)
-            if note:
-                self._note(note)
-            return
-        tmp = header.with_suffix(".tmp")
-        tmp.write_text(json.dumps(self.root_attrs, default=json_default, indent=1))
-        os.replace(tmp, header)
+        if not header.exists():
+            rebuilt = root_as_header(self.path)
+            if rebuilt is not None:
+                self._note(f"the journal header {header.name} was missing; rewritten from {self.path.name}")
+            attrs = rebuilt if rebuilt is not None else dict(self.root_attrs)
+            attrs.setdefault("session_id", uuid.uuid4().hex)  # names this session in every press it records
+            write_header(self.journal, attrs)
+        existing = self._journal_header()
+        for key in ("object", "sensor"):
+            if existing.get(key) != self.root_attrs.get(key):
+                raise DataError(
+                    f"{self.path.name}: the journal belongs to {key}={existing.get(key)!r}, "
+                    f"not {self.root_attrs.get(key)!r}"
+                )
+        note = check_same_rig(existing, self.root_attrs, self.path)
+        if note:
+            self._note(note)
+        # a session begun before session ids (schema 2 or older) stays as it was: its presses carry no identity
+        self.identity = {key: str(existing[key]) for key in IDENTITY_KEYS} if "session_id" in existing else {}
+
+    def _stamped(self, rec: PressRecord) -> PressRecord:
+        """``rec`` carrying this session's identity in its attributes (under its seal once written)."""
+        if all(rec.attrs.get(key) == value for key, value in self.identity.items()):
+            return rec
+        return dataclasses.replace(rec, attrs={**rec.attrs, **self.identity})
 
     def _journal_header(self) -> dict[str, Any]:
         return read_journal_header(self.journal)
@@ -522,30 +492,12 @@ class SessionWriter:
             self._root, self._links, self._groups = self._header_root(), {}, []
             self._publish()
             check = check_session(self.path)
-        restore: list[PressRecord] = []
-        journal_fix: list[str] = []
-        lost: dict[str, str] = {}  # press id -> why it cannot be repaired
-        broken_entries: list[Path] = []
+        if check.root_problem:
+            self._root = self._header_root(check.version or SCHEMA_VERSION)
+        # the session file's extraction settings are the newer side: extract renames it before the journal's copies
+        settings = settings_of(self._root.get("extraction_settings"))
         journal = self._journal_press_files()
-        for pid, path in journal.items():
-            state, detail = _journal_check(path)
-            if pid in check.statuses:  # intact in the session
-                if state == "damaged":
-                    journal_fix.append(pid)
-                elif check.statuses[pid] not in FINISHED_STATUSES and detail != check.statuses[pid]:
-                    restore.append(self._read_journal(path))  # e.g. aborted in the session, finished in the journal
-                continue
-            if state == "damaged":
-                if pid in check.damaged:
-                    lost[pid] = f"{check.damaged[pid]}, and its journal copy is damaged too ({detail})"
-                    broken_entries.append(path)
-                else:
-                    self._note(f"journal entry {path.name} is damaged ({detail}); ignored")
-                continue
-            restore.append(self._read_journal(path))
-        for pid, what in check.damaged.items():
-            if pid not in journal:
-                lost[pid] = f"{what}, and it has no journal copy"
+        restore, journal_fix, lost, broken_entries = self._triage(check, journal, settings)
         if lost and self.unrepairable == "refuse":
             pid, why = next(iter(lost.items()))
             more = f" (and {len(lost) - 1} more presses)" if len(lost) > 1 else ""
@@ -564,16 +516,23 @@ class SessionWriter:
                 elif pid in self._groups:  # the older layout: the damaged version of the whole file survives
                     session_aside = session_aside or keep_aside(self.path, move=False)
                     kept_as[pid] = session_aside.name
-            for entry in broken_entries:
-                keep_aside(entry, move=True)
+            for entry_path in broken_entries:
+                keep_aside(entry_path, move=True)
+        restore = [self._stamped(r) for r in restore]
+        if settings is not None:  # a journal copy older than the session's extraction is re-extracted
+            stale = {
+                r.press_id
+                for r in restore
+                if r.extraction is not None and settings_of(r.extraction.settings.to_dict()) != settings
+            }
+            restore = [reextracted(r, settings) if r.press_id in stale else r for r in restore]
+            journal_fix.update({pid: "held an older extraction than the session file" for pid in stale})
         gone = set(check.half_written) | set(lost) | set(check.damaged) | {rec.press_id for rec in restore}
         for pid in gone:
             self._links.pop(pid, None)
         self._groups = [pid for pid in self._groups if pid not in gone]
         for rec in restore:
             self._links[rec.press_id] = self._new_press_file(rec.press_id, writing(rec))
-        if check.root_problem:
-            self._root = self._header_root(check.version or SCHEMA_VERSION)
         if gone or check.root_problem:
             self._publish()
         for pid, why in lost.items():
@@ -581,15 +540,80 @@ class SessionWriter:
             self._note(f"press {pid} was damaged ({why}): dropped, it will be pressed again{aside}")
         if check.root_problem:
             self._note(f"{self.path.name}: {check.root_problem}; rewritten from the journal header")
-        for pid in journal_fix:
-            with h5py.File(self.path, "r") as f:
-                rec = read_press_group(f["presses"][pid])
+        restored = {rec.press_id: rec for rec in restore}
+        for pid, why in journal_fix.items():
+            if pid in restored:
+                rec = restored[pid]
+            else:
+                with h5py.File(self.path, "r") as f:
+                    rec = self._stamped(read_press_group(f["presses"][pid]))
             write_journal_entry(self.journal, rec)
-            self._note(f"journal entry {pid}.h5 was damaged; rewritten from the session file")
+            self._note(
+                f"journal entry {pid}.h5 {why}; rewritten from the {'journal' if pid in restored else 'session file'}"
+            )
+        self._align_header(settings)
         self.recovery_notes.extend(f"press {pid} was half written; dropped" for pid in check.half_written)
         for rec in restore:
             what = "damaged in the session file; replaced by" if rec.press_id in check.damaged else "restored from"
             self._note(f"press {rec.press_id} ({rec.status}) {what} the journal")
+
+    def _triage(
+        self, check: SessionCheck, journal: dict[str, Path], settings: dict[str, Any] | None
+    ) -> tuple[list[PressRecord], dict[str, str], dict[str, str], list[Path]]:
+        """What the session and journal need: (presses to restore from the journal, press id -> why its journal
+        entry is rewritten, press id -> why it cannot be repaired, journal entries damaged with their press)."""
+        restore: list[PressRecord] = []
+        journal_fix: dict[str, str] = {}  # press id -> why its journal entry is rewritten from the session file
+        lost: dict[str, str] = {}  # press id -> why it cannot be repaired
+        broken_entries: list[Path] = []
+        entries = {pid: journal_entry_check(path, self.identity) for pid, path in journal.items()}
+        # an intact entry under another press's name (two entries swapped): still a good copy of the press it holds
+        spare = {e.holds: journal[pid] for pid, e in entries.items() if e.holds and e.holds != pid and e.status}
+        for pid, path in journal.items():
+            entry = entries[pid]
+            state, detail = entry.state, entry.detail
+            if pid in check.statuses:  # intact in the session
+                if state == "damaged":
+                    journal_fix[pid] = f"was damaged ({detail})"
+                elif check.statuses[pid] not in FINISHED_STATUSES and entry.status != check.statuses[pid]:
+                    restore.append(self._read_journal(path))  # e.g. aborted in the session, finished in the journal
+                elif settings is not None and entry.settings is not None and entry.settings != settings:
+                    journal_fix[pid] = "held an older extraction than the session file"
+                continue
+            if state == "damaged" and pid in spare:
+                restore.append(self._read_journal(spare[pid]))
+                journal_fix[pid] = f"was damaged ({detail})"
+                continue
+            if state == "damaged":
+                if pid in check.damaged:
+                    lost[pid] = f"{check.damaged[pid]}, and its journal copy is damaged too ({detail})"
+                    broken_entries.append(path)
+                else:
+                    self._note(f"journal entry {path.name} is damaged ({detail}); ignored")
+                continue
+            restore.append(self._read_journal(path))
+        for pid, what in check.damaged.items():
+            if pid in journal:
+                continue
+            if pid in spare:
+                restore.append(self._read_journal(spare[pid]))
+                journal_fix[pid] = "was missing"
+            else:
+                lost[pid] = f"{what}, and it has no journal copy"
+        for pid in check.statuses:
+            if pid not in journal and pid not in journal_fix and check.version and check.version >= 2:
+                journal_fix[pid] = "was missing (the press had no repair copy)"
+        return restore, journal_fix, lost, broken_entries
+
+    def _align_header(self, settings: dict[str, Any] | None) -> None:
+        """The journal header's extraction settings follow the session file's (a kill between extract's renames)."""
+        if settings is None:
+            return
+        header = self._journal_header()
+        if settings_of(header.get("extraction_settings")) != settings:
+            header["extraction_settings"] = settings
+            write_header(self.journal, header)
+            self._note("the journal header held an older extraction than the session file; brought in step")
 
     def _remove_unlinked_press_files(self) -> None:
         """Delete press files the published session file does not link: versions superseded by an earlier command
@@ -638,9 +662,7 @@ class SessionWriter:
         if serial is not None and recorded is None:
             attrs = {**attrs, "sensor_serial": str(serial)}  # the first serial a driver reported stays the session's
         header.update(attrs)
-        tmp = self.journal / "_session.tmp"
-        tmp.write_text(json.dumps(header, default=json_default, indent=1))
-        os.replace(tmp, self.journal / "_session.json")
+        write_header(self.journal, header)
 
         for key, value in attrs.items():
             self._root[key] = attr_value(value)
@@ -655,6 +677,7 @@ class SessionWriter:
         nbytes = record_nbytes(rec)
         self._room(tmp, 2 * nbytes, f"press {rec.press_id}")  # the journal entry and the press file
         try:
+            rec = self._stamped(rec)
             write_journal_entry(self.journal, rec)
             self._presses_written += 1
             # durable from here on: a failure below only delays the press file and its link to the next open
@@ -679,7 +702,7 @@ class SessionWriter:
         self.path.unlink(missing_ok=True)
         with contextlib.suppress(OSError):
             self.press_dir.rmdir()  # only when empty
-        for leftover in ("_session.json", "_session.tmp"):
+        for leftover in ("_session.json", "_session.tmp", "_verified.json"):
             (self.journal / leftover).unlink(missing_ok=True)
         self._lease.release(unlink=True)
         for folder in (self.journal, self.journal.parent, self.data_dir):
@@ -687,21 +710,6 @@ class SessionWriter:
                 folder.rmdir()  # only when empty
             except OSError:
                 break
-
-
-def read_journal_header(journal: Path) -> dict[str, Any]:
-    """A journal's ``_session.json`` (the session's root attributes); DataError when it is unreadable."""
-    header = journal / "_session.json"
-    try:
-        data = json.loads(header.read_text())
-        if not isinstance(data, dict) or "object" not in data or "sensor" not in data:
-            raise ValueError("not a session header")
-    except (OSError, ValueError, RecursionError) as exc:
-        raise DataError(
-            f"{header} is unreadable ({exc})",
-            hint="restore it from a backup, or move the session aside and collect into a new --data directory",
-        ) from exc
-    return data
 
 
 def repair_session(path: Path, problem: str) -> list[str]:
@@ -712,8 +720,8 @@ def repair_session(path: Path, problem: str) -> list[str]:
     """
     path = Path(path)
     journal = path.parent / ".journal" / path.stem
-    header = journal / "_session.json"
-    if not header.is_file():
+    attrs = session_header(path)
+    if attrs is None:
         raise DataError(
             f"{problem}; there is no journal to repair it from (.journal/{path.stem})",
             hint="restore the file from a backup, or move it aside and collect the session again",
@@ -726,7 +734,6 @@ def repair_session(path: Path, problem: str) -> list[str]:
             hint="rerun when that collection has finished (collect repairs it from the journal when it next opens "
             "the session)",
         )
-    attrs = read_journal_header(journal)
     object_id, sensor = str(attrs["object"]), str(attrs["sensor"])
     if session_path(path.parent, object_id, sensor) != path:
         raise DataError(f"{path} and its journal header name another session ({object_id}/{sensor})")

@@ -18,18 +18,18 @@ from unitac_rig.errors import DataError
 from unitac_rig.storage.checksums import ROOT_ATTR
 from unitac_rig.storage.extraction import Extraction, ExtractionSettings
 from unitac_rig.storage.integrity import check_session
+from unitac_rig.storage.journal import journal_check
 from unitac_rig.storage.lease import SessionLease
 from unitac_rig.storage.manifest import sha256_file
 from unitac_rig.storage.press_record import iter_press_groups, json_default, reseal_extraction, write_extraction
 from unitac_rig.storage.recorder import (
     PRESS_GROUP,
     SessionWriter,
-    _journal_check,
     ensure_room,
     press_dir,
     private_copy_path,
-    read_journal_header,
     session_bytes,
+    session_header,
     session_layout,
     write_session_file,
 )
@@ -122,18 +122,17 @@ def reextract_sessions(
         plans: list[tuple[Path, list[Path]]] = []
         for path in paths:
             journal = path.parent / ".journal" / path.stem
-            if (journal / "_session.json").is_file():
+            if journal.is_dir():  # a journal without its header too: the writer below rebuilds the header
                 lease = SessionLease(journal, path.stem)
                 lease.acquire(wait_s=0.5, hint=hint)
                 leases.append(lease)
         for path in paths:
-            journal = path.parent / ".journal" / path.stem
-            if (journal / "_session.json").is_file():
-                header = read_journal_header(journal)
+            header = session_header(path)
+            if header is not None:
                 writer = SessionWriter(path.parent, str(header["object"]), str(header["sensor"]), header,
                                        unrepairable="refuse")  # fmt: skip
                 writers.append(writer)
-                entries = [p for p in writer._journal_press_files().values() if _journal_check(p)[0] != "damaged"]
+                entries = [p for p in writer._journal_press_files().values() if journal_check(p)[0] != "damaged"]
             else:
                 check = check_session(path)
                 if check.needs_repair:

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from unitac_rig.storage.lease import lease_holder
-from unitac_rig.storage.reader import list_sessions, press_summaries
+from unitac_rig.storage.reader import list_sessions, press_summaries, rig_label
 from unitac_rig.storage.recorder import journal_dir
 
 
@@ -24,7 +24,8 @@ def _stats(values: list[float], keys: tuple[str, ...]) -> dict[str, float | None
 def inspect_dataset(data_dir: Path) -> dict[str, Any]:
     """The ``inspect --json`` document (see docs/dataset.md for every key)."""
     sessions = []
-    keys_by_object: dict[str, dict[str, set[tuple[float, float, float]]]] = defaultdict(dict)
+    # object -> (rig, sensor) -> join keys: pairs join only within one rig (unitac_rig.storage.paired)
+    keys_by_object: dict[str, dict[tuple[str, str], set[tuple[float, float, float]]]] = defaultdict(dict)
     for info in list_sessions(data_dir):
         presses = press_summaries(info.path)
         planned = info.attrs.get("planned_presses") or []
@@ -42,13 +43,15 @@ def inspect_dataset(data_dir: Path) -> dict[str, Any]:
             errors.extend(np.abs(ex.error_n[hit]).tolist())
             for target in ex.targets_n[hit]:
                 keys.add((float(p["rotation_deg"]), float(p["angle_deg"]), round(float(target), 2)))
-        keys_by_object[info.object_id][info.sensor] = keys
+        rig = rig_label(info.attrs)
+        keys_by_object[info.object_id][(rig, info.sensor)] = keys
         peaks = [float(p.get("peak_force_n", np.nan)) for p in complete if "peak_force_n" in p]
         sessions.append(
             {
                 "object": info.object_id,
                 "sensor": info.sensor,
                 "simulated": info.simulated,
+                "rig": rig,  # which rig recorded it ("simulated: <name>", "hardware: <name>", "imported: ..."), or ""
                 "file": info.path.name,
                 # "verified" (every press matched its checksums), "repaired from the journal, ...", or why not
                 "integrity": info.integrity,
@@ -66,7 +69,10 @@ def inspect_dataset(data_dir: Path) -> dict[str, Any]:
             }
         )
     pairs = {}
-    for object_id, by_sensor in sorted(keys_by_object.items()):
-        sets = list(by_sensor.values())
-        pairs[object_id] = len(set.intersection(*sets)) if len(sets) > 1 else 0
+    for object_id, by_rig_sensor in sorted(keys_by_object.items()):
+        total = 0
+        for rig in {r for r, _ in by_rig_sensor}:
+            sets = [keys for (r, _), keys in by_rig_sensor.items() if r == rig]
+            total += len(set.intersection(*sets)) if len(sets) > 1 else 0
+        pairs[object_id] = total
     return {"sessions": sessions, "pairs": pairs}

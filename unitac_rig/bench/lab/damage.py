@@ -7,6 +7,8 @@ recorder's copy-on-write on purpose.
 
 from __future__ import annotations
 
+import os
+import shutil
 from pathlib import Path
 
 import h5py
@@ -88,3 +90,67 @@ def _datasets(group: h5py.Group) -> list[str]:
     names: list[str] = []
     group.visititems(lambda name, obj: names.append(name) if isinstance(obj, h5py.Dataset) else None)
     return sorted(names)
+
+
+# -- a press intact but in the wrong place, and the journal's own damage (issue 41) ---------------------------------
+# Each takes a dataset folder and the (object, sensor) session to damage; what it returns names what it changed.
+
+
+def _press_file(data: Path, object_id: str, sensor: str, pid: str) -> Path:
+    """The press file the session file of (object, sensor) links ``pid`` to."""
+    session = Path(data) / f"{object_id}__{sensor}.h5"
+    with h5py.File(session, "r") as f:
+        link = f["presses"].get(pid, getlink=True)
+    return session.parent / str(link.filename)
+
+
+def copy_press_over(data: Path, source: tuple[str, str], target: tuple[str, str], index: int = 0) -> str:
+    """Copy ``source``'s press file of a press id both sessions have over ``target``'s file of that press (another
+    object's press, or another sensor's): intact bytes in the wrong place. Returns the press id."""
+    shared = sorted(set(press_ids(Path(data) / f"{source[0]}__{source[1]}.h5"))
+                    & set(press_ids(Path(data) / f"{target[0]}__{target[1]}.h5")))  # fmt: skip
+    pid = shared[index]
+    shutil.copyfile(_press_file(data, *source, pid), _press_file(data, *target, pid))
+    return pid
+
+
+def swap_press_files(data: Path, object_id: str, sensor: str, first: int = 0, second: int = 1) -> tuple[str, str]:
+    """Swap the contents of two press files of one session (their names stay)."""
+    pids = press_ids(Path(data) / f"{object_id}__{sensor}.h5")
+    a, b = _press_file(data, object_id, sensor, pids[first]), _press_file(data, object_id, sensor, pids[second])
+    _swap(a, b)
+    return pids[first], pids[second]
+
+
+def swap_journal_entries(data: Path, object_id: str, sensor: str, first: int = 0, second: int = 1) -> tuple[str, str]:
+    """Swap the contents of two journal entries of one session (their names stay)."""
+    journal = Path(data) / ".journal" / f"{object_id}__{sensor}"
+    pids = press_ids(Path(data) / f"{object_id}__{sensor}.h5")
+    _swap(journal / f"{pids[first]}.h5", journal / f"{pids[second]}.h5")
+    return pids[first], pids[second]
+
+
+def delete_press_file(data: Path, object_id: str, sensor: str, index: int = 0) -> str:
+    pid = press_ids(Path(data) / f"{object_id}__{sensor}.h5")[index]
+    _press_file(data, object_id, sensor, pid).unlink()
+    return pid
+
+
+def flip_seal_name(path: Path, bit: int = 4) -> int:
+    """Flip one bit inside the stored name ``attrs_sha256`` of a session file's root seal: the attribute area is
+    damaged so that the seal reads as absent (the review's "offset 7792 bit 4"). Returns the byte offset."""
+    raw = bytearray(Path(path).read_bytes())
+    offset = raw.find(b"attrs_sha256")
+    if offset < 0:
+        raise ValueError(f"{path} has no root seal to damage")
+    offset += 3
+    raw[offset] ^= 1 << bit
+    Path(path).write_bytes(bytes(raw))
+    return offset
+
+
+def _swap(a: Path, b: Path) -> None:
+    tmp = a.with_name(a.name + ".swap")
+    os.replace(a, tmp)
+    os.replace(b, a)
+    os.replace(tmp, b)

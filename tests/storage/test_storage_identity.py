@@ -152,12 +152,12 @@ def test_pairs_join_only_within_one_rig_and_say_why_not() -> None:
     from unitac_rig.storage.paired import build_paired_dataset
 
     sets = synthetic_matched_sets(("circle_pla",), (USKIN, PAPILLARRAY), angles_deg=(0.0, 9.0), targets_n=(4.0, 6.0))
-    same = [dataclasses.replace(s, rig="simulated: lab-a") for s in sets]
+    same = [dataclasses.replace(s, rig="simulated rig 'lab-a'") for s in sets]
     assert len(build_paired_dataset(same)) > 0
-    mixed = [dataclasses.replace(s, rig=f"hardware: lab-{'a' if s.sensor == 'uskin' else 'b'}") for s in sets]
+    mixed = [dataclasses.replace(s, rig=f"hardware rig 'lab-{'a' if s.sensor == 'uskin' else 'b'}'") for s in sets]
     with pytest.raises(DataError, match="pairs join only within one rig") as refused:
         build_paired_dataset(mixed)
-    assert "hardware: lab-a" in str(refused.value) and "hardware: lab-b" in str(refused.value)
+    assert "hardware rig 'lab-a'" in str(refused.value) and "hardware rig 'lab-b'" in str(refused.value)
 
 
 def test_temporary_files_of_killed_processes_are_removed_by_the_next_run(data: Path, tmp_path: Path) -> None:

@@ -60,11 +60,11 @@ def inspect_tables(report: dict[str, Any], data: Path) -> RenderableType:
         notes.append("* simulated rig")
     rigs = sorted({s.get("rig", "") for s in sessions} - {""})
     if len(rigs) > 1:  # pairs join only within one rig: say which session is whose
-        notes.extend(f"rig {rig}: " + ", ".join(f"{s['object']}/{s['sensor']}" for s in sessions if s.get("rig") == rig)
+        notes.extend(f"{rig}: " + ", ".join(f"{s['object']}/{s['sensor']}" for s in sessions if s.get("rig") == rig)
                      for rig in rigs)  # fmt: skip
         notes.append("pairs join only within one rig: train and export one rig's --data at a time")
     elif rigs:
-        notes.append(f"rig {rigs[0]}")
+        notes.append(f"recorded on: {rigs[0]}")
     unverified = [s for s in sessions if s.get("integrity", "verified") != "verified"]
     notes.extend(f"{s['object']}/{s['sensor']}: {s['integrity']}" for s in unverified)
     notes.extend(_resume_note(data, s) for s in sessions if _unfinished(s) and not s.get("writer"))

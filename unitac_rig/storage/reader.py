@@ -291,14 +291,15 @@ def press_summaries(path: Path) -> list[dict[str, Any]]:
 
 
 def rig_label(attrs: dict[str, Any]) -> str:
-    """Which rig recorded a session, from its root attributes: ``imported: <source>``, ``simulated: <rig name>`` or
-    ``hardware: <rig name>``; "" when it names no rig (written by a script). Pairs join only within one label."""
+    """Which rig recorded a session, from its root attributes: ``imported from <source>``, ``simulated rig '<rig
+    name>'`` or ``hardware rig '<rig name>'``; "" when it names no rig (written by a script). Pairs join only within
+    one label."""
     if attrs.get("source"):
-        return f"imported: {attrs['source']}"
+        return f"imported from {attrs['source']}"
     if not attrs.get("rig"):  # a script's session names no rig: it cannot be told apart, so it is not checked
         return ""
     kind = "simulated" if attrs.get("simulated") else "hardware"
-    return f"{kind}: {attrs['rig']}"
+    return f"{kind} rig '{attrs['rig']}'"
 
 
 def load_matched_set(path: Path) -> MatchedSet:

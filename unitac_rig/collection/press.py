@@ -191,13 +191,12 @@ def run_press(
         streams.event("stop", reason)
         streams.phase = "dwell"
         streams.hold(press.dwell_s)
-        streams.phase = "retract"
-        _retract(arm, streams, plan, press)
+        _back_off(arm, streams, plan, press)
     except TravelLimit as exc:
         status, reason = "failed", "off_axis" if isinstance(exc, OffAxisLimit) else "travel"
         streams.event("stop", f"{reason.replace('_', '-')} limit: {exc}")
         stop_arm(arm)
-        _retract_quietly(arm, streams, plan, press)
+        _back_off(arm, streams, plan, press, quiet=True)
     except (SafetyLimit, ProtectiveStop, DeviceError, KeyboardInterrupt) as exc:
         status, reason, pending = "aborted", _abort_reason(exc), exc
         detail = "interrupted by the operator" if isinstance(exc, KeyboardInterrupt) else f"{reason}: {exc}"
@@ -239,10 +238,19 @@ def json_list(values: np.ndarray) -> str:
     return "[" + ", ".join(f"{v:.4f}" for v in np.asarray(values).ravel()) + "]"
 
 
-def _retract(arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfig) -> None:
-    """Back off along the ray at ``press.retract_speed_mm_s``, still recording, until the pad is unloaded (a held,
-    filtered condition: the mean of the last ``RETRACT_HOLD_PERIODS`` readings, not one noisy sample) and 1 mm back;
-    then stop recording."""
+def _back_off(arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfig, *, quiet: bool = False) -> None:
+    """The press's own retract phase: back off along the ray at ``press.retract_speed_mm_s``, still recording, until
+    the pad is unloaded (a held, filtered condition: the mean of the last ``RETRACT_HOLD_PERIODS`` readings, not one
+    noisy sample) and 1 mm back; then stop recording. ``quiet`` (after a travel limit): a limit or stall on the way
+    back stops the arm and ends the phase instead of raising; the return to the stand-off follows. Pulling away
+    after an abort is :func:`unitac_rig.collection.transit.retract_from_object`."""
+    streams.phase = "retract"
+    if quiet:
+        try:
+            _back_off(arm, streams, plan, press)
+        except (TravelLimit, SafetyLimit, DeviceTimeout):
+            stop_arm(arm)
+        return
     speed = min(press.transit_speed_mm_s, press.retract_speed_mm_s) / 1000.0
     twist = np.concatenate([-plan.direction * speed, np.zeros(3)])
     start = np.asarray(arm.read_state().tcp_pose[:3])
@@ -288,14 +296,6 @@ def contact_travel_mm(contact_pose: np.ndarray | None, plan: PressPlan) -> float
     if contact_pose is None:
         return math.nan
     return 1000.0 * float(np.dot(np.asarray(contact_pose[:3]) - np.asarray(plan.start_pose[:3]), plan.direction))
-
-
-def _retract_quietly(arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfig) -> None:
-    streams.phase = "retract"
-    try:
-        _retract(arm, streams, plan, press)
-    except (TravelLimit, SafetyLimit, DeviceTimeout):
-        stop_arm(arm)
 
 
 def _to_record(

@@ -35,7 +35,7 @@ import numpy as np
 
 from drivers.arm import Arm
 from drivers.errors import ArmError, ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop
-from drivers.motion import check_controller, settle
+from drivers.motion import settle
 from drivers.sensor import TactileSensor
 from unitac_rig.collection.press import run_press, zero_wrist
 from unitac_rig.collection.streams import TickInfo
@@ -228,7 +228,7 @@ def _press_all(
         if plan.rotation_deg != current_rotation:
             confirmed = False  # the placement is unknown again after the object is turned
             if previous is not None:  # out to the clearance radius before anyone turns the object by hand
-                _retract_from_object(rig, previous)
+                _retract(rig, previous, best_effort=False)
             rig.mount(obj, plan.rotation_deg, sensor_name)
             if ask_operator is not None and not rig.simulated and n_rotations > 1:
                 with rig.arm.keep_alive():
@@ -528,31 +528,20 @@ def _reconnect(rig: Rig, sensor: TactileSensor) -> None:
             rig.clock.sleep(RECONNECT_POLL_S)
 
 
-def _retract(rig: Rig, plan: PressPlan, *, to_clearance: bool = True) -> None:
-    """After an abort, pull the pad off the object from where the arm is (:func:`retract_from_object`), so a stopped
-    session never leaves the pad loaded. Not when the controller stopped on its own (protective stop, program
-    stopped): the operator decides on the pendant. Best effort: a failure is logged (the arm is stopped by then) and
-    the next run starts with a checked move from wherever the arm is."""
-    try:
-        check_controller(rig.arm.read_state(), "the retract")
-        _retract_from_object(rig, plan, to_clearance=to_clearance)
-    except (ProtectiveStop, ControlScriptStopped) as exc:
-        log.info("not retracting after press %s: %s", plan.press_id, exc)
-    except KeyboardInterrupt:
-        raise  # a second interrupt: the move stopped the arm on its way out
-    except Exception:
-        log.exception("retracting from the object after press %s failed; the arm is stopped", plan.press_id)
-
-
-def _retract_from_object(rig: Rig, plan: PressPlan, *, to_clearance: bool = True) -> None:
-    """:func:`retract_from_object` with the rig file's stand-off, clearance and transit speed (raises what it
-    raises)."""
+def _retract(rig: Rig, plan: PressPlan, *, to_clearance: bool = True, best_effort: bool = True) -> None:
+    """:func:`retract_from_object` with the rig file's stand-off, clearance and transit speed; best effort (logged,
+    not raised) unless ``best_effort=False``."""
     config = rig.config
     retract_from_object(
-        rig.arm, plan, config.limits, standoff_m=config.object.standoff_mm / 1000.0,
-        clearance_m=config.object.clearance_mm / 1000.0, transit_speed_m_s=config.press.transit_speed_mm_s / 1000.0,
+        rig.arm,
+        plan,
+        config.limits,
+        standoff_m=config.object.standoff_mm / 1000.0,
+        clearance_m=config.object.clearance_mm / 1000.0,
+        transit_speed_m_s=config.press.transit_speed_mm_s / 1000.0,
         to_clearance=to_clearance,
-    )  # fmt: skip
+        best_effort=best_effort,
+    )
 
 
 def _save(

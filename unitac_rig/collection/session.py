@@ -166,8 +166,13 @@ def collect_session(
     # rewriting the session file on resume) run kept alive, or the controller stops the program under them.
     try:
         arm = rig.arm
-        check_session_plan(arm.read_state().tcp_pose, todo, config.object.clearance_mm / 1000.0, config.limits,
-                           confirmed_standoff_mm(config))  # fmt: skip
+        check_session_plan(
+            arm.read_state().tcp_pose,
+            todo,
+            config.object.clearance_mm / 1000.0,
+            config.limits,
+            confirmed_standoff_mm(config),
+        )
         with _kept_alive(arm):  # python-can's slcan alone waits 2 s after opening the port
             sensor = rig.open_sensor(sensor_name)
     except BaseException:
@@ -188,8 +193,20 @@ def collect_session(
             _say_load_left(rig, exc, outcome)
             raise
         try:
-            _press_all(rig, obj, sensor, sensor_name, todo, writer, extraction, outcome, on_press, on_tick,
-                       ask_operator, len(rotations))  # fmt: skip
+            _press_all(
+                rig,
+                obj,
+                sensor,
+                sensor_name,
+                todo,
+                writer,
+                extraction,
+                outcome,
+                on_press,
+                on_tick,
+                ask_operator,
+                len(rotations),
+            )
         except BaseException as exc:
             _say_load_left(rig, exc, outcome)
             raise
@@ -236,8 +253,9 @@ def _press_all(
             current_rotation = plan.rotation_deg
         if confirmed:  # the object stands where measured: a shorter free-air approach (and return to it)
             plan = with_standoff(plan, confirmed_standoff_mm(config))
-        record, stop = _one_press(rig, sensor, plan, writer, extraction, outcome, on_tick,
-                                  moves_limits(config, confirmed))  # fmt: skip
+        record, stop = _one_press(
+            rig, sensor, plan, writer, extraction, outcome, on_tick, moves_limits(config, confirmed)
+        )
         previous = plan
         confirmed = confirmed or (record is not None and placement_confirmed(record, config))
         if on_press is not None and record is not None:
@@ -391,10 +409,12 @@ def session_tare(
     """
     config = rig.config
     free = free if free is not None else unload_wrist(rig.arm, config.limits, zero=zero)
-    move_clear(rig.arm, first, config.object.clearance_mm / 1000.0, config.press.transit_speed_mm_s / 1000.0,
-               config.limits)  # fmt: skip
-    frames, wrenches = zero_wrist(rig.arm, sensor, 0.3, f"the first stand-off ({first.press_id})",
-                                  reference=free.free_reading)  # fmt: skip
+    move_clear(
+        rig.arm, first, config.object.clearance_mm / 1000.0, config.press.transit_speed_mm_s / 1000.0, config.limits
+    )
+    frames, wrenches = zero_wrist(
+        rig.arm, sensor, 0.3, f"the first stand-off ({first.press_id})", reference=free.free_reading
+    )
     with rig.arm.keep_alive():  # a device bias waits for the sensor to settle; the arm rests meanwhile
         record = sensor.tare(frames)
     sensor.poll()  # frames from during a device bias are not kept
@@ -431,9 +451,14 @@ def _one_press(
     for attempt in (1, 2):
         try:
             record = run_press(
-                rig.arm, sensor, plan, config.press, limits, on_tick=on_tick,
+                rig.arm,
+                sensor,
+                plan,
+                config.press,
+                limits,
+                on_tick=on_tick,
                 clearance_m=config.object.clearance_mm / 1000.0,
-            )  # fmt: skip
+            )
         except (SafetyLimit, ProtectiveStop, ArmError, KeyboardInterrupt) as exc:
             partial = exc.press_record if isinstance(exc, CarriesPressRecord) else None
             if partial is not None:
@@ -524,7 +549,7 @@ def _reconnect(rig: Rig, sensor: TactileSensor) -> None:
             if rig.clock.now_ns() >= deadline_ns:
                 raise
             log.info("sensor not back yet (%s); retrying in %.2f s", exc, RECONNECT_POLL_S)
-            raise_if_interrupted()  # a deferred Ctrl-C ends the wait (cli/signals.py)
+            raise_if_interrupted()  # a deferred Ctrl-C ends the wait (interrupts.py)
             rig.clock.sleep(RECONNECT_POLL_S)
 
 

@@ -163,8 +163,9 @@ def run_press(
     """
     strategy = press_strategy(press.strategy)  # an unregistered name fails before the arm moves
     move_clear(arm, plan, clearance_m, press.transit_speed_mm_s / 1000.0, limits)
-    frames, wrenches = zero_wrist(arm, sensor, settle_s, f"the stand-off of press {plan.press_id}",
-                                  check_s=UNLOADED_CHECK_S)  # fmt: skip
+    frames, wrenches = zero_wrist(
+        arm, sensor, settle_s, f"the stand-off of press {plan.press_id}", check_s=UNLOADED_CHECK_S
+    )
     ft_offset = wrenches.mean(axis=0)
     arm = cast(Arm, ZeroedArm(arm, ft_offset))
     noise_n = float(np.std(-(wrenches[:, :3] @ plan.direction)))
@@ -177,8 +178,17 @@ def run_press(
     baseline = np.median(stack, axis=0)
     tare = {"method": "host-median", "n_frames": len(valid), "spread": float(stack.std(axis=0).max())}
 
-    streams = PressStreams(arm, sensor, plan, press, limits, stall_timeout_s, on_tick, contact_threshold_n,
-                           offset_along_press_n=float(np.dot(ft_offset[:3], plan.direction)))  # fmt: skip
+    streams = PressStreams(
+        arm,
+        sensor,
+        plan,
+        press,
+        limits,
+        stall_timeout_s,
+        on_tick,
+        contact_threshold_n,
+        offset_along_press_n=float(np.dot(ft_offset[:3], plan.direction)),
+    )
     streams.event("start", f"strategy={press.strategy} speed={press.speed_mm_s} mm/s")
     streams.event("contact_threshold", f"{contact_threshold_n:.2f} N (press-force noise {noise_n:.3f} N rms)")
     streams.event("ft_zero", json_list(ft_offset))

@@ -264,8 +264,11 @@ def check_session_plan(
         named.append(("press travel end", press_travel_end(plan, limits)))
         named.append(("retract waypoint", retract_waypoint(plan, clearance_m)))
         for what, waypoint in named:
-            check_waypoint(waypoint, limits, f"session plan (press {index + 1} of {len(plans)}): the {what} of press "
-                                             f"{plan.press_id}")  # fmt: skip
+            check_waypoint(
+                waypoint,
+                limits,
+                f"session plan (press {index + 1} of {len(plans)}): the {what} of press {plan.press_id}",
+            )
             checked += 1
         pose = plan.start_pose
     return checked

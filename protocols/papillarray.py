@@ -38,7 +38,7 @@ PTS 2.1 spec and PTS Python/ROS manuals, and the body layout of langxin11/contac
 (third-party, said to match the SDK output), as summarised in the project's hardware facts (section 2).
 Pure codec: no I/O, threads or clocks.
 
-Why one module of ~670 lines: it is one binary format. The encoder (for the simulated hub) and the decoder (for the
+Why one module: it is one binary format. The encoder (for the simulated hub) and the decoder (for the
 driver) mirror each other block by block and are tested against each other (round trips, fuzzing), and the stream
 parser reuses the decoder's cached body layout (``_Layout``) to skip re-walking same-shaped packets; split apart,
 each half would have to expose the other's internals.

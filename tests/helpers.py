@@ -1,8 +1,14 @@
-"""Helpers every test folder may use (import them as ``tests.helpers``)."""
+"""Helpers every test folder may use (import them as ``tests.helpers``).
+
+A test runs the CLI one of two ways: :func:`cli` in-process (fast; the output through pytest's ``capsys``), or the
+installed console script in a child process, what a user types (:func:`run_console`, or ``[console_script(), ...]``
+with ``subprocess.Popen`` for a test that signals or kills it)."""
 
 from __future__ import annotations
 
+import os
 import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -27,3 +33,14 @@ def console_script() -> str:
     if found is None:
         pytest.fail("the unitac-rig console script is not installed (pip install -e .)")
     return found
+
+
+def run_console(
+    *args: str, cwd: Path | None = None, env: dict[str, str] | None = None, timeout: float = 600
+) -> subprocess.CompletedProcess[str]:
+    """``unitac-rig ARGS`` through the console script, stdout and stderr captured (pipes, not a terminal, as in a
+    log or CI), 80 columns and no colour so the text is stable; ``env`` adds to the environment."""
+    full = {**os.environ, "COLUMNS": "80", "NO_COLOR": "1", **(env or {})}
+    return subprocess.run(
+        [console_script(), *args], capture_output=True, text=True, timeout=timeout, env=full, cwd=cwd, check=False
+    )

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.helpers import cli
+from tests.helpers import cli, console_script
 from unitac_rig.storage.reader import read_presses
 
 rr = pytest.importorskip("rerun")
@@ -86,11 +86,9 @@ def test_view_stream_simulated_logs_live_frames(tmp_path: Path) -> None:
 
 def test_view_is_in_the_help_at_80_columns() -> None:
     import subprocess
-    import sys
 
     def help_of(*args: str) -> str:
-        done = subprocess.run([sys.executable, "-m", "unitac_rig", *args, "--help"], capture_output=True, text=True,
-                              timeout=120)  # fmt: skip
+        done = subprocess.run([console_script(), *args, "--help"], capture_output=True, text=True, timeout=120)
         assert done.returncode == 0, done.stderr
         return done.stdout
 

@@ -6,7 +6,6 @@ The interruption messages (what was kept, the command that goes on) are in test_
 
 from __future__ import annotations
 
-import os
 import subprocess
 from pathlib import Path
 from typing import Any
@@ -14,14 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tests.helpers import cli, console_script
-
-
-def _run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "COLUMNS": "80", "NO_COLOR": "1"}
-    return subprocess.run(
-        [console_script(), *args], capture_output=True, text=True, timeout=300, env=env, cwd=cwd, check=False
-    )
+from tests.helpers import cli, run_console
 
 
 def _one_error_line(result: subprocess.CompletedProcess[str]) -> str:
@@ -33,7 +25,7 @@ def _one_error_line(result: subprocess.CompletedProcess[str]) -> str:
 
 
 def test_no_command_prints_the_help_as_help_and_exits_2() -> None:
-    result = _run()
+    result = run_console()
     assert result.returncode == 2
     assert result.stdout.startswith("Usage: unitac-rig"), result.stdout
     assert "Collect data:" in result.stdout and "\n  collect" in result.stdout  # laid out, not squashed in one line
@@ -41,14 +33,14 @@ def test_no_command_prints_the_help_as_help_and_exits_2() -> None:
 
 
 def test_a_command_that_works_exits_0() -> None:
-    result = _run("objects")
+    result = run_console("objects")
     assert result.returncode == 0, result.stderr
     assert "hex_tpu" in result.stdout
 
 
 def test_a_runtime_failure_exits_1(tmp_path: Path) -> None:
     (tmp_path / "not-an-export").mkdir()
-    result = _run("verify", str(tmp_path / "not-an-export"))
+    result = run_console("verify", str(tmp_path / "not-an-export"))
     assert result.returncode == 1
     assert "manifest.json does not exist" in _one_error_line(result)
 
@@ -86,25 +78,25 @@ def test_path_and_value_errors_exit_2_in_one_line_and_write_nothing(
     places: Path, args: list[str], expected: str
 ) -> None:
     before = sorted(p.name for p in places.rglob("*"))
-    result = _run(*args, cwd=places)
+    result = run_console(*args, cwd=places)
     assert result.returncode == 2, result.stdout + result.stderr
     assert expected in _one_error_line(result)
     assert sorted(p.name for p in places.rglob("*")) == before  # nothing collected, exported or probed left behind
 
 
 def test_debug_shows_the_traceback_with_the_same_exit_code(places: Path) -> None:
-    plain = _run("export-model", "runs/nope", cwd=places)
-    debug = _run("export-model", "runs/nope", "--debug", cwd=places)
+    plain = run_console("export-model", "runs/nope", cwd=places)
+    debug = run_console("export-model", "runs/nope", "--debug", cwd=places)
     assert plain.returncode == debug.returncode == 2
     assert "Traceback" in debug.stderr and "Traceback" not in plain.stderr
-    inspect = _run("--debug", "inspect", "nodir", cwd=places)
+    inspect = run_console("--debug", "inspect", "nodir", cwd=places)
     assert inspect.returncode == 2 and "Traceback" in inspect.stderr
 
 
 def test_a_typo_in_a_rig_file_is_a_usage_error_that_names_the_key_meant(tmp_path: Path) -> None:
     rig = tmp_path / "labb.toml"
     rig.write_text("[press]\nthreshhold_n = 3.0\n")
-    result = _run("collect", "--object", "hex_tpu", "--rig", str(rig), "--data", str(tmp_path / "data"))
+    result = run_console("collect", "--object", "hex_tpu", "--rig", str(rig), "--data", str(tmp_path / "data"))
     assert result.returncode == 2
     line = _one_error_line(result)
     assert "press.threshhold_n: unknown key (did you mean threshold_n?)" in line
@@ -114,8 +106,20 @@ def test_a_typo_in_a_rig_file_is_a_usage_error_that_names_the_key_meant(tmp_path
 def test_a_rig_file_without_an_arm_says_so_instead_of_no_rig_file(tmp_path: Path) -> None:
     rig = tmp_path / "labb.toml"
     rig.write_text('name = "labb"\n')
-    result = _run("collect", "--object", "hex_tpu", "--rig", str(rig), "--data", str(tmp_path / "data"),
-                  "--angles", "3", "--max-presses", "1", "--no-live")  # fmt: skip
+    result = run_console(
+        "collect",
+        "--object",
+        "hex_tpu",
+        "--rig",
+        str(rig),
+        "--data",
+        str(tmp_path / "data"),
+        "--angles",
+        "3",
+        "--max-presses",
+        "1",
+        "--no-live",
+    )
     assert result.returncode == 0, result.stderr
     text = " ".join(result.stdout.split())
     assert f"SIMULATED RIG (rig file {rig} has no [arm])" in text

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from drivers.frames import TactileFrame
-from tests.helpers import cli, console_script
+from tests.helpers import cli, console_script, run_console
 from tests.learning.learning_helpers import small_sets, write_sessions
 from tests.twin.twin_helpers import wait_until
 from unitac_rig.cli.learn import kept_run_line
@@ -30,14 +30,6 @@ from unitac_rig.learning.data import build_paired_dataset
 from unitac_rig.learning.live import LiveOutput, stream_frames
 from unitac_rig.learning.run import load_checkpoint
 from unitac_rig.learning.train import TrainConfig, train
-
-
-def _run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "COLUMNS": "80", "NO_COLOR": "1"}
-    return subprocess.run(
-        [console_script(), *args], capture_output=True, text=True, timeout=300, env=env, cwd=cwd, check=False
-    )
-
 
 # ---- train: the finished epoch is kept, and the line says so -----------------------------------------------------
 
@@ -61,8 +53,13 @@ def test_ctrl_c_in_train_keeps_the_epoch_it_finished_and_names_the_resume_comman
 
     try:
         with pytest.raises(KeyboardInterrupt):
-            train(build_paired_dataset(small_sets()), out, TrainConfig(epochs=500, checkpoint_every=50),
-                  device="cpu", progress=ctrl_c_at_epoch_7)  # fmt: skip
+            train(
+                build_paired_dataset(small_sets()),
+                out,
+                TrainConfig(epochs=500, checkpoint_every=50),
+                device="cpu",
+                progress=ctrl_c_at_epoch_7,
+            )
     finally:
         forget_interrupts()
     assert load_checkpoint(out)["epoch"] == 7  # nothing trained is lost
@@ -77,10 +74,23 @@ def test_ctrl_c_in_the_train_command_exits_130_with_the_kept_epoch(data_dir: Pat
     out = tmp_path / "run"
     env = {**os.environ, "COLUMNS": "80", "NO_COLOR": "1", "PYTHONUNBUFFERED": "1"}
     train_cmd = subprocess.Popen(
-        [console_script(), "train", "--data", str(data_dir), "--out", str(out), "--epochs", "100000",
-         "--no-baselines", "--no-report"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-    )  # fmt: skip
+        [
+            console_script(),
+            "train",
+            "--data",
+            str(data_dir),
+            "--out",
+            str(out),
+            "--epochs",
+            "100000",
+            "--no-baselines",
+            "--no-report",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     lines: list[str] = []
     reader = threading.Thread(target=lambda: lines.extend(iter(train_cmd.stdout.readline, "")))  # type: ignore[union-attr]
     reader.start()
@@ -134,16 +144,31 @@ def test_ctrl_c_during_the_report_leaves_metrics_and_report_as_they_were(
 
 def test_inspect_names_an_unfinished_session_and_its_command_resumes_it(tmp_path: Path) -> None:
     data = tmp_path / "data"
-    assert _run("collect", "--object", "hex_tpu", "--sensor", "uskin", "--angles", "3", "--max-presses", "1",
-                "--data", str(data), "--no-live").returncode == 0  # fmt: skip
-    shown = " ".join(_run("inspect", str(data)).stdout.split())
+    assert (
+        run_console(
+            "collect",
+            "--object",
+            "hex_tpu",
+            "--sensor",
+            "uskin",
+            "--angles",
+            "3",
+            "--max-presses",
+            "1",
+            "--data",
+            str(data),
+            "--no-live",
+        ).returncode
+        == 0
+    )
+    shown = " ".join(run_console("inspect", str(data)).stdout.split())
     command = f"unitac-rig collect --object hex_tpu --sensor uskin --data {data} --angles 3"
     assert f"hex_tpu/uskin: incomplete (1 of 3 presses finished); resume: {command}" in shown
     # the campaign's first line counts the press done before it
-    campaign = _run("campaign", "--objects", "hex_tpu", "--angles", "3", "--data", str(data), "--no-live")
+    campaign = run_console("campaign", "--objects", "hex_tpu", "--angles", "3", "--data", str(data), "--no-live")
     assert campaign.returncode == 0, campaign.stderr
     assert "campaign: session 1/2 (hex_tpu / uskin), 1/6 presses done" in " ".join(campaign.stdout.split())
-    assert "incomplete" not in _run("inspect", str(data)).stdout
+    assert "incomplete" not in run_console("inspect", str(data)).stdout
 
 
 # ---- extract: settings that lose most matches change nothing without --force --------------------------------------
@@ -161,15 +186,15 @@ def test_extract_refuses_settings_that_drop_most_matches_unless_forced(tmp_path:
     data = tmp_path / "data"
     write_sessions(data, small_sets(objects=("hex_tpu",)))
     before = _digest(data)
-    refused = _run("extract", str(data), "--tolerance", "1e-6")
+    refused = run_console("extract", str(data), "--tolerance", "1e-6")
     assert refused.returncode == 2, refused.stdout + refused.stderr
     assert "would keep 0 of the 110 matched targets (drop 110, 100 %); nothing was changed" in refused.stderr
     assert "--force" in refused.stderr
     assert _digest(data) == before
-    forced = _run("extract", str(data), "--tolerance", "1e-6", "--force")
+    forced = run_console("extract", str(data), "--tolerance", "1e-6", "--force")
     assert forced.returncode == 0, forced.stderr
     assert "0 targets matched (was 55)" in forced.stdout
-    assert '"targets_matched": 0' in _run("inspect", str(data), "--json").stdout  # extract and inspect agree
+    assert '"targets_matched": 0' in run_console("inspect", str(data), "--json").stdout  # extract and inspect agree
 
 
 # ---- stream: the rate achieved, and the warm-up apart ----------------------------------------------------------
@@ -207,8 +232,9 @@ def test_stream_marks_the_warm_up_backlog_and_reports_the_steady_state_apart() -
         return now[0]
 
     lines: list[bytes] = []
-    stats = stream_frames(_Sensor(lambda: now[0]), _Model(), lines.append, tare_frames=50, max_frames=130,
-                          clock_ns=clock)  # type: ignore[arg-type]  # fmt: skip
+    stats = stream_frames(
+        _Sensor(lambda: now[0]), _Model(), lines.append, tare_frames=50, max_frames=130, clock_ns=clock
+    )  # type: ignore[arg-type]
     import json
 
     items = [json.loads(line) for line in lines]
@@ -224,8 +250,15 @@ def test_stream_marks_the_warm_up_backlog_and_reports_the_steady_state_apart() -
 def test_the_stream_summary_warns_when_the_rate_falls_short_of_the_one_asked() -> None:
     def summary(rate: float) -> dict[str, Any]:
         latency = {"median": 0.3, "p99": 0.9, "max": 1.2}
-        return {"frames_out": 1000, "seconds": 2.0, "rate_hz": rate, "asked_rate_hz": 1000, "seq_gaps": 0,
-                "latency_ms": latency, "warmup": {"frames": 40, "seconds": 0.5, "latency_ms": latency}}  # fmt: skip
+        return {
+            "frames_out": 1000,
+            "seconds": 2.0,
+            "rate_hz": rate,
+            "asked_rate_hz": 1000,
+            "seq_gaps": 0,
+            "latency_ms": latency,
+            "warmup": {"frames": 40, "seconds": 0.5, "latency_ms": latency},
+        }
 
     slow = "\n".join(summary_lines(summary(480.0)))
     assert "at 480 Hz (asked 1000 Hz)" in slow

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.helpers import console_script
+from tests.helpers import console_script, run_console
 from unitac_rig.storage.reader import snapshot_session
 
 ANGLES = "3"
@@ -29,15 +29,8 @@ def _env(**extra: str) -> dict[str, str]:
     return {**os.environ, "COLUMNS": "80", "NO_COLOR": "1", **extra}
 
 
-def run(*args: str, cwd: Path | None = None, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
-    """The console script with stdout a pipe (not a terminal), as in a log or CI."""
-    return subprocess.run(
-        [console_script(), *args], capture_output=True, text=True, timeout=600, env=env or _env(), cwd=cwd, check=False
-    )
-
-
 def ok(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    result = run(*args, cwd=cwd)
+    result = run_console(*args, cwd=cwd)
     assert result.returncode == 0, result.stdout + result.stderr
     return result
 
@@ -49,8 +42,19 @@ def data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     for obj in ("hex_tpu", "irregular_pla"):
         for sensor in ("uskin", "papillarray"):
             ok("collect", "--object", obj, "--sensor", sensor, "--angles", ANGLES, "--data", str(root))
-    ok("collect", "--object", "circle_pla", "--sensor", "uskin", "--angles", ANGLES, "--max-presses", "1",
-       "--data", str(root))  # fmt: skip
+    ok(
+        "collect",
+        "--object",
+        "circle_pla",
+        "--sensor",
+        "uskin",
+        "--angles",
+        ANGLES,
+        "--max-presses",
+        "1",
+        "--data",
+        str(root),
+    )
     return root
 
 
@@ -151,7 +155,7 @@ def test_12_geometry_refuses_a_run_without_an_unseen_object_before_training(
         snapshot_session(data / name, seen_only / name)  # the session as one self-contained file
     run_dir = tmp_path / "run"
     ok("train", "--data", str(seen_only), "--out", str(run_dir), "--epochs", "1", "--no-report")
-    result = run("geometry", str(run_dir))
+    result = run_console("geometry", str(run_dir))
     assert result.returncode == 1
     assert "no unseen object" in result.stderr
     assert "training the profile MLPs" not in result.stdout
@@ -209,10 +213,27 @@ def test_7_ctrl_c_says_what_was_kept_and_that_the_same_command_resumes(tmp_path:
 # ---- 9-13: conventions ---------------------------------------------------------------------------------------------
 
 COMMANDS = [
-    [], ["collect"], ["campaign"], ["extract"], ["objects"], ["inspect"], ["export"], ["verify"], ["train"],
-    ["report"], ["translate"], ["geometry"], ["export-model"], ["import-unitac-nv"], ["twin"], ["probe"],
-    ["probe", "uskin"], ["probe", "papillarray"], ["probe", "ur5e"], ["bench"],
-]  # fmt: skip
+    [],
+    ["collect"],
+    ["campaign"],
+    ["extract"],
+    ["objects"],
+    ["inspect"],
+    ["export"],
+    ["verify"],
+    ["train"],
+    ["report"],
+    ["translate"],
+    ["geometry"],
+    ["export-model"],
+    ["import-unitac-nv"],
+    ["twin"],
+    ["probe"],
+    ["probe", "uskin"],
+    ["probe", "papillarray"],
+    ["probe", "ur5e"],
+    ["bench"],
+]
 
 
 @pytest.mark.parametrize("command", COMMANDS, ids=lambda c: " ".join(c) or "root")
@@ -239,13 +260,13 @@ def test_9_train_help_is_grouped() -> None:
 def test_10_version_and_debug_after_the_command() -> None:
     version = ok("--version")
     assert re.fullmatch(r"unitac-rig \d+\.\d+\.\d+\S*\n", version.stdout)
-    after = run("collect", "--object", "no_such_object", "--debug")
+    after = run_console("collect", "--object", "no_such_object", "--debug")
     assert after.returncode != 0
     assert "Traceback" in after.stderr and "No such option" not in after.stderr
 
 
 def test_11_an_option_error_names_the_option_typed_and_exits_2() -> None:
-    result = run("collect", "--object", "hex_tpu", "--angles", "0", "--data", "/nonexistent/never")
+    result = run_console("collect", "--object", "hex_tpu", "--angles", "0", "--data", "/nonexistent/never")
     assert result.returncode == 2
     assert "--angles" in result.stderr and "got 0" in result.stderr and "press.angle_count" not in result.stderr
 
@@ -253,7 +274,7 @@ def test_11_an_option_error_names_the_option_typed_and_exits_2() -> None:
 @pytest.mark.slow
 def test_11_export_into_a_non_empty_folder_is_a_usage_error_like_export_model(tmp_path: Path, data: Path) -> None:
     (tmp_path / "kept.txt").write_text("mine")
-    result = run("export", str(data), "--out", str(tmp_path))
+    result = run_console("export", str(data), "--out", str(tmp_path))
     assert result.returncode == 2, result.stderr
     assert "--out" in result.stderr
 
@@ -270,7 +291,7 @@ def test_11_bad_train_arguments_are_refused_before_torch_is_imported(
         (["--data", str(tmp_path), "--out", str(tmp_path / "r"), "--preprocessing", "zscore"], "--preprocessing"),
         (["--data", str(tmp_path), "--out", str(existing)], "already holds a run"),
     ):
-        result = run("train", *args, env=torch_unimportable)
+        result = run_console("train", *args, env=torch_unimportable)
         assert result.returncode == 2, result.stderr
         assert expected in result.stderr and "torch imported" not in result.stderr, result.stderr
 
@@ -278,7 +299,7 @@ def test_11_bad_train_arguments_are_refused_before_torch_is_imported(
 def test_13_a_rig_file_type_error_names_the_field(tmp_path: Path) -> None:
     rig = tmp_path / "rig.toml"
     rig.write_text('[sensors.papillarray]\ntype = "papillarray"\nport = 5\n')
-    result = run("objects", "--rig", str(rig))
+    result = run_console("objects", "--rig", str(rig))
     assert result.returncode != 0
     assert "sensors.papillarray.port:" in result.stderr
     assert "papillarray.papillarray" not in result.stderr

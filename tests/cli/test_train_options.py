@@ -11,8 +11,8 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
+from tests.helpers import cli
 from unitac_rig.cli import learn_train
-from unitac_rig.cli.app import main
 from unitac_rig.cli.help import use_plain_help
 from unitac_rig.learning import config as train_config
 from unitac_rig.learning.train import TrainConfig
@@ -82,10 +82,7 @@ def started(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
 
 def _train(tmp_path: Path, *args: str, out: str = "run") -> int:
     (tmp_path / "data").mkdir(exist_ok=True)
-    with pytest.raises(SystemExit) as exited:
-        main(["train", "--data", str(tmp_path / "data"), "--out", str(tmp_path / out), *args])
-        raise SystemExit(0)
-    return int(exited.value.code or 0)
+    return cli(["train", "--data", str(tmp_path / "data"), "--out", str(tmp_path / out), *args])
 
 
 @pytest.mark.parametrize(

@@ -29,14 +29,28 @@ def test_every_train_option_reaches_the_request() -> None:
 
 def test_the_request_builds_the_config_the_options_ask_for(tmp_path: Path) -> None:
     params = {name: None for name in config_options()} | {
-        "data": [tmp_path], "out": tmp_path / "run", "resume": False, "config_file": None, "partial": False,
-        "from_run": None, "new_sensor": None, "epochs": 7, "seed": 3, "n_seeds": 2, "device": "cpu", "threads": 0,
-        "report": False, "latent_dim": 8, "encoder_hidden": "32,16", "nmae_normaliser": "sensor_range",
-    }  # fmt: skip
+        "data": [tmp_path],
+        "out": tmp_path / "run",
+        "resume": False,
+        "config_file": None,
+        "partial": False,
+        "from_run": None,
+        "new_sensor": None,
+        "epochs": 7,
+        "seed": 3,
+        "n_seeds": 2,
+        "device": "cpu",
+        "threads": 0,
+        "report": False,
+        "latent_dim": 8,
+        "encoder_hidden": "32,16",
+        "nmae_normaliser": "sensor_range",
+    }
     config = TrainRequest.from_params(params).train_config()
     assert (config.epochs, config.seeds, config.nmae_normaliser) == (7, (3, 4), "sensor_range")
     assert (config.shape.latent_dim, config.shape.encoder_hidden) == (8, (32, 16))
-    resumed = TrainRequest.from_params(params | {"resume": True, "seed": None, "n_seeds": None, "latent_dim": None,
-                                                 "encoder_hidden": None})  # fmt: skip
+    resumed = TrainRequest.from_params(
+        params | {"resume": True, "seed": None, "n_seeds": None, "latent_dim": None, "encoder_hidden": None}
+    )
     with pytest.raises(UsageError, match="drop --nmae-normaliser"):
         resumed.train_config()

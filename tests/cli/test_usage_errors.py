@@ -3,18 +3,11 @@ traceback (and a traceback with --debug)."""
 
 from __future__ import annotations
 
-import os
-import subprocess
 import sys
 
 import pytest
 
-from tests.helpers import console_script
-
-
-def _run(*args: str) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "COLUMNS": "80", "NO_COLOR": "1"}
-    return subprocess.run([console_script(), *args], capture_output=True, text=True, timeout=120, env=env, check=False)
+from tests.helpers import run_console
 
 
 @pytest.mark.parametrize(
@@ -27,7 +20,7 @@ def _run(*args: str) -> subprocess.CompletedProcess[str]:
     ],
 )
 def test_usage_error_is_one_line_and_exit_2(args: list[str], expected: str) -> None:
-    result = _run(*args)
+    result = run_console(*args)
     assert result.returncode == 2, result.stderr
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1, result.stderr
@@ -38,13 +31,13 @@ def test_usage_error_is_one_line_and_exit_2(args: list[str], expected: str) -> N
 
 
 def test_debug_shows_the_traceback_of_a_usage_error() -> None:
-    result = _run("--debug", "collect", "--objct", "hex_tpu")
+    result = run_console("--debug", "collect", "--objct", "hex_tpu")
     assert result.returncode != 0
     assert "Traceback" in result.stderr
 
 
 def test_help_still_exits_0() -> None:
-    result = _run("--help")
+    result = run_console("--help")
     assert result.returncode == 0
     assert "collect" in result.stdout
 
@@ -60,8 +53,15 @@ def test_a_logged_exception_is_one_line_without_debug_and_a_traceback_with_it() 
         raise ValueError("the wrist felt 14.2 N during a transit move")
     except ValueError:
         exc_info = sys.exc_info()
-    record = logging.LogRecord("unitac_rig.collection.session", logging.ERROR, __file__, 1,
-                               "retracting after press %s failed", ("rot000_ang-45",), exc_info)  # fmt: skip
+    record = logging.LogRecord(
+        "unitac_rig.collection.session",
+        logging.ERROR,
+        __file__,
+        1,
+        "retracting after press %s failed",
+        ("rot000_ang-45",),
+        exc_info,
+    )
     line = _LogLine().format(record)
     assert line == (
         "ERROR unitac_rig.collection.session: retracting after press rot000_ang-45 failed "

@@ -119,8 +119,9 @@ class TinyDriver(PumpedSensor):
 
     def tare(self, frames: list[TactileFrame]) -> TareRecord:
         values = np.stack([f.values for f in frames])
-        return TareRecord(values.mean(axis=0), len(frames), self.clock.now_ns(), "host-mean",
-                          float(values.std(axis=0).max()))  # fmt: skip
+        return TareRecord(
+            values.mean(axis=0), len(frames), self.clock.now_ns(), "host-mean", float(values.std(axis=0).max())
+        )
 
 
 def open_tiny(config: SensorConfigBase, clock: Clock) -> TactileSensor:
@@ -235,8 +236,23 @@ def data(registered: SensorSpec, tmp_path_factory: pytest.TempPathFactory) -> Pa
     directory = tmp_path_factory.mktemp("tiny") / "data"
     for object_id, angles in (("circle_pla", "5"), ("irregular_pla", "3")):
         for sensor in ("tinyskin", "papillarray"):
-            assert cli(["collect", "--object", object_id, "--sensor", sensor, "--angles", angles,
-                        "--data", str(directory), "--no-live"]) == 0  # fmt: skip
+            assert (
+                cli(
+                    [
+                        "collect",
+                        "--object",
+                        object_id,
+                        "--sensor",
+                        sensor,
+                        "--angles",
+                        angles,
+                        "--data",
+                        str(directory),
+                        "--no-live",
+                    ]
+                )
+                == 0
+            )
     return directory
 
 
@@ -255,8 +271,20 @@ def test_the_fast_twin_collects_it_with_its_pad_model(data: Path) -> None:
 
 
 def test_train_translate_and_geometry_take_it_like_any_sensor(data: Path, run: Path) -> None:
-    assert cli(["translate", str(run), str(session_path(data, "circle_pla", "tinyskin")),
-                "--from", "tinyskin", "--to", "papillarray"]) == 0  # fmt: skip
+    assert (
+        cli(
+            [
+                "translate",
+                str(run),
+                str(session_path(data, "circle_pla", "tinyskin")),
+                "--from",
+                "tinyskin",
+                "--to",
+                "papillarray",
+            ]
+        )
+        == 0
+    )
     translated = np.load(run / "translations" / "circle_pla__tinyskin_to_papillarray.npz")
     assert translated["frames"].shape[1:] == (9, 3) and np.isfinite(translated["frames"]).all()
 
@@ -274,8 +302,25 @@ def test_the_real_time_twin_serves_it_to_the_hardware_code_path(registered: Sens
     with RigTwin("circle_pla", sensor="tinyskin", host=first_free_loopback(140, 149), seed=3) as twin:
         rig_file = tmp_path / "twin.toml"
         rig_file.write_text(twin.rig_file())
-        assert cli(["collect", "--rig", str(rig_file), "--object", "circle_pla", "--sensor", "tinyskin",
-                    "--angles", "2", "--data", str(tmp_path / "data"), "--no-live"]) == 0  # fmt: skip
+        assert (
+            cli(
+                [
+                    "collect",
+                    "--rig",
+                    str(rig_file),
+                    "--object",
+                    "circle_pla",
+                    "--sensor",
+                    "tinyskin",
+                    "--angles",
+                    "2",
+                    "--data",
+                    str(tmp_path / "data"),
+                    "--no-live",
+                ]
+            )
+            == 0
+        )
     matched = load_matched_set(session_path(tmp_path / "data", "circle_pla", "tinyskin"))
     assert matched.values.shape[1:] == TINY.frame_shape and len(matched) > 0
     assert 2.0 < float(matched.values[..., 2].sum(axis=1).max()) < 12.0  # the twin's scene, felt through TCP

@@ -6,7 +6,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -15,7 +14,7 @@ import numpy as np
 import pytest
 
 from drivers.errors import ProtectiveStop
-from unitac_rig.cli import main
+from tests.helpers import cli, console_script
 from unitac_rig.collection.session import collect_session
 from unitac_rig.collection.streams import TickInfo
 from unitac_rig.rig.config import RigConfig, parse_rig_config
@@ -28,14 +27,15 @@ from unitac_rig.storage.summary import inspect_dataset
 FEW_ANGLES = {"press": {"angle_count": 3}}
 
 
-def run_cli(*args: str) -> None:
-    main([*args, "--no-live"] if args[0] in ("collect", "campaign") else list(args))
+def run_cli(*args: str) -> int:
+    """:func:`tests.helpers.cli` without the live view (its output is what the tests read)."""
+    return cli([*args, "--no-live"] if args[0] in ("collect", "campaign") else list(args))
 
 
 def test_collect_twice_swaps_sensor_and_pairs_join(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    run_cli("collect", "--object", "hex_tpu", "--data", str(tmp_path), "--angles", "3")
+    assert not run_cli("collect", "--object", "hex_tpu", "--data", str(tmp_path), "--angles", "3")
     assert "mounting uskin" in capsys.readouterr().out
-    run_cli("collect", "--object", "hex_tpu", "--data", str(tmp_path), "--angles", "3")
+    assert not run_cli("collect", "--object", "hex_tpu", "--data", str(tmp_path), "--angles", "3")
     assert "mounting papillarray" in capsys.readouterr().out
     report = inspect_dataset(tmp_path)
     by_sensor = {s["sensor"]: s for s in report["sessions"]}
@@ -52,20 +52,31 @@ def test_collect_twice_swaps_sensor_and_pairs_join(tmp_path: Path, capsys: pytes
     assert 500 < np.abs(matched["uskin"].values[..., 2]).max() < 8000
     assert 1.0 < matched["papillarray"].values[..., 2].max() < 8.0
     # a third run has nothing left to do on the simulated rig
-    with pytest.raises(SystemExit) as exit_info:
-        run_cli("collect", "--object", "hex_tpu", "--data", str(tmp_path), "--angles", "3")
-    assert exit_info.value.code == 2
+    assert run_cli("collect", "--object", "hex_tpu", "--data", str(tmp_path), "--angles", "3") == 2
     assert "already has a complete session" in capsys.readouterr().err
 
 
 def test_inspect_json_has_the_documented_keys(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    run_cli("collect", "--object", "circle_pla", "--sensor", "papillarray", "--data", str(tmp_path), "--angles", "2")
+    assert not run_cli(
+        "collect", "--object", "circle_pla", "--sensor", "papillarray", "--data", str(tmp_path), "--angles", "2"
+    )
     capsys.readouterr()
-    run_cli("inspect", str(tmp_path), "--json")
+    assert not run_cli("inspect", str(tmp_path), "--json")
     doc = json.loads(capsys.readouterr().out)
     (session,) = doc["sessions"]
-    for key in ("object", "sensor", "simulated", "presses_planned", "presses_complete", "presses_failed",
-                "targets_matched", "targets_missed", "match_error_n", "peak_force_n", "duration_s"):  # fmt: skip
+    for key in (
+        "object",
+        "sensor",
+        "simulated",
+        "presses_planned",
+        "presses_complete",
+        "presses_failed",
+        "targets_matched",
+        "targets_missed",
+        "match_error_n",
+        "peak_force_n",
+        "duration_s",
+    ):
         assert key in session
     assert set(session["match_error_n"]) == {"median", "p95", "max"}
     assert set(session["peak_force_n"]) == {"median", "max"}
@@ -111,8 +122,19 @@ def test_protective_stop_mid_press_stops_keeps_data_and_resumes(tmp_path: Path) 
 
 def test_kill_at_a_random_moment_then_resume_loses_nothing(tmp_path: Path) -> None:
     rng = np.random.default_rng(7)
-    cmd = [sys.executable, "-m", "unitac_rig", "collect", "--object", "hex_pla", "--sensor", "uskin",
-           "--data", str(tmp_path), "--angles", "6", "--no-live"]  # fmt: skip
+    cmd = [
+        console_script(),
+        "collect",
+        "--object",
+        "hex_pla",
+        "--sensor",
+        "uskin",
+        "--data",
+        str(tmp_path),
+        "--angles",
+        "6",
+        "--no-live",
+    ]
     journal = tmp_path / ".journal" / "hex_pla__uskin"
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:

@@ -180,8 +180,13 @@ def test_the_fit_shifts_the_reading_back_by_the_wrist_lag():
 
 
 def test_stored_settings_without_a_method_re_extract_with_the_fit_and_the_old_method_stays_selectable():
-    old_session = {"targets_n": [4.0, 5.0], "tolerance_n": 0.5, "smoothing_samples": 15, "max_frame_gap_s": 0.05,
-                   "tactile_latency_s": 0.0}  # fmt: skip
+    old_session = {
+        "targets_n": [4.0, 5.0],
+        "tolerance_n": 0.5,
+        "smoothing_samples": 15,
+        "max_frame_gap_s": 0.05,
+        "tactile_latency_s": 0.0,
+    }
     assert ExtractionSettings.from_dict(old_session).method == "fit"
     chosen = ExtractionSettings(method=MOVING_AVERAGE, fit_knot_s=0.3)
     assert ExtractionSettings.from_dict(chosen.to_dict()) == chosen

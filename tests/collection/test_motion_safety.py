@@ -117,8 +117,9 @@ def test_the_retract_goes_back_along_the_pad_and_out_never_to_the_unreached_stan
         short = plan.start_pose.copy()
         short[:3] -= plan.direction * 0.020
         rig.sim_arm.move_linear(short, 0.05, 0.5)
-        moved = retract_from_object(rig.arm, plan, config.limits, standoff_m=0.008, clearance_m=0.09,
-                                    transit_speed_m_s=0.05)  # fmt: skip
+        moved = retract_from_object(
+            rig.arm, plan, config.limits, standoff_m=0.008, clearance_m=0.09, transit_speed_m_s=0.05
+        )
         end = rig.sim_arm.true_tcp_pose()
     center = np.asarray(plan.center_xy_m)
     # not loaded and already outside the stand-off radius: no move along the pad; one move out to the clearance

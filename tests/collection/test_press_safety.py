@@ -198,8 +198,14 @@ def test_a_waypoint_outside_the_workspace_is_refused_before_anything_moves() -> 
     with SimRig(config, seed=0) as rig:
         low = np.concatenate([[CENTER[0], CENTER[1] - 0.05, 0.185], plan.start_pose[3:]])  # off the press plane
         rig.sim_arm.move_linear(low, 0.05, 0.5)
-        far = PressPlan(0.0, 0.0, pose_from(np.array([0.5, 0.7, 0.2]), press_rotation(np.array([0, 1.0, 0]))),
-                        np.array([0.0, 1.0, 0.0]), 0.008, (0.5, 0.75))  # fmt: skip
+        far = PressPlan(
+            0.0,
+            0.0,
+            pose_from(np.array([0.5, 0.7, 0.2]), press_rotation(np.array([0, 1.0, 0]))),
+            np.array([0.0, 1.0, 0.0]),
+            0.008,
+            (0.5, 0.75),
+        )
         for target, limit in ((plan, limits), (far, LimitsConfig())):
             before = rig.sim_arm.true_tcp_pose()
             with pytest.raises(SafetyLimit, match="outside the workspace box"):

@@ -16,7 +16,7 @@ from drivers.clock import Clock
 from drivers.frames import TactileFrame
 from drivers.layouts import SensorLayout
 from drivers.sensor import TactileSensor, TareRecord
-from unitac_rig.cli import main
+from tests.helpers import cli
 from unitac_rig.collection.sensor_choice import choose_sensor, collection_order
 from unitac_rig.errors import ConfigError, UsageError
 from unitac_rig.rig.config import parse_rig_config
@@ -164,8 +164,20 @@ def test_the_simulated_rig_mounts_it_and_a_session_records_its_frames(fakeskin: 
     with SimRig(parse_rig_config({"press": {"angle_count": 2}}), seed=0) as rig:
         assert collection_order(rig) == ["uskin", "papillarray", "fakeskin"]
         assert choose_sensor(rig, "hex_tpu", "fakeskin", tmp_path).name == "fakeskin"
-    main(["collect", "--object", "hex_tpu", "--sensor", "fakeskin", "--data", str(tmp_path), "--angles", "2",
-          "--no-live"])  # fmt: skip
+    assert not cli(
+        [
+            "collect",
+            "--object",
+            "hex_tpu",
+            "--sensor",
+            "fakeskin",
+            "--data",
+            str(tmp_path),
+            "--angles",
+            "2",
+            "--no-live",
+        ]
+    )
     (session,) = inspect_dataset(tmp_path)["sessions"]
     assert (session["sensor"], session["presses_complete"]) == ("fakeskin", 2)
     matched = load_matched_set(session_path(tmp_path, "hex_tpu", "fakeskin"))
@@ -178,7 +190,7 @@ def test_a_simulated_collect_mounts_it_after_the_other_sensors_are_complete(
     fakeskin: SensorSpec, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     for expected in ("uskin", "papillarray", "fakeskin"):
-        main(["collect", "--object", "circle_pla", "--data", str(tmp_path), "--angles", "1", "--no-live"])
+        assert not cli(["collect", "--object", "circle_pla", "--data", str(tmp_path), "--angles", "1", "--no-live"])
         assert f"mounting {expected}" in capsys.readouterr().out
 
 

@@ -133,8 +133,20 @@ def test_a_hard_limit_of_1e9_is_refused_by_collect_before_anything_moves(
 ) -> None:
     rig_file = tmp_path / "rig.toml"
     rig_file.write_text("[limits]\nhard_force_n = 1e9\n")
-    code = cli(["collect", "--object", "circle_pla", "--sensor", "uskin", "--rig", str(rig_file), "--data",
-                str(tmp_path / "d"), "--no-live"])  # fmt: skip
+    code = cli(
+        [
+            "collect",
+            "--object",
+            "circle_pla",
+            "--sensor",
+            "uskin",
+            "--rig",
+            str(rig_file),
+            "--data",
+            str(tmp_path / "d"),
+            "--no-live",
+        ]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert code != 0 and len(err) == 1 and "hard_force_n" in err[0] and "50 N" in err[0]
     assert not (tmp_path / "d").exists() or not any((tmp_path / "d").iterdir())
@@ -152,8 +164,14 @@ def test_a_reversed_wrist_sign_is_caught_in_the_first_millimetre_not_at_the_hard
     clock.on_advance(lambda _: peak.__setitem__(0, max(peak[0], float(np.linalg.norm(arm.true_wrench()[:3])))))
     plan = PressPlan(0.0, 0.0, START_POSE, PRESS_DIR, 0.008)
     with pytest.raises(SafetyLimit, match="points the wrong way"):
-        run_press(arm, _OneFramePerPoll(clock), plan, PressConfig(), LimitsConfig(workspace_min_m=(-1.0, -1.0, 0.0)),
-                  clearance_m=0.0)  # type: ignore[arg-type]  # fmt: skip
+        run_press(
+            arm,
+            _OneFramePerPoll(clock),
+            plan,
+            PressConfig(),
+            LimitsConfig(workspace_min_m=(-1.0, -1.0, 0.0)),
+            clearance_m=0.0,
+        )  # type: ignore[arg-type]
     assert peak[0] / stiffness_n_m * 1000.0 < 1.0  # mm past the wall's surface at the worst
     assert peak[0] < (6.0 if stiffness_n_m < 5e4 else 23.0)
 

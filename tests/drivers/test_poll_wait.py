@@ -21,8 +21,13 @@ class QueueDriver(PumpedSensor):
     """Delivers what the test puts in ``feed``: a frame, or an exception to raise (a port that went away)."""
 
     def __init__(self) -> None:
-        super().__init__(PAPILLARRAY, clock=None, stall_timeout_s=600.0, thread_name="queue-driver",
-                         is_saturated=lambda v: np.zeros(len(v), bool))  # fmt: skip
+        super().__init__(
+            PAPILLARRAY,
+            clock=None,
+            stall_timeout_s=600.0,
+            thread_name="queue-driver",
+            is_saturated=lambda v: np.zeros(len(v), bool),
+        )
         self.feed: queue.Queue[object] = queue.Queue()
 
     def _open(self) -> None:

@@ -9,8 +9,8 @@ import h5py
 import numpy as np
 import pytest
 
+from tests.helpers import cli
 from tests.importer.unitac_nv_fixtures import QUIET, Press, write_processed_npz, write_raw_csv
-from unitac_rig.cli import main
 from unitac_rig.errors import ConfigError, DataError
 from unitac_rig.importer import ImportConventions, conventions_from_dict, import_unitac_nv
 from unitac_rig.storage.press_record import PressRecord
@@ -202,20 +202,18 @@ def test_arbitrary_files_land_in_one_session_at_their_assumed_rotations(tmp_path
 
 def test_cli_prints_a_summary_per_session_and_a_total(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     write_raw_csv(tmp_path / "src" / RAW_XELA, "uskin", [Press(-1.0), Press(0.0)])
-    main(["import-unitac-nv", str(tmp_path / "src"), "--data", str(tmp_path / "data")])
+    assert not cli(["import-unitac-nv", str(tmp_path / "src"), "--data", str(tmp_path / "data")])
     out = capsys.readouterr().out
     assert "2 presses found, 2 complete, 50 targets matched" in out
     assert "hex_tpu__uskin: 2 presses, 2 complete, 50/50 targets matched" in out
     assert "total: 1 sessions, 2 presses, 2 complete, 50/50 targets matched; files: 1 imported" in out
-    main(["import-unitac-nv", str(tmp_path / "src"), "--data", str(tmp_path / "data")])
+    assert not cli(["import-unitac-nv", str(tmp_path / "src"), "--data", str(tmp_path / "data")])
     assert "already-imported" in capsys.readouterr().out
 
 
 def test_cli_exits_1_when_a_file_could_not_be_used(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     _write_peaks_only_npz(tmp_path / "src" / "oblong_PLA_papillarray.npz")
-    with pytest.raises(SystemExit) as exit_info:
-        main(["import-unitac-nv", str(tmp_path / "src"), "--data", str(tmp_path / "data")])
-    assert exit_info.value.code == 1
+    assert cli(["import-unitac-nv", str(tmp_path / "src"), "--data", str(tmp_path / "data")]) == 1
     captured = capsys.readouterr()
     assert "oblong_PLA_papillarray.npz -> square_pla__papillarray: failed:" in captured.out
     assert "import the raw session CSVs" in captured.out
@@ -224,21 +222,19 @@ def test_cli_exits_1_when_a_file_could_not_be_used(tmp_path: Path, capsys: pytes
 
 
 def test_cli_missing_source_is_one_usage_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    with pytest.raises(SystemExit) as exit_info:
-        main(["import-unitac-nv", str(tmp_path / "nowhere"), "--data", str(tmp_path / "data")])
-    assert exit_info.value.code == 2
+    assert cli(["import-unitac-nv", str(tmp_path / "nowhere"), "--data", str(tmp_path / "data")]) == 2
     err = capsys.readouterr().err.strip()
     assert "nowhere does not exist" in err and len(err.splitlines()) == 1
     assert not (tmp_path / "data").exists()
 
 
 def test_cli_show_conventions_prints_toml_that_reads_back(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    main(["import-unitac-nv", str(tmp_path), "--data", str(tmp_path / "data"), "--show-conventions"])
+    assert not cli(["import-unitac-nv", str(tmp_path), "--data", str(tmp_path / "data"), "--show-conventions"])
     text = capsys.readouterr().out
     assert "ft_rotation_deg = 45.0" in text
     path = tmp_path / "conv.toml"
     path.write_text(text)
-    main(
+    assert not cli(
         [
             "import-unitac-nv",
             str(tmp_path),

@@ -80,8 +80,12 @@ def test_the_cards_from_pretrained_code_translates_like_translate_offline(
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "PYTHONPATH": str(Path(__file__).parents[2])}
     done = subprocess.run(
         [sys.executable, "-c", _card_code(exported) + COMPARE, str(tmp_path / "frames.pt"), str(tmp_path / "out.pt")],
-        capture_output=True, text=True, timeout=300, cwd=exported, env=env,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=exported,
+        env=env,
+    )
     assert done.returncode == 0, done.stderr
     results = torch.load(tmp_path / "out.pt", weights_only=True)
     translator = Translator.load(run_dir)
@@ -182,6 +186,8 @@ def test_push_to_hub_sends_the_export_folder_to_the_model_repo(
     assert upload["files"] == ["README.md", "config.json", "model.safetensors"]
     sent.clear()
     other = tmp_path / "ts"
-    assert cli(["export-model", str(run_dir), "--format", "torchscript", "--out", str(other),
-                "--push-to-hub", "lab/x"]) == 2  # fmt: skip
+    assert (
+        cli(["export-model", str(run_dir), "--format", "torchscript", "--out", str(other), "--push-to-hub", "lab/x"])
+        == 2
+    )
     assert sent == [] and not other.exists()  # refused before anything was written or sent

@@ -75,11 +75,21 @@ def write_synthetic_sessions(data_dir: Path, objects: tuple[str, ...] = ("circle
             n = len(rows)
             writer.write_press(
                 PressRecord(
-                    press_id=press_id(rotation, angle), rotation_deg=rotation, angle_deg=angle, status="complete",
-                    reason="force", robot_t_s=robot_t, robot_force=np.zeros((robot_t.size, 6)),
-                    robot_pose=np.zeros((robot_t.size, 6)), press_force_n=force, tactile_t_s=tactile_t,
-                    tactile_values=matched.values[rows], tactile_seq=np.arange(n), tactile_device_t_us=np.full(n, -1),
-                    tactile_valid=np.ones(n, bool), tare_baseline=np.zeros(matched.values.shape[1:]),
+                    press_id=press_id(rotation, angle),
+                    rotation_deg=rotation,
+                    angle_deg=angle,
+                    status="complete",
+                    reason="force",
+                    robot_t_s=robot_t,
+                    robot_force=np.zeros((robot_t.size, 6)),
+                    robot_pose=np.zeros((robot_t.size, 6)),
+                    press_force_n=force,
+                    tactile_t_s=tactile_t,
+                    tactile_values=matched.values[rows],
+                    tactile_seq=np.arange(n),
+                    tactile_device_t_us=np.full(n, -1),
+                    tactile_valid=np.ones(n, bool),
+                    tare_baseline=np.zeros(matched.values.shape[1:]),
                     extraction=extract_press(robot_t, force, tactile_t, settings=settings),
                 )
-            )  # fmt: skip
+            )

@@ -114,8 +114,23 @@ def test_a_failed_start_leaves_no_empty_session_in_a_fresh_directory(
         "[sensors.papillarray]\ntype = 'papillarray'\nport = '/dev/nope'\n"
     )
     fresh = tmp_path / "fresh"
-    assert cli(["collect", "--object", "hex_tpu", "--sensor", "papillarray", "--rig", str(rig_file), "--data",
-                str(fresh), "--no-live"]) == 1  # fmt: skip
+    assert (
+        cli(
+            [
+                "collect",
+                "--object",
+                "hex_tpu",
+                "--sensor",
+                "papillarray",
+                "--rig",
+                str(rig_file),
+                "--data",
+                str(fresh),
+                "--no-live",
+            ]
+        )
+        == 1
+    )
     one_error_line(capsys)
     assert not fresh.exists() or not any(fresh.rglob("*.h5"))
 

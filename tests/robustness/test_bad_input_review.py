@@ -117,12 +117,19 @@ def test_a_checkpoint_with_nan_weights_is_refused_not_translated_to_nan(
     run.mkdir()
     weights = torch.zeros(4, 72)
     weights[1, 3] = math.nan
-    payload = {"format": CHECKPOINT_FORMAT, "version": 2,
-               "engine": {"parameters": {"uskin.enc.0": {"weight": weights, "bias": torch.zeros(4)}}}}  # fmt: skip
+    payload = {
+        "format": CHECKPOINT_FORMAT,
+        "version": 2,
+        "engine": {"parameters": {"uskin.enc.0": {"weight": weights, "bias": torch.zeros(4)}}},
+    }
     torch.save(payload, checkpoint_path(run))
     out = tmp_path / "out.npy"
-    assert cli(["translate", str(run), str(_frames(tmp_path)), "--from", "uskin", "--to", "papillarray",
-                "--out", str(out)]) == 1  # fmt: skip
+    assert (
+        cli(
+            ["translate", str(run), str(_frames(tmp_path)), "--from", "uskin", "--to", "papillarray", "--out", str(out)]
+        )
+        == 1
+    )
     line = one_error_line(capsys)
     assert "NaN or infinite values in engine.parameters.uskin.enc.0.weight" in line and "retrain" in line
     assert not out.exists()
@@ -134,8 +141,11 @@ def test_a_refused_checkpoint_never_advises_loading_it_with_the_safety_off(
     run = tmp_path / "run"
     run.mkdir()
     # torch's legacy (non-zip) format: torch cannot list its globals, only its own error text says what it holds
-    torch.save({"format": CHECKPOINT_FORMAT, "made": datetime.date(2025, 1, 1)}, checkpoint_path(run),
-               _use_new_zipfile_serialization=False)  # fmt: skip
+    torch.save(
+        {"format": CHECKPOINT_FORMAT, "made": datetime.date(2025, 1, 1)},
+        checkpoint_path(run),
+        _use_new_zipfile_serialization=False,
+    )
     assert cli(["translate", str(run), str(_frames(tmp_path)), "--from", "uskin", "--to", "papillarray"]) == 1
     line = one_error_line(capsys)
     assert "datetime.date" in line and "could run code" in line

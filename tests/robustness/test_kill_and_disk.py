@@ -12,7 +12,6 @@ from __future__ import annotations
 import resource
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -20,12 +19,24 @@ import h5py
 import numpy as np
 import pytest
 
+from tests.helpers import console_script
 from unitac_rig.storage.recorder import session_path
 
 
 def _collect_cmd(data: Path, angles: int, obj: str = "hex_pla") -> list[str]:
-    return [sys.executable, "-m", "unitac_rig", "collect", "--object", obj, "--sensor", "uskin",
-            "--data", str(data), "--angles", str(angles), "--no-live"]  # fmt: skip
+    return [
+        console_script(),
+        "collect",
+        "--object",
+        obj,
+        "--sensor",
+        "uskin",
+        "--data",
+        str(data),
+        "--angles",
+        str(angles),
+        "--no-live",
+    ]
 
 
 def _journal_entries(journal: Path) -> dict[str, tuple[int, int]]:
@@ -123,8 +134,13 @@ def test_no_file_grows_with_the_session(tmp_path: Path) -> None:
     """Each press has its own file and the session file holds only links: a per-file size limit of 900 kB, which
     the single-file layout outgrew after a few presses, never stops a 16-press session."""
     presses = 16
-    done = subprocess.run(_collect_cmd(tmp_path, presses), capture_output=True, text=True, timeout=240,
-                          preexec_fn=_limit_file_size(900_000))  # fmt: skip
+    done = subprocess.run(
+        _collect_cmd(tmp_path, presses),
+        capture_output=True,
+        text=True,
+        timeout=240,
+        preexec_fn=_limit_file_size(900_000),
+    )
     assert done.returncode == 0, done.stderr
     statuses = _session_statuses(session_path(tmp_path, "hex_pla", "uskin"))
     assert len(statuses) == presses and set(statuses.values()) == {"complete"}

@@ -9,7 +9,6 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -17,7 +16,7 @@ import h5py
 import numpy as np
 import pytest
 
-from tests.helpers import cli
+from tests.helpers import cli, console_script
 from tests.robustness.robustness_helpers import few_angles, one_error_line
 from unitac_rig.collection.press import TickInfo
 from unitac_rig.collection.session import collect_session
@@ -54,8 +53,18 @@ def test_passing_the_hard_limit_aborts_backs_off_and_stops(tmp_path: Path) -> No
 def test_hard_limit_through_the_cli_is_one_line_and_exit_1(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     rig_file = tmp_path / "rig.toml"
     rig_file.write_text("[press]\nangle_count = 2\nspeed_mm_s = 40.0\n[limits]\nhard_force_n = 11.0\n")
-    args = ["collect", "--object", "square_pla", "--sensor", "uskin", "--rig", str(rig_file), "--data",
-            str(tmp_path / "d"), "--no-live"]  # fmt: skip
+    args = [
+        "collect",
+        "--object",
+        "square_pla",
+        "--sensor",
+        "uskin",
+        "--rig",
+        str(rig_file),
+        "--data",
+        str(tmp_path / "d"),
+        "--no-live",
+    ]
     assert cli(args) == 1
     assert "passed the hard limit" in one_error_line(capsys)
 
@@ -92,8 +101,19 @@ def test_ctrl_c_at_a_random_tick_stops_the_arm_keeps_the_partial_press_and_resum
 
 def test_sigint_at_random_moments_exits_130_and_the_same_command_finishes(tmp_path: Path) -> None:
     rng = np.random.default_rng(11)
-    cmd = [sys.executable, "-m", "unitac_rig", "collect", "--object", "circle_pla", "--sensor", "uskin",
-           "--data", str(tmp_path), "--angles", "6", "--no-live"]  # fmt: skip
+    cmd = [
+        console_script(),
+        "collect",
+        "--object",
+        "circle_pla",
+        "--sensor",
+        "uskin",
+        "--data",
+        str(tmp_path),
+        "--angles",
+        "6",
+        "--no-live",
+    ]
     header = tmp_path / ".journal" / "circle_pla__uskin" / "_session.json"
     interrupted = 0
     for _ in range(3):
@@ -135,8 +155,19 @@ def test_ctrl_c_during_start_up_is_one_line_and_exit_130(tmp_path: Path) -> None
     """Caught while the application is still being imported (numpy's core loaded, most of the rest not): no
     traceback, and not the -2 (killed by SIGINT) that a KeyboardInterrupt inside an importing extension left even
     after the CLI printed its line."""
-    cmd = [sys.executable, "-m", "unitac_rig", "collect", "--object", "circle_pla", "--sensor", "uskin",
-           "--data", str(tmp_path), "--angles", "2", "--no-live"]  # fmt: skip
+    cmd = [
+        console_script(),
+        "collect",
+        "--object",
+        "circle_pla",
+        "--sensor",
+        "uskin",
+        "--data",
+        str(tmp_path),
+        "--angles",
+        "2",
+        "--no-live",
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 60
@@ -156,8 +187,19 @@ def test_sigterm_and_sighup_take_the_ctrl_c_path(tmp_path: Path, sig: signal.Sig
     """kill (SIGTERM) or a closed SSH session (SIGHUP) mid-session: the arm stopped, the press kept as interrupted,
     one line, 128 + the signal; the same command finishes the session. (Against the real-time twin, with the arm's
     true motion: tests/robustness/test_twin_host_death.py.)"""
-    cmd = [sys.executable, "-m", "unitac_rig", "collect", "--object", "circle_pla", "--sensor", "uskin",
-           "--data", str(tmp_path), "--angles", "4", "--no-live"]  # fmt: skip
+    cmd = [
+        console_script(),
+        "collect",
+        "--object",
+        "circle_pla",
+        "--sensor",
+        "uskin",
+        "--data",
+        str(tmp_path),
+        "--angles",
+        "4",
+        "--no-live",
+    ]
     journal = tmp_path / ".journal" / "circle_pla__uskin"
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:

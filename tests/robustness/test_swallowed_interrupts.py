@@ -1,4 +1,4 @@
-"""Interrupts while a command moves the arm (unitac_rig/interrupts.py, unitac_rig/cli/signals.py).
+"""Interrupts while a command moves the arm (unitac_rig/interrupts.py).
 
 * Deferred: a Ctrl-C (or SIGTERM) is noted and raised at the next check of the control loop, never inside whatever
   the main thread is running (raised inside python-can's virtual-bus queue it once left a lock held and the stop
@@ -15,8 +15,7 @@ import time
 
 import pytest
 
-from unitac_rig.cli.signals import termination_as_interrupt
-from unitac_rig.interrupts import Terminated, immediate_interrupts, raise_if_interrupted
+from unitac_rig.interrupts import Terminated, immediate_interrupts, raise_if_interrupted, termination_as_interrupt
 
 
 def _deliver(sig: int) -> None:

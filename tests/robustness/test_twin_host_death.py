@@ -15,7 +15,6 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -23,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.helpers import console_script
 from unitac_rig.sim.twin import ControllerParams, TwinTruth, first_free_loopback
 from unitac_rig.sim.twin.rig import RigTwin
 from unitac_rig.storage.reader import read_presses
@@ -39,16 +39,28 @@ def free_host() -> str:
 
 @pytest.fixture
 def rig_twin(tmp_path: Path) -> Iterator[tuple[RigTwin, Path]]:
-    with RigTwin("circle_pla", sensor="papillarray", host=free_host(), seed=2,
-                 params=ControllerParams(unlock_delay_s=0.3)) as rig:  # fmt: skip
+    with RigTwin(
+        "circle_pla", sensor="papillarray", host=free_host(), seed=2, params=ControllerParams(unlock_delay_s=0.3)
+    ) as rig:
         rig_file = tmp_path / "twin.toml"
         rig_file.write_text(rig.rig_file())
         yield rig, rig_file
 
 
 def collect_cmd(rig_file: Path, data: Path, angles: int = 3) -> list[str]:
-    return [sys.executable, "-m", "unitac_rig", "collect", "--rig", str(rig_file), "--object", "circle_pla",
-            "--angles", str(angles), "--data", str(data), "--no-live"]  # fmt: skip
+    return [
+        console_script(),
+        "collect",
+        "--rig",
+        str(rig_file),
+        "--object",
+        "circle_pla",
+        "--angles",
+        str(angles),
+        "--data",
+        str(data),
+        "--no-live",
+    ]
 
 
 def start_and_wait_for_a_press(rig: RigTwin, cmd: list[str]) -> subprocess.Popen[str]:

@@ -11,13 +11,13 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
+from tests.helpers import console_script
 from unitac_rig.sim.twin import ControllerParams, first_free_loopback
 from unitac_rig.sim.twin.rig import RigTwin
 from unitac_rig.storage.recorder import session_path
@@ -28,8 +28,13 @@ OBJECT = "circle_pla"
 
 @pytest.fixture
 def twin(tmp_path: Path) -> Iterator[RigTwin]:
-    with RigTwin(OBJECT, sensor="papillarray", host=first_free_loopback(200, 209), seed=3,
-                 params=ControllerParams(unlock_delay_s=0.3)) as rig:  # fmt: skip
+    with RigTwin(
+        OBJECT,
+        sensor="papillarray",
+        host=first_free_loopback(200, 209),
+        seed=3,
+        params=ControllerParams(unlock_delay_s=0.3),
+    ) as rig:
         yield rig
 
 
@@ -40,8 +45,19 @@ def rig_file(rig: RigTwin, tmp_path: Path, **tables: dict[str, object]) -> Path:
 
 
 def collect(rig_path: Path, data: Path, angles: int = 3) -> list[str]:
-    return [sys.executable, "-m", "unitac_rig", "collect", "--rig", str(rig_path), "--object", OBJECT,
-            "--angles", str(angles), "--data", str(data), "--no-live"]  # fmt: skip
+    return [
+        console_script(),
+        "collect",
+        "--rig",
+        str(rig_path),
+        "--object",
+        OBJECT,
+        "--angles",
+        str(angles),
+        "--data",
+        str(data),
+        "--no-live",
+    ]
 
 
 def run_to_end(rig: RigTwin, cmd: list[str], *, freeze_at_contact_s: float = 0.0) -> tuple[int, str, bool]:

@@ -9,7 +9,6 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 import tomllib
@@ -22,6 +21,7 @@ import rtde_control
 
 from drivers.frames import TactileFrame
 from drivers.sensor import TactileSensor
+from tests.helpers import console_script
 from tests.twin.twin_helpers import wait_until
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.config import ObjectPlacement, load_rig_config, parse_rig_config
@@ -132,17 +132,43 @@ def test_collect_runs_through_the_hardware_path_against_the_twin(tmp_path: Path)
     rig_file = tmp_path / "twin.toml"
     environment = {**os.environ, "PYTHONUNBUFFERED": "1"}
     twin = subprocess.Popen(
-        [sys.executable, "-m", "unitac_rig", "twin", "--object", "circle_pla", "--host", host,
-         "--write-rig", str(rig_file), "--unlock-delay", "0.5"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=environment,
-    )  # fmt: skip
+        [
+            console_script(),
+            "twin",
+            "--object",
+            "circle_pla",
+            "--host",
+            host,
+            "--write-rig",
+            str(rig_file),
+            "--unlock-delay",
+            "0.5",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=environment,
+    )
     try:
         assert wait_until(rig_file.exists, 30.0), "the twin did not start"
         collect = subprocess.run(
-            [sys.executable, "-m", "unitac_rig", "collect", "--rig", str(rig_file), "--object", "circle_pla",
-             "--angles", "2", "--data", str(tmp_path / "data"), "--no-live"],
-            capture_output=True, text=True, timeout=300, env=environment,
-        )  # fmt: skip
+            [
+                console_script(),
+                "collect",
+                "--rig",
+                str(rig_file),
+                "--object",
+                "circle_pla",
+                "--angles",
+                "2",
+                "--data",
+                str(tmp_path / "data"),
+                "--no-live",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            env=environment,
+        )
         assert collect.returncode == 0, collect.stdout + collect.stderr
         assert "detected mounted sensor: uskin" in collect.stdout
         presses = press_summaries(tmp_path / "data" / "circle_pla__uskin.h5")

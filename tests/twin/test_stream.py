@@ -14,7 +14,6 @@ import os
 import signal
 import socket
 import subprocess
-import sys
 import threading
 import tomllib
 from collections.abc import Iterator
@@ -25,7 +24,7 @@ import pytest
 import rtde_control
 import torch
 
-from tests.helpers import cli
+from tests.helpers import cli, console_script
 from tests.learning.learning_helpers import small_sets
 from tests.twin.twin_helpers import wait_until
 from unitac_rig.learning.contact_geometry import GeometryConfig, GeometryEstimator, geometry_for_run
@@ -100,10 +99,21 @@ def test_stream_emits_every_frame_of_the_twin_while_the_arm_presses(
     rig_file = _twin_rig_file(twin, tmp_path)
     summary_path = tmp_path / "summary.json"
     stream = subprocess.Popen(
-        [sys.executable, "-m", "unitac_rig", "stream", str(run_dir), "--rig", str(rig_file), "--sensor", "papillarray",
-         "--summary", str(summary_path)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "PYTHONUNBUFFERED": "1"},
-    )  # fmt: skip
+        [
+            console_script(),
+            "stream",
+            str(run_dir),
+            "--rig",
+            str(rig_file),
+            "--sensor",
+            "papillarray",
+            "--summary",
+            str(summary_path),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
     lines: list[bytes] = []
     reader = threading.Thread(target=lambda: lines.extend(iter(stream.stdout.readline, b"")), name="stream-lines")  # type: ignore[union-attr]
     reader.start()
@@ -168,10 +178,23 @@ def test_stream_serves_one_local_client_over_a_socket(run_dir: Path, twin: RigTw
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     stream = subprocess.Popen(
-        [sys.executable, "-m", "unitac_rig", "stream", str(run_dir), "--rig", str(rig_file), "--sensor", "papillarray",
-         "--listen", f"127.0.0.1:{port}", "--frames", "200", "--no-geometry"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-    )  # fmt: skip
+        [
+            console_script(),
+            "stream",
+            str(run_dir),
+            "--rig",
+            str(rig_file),
+            "--sensor",
+            "papillarray",
+            "--listen",
+            f"127.0.0.1:{port}",
+            "--frames",
+            "200",
+            "--no-geometry",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     client: socket.socket | None = None
 
     def connected() -> bool:

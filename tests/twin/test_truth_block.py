@@ -17,13 +17,35 @@ def snapshot(cycles: int) -> TwinTruth:
     pose = np.array([0.1 * cycles, 0.2, 0.3, 0.0, 3.14, 0.0])
     zeros = np.zeros(6)
     return TwinTruth(
-        controller_t_s=0.002 * cycles, cycles=cycles, pad_pose=pose, tcp_pose=pose, true_wrench=zeros,
-        reported_wrench=zeros, tcp_speed=zeros, force_n=float(cycles), peak_force_n=float(cycles), robot_mode=7,
-        safety_mode=1, safety_status_bits=1, robot_status_bits=3, runtime_state=2, program_running=True,
-        watchdog_armed=True, watchdog_trips=0, protective_stops=0, emergency_stops=0, program_starts=1,
-        script_uploads=1, rtde_clients=2, last_input_t_s=0.0, worst_lateness_s=0.0, late_cycles=0, skipped_cycles=0,
-        achieved_rate_hz=500.0, commands_done=cycles,
-    )  # fmt: skip
+        controller_t_s=0.002 * cycles,
+        cycles=cycles,
+        pad_pose=pose,
+        tcp_pose=pose,
+        true_wrench=zeros,
+        reported_wrench=zeros,
+        tcp_speed=zeros,
+        force_n=float(cycles),
+        peak_force_n=float(cycles),
+        robot_mode=7,
+        safety_mode=1,
+        safety_status_bits=1,
+        robot_status_bits=3,
+        runtime_state=2,
+        program_running=True,
+        watchdog_armed=True,
+        watchdog_trips=0,
+        protective_stops=0,
+        emergency_stops=0,
+        program_starts=1,
+        script_uploads=1,
+        rtde_clients=2,
+        last_input_t_s=0.0,
+        worst_lateness_s=0.0,
+        late_cycles=0,
+        skipped_cycles=0,
+        achieved_rate_hz=500.0,
+        commands_done=cycles,
+    )
 
 
 @pytest.fixture

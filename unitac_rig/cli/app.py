@@ -19,8 +19,8 @@ import typer
 
 from protocols.errors import UnitacError
 from unitac_rig.cli.help import use_plain_help
-from unitac_rig.cli.signals import last_termination_signal, termination_signal
 from unitac_rig.errors import ConfigError, UsageError
+from unitac_rig.interrupts import last_termination_signal, termination_signal
 from unitac_rig.provenance import package_version
 
 app = typer.Typer(
@@ -37,7 +37,8 @@ app = typer.Typer(
 COMMAND_MODULES = (
     "unitac_rig.cli.collect",  # collect, campaign, extract, objects
     "unitac_rig.cli.dataset",  # inspect [--watch], export, verify
-    "unitac_rig.cli.learn",  # train, translate, geometry
+    "unitac_rig.cli.learn_train",  # train
+    "unitac_rig.cli.learn",  # report, translate, geometry, export-model
     "unitac_rig.cli.probe",  # probe uskin|papillarray|ur5e
     "unitac_rig.cli.import_unitac_nv",  # import-unitac-nv
     "unitac_rig.cli.bench",  # bench ...

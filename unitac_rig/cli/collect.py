@@ -19,13 +19,12 @@ from rich.text import Text
 
 from unitac_rig.cli.pace import spoken_duration
 from unitac_rig.cli.paths import path_text, require_data_folder, require_directory
-from unitac_rig.cli.signals import termination_as_interrupt
 from unitac_rig.collection.sensor_choice import choose_sensor, collection_order, session_complete
 from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session, dry_run
 from unitac_rig.collection.streams import TickInfo
 from unitac_rig.collection.transit import PressPlan
 from unitac_rig.errors import ConfigError, SessionStopped, UsageError
-from unitac_rig.interrupts import immediate_interrupts
+from unitac_rig.interrupts import immediate_interrupts, termination_as_interrupt
 from unitac_rig.rig.backends import open_rig
 from unitac_rig.rig.base import Rig
 from unitac_rig.rig.config import RigConfig, load_rig_config, parse_rig_config
@@ -273,11 +272,16 @@ def _run_session(
         if panel is not None:
             panel.live.start()
         outcome = collect_session(
-            rig, obj, sensor, data_dir, rotations=rot,
+            rig,
+            obj,
+            sensor,
+            data_dir,
+            rotations=rot,
             on_press=panel.on_press if panel else lines.on_press if lines else None,
             on_tick=panel.on_tick if panel else None,
-            ask_operator=ask, max_presses=max_presses,
-        )  # fmt: skip
+            ask_operator=ask,
+            max_presses=max_presses,
+        )
     except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM, SIGHUP: the arm has stopped; say what is kept and how to go on
         if panel is not None:
             with contextlib.suppress(OSError):
@@ -432,9 +436,12 @@ def campaign(
     with termination_as_interrupt(), open_rig(config, seed=seed, imperfections=imperfections) as rig:
         sensors = collection_order(rig)
         progress = CampaignProgress(
-            [(obj.id, sensor, len(obj.rotations_deg) * config.press.angle_count) for sensor in sensors
-             for obj in catalogue]
-        )  # fmt: skip
+            [
+                (obj.id, sensor, len(obj.rotations_deg) * config.press.angle_count)
+                for sensor in sensors
+                for obj in catalogue
+            ]
+        )
         for obj in catalogue:  # presses finished by earlier runs count as done from the first line on
             for sensor in sensors:
                 counts = _finished_presses(data, obj.id, sensor)
@@ -556,9 +563,12 @@ def objects_cmd(
         table.add_column(col)
     for o in list_objects(extra_files=config.object.objects_files):
         table.add_row(
-            o.id, o.shape, o.material, ", ".join(f"{r:g}" for r in o.rotations_deg),
+            o.id,
+            o.shape,
+            o.material,
+            ", ".join(f"{r:g}" for r in o.rotations_deg),
             "yes" if o.in_autoencoder_training else "no (test only)",
-        )  # fmt: skip
+        )
     console.print(table)
 
 

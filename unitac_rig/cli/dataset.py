@@ -20,9 +20,8 @@ from rich.table import Table
 from rich.text import Text
 
 from unitac_rig.cli.paths import path_text, require_directory, require_writable_output
-from unitac_rig.cli.signals import termination_as_interrupt
 from unitac_rig.errors import DataError, UsageError
-from unitac_rig.interrupts import raise_if_interrupted
+from unitac_rig.interrupts import raise_if_interrupted, termination_as_interrupt
 
 console = Console()
 _DATA_HINT = "pass the --data folder you collected into"
@@ -38,20 +37,28 @@ def inspect_tables(report: dict[str, Any], data: Path) -> RenderableType:
     if not sessions:
         return Text(f"no sessions in {data} yet")
     table = Table(box=None, pad_edge=False)
-    for name, justify in (("object", "left"), ("sensor", "left"), ("presses", "right"), ("targets", "right"),
-                          ("|err| mN", "right"), ("peak N", "right"), ("time s", "right")):  # fmt: skip
+    for name, justify in (
+        ("object", "left"),
+        ("sensor", "left"),
+        ("presses", "right"),
+        ("targets", "right"),
+        ("|err| mN", "right"),
+        ("peak N", "right"),
+        ("time s", "right"),
+    ):
         table.add_column(name, justify=justify, overflow="fold")  # type: ignore[arg-type]
     for s in sessions:
         e, p = s["match_error_n"], s["peak_force_n"]
         sensor = s["sensor"] + ("*" if s["simulated"] else "") + (" ●" if s.get("writer") else "")
         table.add_row(
-            s["object"], sensor,
+            s["object"],
+            sensor,
             f"{s['presses_complete']}/{s['presses_failed']}/{s['presses_planned']}",
             f"{s['targets_matched']}/{s['targets_missed']}",
             "/".join(_num(e[k], ".0f", 1000.0) for k in ("median", "p95", "max")),
             "/".join(_num(p[k], ".1f") for k in ("median", "max")),
             f"{s['duration_s']:.0f}",
-        )  # fmt: skip
+        )
     notes = [
         "presses: complete/failed/planned   targets: matched/missed   time: pressing",
         "|err|: force-matching error median/p95/max   peak: press force median/max",
@@ -97,8 +104,12 @@ def _resume_note(data: Path, session: dict[str, Any]) -> str:
     from unitac_rig.storage.reader import read_session_info
 
     finished = session["presses_complete"] + session["presses_failed"]
-    command = ["unitac-rig collect", f"--object {session['object']}", f"--sensor {session['sensor']}",
-               f"--data {shlex.quote(str(data))}"]  # fmt: skip
+    command = [
+        "unitac-rig collect",
+        f"--object {session['object']}",
+        f"--sensor {session['sensor']}",
+        f"--data {shlex.quote(str(data))}",
+    ]
     try:  # verified already by inspect in this process: only the attributes are read again
         attrs = read_session_info(data / session["file"]).attrs
         angles = attrs.get("config", {}).get("press", {}).get("angle_count")

@@ -39,8 +39,14 @@ def kept_run_line(run: Path, data: list[Path]) -> str:
         return "train: interrupted before the first checkpoint, nothing kept; run the same command to start again"
     payload = load_checkpoint(run)
     planned = payload.get("config", {}).get("epochs", "?")
-    command = " ".join(["unitac-rig train", *(f"--data {shlex.quote(str(d))}" for d in data),
-                        f"--out {shlex.quote(str(run))}", "--resume"])  # fmt: skip
+    command = " ".join(
+        [
+            "unitac-rig train",
+            *(f"--data {shlex.quote(str(d))}" for d in data),
+            f"--out {shlex.quote(str(run))}",
+            "--resume",
+        ]
+    )
     return f"train: interrupted; kept epoch {payload.get('epoch', '?')}/{planned} in {run}; go on with: {command}"
 
 
@@ -74,8 +80,9 @@ def report_command(
     console = Console()
     try:
         on_stage = stage_printer(console)
-        path = write_report(run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range,
-                            on_stage=on_stage)  # fmt: skip
+        path = write_report(
+            run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range, on_stage=on_stage
+        )
     except KeyboardInterrupt:
         typer.echo(report_interrupted_line(run), err=True)
         raise
@@ -88,8 +95,9 @@ def _short_sensor_names(sensors: list[str]) -> dict[str, str]:
     short = {}
     for name in sensors:
         others = [o for o in sensors if o != name]
-        short[name] = next((name[:k] for k in range(1, len(name)) if not any(o.startswith(name[:k]) for o in others)),
-                           name)  # fmt: skip
+        short[name] = next(
+            (name[:k] for k in range(1, len(name)) if not any(o.startswith(name[:k]) for o in others)), name
+        )
     return short
 
 
@@ -351,8 +359,7 @@ def export_model_command(
     from rich.console import Console
 
     from unitac_rig.errors import UsageError
-    from unitac_rig.learning.export import CARD_NAME, MODEL_JSON, export_model
-    from unitac_rig.learning.safetensors_export import CONFIG_NAME
+    from unitac_rig.learning.export import CARD_NAME, CONFIG_NAME, MODEL_JSON, export_model
 
     if push_to_hub is not None and fmt != "safetensors":
         raise UsageError("--push-to-hub uploads the Hub layout only", hint="drop --format or use --format safetensors")
@@ -367,16 +374,13 @@ def export_model_command(
     config = CONFIG_NAME if fmt == "safetensors" else MODEL_JSON
     console.print(f"  {config}, {CARD_NAME} (model card: data hash, metrics, intended use, limits, loading)")
     if push_to_hub is not None:
-        from unitac_rig.learning.safetensors_export import push_to_hub as push
+        from unitac_rig.learning.export import push_to_hub as push
 
         console.print(f"pushed to https://huggingface.co/{push_to_hub}: {push(out, push_to_hub)}")
 
 
 def register(app: typer.Typer) -> None:
-    """Add this area's commands to the root app."""
-    from unitac_rig.cli.learn_train import train_command  # it imports this module's table printer
-
-    app.command("train")(train_command)
+    """Add this area's commands to the root app (``train`` is added by :mod:`unitac_rig.cli.learn_train`)."""
     app.command("report")(report_command)
     app.command("translate")(translate_command)
     app.command("geometry")(geometry_command)

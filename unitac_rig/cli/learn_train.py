@@ -29,8 +29,8 @@ from unitac_rig.cli.learn import (
 )
 from unitac_rig.cli.pace import Pace
 from unitac_rig.cli.paths import require_writable_output
-from unitac_rig.cli.signals import termination_as_interrupt
 from unitac_rig.errors import UsageError
+from unitac_rig.interrupts import termination_as_interrupt
 from unitac_rig.learning import config as train_config
 from unitac_rig.rig.config import read_toml
 
@@ -608,6 +608,5 @@ def _train_new_sensor(
 
 
 def register(app: typer.Typer) -> None:
-    """Add ``train`` to the root app. Today ``cli/learn.py``'s ``register`` adds it, so the two modules import each
-    other; naming this module in ``cli/app.py``'s COMMAND_MODULES instead ends that cycle."""
+    """Add ``train`` to the root app (named in ``cli/app.py``'s COMMAND_MODULES, so the import goes one way)."""
     app.command("train")(train_command)

@@ -266,13 +266,15 @@ def sensor_probe_command(spec: SensorSpec) -> CommandInfo:
 
     keyword = inspect.Parameter.KEYWORD_ONLY
     parameters = [
-        *(inspect.Parameter(o.field, keyword, default=o.typer_option(), annotation=o.kind | None)
-          for o in options.values()),
+        *(
+            inspect.Parameter(o.field, keyword, default=o.typer_option(), annotation=o.kind | None)
+            for o in options.values()
+        ),
         inspect.Parameter("frames", keyword, default=FRAMES_OPTION, annotation=int),
         inspect.Parameter("as_json", keyword, default=JSON_OPTION, annotation=bool),
         inspect.Parameter("timeout", keyword, default=TIMEOUT_OPTION, annotation=float),
         inspect.Parameter("simulated", keyword, default=SIMULATED_OPTION, annotation=bool),
-    ]  # fmt: skip
+    ]
     command.__signature__ = inspect.Signature(parameters)  # type: ignore[attr-defined]
     command.__annotations__ = {p.name: p.annotation for p in parameters}
     layout = spec.layout

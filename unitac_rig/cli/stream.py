@@ -24,9 +24,8 @@ from typing import Any
 
 import typer
 
-from unitac_rig.cli.signals import stop_on_signals
 from unitac_rig.errors import UsageError
-from unitac_rig.interrupts import interrupt_for
+from unitac_rig.interrupts import interrupt_for, stop_on_signals
 
 RATE_WARNING = 0.9  # warn when the steady-state rate falls below this share of --rate
 
@@ -174,8 +173,15 @@ def stream_command(
             with contextlib.ExitStack() as stack:
                 write = stack.enter_context(_socket_writer(address, stop)) if address else _stdout_writer()
                 try:
-                    stats = stream_frames(live_sensor(driver), model, write, tare_frames=tare_frames,
-                                          max_frames=frames, duration_s=duration, should_stop=stop.is_set)  # fmt: skip
+                    stats = stream_frames(
+                        live_sensor(driver),
+                        model,
+                        write,
+                        tare_frames=tare_frames,
+                        max_frames=frames,
+                        duration_s=duration,
+                        should_stop=stop.is_set,
+                    )
                 except (BrokenPipeError, ConnectionError):
                     raise UsageError(
                         "the reader of the stream went away", hint="stream stops with its reader"
@@ -184,8 +190,15 @@ def stream_command(
     except KeyboardInterrupt:
         typer.echo("stream: stopped before the first frame, nothing written; run the same command to start", err=True)
         raise
-    summary = {"run": str(run), "sensor": name, "targets": list(model.targets), **stats.summary(), "driver": health,
-               "asked_rate_hz": rate_hz, "finished_unix": time.time()}  # fmt: skip
+    summary = {
+        "run": str(run),
+        "sensor": name,
+        "targets": list(model.targets),
+        **stats.summary(),
+        "driver": health,
+        "asked_rate_hz": rate_hz,
+        "finished_unix": time.time(),
+    }
     for line in summary_lines(summary):
         typer.echo(line, err=True)
     if summary_path is not None:

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import typer
 
-from unitac_rig.cli.signals import stop_on_signals
 from unitac_rig.errors import UsageError
+from unitac_rig.interrupts import stop_on_signals
 from unitac_rig.rig.sensors import sensor_names
 
 

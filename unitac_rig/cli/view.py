@@ -38,15 +38,27 @@ def view_command(
         rec.spawn()
     try:
         if stream:
-            from unitac_rig.cli.signals import stop_on_signals
             from unitac_rig.cli.stream import _mounted_sensor
+            from unitac_rig.interrupts import stop_on_signals
             from unitac_rig.learning.live import live_sensor
 
-            with stop_on_signals() as stop, _mounted_sensor(rig_file, simulated, sensor, object_id, None,
-                                                            ("papillarray", "uskin")) as (driver, name):  # fmt: skip
+            with (
+                stop_on_signals() as stop,
+                _mounted_sensor(rig_file, simulated, sensor, object_id, None, ("papillarray", "uskin")) as (
+                    driver,
+                    name,
+                ),
+            ):
                 typer.echo(f"view: {name} live, taring on {tare_frames} frames (keep the pad unloaded)", err=True)
-                n = log_stream(rec, name, live_sensor(driver), tare_frames=tare_frames, max_frames=frames,
-                               duration_s=duration, should_stop=stop.is_set)  # fmt: skip
+                n = log_stream(
+                    rec,
+                    name,
+                    live_sensor(driver),
+                    tare_frames=tare_frames,
+                    max_frames=frames,
+                    duration_s=duration,
+                    should_stop=stop.is_set,
+                )
             typer.echo(f"view: {n} frames of {name}" + (f" -> {save}" if save else ""), err=True)
             return
         sessions = (

@@ -163,8 +163,9 @@ def run_press(
     """
     strategy = press_strategy(press.strategy)  # an unregistered name fails before the arm moves
     move_clear(arm, plan, clearance_m, press.transit_speed_mm_s / 1000.0, limits)
-    frames, wrenches = zero_wrist(arm, sensor, settle_s, f"the stand-off of press {plan.press_id}",
-                                  check_s=UNLOADED_CHECK_S)  # fmt: skip
+    frames, wrenches = zero_wrist(
+        arm, sensor, settle_s, f"the stand-off of press {plan.press_id}", check_s=UNLOADED_CHECK_S
+    )
     ft_offset = wrenches.mean(axis=0)
     arm = cast(Arm, ZeroedArm(arm, ft_offset))
     noise_n = float(np.std(-(wrenches[:, :3] @ plan.direction)))
@@ -177,8 +178,17 @@ def run_press(
     baseline = np.median(stack, axis=0)
     tare = {"method": "host-median", "n_frames": len(valid), "spread": float(stack.std(axis=0).max())}
 
-    streams = PressStreams(arm, sensor, plan, press, limits, stall_timeout_s, on_tick, contact_threshold_n,
-                           offset_along_press_n=float(np.dot(ft_offset[:3], plan.direction)))  # fmt: skip
+    streams = PressStreams(
+        arm,
+        sensor,
+        plan,
+        press,
+        limits,
+        stall_timeout_s,
+        on_tick,
+        contact_threshold_n,
+        offset_along_press_n=float(np.dot(ft_offset[:3], plan.direction)),
+    )
     streams.event("start", f"strategy={press.strategy} speed={press.speed_mm_s} mm/s")
     streams.event("contact_threshold", f"{contact_threshold_n:.2f} N (press-force noise {noise_n:.3f} N rms)")
     streams.event("ft_zero", json_list(ft_offset))
@@ -191,13 +201,12 @@ def run_press(
         streams.event("stop", reason)
         streams.phase = "dwell"
         streams.hold(press.dwell_s)
-        streams.phase = "retract"
-        _retract(arm, streams, plan, press)
+        _back_off(arm, streams, plan, press)
     except TravelLimit as exc:
         status, reason = "failed", "off_axis" if isinstance(exc, OffAxisLimit) else "travel"
         streams.event("stop", f"{reason.replace('_', '-')} limit: {exc}")
         stop_arm(arm)
-        _retract_quietly(arm, streams, plan, press)
+        _back_off(arm, streams, plan, press, quiet=True)
     except (SafetyLimit, ProtectiveStop, DeviceError, KeyboardInterrupt) as exc:
         status, reason, pending = "aborted", _abort_reason(exc), exc
         detail = "interrupted by the operator" if isinstance(exc, KeyboardInterrupt) else f"{reason}: {exc}"
@@ -239,10 +248,19 @@ def json_list(values: np.ndarray) -> str:
     return "[" + ", ".join(f"{v:.4f}" for v in np.asarray(values).ravel()) + "]"
 
 
-def _retract(arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfig) -> None:
-    """Back off along the ray at ``press.retract_speed_mm_s``, still recording, until the pad is unloaded (a held,
-    filtered condition: the mean of the last ``RETRACT_HOLD_PERIODS`` readings, not one noisy sample) and 1 mm back;
-    then stop recording."""
+def _back_off(arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfig, *, quiet: bool = False) -> None:
+    """The press's own retract phase: back off along the ray at ``press.retract_speed_mm_s``, still recording, until
+    the pad is unloaded (a held, filtered condition: the mean of the last ``RETRACT_HOLD_PERIODS`` readings, not one
+    noisy sample) and 1 mm back; then stop recording. ``quiet`` (after a travel limit): a limit or stall on the way
+    back stops the arm and ends the phase instead of raising; the return to the stand-off follows. Pulling away
+    after an abort is :func:`unitac_rig.collection.transit.retract_from_object`."""
+    streams.phase = "retract"
+    if quiet:
+        try:
+            _back_off(arm, streams, plan, press)
+        except (TravelLimit, SafetyLimit, DeviceTimeout):
+            stop_arm(arm)
+        return
     speed = min(press.transit_speed_mm_s, press.retract_speed_mm_s) / 1000.0
     twist = np.concatenate([-plan.direction * speed, np.zeros(3)])
     start = np.asarray(arm.read_state().tcp_pose[:3])
@@ -288,14 +306,6 @@ def contact_travel_mm(contact_pose: np.ndarray | None, plan: PressPlan) -> float
     if contact_pose is None:
         return math.nan
     return 1000.0 * float(np.dot(np.asarray(contact_pose[:3]) - np.asarray(plan.start_pose[:3]), plan.direction))
-
-
-def _retract_quietly(arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfig) -> None:
-    streams.phase = "retract"
-    try:
-        _retract(arm, streams, plan, press)
-    except (TravelLimit, SafetyLimit, DeviceTimeout):
-        stop_arm(arm)
 
 
 def _to_record(

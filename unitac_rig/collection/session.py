@@ -35,7 +35,7 @@ import numpy as np
 
 from drivers.arm import Arm
 from drivers.errors import ArmError, ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop
-from drivers.motion import check_controller, settle
+from drivers.motion import settle
 from drivers.sensor import TactileSensor
 from unitac_rig.collection.press import run_press, zero_wrist
 from unitac_rig.collection.streams import TickInfo
@@ -167,8 +167,13 @@ def collect_session(
     # one that takes longer than that (a slow disk, a device that does not answer).
     try:
         arm = rig.arm
-        check_session_plan(arm.read_state().tcp_pose, todo, config.object.clearance_mm / 1000.0, config.limits,
-                           confirmed_standoff_mm(config))  # fmt: skip
+        check_session_plan(
+            arm.read_state().tcp_pose,
+            todo,
+            config.object.clearance_mm / 1000.0,
+            config.limits,
+            confirmed_standoff_mm(config),
+        )
         with _kept_alive(arm):  # python-can's slcan alone waits 2 s after opening the port
             sensor = rig.open_sensor(sensor_name)
     except BaseException:
@@ -189,8 +194,20 @@ def collect_session(
             _say_load_left(rig, exc, outcome)
             raise
         try:
-            _press_all(rig, obj, sensor, sensor_name, todo, writer, extraction, outcome, on_press, on_tick,
-                       ask_operator, len(rotations))  # fmt: skip
+            _press_all(
+                rig,
+                obj,
+                sensor,
+                sensor_name,
+                todo,
+                writer,
+                extraction,
+                outcome,
+                on_press,
+                on_tick,
+                ask_operator,
+                len(rotations),
+            )
         except BaseException as exc:
             _say_load_left(rig, exc, outcome)
             raise
@@ -229,7 +246,7 @@ def _press_all(
         if plan.rotation_deg != current_rotation:
             confirmed = False  # the placement is unknown again after the object is turned
             if previous is not None:  # out to the clearance radius before anyone turns the object by hand
-                _retract_from_object(rig, previous)
+                _retract(rig, previous, best_effort=False)
             rig.mount(obj, plan.rotation_deg, sensor_name)
             if ask_operator is not None and not rig.simulated and n_rotations > 1:
                 with rig.arm.keep_alive():
@@ -237,8 +254,9 @@ def _press_all(
             current_rotation = plan.rotation_deg
         if confirmed:  # the object stands where measured: a shorter free-air approach (and return to it)
             plan = with_standoff(plan, confirmed_standoff_mm(config))
-        record, stop = _one_press(rig, sensor, plan, writer, extraction, outcome, on_tick,
-                                  moves_limits(config, confirmed))  # fmt: skip
+        record, stop = _one_press(
+            rig, sensor, plan, writer, extraction, outcome, on_tick, moves_limits(config, confirmed)
+        )
         previous = plan
         confirmed = confirmed or (record is not None and placement_confirmed(record, config))
         if on_press is not None and record is not None:
@@ -395,10 +413,12 @@ def session_tare(
     """
     config = rig.config
     free = free if free is not None else unload_wrist(rig.arm, config.limits, zero=zero)
-    move_clear(rig.arm, first, config.object.clearance_mm / 1000.0, config.press.transit_speed_mm_s / 1000.0,
-               config.limits)  # fmt: skip
-    frames, wrenches = zero_wrist(rig.arm, sensor, 0.3, f"the first stand-off ({first.press_id})",
-                                  reference=free.free_reading)  # fmt: skip
+    move_clear(
+        rig.arm, first, config.object.clearance_mm / 1000.0, config.press.transit_speed_mm_s / 1000.0, config.limits
+    )
+    frames, wrenches = zero_wrist(
+        rig.arm, sensor, 0.3, f"the first stand-off ({first.press_id})", reference=free.free_reading
+    )
     with rig.arm.keep_alive():  # a device bias waits for the sensor to settle; the arm rests meanwhile
         record = sensor.tare(frames)
     sensor.poll()  # frames from during a device bias are not kept
@@ -435,9 +455,14 @@ def _one_press(
     for attempt in (1, 2):
         try:
             record = run_press(
-                rig.arm, sensor, plan, config.press, limits, on_tick=on_tick,
+                rig.arm,
+                sensor,
+                plan,
+                config.press,
+                limits,
+                on_tick=on_tick,
                 clearance_m=config.object.clearance_mm / 1000.0,
-            )  # fmt: skip
+            )
         except (SafetyLimit, ProtectiveStop, ArmError, KeyboardInterrupt) as exc:
             partial = exc.press_record if isinstance(exc, CarriesPressRecord) else None
             if partial is not None:
@@ -528,35 +553,24 @@ def _reconnect(rig: Rig, sensor: TactileSensor) -> None:
             if rig.clock.now_ns() >= deadline_ns:
                 raise
             log.info("sensor not back yet (%s); retrying in %.2f s", exc, RECONNECT_POLL_S)
-            raise_if_interrupted()  # a deferred Ctrl-C ends the wait (cli/signals.py)
+            raise_if_interrupted()  # a deferred Ctrl-C ends the wait (interrupts.py)
             rig.clock.sleep(RECONNECT_POLL_S)
 
 
-def _retract(rig: Rig, plan: PressPlan, *, to_clearance: bool = True) -> None:
-    """After an abort, pull the pad off the object from where the arm is (:func:`retract_from_object`), so a stopped
-    session never leaves the pad loaded. Not when the controller stopped on its own (protective stop, program
-    stopped): the operator decides on the pendant. Best effort: a failure is logged (the arm is stopped by then) and
-    the next run starts with a checked move from wherever the arm is."""
-    try:
-        check_controller(rig.arm.read_state(), "the retract")
-        _retract_from_object(rig, plan, to_clearance=to_clearance)
-    except (ProtectiveStop, ControlScriptStopped) as exc:
-        log.info("not retracting after press %s: %s", plan.press_id, exc)
-    except KeyboardInterrupt:
-        raise  # a second interrupt: the move stopped the arm on its way out
-    except Exception:
-        log.exception("retracting from the object after press %s failed; the arm is stopped", plan.press_id)
-
-
-def _retract_from_object(rig: Rig, plan: PressPlan, *, to_clearance: bool = True) -> None:
-    """:func:`retract_from_object` with the rig file's stand-off, clearance and transit speed (raises what it
-    raises)."""
+def _retract(rig: Rig, plan: PressPlan, *, to_clearance: bool = True, best_effort: bool = True) -> None:
+    """:func:`retract_from_object` with the rig file's stand-off, clearance and transit speed; best effort (logged,
+    not raised) unless ``best_effort=False``."""
     config = rig.config
     retract_from_object(
-        rig.arm, plan, config.limits, standoff_m=config.object.standoff_mm / 1000.0,
-        clearance_m=config.object.clearance_mm / 1000.0, transit_speed_m_s=config.press.transit_speed_mm_s / 1000.0,
+        rig.arm,
+        plan,
+        config.limits,
+        standoff_m=config.object.standoff_mm / 1000.0,
+        clearance_m=config.object.clearance_mm / 1000.0,
+        transit_speed_m_s=config.press.transit_speed_mm_s / 1000.0,
         to_clearance=to_clearance,
-    )  # fmt: skip
+        best_effort=best_effort,
+    )
 
 
 def _save(

@@ -168,12 +168,21 @@ class PressContext:
         if budget_m <= 0.0:
             return Move(self._reason("travel"), 0.0)
         result = guarded_move(
-            self._arm, self._plan.direction, speed_m_s, until_n,
-            max_travel_m=budget_m, stop_samples=samples, max_duration_s=budget_m / speed_m_s + PRESS_EXTRA_S,
-            settle_s=self._final_settle_s if final else DEFAULT_SETTLE_S, keep_moving=keep_moving,
-            hard_limit_n=self.limits.hard_force_n, hard_torque_nm=self.limits.hard_torque_nm,
-            on_period=self._streams.tick, force_setpoint_n=self._setpoint_n, setpoint_ceiling_n=self._ceiling_n,
-        )  # fmt: skip
+            self._arm,
+            self._plan.direction,
+            speed_m_s,
+            until_n,
+            max_travel_m=budget_m,
+            stop_samples=samples,
+            max_duration_s=budget_m / speed_m_s + PRESS_EXTRA_S,
+            settle_s=self._final_settle_s if final else DEFAULT_SETTLE_S,
+            keep_moving=keep_moving,
+            hard_limit_n=self.limits.hard_force_n,
+            hard_torque_nm=self.limits.hard_torque_nm,
+            on_period=self._streams.tick,
+            force_setpoint_n=self._setpoint_n,
+            setpoint_ceiling_n=self._ceiling_n,
+        )
         self._moving = keep_moving and result.reason == "force"
         return Move(self._reason(result.reason), result.travel_m)
 

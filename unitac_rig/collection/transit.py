@@ -17,7 +17,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from drivers.arm import Arm, ArmState
-from drivers.motion import move_to
+from drivers.errors import ControlScriptStopped, ProtectiveStop
+from drivers.motion import check_controller, move_to
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.interrupts import raise_if_interrupted
 from unitac_rig.rig.config import LimitsConfig
@@ -263,8 +264,11 @@ def check_session_plan(
         named.append(("press travel end", press_travel_end(plan, limits)))
         named.append(("retract waypoint", retract_waypoint(plan, clearance_m)))
         for what, waypoint in named:
-            check_waypoint(waypoint, limits, f"session plan (press {index + 1} of {len(plans)}): the {what} of press "
-                                             f"{plan.press_id}")  # fmt: skip
+            check_waypoint(
+                waypoint,
+                limits,
+                f"session plan (press {index + 1} of {len(plans)}): the {what} of press {plan.press_id}",
+            )
             checked += 1
         pose = plan.start_pose
     return checked
@@ -279,6 +283,7 @@ def retract_from_object(
     clearance_m: float,
     transit_speed_m_s: float,
     to_clearance: bool = True,
+    best_effort: bool = False,
 ) -> list[np.ndarray]:
     """After an abort: pull the pad off whatever it touches, from wherever the arm IS, never toward a pose that was
     not reached; -> the poses moved to.
@@ -291,7 +296,31 @@ def retract_from_object(
     box and reach (a leg that would leave them ends at their edge). The next press then starts with a fresh,
     checked move (:func:`move_clear`). Raises what the moves raise (SafetyLimit when the guard trips, the arm
     stopped).
+
+    ``best_effort`` (a session stopping, so it never leaves the pad loaded): not when the controller stopped on its
+    own (protective stop, program stopped: the operator decides on the pendant), and a failure is logged, not raised
+    (the arm is stopped by then; the next run starts with a checked move from wherever the arm is). A second Ctrl-C
+    still ends it (the move stopped the arm on its way out).
     """
+    if best_effort:
+        try:
+            check_controller(arm.read_state(), "the retract")
+            return retract_from_object(
+                arm,
+                plan,
+                limits,
+                standoff_m=standoff_m,
+                clearance_m=clearance_m,
+                transit_speed_m_s=transit_speed_m_s,
+                to_clearance=to_clearance,
+            )
+        except (ProtectiveStop, ControlScriptStopped) as exc:
+            log.info("not retracting after press %s: %s", plan.press_id, exc)
+        except KeyboardInterrupt:
+            raise
+        except Exception:
+            log.exception("retracting from the object after press %s failed; the arm is stopped", plan.press_id)
+        return []
     state = arm.read_state()
     here = np.asarray(state.tcp_pose, dtype=np.float64)
     center = np.asarray(plan.center_xy_m, dtype=np.float64)

@@ -48,7 +48,7 @@ class LiveModel:
 
     def __init__(self, run_dir: Path, sensor: str, member: int = 0, geometry: bool = True) -> None:
         from unitac_rig.learning.engine import UNITAC_GROUP
-        from unitac_rig.learning.safetensors_export import hub_model
+        from unitac_rig.learning.export import hub_model
         from unitac_rig.learning.train import load_run
 
         run = load_run(Path(run_dir))

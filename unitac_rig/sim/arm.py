@@ -35,7 +35,7 @@ advances the clock (which makes simulated sensors emit the samples that fall due
 If other code advances the clock directly (a host stall injected by a test or benchmark), the arm integrates those
 periods too (it listens to the clock), exactly as a controller goes on while its host is frozen.
 
-Why one module of ~710 lines: the kinematics, the F/T model and the controller-program model (watchdog, protective
+Why one module: the kinematics, the F/T model and the controller-program model (watchdog, protective
 stop) all act on one state per control period.
 """
 

@@ -31,7 +31,7 @@ Gotchas found by running ``rtde_receive.RTDEReceiveInterface`` (ur-rtde 1.6.5) a
 * ``disconnect()`` takes about 0.5 s; on a failed connection the C++ library prints ``connect: Connection refused``
   to stderr itself before raising ``RuntimeError``.
 
-Why one module of ~720 lines: the RTDE session state machine, the variable type table that must agree with
+Why one module: the RTDE session state machine, the variable type table that must agree with
 ur_rtde's, and the child-process server with its seqlocked shared state are one contract with the real client.
 """
 

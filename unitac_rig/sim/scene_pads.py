@@ -18,7 +18,7 @@ from unitac_rig.rig.objects import MaterialSpec
 from unitac_rig.sim.scene_geometry import Section
 
 if TYPE_CHECKING:
-    from unitac_rig.sim.scene import SceneParams
+    from unitac_rig.sim.scene_params import SceneParams
 
 log = logging.getLogger(__name__)
 

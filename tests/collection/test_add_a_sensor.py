@@ -37,7 +37,7 @@ from unitac_rig.rig.objects import get_object
 from unitac_rig.rig.sensors import SENSORS, SensorConfigBase, SensorSpec, SyntheticResponse
 from unitac_rig.sim.fast_rig import SimRig, seeded_scene
 from unitac_rig.sim.sensor_models import model_for
-from unitac_rig.sim.signals import SensorSample, SignalSource
+from unitac_rig.sim.sensor_signals import SensorSample, SignalSource
 from unitac_rig.sim.twin import first_free_loopback
 from unitac_rig.storage.reader import load_matched_set
 from unitac_rig.storage.recorder import session_path

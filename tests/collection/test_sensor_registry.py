@@ -24,7 +24,7 @@ from unitac_rig.rig.hardware import HardwareRig
 from unitac_rig.rig.sensors import SENSORS, SensorConfigBase, SensorSpec
 from unitac_rig.sim.fast_rig import SimRig
 from unitac_rig.sim.scene import TaxelLoads
-from unitac_rig.sim.signals import SensorSample, SignalSource
+from unitac_rig.sim.sensor_signals import SensorSample, SignalSource
 from unitac_rig.storage.reader import load_matched_set
 from unitac_rig.storage.recorder import session_path
 from unitac_rig.storage.summary import inspect_dataset

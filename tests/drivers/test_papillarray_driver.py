@@ -19,7 +19,7 @@ from protocols.papillarray import PapillArrayPacket, PillarSensorData, encode_pa
 from tests.drivers.driver_helpers import PERIOD_NS, run_mode, step
 from unitac_rig.sim.devices import SimPapillArrayHub
 from unitac_rig.sim.faults import FaultPlan
-from unitac_rig.sim.signals import SensorSample, SignalSource
+from unitac_rig.sim.sensor_signals import SensorSample, SignalSource
 from unitac_rig.sim.synthetic_sources import PapillArrayPressSource, RecordingSource
 
 

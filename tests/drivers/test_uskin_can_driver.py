@@ -18,7 +18,7 @@ from drivers.uskin import UskinCanDriver, open_can_bus
 from tests.drivers.driver_helpers import PERIOD_NS, collect, run_mode, step
 from unitac_rig.sim.devices import SimSlcanAdapter, SimXelaController, counts_from_sample
 from unitac_rig.sim.faults import FaultPlan
-from unitac_rig.sim.signals import SensorSample, SignalSource
+from unitac_rig.sim.sensor_signals import SensorSample, SignalSource
 from unitac_rig.sim.synthetic_sources import RecordingSource, UskinPressSource
 
 _channels = itertools.count()

@@ -19,7 +19,7 @@ from tests.drivers.driver_helpers import collect
 from unitac_rig.sim.devices import counts_from_sample
 from unitac_rig.sim.devices.xela_server import SimXelaServer
 from unitac_rig.sim.faults import FaultPlan
-from unitac_rig.sim.signals import SensorSample
+from unitac_rig.sim.sensor_signals import SensorSample
 from unitac_rig.sim.synthetic_sources import RecordingSource, UskinPressSource
 
 RATE_HZ = 500  # fast, to keep the real-time tests short

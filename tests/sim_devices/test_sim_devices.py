@@ -22,7 +22,7 @@ from protocols.xela_can import USPA46_ID_MAP, decode_taxel_message
 from unitac_rig.sim.devices import SimPapillArrayHub, SimSlcanAdapter, SimXelaController
 from unitac_rig.sim.devices.xela_server import SimXelaServer
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
-from unitac_rig.sim.signals import SensorSample
+from unitac_rig.sim.sensor_signals import SensorSample
 from unitac_rig.sim.synthetic_sources import PapillArrayPressSource, UskinPressSource
 
 _channels = itertools.count()

@@ -43,7 +43,7 @@ from unitac_rig.sim.imperfections import (
 )
 from unitac_rig.sim.scene import PressScene, SceneParams, TaxelLoads
 from unitac_rig.sim.sensor_models import timed_sampler
-from unitac_rig.sim.signals import SensorSample, SignalSource
+from unitac_rig.sim.sensor_signals import SensorSample, SignalSource
 from unitac_rig.sim.world import NO_WRENCH
 
 log = logging.getLogger(__name__)

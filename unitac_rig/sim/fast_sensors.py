@@ -36,7 +36,7 @@ from unitac_rig.rig.sensors import SENSORS, get_sensor
 from unitac_rig.sim.faults import FaultPlan
 from unitac_rig.sim.imperfections import Imperfections
 from unitac_rig.sim.sensor_models import PapillArrayModel, UskinModel
-from unitac_rig.sim.signals import SignalSource
+from unitac_rig.sim.sensor_signals import SignalSource
 
 _Device = TypeVar("_Device")
 Serve = Callable[[_Device], _Device]  # keeps a simulated device running until the twin closes; returns it

@@ -26,7 +26,7 @@ from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
 from unitac_rig.sim.ft_noise import NormalBlocks
 from unitac_rig.sim.imperfections import CLEAN, ElastomerMemory, Imperfections, RandomWalk
 from unitac_rig.sim.scene import SceneParams, TaxelLoads
-from unitac_rig.sim.signals import SensorSample
+from unitac_rig.sim.sensor_signals import SensorSample
 
 COUNTS_MAX = 65535  # 16-bit unsigned per axis [S: XELA controller version 3]
 

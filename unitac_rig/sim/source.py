@@ -1,4 +1,4 @@
-"""The press scene as a :class:`~unitac_rig.sim.signals.SignalSource`: what the simulated sensor device sends.
+"""The press scene as a :class:`~unitac_rig.sim.sensor_signals.SignalSource`: what the simulated sensor device sends.
 
 Each sample asks ``pose_provider`` for the arm's current TCP pose (the simulated arm's state, base frame), asks the
 scene what every taxel feels there, and turns that into wire units with the sensor's output model. The simulated
@@ -14,7 +14,7 @@ import numpy as np
 from unitac_rig.errors import ConfigError
 from unitac_rig.sim.scene import PressScene
 from unitac_rig.sim.sensor_models import PapillArrayModel, UskinModel, model_for, timed_sampler
-from unitac_rig.sim.signals import SensorSample
+from unitac_rig.sim.sensor_signals import SensorSample
 
 
 class SceneSensorSource:

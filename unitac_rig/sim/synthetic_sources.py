@@ -1,4 +1,4 @@
-"""Synthetic :class:`~unitac_rig.sim.signals.SignalSource` s: repeating presses with plausible baselines and noise.
+"""Synthetic sensor signals (:class:`~unitac_rig.sim.sensor_signals.SignalSource`): repeating presses with noise.
 
 They stand in for the press scene when a simulated device needs *something* to send (tests, ``probe --simulated``).
 Every sample is a pure function of ``(seed, t_ns)``, so a device that samples the same instants sends the same values
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.layouts import PAPILLARRAY, USKIN
-from unitac_rig.sim.signals import SensorSample, SignalSource
+from unitac_rig.sim.sensor_signals import SensorSample, SignalSource
 
 PILLAR_AXIAL_STIFFNESS_N_PER_MM = 6.0
 PILLAR_LATERAL_STIFFNESS_N_PER_MM = 4.0

@@ -32,8 +32,8 @@ from protocols.papillarray_commands import Command as HubCommandKind
 from protocols.papillarray_commands import CommandParser
 from unitac_rig.sim.devices._timing import SampleTimer
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
+from unitac_rig.sim.sensor_signals import SignalSource
 from unitac_rig.sim.serial_urls import SimSerialEndpoint, unique_name
-from unitac_rig.sim.signals import SignalSource
 
 logger = logging.getLogger(__name__)
 

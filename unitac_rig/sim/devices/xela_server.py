@@ -25,7 +25,7 @@ from protocols.xela_ws import XelaSensorData, encode_data_message, encode_welcom
 from unitac_rig.sim.devices._timing import SampleTimer
 from unitac_rig.sim.devices.xela_can import counts_from_sample
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
-from unitac_rig.sim.signals import SignalSource
+from unitac_rig.sim.sensor_signals import SignalSource
 
 logger = logging.getLogger(__name__)
 

@@ -38,7 +38,7 @@ from unitac_rig.rig.objects import get_object
 from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation
 from unitac_rig.rig.sensors import sensor_layout, sensor_names
 from unitac_rig.sim.fast_sensors import configured_sensors
-from unitac_rig.sim.signals import SignalSource
+from unitac_rig.sim.sensor_signals import SignalSource
 from unitac_rig.sim.twin.controller import build_scene
 from unitac_rig.sim.twin.handle import ControllerTwin
 from unitac_rig.sim.twin.params import ControllerParams, SceneSpec

@@ -11,11 +11,13 @@ contact's lateral force is bounded by nothing but stiffness (hardware-facts 3.6)
 that stands where the rig file says touches it with its face: the contact normal is the press axis and Coulomb
 friction bounds the lateral force by mu x the press force. A lateral force beyond that means the normal itself is
 tilted: the object touches the pad's rim (it stands to the side, or the pad is not over it). The bound is
-``OFF_AXIS_FRICTION`` x (filtered press force) + ``OFF_AXIS_FLOOR_N``: 0.8 is 1.8x the largest friction coefficient
+``OFF_AXIS_FRICTION`` x (filtered press force) + ``OFF_AXIS_FLOOR_N``: 0.7 is 1.55x the largest friction coefficient
 the project knows (the PapillArray's silicone pillars on printed plastic, fitted 0.45 in sim/scene.py, which the
-simulated square's corners reach), and the floor covers the wrist's noise in two axes (~0.4 N per axis after the
-controller's filter, ~0.25 N for the mean of the 20 ms window the check reads, so that noise alone stays 6 sigma
-under it). At the 10 N threshold it lets |F| reach sqrt(10.2^2 + 9.7^2) = 14.1 N at most, under the 15 N the issue asks.
+simulated square's corners reach), and the floor covers what the wrist reads across the axis with no contact: its
+noise after the controller's filter is correlated over ~8 ms, so the 20 ms mean the check reads still swings by
+1-2 N (a 1.5 N floor stopped 1 of 91 well-placed hex_tpu presses on the twin before contact), and a UR5e's F/T
+precision is +-3.5 N (hardware-facts 3). At the 10 N threshold it lets |F| reach sqrt(10.2^2 + 10.1^2) = 14.4 N at
+most, under the 15 N the issue asks.
 """
 
 from __future__ import annotations
@@ -43,8 +45,8 @@ HOST_GAP_EVENT_S = 0.02  # controller-clock gaps between two reads longer than t
 # object reads -10 N. The stop rule's 100 ms window alone let a stiff object reach the hard limit first.
 SIGN_SAMPLES = 10
 SIGN_FACTOR = 1.5
-OFF_AXIS_FRICTION = 0.8  # lateral force allowed per newton of press force (a friction cone of 38.7 deg), see above
-OFF_AXIS_FLOOR_N = 1.5  # lateral force allowed at no press force (noise and accuracy), N
+OFF_AXIS_FRICTION = 0.7  # lateral force allowed per newton of press force (a friction cone of 35 deg), see above
+OFF_AXIS_FLOOR_N = 3.0  # lateral force allowed at no press force (the wrist's noise across the axis), N
 OFF_AXIS_PHASES = ("approach", "press", "dwell")  # while the pad is driven into the object or held there
 
 

@@ -175,9 +175,12 @@ def test_inspect_names_an_unfinished_session_and_its_command_resumes_it(tmp_path
 
 
 def _digest(folder: Path) -> str:
-    """The data files (the session lease's lock file notes who read last: not data)."""
+    """The data files (the session lease's lock file notes who read last, the readers' verify-once cache what they
+    verified: neither is data)."""
     h = hashlib.sha256()
-    for path in sorted(p for p in folder.rglob("*") if p.is_file() and p.name != "_writer.lock"):
+    for path in sorted(
+        p for p in folder.rglob("*") if p.is_file() and p.name not in ("_writer.lock", "_verified.json")
+    ):
         h.update(path.name.encode() + path.read_bytes())
     return h.hexdigest()
 

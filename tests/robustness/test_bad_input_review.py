@@ -17,7 +17,7 @@ from protocols import rtde
 from protocols.rtde import ControllerVersion
 from tests.helpers import cli
 from tests.robustness.robustness_helpers import one_error_line, tree_hashes
-from unitac_rig.learning.run import CHECKPOINT_FORMAT, checkpoint_path
+from unitac_rig.learning.run import CHECKPOINT_FORMAT, CHECKPOINT_VERSION, checkpoint_path
 from unitac_rig.rig.config import load_rig_config
 
 COLLECT = ["collect", "--object", "hex_tpu", "--no-live"]
@@ -119,8 +119,8 @@ def test_a_checkpoint_with_nan_weights_is_refused_not_translated_to_nan(
     weights[1, 3] = math.nan
     payload = {
         "format": CHECKPOINT_FORMAT,
-        "version": 2,
-        "engine": {"parameters": {"uskin.enc.0": {"weight": weights, "bias": torch.zeros(4)}}},
+        "version": CHECKPOINT_VERSION,
+        "engine": {"state_dict": {"uskin.enc.0.weight": weights, "uskin.enc.0.bias": torch.zeros(4)}},
     }
     torch.save(payload, checkpoint_path(run))
     out = tmp_path / "out.npy"
@@ -131,7 +131,7 @@ def test_a_checkpoint_with_nan_weights_is_refused_not_translated_to_nan(
         == 1
     )
     line = one_error_line(capsys)
-    assert "NaN or infinite values in engine.parameters.uskin.enc.0.weight" in line and "retrain" in line
+    assert "NaN or infinite values in engine.uskin.enc.0.weight" in line and "retrain" in line
     assert not out.exists()
 
 

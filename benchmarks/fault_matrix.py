@@ -787,6 +787,9 @@ def main() -> None:
         write_docs(json.loads(args.out.read_text()), args.docs)
         print(f"table written into {args.docs} ({DOC_SECTION})")
         return
+    if args.merge is not None and args.out.resolve() == args.merge.resolve():
+        # the rows are written after every one; into the merge target itself, they would replace the rows kept there
+        args.out = Path(tempfile.mkdtemp(prefix="fault_matrix_rows_")) / "rows.json"
     chosen = scenarios()
     if args.quick:
         chosen = [s for s in chosen if s.row in QUICK_ROWS]

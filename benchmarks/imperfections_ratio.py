@@ -23,17 +23,10 @@ from typing import Any
 import numpy as np
 
 from unitac_rig.bench import write_json
-from unitac_rig.learning.paper import PAPER_TABLE1
+from unitac_rig.learning.paper import PAPER_TABLE1, TABLE1_COLUMNS
 from unitac_rig.storage.paired import build_paired_dataset, load_sets
 
-COLUMNS = (
-    "ae_uskin",
-    "ae_papillarray",
-    "uskin_to_uskin",
-    "uskin_to_papillarray",
-    "papillarray_to_papillarray",
-    "papillarray_to_uskin",
-)
+COLUMNS = TABLE1_COLUMNS
 SEEN, UNSEEN = "all_seen", "irregular_pla"
 FACTOR = 1.5  # the tolerance on each column's ratio
 

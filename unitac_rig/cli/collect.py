@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -31,6 +32,7 @@ from unitac_rig.rig.config import RigConfig, load_rig_config, parse_rig_config
 from unitac_rig.rig.objects import ObjectSpec, get_object, list_objects
 from unitac_rig.rig.sensors import sensor_layout, sensor_names
 from unitac_rig.rig.strategies import PRESS_STRATEGIES
+from unitac_rig.sim.imperfections import Imperfections
 from unitac_rig.storage.extraction import ExtractionSettings
 from unitac_rig.storage.press_record import FINISHED_STATUSES
 from unitac_rig.storage.reader import list_sessions, press_summaries, read_session_info
@@ -56,6 +58,13 @@ def _spoken(names: list[str]) -> str:
     return f"{', '.join(names[:-1])} or {names[-1]}" if len(names) > 1 else names[0]
 
 
+IMPERFECTIONS_OPTION = typer.Option(
+    "all",
+    "--imperfections",
+    metavar="LIST",
+    help="Simulated rig: which real-sensor imperfections it has: all, none (the clean twin), all,-creep, or names "
+    f"from {', '.join(f.name for f in dataclasses.fields(Imperfections))}.",
+)
 _PRESS = RigConfig().press  # the rig file's defaults, for the help of the options that override them
 
 
@@ -333,13 +342,7 @@ def collect(
         None, "--rotation", metavar="DEG", show_default="every rotation", help="Sweep this object rotation only."
     ),
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed (runs are deterministic per seed)."),
-    imperfections: str = typer.Option(
-        "all",
-        "--imperfections",
-        metavar="LIST",
-        help="Simulated rig: which real-sensor imperfections it has: all, none (the clean twin), all,-creep, or "
-        "names from hysteresis, creep, drift, gain_spread, crosstalk, print_tolerance, mount_offset.",
-    ),
+    imperfections: str = IMPERFECTIONS_OPTION,
     angles: int | None = typer.Option(
         None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
     ),
@@ -405,13 +408,7 @@ def campaign(
     rig_file: Path | None = RIG_OPTION,
     data: Path = DATA_OPTION,
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed."),
-    imperfections: str = typer.Option(
-        "all",
-        "--imperfections",
-        metavar="LIST",
-        help="Simulated rig: which real-sensor imperfections it has: all, none (the clean twin), all,-creep, or "
-        "names from hysteresis, creep, drift, gain_spread, crosstalk, print_tolerance, mount_offset.",
-    ),
+    imperfections: str = IMPERFECTIONS_OPTION,
     angles: int | None = typer.Option(
         None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
     ),

@@ -100,6 +100,21 @@ class PapillArrayParams:
     axis_crosstalk_sd: float = 0.03  # [I] each pillar's force axes mix by sd 3 % through its calibration
 
 
+def elastomer_for(n_taxels: int, params: Any, imperfections: Imperfections) -> ElastomerMemory | None:
+    """The elastomer's memory (hysteresis and creep) of a sensor model's ``params`` (its ``full_scale_n``,
+    ``hysteresis_fraction``, ``creep_fraction``, ``creep_tau_s``), with the switched-off terms at 0; None when both
+    are off, so the clean twin computes nothing for it."""
+    if not (imperfections.hysteresis or imperfections.creep):
+        return None
+    return ElastomerMemory(
+        n_taxels,
+        full_scale_n=params.full_scale_n,
+        hysteresis_fraction=params.hysteresis_fraction if imperfections.hysteresis else 0.0,
+        creep_fraction=params.creep_fraction if imperfections.creep else 0.0,
+        creep_tau_s=params.creep_tau_s,
+    )
+
+
 class UskinModel:
     """Taxel loads (N) -> uSkin raw counts (float; the device encoder rounds).
 
@@ -137,17 +152,7 @@ class UskinModel:
             dist = np.linalg.norm(xy[:, None, :] - xy[None, :, :], axis=2)
             pitch = float(np.min(dist[dist > 0]))
             self.neighbours = np.where((dist > 0) & (dist < 1.2 * pitch), p.neighbour_crosstalk, 0.0)
-        self.elastomer = (
-            ElastomerMemory(
-                n,
-                full_scale_n=p.full_scale_n,
-                hysteresis_fraction=p.hysteresis_fraction if imperfections.hysteresis else 0.0,
-                creep_fraction=p.creep_fraction if imperfections.creep else 0.0,
-                creep_tau_s=p.creep_tau_s,
-            )
-            if imperfections.hysteresis or imperfections.creep
-            else None
-        )
+        self.elastomer = elastomer_for(n, p, imperfections)
         self.drift = RandomWalk((n, 3), p.drift_counts_per_sqrt_s) if imperfections.drift else None
         self._t_ns = 0  # the sample clock when a caller gives none: 100 Hz
         # every sample's noise from here on: the same normals rng.normal drew one sample at a time, a block at once
@@ -221,17 +226,7 @@ class PapillArrayModel:
                 mix[:, np.arange(3), np.arange(3)] = 0.0
                 force_map += mix
             self.force_map = force_map
-        self.elastomer = (
-            ElastomerMemory(
-                n,
-                full_scale_n=p.full_scale_n,
-                hysteresis_fraction=p.hysteresis_fraction if imperfections.hysteresis else 0.0,
-                creep_fraction=p.creep_fraction if imperfections.creep else 0.0,
-                creep_tau_s=p.creep_tau_s,
-            )
-            if imperfections.hysteresis or imperfections.creep
-            else None
-        )
+        self.elastomer = elastomer_for(n, p, imperfections)
         self.drift = RandomWalk((n, 3), p.drift_mm_per_sqrt_s) if imperfections.drift else None
         self._t_ns = 0
         self._normals = NormalBlocks(self.rng)  # every sample's noise from here on (see UskinModel)

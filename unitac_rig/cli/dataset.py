@@ -222,8 +222,8 @@ def export(
     ),
 ) -> None:
     """Write the force-matched paired dataset as Parquet, the raw sessions, a dataset card and manifest.json
-    (--format lerobot: one LeRobotDataset v3 per sensor, a press per episode; --format rosbag2: one ROS 2 bag per
-    session; see docs/share-your-data.md)."""
+    (--format lerobot: one LeRobotDataset v3 per sensor, a press per episode, or rosbag2: a ROS 2 bag per session,
+    see docs/share-your-data.md)."""
     if fmt not in ("parquet", "lerobot", "rosbag2"):
         raise UsageError(f"--format {fmt}: unknown export format", hint="use parquet, lerobot or rosbag2")
     if out.exists() and (not out.is_dir() or any(out.iterdir())):  # a usage error like export-model's: exit 2

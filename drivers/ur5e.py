@@ -47,7 +47,7 @@ Gotchas: ur_rtde's Python constructors hold the GIL until the handshake finishes
 process would deadlock, hence the twins' server processes); the C++ library prints to file descriptor 2 itself
 (e.g. ``connect: Connection refused``), so the constructors run with fd 2 routed to the log.
 
-Why one module of ~670 lines: every ur_rtde control call the project makes goes through the same error mapping and
+Why one module: every ur_rtde control call the project makes goes through the same error mapping and
 safety checks here (watchdog, stops, TCP/payload read-back).
 """
 

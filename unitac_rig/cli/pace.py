@@ -1,5 +1,6 @@
 """Time left at this run's pace, said as a person would (``about 12 min left``): the progress lines of ``collect``,
-``campaign`` and ``train`` share it, so an estimate reads the same everywhere.
+``campaign`` and ``train`` all say a duration with :func:`spoken_duration`, so an estimate reads the same everywhere;
+``train`` measures its pace per epoch with :class:`Pace` (``collect`` and ``campaign`` count presses themselves).
 
 The pace is measured on this run only (work done before a resume does not count: it took no time here), so the
 estimate follows the load of the machine it runs on rather than a figure measured elsewhere.

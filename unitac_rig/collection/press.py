@@ -42,6 +42,7 @@ from unitac_rig.collection.transit import (
     move_clear,
     transit_guard,
 )
+from unitac_rig.collection.wrist import force_n
 from unitac_rig.errors import SafetyLimit, with_press_record
 from unitac_rig.rig.config import LimitsConfig, PressConfig
 from unitac_rig.storage.press_record import PressRecord
@@ -106,7 +107,6 @@ def zero_wrist(
     settle_s: float,
     where: str,
     *,
-    check_unloaded: bool = True,
     check_s: float | None = None,
     reference: np.ndarray | None = None,
 ) -> tuple[list[TactileFrame], np.ndarray]:
@@ -117,14 +117,13 @@ def zero_wrist(
     The unloaded check compares the mean wrench with ``reference`` (6,), an unloaded reading (the session's first
     zero passes the free reading its back-off found, collection/wrist.py); without one, with the controller's zero,
     which the last zero set on an unloaded pad (a UR's F/T drifts by well under ``UNLOADED_FORCE_N`` between
-    presses). ``check_unloaded=False`` skips it: only for a caller that proved the pad free itself. After zeroing,
+    presses). There is no way to skip it: a zero under load is what pressed a resumed pad to 28-30 N. After zeroing,
     the window's mean must be near zero.
     """
     wait_until_at_rest(arm)
     before, mean_wrench = settle_frames(arm, sensor, settle_s if check_s is None else check_s)
-    loaded = mean_wrench[:3] if reference is None else mean_wrench[:3] - np.asarray(reference, dtype=np.float64)[:3]
-    mean_force = float(np.linalg.norm(loaded))
-    if check_unloaded and mean_force > UNLOADED_FORCE_N:
+    mean_force = force_n(mean_wrench, reference)
+    if mean_force > UNLOADED_FORCE_N:
         raise SafetyLimit(
             f"wrist reads {mean_force:.2f} N at {where}: the pad is touching something, refusing to zero the F/T",
             hint="check the object's position (object.center_m) and the stand-off in the rig file",

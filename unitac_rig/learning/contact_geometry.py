@@ -23,7 +23,7 @@ The trained MLPs are kept in the run (``geometry_estimator.pt``: tensors and pla
 ``weights_only=True``; ``geometry_estimator.json`` for people) and applied to new frames by :func:`predict_geometry`
 (``unitac-rig geometry RUN --predict FRAMES --sensor S``).
 
-Why one module of ~580 lines: ground-truth profiles, the estimator's training, its saved form and prediction share
+Why one module: ground-truth profiles, the estimator's training, its saved form and prediction share
 the profile layout.
 """
 

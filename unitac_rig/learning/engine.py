@@ -31,7 +31,7 @@ Layout of a frame in the model: the sensor's (n_taxels, 3) frame flattened taxel
 (:class:`unitac_rig.learning.data.Normaliser`); the decoder of a group outputs the concatenation of its sensors'
 frames in the group's sensor order.
 
-Why one module of ~800 lines: the stacked layers, the dropout masks, the masked loss, frozen layers, the checkpoint
+Why one module: the stacked layers, the dropout masks, the masked loss, frozen layers, the checkpoint
 state and the plain per-member network all index one (member, layer) layout; apart, each piece would have to
 re-explain that layout.
 """

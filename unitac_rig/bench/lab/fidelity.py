@@ -10,7 +10,7 @@ reading per tactile sample).
 
 The recorded numbers are carried here (:data:`RECORDED`), not read from anywhere at run time.
 
-Why one module of ~680 lines: the recorded numbers, the measurement, the verdicts, the refit and the figure share
+Why one module: the recorded numbers, the measurement, the verdicts, the refit and the figure share
 the same targets and tolerances.
 """
 

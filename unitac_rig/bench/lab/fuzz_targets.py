@@ -2,7 +2,7 @@
 decode path where there is one, and what they share: one input (:class:`Case`), the :class:`Target` interface and the
 input generators.
 
-Why one module of ~870 lines: five targets of about 130 lines each (input kinds, the check, the long-lived stream),
+Why one module: five targets of about 130 lines each (input kinds, the check, the long-lived stream),
 alike in shape, read side by side, after the interface and generators they all use.
 """
 

@@ -25,7 +25,7 @@ contacts. All members (seeds) and training sensors of a fold are trained togethe
 Standard deviations are population ones (``ddof=0``), as ``metrics.json``'s ``table1_std``. The figures are drawn at
 the end of this module.
 
-Why one module of ~720 lines: the analysis and its three figures (which read its METRICS); its three reports share the
+Why one module: the analysis and its three figures (which read its METRICS); its three reports share the
 cross-validated fold machinery.
 """
 

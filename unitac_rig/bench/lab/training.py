@@ -21,7 +21,7 @@ the other jobs too; wall-clock rates are kept in the JSON.
 
 Everything runs on the CPU at one torch thread, as ``unitac-rig train`` does on a CPU.
 
-Why one module of ~470 lines: three trainers (stacked, vmap, plain loop) run under one interleaved timing harness so
+Why one module: three trainers (stacked, vmap, plain loop) run under one interleaved timing harness so
 their numbers are comparable.
 """
 

@@ -50,46 +50,13 @@ def tree_hashes(root: Path) -> dict[str, str]:
 def write_synthetic_sessions(data_dir: Path, objects: tuple[str, ...] = ("circle_pla", "irregular_pla")) -> None:
     """Session files (through the real recorder) holding synthetic contacts of both sensors: enough to train on.
 
-    Each press is a 5 N/s ramp at 500 Hz with one tactile frame at each target's crossing.
+    Each press is a 5 N/s ramp at 500 Hz with one tactile frame at each target's crossing (the learning tests'
+    :func:`~tests.learning.learning_helpers.write_sessions`, at 11 angles and 4 targets).
     """
-    import numpy as np
-
     from drivers.layouts import PAPILLARRAY, USKIN
+    from tests.learning.learning_helpers import write_sessions
     from unitac_rig.learning.synthetic_data import synthetic_matched_sets
-    from unitac_rig.storage.extraction import ExtractionSettings, extract_press
-    from unitac_rig.storage.press_record import PressRecord, press_id
-    from unitac_rig.storage.recorder import SessionWriter
 
-    targets = (4.0, 6.0, 8.0, 10.0)
     angles = tuple(float(a) for a in range(-45, 46, 9))
-    for matched in synthetic_matched_sets(objects, (USKIN, PAPILLARRAY), angles_deg=angles, targets_n=targets):
-        attrs = {"object": matched.object_id, "sensor": matched.sensor, "simulated": True}
-        writer = SessionWriter(data_dir, matched.object_id, matched.sensor, attrs)
-        for rotation, angle in sorted(set(zip(matched.rotation_deg.tolist(), matched.angle_deg.tolist(), strict=True))):
-            rows = np.flatnonzero((matched.rotation_deg == rotation) & (matched.angle_deg == angle))
-            rows = rows[np.argsort(matched.target_n[rows])]
-            robot_t = np.arange(0.0, 2.2, 0.002)
-            force = 5.0 * robot_t
-            tactile_t = matched.target_n[rows] / 5.0
-            settings = ExtractionSettings(targets_n=tuple(float(t) for t in matched.target_n[rows]))
-            n = len(rows)
-            writer.write_press(
-                PressRecord(
-                    press_id=press_id(rotation, angle),
-                    rotation_deg=rotation,
-                    angle_deg=angle,
-                    status="complete",
-                    reason="force",
-                    robot_t_s=robot_t,
-                    robot_force=np.zeros((robot_t.size, 6)),
-                    robot_pose=np.zeros((robot_t.size, 6)),
-                    press_force_n=force,
-                    tactile_t_s=tactile_t,
-                    tactile_values=matched.values[rows],
-                    tactile_seq=np.arange(n),
-                    tactile_device_t_us=np.full(n, -1),
-                    tactile_valid=np.ones(n, bool),
-                    tare_baseline=np.zeros(matched.values.shape[1:]),
-                    extraction=extract_press(robot_t, force, tactile_t, settings=settings),
-                )
-            )
+    sets = synthetic_matched_sets(objects, (USKIN, PAPILLARRAY), angles_deg=angles, targets_n=(4.0, 6.0, 8.0, 10.0))
+    write_sessions(data_dir, sets)

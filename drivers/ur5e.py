@@ -561,7 +561,13 @@ class UR5eArm:
             return  # setWatchdog would wait ur_rtde's 300 s for an answer; the armed watchdog stops the program
         rest_hz = min(REST_WATCHDOG_HZ, self._watchdog_hz)
         if always or self._watchdog_set_hz != rest_hz:
-            self._set_watchdog(rest_hz)
+            try:
+                self._set_watchdog(rest_hz)
+            except (ControlScriptStopped, ProtectiveStop):
+                # a stopped program has no watchdog left to relax and moves nothing: the caller's next state check
+                # reports the stop in its own words (which stop, and that the same command resumes)
+                if always:
+                    raise
 
     def _set_watchdog(self, frequency_hz: float) -> None:
         self._watchdog_set_hz = None  # unknown until the controller confirmed it

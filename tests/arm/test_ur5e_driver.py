@@ -555,3 +555,17 @@ def test_an_earlier_moves_finish_signal_cannot_end_the_next_move() -> None:
         control.move_periods = 0
         control.stop_moves()
         assert not arm.move_running()  # operation 2 finished
+
+
+def test_relaxing_the_watchdog_of_a_program_that_already_stopped_is_no_error_of_its_own() -> None:
+    """A host frozen 0.5 s mid-press: the controller's watchdog stopped the program; the press's force_mode_stop
+    then relaxes the watchdog. That setWatchdog is refused (no program runs), and the stop must surface as the
+    stopped program (which the press reports with what happened and how to resume), not as 'setWatchdog: ...'."""
+    control = FakeControl()
+    with UR5eArm("ur", control=control, receive=FakeReceive(), watchdog_hz=8.0) as arm:
+        arm.force_mode(np.zeros(6), np.array([0, 0, 1, 0, 0, 0]), np.array([0, 0, 5.0, 0, 0, 0]), np.full(6, 0.02))
+        control.program_running = False
+        control.results["setWatchdog"] = False
+        arm.force_mode_stop()  # nothing left to relax: no error of its own
+        with pytest.raises(ControlScriptStopped):
+            arm.speed_linear(np.array([0, 0, 0.005, 0, 0, 0]), 0.5)

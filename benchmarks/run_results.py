@@ -116,7 +116,7 @@ def load_results(folder: Path) -> dict[str, list[dict[str, Any]]]:
                     "metrics": doc["metrics"],
                     "readings": doc["readings"],
                     "history": doc["history"],
-                    "config": TrainConfig.from_dict(doc["config"]),
+                    "config": doc["config"],
                     "summary": doc["summary"],
                     "split": doc.get("split", {}),
                     "geometry": {
@@ -440,23 +440,23 @@ def render(
     first, config = splits0[0]["metrics"], splits0[0]["config"]
     sensors = tuple(first["sensors"])
     prov = first.get("provenance", {})
-    described = metric_description(config.nmae_normaliser, config.ssim_range)
+    described = metric_description(config["nmae_normaliser"], config["ssim_range"])
     summary = splits0[0]["summary"]
-    shape = config.shape
+    shape, seeds = config["shape"], len(config["seeds"])
     lines = [
         START,
         "# Results: UniTac-NV reproduced",
         "",
         f"Data: {'the simulated campaign' if first['simulated'] else 'recorded sessions'}, sensors "
         f"{', '.join(sensors)}, objects {', '.join(summary.get('objects', []))} ({summary.get('rows')} joined "
-        f"contacts). Per protocol {len(splits0)} splits x {len(config.seeds)} model seeds (split K trains seeds "
-        f"K·{len(config.seeds)} to K·{len(config.seeds)}+{len(config.seeds) - 1}), each run training UniTac-NV and "
-        f"both per-sensor baselines together; {epochs_text(results)}, batch {config.batch_size}, Adam lr "
-        f"{config.learning_rate}, dropout {shape.dropout}, widths {list(shape.encoder_hidden)} / "
-        f"{shape.latent_dim} / {list(shape.decoder_hidden)}. unitac-rig {prov.get('package_version')}, commit "
+        f"contacts). Per protocol {len(splits0)} splits x {seeds} model seeds (split K trains seeds "
+        f"K·{seeds} to K·{seeds}+{seeds - 1}), each run training UniTac-NV and "
+        f"both per-sensor baselines together; {epochs_text(results)}, batch {config['batch_size']}, Adam lr "
+        f"{config['learning_rate']}, dropout {shape['dropout']}, widths {list(shape['encoder_hidden'])} / "
+        f"{shape['latent_dim']} / {list(shape['decoder_hidden'])}. unitac-rig {prov.get('package_version')}, commit "
         f"`{str(prov.get('git_commit', ''))[:12]}`.",
         "",
-        f"Preprocessing: {PREPROCESSING_TEXT[config.preprocessing]} (`{config.preprocessing}`). Default reading: "
+        f"Preprocessing: {PREPROCESSING_TEXT[config['preprocessing']]} (`{config['preprocessing']}`). Default reading: "
         f"NMAE (`{described['nmae_normaliser']}`): {described['nmae']}. SSIM (`{described['ssim_range']}`): "
         f"{described['ssim']}. Why these: docs/learning.md (Preprocessing and metrics); every claim under every "
         "other reading is in its own table below.",
@@ -534,7 +534,7 @@ def protocol_section(protocol: str, splits: list[dict[str, Any]], figures: dict[
     lines += [
         "",
         f"### Table I ({protocol} split): NMAE / SSIM on the test set, mean ± std over {n_members} members "
-        f"({len(splits)} splits x {len(config.seeds)} seeds), paper below",
+        f"({len(splits)} splits x {len(config['seeds'])} seeds), paper below",
         "",
         "| row | " + " | ".join(_arrow(c) for c in columns) + " |",
         "|---|" + "---|" * len(columns),
@@ -758,7 +758,7 @@ def readings_lines(splits: list[dict[str, Any]]) -> list[str]:
             found = reading_claims(splits, nmae, ssim)
             if not found:
                 continue
-            default = nmae == config.nmae_normaliser and ssim == config.ssim_range
+            default = nmae == config["nmae_normaliser"] and ssim == config["ssim_range"]
             cells = [f"{'yes' if ok else '**no**'} ({text})" for _, ok, text in found]
             rows.append(
                 (found, f"| `{nmae}` | `{ssim}` | {'**default**' if default else ''} | " + " | ".join(cells) + " |")

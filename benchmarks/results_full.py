@@ -31,7 +31,6 @@ import argparse
 import json
 import multiprocessing
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -41,7 +40,6 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-ROOT = Path(__file__).resolve().parent.parent
 SENSORS = ("uskin", "papillarray")
 PROBE_EPOCHS = 2
 COLLECTION_JSON = "collection.json"  # run_results reads it beside the protocols' folders
@@ -116,7 +114,9 @@ def main() -> None:
         mark("geometry")
         list(pool.map(_export_task, [(args.work, p, k, args.out) for p, k in runs]))
         mark("exported")
-    render(args.out, args.work / "runs")
+    import run_results  # the sibling script: the page from the JSON
+
+    run_results.write_page(args.out / "results", args.out / "results.md", args.work / "runs")
     mark("rendered")
     (args.out / "timings.json").write_text(json.dumps(timings, indent=2) + "\n", encoding="utf-8")
 
@@ -205,20 +205,6 @@ def _export_task(task: tuple[Path, str, int, Path]) -> None:
     export_split(
         work / "runs" / protocol / f"split-{split}", protocol, out / "results" / protocol / f"split-{split}.json"
     )
-
-
-def render(out: Path, runs: Path) -> None:
-    """The page from OUT's JSON: the repo's results.md with its generated block replaced, figures beside it (split
-    0's run figures copied from ``runs``)."""
-    import run_results
-
-    page = out / "results.md"
-    if not page.exists() and (ROOT / "docs" / "results.md").exists():
-        shutil.copyfile(ROOT / "docs" / "results.md", page)
-    results = run_results.load_results(out / "results")
-    figures = run_results.draw_figures(results, out / "figures", runs)
-    collection = run_results.load_collection(out / "results")
-    run_results.write_results(page, run_results.render(results, figures, collection))
 
 
 if __name__ == "__main__":

@@ -91,13 +91,25 @@ def main() -> None:
                     geometry_member(run_dir, protocol, member, ceiling=member < args.ceiling_members)
                 export_split(run_dir, protocol, args.json / protocol / f"split-{k}.json")
                 print(f"{protocol} split {k}: done", flush=True)
-    results = load_results(args.json)
-    if not results:
+    if write_page(args.json, args.docs / "results.md", args.out):
+        print(f"wrote {args.docs / 'results.md'}")
+    else:
         print(f"no split JSON under {args.json}: results.md not written")
-        return
-    figures = draw_figures(results, args.docs / "figures", args.out)
-    write_results(args.docs / "results.md", render(results, figures, load_collection(args.json)))
-    print(f"wrote {args.docs / 'results.md'}")
+
+
+def write_page(folder: Path, page: Path, runs: Path | None) -> bool:
+    """Render ``page``'s generated block from the JSON under ``folder``, its figures into ``page``'s figures/ folder
+    (split 0's run figures copied from ``runs`` when there); a new page starts from the repository's, so its
+    hand-written part is kept. False when there is no split JSON."""
+    results = load_results(folder)
+    if not results:
+        return False
+    if not page.exists() and (ROOT / "docs" / "results.md").exists():
+        page.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(ROOT / "docs" / "results.md", page)
+    figures = draw_figures(results, page.parent / "figures", runs)
+    write_results(page, render(results, figures, load_collection(folder)))
+    return True
 
 
 def load_results(folder: Path) -> dict[str, list[dict[str, Any]]]:
@@ -358,12 +370,17 @@ def _rel(path: Path) -> str:
     return f"figures/{path.name}"
 
 
-def _curve(splits: list[dict[str, Any]], key: str) -> tuple[np.ndarray, np.ndarray]:
-    """(epochs, values (points, members over all splits)) of one validation alignment measure on all contacts."""
+def _curve(
+    splits: list[dict[str, Any]], key: str, subset: str = "all", metric: str | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """(epochs, values (points, members over all splits)) of one validation measure: an alignment ``key`` on
+    ``subset``'s contacts, or with ``metric`` a direction's NMAE or SSIM (``key`` the direction, ``subset`` "seen")."""
     per_split = []
     for split in splits:
-        points = [h for h in split["history"] if key in h.get("val", {}).get("all", {})]
-        per_split.append({h["epoch"]: h["val"]["all"][key] for h in points})
+        points = [h for h in split["history"] if key in h.get("val", {}).get(subset, {})]
+        per_split.append(
+            {h["epoch"]: h["val"][subset][key] if metric is None else h["val"][subset][key][metric] for h in points}
+        )
     epochs = sorted(set.intersection(*(set(p) for p in per_split)))
     values = np.array([[v for p in per_split for v in p[e]] for e in epochs], dtype=float)
     return np.asarray(epochs), values
@@ -407,12 +424,7 @@ def plot_validation_nmae(splits: list[dict[str, Any]], path: Path) -> Path:
     columns = list(splits[0]["metrics"]["table1"]["all_seen"])
     for ax, metric in zip(axes, ("nmae", "ssim"), strict=True):
         for column in columns:
-            per_split = []
-            for split in splits:
-                points = [h for h in split["history"] if column in h.get("val", {}).get("seen", {})]
-                per_split.append({h["epoch"]: h["val"]["seen"][column][metric] for h in points})
-            epochs = sorted(set.intersection(*(set(p) for p in per_split)))
-            values = np.array([[v for p in per_split for v in p[e]] for e in epochs], dtype=float)
+            epochs, values = _curve(splits, column, "seen", metric)
             if len(epochs):
                 style = "--" if column.startswith("ae_") else "-"
                 ax.plot(epochs, values.mean(axis=1), style, label=_arrow(column), lw=1.3)
@@ -917,8 +929,7 @@ def cross_sensor_lines(protocol: str, splits: list[dict[str, Any]]) -> list[str]
         for key, entry in summary["ceiling"].items():
             choices = "; ".join(f"{lr:g}, {d:g}, {e}" for lr, d, e in entry["choices"][:5])
             lines.append(
-                f"| {key.replace('_', ' on ', 1) if False else key} | {entry['test_mm']:.3f} ± "
-                f"{entry['std']:.3f} | {choices} | {entry['seconds']:.0f} |"
+                f"| {key} | {entry['test_mm']:.3f} ± {entry['std']:.3f} | {choices} | {entry['seconds']:.0f} |"
             )
         lines += ["", halving_verdict(summary)]
     return lines

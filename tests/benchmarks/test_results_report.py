@@ -141,3 +141,17 @@ def test_the_halving_verdict_does_not_call_a_ceiling_a_bound_when_a_strict_metho
     assert "For papillarray → uskin a strict cross-sensor method reads below the ceiling" in verdict
     assert "leaves room to halve the paper's error for uskin → papillarray" in verdict
     assert "rules out" not in verdict
+
+
+def test_the_committed_page_is_what_the_committed_json_renders(tmp_path: Path) -> None:
+    """``run_results.py --report-only`` regenerates docs/results.md byte for byte from docs/results/*.json (the JSON
+    keeps the training config of the code that wrote it: the page reads it as stored, not through TrainConfig)."""
+    import run_results
+
+    (tmp_path / "figures").mkdir()
+    for figure in (ROOT / "docs" / "figures").glob("results_*.png"):  # the per-run figures are copied, not drawn
+        shutil.copyfile(figure, tmp_path / "figures" / figure.name)
+    page = tmp_path / "results.md"
+    shutil.copyfile(ROOT / "docs" / "results.md", page)
+    assert run_results.write_page(ROOT / "docs" / "results", page, None)
+    assert page.read_text(encoding="utf-8") == (ROOT / "docs" / "results.md").read_text(encoding="utf-8")

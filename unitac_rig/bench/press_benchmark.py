@@ -15,10 +15,9 @@ real press routine (:func:`unitac_rig.collection.press.run_press`) and the real 
   and the true peak minus the threshold (overshoot; negative = stopped short because a noisy sample crossed first);
 * the force rise rate between the 4 N and 9.5 N crossings (N/s).
 
-The raw streams are kept in memory, so the extraction is re-run for each *variant* (the fixes a user can make with
-the code's own settings: the fitted force or the old moving average, the PapillArray streaming at 1000 Hz, shifting
-the tactile times by the wrist F/T's lag) without pressing again. Simulated times do not depend on the machine; only
-wall time does.
+The raw streams are kept in memory, so the extraction is re-run for each *variant* (:data:`VARIANTS`: the fitted
+force, the default, and the old moving average of 15 samples) without pressing again. Simulated times do not depend
+on the machine; only wall time does.
 
 This module plans, presses and scores (the second half: error with misses counted, campaign time, the Pareto front
 of time against error, the goal verdict); :mod:`unitac_rig.bench.press_report` draws the figure and the text
@@ -64,21 +63,10 @@ class PressSetting:
         }
 
 
-@dataclass(frozen=True)
-class ExtractionVariant:
-    """A way to record and extract: the PapillArray stream rate (Hz) and the extraction settings it is matched with.
-
-    ``method``: the extraction's force estimate, ``fit`` (the fitted, lag-compensated true force, the default) or
-    ``moving-average`` (the old one). ``ft_lag_compensation`` (moving average only): shift tactile times by the wrist
-    F/T's modelled lag (transport latency + filter time constant), so a frame is matched to the force the wrist
-    reports for the same instant. The fit always compensates the lag, with the simulated wrist's own.
-    """
-
-    name: str
-    papillarray_rate_hz: int = 100
-    smoothing_samples: int = 15
-    ft_lag_compensation: bool = False
-    method: str = "fit"
+# variant name -> the extraction's force estimate: the fitted, lag-compensated true force (with the simulated wrist's
+# own lag) or the old moving average of the recorded force
+VARIANTS = {"fit (the default)": "fit", "moving average of 15 (the old method)": "moving-average"}
+PAPILLARRAY_RATE_HZ = 100  # the simulated hub's stream rate in every cell
 
 
 @dataclass(frozen=True)
@@ -89,11 +77,6 @@ class PressBenchPlan:
     angle_count: int = 5
     angle_span_deg: float = 90.0  # the angles are spread evenly over +-half of this
     seeds: tuple[int, ...] = (0, 1)
-    variants: tuple[ExtractionVariant, ...] = (ExtractionVariant("as collected"),)
-
-    @property
-    def papillarray_rates(self) -> tuple[int, ...]:
-        return tuple(sorted({v.papillarray_rate_hz for v in self.variants}))
 
 
 def full_plan() -> PressBenchPlan:
@@ -107,11 +90,7 @@ def full_plan() -> PressBenchPlan:
         *(PressSetting("two-phase", speed_mm_s=v, fast_speed_mm_s=30.0) for v in (2.0, 3.0)),
         *(PressSetting("force-ramp", ramp_rate_n_s=r) for r in (4.0, 8.0, 16.0, 32.0)),
     )
-    variants = (
-        ExtractionVariant("fit (the default)"),
-        ExtractionVariant("moving average of 15 (the old method)", method="moving-average"),
-    )
-    return PressBenchPlan(settings=settings, variants=variants, angle_count=3, angle_span_deg=10.0, seeds=(0,))
+    return PressBenchPlan(settings=settings, angle_count=3, angle_span_deg=10.0, seeds=(0,))
 
 
 def quick_plan() -> PressBenchPlan:
@@ -122,11 +101,7 @@ def quick_plan() -> PressBenchPlan:
         PressSetting("two-phase", speed_mm_s=2.0),
         PressSetting("force-ramp", ramp_rate_n_s=8.0),
     )
-    variants = (
-        ExtractionVariant("fit (the default)"),
-        ExtractionVariant("moving average of 15 (the old method)", method="moving-average"),
-    )
-    return PressBenchPlan(settings=settings, objects=("hex_pla",), angle_count=2, seeds=(0,), variants=variants)
+    return PressBenchPlan(settings=settings, objects=("hex_pla",), angle_count=2, seeds=(0,))
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -141,7 +116,6 @@ class PressSample:
     object_id: str
     sensor: str
     seed: int
-    papillarray_rate_hz: int
     angle_deg: float
     status: str
     reason: str
@@ -165,7 +139,6 @@ class Cell:
     object_id: str
     sensor: str
     seed: int
-    papillarray_rate_hz: int
     angle_count: int
     angle_span_deg: float = 90.0
 
@@ -189,7 +162,7 @@ def run_cell(cell: Cell) -> list[PressSample]:
     rotation = obj.rotations_deg[0]
     plans = plan_presses(obj, config, [rotation])
     samples: list[PressSample] = []
-    rig = SimRig(config, seed=cell.seed, sensor_options={"papillarray": {"rate_hz": cell.papillarray_rate_hz}})
+    rig = SimRig(config, seed=cell.seed, sensor_options={"papillarray": {"rate_hz": PAPILLARRAY_RATE_HZ}})
     with rig:
         sensor = rig.open_sensor(cell.sensor)
         try:
@@ -223,7 +196,6 @@ def run_cell(cell: Cell) -> list[PressSample]:
                         object_id=cell.object_id,
                         sensor=cell.sensor,
                         seed=cell.seed,
-                        papillarray_rate_hz=cell.papillarray_rate_hz,
                         angle_deg=plan.angle_deg,
                         status=record.status,
                         reason=record.reason,
@@ -270,16 +242,14 @@ def _phases(events: list[tuple[float, str, str]], began_s: float, ended_s: float
 
 
 def plan_cells(plan: PressBenchPlan) -> list[Cell]:
-    """Every rig session the plan needs; uSkin cells once (the PapillArray rate does not touch them)."""
-    cells = []
-    for setting in plan.settings:
-        for object_id in plan.objects:
-            for sensor in plan.sensors:
-                rates = plan.papillarray_rates if sensor == "papillarray" else (100,)
-                for rate in rates:
-                    for seed in plan.seeds:
-                        cell = Cell(setting, object_id, sensor, seed, rate, plan.angle_count, plan.angle_span_deg)
-                        cells.append(cell)
+    """Every rig session the plan needs: each setting on each object with each sensor and seed."""
+    cells = [
+        Cell(setting, object_id, sensor, seed, plan.angle_count, plan.angle_span_deg)
+        for setting in plan.settings
+        for object_id in plan.objects
+        for sensor in plan.sensors
+        for seed in plan.seeds
+    ]
     # slow settings first, so the pool's last jobs are short
     return sorted(cells, key=lambda c: -_expected_cost(c.setting))
 
@@ -333,7 +303,7 @@ def run_press_benchmark(
             "angle_count": plan.angle_count,
             "angle_span_deg": plan.angle_span_deg,
             "seeds": list(plan.seeds),
-            "papillarray_rates_hz": list(plan.papillarray_rates),
+            "papillarray_rate_hz": PAPILLARRAY_RATE_HZ,
             "campaign_presses": CAMPAIGN_PRESSES,
         },
         "presses_run": len(samples),
@@ -407,15 +377,10 @@ class Score:
     phases_s: dict[str, list[float]] = field(default_factory=dict)
     statuses: dict[str, int] = field(default_factory=dict)
 
-    def add(self, sample: PressSample, variant: ExtractionVariant, threshold_n: float) -> None:
+    def add(self, sample: PressSample, method: str, threshold_n: float) -> None:
         from unitac_rig.storage.extraction import ExtractionSettings, extract_press
 
-        settings = ExtractionSettings(
-            method=variant.method,  # type: ignore[arg-type]
-            smoothing_samples=variant.smoothing_samples,
-            tactile_latency_s=-ft_lag_s() if variant.ft_lag_compensation else 0.0,
-            ft_lag_s=ft_lag_s(),
-        )
+        settings = ExtractionSettings(method=method, ft_lag_s=ft_lag_s())  # type: ignore[arg-type]
         ex = extract_press(sample.robot_t_s, sample.press_force_n, sample.tactile_t_s, sample.tactile_valid, settings)
         self.presses += 1
         self.targets += ex.targets_n.size
@@ -522,20 +487,14 @@ def score(plan: PressBenchPlan, samples: list[PressSample]) -> dict[str, Any]:
     transit = float(np.mean([campaign_transit_s(o) for o in plan.objects]))
     strategies = {s.label: s.strategy for s in plan.settings}
     variants = []
-    for variant in plan.variants:
+    for name, method in VARIANTS.items():
         rows = []
         for setting in plan.settings:
-            chosen = [
-                s
-                for s in samples
-                if s.setting == setting.label
-                and (s.sensor != "papillarray" or s.papillarray_rate_hz == variant.papillarray_rate_hz)
-            ]
             pooled = Score()
             by_sensor: dict[str, Score] = {}
-            for sample in chosen:
-                pooled.add(sample, variant, threshold_n)
-                by_sensor.setdefault(sample.sensor, Score()).add(sample, variant, threshold_n)
+            for sample in (s for s in samples if s.setting == setting.label):
+                pooled.add(sample, method, threshold_n)
+                by_sensor.setdefault(sample.sensor, Score()).add(sample, method, threshold_n)
             rows.append(
                 {
                     "setting": setting.label,
@@ -554,12 +513,9 @@ def score(plan: PressBenchPlan, samples: list[PressSample]) -> dict[str, Any]:
             row["pareto_true"] = i in true_front
         variants.append(
             {
-                "name": variant.name,
-                "papillarray_rate_hz": variant.papillarray_rate_hz,
-                "smoothing_samples": variant.smoothing_samples,
-                "tactile_latency_s": -ft_lag_s() if variant.ft_lag_compensation else 0.0,
+                "name": name,
                 "rows": rows,
-                "method": variant.method,
+                "method": method,
                 "pareto_front": [rows[i]["setting"] for i in front],
                 "pareto_front_true": [rows[i]["setting"] for i in true_front],
                 "goal": evaluate_goal(rows),

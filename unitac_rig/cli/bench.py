@@ -7,7 +7,9 @@ checkout's docs/figures, else ./bench-out). ``--quick`` is a smoke run of well u
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -20,14 +22,17 @@ _QUICK = typer.Option(False, "--quick", help="Smoke run (well under a minute).")
 _OUT = typer.Option(None, "--out", help="Folder for the JSON and PNG (default: docs/figures of this checkout).")
 
 
-def _out_dir(out: Path | None) -> Path:
-    from unitac_rig.bench import default_out_dir
+def _finish(
+    doc: dict[str, Any], plot: Callable[..., Path], summary: Callable[..., list[str]], out: Path | None
+) -> None:
+    """Write ``OUT/bench_<name>.json`` and ``.png`` for a benchmark's result, then print its summary."""
+    from unitac_rig.bench import default_out_dir, write_json
 
-    return default_out_dir() if out is None else out
-
-
-def _finish(lines: list[str], json_path: Path, png_path: Path) -> None:
-    for line in lines:
+    folder = default_out_dir() if out is None else out
+    name = doc["benchmark"]
+    json_path = write_json(doc, folder / f"bench_{name}.json")
+    png_path = plot(doc, folder / f"bench_{name}.png")
+    for line in summary(doc):
         typer.echo(line)
     typer.echo(f"wrote {json_path} and {png_path}")
 
@@ -41,11 +46,9 @@ def press_command(
     """Press strategies and speeds on the simulated rig: campaign time against force-matching error."""
     from rich.progress import Progress
 
-    from unitac_rig.bench import write_json
     from unitac_rig.bench.press_benchmark import full_plan, quick_plan, run_press_benchmark
     from unitac_rig.bench.press_report import plot_press_benchmark, summary_lines
 
-    folder = _out_dir(out)
     with Progress(transient=True) as progress:
         task = progress.add_task("rig sessions", total=None)
 
@@ -53,11 +56,7 @@ def press_command(
             progress.update(task, completed=done, total=total)
 
         doc = run_press_benchmark(quick_plan() if quick else full_plan(), jobs=max(1, jobs), on_cell=on_cell)
-    _finish(
-        summary_lines(doc),
-        write_json(doc, folder / "bench_press.json"),
-        plot_press_benchmark(doc, folder / "bench_press.png"),
-    )
+    _finish(doc, plot_press_benchmark, summary_lines, out)
 
 
 @bench_app.command("recorder")
@@ -69,22 +68,10 @@ def recorder_command(
     ),
 ) -> None:
     """Recorder write rate and the live PapillArray path against the hardware's stream rates."""
-    from unitac_rig.bench import write_json
-    from unitac_rig.bench.recorder import (
-        full_plan,
-        plot_recorder_benchmark,
-        quick_plan,
-        run_recorder_benchmark,
-        summary_lines,
-    )
+    from unitac_rig.bench import recorder
 
-    folder = _out_dir(out)
-    doc = run_recorder_benchmark(quick_plan() if quick else full_plan(), work_dir)
-    _finish(
-        summary_lines(doc),
-        write_json(doc, folder / "bench_recorder.json"),
-        plot_recorder_benchmark(doc, folder / "bench_recorder.png"),
-    )
+    doc = recorder.run_recorder_benchmark(recorder.quick_plan() if quick else recorder.full_plan(), work_dir)
+    _finish(doc, recorder.plot_recorder_benchmark, recorder.summary_lines, out)
 
 
 @bench_app.command("inference")
@@ -94,25 +81,13 @@ def inference_command(
     run: Path | None = typer.Option(None, "--run", help="A trained run (default: train a tiny one on synthetic data)."),
 ) -> None:
     """Encode / decode / translate latency against the 1 ms a 1000 Hz stream leaves."""
-    from unitac_rig.bench import write_json
-    from unitac_rig.bench.inference import (
-        full_plan,
-        plot_inference_benchmark,
-        quick_plan,
-        run_inference_benchmark,
-        summary_lines,
-    )
+    from unitac_rig.bench import inference
     from unitac_rig.errors import UsageError
 
     if run is not None and not (run / "checkpoint.pt").is_file():
         raise UsageError(f"{run} has no checkpoint.pt", hint="give a run directory written by `unitac-rig train`")
-    folder = _out_dir(out)
-    doc = run_inference_benchmark(quick_plan() if quick else full_plan(), run)
-    _finish(
-        summary_lines(doc),
-        write_json(doc, folder / "bench_inference.json"),
-        plot_inference_benchmark(doc, folder / "bench_inference.png"),
-    )
+    doc = inference.run_inference_benchmark(inference.quick_plan() if quick else inference.full_plan(), run)
+    _finish(doc, inference.plot_inference_benchmark, inference.summary_lines, out)
 
 
 def register(app: typer.Typer) -> None:

@@ -29,28 +29,10 @@ contact episode, F > 0.5 N until F < 0.2 N, whose peak reached 9 N):
   v > 0.5 mm/s of the run that resumes it;
 * ``first contact`` (double fault only): the first poll with F > 0.5 N.
 
-Faults: a host stall (SIGSTOP, the stall, SIGCONT) of 0.1, 0.5 or 2 s, host death (SIGKILL) and a protective stop
-(the twin's hook) are injected at a moment, so they are crossed with every motion. The object missing (1 m away),
-misplaced by +-50 mm on x or y, 10x stiffer or softer, the wrist-force sign flipped, and a TCP differing from the
-rig file are conditions of a whole session (set before it starts); a workspace box that excludes press 2 is a
-property of the rig file (refused before any motion), run as a whole session and as the resume of a session whose
-rig file was edited. The object removed between presses is the one condition injected at a moment (transit).
-
-After the faulted run the fault is cleared (object back, stiffness and sign restored, protective stop unlocked on
-the "pendant", TCP corrected on the pendant and in the rig file; a stall or a death needs nothing) and the same
-command runs again; a workspace refusal is not cleared (the rig file itself is the fault). Criteria per row (issue
-26): true peak force below the 25 N hard limit; the arm at rest and inside the rig file's workspace at the end of
-each run; the pad unloaded (F < 1 N) at the end where the host could act (not after SIGKILL, a stall longer than
-the 167 ms watchdog period or a protective stop: the controller stopped the program and the host can move nothing);
-a failed run ends with one clear line (the last stderr line ``error: ...``, no traceback; not after SIGKILL); every
-press recorded before the fault is still there, with the same status, after the resume; and the resume finishes the
-session where the fault was cleared. Issue 37's rows (``--issue-37``): the object 20 mm to the side with the pad a
-2 mm disc (the twin's rim contact, sim/scene_disc.py), the object 15 mm closer with the host killed at first contact
-and the same command run again before the object is moved, and the host under CPU and disk load; their added
-criteria: no true peak above 15 N where no fault is injected during contact, a resume that meets the fault adds no
-force to what the fault left, and no exit 0 with nothing pressed. Writes the JSON (``--out``); ``--write-docs``
-renders the table into docs/reliability.md's "## Motion faults" section. The full matrix takes about an hour on a
-loaded 2-core box; ``--quick`` runs six rows (about 5 min).
+Which faults meet which motions, how each is cleared before the same command runs again, and the criteria a row
+must meet are said once, in the table's text (:func:`render_section`, docs/reliability.md "## Motion faults").
+Writes the JSON (``--out``); ``--write-docs`` renders the table into that section. The full matrix takes about an
+hour on a loaded 2-core box; ``--quick`` runs six rows (about 5 min).
 """
 
 from __future__ import annotations
@@ -74,7 +56,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from unitac_rig.bench import machine_info, write_json
+from unitac_rig.bench import machine_info, replace_doc_section, write_json
 from unitac_rig.rig.config import PressConfig, load_rig_config
 from unitac_rig.sim.twin import ControllerParams, first_free_loopback
 from unitac_rig.sim.twin.rig import RigTwin
@@ -107,6 +89,7 @@ DOC_SECTION = "## Motion faults"
 STRICT_PEAK_N = 15.0  # issue 37: every true peak at most this where no fault is injected during contact, N
 LOAD_BUSY_PER_CPU = 2  # the host-load row: busy processes per CPU, besides a writer doing fsync
 CLOSER_15_M = (0.0, -0.015)  # the arm approaches from -y: 15 mm closer (the stand-off lies 7 mm inside the object)
+STALLS_S = (0.1, 0.5, 2.0)  # host stalls crossed with every motion: under, near and far past the watchdog period
 MOTIONS = ("first move", "transit", "approach", "press", "retract", "back-off", "resume")
 
 
@@ -153,9 +136,15 @@ def _slug(text: str) -> str:
 def scenarios() -> list[Scenario]:
     """Every meaningful fault x motion pair (see the module docstring for which and why)."""
     rows = [
-        Scenario("double-fault", "misplaced -50 mm y AND host stall 2 s", "first contact",
-                 placement_m=CLOSER_M, inject="stall", stall_s=2.0),
-    ]  # fmt: skip
+        Scenario(
+            "double-fault",
+            "misplaced -50 mm y AND host stall 2 s",
+            "first contact",
+            placement_m=CLOSER_M,
+            inject="stall",
+            stall_s=2.0,
+        ),
+    ]
     session = [
         Scenario("object-missing", "object missing (1 m away)", "session", angles=3, placement_m=MISSING_M),
         Scenario("misplaced-x-plus", "misplaced +50 mm x", "session", placement_m=(0.05, 0.0)),
@@ -182,19 +171,37 @@ def scenarios() -> list[Scenario]:
     ]
     rows += session
     rows += [  # issue 37: the faults an independent controller found
-        Scenario("side-20mm-disc", "object 20 mm to the side, the pad a 2 mm disc (rim contact)", "session", angles=3,
-                 placement_m=(0.02, 0.0), disc_pad_mm=2.0, strict_peak=True),
-        Scenario("resume-double-fault", "object 15 mm closer AND host death at first contact, resumed before the "
-                 "object is moved", "first contact", placement_m=CLOSER_15_M, inject="kill", uncleared_resume=True),
-        Scenario("host-load", "host under CPU and disk load (2 busy processes per CPU, a writer doing fsync)",
-                 "session", load=True, strict_peak=True),
-    ]  # fmt: skip
-    for motion in MOTIONS:
-        for stall in (0.1, 0.5, 2.0):
-            rows.append(Scenario(f"stall-{stall:g}s-{_slug(motion)}", f"host stall {stall:g} s", motion,
-                                 inject="stall", stall_s=stall))  # fmt: skip
-        rows.append(Scenario(f"kill-{_slug(motion)}", "host death (SIGKILL)", motion, inject="kill"))
-        rows.append(Scenario(f"pstop-{_slug(motion)}", "protective stop", motion, inject="pstop"))
+        Scenario(
+            "side-20mm-disc",
+            "object 20 mm to the side, the pad a 2 mm disc (rim contact)",
+            "session",
+            angles=3,
+            placement_m=(0.02, 0.0),
+            disc_pad_mm=2.0,
+            strict_peak=True,
+        ),
+        Scenario(
+            "resume-double-fault",
+            "object 15 mm closer AND host death at first contact, resumed before the object is moved",
+            "first contact",
+            placement_m=CLOSER_15_M,
+            inject="kill",
+            uncleared_resume=True,
+        ),
+        Scenario(
+            "host-load",
+            "host under CPU and disk load (2 busy processes per CPU, a writer doing fsync)",
+            "session",
+            load=True,
+            strict_peak=True,
+        ),
+    ]
+    for motion, slug in ((m, _slug(m)) for m in MOTIONS):
+        rows += [
+            Scenario(f"stall-{s:g}s-{slug}", f"host stall {s:g} s", motion, inject="stall", stall_s=s) for s in STALLS_S
+        ]
+        rows.append(Scenario(f"kill-{slug}", "host death (SIGKILL)", motion, inject="kill"))
+        rows.append(Scenario(f"pstop-{slug}", "protective stop", motion, inject="pstop"))
     return rows
 
 
@@ -292,8 +299,8 @@ def last_line(err: str) -> str:
 
 
 def collect_command(rig_path: Path, data: Path, angles: int, max_presses: int | None = None) -> list[str]:
-    cmd = [sys.executable, "-m", "unitac_rig", "collect", "--rig", str(rig_path), "--object", OBJECT,
-           "--angles", str(angles), "--data", str(data), "--no-live"]  # fmt: skip
+    cmd = [sys.executable, "-m", "unitac_rig", "collect", "--rig", str(rig_path), "--object", OBJECT, "--no-live"]
+    cmd += ["--angles", str(angles), "--data", str(data)]
     return cmd + (["--max-presses", str(max_presses)] if max_presses else [])
 
 
@@ -318,10 +325,10 @@ def run_collect(
     rig: RigTwin,
     cmd: list[str],
     rig_path: Path,
+    stderr_path: Path,
     *,
     scenario: Scenario | None = None,
-    detector: MomentDetector | None,
-    stderr_path: Path | None = None,
+    detector: MomentDetector | None = None,
     put_back: dict[str, bool] | None = None,
 ) -> RunResult:
     """Run ``cmd`` to its end; with ``detector`` inject ``scenario``'s fault at the moment it names. The whole stderr
@@ -355,8 +362,7 @@ def run_collect(
             proc.wait()
         err_file.seek(0)
         err = err_file.read()
-    if stderr_path is not None:
-        stderr_path.write_text(err)
+    stderr_path.write_text(err)
     rig.controller.wait_for(lambda t: t.at_rest, timeout_s=3.0)
     time.sleep(0.3)  # settled: a brake ramp is over, a force reading is steady
     truth = rig.controller.truth()
@@ -370,14 +376,21 @@ def run_collect(
     if proc.returncode not in (0, -signal.SIGKILL):
         clear = line.startswith("error:") and "Traceback" not in err and "unexpected" not in line
     return RunResult(
-        exit_code=proc.returncode, last_line=line, one_clear_line=clear, peak_n=round(truth.peak_force_n, 2),
-        at_rest=truth.at_rest, inside_workspace=inside, end_force_n=round(truth.force_n, 2),
-        end_xyz_m=[round(float(v), 4) for v in xyz], seconds=round(time.monotonic() - started, 1), moment=moment,
+        exit_code=proc.returncode,
+        last_line=line,
+        one_clear_line=clear,
+        peak_n=round(truth.peak_force_n, 2),
+        at_rest=truth.at_rest,
+        inside_workspace=inside,
+        end_force_n=round(truth.force_n, 2),
+        end_xyz_m=[round(float(v), 4) for v in xyz],
+        seconds=round(time.monotonic() - started, 1),
+        moment=moment,
         watchdog_trips=truth.watchdog_trips - counts.watchdog_trips,
         protective_stops=truth.protective_stops - counts.protective_stops,
         controller_last_error=str(rig.controller.status().get("last_error") or ""),
         stderr_tail=[s for s in err.strip().splitlines() if s.strip()][-4:],
-    )  # fmt: skip
+    )
 
 
 def _pad_radius(rig: RigTwin, truth: TwinTruth) -> float:
@@ -429,8 +442,8 @@ def run_scenario(scenario: Scenario, workdir: Path) -> dict[str, Any]:
         full = collect_command(faulted, data, scenario.angles)
         base: RunResult | None = None
         if scenario.base == "resumed":
-            base = run_collect(rig, collect_command(good, data, scenario.angles, max_presses=1), good, detector=None,
-                               stderr_path=workdir / "base.stderr")  # fmt: skip
+            first_press = collect_command(good, data, scenario.angles, max_presses=1)
+            base = run_collect(rig, first_press, good, workdir / "base.stderr")
         if scenario.placement_m != (0.0, 0.0):
             rig.set_placement_error(*scenario.placement_m)
         if scenario.base == "abort":
@@ -446,8 +459,8 @@ def run_scenario(scenario: Scenario, workdir: Path) -> dict[str, Any]:
         early: list[RunResult] = []  # faulted runs a host-starved watchdog stopped before the moment came
         with host_load(scenario.load, workdir):
             for attempt in range(1, RESUME_ATTEMPTS + 1):
-                fault = run_collect(rig, full, faulted, scenario=scenario, detector=detector,
-                                    stderr_path=workdir / f"fault-{attempt}.stderr")  # fmt: skip
+                stderr = workdir / f"fault-{attempt}.stderr"
+                fault = run_collect(rig, full, faulted, stderr, scenario=scenario, detector=detector)
                 if not (fault.moment is None and _stopped_by_watchdog(fault)):
                     break
                 # the same command again, the same detector (it remembers press 1); a condition of the whole session
@@ -455,15 +468,15 @@ def run_scenario(scenario: Scenario, workdir: Path) -> dict[str, Any]:
                 early.append(fault)
         uncleared: RunResult | None = None
         if scenario.uncleared_resume:  # what an operator who reruns at once meets: the fault still in place
-            uncleared = run_collect(rig, full, faulted, detector=None, stderr_path=workdir / "uncleared.stderr")
+            uncleared = run_collect(rig, full, faulted, workdir / "uncleared.stderr")
         after_fault = recorded_presses(data)
         resumes: list[RunResult] = []
         final = after_fault
         if scenario.clearable:
             put_back = {"pending": _clear(rig, scenario)}
             for attempt in range(1, RESUME_ATTEMPTS + 1):
-                again = run_collect(rig, collect_command(good, data, scenario.angles), good, detector=None,
-                                    stderr_path=workdir / f"resume-{attempt}.stderr", put_back=put_back)  # fmt: skip
+                again_cmd, stderr = collect_command(good, data, scenario.angles), workdir / f"resume-{attempt}.stderr"
+                again = run_collect(rig, again_cmd, good, stderr, put_back=put_back)
                 resumes.append(again)
                 if not _stopped_by_watchdog(again):
                     break  # done, or failed for another reason than a program the watchdog stopped
@@ -471,16 +484,24 @@ def run_scenario(scenario: Scenario, workdir: Path) -> dict[str, Any]:
         resume = resumes[-1] if resumes else None
         twin_host = rig.host
     record: dict[str, Any] = {
-        "row": scenario.row, "fault": scenario.fault, "motion": scenario.motion, "host": twin_host,
-        "scenario": dataclasses.asdict(scenario), "host_can_act": scenario.host_can_act,
+        "row": scenario.row,
+        "fault": scenario.fault,
+        "motion": scenario.motion,
+        "host": twin_host,
+        "scenario": dataclasses.asdict(scenario),
+        "host_can_act": scenario.host_can_act,
         "base_run": None if base is None else dataclasses.asdict(base),
         "early_fault_runs": [dataclasses.asdict(r) for r in early],
-        "fault_run": dataclasses.asdict(fault), "resume_run": None if resume is None else dataclasses.asdict(resume),
+        "fault_run": dataclasses.asdict(fault),
+        "resume_run": None if resume is None else dataclasses.asdict(resume),
         "uncleared_run": None if uncleared is None else dataclasses.asdict(uncleared),
         "resume_runs": [dataclasses.asdict(r) for r in resumes],
-        "expected_presses": scenario.angles, "recorded_before": before, "recorded_after_fault": after_fault,
-        "recorded_final": final, "seconds": round(time.monotonic() - started, 1),
-    }  # fmt: skip
+        "expected_presses": scenario.angles,
+        "recorded_before": before,
+        "recorded_after_fault": after_fault,
+        "recorded_final": final,
+        "seconds": round(time.monotonic() - started, 1),
+    }
     record["criteria"] = criteria(record)
     record["pass"] = all(v for v in record["criteria"].values() if v is not None)
     return record
@@ -494,9 +515,13 @@ def host_load(on: bool, workdir: Path) -> Iterator[None]:
     if on:
         busy = [sys.executable, "-c", "while True: pass"]
         target = workdir / "load.bin"
-        writer = [sys.executable, "-c", "import os\nwhile True:\n"
-                  f"    f = os.open({str(target)!r}, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)\n"
-                  "    os.write(f, os.urandom(1 << 20)); os.fsync(f); os.close(f)"]  # fmt: skip
+        writer = [
+            sys.executable,
+            "-c",
+            "import os\nwhile True:\n"
+            f"    f = os.open({str(target)!r}, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)\n"
+            "    os.write(f, os.urandom(1 << 20)); os.fsync(f); os.close(f)",
+        ]
         procs = [subprocess.Popen(busy) for _ in range(LOAD_BUSY_PER_CPU * (os.cpu_count() or 1))]
         procs.append(subprocess.Popen(writer))
     try:
@@ -550,9 +575,12 @@ def criteria(record: dict[str, Any]) -> dict[str, bool | None]:
     uncleared = record.get("uncleared_run")
     if uncleared is not None:
         runs.append(uncleared)
-    lost = [pid for pid, status in record["recorded_after_fault"].items()
-            if pid not in record["recorded_final"]
-            or (status in FINISHED_STATUSES and record["recorded_final"][pid] != status)]  # fmt: skip
+    lost = [
+        pid
+        for pid, status in record["recorded_after_fault"].items()
+        if pid not in record["recorded_final"]
+        or (status in FINISHED_STATUSES and record["recorded_final"][pid] != status)
+    ]
     lost += [pid for pid in record["recorded_before"] if pid not in record["recorded_after_fault"]]
     finished = [s for s in record["recorded_final"].values() if s in FINISHED_STATUSES]
     return {
@@ -567,22 +595,26 @@ def criteria(record: dict[str, Any]) -> dict[str, bool | None]:
         # command resumes (not for the back-off: its line is the abort's, the first error, which the same command
         # also resumes)
         "line_says_what_happened_and_to_resume": _says_what_happened(record["scenario"], fault["last_line"])
-        if _stops_the_program(record["scenario"]) and record["motion"] != "back-off" else None,
+        if _stops_the_program(record["scenario"]) and record["motion"] != "back-off"
+        else None,
         "nothing_recorded_lost": not lost,
-        "resume_completes": None if resume is None
+        "resume_completes": None
+        if resume is None
         else resume["exit_code"] == 0 and len(finished) == record["expected_presses"],
         # issue 37: no true peak above 15 N where no fault is injected during contact
         "peak_within_15_n": max(r["peak_n"] for r in runs) <= STRICT_PEAK_N
-        if record["scenario"].get("strict_peak") else None,
+        if record["scenario"].get("strict_peak")
+        else None,
         # issue 37: a resume that meets the fault still in place (the pad left loaded, the object closer) adds no
         # force to what the fault left, and never goes past 15 N because of it
-        "uncleared_resume_adds_nothing": None if uncleared is None
+        "uncleared_resume_adds_nothing": None
+        if uncleared is None
         else uncleared["peak_n"] <= max(STRICT_PEAK_N, fault["end_force_n"] + 1.0),
         # issue 37: no exit 0 with nothing pressed
         "no_exit_0_with_nothing_pressed": not any(
             r["exit_code"] == 0 and not any(s == "complete" for s in record["recorded_final"].values()) for r in runs
         ),
-    }  # fmt: skip
+    }
 
 
 # ---- the report -------------------------------------------------------------------------------------------------
@@ -606,8 +638,11 @@ def _injected_stop(row: dict[str, Any]) -> bool:
 
 def summary_lines(doc: dict[str, Any]) -> list[str]:
     """Worst peak, and how often an overloaded host let the watchdog stop a run nobody froze."""
-    runs = [(r, x) for r in doc["rows"] for x in [*(r.get("early_fault_runs") or []), r["fault_run"],
-                                                  *(r.get("resume_runs") or [])]]  # fmt: skip
+    runs = [
+        (r, x)
+        for r in doc["rows"]
+        for x in [*(r.get("early_fault_runs") or []), r["fault_run"], *(r.get("resume_runs") or [])]
+    ]
     worst_row, worst = max(runs, key=lambda rx: rx[1]["peak_n"])
     every_stop = [(r, x) for r, x in runs if _watchdog_ended(x) and not (x is r["fault_run"] and _injected_stop(r))]
     spontaneous = [(r, x) for r, x in every_stop if not r.get("ran")]  # at the main run's load
@@ -735,22 +770,8 @@ def render_section(doc: dict[str, Any]) -> str:
         "*recorded*: presses finished (complete or failed) when the faulted run ended → presses complete after the "
         "resume. Exit 1/2 is a failed run with its one line, -9 the SIGKILL, 0 a session that finished (presses "
         "that touched nothing or could not reach the threshold are recorded as failed).",
-        "",
     ]
     return "\n".join(lines)
-
-
-def write_docs(doc: dict[str, Any], path: Path) -> None:
-    """Replace (or append) the "## Motion faults" section of ``path``."""
-    text = path.read_text()
-    section = render_section(doc)
-    start = text.find(f"\n{DOC_SECTION}\n")
-    if start < 0:
-        path.write_text(text.rstrip("\n") + "\n\n" + section)
-        return
-    end = text.find("\n## ", start + 1)
-    rest = "" if end < 0 else text[end + 1 :]
-    path.write_text(text[: start + 1] + section + ("\n" + rest if rest else ""))
 
 
 def merge_rows(doc: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -767,8 +788,12 @@ def merge_rows(doc: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, Any
 
 def _summarise(doc: dict[str, Any]) -> None:
     rows = doc["rows"]
-    doc.update(finished_utc=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), machine=machine_info(),
-               passed=sum(r["pass"] for r in rows), total=len(rows))  # fmt: skip
+    doc.update(
+        finished_utc=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        machine=machine_info(),
+        passed=sum(r["pass"] for r in rows),
+        total=len(rows),
+    )
 
 
 def main() -> None:
@@ -784,7 +809,7 @@ def main() -> None:
     parser.add_argument("--merge", type=Path, default=None, help="put these rows into that JSON (replacing by id)")
     args = parser.parse_args()
     if args.render:
-        write_docs(json.loads(args.out.read_text()), args.docs)
+        replace_doc_section(args.docs, "fault_matrix", render_section(json.loads(args.out.read_text())))
         print(f"table written into {args.docs} ({DOC_SECTION})")
         return
     if args.merge is not None and args.out.resolve() == args.merge.resolve():
@@ -799,21 +824,29 @@ def main() -> None:
         chosen = [s for s in chosen if s.row in NEW_ROWS_37]
     rows: list[dict[str, Any]] = []
     doc: dict[str, Any] = {
-        "benchmark": "fault_matrix", "object": OBJECT, "sensor": SENSOR, "hard_limit_n": HARD_LIMIT_N,
-        "quick": bool(args.quick or args.only or args.issue_37), "planned": len(chosen), "rows": rows,
-    }  # fmt: skip
+        "benchmark": "fault_matrix",
+        "object": OBJECT,
+        "sensor": SENSOR,
+        "hard_limit_n": HARD_LIMIT_N,
+        "quick": bool(args.quick or args.only or args.issue_37),
+        "planned": len(chosen),
+        "rows": rows,
+    }
     with tempfile.TemporaryDirectory(prefix="fault_matrix_") as tmp:
         root = args.workdir or Path(tmp)
         for k, scenario in enumerate(chosen):
             record = run_scenario(scenario, root / scenario.row)
-            record["ran"] = (f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load "
-                             f"{machine_info()['load_average_1min']}")  # fmt: skip
+            record["ran"] = (
+                f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load {machine_info()['load_average_1min']}"
+            )
             rows.append(record)
             bad = [name for name, ok in record["criteria"].items() if ok is False]
             fr = record["fault_run"]
-            print(f"[{k + 1}/{len(chosen)}] {scenario.row}: {'pass' if record['pass'] else 'FAIL ' + str(bad)} "
-                  f"peak {fr['peak_n']} N, exit {fr['exit_code']}, {record['seconds']} s | {fr['last_line'][:120]}",
-                  flush=True)  # fmt: skip
+            print(
+                f"[{k + 1}/{len(chosen)}] {scenario.row}: {'pass' if record['pass'] else 'FAIL ' + str(bad)} "
+                f"peak {fr['peak_n']} N, exit {fr['exit_code']}, {record['seconds']} s | {fr['last_line'][:120]}",
+                flush=True,
+            )
             _summarise(doc)
             write_json(doc, args.out)  # after every row: a long run that is cut short keeps what it measured
     print(f"{doc['passed']}/{doc['total']} rows pass -> {args.out}")
@@ -822,7 +855,7 @@ def main() -> None:
         write_json(doc, args.merge)
         print(f"merged into {args.merge}: {doc['passed']}/{doc['total']} rows pass")
     if args.write_docs:
-        write_docs(doc, args.docs)
+        replace_doc_section(args.docs, "fault_matrix", render_section(doc))
         print(f"table written into {args.docs} ({DOC_SECTION})")
 
 

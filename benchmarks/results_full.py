@@ -129,8 +129,8 @@ def collect(data: Path, angles: int | None, jobs: int, logs: Path) -> None:
     commands = []
     for obj in objects:
         for sensor in SENSORS:
-            command = [sys.executable, "-m", "unitac_rig", "collect", "--object", obj.id, "--sensor", sensor,
-                       "--no-live", "--data", str(data), "--seed", "0"]  # fmt: skip
+            command = [sys.executable, "-m", "unitac_rig", "collect", "--object", obj.id, "--sensor", sensor]
+            command += ["--no-live", "--data", str(data), "--seed", "0"]
             if angles is not None:
                 command += ["--angles", str(angles)]
             commands.append((f"collect_{obj.id}_{sensor}", command))

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from unitac_rig.bench import replace_doc_section
 from unitac_rig.learning.config import load_config
 from unitac_rig.learning.contact_geometry import GeometryConfig
 from unitac_rig.learning.data import build_paired_dataset, load_sets
@@ -42,7 +43,6 @@ from unitac_rig.learning.train import TrainConfig
 from unitac_rig.plotting import new_figure, save_figure
 
 ROOT = Path(__file__).resolve().parent.parent
-START, END = "<!-- generated:start -->", "<!-- generated:end -->"
 SEEN_DIRECTIONS = ("uskin_to_uskin", "uskin_to_papillarray", "papillarray_to_papillarray", "papillarray_to_uskin")
 CROSS = ("uskin_to_papillarray", "papillarray_to_uskin")
 MIXED_ENOUGH = 0.5  # "interleaved": the other-sensor share of 10 NN is at least half its perfect-mixing value
@@ -108,7 +108,7 @@ def write_page(folder: Path, page: Path, runs: Path | None) -> bool:
         page.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(ROOT / "docs" / "results.md", page)
     figures = draw_figures(results, page.parent / "figures", runs)
-    write_results(page, render(results, figures, load_collection(folder)))
+    replace_doc_section(page, "generated", render(results, figures, load_collection(folder)), ("start", "end"))
     return True
 
 
@@ -446,8 +446,8 @@ def render(
     figures: dict[str, dict[str, str]],
     collection: dict[str, Any] | None = None,
 ) -> str:
-    """The generated block: a header, then per protocol the claims, Table I, the readings, alignment and
-    geometry, then the beyond-the-paper section and the figures."""
+    """The generated block (without its markers): a header, then per protocol the claims, Table I, the readings,
+    alignment and geometry, then the beyond-the-paper section and the figures."""
     splits0 = next(iter(results.values()))
     first, config = splits0[0]["metrics"], splits0[0]["config"]
     sensors = tuple(first["sensors"])
@@ -456,7 +456,6 @@ def render(
     summary = splits0[0]["summary"]
     shape, seeds = config["shape"], len(config["seeds"])
     lines = [
-        START,
         "# Results: UniTac-NV reproduced",
         "",
         f"Data: {'the simulated campaign' if first['simulated'] else 'recorded sessions'}, sensors "
@@ -485,7 +484,6 @@ def render(
         from beyond_paper import render_section  # the sibling script, on sys.path when this one runs
 
         lines += ["", *render_section(json.loads(beyond.read_text(encoding="utf-8")))]
-    lines.append(END)
     return "\n".join(lines)
 
 
@@ -1120,20 +1118,6 @@ def _consistency_lines(splits: list[dict[str, Any]], columns: list[str]) -> list
             cells.append(f"{float(np.exp(np.mean(slopes))) / paper_slope:.2f}")
         lines.append(f"| `{nmae_option}` | " + " | ".join(cells) + " |")
     return lines
-
-
-def write_results(path: Path, generated: str) -> None:
-    """Replace the generated block of ``path`` and keep every hand-written line around it; a file without the
-    markers keeps its sections from "## How the data were made" on after the new block."""
-    old = path.read_text(encoding="utf-8") if path.exists() else ""
-    if START in old and END in old:
-        before, rest = old.split(START, 1)
-        after = rest.split(END, 1)[1]
-        text = before + generated + after
-    else:
-        kept = old[old.index("## How the data were made") :] if "## How the data were made" in old else ""
-        text = generated + ("\n\n" + kept if kept else "\n")
-    path.write_text(text, encoding="utf-8")
 
 
 if __name__ == "__main__":

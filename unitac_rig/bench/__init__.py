@@ -66,15 +66,16 @@ def default_out_dir() -> Path:
     return docs if docs.is_dir() else Path("bench-out")
 
 
-def replace_doc_section(doc_path: Path, name: str, body: str) -> None:
-    """Put ``body`` between ``<!-- name:begin -->`` and ``<!-- name:end -->`` in a Markdown file (appended with the
-    markers when they are missing): how a benchmark regenerates its table in the docs."""
+def replace_doc_section(doc_path: Path, name: str, body: str, markers: tuple[str, str] = ("begin", "end")) -> None:
+    """Put ``body`` between ``<!-- name:begin -->`` and ``<!-- name:end -->`` (the words: ``markers``) in a Markdown
+    file, keeping every line around them (appended with the markers when they are missing): how a benchmark
+    regenerates its part of the docs."""
     doc_path = Path(doc_path)
-    text = doc_path.read_text()
-    begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
+    text = doc_path.read_text(encoding="utf-8")
+    begin, end = (f"<!-- {name}:{marker} -->" for marker in markers)
     block = f"{begin}\n{body}\n{end}"
     if begin in text and end in text:
         text = text[: text.index(begin)] + block + text[text.index(end) + len(end) :]
     else:
         text = text.rstrip("\n") + "\n\n" + block + "\n"
-    doc_path.write_text(text)
+    doc_path.write_text(text, encoding="utf-8")

@@ -156,8 +156,9 @@ def run_cell(cell: Cell) -> list[PressSample]:
     from unitac_rig.storage.press_record import PressRecord
 
     half = cell.angle_span_deg / 2
-    config = parse_rig_config({"press": {**cell.setting.press_config(), "angle_count": cell.angle_count,
-                                         "angle_min_deg": -half, "angle_max_deg": half}})  # fmt: skip
+    arc = {"angle_count": cell.angle_count, "angle_min_deg": -half, "angle_max_deg": half}
+    config = parse_rig_config({"press": {**cell.setting.press_config(), **arc}})
+    press, limits = config.press, config.limits
     obj = get_object(cell.object_id)
     rotation = obj.rotations_deg[0]
     plans = plan_presses(obj, config, [rotation])
@@ -180,9 +181,8 @@ def run_cell(cell: Cell) -> list[PressSample]:
                 record: PressRecord | None
                 try:
                     record = run_press(
-                        rig.arm, sensor, plan, config.press, config.limits, on_tick=truth.on_tick,
-                        clearance_m=clearance_m,
-                    )  # fmt: skip
+                        rig.arm, sensor, plan, press, limits, on_tick=truth.on_tick, clearance_m=clearance_m
+                    )
                 except (SafetyLimit, ProtectiveStop, DeviceTimeout) as exc:
                     record = exc.press_record
                     if record is None:

@@ -124,9 +124,13 @@ class Scenario:
     @property
     def host_can_act(self) -> bool:
         """Whether the host can still move the arm after the fault (else the controller stopped the program)."""
-        if self.inject in ("kill", "pstop"):
-            return False
-        return not (self.inject == "stall" and self.stall_s > WATCHDOG_PERIOD_S)
+        return not stops_the_program(dataclasses.asdict(self), "kill", "pstop")
+
+
+def stops_the_program(scenario: dict[str, Any], *injected: str) -> bool:
+    """The row's fault stops the controller's program: a stall past the watchdog period, or one of ``injected``
+    ("kill": a death, which the watchdog ends too; "pstop": a protective stop)."""
+    return scenario["inject"] in injected or (scenario["inject"] == "stall" and scenario["stall_s"] > WATCHDOG_PERIOD_S)
 
 
 def _slug(text: str) -> str:
@@ -555,12 +559,6 @@ def _clear(rig: RigTwin, scenario: Scenario) -> bool:
     return pending
 
 
-def _stops_the_program(scenario: dict[str, Any]) -> bool:
-    """The fault stops the controller's program with the host alive afterwards: a stall past the watchdog period,
-    or a protective stop."""
-    return scenario["inject"] == "pstop" or (scenario["inject"] == "stall" and scenario["stall_s"] > WATCHDOG_PERIOD_S)
-
-
 def _says_what_happened(scenario: dict[str, Any], line: str) -> bool:
     """A protective stop is named as one (the operator must unlock it); a stall as the program having stopped."""
     what = "protective stop" if scenario["inject"] == "pstop" else "program stopped"
@@ -595,7 +593,7 @@ def criteria(record: dict[str, Any]) -> dict[str, bool | None]:
         # command resumes (not for the back-off: its line is the abort's, the first error, which the same command
         # also resumes)
         "line_says_what_happened_and_to_resume": _says_what_happened(record["scenario"], fault["last_line"])
-        if _stops_the_program(record["scenario"]) and record["motion"] != "back-off"
+        if stops_the_program(record["scenario"], "pstop") and record["motion"] != "back-off"
         else None,
         "nothing_recorded_lost": not lost,
         "resume_completes": None
@@ -630,12 +628,6 @@ def _watchdog_ended(run: dict[str, Any]) -> bool:
     return "program stopped" in run["last_line"] and "watchdog" in run.get("controller_last_error", "watchdog")
 
 
-def _injected_stop(row: dict[str, Any]) -> bool:
-    """The row's fault itself stops the program through the watchdog (a stall past its period, a death)."""
-    scenario = row["scenario"]
-    return scenario["inject"] == "kill" or (scenario["inject"] == "stall" and scenario["stall_s"] > WATCHDOG_PERIOD_S)
-
-
 def summary_lines(doc: dict[str, Any]) -> list[str]:
     """Worst peak, and how often an overloaded host let the watchdog stop a run nobody froze."""
     runs = [
@@ -644,7 +636,11 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
         for x in [*(r.get("early_fault_runs") or []), r["fault_run"], *(r.get("resume_runs") or [])]
     ]
     worst_row, worst = max(runs, key=lambda rx: rx[1]["peak_n"])
-    every_stop = [(r, x) for r, x in runs if _watchdog_ended(x) and not (x is r["fault_run"] and _injected_stop(r))]
+    every_stop = [
+        (r, x)
+        for r, x in runs
+        if _watchdog_ended(x) and not (x is r["fault_run"] and stops_the_program(r["scenario"], "kill"))
+    ]
     spontaneous = [(r, x) for r, x in every_stop if not r.get("ran")]  # at the main run's load
     elsewhere = len(every_stop) - len(spontaneous)  # in rows run on their own, at the loads they name
     rerun = [r["row"] + (f" ({r['ran']})" if r.get("ran") else "") for r in doc["rows"] if r.get("rerun")]

@@ -21,8 +21,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from unitac_rig.bench import jsonable
 from unitac_rig.bench.lab.cross_geometry import cross_sensor_geometry
 from unitac_rig.bench.lab.pooled_geometry import pooled_geometry
 from unitac_rig.learning.contact_geometry import GeometryConfig, geometry_for_run
@@ -107,7 +106,7 @@ def geometry_member(
         for scenario in pooled["scenarios"].values():
             scenario.pop("per_point_mae_mm", None)
         record["pooled_head"] = pooled
-    (run_dir / MEMBER_JSON.format(member)).write_text(json.dumps(_rounded(record)) + "\n", encoding="utf-8")
+    (run_dir / MEMBER_JSON.format(member)).write_text(json.dumps(jsonable(record, DIGITS)) + "\n", encoding="utf-8")
     return record
 
 
@@ -155,7 +154,7 @@ def export_split(run_dir: Path, protocol: str, target: Path, figures: bool = Tru
         },
     }
     target.parent.mkdir(parents=True, exist_ok=True)
-    target.write_text(json.dumps(_rounded(doc), separators=(",", ":")) + "\n", encoding="utf-8")
+    target.write_text(json.dumps(jsonable(doc, DIGITS), separators=(",", ":")) + "\n", encoding="utf-8")
     return doc
 
 
@@ -193,16 +192,3 @@ def compact_history(history: list[dict[str, Any]]) -> list[dict[str, Any]]:
             }
         )
     return out
-
-
-def _rounded(value: Any) -> Any:
-    """Floats to ``DIGITS`` significant digits, recursively (the JSON stays small and diffs stay readable)."""
-    if isinstance(value, float):
-        return float(f"{value:.{DIGITS}g}") if np.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _rounded(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_rounded(v) for v in value]
-    if isinstance(value, np.generic):
-        return _rounded(value.item())
-    return value

@@ -37,18 +37,21 @@ def machine_info() -> dict[str, Any]:
     }
 
 
-def _jsonable(value: Any) -> Any:
-    """numpy scalars/arrays to Python; non-finite floats to None (JSON has no inf/NaN)."""
+def jsonable(value: Any, digits: int | None = None) -> Any:
+    """numpy scalars/arrays to Python; non-finite floats to None (JSON has no inf/NaN); with ``digits``, floats to
+    that many significant digits (committed JSON stays small and its diffs readable)."""
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v, digits) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v, digits) for v in value]
     if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
+        return jsonable(value.tolist(), digits)
     if isinstance(value, np.generic):
-        return _jsonable(value.item())
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
+        return jsonable(value.item(), digits)
+    if isinstance(value, float):
+        if not np.isfinite(value):
+            return None
+        return value if digits is None else float(f"{value:.{digits}g}")
     return value
 
 
@@ -56,7 +59,7 @@ def write_json(doc: dict[str, Any], path: Path) -> Path:
     """Write ``doc`` as indented JSON (inf/NaN as null), creating the folder; returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(_jsonable(doc), indent=1) + "\n")
+    path.write_text(json.dumps(jsonable(doc), indent=1) + "\n")
     return path
 
 

@@ -1,8 +1,9 @@
-"""Speed-against-accuracy benchmarks that the ``benchmarks/bench_*.py`` scripts and ``unitac-rig bench`` share.
+"""The benchmarks ``unitac-rig bench`` runs (press, recorder, inference), and what every measuring script shares:
+the machine's description, the JSON writer and the regenerated doc section.
 
-Each module measures and returns a JSON-ready dict and draws its figure; printing belongs to the callers. Simulated
-time (virtual clock) is reported as-is; wall-clock figures are reported next to the hardware rate they must beat, as
-ratios, because the machine's speed would otherwise decide the number.
+Each benchmark module measures and returns a JSON-ready dict and draws its figure; printing belongs to the callers.
+Simulated time (virtual clock) is reported as-is; wall-clock figures are reported next to the hardware rate they
+must beat, as ratios, because the machine's speed would otherwise decide the number.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``unitac-rig bench press|recorder|inference``: the speed-against-accuracy benchmarks (same code as benchmarks/*.py).
+"""``unitac-rig bench press|recorder|inference``: what a user runs to judge a rig and its host (unitac_rig/bench).
 
 Each prints a summary and writes ``OUT/bench_<name>.json`` and ``OUT/bench_<name>.png`` (OUT defaults to the
 checkout's docs/figures, else ./bench-out). ``--quick`` is a smoke run of well under a minute.

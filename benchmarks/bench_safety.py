@@ -1,6 +1,6 @@
 """Safety of the press when the host stalls or dies: true peak force against host stall length, before and after.
 
-The measuring code is unitac_rig/bench/lab/safety.py (the per-process worker is unitac_rig/bench/lab/safety_worker.py).
+The measuring code is benchmarks/lab/safety.py (the per-process worker is benchmarks/lab/safety_worker.py).
 
     python benchmarks/bench_safety.py [--quick] [--jobs 2] [--out docs/figures] [--before f419c22] [--after-only]
 
@@ -21,8 +21,8 @@ import dataclasses
 import json
 from pathlib import Path
 
+from lab.safety import BEFORE_COMMIT, SafetyPlan, draw, quick_plan, run, run_twin
 from unitac_rig.bench import default_out_dir, write_json
-from unitac_rig.bench.lab.safety import BEFORE_COMMIT, SafetyPlan, draw, quick_plan, run, run_twin
 
 
 def main() -> None:

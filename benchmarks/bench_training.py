@@ -1,6 +1,6 @@
 """Training speed of UniTac-NV: the stacked autograd trainer against torch.func vmap and the plain eager loop (both
 over the plain per-member networks sliced out of the stacked model), at 1, 3 and 15 stacked models; the 5-seed paper
-run's wall time; budget against accuracy. Measuring code: unitac_rig/bench/lab/training.py.
+run's wall time; budget against accuracy. Measuring code: benchmarks/lab/training.py.
 
     nice -n 10 python benchmarks/bench_training.py [--data DIR] [--quick] [--out docs/figures]
         [--rounds 8] [--seconds-per-cell 0.6] [--paper-run-epochs 5] [--budget-epochs 100]
@@ -19,14 +19,14 @@ from dataclasses import replace
 from pathlib import Path
 
 from drivers.layouts import PAPILLARRAY, USKIN
-from unitac_rig.bench import default_out_dir, write_json
-from unitac_rig.bench.lab.training import (
+from lab.training import (
     full_plan,
     plot_training_benchmark,
     quick_plan,
     run_training_benchmark,
     summary_lines,
 )
+from unitac_rig.bench import default_out_dir, write_json
 from unitac_rig.learning.data import build_paired_dataset, load_sets
 from unitac_rig.learning.synthetic_data import synthetic_matched_sets
 

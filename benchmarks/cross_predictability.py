@@ -1,6 +1,6 @@
 """What one sensor's frame determines of the other's: the ceiling on cross-sensor reconstruction, per channel.
 
-The measuring code is unitac_rig/bench/lab/cross_sensor.py.
+The measuring code is benchmarks/lab/cross_sensor.py.
 
     python benchmarks/cross_predictability.py [--quick] [--seeds 0,1] [--out docs/figures]
 
@@ -18,8 +18,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from lab.cross_sensor import CHANNELS, VARIANTS, plot_cross_predictability, run_cross_predictability
 from unitac_rig.bench import default_out_dir, write_json
-from unitac_rig.bench.lab.cross_sensor import CHANNELS, VARIANTS, plot_cross_predictability, run_cross_predictability
 
 
 def _line(name: str, result: dict[str, Any]) -> str:

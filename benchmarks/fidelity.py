@@ -1,6 +1,6 @@
 """Simulator fidelity report: the simulated rig's pooled signal statistics beside the authors' recorded ones.
 
-The measuring code is unitac_rig/bench/lab/fidelity.py; the recorded numbers it compares against are carried there.
+The measuring code is benchmarks/lab/fidelity.py; the recorded numbers it compares against are carried there.
 
     python benchmarks/fidelity.py [--quick] [--angles N] [--seed S] [--imperfections all|none|...] [--out docs/figures]
         [--keep DIR]
@@ -19,8 +19,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lab.fidelity import QUICK_ANGLES, ablation_lines, plot_fidelity, run_fidelity, summary_lines
 from unitac_rig.bench import default_out_dir, write_json
-from unitac_rig.bench.lab.fidelity import QUICK_ANGLES, ablation_lines, plot_fidelity, run_fidelity, summary_lines
 
 
 def main() -> None:

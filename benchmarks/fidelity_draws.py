@@ -19,8 +19,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lab.fidelity import draw_spread, model_settings
 from unitac_rig.bench import default_out_dir, write_json
-from unitac_rig.bench.lab.fidelity import draw_spread, model_settings
 from unitac_rig.errors import ConfigError
 
 

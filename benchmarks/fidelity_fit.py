@@ -2,7 +2,7 @@
 
     python benchmarks/fidelity_fit.py [--params a,b,...] [--rounds N] [--angles N] [--draws N] [--out docs/figures]
 
-Coordinate descent (unitac_rig/bench/lab/fidelity.py, ``refit``) on the scene alone (no arm, no noise; the same
+Coordinate descent (benchmarks/lab/fidelity.py, ``refit``) on the scene alone (no arm, no noise; the same
 statistics as the ablation in benchmarks/fidelity.py) over the named parameters (default: all of
 ``FIT_PARAMETERS`` but the terms the scene leaves off, which are fitted only when named), starting from the
 defaults. Prints the cost each round and, at the end, every target still more than 25 % off at 91 angles, and
@@ -15,8 +15,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lab.fidelity import FIT_PARAMETERS, REL_TOLERANCE, TERMS_OFF_BY_DEFAULT, fit_evaluation, refit
 from unitac_rig.bench import default_out_dir, write_json
-from unitac_rig.bench.lab.fidelity import FIT_PARAMETERS, REL_TOLERANCE, TERMS_OFF_BY_DEFAULT, fit_evaluation, refit
 
 
 def main() -> None:

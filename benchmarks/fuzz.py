@@ -9,7 +9,7 @@ frame path), ``papillarray`` (PacketParser on chunked streams; PapillArrayDriver
 (CommandParser, encode_command) and ``rtde`` (RtdePackageParser and every package decoder). Reports crashes
 (anything outside the project's error tree), hangs (over 50 ms CPU for one input, twice), wrong decodes of valid
 packets placed among garbage and damage, and memory growth of one long-lived decoder (tracemalloc). The method is in
-:mod:`unitac_rig.bench.lab.fuzz`.
+:mod:`lab.fuzz`.
 
 Writes docs/figures/fuzz.json; with ``--write-docs`` also the table between the fuzz markers of docs/reliability.md.
 Exits 1 when anything was found. Run it niced on a shared box: ``nice -n 10 python benchmarks/fuzz.py``.
@@ -23,8 +23,7 @@ import logging
 import sys
 from pathlib import Path
 
-from unitac_rig.bench import machine_info
-from unitac_rig.bench.lab.fuzz import (
+from lab.fuzz import (
     HANG_MS,
     MAX_MEMORY_GROWTH_BYTES,
     TARGETS,
@@ -33,6 +32,7 @@ from unitac_rig.bench.lab.fuzz import (
     rebuild,
     run_campaign,
 )
+from unitac_rig.bench import machine_info
 
 ROOT = Path(__file__).resolve().parents[1]
 OUTPUT = ROOT / "docs" / "figures" / "fuzz.json"

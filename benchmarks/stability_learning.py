@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from unitac_rig.bench.lab.stability import (
+from lab.stability import (
     DEFAULT_GEOMETRY_FOLDS,
     FACE_DISTANCE_MM,
     STABILITY_JSON,

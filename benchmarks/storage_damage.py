@@ -30,8 +30,7 @@ from typing import Any
 
 import h5py
 
-from unitac_rig.bench import default_out_dir, machine_info, replace_doc_section, write_json
-from unitac_rig.bench.lab.damage import (
+from lab.damage import (
     copy_press_over,
     delete_press_file,
     flip_bits,
@@ -42,6 +41,7 @@ from unitac_rig.bench.lab.damage import (
     swap_journal_entries,
     swap_press_files,
 )
+from unitac_rig.bench import default_out_dir, machine_info, replace_doc_section, write_json
 from unitac_rig.cli import main as cli_main
 from unitac_rig.storage.integrity import check_session
 from unitac_rig.storage.recorder import journal_dir, session_path

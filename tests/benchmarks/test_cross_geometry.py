@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lab import cross_geometry
+from lab.cross_geometry import cca_projections, cross_sensor_geometry, ridge_map
 from tests.learning.learning_helpers import small_sets
-from unitac_rig.bench.lab import cross_geometry
-from unitac_rig.bench.lab.cross_geometry import cca_projections, cross_sensor_geometry, ridge_map
 from unitac_rig.learning.contact_geometry import GeometryConfig
 from unitac_rig.learning.data import build_paired_dataset
 from unitac_rig.learning.train import TrainConfig, load_run, load_test_set, train

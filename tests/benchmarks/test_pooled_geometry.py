@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lab.pooled_geometry import pooled_geometry
 from tests.learning.learning_helpers import small_sets
-from unitac_rig.bench.lab.pooled_geometry import pooled_geometry
 from unitac_rig.learning.contact_geometry import GeometryConfig, run_geometry
 from unitac_rig.learning.data import build_paired_dataset, ray_deg
 from unitac_rig.learning.train import TrainConfig, load_run, load_test_set, train

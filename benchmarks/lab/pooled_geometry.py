@@ -6,7 +6,7 @@ the training contacts' latents of every sensor at once (each contact once per se
 tested on each sensor's latents of the held-out contacts. It has seen the test sensor's latents of the unseen object
 in training, so its errors answer "one head that serves every sensor a lab has geometry labels for" and compare with
 the *same-sensor* heads, never with the paper's cross-sensor transfer (that is
-:mod:`unitac_rig.bench.lab.cross_geometry`). Same split, targets and epochs as the paper's heads.
+:mod:`lab.cross_geometry`). Same split, targets and epochs as the paper's heads.
 """
 
 from __future__ import annotations

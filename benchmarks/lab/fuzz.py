@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from unitac_rig.bench.lab.fuzz_targets import (
+from lab.fuzz_targets import (
     Case,
     PapillArrayCommandTarget,
     PapillArrayTarget,

@@ -2,7 +2,7 @@
 moved to the controller, plus each strategy's overshoot and force-matching error.
 
 Everything runs on the fast twin, whose simulated controller goes on executing its last command while the host is
-frozen or dead (``unitac_rig.bench.lab.safety_worker``). The same worker runs against this checkout ("after") and
+frozen or dead (``lab.safety_worker``). The same worker runs against this checkout ("after") and
 against an older commit unpacked with ``git archive`` ("before", by default f419c22, the code issue 11 reviewed), so
 both columns come from one measurement. Forces are the simulator's ground truth, not the wrist's noisy reading.
 

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from lab.pooled_geometry import pooled_geometry
+from lab.geometry_heads import pooled_geometry
 from unitac_rig.learning.contact_geometry import run_geometry
 from unitac_rig.learning.data import build_paired_dataset, load_sets
 from unitac_rig.learning.engine import UNITAC_GROUP

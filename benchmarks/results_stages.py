@@ -23,8 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from lab.cross_geometry import cross_sensor_geometry
-from lab.pooled_geometry import pooled_geometry
+from lab.geometry_heads import cross_sensor_geometry, pooled_geometry
 from unitac_rig.learning.contact_geometry import GeometryConfig, geometry_for_run
 from unitac_rig.learning.data import PairedDataset
 from unitac_rig.learning.evaluate import evaluate_run, simple_predictions

@@ -1,4 +1,4 @@
-"""The fuzz campaign's targets (see benchmarks/lab/fuzz.py): one per wire codec, each also driving its driver's
+"""The fuzz campaign's targets (see benchmarks/fuzz.py): one per wire codec, each also driving its driver's
 decode path where there is one, and what they share: one input (:class:`Case`), the :class:`Target` interface and the
 input generators.
 

@@ -78,9 +78,13 @@ class SafetyPlan:
 def quick_plan() -> SafetyPlan:
     """A smoke run (a few minutes on 2 cores)."""
     return SafetyPlan(
-        strategies=("guarded", "two-phase"), stalls_s=(0.0, 0.2), triggers_n=(0.05, 9.0), seeds=(0,),
-        session_sensors=("uskin",), session_angles=3,
-    )  # fmt: skip
+        strategies=("guarded", "two-phase"),
+        stalls_s=(0.0, 0.2),
+        triggers_n=(0.05, 9.0),
+        seeds=(0,),
+        session_sensors=("uskin",),
+        session_angles=3,
+    )
 
 
 @dataclass
@@ -107,8 +111,15 @@ def run_cases(cases: Sequence[dict[str, Any]], checkout: Checkout, jobs: int = 2
     chunks = [list(cases[i::jobs]) for i in range(jobs) if cases[i::jobs]]
 
     def run(chunk: list[dict[str, Any]]) -> list[dict[str, Any]]:
-        proc = subprocess.run([sys.executable, "-c", _RUNNER], input=json.dumps(chunk), capture_output=True,
-                              text=True, env=env, cwd=tempfile.gettempdir(), check=False)  # fmt: skip
+        proc = subprocess.run(
+            [sys.executable, "-c", _RUNNER],
+            input=json.dumps(chunk),
+            capture_output=True,
+            text=True,
+            env=env,
+            cwd=tempfile.gettempdir(),
+            check=False,
+        )
         if proc.returncode != 0:
             raise RuntimeError(f"safety worker ({checkout.name}) failed: {proc.stderr[-2000:]}")
         return [json.loads(line) for line in proc.stdout.splitlines() if line.startswith("{")]
@@ -124,8 +135,16 @@ def stall_cases(plan: SafetyPlan) -> list[dict[str, Any]]:
             for stall in (*plan.stalls_s, None):  # None = host death
                 triggers = plan.triggers_n if stall != 0.0 else plan.triggers_n[:1]  # no stall: nothing to place
                 for trigger in triggers:
-                    cases.append({"strategy": strategy, "stall_s": stall, "trigger_n": trigger, "seed": seed,
-                                  "object_id": plan.object_id, "angle_deg": plan.angle_deg})  # fmt: skip
+                    cases.append(
+                        {
+                            "strategy": strategy,
+                            "stall_s": stall,
+                            "trigger_n": trigger,
+                            "seed": seed,
+                            "object_id": plan.object_id,
+                            "angle_deg": plan.angle_deg,
+                        }
+                    )
     return cases
 
 
@@ -205,8 +224,12 @@ def _median(values: Sequence[float]) -> float | None:
 
 def run(plan: SafetyPlan, before_commit: str = BEFORE_COMMIT) -> dict[str, Any]:
     """Measure every version in ``plan.versions``; -> a JSON-ready document."""
-    doc: dict[str, Any] = {"machine": machine_info(), "plan": plan.__dict__, "before_commit": before_commit,
-                           "versions": {}}  # fmt: skip
+    doc: dict[str, Any] = {
+        "machine": machine_info(),
+        "plan": plan.__dict__,
+        "before_commit": before_commit,
+        "versions": {},
+    }
     for name in plan.versions:
         checkout = before_checkout(before_commit) if name == "before" else Checkout("after", None)
         try:
@@ -269,8 +292,9 @@ def draw(doc: dict[str, Any], path: Path) -> Path:
             rows = summary["rows"]
             labels = [r["label"] for r in rows]
             peaks = [r["worst_peak_abs_n"] for r in rows]
-            left.plot(range(len(rows)), peaks, style, marker="o", color=colours.get(strategy),
-                      label=f"{strategy} ({name})")  # fmt: skip
+            left.plot(
+                range(len(rows)), peaks, style, marker="o", color=colours.get(strategy), label=f"{strategy} ({name})"
+            )
     left.axhline(HARD_LIMIT_N, color="red", lw=1)
     left.text(0.02, HARD_LIMIT_N * 1.05, "hard limit 25 N", color="red", transform=left.get_yaxis_transform())
     left.set_yscale("log")
@@ -283,17 +307,28 @@ def draw(doc: dict[str, Any], path: Path) -> Path:
     strategies = list(doc["versions"].get("after", doc["versions"].get("before", {})).get("sessions", {}))
     x = np.arange(len(strategies))
     width = 0.2
-    for k, (name, metric, hatch) in enumerate((
-        ("before", "true_overshoot_median_n", None), ("after", "true_overshoot_median_n", None),
-        ("before", "match_error_median_n", "//"), ("after", "match_error_median_n", "//"),
-    )):  # fmt: skip
+    for k, (name, metric, hatch) in enumerate(
+        (
+            ("before", "true_overshoot_median_n", None),
+            ("after", "true_overshoot_median_n", None),
+            ("before", "match_error_median_n", "//"),
+            ("after", "match_error_median_n", "//"),
+        )
+    ):
         version = doc["versions"].get(name)
         if version is None:
             continue
         values = [version["sessions"].get(s, {}).get(metric) or 0.0 for s in strategies]
         what = "true overshoot" if "overshoot" in metric else "median |matching error|"
-        right.bar(x + (k - 1.5) * width, values, width, hatch=hatch, alpha=0.5 if name == "before" else 0.9,
-                  color="grey" if name == "before" else "tab:blue", label=f"{what} ({name})")  # fmt: skip
+        right.bar(
+            x + (k - 1.5) * width,
+            values,
+            width,
+            hatch=hatch,
+            alpha=0.5 if name == "before" else 0.9,
+            color="grey" if name == "before" else "tab:blue",
+            label=f"{what} ({name})",
+        )
     right.set_xticks(x, strategies)
     right.set_ylabel("N")
     right.set_title("Overshoot over 10 N and matching error, per strategy")
@@ -312,16 +347,23 @@ def _draw_twin_deaths(ax: Any, twin: dict[str, Any], colours: dict[str, str]) ->
     for k, name in enumerate(("before", "after")):
         rows = {d["strategy"]: d for d in deaths if d["version"] == name}
         values = [rows[s]["peak_abs_n"] if s in rows else 0.0 for s in strategies]
-        bars = ax.bar(x + (k - 0.5) * 0.38, values, 0.38, color=[colours.get(s, "grey") for s in strategies],
-                      alpha=0.45 if name == "before" else 0.95, label=name)  # fmt: skip
+        bars = ax.bar(
+            x + (k - 0.5) * 0.38,
+            values,
+            0.38,
+            color=[colours.get(s, "grey") for s in strategies],
+            alpha=0.45 if name == "before" else 0.95,
+            label=name,
+        )
         for bar, s in zip(bars, strategies, strict=True):
             row = rows.get(s)
             if row is None:
                 continue
             rest = row["rest_after_last_write_s"]
             note = "moving\nafter 3 s" if rest is None else f"rest\n{1000 * rest:.0f} ms"
-            ax.annotate(note, (bar.get_x() + bar.get_width() / 2, bar.get_height()), ha="center", va="bottom",
-                        fontsize=7)  # fmt: skip
+            ax.annotate(
+                note, (bar.get_x() + bar.get_width() / 2, bar.get_height()), ha="center", va="bottom", fontsize=7
+            )
     ax.axhline(HARD_LIMIT_N, color="red", lw=1)
     ax.set_yscale("log")
     ax.set_xticks(x, strategies)
@@ -354,10 +396,26 @@ def _twin_rig_file(host: str, strategy: str) -> str:
 
 def _collect(checkout: Checkout, rig_file: Path, data: Path, angles: int) -> subprocess.Popen[str]:
     env = {**os.environ, "PYTHONPATH": str(checkout.path or REPO), "PYTHONUNBUFFERED": "1"}
-    cmd = [sys.executable, "-c", _TWIN_RUNNER, "collect", "--rig", str(rig_file), "--object", "circle_pla",
-           "--sensor", "uskin", "--angles", str(angles), "--data", str(data), "--no-live"]  # fmt: skip
-    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-                            cwd=tempfile.gettempdir())  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-c",
+        _TWIN_RUNNER,
+        "collect",
+        "--rig",
+        str(rig_file),
+        "--object",
+        "circle_pla",
+        "--sensor",
+        "uskin",
+        "--angles",
+        str(angles),
+        "--data",
+        str(data),
+        "--no-live",
+    ]
+    return subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tempfile.gettempdir()
+    )
 
 
 def twin_host_death(checkout: Checkout, strategy: str, watch_s: float = 3.0) -> dict[str, Any]:
@@ -370,8 +428,10 @@ def twin_host_death(checkout: Checkout, strategy: str, watch_s: float = 3.0) -> 
     from unitac_rig.sim.twin.rig import RigTwin
 
     host = first_free_loopback(TWIN_FIRST, TWIN_LAST)
-    with tempfile.TemporaryDirectory() as tmp, RigTwin("circle_pla", host=host, seed=1,
-                                                       params=ControllerParams(unlock_delay_s=0.5)) as rig:  # fmt: skip
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        RigTwin("circle_pla", host=host, seed=1, params=ControllerParams(unlock_delay_s=0.5)) as rig,
+    ):
         rig_file = Path(tmp) / "twin.toml"
         rig_file.write_text(_twin_rig_file(host, strategy))
         proc = _collect(checkout, rig_file, Path(tmp) / "data", angles=3)
@@ -397,10 +457,14 @@ def twin_host_death(checkout: Checkout, strategy: str, watch_s: float = 3.0) -> 
         moving = [t.controller_t_s for t in seen if not t.at_rest]
         rest = (max(moving) if moving else seen[0].controller_t_s) - last.last_input_t_s if last.at_rest else None
         return {
-            "version": checkout.name, "strategy": strategy, "peak_abs_n": last.peak_force_n,
-            "rest_after_last_write_s": rest, "still_moving_after_s": None if last.at_rest else watch_s,
-            "watchdog_trips": last.watchdog_trips, "protective_stops": last.protective_stops,
-        }  # fmt: skip
+            "version": checkout.name,
+            "strategy": strategy,
+            "peak_abs_n": last.peak_force_n,
+            "rest_after_last_write_s": rest,
+            "still_moving_after_s": None if last.at_rest else watch_s,
+            "watchdog_trips": last.watchdog_trips,
+            "protective_stops": last.protective_stops,
+        }
 
 
 def twin_session(strategy: str, angles: int = 5) -> dict[str, Any]:
@@ -416,8 +480,10 @@ def twin_session(strategy: str, angles: int = 5) -> dict[str, Any]:
     from unitac_rig.storage.recorder import session_path
 
     host = first_free_loopback(TWIN_FIRST, TWIN_LAST)
-    with tempfile.TemporaryDirectory() as tmp, RigTwin("circle_pla", host=host, seed=1,
-                                                       params=ControllerParams(unlock_delay_s=0.5)) as rig:  # fmt: skip
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        RigTwin("circle_pla", host=host, seed=1, params=ControllerParams(unlock_delay_s=0.5)) as rig,
+    ):
         rig_file = Path(tmp) / "twin.toml"
         rig_file.write_text(_twin_rig_file(host, strategy))
         peaks: list[float] = []
@@ -446,10 +512,17 @@ def twin_session(strategy: str, angles: int = 5) -> dict[str, Any]:
         if proc.returncode != 0:
             raise RuntimeError(f"twin session ({strategy}) failed: {err[-1500:]}")
         presses = read_presses(session_path(Path(tmp) / "data", "circle_pla", "uskin"))
-        errors = [abs(float(e)) for p in presses if p.extraction is not None
-                  for e, m in zip(p.extraction.error_n, p.extraction.miss, strict=True) if not m]  # fmt: skip
+        errors = [
+            abs(float(e))
+            for p in presses
+            if p.extraction is not None
+            for e, m in zip(p.extraction.error_n, p.extraction.miss, strict=True)
+            if not m
+        ]
         return {
-            "strategy": strategy, "presses": len(presses), "complete": sum(p.status == "complete" for p in presses),
+            "strategy": strategy,
+            "presses": len(presses),
+            "complete": sum(p.status == "complete" for p in presses),
             "wall_s": time.monotonic() - began,
             "recorded_overshoot_median_n": _median([float(p.attrs["peak_force_n"]) - 10.0 for p in presses]),
             "true_overshoot_median_n": _median([p - 10.0 for p in peaks]),
@@ -457,7 +530,7 @@ def twin_session(strategy: str, angles: int = 5) -> dict[str, Any]:
             "match_error_median_n": _median(errors),
             "misses": sum(int(np.sum(p.extraction.miss)) for p in presses if p.extraction is not None),
             "targets": 25 * len(presses),
-        }  # fmt: skip
+        }
 
 
 def run_twin(plan: SafetyPlan, before_commit: str = BEFORE_COMMIT) -> dict[str, Any]:
@@ -493,19 +566,25 @@ def main() -> None:
     if args.twin or args.twin_only:
         doc["twin"] = run_twin(plan, before_commit=args.before)
         for death in doc["twin"]["deaths"]:
-            print(f"  twin kill -9 ({death['version']}, {death['strategy']}): peak {death['peak_abs_n']:.1f} N, "
-                  f"rest {death['rest_after_last_write_s']} s after the last write")  # fmt: skip
+            print(
+                f"  twin kill -9 ({death['version']}, {death['strategy']}): peak {death['peak_abs_n']:.1f} N, "
+                f"rest {death['rest_after_last_write_s']} s after the last write"
+            )
         for strategy, s in doc["twin"]["sessions"].items():
-            print(f"  twin session {strategy}: {s['complete']}/{s['presses']} complete, true overshoot "
-                  f"{s['true_overshoot_median_n']} N, |matching error| {s['match_error_median_n']} N")  # fmt: skip
+            print(
+                f"  twin session {strategy}: {s['complete']}/{s['presses']} complete, true overshoot "
+                f"{s['true_overshoot_median_n']} N, |matching error| {s['match_error_median_n']} N"
+            )
     for name, version in doc["versions"].items():
         print(f"== {name}")
         for strategy, summary in version["stalls"].items():
             cells = ", ".join(f"{r['label']}: {r['worst_peak_abs_n']:.1f} N" for r in summary["rows"])
             print(f"  {strategy:10s} worst true |F| by stall: {cells}")
         for strategy, s in version["sessions"].items():
-            print(f"  {strategy:10s} true overshoot {s['true_overshoot_median_n']} N, |matching error| median "
-                  f"{s['match_error_median_n']} N, misses {s['misses']}/{s['targets']}")  # fmt: skip
+            print(
+                f"  {strategy:10s} true overshoot {s['true_overshoot_median_n']} N, |matching error| median "
+                f"{s['match_error_median_n']} N, misses {s['misses']}/{s['targets']}"
+            )
     print("goals:", doc["goals"])
     json_path = write_json(doc, json_file)
     png_path = draw(doc, args.out / "bench_safety.png")

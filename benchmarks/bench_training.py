@@ -84,9 +84,14 @@ def full_plan() -> TrainingBenchPlan:
 
 def quick_plan() -> TrainingBenchPlan:
     return TrainingBenchPlan(
-        stack_sizes=(1, 3), rounds=1, seconds_per_cell=0.05, warmup_steps=1, paper_run_epochs=4, budget_epochs=2,
+        stack_sizes=(1, 3),
+        rounds=1,
+        seconds_per_cell=0.05,
+        warmup_steps=1,
+        paper_run_epochs=4,
+        budget_epochs=2,
         eval_every=1,
-    )  # fmt: skip
+    )
 
 
 def stack(size: int) -> tuple[list[int], bool]:
@@ -318,7 +323,7 @@ def measure_paper_run(dataset: PairedDataset, epochs: int) -> dict[str, Any]:
             "train_only_s": PAPER_EPOCHS * train_epoch,
             "end_to_end_s": setup + PAPER_EPOCHS * train_epoch + 2 * evaluation + checkpoints * checkpoint,
         },
-    }  # fmt: skip
+    }
 
 
 def measure_budget(dataset: PairedDataset, epochs: int, eval_every: int) -> dict[str, Any]:
@@ -496,9 +501,11 @@ def plot_training_benchmark(doc: dict[str, Any], path: Path) -> Path:
             ax.grid(alpha=0.3)
         ax_nmae.set_yscale("log")
         ax_nmae.legend(fontsize=7)
-    fig.suptitle(f"UniTac-NV training speed ({doc['data']}; {doc['machine']['cpus']} CPUs shared, load average "
-                 f"{doc['load_average_1min_at_start']} at start, {doc['machine']['load_average_1min']} at end)",
-                 fontsize=10)  # fmt: skip
+    fig.suptitle(
+        f"UniTac-NV training speed ({doc['data']}; {doc['machine']['cpus']} CPUs shared, load average "
+        f"{doc['load_average_1min_at_start']} at start, {doc['machine']['load_average_1min']} at end)",
+        fontsize=10,
+    )
     return save_figure(fig, path)
 
 

@@ -479,8 +479,15 @@ def plot_fidelity(doc: dict[str, Any], path: Path) -> Path:
     im = ax.imshow(rel.T, cmap="RdBu_r", vmin=-75, vmax=75, aspect="auto")
     for i in range(rel.shape[0]):
         for j in range(rel.shape[1]):
-            ax.text(i, j, f"{rel[i, j]:+.0f}", ha="center", va="center", fontsize=7,
-                    fontweight="bold" if abs(rel[i, j]) > 100 * REL_TOLERANCE else "normal")  # fmt: skip
+            ax.text(
+                i,
+                j,
+                f"{rel[i, j]:+.0f}",
+                ha="center",
+                va="center",
+                fontsize=7,
+                fontweight="bold" if abs(rel[i, j]) > 100 * REL_TOLERANCE else "normal",
+            )
     ax.set_xticks(x, objects, rotation=30, fontsize=7)
     ax.set_yticks(range(len(names)), [n.replace("papillarray", "pap") for n in names], fontsize=7)
     ax.set_title("simulated / recorded - 1 (%); bold: outside +-25 %", fontsize=9)

@@ -207,8 +207,13 @@ def memory_growth(target: Target, seed: int, n: int) -> dict[str, int]:
         late, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
-    return {"inputs": n, "after_fifth_bytes": early, "at_end_bytes": late, "growth_bytes": late - early,
-            "peak_bytes": peak}  # fmt: skip
+    return {
+        "inputs": n,
+        "after_fifth_bytes": early,
+        "at_end_bytes": late,
+        "growth_bytes": late - early,
+        "peak_bytes": peak,
+    }
 
 
 def _quiet(feed: Callable[[Case], None], case: Case, allowed: tuple[type[BaseException], ...]) -> None:
@@ -216,9 +221,14 @@ def _quiet(feed: Callable[[Case], None], case: Case, allowed: tuple[type[BaseExc
         feed(case)
 
 
-def run_campaign(n_inputs: int, seed: int, targets: list[str] | None = None, hang_ms: float = HANG_MS,
-                 progress: Callable[[Report], None] | None = None,
-                 memory_inputs: int | None = None) -> dict[str, Any]:  # fmt: skip
+def run_campaign(
+    n_inputs: int,
+    seed: int,
+    targets: list[str] | None = None,
+    hang_ms: float = HANG_MS,
+    progress: Callable[[Report], None] | None = None,
+    memory_inputs: int | None = None,
+) -> dict[str, Any]:
     """Every target (or ``targets``) with ``n_inputs`` inputs each; a JSON-ready summary."""
     reports = []
     started = time.perf_counter()

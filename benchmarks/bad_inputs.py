@@ -45,8 +45,11 @@ def run_cli(args: list[str]) -> tuple[int, list[str]]:
 
 
 def _hashes(root: Path) -> dict[str, str]:
-    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(root.rglob("*"))
-            if p.is_file() and p.name != "_writer.lock"}  # fmt: skip
+    return {
+        str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and p.name != "_writer.lock"
+    }
 
 
 def _rig(text: str | bytes) -> Setup:
@@ -95,23 +98,43 @@ def _nan_checkpoint(work: Path) -> list[str]:
     (work / "run").mkdir()
     weights = torch.zeros(4, 72)
     weights[0, 0] = math.nan
-    torch.save({"format": CHECKPOINT_FORMAT, "version": 2,
-                "engine": {"parameters": {"uskin.enc.0": {"weight": weights, "bias": torch.zeros(4)}}}},
-               checkpoint_path(work / "run"))  # fmt: skip
+    torch.save(
+        {
+            "format": CHECKPOINT_FORMAT,
+            "version": 2,
+            "engine": {"parameters": {"uskin.enc.0": {"weight": weights, "bias": torch.zeros(4)}}},
+        },
+        checkpoint_path(work / "run"),
+    )
     return ["translate", str(work / "run"), str(_frames(work)), "--from", "uskin", "--to", "papillarray"]
 
 
 def _pickled_checkpoint(work: Path) -> list[str]:
     (work / "run").mkdir()
-    torch.save({"format": CHECKPOINT_FORMAT, "made": datetime.date(2025, 1, 1)}, checkpoint_path(work / "run"),
-               _use_new_zipfile_serialization=False)  # fmt: skip
+    torch.save(
+        {"format": CHECKPOINT_FORMAT, "made": datetime.date(2025, 1, 1)},
+        checkpoint_path(work / "run"),
+        _use_new_zipfile_serialization=False,
+    )
     return ["translate", str(work / "run"), str(_frames(work)), "--from", "uskin", "--to", "papillarray"]
 
 
 def _other_rig(work: Path) -> list[str]:
     (work / "lab_b.toml").write_text('name = "lab-b"\n')
-    return ["collect", "--object", "circle_pla", "--sensor", "uskin", "--rig", str(work / "lab_b.toml"), "--data",
-            str(work / "data"), "--angles", "2", "--no-live"]  # fmt: skip
+    return [
+        "collect",
+        "--object",
+        "circle_pla",
+        "--sensor",
+        "uskin",
+        "--rig",
+        str(work / "lab_b.toml"),
+        "--data",
+        str(work / "data"),
+        "--angles",
+        "2",
+        "--no-live",
+    ]
 
 
 INPUTS: list[tuple[str, Setup]] = [
@@ -144,16 +167,21 @@ def controller_row() -> dict[str, Any]:
     session = RtdeSession("bench", controller_version=ControllerVersion(5, 11, 0, 0), max_frequency_hz=500.0)
     (package,) = rtde.RtdePackageParser().feed(rtde.encode_setup_outputs(math.nan, ["timestamp"]))
     session.handle(package)
-    return {"input": "RTDE client asks the simulated controller for NaN Hz", "exit": None,
-            "lines": [f"(no error: streams at {1 / session.period_s:g} Hz, its limit, as for any rate it cannot "
-                      "run)"], "one_line": True, "unchanged": True}  # fmt: skip
+    return {
+        "input": "RTDE client asks the simulated controller for NaN Hz",
+        "exit": None,
+        "lines": [f"(no error: streams at {1 / session.period_s:g} Hz, its limit, as for any rate it cannot run)"],
+        "one_line": True,
+        "unchanged": True,
+    }
 
 
 def record(root: Path) -> Path:
     data = root / "data"
     for sensor in ("uskin", "papillarray"):
-        code, lines = run_cli(["collect", "--object", "circle_pla", "--sensor", sensor, "--data", str(data),
-                               "--angles", "2", "--no-live"])  # fmt: skip
+        code, lines = run_cli(
+            ["collect", "--object", "circle_pla", "--sensor", sensor, "--data", str(data), "--angles", "2", "--no-live"]
+        )
         if code != 0:
             raise RuntimeError(f"recording failed: {lines}")
     return data
@@ -185,8 +213,16 @@ def main() -> None:
             code, lines = run_cli(argv)
             lines = [line.replace(f"{work}/", "") for line in lines]  # the scratch folder, not the user's
             one = len(lines) == 1 and lines[0].startswith("error: ")
-            rows.append({"input": name, "argv": argv[:1], "exit": code, "lines": lines, "one_line": one,
-                         "unchanged": _hashes(work / "data") == before})  # fmt: skip
+            rows.append(
+                {
+                    "input": name,
+                    "argv": argv[:1],
+                    "exit": code,
+                    "lines": lines,
+                    "one_line": one,
+                    "unchanged": _hashes(work / "data") == before,
+                }
+            )
             print(f"{code}  {name}: {' / '.join(lines)}")
     rows.append(controller_row())
     path = write_json({"machine": machine_info(), "inputs": rows}, args.out / "bad_inputs.json")

@@ -17,25 +17,19 @@ Writes docs/figures/bench_codecs.json and docs/figures/bench_codecs.png.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-import matplotlib
 import numpy as np
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 
 from protocols.papillarray import PacketParser, PapillArrayPacket, PillarSensorData, encode_packet
 from protocols.xela_can import USPA46_ID_MAP, FrameAssembler, encode_taxel_message
 from protocols.xela_ws import XelaSensorData, XelaWelcome, decode_message, encode_data_message
-from unitac_rig.bench import machine_info
+from unitac_rig.bench import default_out_dir, machine_info, write_json
+from unitac_rig.plotting import new_figure, save_figure
 
-ROOT = Path(__file__).resolve().parents[1]
-FIGURES = ROOT / "docs" / "figures"
 TARGET_MULTIPLE = 50.0
 
 HARDWARE_PEAK = {
@@ -140,19 +134,6 @@ def bench_xela_server(n_messages: int, as_hex: bool) -> Bench:
     return run, {"bytes_per_msg": sum(map(len, texts)) / n_messages, "items": n_messages}
 
 
-def machine() -> dict[str, object]:
-    """The shared machine record, under the key names this benchmark's JSON has always used."""
-    info = machine_info()
-    return {
-        "cpu": info["cpu_model"],
-        "load_average_1min": info["load_average_1min"],
-        "logical_cpus": info["cpus"],
-        "python": info["python"],
-        "numpy": info["numpy"],
-        "platform": info["platform"],
-    }
-
-
 # name -> (chart label, unit of one item, device peak rate in items/s)
 CASES: dict[str, tuple[str, str, float]] = {
     "papillarray_4k_reads": ("PapillArray\n4 KiB reads\n(peak 1000 packets/s)", "packets", 1000.0),
@@ -166,7 +147,8 @@ CASES: dict[str, tuple[str, str, float]] = {
 def plot(results: dict[str, dict[str, float]], path: Path) -> None:
     names = list(CASES)
     multiples = [results[name]["x_device_peak"] for name in names]
-    fig, ax = plt.subplots(figsize=(10.5, 5.4), dpi=120)
+    fig = new_figure(10.5, 5.4, dpi=120, layout="tight")
+    ax = fig.subplots()
     colors = ["#3b7dd8", "#7fa7e3", "#2a9d8f", "#c0462a", "#b5651d"]
     bars = ax.bar([CASES[name][0] for name in names], multiples, color=colors, edgecolor="black", linewidth=0.6)
     ax.set_yscale("log")
@@ -182,18 +164,17 @@ def plot(results: dict[str, dict[str, float]], path: Path) -> None:
     ax.set_ylabel("decode throughput / device peak rate (log scale)", fontsize=11)
     ax.set_title("Wire codec decode throughput, one Python thread (best of repeats)", fontsize=13)
     ax.tick_params(axis="x", labelsize=10)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer items and repeats (smoke run)")
     parser.add_argument("--repeats", type=int, default=9, help="timed runs per case, interleaved (default 9)")
+    parser.add_argument("--out", type=Path, default=default_out_dir(), help="folder for the JSON and PNG")
     args = parser.parse_args()
     scale, repeats = (0.1, 2) if args.quick else (1.0, args.repeats)
-    host = machine()
+    host = machine_info()
 
     benches = {
         "papillarray_4k_reads": bench_papillarray(int(10_000 * scale), read_size=4096),
@@ -216,11 +197,10 @@ def main() -> None:
         "repeats": repeats,
         "results": results,
     }
-    FIGURES.mkdir(parents=True, exist_ok=True)
-    (FIGURES / "bench_codecs.json").write_text(json.dumps(report, indent=2) + "\n")
-    plot(results, FIGURES / "bench_codecs.png")
+    json_path = write_json(report, args.out / "bench_codecs.json")
+    plot(results, args.out / "bench_codecs.png")
 
-    print(f"machine: {host['cpu']}, {host['logical_cpus']} logical CPUs, load average {host['load_average_1min']}")
+    print(f"machine: {host['cpu_model']}, {host['cpus']} logical CPUs, load average {host['load_average_1min']}")
     print(f"{'case':<24}{'best/s':>12}{'median/s':>12}{'best x peak':>13}{'median x peak':>15}")
     for name, (_, unit, peak) in CASES.items():
         row = results[name]
@@ -228,7 +208,7 @@ def main() -> None:
             f"{name:<24}{row['best_per_s']:>12,.0f}{row['median_per_s']:>12,.0f}"
             f"{row['x_device_peak']:>12,.0f}x{row['x_device_peak_median']:>14,.0f}x   ({unit}, peak {peak:,.0f}/s)"
         )
-    print(f"wrote {FIGURES / 'bench_codecs.json'} and {FIGURES / 'bench_codecs.png'}")
+    print(f"wrote {json_path} and {args.out / 'bench_codecs.png'}")
 
 
 if __name__ == "__main__":

@@ -17,9 +17,7 @@ from __future__ import annotations
 
 import argparse
 import functools
-import json
 import math
-import platform
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -28,13 +26,13 @@ from typing import Any
 import numpy as np
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
+from unitac_rig.bench import default_out_dir, machine_info, write_json
 from unitac_rig.plotting import new_figure, save_figure
 from unitac_rig.rig.objects import list_objects
 from unitac_rig.sim.scene import PressScene, SceneParams
 from unitac_rig.sim.sensor_models import model_for
 from unitac_rig.sim.source import SceneSensorSource
 
-OUT_DIR = Path(__file__).resolve().parent.parent / "docs" / "figures"
 ARM_HZ, SENSOR_HZ = 500, 100
 SPEED_MM_S, STANDOFF_MM, HOLD_S, STOP_N = 5.0, 2.0, 0.1, 10.0
 
@@ -199,7 +197,7 @@ def fidelity(angles: list[int], steps: list[float], points: list[int]) -> dict[s
         reference_results = {name: _loads_at_10n(ref, layout, angles) for name, ref in references.items()}
         for name, value in settings:
             ref_loads, ref_travel, _ = reference_results[name]
-            loads, travel, build_ms = _loads_at_10n(replace(SceneParams(), **{name: value}), layout, angles)
+            loads, travel, build_ms = _loads_at_10n(replace(SceneParams(), **{name: value}), layout, angles)  # type: ignore[arg-type]
             diff = np.abs(loads - ref_loads)
             rows.append(
                 {
@@ -259,20 +257,19 @@ def plot(report: dict[str, Any], out: Path) -> Path:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer angles: a smoke run, not numbers to report")
-    parser.add_argument("--out", type=Path, default=OUT_DIR)
+    parser.add_argument("--out", type=Path, default=default_out_dir())
     args = parser.parse_args()
     angles = list(range(-45, 46, 15 if args.quick else 1))
     sweep_angles = list(range(-45, 46, 15 if args.quick else 5))
     report: dict[str, Any] = {
-        "host": {"python": platform.python_version(), "machine": platform.machine(), "processor": platform.processor()},
+        "host": machine_info(),
         "settings": {"arm_hz": ARM_HZ, "sensor_hz": SENSOR_HZ, "speed_mm_s": SPEED_MM_S, "stop_n": STOP_N},
     }
     report["campaign_scene"] = campaign(angles, with_sensor_models=False)
     report["campaign_scene_and_sensor_models"] = campaign(angles, with_sensor_models=True)
     report["sim_arm_guarded_move"] = with_sim_arm(sweep_angles)
     report["fidelity"] = fidelity(sweep_angles, [0.05, 0.1, 0.25, 0.5, 1.0, 2.0], [25, 50, 100, 200, 400])
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "sim_bench.json").write_text(json.dumps(report, indent=1))
+    write_json(report, args.out / "sim_bench.json")
     plot(report, args.out / "sim_bench.png")
     for key in ("campaign_scene", "campaign_scene_and_sensor_models", "sim_arm_guarded_move"):
         r = report[key]

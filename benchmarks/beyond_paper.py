@@ -30,7 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from unitac_rig.bench.lab.pooled_geometry import pooled_geometry
+from lab.geometry_heads import pooled_geometry
+from unitac_rig.bench import write_json
 from unitac_rig.learning.contact_geometry import run_geometry
 from unitac_rig.learning.data import build_paired_dataset, load_sets
 from unitac_rig.learning.engine import UNITAC_GROUP
@@ -110,8 +111,7 @@ def main() -> None:
         return
     doc = summarise(results, args)
     figures = args.docs / "figures"
-    figures.mkdir(parents=True, exist_ok=True)
-    (figures / "beyond_paper.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    write_json(doc, figures / "beyond_paper.json")
     plot_geometry_options(doc, figures / "beyond_geometry.png")
     plot_sizes(doc, figures / "beyond_size.png")
     print(f"wrote {figures / 'beyond_paper.json'} and its figures")
@@ -157,7 +157,7 @@ def run_variant(dataset: Any, run_dir: Path, name: str, base: TrainConfig) -> No
         "geometry_paper_heads": heads,
         "geometry_pooled_head": pooled,
     }
-    (run_dir / RESULT).write_text(json.dumps(record, indent=2) + "\n", encoding="utf-8")
+    write_json(record, run_dir / RESULT)
     print(f"{name}: {train_cpu / 60:.1f} CPU min training", flush=True)
 
 
@@ -245,8 +245,10 @@ def size_margin_text(doc: dict[str, Any]) -> str:
             for c in DIRECTIONS
         }
         worst = min(slack, key=lambda c: slack[c])
-        parts.append(f"{name} {'missed' if slack[worst] < 0 else 'passed'} by {abs(slack[worst]):.0%} of the "
-                     f"allowance on {worst.replace('_to_', ' → ')}")  # fmt: skip
+        parts.append(
+            f"{name} {'missed' if slack[worst] < 0 else 'passed'} by {abs(slack[worst]):.0%} of the "
+            f"allowance on {worst.replace('_to_', ' → ')}"
+        )
     return (
         f"Margins ({doc['seeds']} seeds, split {doc['split']}, one validation set, so a margin under about half the "
         "allowance is within what the seeds and the split move and decides nothing): " + "; ".join(parts) + "."
@@ -296,12 +298,22 @@ def plot_geometry_options(doc: dict[str, Any], path: Path) -> Path:
         marker = "s" if "pooled" in row["option"] else "o"
         if row["cross_mm"] is not None:  # the pooled head has no cross-sensor error (it saw the test sensor)
             ax.scatter(row["cpu_seconds"] / 60, row["cross_mm"], marker=marker, s=40)
-            ax.annotate(row["option"], (row["cpu_seconds"] / 60, row["cross_mm"]), fontsize=7, xytext=(4, 3),
-                        textcoords="offset points")  # fmt: skip
+            ax.annotate(
+                row["option"],
+                (row["cpu_seconds"] / 60, row["cross_mm"]),
+                fontsize=7,
+                xytext=(4, 3),
+                textcoords="offset points",
+            )
         ax2.scatter(row["cpu_seconds"] / 60, row["self_ssim_validation"], marker=marker, s=40)
         # a pooled head shares its autoencoder's SSIM, so its label goes below the paper heads' one
-        ax2.annotate(row["option"], (row["cpu_seconds"] / 60, row["self_ssim_validation"]), fontsize=7,
-                     xytext=(4, -9 if marker == "s" else 3), textcoords="offset points")  # fmt: skip
+        ax2.annotate(
+            row["option"],
+            (row["cpu_seconds"] / 60, row["self_ssim_validation"]),
+            fontsize=7,
+            xytext=(4, -9 if marker == "s" else 3),
+            textcoords="offset points",
+        )
     ax.axhline(doc["paper_cross_mm"], color="tab:red", ls="--", lw=1, label="paper, cross-sensor (mean)")
     ax.axhline(doc["target_cross_mm"], color="tab:green", ls="--", lw=1, label="half the paper's")
     ax.set_xlabel("training cost (CPU minutes: autoencoder + geometry head)")
@@ -329,8 +341,9 @@ def plot_sizes(doc: dict[str, Any], path: Path) -> Path:
     axes[1].plot(params, [e["train_cpu_seconds"] / 60 for e in entries], "o", color="black")
     axes[1].set_ylabel("training cost (CPU minutes)")
     for scenario in PAPER_GEOMETRY_MAE_MM:
-        axes[2].plot(params, [e["geometry_mm"][scenario]["mean"] for e in entries], "o",
-                     label=scenario.replace("_to_", " → "))  # fmt: skip
+        axes[2].plot(
+            params, [e["geometry_mm"][scenario]["mean"] for e in entries], "o", label=scenario.replace("_to_", " → ")
+        )
     axes[2].set_ylabel("geometry error (mm, test)")
     for ax in axes:
         ax.set_xscale("log")
@@ -338,8 +351,9 @@ def plot_sizes(doc: dict[str, Any], path: Path) -> Path:
         ax.grid(alpha=0.3)
         for name, p, e in zip(names, params, entries, strict=True):
             if ax is axes[1]:
-                ax.annotate(name, (p, e["train_cpu_seconds"] / 60), fontsize=7, xytext=(3, 3),
-                            textcoords="offset points")  # fmt: skip
+                ax.annotate(
+                    name, (p, e["train_cpu_seconds"] / 60), fontsize=7, xytext=(3, 3), textcoords="offset points"
+                )
     axes[0].legend(fontsize=7)
     axes[2].legend(fontsize=7)
     chosen = doc["size_choice"]["chosen"]

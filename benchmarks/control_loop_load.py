@@ -148,8 +148,22 @@ HOST_PREFIX: list[str] = []  # e.g. chrt -f 5: the collecting process under real
 
 
 def collect_cmd(rig_file: Path, data: Path, angles: int) -> list[str]:
-    return [*HOST_PREFIX, sys.executable, "-m", "unitac_rig", "collect", "--rig", str(rig_file), "--object",
-            "circle_pla", "--angles", str(angles), "--data", str(data), "--no-live"]  # fmt: skip
+    return [
+        *HOST_PREFIX,
+        sys.executable,
+        "-m",
+        "unitac_rig",
+        "collect",
+        "--rig",
+        str(rig_file),
+        "--object",
+        "circle_pla",
+        "--angles",
+        str(angles),
+        "--data",
+        str(data),
+        "--no-live",
+    ]
 
 
 def _run(rig: RigTwin, cmd: list[str], stdin: str | None = None) -> dict[str, Any]:
@@ -212,9 +226,22 @@ def campaign(angles: int, scratch: Path, host: str) -> dict[str, Any]:
     with RigTwin("circle_pla", sensor="papillarray", host=host, seed=4) as rig:
         rig_file = scratch / "campaign.toml"
         rig_file.write_text(_only_sensor(rig.rig_file(), "papillarray"))  # the twin serves the mounted one only
-        cmd = [*HOST_PREFIX, sys.executable, "-m", "unitac_rig", "campaign", "--rig", str(rig_file), "--objects",
-               "circle_pla,circle_tpu", "--angles", str(angles), "--data", str(scratch / "campaign"),
-               "--no-live"]  # fmt: skip
+        cmd = [
+            *HOST_PREFIX,
+            sys.executable,
+            "-m",
+            "unitac_rig",
+            "campaign",
+            "--rig",
+            str(rig_file),
+            "--objects",
+            "circle_pla,circle_tpu",
+            "--angles",
+            str(angles),
+            "--data",
+            str(scratch / "campaign"),
+            "--no-live",
+        ]
         run = _run(rig, cmd, stdin="\n" * 8)  # mount the sensor, then each object
     print(f"campaign: {run}", flush=True)
     return run
@@ -230,12 +257,14 @@ def _watch(rig: RigTwin, seconds: float) -> list[TwinTruth]:
 
 def host_death(how: str, angles: int, scratch: Path, host: str) -> dict[str, Any]:
     """Kill or freeze a collect mid-press; the controller time from its last write to the arm at rest for good."""
-    with RigTwin("circle_pla", sensor="papillarray", host=host, seed=2,
-                 params=ControllerParams(unlock_delay_s=0.3)) as rig:  # fmt: skip
+    with RigTwin(
+        "circle_pla", sensor="papillarray", host=host, seed=2, params=ControllerParams(unlock_delay_s=0.3)
+    ) as rig:
         rig_file = scratch / f"{how}.toml"
         rig_file.write_text(rig.rig_file())
-        proc = subprocess.Popen(collect_cmd(rig_file, scratch / how, angles), stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL)  # fmt: skip
+        proc = subprocess.Popen(
+            collect_cmd(rig_file, scratch / how, angles), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
         try:
             deadline = time.monotonic() + 300
             while rig.controller.truth().force_n < PRESSING_N:

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from unitac_rig.bench import write_json
 from unitac_rig.learning.data import PREPROCESSING, build_paired_dataset, load_sets
 from unitac_rig.learning.engine import UNITAC_GROUP
 from unitac_rig.learning.evaluate import Evaluator
@@ -52,8 +53,7 @@ def main() -> None:
         m: json.loads((args.out / m / RESULT).read_text()) for m in PREPROCESSING if (args.out / m / RESULT).exists()
     }
     doc = {"epochs": args.epochs, "seeds": args.seeds, "split": 0, "modes": found}
-    path = args.docs / "figures" / "preprocessing_choice.json"
-    path.write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+    write_json(doc, args.docs / "figures" / "preprocessing_choice.json")
     for line in table(doc):
         print(line)
 
@@ -105,7 +105,7 @@ def run_mode(dataset: Any, run_dir: Path, mode: str, args: argparse.Namespace) -
             .item()
         ),
     }
-    (run_dir / RESULT).write_text(json.dumps(result, indent=2) + "\n", encoding="utf-8")
+    write_json(result, run_dir / RESULT)
 
 
 def table(doc: dict[str, Any]) -> list[str]:

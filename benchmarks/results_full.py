@@ -177,7 +177,6 @@ def _train_task(task: tuple[Path, Path, str, int, int, int, int]) -> float:
     seconds per epoch."""
     dataset_dir, work, protocol, split, seeds, epochs, patience = task
     from results_stages import split_config, train_split
-
     from unitac_rig.learning.run import load_test_set
     from unitac_rig.learning.train import TrainConfig, load_run
 

@@ -21,9 +21,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from lab.geometry_heads import cross_sensor_geometry, pooled_geometry
 from unitac_rig.bench import jsonable
-from unitac_rig.bench.lab.cross_geometry import cross_sensor_geometry
-from unitac_rig.bench.lab.pooled_geometry import pooled_geometry
 from unitac_rig.learning.contact_geometry import GeometryConfig, geometry_for_run
 from unitac_rig.learning.data import PairedDataset
 from unitac_rig.learning.evaluate import evaluate_run, simple_predictions

@@ -90,8 +90,14 @@ def run_session(config: RigConfig, object_id: str, sensor: str, data: Path, seed
         ex = extract_press(press.robot_t_s, press.press_force_n, frame_t, press.tactile_valid, ExtractionSettings())
         ok = ~ex.miss
         if not ok.all():
-            missed.append({"press": press.press_id, "status": press.status, "targets_n": ex.targets_n[~ok].tolist(),
-                           "error_n": ex.error_n[~ok].tolist()})  # fmt: skip
+            missed.append(
+                {
+                    "press": press.press_id,
+                    "status": press.status,
+                    "targets_n": ex.targets_n[~ok].tolist(),
+                    "error_n": ex.error_n[~ok].tolist(),
+                }
+            )
         matched += int(ok.sum())
         targets += ex.targets_n.size
         errors["measured"].append(np.abs(ex.error_n[ok]))

@@ -26,21 +26,18 @@ import contextlib
 import importlib
 import json
 import os
-import platform
 import resource
-import shutil
 import signal
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-ROOT = Path(__file__).resolve().parent.parent
-OUT = ROOT / "docs" / "figures" / "sim_cost.json"
+from lab.versions import ROOT, checkout, run_worker, short_commit
+
 SENSORS = ("uskin", "papillarray")
 
 
@@ -180,7 +177,11 @@ def period_cost() -> dict[str, float]:
             runs.append((time.process_time() - start) / n * 1e6)
         return round(min(runs), 2)
 
-    rest = best_us(lambda: (arm.wait_period(), arm.read_state()), 4000)
+    def at_rest() -> None:
+        arm.wait_period()
+        arm.read_state()
+
+    rest = best_us(at_rest, 4000)
     frame, selection = np.array(arm.read_state().tcp_pose), np.array([0, 0, 1.0, 0, 0, 0])
     limits = np.array([0, 0, 0.002, 0, 0, 0])
 
@@ -195,33 +196,13 @@ def period_cost() -> dict[str, float]:
 
 
 # ---- the driver: versions in subprocesses --------------------------------------------------------------------------
-@contextlib.contextmanager
-def checkout(ref: str) -> Iterator[Path]:
-    """A detached ``git worktree`` of ``ref`` in a temporary folder, removed afterwards."""
-    folder = Path(tempfile.mkdtemp(prefix="sim-cost-")) / "tree"
-    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "-q", str(folder), ref], check=True)
-    try:
-        yield folder
-    finally:
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(folder)], check=False)
-        shutil.rmtree(folder.parent, ignore_errors=True)
-
-
-def _env(code: Path) -> dict[str, str]:
-    return {**os.environ, "PYTHONPATH": str(code)}
-
-
 def measure(code: Path, sensor: str, object_id: str, angles: int, presses: int | None, seed: int) -> dict[str, Any]:
     """Run one session of the code in ``code`` in a fresh process (imports from ``code`` only)."""
-    command = [sys.executable, str(Path(__file__).resolve()), "--worker", sensor, "--object", object_id]
+    command = [str(Path(__file__).resolve()), "--worker", sensor, "--object", object_id]
     command += ["--angles", str(angles), "--seed", str(seed)]
     if presses:
         command += ["--presses", str(presses)]
-    done = subprocess.run(command, env=_env(code), cwd=tempfile.gettempdir(), capture_output=True, text=True)
-    if done.returncode != 0:
-        raise SystemExit(f"session with {sensor} on {code} failed:\n{done.stderr[-2000:]}")
-    result: dict[str, Any] = json.loads(done.stdout.strip().splitlines()[-1])
-    return result
+    return run_worker(code, command)
 
 
 def campaign_presses() -> dict[str, int]:
@@ -238,7 +219,8 @@ def run_campaign(code: Path) -> dict[str, float]:
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         start = time.monotonic()
         command = [sys.executable, "-m", "unitac_rig", "campaign", "--data", tmp, "--no-live"]
-        subprocess.run(command, env=_env(code), cwd=tmp, check=True, capture_output=True)
+        env = {**os.environ, "PYTHONPATH": str(code)}
+        subprocess.run(command, env=env, cwd=tmp, check=True, capture_output=True)
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     return {"cpu_s": round(cpu, 1), "wall_s": round(time.monotonic() - start, 1)}
@@ -303,6 +285,9 @@ def _print(label: str, s: dict[str, Any]) -> None:
 
 
 def main() -> None:
+    # the workers import only the version they measure, so this checkout's package is imported here, not on top
+    from unitac_rig.bench import default_out_dir, machine_info, write_json
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--before", default="2813621", help="commit measured as 'before' (default: 2813621)")
     parser.add_argument("--object", default="hex_tpu")
@@ -315,7 +300,7 @@ def main() -> None:
         "--campaign-presses", type=int, default=0, help="estimate the campaign from this many presses per object"
     )
     parser.add_argument("--full", action="store_true", help="also run the whole campaign on each version (long)")
-    parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("--out", type=Path, default=default_out_dir() / "sim_cost.json")
     parser.add_argument(
         "--period-cost", action="store_true", help="only time one simulated control period alone, before and after"
     )
@@ -331,9 +316,8 @@ def main() -> None:
     if args.period_cost:
         with checkout(args.before) as before_tree:
             for label, code in (("before", before_tree), ("after", ROOT)):
-                command = [sys.executable, str(Path(__file__).resolve()), "--period-worker"]
-                done = subprocess.run(command, env=_env(code), capture_output=True, text=True, check=True)
-                print(f"{label} ({args.before if label == 'before' else 'this checkout'}): {done.stdout.strip()}")
+                cost = run_worker(code, [str(Path(__file__).resolve()), "--period-worker"])
+                print(f"{label} ({args.before if label == 'before' else 'this checkout'}): {json.dumps(cost)}")
         return
     with checkout(args.before) as before_tree:
         trees = {"before": before_tree, "after": ROOT}
@@ -352,10 +336,8 @@ def main() -> None:
         "what": "CPU seconds per simulated second of one seeded fast-twin session, before and after (issue 27)",
         "command": "python benchmarks/sim_cost.py " + " ".join(sys.argv[1:]),
         "before_commit": args.before,
-        "after_commit": subprocess.run(
-            ["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
-        ).stdout.strip(),
-        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "load_avg": os.getloadavg()},
+        "after_commit": short_commit(),
+        "machine": machine_info(),
         "object": args.object,
         "angles": args.angles,
         "presses": args.presses,
@@ -363,9 +345,7 @@ def main() -> None:
         "pairs": args.pairs,
         "versions": versions,
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(doc, indent=2) + "\n")
-    print(f"wrote {args.out}")
+    print(f"wrote {write_json(doc, args.out)}")
 
 
 if __name__ == "__main__":

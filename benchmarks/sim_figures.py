@@ -16,6 +16,7 @@ import numpy as np
 from matplotlib.axes import Axes
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
+from unitac_rig.bench import default_out_dir
 from unitac_rig.plotting import draw_taxel_map, new_figure, save_figure
 from unitac_rig.rig.objects import ObjectSpec, list_objects, pad_side_direction
 from unitac_rig.sim.scene import PressScene
@@ -23,7 +24,6 @@ from unitac_rig.sim.sensor_models import PapillArrayModel, UskinModel
 
 ANGLES_DEG = (-45, -20, 0, 20, 45)
 FORCE_N = 10.0
-OUT_DIR = Path(__file__).resolve().parent.parent / "docs" / "figures"
 
 
 def draw_outline(ax: Axes, obj: ObjectSpec, rotation_deg: float, angles: tuple[int, ...]) -> None:
@@ -35,8 +35,10 @@ def draw_outline(ax: Axes, obj: ObjectSpec, rotation_deg: float, angles: tuple[i
         r = float(np.linalg.norm(obj.outline_hit(pad_side_direction(angle, rotation_deg))))
         a = np.radians(angle)
         u = np.array([np.sin(a), -np.cos(a)])
-        ax.annotate("", xy=u * r, xytext=u * (r + 14), arrowprops={"arrowstyle": "->", "color": "C3", "lw": 0.8})
-        ax.text(*(u * (r + 17)), f"{angle}", fontsize=6, ha="center", va="center")
+        tip, tail, label = u * r, u * (r + 14), u * (r + 17)
+        arrow = {"arrowstyle": "->", "color": "C3", "lw": 0.8}
+        ax.annotate("", xy=(tip[0], tip[1]), xytext=(tail[0], tail[1]), arrowprops=arrow)
+        ax.text(label[0], label[1], f"{angle}", fontsize=6, ha="center", va="center")
     ax.set_aspect("equal")
     ax.set_xlim(-45, 45)
     ax.set_ylim(-45, 35)
@@ -159,7 +161,7 @@ def readings(out: Path) -> Path:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=OUT_DIR)
+    parser.add_argument("--out", type=Path, default=default_out_dir())
     args = parser.parse_args()
     written = [
         taxel_maps(USKIN, args.out / "sim_taxel_maps_uskin.png"),

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from unitac_rig.bench import default_out_dir, write_json
 from unitac_rig.collection.session import collect_session
 from unitac_rig.rig.config import parse_rig_config
 from unitac_rig.rig.objects import get_object
@@ -35,7 +36,6 @@ from unitac_rig.storage.press_record import PressRecord
 from unitac_rig.storage.reader import read_presses
 from unitac_rig.storage.recorder import session_path
 
-OUT_DIR = Path(__file__).resolve().parent.parent / "docs" / "figures"
 THRESHOLD_N = 10.0
 
 
@@ -257,8 +257,13 @@ def draw(result: dict[str, Any], out_dir: Path) -> list[Path]:
         rows = [r for r in soft["rows"] if r["object"] == obj_id]
         limits = [r["max_travel_after_contact_mm"] for r in rows]
         ax2.plot(limits, [r["failed_travel"] / r["presses"] for r in rows], marker=marker, label=f"{obj_id}: failed")
-        ax2.plot(limits, [np.median(r["peak_force_n"]) / THRESHOLD_N for r in rows], marker=marker, ls=":",
-                 label=f"{obj_id}: median peak / 10 N")  # fmt: skip
+        ax2.plot(
+            limits,
+            [np.median(r["peak_force_n"]) / THRESHOLD_N for r in rows],
+            marker=marker,
+            ls=":",
+            label=f"{obj_id}: median peak / 10 N",
+        )
     ax2.set(xlabel="travel limit past first contact (mm)", ylabel="fraction", xscale="log", title="outcome")
     ax2.set_xticks(soft["limits_mm"], [f"{v:g}" for v in soft["limits_mm"]])
     ax2.minorticks_off()
@@ -287,12 +292,21 @@ def draw(result: dict[str, Any], out_dir: Path) -> list[Path]:
     ax1.axhline(tol, color="C3", lw=0.8, ls=":", label=f"tolerance {tol} N")
     sim = result["sim_points"]
     ax1.plot([p[0] for p in sim], [p[1] for p in sim], "x", color="0.3", ms=3, label="simulated rig, matched")
-    ax1.set(xscale="log", yscale="log", xlabel="ramp rate x frame period, r T (N per frame)",
-            ylabel="|matching error| (N)", title="true error: mean (o), max (^); reported max (-)")  # fmt: skip
+    ax1.set(
+        xscale="log",
+        yscale="log",
+        xlabel="ramp rate x frame period, r T (N per frame)",
+        ylabel="|matching error| (N)",
+        title="true error: mean (o), max (^); reported max (-)",
+    )
     ax1.legend(fontsize=6)
     ax2.plot(x, np.clip(1 - 2 * tol / x, 0, 1), "k--", lw=1, label="1 - 2 tol / (r T)")
-    ax2.set(xscale="log", xlabel="r T (N per frame)", ylabel="fraction of the 25 targets",
-            title="misses (o); matched but truly off > tol (x)")  # fmt: skip
+    ax2.set(
+        xscale="log",
+        xlabel="r T (N per frame)",
+        ylabel="fraction of the 25 targets",
+        title="misses (o); matched but truly off > tol (x)",
+    )
     ax2.legend(fontsize=6)
     paths.append(save_figure(fig, out_dir / "stability_ramp.png"))
 
@@ -308,8 +322,13 @@ def draw(result: dict[str, Any], out_dir: Path) -> list[Path]:
         groups, names = [], []
         for material in ("pla", "tpu"):
             for sensor in ("uskin", "papillarray"):
-                ss = [s for k, v in sessions.items() if k.split("/")[0].endswith(material) and k.endswith(sensor)
-                      for s in v if s["status"] == "complete"]  # fmt: skip
+                ss = [
+                    s
+                    for k, v in sessions.items()
+                    if k.split("/")[0].endswith(material) and k.endswith(sensor)
+                    for s in v
+                    if s["status"] == "complete"
+                ]
                 values = np.concatenate([s[key] for s in ss]) if key == "abs_error_n" else [s[key] for s in ss]
                 groups.append(np.asarray(values, dtype=np.float64))
                 names.append(f"{material.upper()}\n{sensor}")
@@ -325,7 +344,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--angles", type=int, default=9, help="approach angles per simulated session")
     parser.add_argument("--trials", type=int, default=40, help="random frame phases per (ramp rate, frame period)")
-    parser.add_argument("--out", type=Path, default=OUT_DIR)
+    parser.add_argument("--out", type=Path, default=default_out_dir())
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()
@@ -353,11 +372,10 @@ def main() -> None:
         "sim_points": sim_points,
     }
     result["wall_s"] = round(time.monotonic() - started, 1)
-    json_path = args.out / "stability_collection.json"
-    json_path.write_text(json.dumps(result, indent=1, default=float))
+    json_path = write_json(result, args.out / "stability_collection.json")
     for path in [json_path, *draw(result, args.out)]:
         print(path)
-    print(json.dumps(result["materials"]["stats"], indent=1))
+    print(json.dumps(material_stats(sessions), indent=1))
     print(f"wall {result['wall_s']} s")
 
 

@@ -1,12 +1,32 @@
-"""Where the learned representation fails, for a trained run (the learning half of "stability where methods fail").
+"""Where the learned representation fails: errors per outline feature of the unseen irregular prism, PLA against
+TPU, and the spread of every Table I cell over the seeds of a run.
 
-1. Per outline feature of the unseen irregular prism (each of its six corners, 80..160 deg interior angle, and
-   "face" when the contact origin is more than --face-mm from every corner): reconstruction NMAE / SSIM of every
-   UniTac-NV direction (self and cross) and baseline, latent distance, and contact-geometry profile error (mm, from
-   a --folds-fold cross-validation over approach directions, so every contact is predicted once by a model that
-   did not see its direction). The paper says geometry estimation is ambiguous at the 80 deg corner.
-2. PLA against TPU: per shape printed in both materials and pooled over shapes, with TPU - PLA.
-3. Spread over seeds: mean +- std, min and max of every Table I cell over the run's seeds (train with --n-seeds).
+1. **Per outline feature** of the unseen object (default: the run's unseen object, the irregular prism with six
+   corners of 80..160 deg interior angle). Each test contact is assigned by its *contact origin* (where the ray
+   from the prism axis toward the pad meets the outline, :func:`unitac_rig.rig.objects.pad_side_direction` and
+   ``ObjectSpec.outline_hit``): to the nearest corner vertex when that vertex is within ``face_distance_mm``
+   (3 mm by default), else to ``face``. Per feature: reconstruction NMAE and SSIM for every UniTac-NV direction (self
+   and cross) and every baseline, the latent L1 distance between sensors, and the contact-geometry profile error
+   (mm). The paper (Sec. IV-C) names the 80 deg corner as where geometry estimation becomes ambiguous.
+2. **PLA against TPU**: for each shape printed in both materials, the Table I cells of both and their difference
+   (TPU - PLA), and the pooled held-out frames of all PLA and all TPU seen objects.
+3. **Seed spread**: mean, standard deviation, min and max over the run's members (seeds) of every Table I cell.
+
+Metrics come from the existing code: per-frame NMAE/SSIM from :class:`unitac_rig.learning.evaluate.Evaluator`, Table I
+rows from :func:`unitac_rig.learning.evaluate.table_rows`, the ground-truth profiles and the profile MLP from
+:mod:`unitac_rig.learning.contact_geometry`.
+
+Contact geometry is cross-validated here: the object's approach directions are split into ``geometry_folds`` folds
+(10 by default, so each fold holds out 10% of directions as the paper's single split does); the paper's MLP is trained
+on the other folds' latents and tested on the held-out fold, so every contact gets one out-of-fold prediction. A
+single 10% split would leave one or two directions at some corners; the folds give every corner all of its
+contacts. All members (seeds) and training sensors of a fold are trained together in one batched model.
+
+Standard deviations are population ones (``ddof=0``), as ``metrics.json``'s ``table1_std``. The figures are drawn at
+the end of this module.
+
+Why one module: the analysis and its three figures (which read its METRICS); its three reports share the
+cross-validated fold machinery.
 
     python benchmarks/stability_learning.py --run RUN [--out docs/figures] [--folds 10] [--face-mm 3]
 
@@ -18,20 +38,692 @@ epochs); --folds 0 skips them.
 from __future__ import annotations
 
 import argparse
-import json
+import logging
+import math
 import time
+import zlib
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from unitac_rig.bench.lab.stability import (
-    DEFAULT_GEOMETRY_FOLDS,
-    FACE_DISTANCE_MM,
-    STABILITY_JSON,
-    stability_report,
+import numpy as np
+import torch
+
+from unitac_rig.bench import default_out_dir, write_json
+from unitac_rig.errors import DataError, UsageError
+from unitac_rig.learning.contact_geometry import (
+    GeometryConfig,
+    contact_profiles,
+    fit_profile_mlps,
 )
-from unitac_rig.learning.contact_geometry import GeometryConfig
+from unitac_rig.learning.data import PairedDataset, object_shape_material
+from unitac_rig.learning.engine import UNITAC_GROUP
+from unitac_rig.learning.evaluate import Evaluator, table_rows
+from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM, PAPER_TABLE1
+from unitac_rig.learning.report import table_columns
+from unitac_rig.learning.train import LoadedRun, load_run, load_test_set
+from unitac_rig.plotting import new_figure, save_figure
+from unitac_rig.rig.objects import ObjectSpec, get_object, interior_angles_deg, pad_side_direction
 
-ROOT = Path(__file__).resolve().parent.parent
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
+log = logging.getLogger(__name__)
+
+FACE_DISTANCE_MM = 3.0  # a contact origin farther than this from every corner vertex is on a face
+DEFAULT_GEOMETRY_FOLDS = 10  # each fold holds out 10% of the directions, like the paper's single split
+PAPER_FAILING_CORNER_DEG = 80.0
+PAPER_REMARKS = {
+    "geometry": "Sec. IV-C: the 80 deg corner (pointing left) produces a minimal contact surface; few activated "
+    "taxels and sparse shear make local contact identification ambiguous",
+    "reconstruction": "Fig. 4 caption: poor reconstructions of the unseen object often occur when the press hits a "
+    "sharp edge with a small contact area",
+}
+METRICS = ("nmae", "ssim")
+MATERIALS = ("PLA", "TPU")
+
+STABILITY_JSON = "stability_learning.json"
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Outline features
+# ---------------------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class OutlineFeature:
+    """A corner of the outline (``vertex``: 0-based index into ``outer_mm``, interior angle in deg) or the faces."""
+
+    kind: str  # "corner" or "face"
+    vertex: int | None = None
+    interior_angle_deg: float | None = None
+
+    @property
+    def vertex_label(self) -> str | None:
+        """1-based vertex name, as the object's drawings count them (V3 is the irregular prism's 80 deg tip)."""
+        return None if self.vertex is None else f"V{self.vertex + 1}"
+
+    @property
+    def name(self) -> str:
+        """``"corner 80 (V3)"`` or ``"face"``; the vertex keeps two corners of the same angle apart."""
+        if self.kind == "face" or self.interior_angle_deg is None:
+            return "face"
+        return f"corner {round(self.interior_angle_deg)} ({self.vertex_label})"
+
+
+FACE = OutlineFeature("face")
+
+
+@dataclass(frozen=True)
+class FeatureHit:
+    """Which feature a press hits: its contact origin (mm, CAD frame) and distance to the nearest corner (mm)."""
+
+    feature: OutlineFeature
+    origin_mm: np.ndarray
+    corner_distance_mm: float
+
+
+def outline_features(spec: ObjectSpec) -> list[OutlineFeature]:
+    """The object's corners, sharpest first (ties by vertex), then ``face``."""
+    angles = interior_angles_deg(spec.outer_mm)
+    corners = [OutlineFeature("corner", int(i), float(angles[i])) for i in spec.corner_vertices()]
+    corners.sort(key=lambda f: (round(f.interior_angle_deg or 0.0, 1), f.vertex))
+    return [*corners, FACE]
+
+
+def feature_at_point(spec: ObjectSpec, point_mm: np.ndarray, face_distance_mm: float = FACE_DISTANCE_MM) -> FeatureHit:
+    """The feature at a point of the outline: the nearest corner within ``face_distance_mm`` (mm), else ``face``."""
+    point = np.asarray(point_mm, dtype=np.float64)
+    corners = spec.corner_vertices()
+    if corners.size == 0:
+        return FeatureHit(FACE, point, math.inf)
+    distances = np.linalg.norm(spec.outer_mm[corners] - point, axis=1)
+    nearest = int(np.argmin(distances))
+    distance = float(distances[nearest])
+    if distance > face_distance_mm:
+        return FeatureHit(FACE, point, distance)
+    vertex = int(corners[nearest])
+    angle = float(interior_angles_deg(spec.outer_mm)[vertex])
+    return FeatureHit(OutlineFeature("corner", vertex, angle), point, distance)
+
+
+def feature_of_press(
+    spec: ObjectSpec, angle_deg: float, rotation_deg: float, face_distance_mm: float = FACE_DISTANCE_MM
+) -> FeatureHit:
+    """The feature a press at approach ``angle_deg`` on the object turned by ``rotation_deg`` hits (both deg)."""
+    origin = spec.outline_hit(pad_side_direction(angle_deg, rotation_deg))
+    return feature_at_point(spec, origin, face_distance_mm)
+
+
+def assign_features(
+    spec: ObjectSpec,
+    angle_deg: np.ndarray,
+    rotation_deg: np.ndarray,
+    face_distance_mm: float = FACE_DISTANCE_MM,
+) -> tuple[list[OutlineFeature], np.ndarray, np.ndarray]:
+    """(features, index into features per contact (M,), distance to the nearest corner per contact (M,) mm)."""
+    features = outline_features(spec)
+    position = {f: i for i, f in enumerate(features)}
+    cache: dict[tuple[float, float], FeatureHit] = {}
+    index = np.empty(len(angle_deg), dtype=int)
+    distance = np.empty(len(angle_deg))
+    for i, (angle, rotation) in enumerate(zip(angle_deg, rotation_deg, strict=True)):
+        key = (float(angle), float(rotation))
+        if key not in cache:
+            cache[key] = feature_of_press(spec, key[0], key[1], face_distance_mm)
+        index[i] = position[cache[key].feature]
+        distance[i] = cache[key].corner_distance_mm
+    return features, index, distance
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Statistics over members
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def spread(per_member: Iterable[float]) -> dict[str, Any]:
+    """Mean, population std, min and max of one number over the run's members (seeds), plus the values."""
+    values = np.asarray(list(per_member), dtype=np.float64)
+    if values.size == 0 or not np.all(np.isfinite(values)):
+        return {"mean": None, "std": None, "min": None, "max": None, "members": values.tolist()}
+    return {
+        "mean": float(values.mean()),
+        "std": float(values.std()),
+        "min": float(values.min()),
+        "max": float(values.max()),
+        "members": values.tolist(),
+    }
+
+
+def _member_means(values: torch.Tensor, mask: np.ndarray) -> np.ndarray:
+    """(members, M) per-frame values -> (members,) means over the frames ``mask`` selects."""
+    return values[:, torch.from_numpy(mask)].double().mean(dim=1).numpy()
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The report
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def stability_report(
+    run_dir: Path | str,
+    *,
+    object_id: str | None = None,
+    face_distance_mm: float = FACE_DISTANCE_MM,
+    geometry_folds: int = DEFAULT_GEOMETRY_FOLDS,
+    geometry_config: GeometryConfig | None = None,
+    figures_dir: Path | str | None = None,
+    nmae_normaliser: str | None = None,
+    ssim_range: str | None = None,
+) -> dict[str, Any]:
+    """Per-feature errors on ``object_id`` (default: the run's unseen object), PLA vs TPU and the seed spread, as a
+    JSON-ready dict. ``geometry_folds`` = 0 skips the (slowest) contact-geometry part. With ``figures_dir`` the three
+    figures are drawn there and their file names listed under ``"figures"``. The metric options default to the
+    run's own; others re-score the same models (no retraining)."""
+    if geometry_folds < 0 or geometry_folds == 1:
+        raise UsageError(
+            f"geometry folds must be 0 (skip) or at least 2, got {geometry_folds}", hint="the default is 10"
+        )
+    run = load_run(Path(run_dir)).scored_under(nmae_normaliser, ssim_range)
+    test = load_test_set(Path(run_dir))
+    evaluator = Evaluator.for_run(run, test)  # scored under the given (default: the run's) metric options
+    scores, latent_distance = evaluator.per_frame(run.engine)
+    columns = [c for c in table_columns(run.sensors, set(scores)) if c in scores]
+
+    object_id = object_id or _default_object(run, test)
+    spec = get_object(object_id)
+    rows = np.flatnonzero(test.object_id == object_id)
+    if rows.size == 0:
+        raise DataError(
+            f"no test contacts of object {object_id!r} in this run",
+            hint=f"objects in the run's test data: {', '.join(test.objects)}",
+        )
+    features, feature_index, corner_distance = assign_features(
+        spec, test.angle_deg[rows], test.rotation_deg[rows], face_distance_mm
+    )
+
+    report: dict[str, Any] = {
+        "run": str(run_dir),
+        "object": object_id,
+        "sensors": list(run.sensors),
+        "seeds": list(run.engine.seeds),
+        "epochs": int(run.payload["epoch"]),
+        "simulated": bool(test.simulated),
+        "face_distance_mm": face_distance_mm,
+        "paper_failing_corner_deg": PAPER_FAILING_CORNER_DEG,
+        "paper_remarks": dict(PAPER_REMARKS),
+        "columns": columns,
+    }
+    report["features"] = _feature_table(spec, features, feature_index, corner_distance, test, rows)
+    report["reconstruction"] = _reconstruction_by_feature(
+        scores, latent_distance, columns, features, feature_index, rows, len(test)
+    )
+    report["geometry"] = (
+        _geometry_by_feature(run, test, rows, object_id, features, feature_index, geometry_folds, geometry_config)
+        if geometry_folds
+        else None
+    )
+    report["materials"] = _materials(scores, columns, test, run.unseen_objects)
+    report["seed_spread"] = _seed_spread(scores, columns, test, run.unseen_objects)
+    report["figures"] = {}
+    if figures_dir is not None:
+        report["figures"] = {k: p.name for k, p in plot_stability(report, Path(figures_dir)).items()}
+    return report
+
+
+def _default_object(run: LoadedRun, test: PairedDataset) -> str:
+    present = set(test.object_id.tolist())
+    for object_id in run.unseen_objects:
+        if object_id in present:
+            return object_id
+    raise DataError(
+        "the run's test data holds no unseen object to break down by corner",
+        hint="collect the irregular prism (irregular_pla) with every sensor, or pass an object id",
+    )
+
+
+def _feature_table(
+    spec: ObjectSpec,
+    features: Sequence[OutlineFeature],
+    feature_index: np.ndarray,
+    corner_distance: np.ndarray,
+    test: PairedDataset,
+    rows: np.ndarray,
+) -> list[dict[str, Any]]:
+    out = []
+    for k, feature in enumerate(features):
+        members = feature_index == k
+        directions = set(
+            zip(test.rotation_deg[rows][members].tolist(), test.angle_deg[rows][members].tolist(), strict=True)
+        )
+        out.append(
+            {
+                "name": feature.name,
+                "kind": feature.kind,
+                "vertex": feature.vertex_label,
+                "interior_angle_deg": feature.interior_angle_deg,
+                "vertex_mm": None if feature.vertex is None else spec.outer_mm[feature.vertex].tolist(),
+                "test_contacts": int(members.sum()),
+                "directions": len(directions),
+                "max_corner_distance_mm": _finite_or_none(corner_distance[members].max()) if members.any() else None,
+            }
+        )
+    return out
+
+
+def _finite_or_none(value: float) -> float | None:
+    """JSON has no infinity: an object without corners has no corner distance."""
+    return float(value) if math.isfinite(value) else None
+
+
+def _reconstruction_by_feature(
+    scores: dict[str, dict[str, torch.Tensor]],
+    latent_distance: torch.Tensor | None,
+    columns: Sequence[str],
+    features: Sequence[OutlineFeature],
+    feature_index: np.ndarray,
+    rows: np.ndarray,
+    n_test: int,
+) -> dict[str, Any]:
+    """{feature name or "whole object": {column: {metric: spread}, "latent_l1": spread}}; empty features -> None."""
+    groups: list[tuple[str, np.ndarray]] = [(f.name, rows[feature_index == k]) for k, f in enumerate(features)]
+    groups.append(("whole object", rows))
+    out: dict[str, Any] = {}
+    for name, picked in groups:
+        if picked.size == 0:
+            out[name] = None
+            continue
+        mask = np.zeros(n_test, dtype=bool)
+        mask[picked] = True
+        entry: dict[str, Any] = {
+            column: {metric: spread(_member_means(scores[column][metric], mask)) for metric in METRICS}
+            for column in columns
+        }
+        entry["latent_l1"] = spread(_member_means(latent_distance, mask)) if latent_distance is not None else None
+        out[name] = entry
+    return out
+
+
+def _direction_folds(directions: Sequence[tuple[int, int]], folds: int, seed: int, object_id: str) -> np.ndarray:
+    """Fold number (0..folds-1) of each contact; all forces of one (rotation, angle) direction share a fold."""
+    units = sorted(set(directions))
+    if len(units) < folds:
+        raise DataError(
+            f"object {object_id} has {len(units)} approach directions, too few for {folds} geometry folds",
+            hint="use fewer --folds or collect more angles",
+        )
+    rng = np.random.default_rng([seed, zlib.crc32(object_id.encode()), folds])
+    order = rng.permutation(len(units))
+    fold_of_unit = {}
+    for fold, chunk in enumerate(np.array_split(order, folds)):
+        for i in chunk:
+            fold_of_unit[units[int(i)]] = fold
+    return np.array([fold_of_unit[d] for d in directions], dtype=int)
+
+
+def _geometry_by_feature(
+    run: LoadedRun,
+    test: PairedDataset,
+    rows: np.ndarray,
+    object_id: str,
+    features: Sequence[OutlineFeature],
+    feature_index: np.ndarray,
+    folds: int,
+    config: GeometryConfig | None,
+) -> dict[str, Any]:
+    """Out-of-fold profile errors (mm) of every ``<train>_to_<test>`` scenario and member, grouped by feature."""
+    config = config or GeometryConfig()
+    subset, truth, valid, directions = contact_profiles(test, rows, object_id, config)
+    fold_of = _direction_folds(directions, folds, run.config.split_seed, object_id)
+
+    sensors = run.sensors
+    members = run.engine.members
+    latents = {  # (members, M_object, latent) per sensor
+        s: run.engine.encode(UNITAC_GROUP, s, torch.from_numpy(run.normaliser.normalise(s, subset.values[s]))).numpy()
+        for s in sensors
+    }
+    # one stacked model per fold: slot (member m, training sensor s)
+    slots = [(m, s) for m in range(members) for s in sensors]
+    error = {  # (members, M_object) mean |predicted - true| over the profile points, mm; NaN where not tested
+        f"{a}_to_{b}": np.full((members, len(subset)), np.nan) for a in sensors for b in sensors
+    }
+    # reference without the latent: predict the training folds' mean profile for every contact
+    mean_profile_error = np.full(len(subset), np.nan)
+    previous_threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # tiny layers: one thread is fastest (see train.default_threads)
+    try:
+        for fold in range(folds):
+            train_rows = valid & (fold_of != fold)
+            test_rows = np.flatnonzero(valid & (fold_of == fold))
+            if test_rows.size == 0 or not train_rows.any():
+                continue
+            mean_profile = truth[train_rows].mean(axis=0)
+            mean_profile_error[test_rows] = np.abs(truth[test_rows] - mean_profile).mean(axis=1)
+            model = fit_profile_mlps(
+                [latents[s][m][train_rows] for m, s in slots],
+                truth[train_rows],
+                config,
+                [config.dropout_for(s) for _, s in slots],
+                seed=run.engine.seeds[0] * 1000 + fold,
+            )
+            for test_sensor in sensors:
+                stacked = torch.from_numpy(np.stack([latents[test_sensor][m][test_rows] for m, _ in slots]))
+                with torch.no_grad():
+                    predicted = model(stacked).numpy()  # (slots, T, points)
+                for k, (m, train_sensor) in enumerate(slots):
+                    per_contact = np.abs(predicted[k] - truth[test_rows]).mean(axis=1)
+                    error[f"{train_sensor}_to_{test_sensor}"][m, test_rows] = per_contact
+    finally:
+        torch.set_num_threads(previous_threads)
+
+    def summarise(mask: np.ndarray) -> dict[str, Any] | None:
+        tested = mask & valid
+        if not tested.any():
+            return None
+        out: dict[str, Any] = {
+            "contacts": int(tested.sum()),
+            "mean_abs_depth_mm": float(np.abs(truth[tested]).mean()),
+            "mean_profile_mae_mm": float(np.nanmean(mean_profile_error[tested])),
+        }
+        for name, values in error.items():
+            out[name] = spread(values[:, tested].mean(axis=1))
+        return out
+
+    per_feature = {f.name: summarise(feature_index == k) for k, f in enumerate(features)}
+    return {
+        "folds": folds,
+        "protocol": f"{folds}-fold cross-validation over the object's approach directions; each contact's error "
+        "is the mean |predicted - true| depth over the profile points (mm) from the fold that held it out",
+        "profile_points": config.points,
+        "profile_span_mm": config.span_mm,
+        "epochs": config.epochs,
+        "scenarios": list(error),
+        "reference": "mean_profile_mae_mm: the error of predicting the training folds' mean profile for every "
+        "contact (no latent); mean_abs_depth_mm: mean |true depth| over the profile points, how far the surface "
+        "departs from the pad plane through the contact origin",
+        "paper_mae_mm": {name: PAPER_GEOMETRY_MAE_MM.get(name) for name in error},
+        "left_out_contacts": int((~valid).sum()),
+        "whole_object": summarise(np.ones(len(subset), dtype=bool)),
+        "per_feature": per_feature,
+    }
+
+
+def _materials(
+    scores: dict[str, dict[str, torch.Tensor]], columns: Sequence[str], test: PairedDataset, unseen: Sequence[str]
+) -> dict[str, Any]:
+    """PLA against TPU: per shape printed in both (the two Table I rows and TPU - PLA) and pooled over shapes."""
+    seen_objects = [o for o in test.objects if o not in unseen]
+    by_shape: dict[str, dict[str, str]] = {}
+    for object_id in seen_objects:
+        shape, material = object_shape_material(object_id)
+        if material in MATERIALS:
+            by_shape.setdefault(shape, {})[material] = object_id
+
+    def compare(masks: dict[str, np.ndarray], paper: dict[str, dict[str, tuple[float, float]] | None]) -> dict:
+        entry: dict[str, Any] = {}
+        for column in columns:
+            entry[column] = {}
+            for m_index, metric in enumerate(METRICS):
+                per_material = {mat: _member_means(scores[column][metric], masks[mat]) for mat in MATERIALS}
+                cell: dict[str, Any] = {mat: spread(per_material[mat]) for mat in MATERIALS}
+                cell["tpu_minus_pla"] = spread(per_material["TPU"] - per_material["PLA"])
+                paper_values = {mat: (paper[mat] or {}).get(column) for mat in MATERIALS}
+                if all(v is not None for v in paper_values.values()):
+                    pla, tpu = (float(paper_values[mat][m_index]) for mat in MATERIALS)  # type: ignore[index]
+                    cell["paper"] = {"PLA": pla, "TPU": tpu, "tpu_minus_pla": tpu - pla}
+                else:
+                    cell["paper"] = None
+                entry[column][metric] = cell
+        return entry
+
+    per_shape: dict[str, Any] = {}
+    pairs = {shape: ids for shape, ids in sorted(by_shape.items()) if set(ids) == set(MATERIALS)}
+    for shape, ids in pairs.items():
+        masks = {mat: test.object_id == ids[mat] for mat in MATERIALS}
+        paper = {mat: PAPER_TABLE1.get(ids[mat]) for mat in MATERIALS}
+        per_shape[shape] = {"objects": ids, "contacts": {m: int(masks[m].sum()) for m in MATERIALS}}
+        per_shape[shape].update(compare(masks, paper))
+
+    pooled: dict[str, Any] | None = None
+    material_objects = {mat: [ids[mat] for ids in by_shape.values() if mat in ids] for mat in MATERIALS}
+    if all(material_objects.values()):
+        masks = {mat: np.isin(test.object_id, material_objects[mat]) for mat in MATERIALS}
+        paper_pooled: dict[str, dict[str, tuple[float, float]] | None] = {}
+        for mat in MATERIALS:
+            rows = [PAPER_TABLE1.get(o) for o in material_objects[mat]]
+            # the paper's per-object test sets are the same size, so a plain mean over its rows is the pooled value
+            if all(r is not None for r in rows):
+                paper_pooled[mat] = {
+                    c: tuple(float(np.mean([r[c][i] for r in rows if r])) for i in range(2))  # type: ignore[misc]
+                    for c in columns
+                    if all(r is not None and c in r for r in rows)
+                }
+            else:
+                paper_pooled[mat] = None
+        pooled = {"objects": material_objects, "contacts": {m: int(masks[m].sum()) for m in MATERIALS}}
+        pooled.update(compare(masks, paper_pooled))
+    return {"per_shape": per_shape, "pooled": pooled}
+
+
+def _seed_spread(
+    scores: dict[str, dict[str, torch.Tensor]], columns: Sequence[str], test: PairedDataset, unseen: Sequence[str]
+) -> dict[str, Any]:
+    """Every Table I cell (rows as ``metrics.json``) over the run's members: {row: {column: {metric: spread}}}."""
+    out: dict[str, Any] = {}
+    for row, mask in table_rows(test, tuple(unseen)):
+        out[row] = {}
+        for column in columns:
+            out[row][column] = {}
+            for m_index, metric in enumerate(METRICS):
+                cell = spread(_member_means(scores[column][metric], mask))
+                paper = PAPER_TABLE1.get(row, {}).get(column)
+                cell["paper"] = None if paper is None else float(paper[m_index])
+                out[row][column][metric] = cell
+    return out
+
+
+# ---- the three figures: errors per outline feature of the unseen object, PLA against TPU, the spread over seeds --
+CORNERS_PNG = "stability_learning_corners.png"
+MATERIALS_PNG = "stability_learning_materials.png"
+SEEDS_PNG = "stability_learning_seeds.png"
+
+
+def _value(cell: dict[str, Any] | None, key: str = "mean") -> float:
+    if cell is None or cell.get(key) is None:
+        return math.nan
+    return float(cell[key])
+
+
+def _label(column: str) -> str:
+    return column.replace("_to_", " → ").replace("papillarray", "papill")
+
+
+def plot_stability(report: dict[str, Any], out_dir: Path) -> dict[str, Path]:
+    """The three figures of a :func:`stability_report` dict; returns {"corners"|"materials"|"seeds": path}."""
+    out_dir = Path(out_dir)
+    drawn = {"corners": _plot_corners(report, out_dir / CORNERS_PNG)}
+    if report["materials"]["pooled"] is not None:
+        drawn["materials"] = _plot_materials(report, out_dir / MATERIALS_PNG)
+    drawn["seeds"] = _plot_seeds(report, out_dir / SEEDS_PNG)
+    return drawn
+
+
+def _grouped_bars(ax: Axes, names: Sequence[str], series: dict[str, tuple[list[float], list[float]]]) -> None:
+    """Bars per name (x) and series (colour), error bars = std over seeds."""
+    width = 0.8 / max(1, len(series))
+    x = np.arange(len(names))
+    for i, (label, (means, stds)) in enumerate(series.items()):
+        ax.bar(x + (i - (len(series) - 1) / 2) * width, means, width, yerr=stds, capsize=2, label=label)
+    ax.set_xticks(x)
+    ax.set_xticklabels(names, fontsize=8)
+
+
+def _plot_corners(report: dict[str, Any], path: Path) -> Path:
+    features = [f for f in report["features"] if f["test_contacts"] > 0]
+    names = [f["name"] for f in features]
+    ticks = [f"{f['name']}\n{f['test_contacts']} contacts" for f in features]
+    recon = report["reconstruction"]
+    geometry = report["geometry"]
+    panels = 3 if geometry is not None else 2
+    fig = new_figure(max(9.0, 1.6 * len(names)), 3.6 * panels, layout="tight")
+    axes = fig.subplots(panels, 1, squeeze=False)
+    for ax, metric in zip(axes[:, 0], METRICS, strict=False):
+        series = {
+            _label(c): (
+                [_value((recon[n] or {}).get(c, {}).get(metric)) for n in names],
+                [_value((recon[n] or {}).get(c, {}).get(metric), "std") for n in names],
+            )
+            for c in report["columns"]
+        }
+        _grouped_bars(ax, ticks, series)
+        ax.set_ylabel(f"reconstruction {metric.upper()}")
+        whole = recon["whole object"]
+        for j, c in enumerate(report["columns"]):
+            ax.axhline(_value(whole[c][metric]), color=f"C{j}", lw=0.7, ls=":")
+    # headroom above the tallest bar, so the legend (right) and the paper's remark (left) cover no bar
+    axes[0, 0].set_ylim(top=axes[0, 0].get_ylim()[1] * 1.45)
+    axes[0, 0].legend(fontsize=7, ncol=3, title="dotted: whole object", title_fontsize=7, loc="upper right")
+    if geometry is not None:
+        ax = axes[2, 0]
+        per_feature = geometry["per_feature"]
+        series = {
+            _label(s): (
+                [_value((per_feature[n] or {}).get(s)) for n in names],
+                [_value((per_feature[n] or {}).get(s), "std") for n in names],
+            )
+            for s in geometry["scenarios"]
+        }
+        _grouped_bars(ax, ticks, series)
+        for k, paper in enumerate(geometry["paper_mae_mm"].values()):
+            if paper is not None:
+                ax.axhline(paper, color=f"C{k}", lw=0.8, ls="--")
+        reference = [_value(per_feature[n], "mean_profile_mae_mm") for n in names]
+        ax.scatter(
+            np.arange(len(names)), reference, marker="_", s=900, color="k", zorder=3, label="mean profile, no latent"
+        )
+        ax.set_ylabel("geometry profile MAE (mm)")
+        ax.set_ylim(top=max(ax.get_ylim()[1], float(np.nanmax(np.asarray(reference, dtype=float)))) * 1.3)
+        ax.legend(fontsize=7, ncol=3, title="dashed: paper, whole object", title_fontsize=7)
+    failing = [
+        i
+        for i, f in enumerate(features)
+        if f["interior_angle_deg"] is not None
+        and round(f["interior_angle_deg"]) == round(report["paper_failing_corner_deg"])
+    ]
+    for ax in axes[:, 0]:
+        for i in failing:
+            ax.axvspan(i - 0.45, i + 0.45, color="red", alpha=0.08, zorder=0)
+    if failing:
+        _paper_note(axes[0, 0], failing[0], "paper: poor reconstructions at sharp edges\nwith a small contact area")
+        _paper_note(
+            axes[-1, 0],
+            failing[0],
+            "paper (Sec. IV-C): geometry estimation\nambiguous at the 80° corner"
+            if geometry is not None
+            else "paper: 80° corner",
+        )
+    seeds = len(report["seeds"])
+    fig.suptitle(
+        f"{report['object']}: errors by the outline feature the press hits (corner = contact origin within "
+        f"{report['face_distance_mm']:g} mm of the vertex); bars: mean over {seeds} seed(s), error bars: std",
+        fontsize=9,
+    )
+    return save_figure(fig, path)
+
+
+def _paper_note(ax: Axes, x: float, text: str) -> None:
+    """A dark-red remark at the top of the panel, beside bar ``x``."""
+    ax.annotate(
+        text,
+        (x, 1.0),
+        xycoords=("data", "axes fraction"),
+        xytext=(4, -4),
+        textcoords="offset points",
+        fontsize=7,
+        color="darkred",
+        va="top",
+    )
+
+
+def _plot_materials(report: dict[str, Any], path: Path) -> Path:
+    materials = report["materials"]
+    pooled = materials["pooled"]
+    columns = report["columns"]
+    fig = new_figure(13.0, 4.2, layout="tight")
+    axes = fig.subplots(1, 2)
+    x = np.arange(len(columns))
+    markers = ["o", "s", "^", "D", "v"]
+    for ax, metric in zip(axes, METRICS, strict=True):
+        for i, mat in enumerate(MATERIALS):
+            offset = (i - 0.5) * 0.38
+            means = [_value(pooled[c][metric][mat]) for c in columns]
+            stds = [_value(pooled[c][metric][mat], "std") for c in columns]
+            ax.bar(x + offset, means, 0.36, yerr=stds, capsize=2, color=f"C{i}", alpha=0.7, label=f"{mat} (pooled)")
+            for k, (shape, entry) in enumerate(materials["per_shape"].items()):
+                ax.scatter(
+                    x + offset,
+                    [_value(entry[c][metric][mat]) for c in columns],
+                    marker=markers[k % len(markers)],
+                    color="k",
+                    s=14,
+                    zorder=3,
+                    label=shape if i == 0 else None,
+                )
+            paper = [(pooled[c][metric]["paper"] or {}).get(mat, math.nan) for c in columns]
+            ax.scatter(
+                x + offset,
+                paper,
+                marker="_",
+                color="red",
+                s=160,
+                zorder=4,
+                label="paper (mean of its rows)" if i == 0 else None,
+            )
+        ax.set_xticks(x)
+        ax.set_xticklabels([_label(c) for c in columns], fontsize=8, rotation=20)
+        ax.set_ylabel(metric.upper())
+        ax.set_title(f"{metric.upper()}: PLA vs TPU (seen objects' held-out angles)", fontsize=9)
+    axes[0].legend(fontsize=7)
+    return save_figure(fig, path)
+
+
+def _plot_seeds(report: dict[str, Any], path: Path) -> Path:
+    """Heatmaps of each Table I cell's spread over seeds: colour = (max - min) relative to the mean for NMAE, and
+    (max - min) for SSIM; text = mean ± std and [min, max]."""
+    table = report["seed_spread"]
+    rows = list(table)
+    columns = report["columns"]
+    fig = new_figure(1.9 * len(columns) + 2.5, 2 * (0.75 * len(rows) + 1.2), layout="tight")
+    axes = fig.subplots(2, 1)
+    for ax, metric in zip(axes, METRICS, strict=True):
+        text_values = np.empty((len(rows), len(columns)), dtype=object)
+        colour = np.full((len(rows), len(columns)), np.nan)
+        for i, row in enumerate(rows):
+            for j, column in enumerate(columns):
+                cell = table[row][column][metric]
+                mean, low, high = _value(cell), _value(cell, "min"), _value(cell, "max")
+                width = high - low
+                colour[i, j] = 100.0 * width / abs(mean) if metric == "nmae" and mean else width
+                digits = 4 if metric == "nmae" else 3
+                text = f"{mean:.{digits}f}±{_value(cell, 'std'):.{digits}f}\n[{low:.{digits}f}, {high:.{digits}f}]"
+                if cell.get("paper") is not None:
+                    text += f"\npaper {cell['paper']:.3f}"
+                text_values[i, j] = text
+        image = ax.imshow(colour, cmap="Oranges", aspect="auto", vmin=0.0)
+        for i in range(len(rows)):
+            for j in range(len(columns)):
+                ax.text(j, i, text_values[i, j], ha="center", va="center", fontsize=6.5)
+        ax.set_xticks(range(len(columns)))
+        ax.set_xticklabels([_label(c) for c in columns], fontsize=8, rotation=20)
+        ax.set_yticks(range(len(rows)))
+        ax.set_yticklabels(rows, fontsize=8)
+        label = "(max - min) / mean over seeds (%)" if metric == "nmae" else "max - min over seeds"
+        fig.colorbar(image, ax=ax, fraction=0.04, label=label)
+        ax.set_title(f"{metric.upper()}: mean ± std [min, max] over seeds, and the paper's value", fontsize=9)
+    seeds = report["seeds"]
+    fig.suptitle(f"Table I spread over {len(seeds)} seed(s) {seeds} (population std)", fontsize=9)
+    return save_figure(fig, path)
 
 
 def _fmt(cell: dict[str, Any] | None) -> str:
@@ -90,7 +782,7 @@ def print_summary(report: dict[str, Any]) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--run", type=Path, required=True, help="a `unitac-rig train` output folder")
-    parser.add_argument("--out", type=Path, default=ROOT / "docs" / "figures")
+    parser.add_argument("--out", type=Path, default=default_out_dir())
     parser.add_argument("--object", default=None, help="object to break down (default: the run's unseen object)")
     parser.add_argument("--folds", type=int, default=DEFAULT_GEOMETRY_FOLDS, help="geometry folds (0: skip)")
     parser.add_argument("--face-mm", type=float, default=FACE_DISTANCE_MM, help="corner radius of a feature (mm)")
@@ -111,9 +803,7 @@ def main() -> None:
         ssim_range=args.ssim_range,
     )
     report["wall_seconds"] = time.perf_counter() - began
-    args.out.mkdir(parents=True, exist_ok=True)
-    json_path = args.out / STABILITY_JSON
-    json_path.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    json_path = write_json(report, args.out / STABILITY_JSON)
     print_summary(report)
     print(f"\n{report['wall_seconds']:.0f} s; wrote {json_path} and {', '.join(report['figures'].values())}")
 

@@ -22,8 +22,6 @@ OUT/storage_bytes.png. About 3 minutes on a loaded 2-core box. Linux only (``/pr
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -33,9 +31,10 @@ from typing import Any
 
 import numpy as np
 
+from lab.versions import ROOT, checkout, run_worker
 from unitac_rig.bench import default_out_dir, machine_info, write_json
+from unitac_rig.plotting import new_figure, save_figure
 
-REPO = Path(__file__).resolve().parents[1]
 BEFORE_COMMIT = "6641b69"  # the last commit whose recorder copied the whole session file for every press
 OBJECT = "hex_tpu"
 SENSORS = ("uskin", "papillarray")
@@ -96,8 +95,21 @@ def record_source(tmp: Path, sensor: str) -> Path:
     from unitac_rig.storage.recorder import session_path
 
     data = tmp / f"source-{sensor}"
-    cmd = [sys.executable, "-m", "unitac_rig", "collect", "--object", OBJECT, "--sensor", sensor,
-           "--angles", str(SOURCE_ANGLES), "--data", str(data), "--no-live"]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "unitac_rig",
+        "collect",
+        "--object",
+        OBJECT,
+        "--sensor",
+        sensor,
+        "--angles",
+        str(SOURCE_ANGLES),
+        "--data",
+        str(data),
+        "--no-live",
+    ]
     subprocess.run(cmd, check=True, capture_output=True, text=True, timeout=600)
     single = tmp / f"source-{sensor}.h5"
     snapshot_session(session_path(data, OBJECT, sensor), single)
@@ -106,10 +118,7 @@ def record_source(tmp: Path, sensor: str) -> Path:
 
 def replay(code: Path, source: Path, count: int, data: Path) -> dict[str, Any]:
     """Write ``count`` presses from ``source`` with the SessionWriter of the checkout ``code``; what it cost."""
-    env = {**os.environ, "PYTHONPATH": str(code)}
-    done = subprocess.run([sys.executable, "-c", REPLAY, str(source), str(data), str(count)], env=env, cwd=code,
-                          capture_output=True, text=True, timeout=1800, check=True)  # fmt: skip
-    out = json.loads(done.stdout.strip().splitlines()[-1])
+    out = run_worker(code, ["-c", REPLAY, str(source), str(data), str(count)], timeout=1800)
     if Path(out["code"]).resolve() != code.resolve():
         raise RuntimeError(f"replay imported unitac_rig from {out['code']}, not from {code}")
     session = _tree_bytes(data, journal=False)
@@ -157,20 +166,23 @@ def campaign(results: dict[str, dict[str, list[dict[str, Any]]]]) -> dict[str, A
                 count = sessions // len(SENSORS)
                 total += count * written
                 session_total += count * size
-                parts.append({"sessions": what, "sensor": sensor, "count": count, "write_bytes_each": written,
-                              "measured": measured})  # fmt: skip
+                parts.append(
+                    {
+                        "sessions": what,
+                        "sensor": sensor,
+                        "count": count,
+                        "write_bytes_each": written,
+                        "measured": measured,
+                    }
+                )
         out[version] = {"write_bytes": total, "parts": parts}
     out["session_bytes"] = session_total
     return out
 
 
 def figure(doc: dict[str, Any], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    fig = new_figure(11, 4.2, layout="tight")
+    axes = fig.subplots(1, 2)
     ax = axes[0]
     for sensor, style in zip(SENSORS, ("-", "--"), strict=True):
         res = doc["results"][sensor]
@@ -180,10 +192,12 @@ def figure(doc: dict[str, Any], path: Path) -> None:
         xs = [r["presses"] for r in res["before"]]
         ax.plot(xs, [r["write_bytes"] / 1e6 for r in res["before"]], "o", color="tab:red")
         xa = [r["presses"] for r in res["after"]]
-        ax.plot(xa, [r["write_bytes"] / 1e6 for r in res["after"]], style + "o", color="tab:blue",
-                label=f"after ({sensor})")  # fmt: skip
-        ax.plot(xa, [r["session_bytes"] / 1e6 for r in res["after"]], style, color="0.5",
-                label=f"session size ({sensor})")  # fmt: skip
+        ax.plot(
+            xa, [r["write_bytes"] / 1e6 for r in res["after"]], style + "o", color="tab:blue", label=f"after ({sensor})"
+        )
+        ax.plot(
+            xa, [r["session_bytes"] / 1e6 for r in res["after"]], style, color="0.5", label=f"session size ({sensor})"
+        )
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("presses in the session")
@@ -199,9 +213,7 @@ def figure(doc: dict[str, Any], path: Path) -> None:
     ax.set_ylabel("GB")
     ax.set_title("a campaign: 12 x 91 + 2 x 364 presses")
     fig.suptitle("storage: single-file copy-on-write (before) vs one file per press (after), simulated rig")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def main() -> None:
@@ -213,23 +225,19 @@ def main() -> None:
     results: dict[str, dict[str, list[dict[str, Any]]]] = {}
     with tempfile.TemporaryDirectory(prefix="storage-bytes-") as tmp_name:
         tmp = Path(tmp_name)
-        worktree = tmp / "before"
-        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", str(worktree), args.before],
-                       check=True, capture_output=True)  # fmt: skip
-        try:
+        with checkout(args.before) as worktree:
             for sensor in SENSORS:
                 source = record_source(tmp, sensor)
                 results[sensor] = {"before": [], "after": []}
-                for version, code, sizes in (("before", worktree, BEFORE_SIZES), ("after", REPO, AFTER_SIZES)):
+                for version, code, sizes in (("before", worktree, BEFORE_SIZES), ("after", ROOT, AFTER_SIZES)):
                     for n in sizes:
                         row = replay(code, source, n, tmp / f"{version}-{sensor}-{n}")
                         results[sensor][version].append(row)
-                        print(f"{sensor} {version} {n:3d} presses: wrote {row['write_bytes'] / 1e6:8.1f} MB for a "
-                              f"{row['session_bytes'] / 1e6:6.1f} MB session ({row['written_per_session_byte']:.2f}x"
-                              f"; journal {row['journal_bytes'] / 1e6:.1f} MB), {row['cpu_s']:.1f} CPU-s")  # fmt: skip
-        finally:
-            subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force", str(worktree)],
-                           check=False, capture_output=True)  # fmt: skip
+                        print(
+                            f"{sensor} {version} {n:3d} presses: wrote {row['write_bytes'] / 1e6:8.1f} MB for a "
+                            f"{row['session_bytes'] / 1e6:6.1f} MB session ({row['written_per_session_byte']:.2f}x"
+                            f"; journal {row['journal_bytes'] / 1e6:.1f} MB), {row['cpu_s']:.1f} CPU-s"
+                        )
     camp = campaign(results)
     after_40 = {s: next(r for r in results[s]["after"] if r["presses"] == 40) for s in SENSORS}
     doc = {
@@ -248,8 +256,10 @@ def main() -> None:
         "wall_s": round(time.monotonic() - started, 1),
     }
     before_gb, after_gb = camp["before"]["write_bytes"] / 1e9, camp["after"]["write_bytes"] / 1e9
-    print(f"campaign: before {before_gb:.2f} GB, after {after_gb:.2f} GB, for {camp['session_bytes'] / 1e9:.2f} GB "
-          f"of sessions; goal met: {doc['goal']['met']}")  # fmt: skip
+    print(
+        f"campaign: before {before_gb:.2f} GB, after {after_gb:.2f} GB, for {camp['session_bytes'] / 1e9:.2f} GB "
+        f"of sessions; goal met: {doc['goal']['met']}"
+    )
     print(f"wrote {write_json(doc, args.out / 'storage_bytes.json')}")
     figure(doc, args.out / "storage_bytes.png")
     print(f"wrote {args.out / 'storage_bytes.png'}")

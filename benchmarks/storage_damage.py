@@ -30,8 +30,7 @@ from typing import Any
 
 import h5py
 
-from unitac_rig.bench import default_out_dir, machine_info, replace_doc_section, write_json
-from unitac_rig.bench.lab.damage import (
+from lab.damage import (
     copy_press_over,
     delete_press_file,
     flip_bits,
@@ -42,6 +41,7 @@ from unitac_rig.bench.lab.damage import (
     swap_journal_entries,
     swap_press_files,
 )
+from unitac_rig.bench import default_out_dir, machine_info, replace_doc_section, write_json
 from unitac_rig.cli import main as cli_main
 from unitac_rig.storage.integrity import check_session
 from unitac_rig.storage.recorder import journal_dir, session_path
@@ -88,8 +88,9 @@ def record_dataset(root: Path) -> Path:
     data = root / "pristine"
     for obj in OBJECTS:
         for sensor in ("uskin", "papillarray"):
-            code, err, _ = run_cli(["collect", "--object", obj, "--sensor", sensor, "--data", str(data), "--angles",
-                                    ANGLES, "--no-live"])  # fmt: skip
+            code, err, _ = run_cli(
+                ["collect", "--object", obj, "--sensor", sensor, "--data", str(data), "--angles", ANGLES, "--no-live"]
+            )
             if code != 0:
                 raise RuntimeError(f"recording the dataset failed: {err}")
     return data
@@ -100,12 +101,31 @@ def command_args(command: str, data: Path, work: Path) -> list[str]:
     return {
         "inspect": ["inspect", str(data)],
         "extract": ["extract", str(data)],
-        "train": ["train", "--data", str(data), "--out", str(work / "run"), "--epochs", "1", "--no-report",
-                  "--no-baselines"],
+        "train": [
+            "train",
+            "--data",
+            str(data),
+            "--out",
+            str(work / "run"),
+            "--epochs",
+            "1",
+            "--no-report",
+            "--no-baselines",
+        ],
         "export": ["export", str(data), "--out", str(work / "export")],
-        "collect": ["collect", "--object", obj, "--sensor", sensor, "--data", str(data), "--angles", ANGLES,
-                    "--no-live"],
-    }[command]  # fmt: skip
+        "collect": [
+            "collect",
+            "--object",
+            obj,
+            "--sensor",
+            sensor,
+            "--data",
+            str(data),
+            "--angles",
+            ANGLES,
+            "--no-live",
+        ],
+    }[command]
 
 
 # -- the damage cases: each changes a fresh copy of the dataset ------------------------------------------------------
@@ -119,8 +139,13 @@ def review_bits(data: Path) -> None:
     """The review's case: 20 bits changing raw arrays of 3 presses and the compressed tactile/values of 2."""
     path = _target(data)
     pids = press_ids(path)
-    spots = [(pids[0], "robot/t_s"), (pids[1], "robot/press_force_n"), (pids[2], "tactile/seq"),
-             (pids[3], "tactile/values"), (pids[4], "tactile/values")]  # fmt: skip
+    spots = [
+        (pids[0], "robot/t_s"),
+        (pids[1], "robot/press_force_n"),
+        (pids[2], "tactile/seq"),
+        (pids[3], "tactile/values"),
+        (pids[4], "tactile/values"),
+    ]
     for seed, (pid, dataset) in enumerate(spots):
         flip_bits_in_dataset(path, f"presses/{pid}/{dataset}", 4, seed)
 
@@ -231,13 +256,15 @@ def extract_killed_then_press_deleted(data: Path) -> None:
     except KeyboardInterrupt:
         pass
     finally:
-        reextract.os.replace = real  # type: ignore[assignment]
+        reextract.os.replace = real
     delete_press_file(data, *TARGET, 0)
 
 
 CASES: dict[str, tuple[str, Callable[[Path], None]]] = {
-    "review_bits": ("20 flipped bits: raw arrays of 3 presses changed, tactile/values of 2 unreadable; journal "
-                    "intact", review_bits),
+    "review_bits": (
+        "20 flipped bits: raw arrays of 3 presses changed, tactile/values of 2 unreadable; journal intact",
+        review_bits,
+    ),
     "both_copies": ("a press damaged in the session file and in its journal entry", both_copies),
     "no_journal": ("a damaged press, no journal (files copied without .journal/)", no_journal),
     "truncated": ("session file truncated to a third; journal intact", truncated),
@@ -245,22 +272,32 @@ CASES: dict[str, tuple[str, Callable[[Path], None]]] = {
     "foreign": ("a foreign HDF5 file under the session's name; journal intact", foreign_file),
     "broken_header": ("journal header (_session.json) cut short", broken_header),
     "no_checksums": ("files from an older unitac-rig (schema 1: no checksums), not damaged", no_checksums),
-    "other_object_press": ("irregular_pla's press file copied over circle_pla's file of that press",
-                           other_object_press),
-    "other_sensor_press": ("a uSkin press file copied over the PapillArray session's file of that press",
-                           other_sensor_press),
+    "other_object_press": (
+        "irregular_pla's press file copied over circle_pla's file of that press",
+        other_object_press,
+    ),
+    "other_sensor_press": (
+        "a uSkin press file copied over the PapillArray session's file of that press",
+        other_sensor_press,
+    ),
     "swapped_press_files": ("two press files of the session swapped", swapped_press_files),
-    "journal_swapped_then_deleted": ("two journal entries swapped, then a press file deleted",
-                                     journal_swapped_then_deleted),
+    "journal_swapped_then_deleted": (
+        "two journal entries swapped, then a press file deleted",
+        journal_swapped_then_deleted,
+    ),
     "session_deleted": ("the session file deleted (its press files and journal stay)", session_deleted),
     "journal_entry_flipped": ("3 bits flipped in a journal entry", journal_entry_flipped),
     "journal_entry_deleted": ("a journal entry deleted", journal_entry_deleted),
     "header_deleted": ("the journal's _session.json deleted", header_deleted),
-    "seal_name_flipped": ("one bit flipped in the root seal's attribute name (attrs_sha256 reads as absent)",
-                          seal_name_flipped),
-    "extract_killed": ("extract killed right after its session file's rename, then a press file deleted",
-                       extract_killed_then_press_deleted),
-}  # fmt: skip
+    "seal_name_flipped": (
+        "one bit flipped in the root seal's attribute name (attrs_sha256 reads as absent)",
+        seal_name_flipped,
+    ),
+    "extract_killed": (
+        "extract killed right after its session file's rename, then a press file deleted",
+        extract_killed_then_press_deleted,
+    ),
+}
 
 
 def _lost(pristine: Path, data: Path) -> tuple[int, int]:
@@ -338,8 +375,12 @@ def run_case(pristine: Path, root: Path, damage: Callable[[Path], None], command
     damage(data)
     started = time.perf_counter()
     code, err, notes = run_cli(command_args(command, data, work))
-    result: dict[str, Any] = {"exit": code, "error": err.splitlines()[-1] if err else "", "notes": notes,
-                              "seconds": round(time.perf_counter() - started, 2)}  # fmt: skip
+    result: dict[str, Any] = {
+        "exit": code,
+        "error": err.splitlines()[-1] if err else "",
+        "notes": notes,
+        "seconds": round(time.perf_counter() - started, 2),
+    }
     lost, total = _lost(pristine, data)
     result.update(lost=lost, presses=total, summary=_summary(code, err, notes, work), in_step=_in_step(data))
     if command == "export":
@@ -352,8 +393,15 @@ def run_case(pristine: Path, root: Path, damage: Callable[[Path], None], command
 
 def random_bits(pristine: Path, root: Path, seeds: int) -> dict[str, Any]:
     """20 random bits anywhere in the target file, ``seeds`` times: inspect then export on each copy."""
-    outcomes: dict[str, Any] = {"repaired": 0, "refused": 0, "untouched": 0, "passed_on_damaged": 0,
-                                "export_certified_damage": 0, "lost": 0, "seeds": seeds}  # fmt: skip
+    outcomes: dict[str, Any] = {
+        "repaired": 0,
+        "refused": 0,
+        "untouched": 0,
+        "passed_on_damaged": 0,
+        "export_certified_damage": 0,
+        "lost": 0,
+        "seeds": seeds,
+    }
     for seed in range(seeds):
         work = Path(tempfile.mkdtemp(dir=root))
         data = work / "data"
@@ -421,8 +469,12 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=default_out_dir(), help="folder for the JSON")
     parser.add_argument("--doc", type=Path, default=Path(__file__).resolve().parents[1] / "docs" / "reliability.md")
     parser.add_argument("--table-only", action="store_true", help="redraw the table from OUT/storage_damage.json")
-    parser.add_argument("--cases", nargs="+", choices=sorted(CASES), help="rerun only these cases, merged into "
-                        "OUT/storage_damage.json (the random bits and the rest as they were)")  # fmt: skip
+    parser.add_argument(
+        "--cases",
+        nargs="+",
+        choices=sorted(CASES),
+        help="rerun only these cases, merged into OUT/storage_damage.json (the random bits and the rest as they were)",
+    )
     args = parser.parse_args()
     if args.table_only:
         replace_doc_section(
@@ -434,8 +486,13 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         pristine = record_dataset(root)
-        doc: dict[str, Any] = {"machine": machine_info(), "objects": list(OBJECTS), "angles": int(ANGLES),
-                               "target": "__".join(TARGET), "cases": {}}  # fmt: skip
+        doc: dict[str, Any] = {
+            "machine": machine_info(),
+            "objects": list(OBJECTS),
+            "angles": int(ANGLES),
+            "target": "__".join(TARGET),
+            "cases": {},
+        }
         if args.cases:
             doc = json.loads((args.out / "storage_damage.json").read_text())
         for key, (label, damage) in CASES.items():

@@ -26,17 +26,13 @@ import threading
 import time
 from pathlib import Path
 
-import matplotlib
 import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
-
-from unitac_rig.bench import machine_info
+from unitac_rig.bench import default_out_dir, machine_info, write_json
+from unitac_rig.plotting import new_figure, save_figure
 from unitac_rig.sim.twin.rig import RigTwin
 
-ROOT = Path(__file__).resolve().parents[1]
-FIGURES = ROOT / "docs" / "figures"
+FIGURES = default_out_dir()
 BUDGET_MS = 1.0  # one frame period of a PapillArray at 1 kHz
 
 
@@ -47,11 +43,19 @@ def train_small_run(out: Path) -> Path:
     from unitac_rig.learning.synthetic_data import synthetic_matched_sets
     from unitac_rig.learning.train import TrainConfig, train
 
-    sets = synthetic_matched_sets(("circle_pla", "hex_tpu", "irregular_pla"), (USKIN, PAPILLARRAY),
-                                  angles_deg=tuple(float(a) for a in range(-45, 46, 9)),
-                                  targets_n=(4.0, 5.5, 7.0, 8.5, 10.0), seed=0)  # fmt: skip
-    train(build_paired_dataset(sets), out, TrainConfig(epochs=30, seeds=(0,), tsne_contacts=30, eval_every=30),
-          device="cpu")  # fmt: skip
+    sets = synthetic_matched_sets(
+        ("circle_pla", "hex_tpu", "irregular_pla"),
+        (USKIN, PAPILLARRAY),
+        angles_deg=tuple(float(a) for a in range(-45, 46, 9)),
+        targets_n=(4.0, 5.5, 7.0, 8.5, 10.0),
+        seed=0,
+    )
+    train(
+        build_paired_dataset(sets),
+        out,
+        TrainConfig(epochs=30, seeds=(0,), tsne_contacts=30, eval_every=30),
+        device="cpu",
+    )
     geometry_for_run(out, config=GeometryConfig(epochs=5))
     return out
 
@@ -101,10 +105,25 @@ def main() -> None:
             rig_file.write_text(twin.rig_file().replace("rate_hz = 100", "rate_hz = 1000"))
             summary_path = tmp / "summary.json"
             stream = subprocess.Popen(
-                [sys.executable, "-m", "unitac_rig", "stream", str(run), "--rig", str(rig_file), "--sensor",
-                 "papillarray", "--duration", str(args.seconds), "--summary", str(summary_path)],
-                stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
-            )  # fmt: skip
+                [
+                    sys.executable,
+                    "-m",
+                    "unitac_rig",
+                    "stream",
+                    str(run),
+                    "--rig",
+                    str(rig_file),
+                    "--sensor",
+                    "papillarray",
+                    "--duration",
+                    str(args.seconds),
+                    "--summary",
+                    str(summary_path),
+                ],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                env=env,
+            )
             items: list[dict] = []
 
             def read_lines() -> None:
@@ -160,22 +179,23 @@ def main() -> None:
         "median_within_budget": latency["median"] is not None and latency["median"] < BUDGET_MS,
         "histogram_ms": summary["histogram_ms"],
     }
-    FIGURES.mkdir(parents=True, exist_ok=True)
-    (FIGURES / "stream_latency.json").write_text(json.dumps(result, indent=1) + "\n")
+    write_json(result, FIGURES / "stream_latency.json")
     counts_ms = np.asarray(summary["histogram_ms"]["counts"])
     edges = np.arange(counts_ms.size) * summary["histogram_ms"]["bin_ms"]
-    fig, ax = plt.subplots(figsize=(7, 3.5))
+    fig = new_figure(7, 3.5, layout="tight")
+    ax = fig.subplots()
     ax.bar(edges, counts_ms, width=summary["histogram_ms"]["bin_ms"], align="edge")
     ax.axvline(BUDGET_MS, color="red", linestyle="--", label="1 ms: one frame at 1 kHz")
     ax.axvline(latency["median"], color="black", label=f"median {latency['median']:.3f} ms")
     ax.set_yscale("log")
     ax.set_xlabel("host latency per frame, ms (frame stamped -> line written; last bin: >= 5 ms)")
     ax.set_ylabel("frames")
-    ax.set_title(f"stream, {summary['frames_out']} frames in {summary['seconds']:.0f} s, "
-                 f"{result['machine']['cpus']} CPUs, load {result['machine']['load_average_1min']}")  # fmt: skip
+    ax.set_title(
+        f"stream, {summary['frames_out']} frames in {summary['seconds']:.0f} s, "
+        f"{result['machine']['cpus']} CPUs, load {result['machine']['load_average_1min']}"
+    )
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(FIGURES / "stream_latency.png", dpi=110)
+    save_figure(fig, FIGURES / "stream_latency.png")
     print(json.dumps({k: v for k, v in result.items() if k not in ("histogram_ms", "machine")}, indent=1))
 
 

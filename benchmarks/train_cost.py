@@ -14,18 +14,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
-from sim_cost import checkout
-
-ROOT = Path(__file__).resolve().parent.parent
-OUT = ROOT / "docs" / "figures" / "train_cost.json"
+from lab.versions import ROOT, checkout, run_worker, short_commit
 
 
 def _timed(module: Any, name: str, totals: dict[str, float], label: str) -> None:
@@ -59,8 +54,19 @@ def run_train(data: Path, epochs: int, seed: int) -> dict[str, Any]:
         start = time.process_time()
         wall = time.monotonic()
         try:
-            main(["train", "--data", str(data), "--out", str(Path(tmp) / "run"), "--epochs", str(epochs),
-                  "--split-seed", str(seed)])  # fmt: skip
+            main(
+                [
+                    "train",
+                    "--data",
+                    str(data),
+                    "--out",
+                    str(Path(tmp) / "run"),
+                    "--epochs",
+                    str(epochs),
+                    "--split-seed",
+                    str(seed),
+                ]
+            )
         except SystemExit as exc:
             if exc.code not in (0, None):
                 raise
@@ -85,30 +91,26 @@ def run_train(data: Path, epochs: int, seed: int) -> dict[str, Any]:
 
 
 def main() -> None:
+    # the workers import only the version they measure, so this checkout's package is imported here, not on top
+    from unitac_rig.bench import default_out_dir, machine_info, write_json
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", type=Path, required=True, help="dataset folder (both sensors' sessions)")
     parser.add_argument("--epochs", type=int, default=20)
     parser.add_argument("--seed", type=int, default=0, help="the split seed (0)")
     parser.add_argument("--before", default="HEAD~1", help="commit measured as 'before'")
-    parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("--out", type=Path, default=default_out_dir() / "train_cost.json")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         print(json.dumps(run_train(args.data, args.epochs, args.seed)))
         return
-    before_ref = subprocess.run(
-        ["git", "-C", str(ROOT), "rev-parse", "--short", args.before], capture_output=True, text=True, check=True
-    ).stdout.strip()
+    before_ref = short_commit(args.before)
     results: dict[str, Any] = {}
     with checkout(before_ref) as before_tree:
         for label, code in (("before", before_tree), ("after", ROOT)):
-            command = [sys.executable, str(Path(__file__).resolve()), "--worker", "--data", str(args.data.resolve())]
-            command += ["--epochs", str(args.epochs), "--seed", str(args.seed)]
-            env = {**os.environ, "PYTHONPATH": f"{code}{os.pathsep}{Path(__file__).resolve().parent}"}
-            done = subprocess.run(command, env=env, cwd=tempfile.gettempdir(), capture_output=True, text=True)
-            if done.returncode != 0:
-                raise SystemExit(f"train on {code} failed:\n{done.stderr[-2000:]}")
-            results[label] = json.loads(done.stdout.strip().splitlines()[-1])
+            command = [str(Path(__file__).resolve()), "--worker", "--data", str(args.data.resolve())]
+            results[label] = run_worker(code, [*command, "--epochs", str(args.epochs), "--seed", str(args.seed)])
             split = ", ".join(f"{k} {v:.1f}" for k, v in results[label]["phases_cpu_s"].items())
             print(f"{label:6s} {results[label]['cpu_s']:.1f} CPU-s ({split})")
     doc = {
@@ -116,13 +118,10 @@ def main() -> None:
         "command": "python benchmarks/train_cost.py " + " ".join(sys.argv[1:]),
         "before_commit": before_ref,
         "epochs": args.epochs,
-        "cpus": os.cpu_count(),
-        "load_avg": os.getloadavg(),
+        "machine": machine_info(),
         "results": results,
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(doc, indent=2) + "\n")
-    print(f"wrote {args.out}")
+    print(f"wrote {write_json(doc, args.out)}")
 
 
 if __name__ == "__main__":

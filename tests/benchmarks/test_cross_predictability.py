@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from unitac_rig.bench.lab.cross_sensor import channel_r2, fit_and_predict
+from cross_predictability import channel_r2, fit_and_predict
 
 
 def test_channel_r2_on_a_hand_worked_case() -> None:

@@ -11,8 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tests.learning.learning_helpers import small_sets
-from unitac_rig.bench.lab.stability import (
+from stability_learning import (
     CORNERS_PNG,
     MATERIALS_PNG,
     SEEDS_PNG,
@@ -22,6 +21,7 @@ from unitac_rig.bench.lab.stability import (
     outline_features,
     stability_report,
 )
+from tests.learning.learning_helpers import small_sets
 from unitac_rig.errors import DataError, UsageError
 from unitac_rig.learning.contact_geometry import GeometryConfig
 from unitac_rig.learning.data import build_paired_dataset

@@ -8,7 +8,7 @@ from collections.abc import Iterator
 import pytest
 import torch
 
-from unitac_rig.bench.lab.training import TRAINERS, build_step
+from bench_training import TRAINERS, build_step
 from unitac_rig.learning.engine import ModelShape
 
 DIMS = {"uskin": 72, "papillarray": 27}

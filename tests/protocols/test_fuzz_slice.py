@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from unitac_rig.bench.lab.fuzz import (
+from fuzz import (
     MAX_MEMORY_GROWTH_BYTES,
     TARGETS,
     markdown_table,

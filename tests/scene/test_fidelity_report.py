@@ -1,4 +1,4 @@
-"""The fidelity report's measuring code (unitac_rig/bench/lab/fidelity.py): verdicts on hand-made numbers, and the
+"""The fidelity report's measuring code (benchmarks/fidelity.py): verdicts on hand-made numbers, and the
 pooled statistics of a short simulated session read back through the real drivers and the session file."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from unitac_rig.bench.lab.fidelity import (
+from fidelity import (
     RECORDED,
     collect_object,
     compare,

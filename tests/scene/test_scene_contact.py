@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
-from unitac_rig.bench.lab.fidelity import RECORDED
+from fidelity import RECORDED
 from unitac_rig.rig.objects import get_object, list_objects
 from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
 from unitac_rig.sim.scene import PressScene, SceneParams, press_pose

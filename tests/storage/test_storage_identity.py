@@ -11,9 +11,7 @@ from pathlib import Path
 import h5py
 import pytest
 
-from tests.helpers import cli
-from tests.robustness.robustness_helpers import one_error_line
-from unitac_rig.bench.lab.damage import (
+from lab.damage import (
     copy_press_over,
     delete_press_file,
     flip_bits_in_dataset,
@@ -23,6 +21,8 @@ from unitac_rig.bench.lab.damage import (
     swap_journal_entries,
     swap_press_files,
 )
+from tests.helpers import cli
+from tests.robustness.robustness_helpers import one_error_line
 from unitac_rig.storage import reextract
 from unitac_rig.storage.extraction import ExtractionSettings
 from unitac_rig.storage.integrity import check_session

@@ -12,9 +12,9 @@ import h5py
 import numpy as np
 import pytest
 
+from lab.damage import dataset_location, flip_bits, flip_bits_in_dataset, press_ids
 from tests.helpers import cli
 from tests.robustness.robustness_helpers import one_error_line, tree_hashes
-from unitac_rig.bench.lab.damage import dataset_location, flip_bits, flip_bits_in_dataset, press_ids
 from unitac_rig.storage.manifest import sha256_file
 from unitac_rig.storage.reader import session_digest, session_files
 from unitac_rig.storage.recorder import journal_dir, press_dir, session_path

@@ -14,9 +14,9 @@ import h5py
 import numpy as np
 import pytest
 
+from lab.damage import flip_bits
 from tests.helpers import cli
 from tests.robustness.robustness_helpers import one_error_line, tree_hashes
-from unitac_rig.bench.lab.damage import flip_bits
 from unitac_rig.bench.recorder import synthetic_press
 from unitac_rig.errors import DataError
 from unitac_rig.storage import recorder, reextract

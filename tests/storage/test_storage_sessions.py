@@ -9,9 +9,9 @@ from pathlib import Path
 import h5py
 import pytest
 
+from lab.damage import flip_bits_in_dataset, press_ids
 from tests.helpers import cli
 from tests.robustness.robustness_helpers import one_error_line, tree_hashes
-from unitac_rig.bench.lab.damage import flip_bits_in_dataset, press_ids
 from unitac_rig.errors import DataError
 from unitac_rig.storage import reextract
 from unitac_rig.storage.recorder import SessionWriter, journal_dir, keep_aside, session_path

@@ -107,8 +107,10 @@ def _press_file(data: Path, object_id: str, sensor: str, pid: str) -> Path:
 def copy_press_over(data: Path, source: tuple[str, str], target: tuple[str, str], index: int = 0) -> str:
     """Copy ``source``'s press file of a press id both sessions have over ``target``'s file of that press (another
     object's press, or another sensor's): intact bytes in the wrong place. Returns the press id."""
-    shared = sorted(set(press_ids(Path(data) / f"{source[0]}__{source[1]}.h5"))
-                    & set(press_ids(Path(data) / f"{target[0]}__{target[1]}.h5")))  # fmt: skip
+    shared = sorted(
+        set(press_ids(Path(data) / f"{source[0]}__{source[1]}.h5"))
+        & set(press_ids(Path(data) / f"{target[0]}__{target[1]}.h5"))
+    )
     pid = shared[index]
     shutil.copyfile(_press_file(data, *source, pid), _press_file(data, *target, pid))
     return pid

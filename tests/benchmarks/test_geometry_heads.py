@@ -1,5 +1,7 @@
-"""Strict cross-sensor geometry (issue 29): the latent translators on hand-worked linear cases, and the study on a
-small trained run never reading the target sensor's frames of the unseen object in training."""
+"""The geometry heads beyond the paper's (benchmarks/lab/geometry_heads.py). Strict cross-sensor geometry (issue 29):
+the latent translators on hand-worked linear cases, and the study on a small trained run never reading the target
+sensor's frames of the unseen object in training. The pooled head: scored on each sensor over the same held-out
+contacts as the paper's per-sensor heads."""
 
 from __future__ import annotations
 
@@ -8,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lab import geometry_heads
+from lab.geometry_heads import cca_projections, cross_sensor_geometry, pooled_geometry, ridge_map
 from tests.learning.learning_helpers import small_sets
-from unitac_rig.bench.lab import cross_geometry
-from unitac_rig.bench.lab.cross_geometry import cca_projections, cross_sensor_geometry, ridge_map
-from unitac_rig.learning.contact_geometry import GeometryConfig
-from unitac_rig.learning.data import build_paired_dataset
+from unitac_rig.learning.contact_geometry import GeometryConfig, run_geometry
+from unitac_rig.learning.data import build_paired_dataset, ray_deg
 from unitac_rig.learning.train import TrainConfig, load_run, load_test_set, train
 
 
@@ -53,13 +55,13 @@ def test_no_head_trains_on_the_target_sensors_frames_of_the_unseen_object(
     inputs change)."""
     run, test = load_run(run_dir), load_test_set(run_dir)
     fitted: list[list[np.ndarray]] = []
-    original = cross_geometry.fit_single_thread
+    original = geometry_heads.fit_single_thread
 
     def spy(inputs: list[np.ndarray], *args: object, **kwargs: object) -> object:
         fitted.append([np.array(x) for x in inputs])
         return original(inputs, *args, **kwargs)
 
-    monkeypatch.setattr(cross_geometry, "fit_single_thread", spy)
+    monkeypatch.setattr(geometry_heads, "fit_single_thread", spy)
     config = GeometryConfig(epochs=2)
     first = cross_sensor_geometry(run, test, member=0, split_seed=5, config=config, ceiling=False)
     noisy = {s: v.copy() for s, v in test.values.items()}
@@ -68,12 +70,12 @@ def test_no_head_trains_on_the_target_sensors_frames_of_the_unseen_object(
     changed = type(test)(**{**test.__dict__, "values": noisy})
     cross_sensor_geometry(run, changed, member=0, split_seed=5, config=config, ceiling=False)
     heads = [
-        (m, a, b) for m in cross_geometry.METHODS for a in run.sensors for b in run.sensors if a != b or m == "paper"
+        (m, a, b) for m in geometry_heads.METHODS for a in run.sensors for b in run.sensors if a != b or m == "paper"
     ]
     for k, (_, a, _) in enumerate(heads):
         if a == "uskin":  # trained on uSkin frames: the PapillArray's unseen frames must not reach it
             np.testing.assert_array_equal(fitted[0][k], fitted[1][k])
-    assert set(first["methods"]) == set(cross_geometry.METHODS)
+    assert set(first["methods"]) == set(geometry_heads.METHODS)
     assert set(first["methods"]["translated"]["cross"]) == {"uskin_to_papillarray", "papillarray_to_uskin"}
     assert first["no_latent_mm"] > 0
 
@@ -92,3 +94,20 @@ def test_the_ceiling_has_the_same_recipe_and_training_rays_as_every_other_head(r
         assert entry["dropout"] == config.dropout_for(sensor)
         assert entry["contacts_train"] == result["contacts"]["train"] and entry["contacts_val"] == 0
         assert np.isfinite(entry["test_mm"])
+
+
+def test_the_pooled_head_is_scored_on_each_sensor_over_the_paper_heads_test_contacts(run_dir: Path) -> None:
+    run, test = load_run(run_dir), load_test_set(run_dir)
+    config = GeometryConfig(epochs=3)
+    pooled = pooled_geometry(run, test, config=config)
+    paper = run_geometry(run, test, config=config)
+    assert pooled["object"] == paper.object_id == "irregular_pla"
+    assert set(pooled["scenarios"]) == {"pooled_to_uskin", "pooled_to_papillarray"}
+    for scenario in pooled["scenarios"].values():
+        assert np.isfinite(scenario["mae_mm"]) and len(scenario["per_point_mae_mm"]) == 11
+    # 10% of the rays held out: 4 of the 40 physical rays (44 (rotation, angle) keys, four rays with two keys each),
+    # every key of a held-out ray with its 5 forces
+    rays = {ray_deg(r, a) for r, a in zip(paper.rotation_deg, paper.angle_deg, strict=True)}
+    assert len(rays) == 4
+    assert len(paper.test_rows) % 5 == 0 and 4 * 5 <= len(paper.test_rows) <= 8 * 5
+    assert pooled["seconds"] > 0

@@ -1,4 +1,5 @@
-"""Strict cross-sensor contact geometry, the ceiling beside it, and what a 16-d latent allows to close the gap.
+"""Contact-geometry heads beyond the paper's: strict cross-sensor transfer, the ceiling beside it, what a 16-d latent
+allows to close the gap, and a head pooled over both sensors.
 
 "Cross-sensor" here means what the paper's Section IV means: the profile head is trained on sensor A's latents of the
 unseen object's training rays and tested on sensor B's latents of its held-out rays; sensor B's frames of the unseen
@@ -19,6 +20,13 @@ own latents and on its raw (normalised) frames. Every head, the ceiling's includ
 learning rate, epochs and per-sensor dropout, :class:`GeometryConfig`) and the same training rays (issue 38: a
 ceiling tuned apart measured its recipe, not its input). Costs are process CPU seconds of each head's fit (heads
 fitted together are charged equal shares) plus its method's own preparation (the CCA or ridge fit, the translation).
+
+And a head the paper lacks (:func:`pooled_geometry`): one MLP of the paper's architecture and training trained on
+the training contacts' latents of every sensor at once (each contact once per sensor, the same profile target), then
+tested on each sensor's latents of the held-out contacts. It has seen the test sensor's latents of the unseen
+object in training, so its errors answer "one head that serves every sensor a lab has geometry labels for" and
+compare with the *same-sensor* heads, never with the cross-sensor transfer above. Same split, targets and epochs as
+the paper's heads.
 """
 
 from __future__ import annotations
@@ -238,3 +246,49 @@ def _ceiling(
         }
         for h, key in enumerate(keys)
     }
+
+
+POOLED = "pooled"
+
+
+def pooled_geometry(
+    run: LoadedRun,
+    test_set: PairedDataset,
+    object_id: str | None = None,
+    *,
+    member: int = 0,
+    config: GeometryConfig | None = None,
+    split_seed: int | None = None,
+) -> dict[str, Any]:
+    """``{"scenarios": {"pooled_to_<sensor>": {"mae_mm", "per_point_mae_mm"}}, "seconds": ...}`` for one member,
+    split as :func:`unitac_rig.learning.contact_geometry.run_geometry` splits it for the same ``split_seed``
+    (default: the member's model seed). The dropout is the mean of the sensors' paper values (0.25)."""
+    config = config or GeometryConfig()
+    object_id, rows = geometry_object(run, test_set, object_id)
+    seed = run.engine.seeds[member]
+    outline = OutlineGeometry.from_catalogue(object_id)
+    subset, truth, valid, _ = contact_profiles(test_set, rows, object_id, config, outline)
+    split = geometry_split(subset, valid, object_id, seed if split_seed is None else split_seed, config, outline)
+    latents = member_latents(run, member, subset.values)
+    began = time.perf_counter()
+    model = fit_single_thread(
+        [np.concatenate([latents[s][split.train] for s in run.sensors])],
+        np.concatenate([truth[split.train]] * len(run.sensors)),
+        config,
+        [float(np.mean([config.dropout_for(s) for s in run.sensors]))],
+        seed,
+    )
+    seconds = time.perf_counter() - began
+    scenarios = {}
+    for sensor in run.sensors:
+        with torch.no_grad():
+            predicted = model(torch.from_numpy(latents[sensor][split.test][None]))[0].numpy()
+        errors = np.abs(predicted - truth[split.test])
+        scenarios[f"{POOLED}_to_{sensor}"] = {
+            "train_sensor": POOLED,
+            "test_sensor": sensor,
+            "mae_mm": float(errors.mean()),
+            "per_point_mae_mm": errors.mean(axis=0).tolist(),
+            "same_sensor": True,
+        }
+    return {"object": object_id, "member": member, "seed": seed, "scenarios": scenarios, "seconds": seconds}

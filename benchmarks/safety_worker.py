@@ -94,8 +94,15 @@ def stall_case(case: dict[str, Any]) -> dict[str, Any]:
                     return
                 fired.append(rig.clock.now_ns() / 1e9)
                 if death:
-                    for name in ("stop", "force_mode_stop", "speed_linear", "force_mode", "move_linear",
-                                 "start_move_linear", "zero_ft"):  # fmt: skip
+                    for name in (
+                        "stop",
+                        "force_mode_stop",
+                        "speed_linear",
+                        "force_mode",
+                        "move_linear",
+                        "start_move_linear",
+                        "zero_ft",
+                    ):
                         if hasattr(rig.sim_arm, name):
                             setattr(rig.sim_arm, name, lambda *a, **k: None)  # a dead host sends nothing
                     raise _HostDied
@@ -150,14 +157,18 @@ def session_case(case: dict[str, Any]) -> dict[str, Any]:
             extraction = record.extraction
             errors = np.asarray(extraction.error_n, dtype=np.float64)
             miss = np.asarray(extraction.miss, dtype=bool)
-            presses.append({
-                "press_id": record.press_id, "status": record.status,
-                "recorded_peak_n": float(record.attrs.get("peak_force_n", np.nan)),
-                "true_peak_n": truth_peak["n"],
-                "abs_errors_n": [abs(float(e)) for e, m in zip(errors, miss, strict=True) if not m],
-                "misses": int(miss.sum()), "targets": len(miss),
-                "duration_s": float(record.attrs.get("duration_s", np.nan)),
-            })  # fmt: skip
+            presses.append(
+                {
+                    "press_id": record.press_id,
+                    "status": record.status,
+                    "recorded_peak_n": float(record.attrs.get("peak_force_n", np.nan)),
+                    "true_peak_n": truth_peak["n"],
+                    "abs_errors_n": [abs(float(e)) for e, m in zip(errors, miss, strict=True) if not m],
+                    "misses": int(miss.sum()),
+                    "targets": len(miss),
+                    "duration_s": float(record.attrs.get("duration_s", np.nan)),
+                }
+            )
 
         collect_session(rig, obj, case["sensor"], Path(tmp), rotations=[0.0], on_press=on_press, on_tick=on_tick)
     return {**case, "presses": presses}

@@ -1,4 +1,4 @@
-"""The fuzz campaign's targets (see unitac_rig/bench/lab/fuzz.py): one per wire codec, each also driving its driver's
+"""The fuzz campaign's targets (see benchmarks/fuzz.py): one per wire codec, each also driving its driver's
 decode path where there is one, and what they share: one input (:class:`Case`), the :class:`Target` interface and the
 input generators.
 
@@ -456,8 +456,17 @@ class XelaWsTarget(Target):
                 return Case(kind, tokens[0] + '"data": "' + ",".join(items))
             return Case(kind, text)
         obj = json.loads(text)  # fields: one field set to an extreme JSON value
-        paths = [("message",), ("time",), ("sensors",), ("type",), ("1", "taxels"), ("1", "data"), ("1", "calibrated"),
-                 ("1", "sensor"), ("1", "model")]  # fmt: skip
+        paths = [
+            ("message",),
+            ("time",),
+            ("sensors",),
+            ("type",),
+            ("1", "taxels"),
+            ("1", "data"),
+            ("1", "calibrated"),
+            ("1", "sensor"),
+            ("1", "model"),
+        ]
         path = paths[int(rng.integers(0, len(paths)))]
         marker = "__FUZZ__"
         target = obj
@@ -720,8 +729,11 @@ _DECODERS: dict[int, Callable[[bytes], Any]] = {
     PackageType.CONTROL_PACKAGE_PAUSE: decode_accepted_reply,
     PackageType.TEXT_MESSAGE: decode_text_message,
 }
-_REQUEST_DECODERS: list[Callable[[bytes], Any]] = [decode_request_protocol_version, decode_setup_inputs,
-                                                   decode_setup_outputs]  # fmt: skip
+_REQUEST_DECODERS: list[Callable[[bytes], Any]] = [
+    decode_request_protocol_version,
+    decode_setup_inputs,
+    decode_setup_outputs,
+]
 _FIELD_TYPES = sorted(FIELD_FORMATS)
 
 
@@ -760,8 +772,11 @@ class RtdeTarget(Target):
             values = [_field_value(rng, t) for t in types]
             return encode_data_package(int(rng.integers(0, 256)), types, values), ("data", (types, values))
         if choice == 3:
-            text = TextMessage("".join(chr(int(c)) for c in rng.integers(32, 127, int(rng.integers(0, 60)))), "fuzz",
-                               int(rng.integers(0, 256)))  # fmt: skip
+            text = TextMessage(
+                "".join(chr(int(c)) for c in rng.integers(32, 127, int(rng.integers(0, 60)))),
+                "fuzz",
+                int(rng.integers(0, 256)),
+            )
             return encode_text_message(text), ("text", text)
         if choice == 4:
             return encode_protocol_version_reply(bool(rng.random() < 0.5)), ("flag", None)

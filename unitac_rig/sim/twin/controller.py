@@ -48,10 +48,10 @@ import numpy as np
 from protocols import rtde
 from protocols.rtde import ControllerVersion, PackageType
 from unitac_rig.sim.arm import SimArmParams
-from unitac_rig.sim.rtde_server import RtdeSession
 from unitac_rig.sim.twin import dashboard
 from unitac_rig.sim.twin.motion import TwinArm, pose_matrix
 from unitac_rig.sim.twin.params import DASHBOARD_PORT, RTDE_PORT, SCRIPT_PORT, TwinSettings
+from unitac_rig.sim.twin.rtde_session import RtdeSession
 from unitac_rig.sim.twin.script import (
     ControlScript,
     OutputRegisters,
@@ -199,7 +199,13 @@ class Controller:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         connection = _Connection(sock, kind, f"{peer[0]}:{peer[1]}")
         if kind == "rtde":
-            connection.session = RtdeSession(connection.peer, controller_version=self.version, max_frequency_hz=500.0)
+            connection.session = RtdeSession(
+                connection.peer,
+                controller_version=self.version,
+                max_frequency_hz=500.0,
+                registers_in_use=frozenset(self.params.rtde_registers_in_use),
+                outputs_not_found=frozenset(self.params.rtde_outputs_not_found),
+            )
             connection.parser = rtde.RtdePackageParser()
         self.connections.append(connection)
         self.selector.register(sock, selectors.EVENT_READ, connection)

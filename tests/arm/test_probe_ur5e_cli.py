@@ -109,8 +109,15 @@ def test_sign_check_without_a_push_says_so() -> None:
     states = iter(range(10**9))
 
     def still() -> ArmState:
-        return ArmState(host_t_ns=next(states) * 2_000_000, controller_t_s=0.0, tcp_pose=STILL_POSE,
-                        tcp_force=np.zeros(6), robot_mode=7, safety_mode=1, protective_stop=False)  # fmt: skip
+        return ArmState(
+            host_t_ns=next(states) * 2_000_000,
+            controller_t_s=0.0,
+            tcp_pose=STILL_POSE,
+            tcp_force=np.zeros(6),
+            robot_mode=7,
+            safety_mode=1,
+            protective_stop=False,
+        )
 
     with pytest.raises(UsageError, match="no push on the pad within 2 s"):
         run_sign_check(still, echo=lambda _: None, timeout_s=2.0, clock=VirtualClock())

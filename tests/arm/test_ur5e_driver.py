@@ -482,12 +482,18 @@ def test_the_watchdog_is_armed_again_as_each_motion_starts_but_not_every_period(
     names = [n for n in control.commands() if n in ("setWatchdog", "speedL", "forceMode", "moveL")]
     assert names == [
         "setWatchdog",
-        "setWatchdog", "speedL", "speedL", "speedL",
-        "setWatchdog",  # stop: the rest window
-        "setWatchdog", "forceMode", "forceMode",
         "setWatchdog",
-        "setWatchdog", "moveL",
-    ]  # fmt: skip
+        "speedL",
+        "speedL",
+        "speedL",
+        "setWatchdog",  # stop: the rest window
+        "setWatchdog",
+        "forceMode",
+        "forceMode",
+        "setWatchdog",
+        "setWatchdog",
+        "moveL",
+    ]
 
 
 def test_the_watchdog_is_tight_exactly_while_a_motion_is_commanded() -> None:

@@ -19,8 +19,9 @@ What is modelled (numbers and sources in :class:`SimArmParams`):
     ``wait_period`` or by anyone else (a stalled host), the arm moves on. ``speed_linear`` keeps going even with a
     time limit, because ur_rtde's speed thread repeats ``speedl(xd, a, t)`` in a loop; force mode keeps
     regulating toward its last set-point;
-  - the RTDE watchdog (``set_watchdog``): if the host writes nothing (a command, ``kick_watchdog`` or
-    ``wait_period``) for longer than 1 / frequency, the program stops and the arm brakes to rest;
+  - the RTDE watchdog (``watchdog_hz``, armed by the first motion command): if the host writes nothing (a command
+    or ``wait_period``; time inside ``keep_alive`` counts as written) for longer than 1 / frequency, the program
+    stops and the arm brakes to rest;
   - a protective stop when the true contact force exceeds ``protective_stop_n`` (or on
     :meth:`SimArm.trigger_protective_stop`): the arm brakes to rest, the program stops, and every command raises
     (:class:`~drivers.errors.ProtectiveStop` while the stop lasts, then
@@ -318,10 +319,6 @@ class SimArm:
         self._note_write()
         self._begin_stop(min(decel_m_s2, self.params.max_tool_accel_m_s2))
 
-    def stop_linear(self, decel_m_s2: float = 10.0) -> None:
-        """``stopL``: end an asynchronous move (same as :meth:`stop` here)."""
-        self.stop(decel_m_s2)
-
     def zero_ft(self) -> None:
         """Take the current (filtered) F/T reading as the new zero, like ``zeroFtSensor``."""
         self._command()
@@ -374,18 +371,6 @@ class SimArm:
             if not self._protective_stop:
                 self._begin_stop(10.0)
 
-    def set_watchdog(self, min_frequency_hz: float) -> None:
-        """Arm the RTDE watchdog now: the program stops when the host writes nothing for 1 / ``min_frequency_hz``."""
-        self._command()
-        if not (math.isfinite(min_frequency_hz) and min_frequency_hz > 0):
-            raise ArmError(f"watchdog frequency must be > 0 Hz, got {min_frequency_hz}")
-        self._pending_watchdog_hz = min_frequency_hz
-        self._watchdog_ns = round(1e9 / min_frequency_hz)
-
-    def kick_watchdog(self) -> None:
-        """A host write that does nothing else (``kickWatchdog``)."""
-        self._note_write()
-
     @contextlib.contextmanager
     def keep_alive(self) -> Iterator[None]:
         """Feed the watchdog while the host does non-motion work with the arm at rest (UR5eArm runs a kicker
@@ -433,7 +418,7 @@ class SimArm:
         self._latest = self._snapshot()
 
     def reupload_script(self) -> None:
-        """Start the control program again (``reuploadScript()``); the watchdog is off until set again.
+        """Start the control program again (``reuploadScript()``); as in a fresh control script, no watchdog.
 
         Raises ProtectiveStop while a protective stop is not yet unlocked.
         """
@@ -463,10 +448,6 @@ class SimArm:
     def program_stop_reason(self) -> str | None:
         """Why the program last stopped ("watchdog", "protective stop", ...), None while it runs."""
         return self._program_stop_reason
-
-    @property
-    def watchdog_armed(self) -> bool:
-        return self._watchdog_ns is not None
 
     # ---- internals ------------------------------------------------------------------------------------------
 

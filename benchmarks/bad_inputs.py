@@ -162,7 +162,7 @@ def controller_row() -> dict[str, Any]:
     """Not a command line: an RTDE client asking the simulated controller for NaN Hz."""
     from protocols import rtde
     from protocols.rtde import ControllerVersion
-    from unitac_rig.sim.rtde_server import RtdeSession
+    from unitac_rig.sim.twin.rtde_session import RtdeSession
 
     session = RtdeSession("bench", controller_version=ControllerVersion(5, 11, 0, 0), max_frequency_hz=500.0)
     (package,) = rtde.RtdePackageParser().feed(rtde.encode_setup_outputs(math.nan, ["timestamp"]))

@@ -34,7 +34,7 @@ from unitac_rig.bench import default_out_dir, machine_info, write_json
 from unitac_rig.plotting import new_figure, save_figure
 from unitac_rig.sim.scene import press_pose
 from unitac_rig.sim.twin import ControllerParams, SceneSpec, start_twin_on_free_loopback
-from unitac_rig.sim.twin.controller import build_scene
+from unitac_rig.sim.twin.world import build_scene
 
 CENTER_M = (-0.15, 0.625)
 HEIGHT_M = 0.20

@@ -73,8 +73,8 @@ def press_until(twin: object, stop: threading.Event, counts: dict[str, int]) -> 
     """Press circle_pla 1.5 mm past first touch and back, over and over, until ``stop``."""
     import rtde_control
 
-    from unitac_rig.sim.twin.controller import build_scene
     from unitac_rig.sim.twin.rig import RigTwin
+    from unitac_rig.sim.twin.world import build_scene
 
     assert isinstance(twin, RigTwin)
     pressed, home = build_scene(twin.spec).pose_at_travel(0.0, 1.5), twin.controller.settings.start_pose

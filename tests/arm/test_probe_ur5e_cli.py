@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import threading
-import time
 
 import numpy as np
 import pytest
@@ -18,8 +16,8 @@ from tests.helpers import cli
 from unitac_rig.cli import main
 from unitac_rig.cli.probe_ur5e import register_ur5e, run_sign_check, sign_check_verdict
 from unitac_rig.errors import UsageError
-from unitac_rig.rig.poses import tool_z
-from unitac_rig.sim.rtde_server import start_on_free_loopback
+from unitac_rig.sim.scene import press_pose
+from unitac_rig.sim.twin import SceneSpec, start_twin_on_free_loopback
 
 STILL_POSE = np.array([-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214])  # pad facing base +y: tool z = +y
 
@@ -43,7 +41,7 @@ def test_simulated_probe_prints_one_json_object_per_state() -> None:
     for record in records:
         assert record["sensor"] == "ur5e" and record["seq"] is None
         assert record["tcp_pose"] == [-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214]
-        assert record["tcp_force"] == [0.0] * 6
+        assert np.linalg.norm(record["tcp_force"][:3]) < 15.0  # nothing touches the pad: the wrist's bias and noise
         assert record["robot_mode"] == 7 and record["protective_stop"] is False
     assert records[0]["t"] < records[1]["t"] < records[2]["t"]
     assert records[0]["controller_t"] < records[1]["controller_t"] < records[2]["controller_t"]
@@ -75,42 +73,33 @@ def test_missing_host_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> No
     assert "--host" in capsys.readouterr().err
 
 
-class PadPushedByHand:
-    """Still arm; once ``push`` is set, someone pushes the pad face with ``push_n`` along ``direction_sign`` x tool z
-    (-1: back toward the flange, as the object will; +1: the wrong way, what a reversed sign looks like)."""
-
-    def __init__(self, push_n: float, direction_sign: float) -> None:
-        self.push = threading.Event()
-        self.force = np.zeros(6)
-        self.force[:3] = direction_sign * push_n * tool_z(STILL_POSE)
-
-    def __call__(self) -> ArmState:
-        return ArmState(
-            host_t_ns=0, controller_t_s=time.monotonic(), tcp_pose=STILL_POSE,
-            tcp_force=self.force if self.push.is_set() else np.zeros(6), robot_mode=7, safety_mode=1,
-            protective_stop=False,
-        )  # fmt: skip
+CENTER = (-0.15, 0.625)
+PAD = press_pose(0.0, 33.0, object_center_m=CENTER, height_m=0.20)  # 8 mm clear of circle_pla (radius 25 mm)
 
 
-@pytest.mark.parametrize(("sign", "ok"), [(-1.0, True), (1.0, False)])
+@pytest.mark.parametrize(("ft_sign", "ok"), [(1.0, True), (-1.0, False)])
 def test_sign_check_passes_a_push_toward_the_flange_and_refuses_a_reversed_sign(
-    sign: float, ok: bool, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+    ft_sign: float, ok: bool, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    pad = PadPushedByHand(12.0, sign)
+    """The object pushes the pad back toward the flange (the twin moves it 8.5 mm toward the pad: about 12 N) once
+    the operator is asked to push; a wrist with a flipped frame (``ft_sign`` -1) must be refused."""
     echo = typer.echo
+    scene = SceneSpec("circle_pla", center_m=CENTER, seed=0)
+    with start_twin_on_free_loopback(60, 79, scene=scene, start_pose=PAD) as twin:
+        twin.set_ft_sign(ft_sign)
 
-    def operator_reads_and_pushes(message: object = None, *args: object, **kwargs: object) -> None:
-        echo(message, *args, **kwargs)  # type: ignore[arg-type]
-        if "push the pad face" in str(message):
-            pad.push.set()
+        def operator_reads_and_pushes(message: object = None, *args: object, **kwargs: object) -> None:
+            echo(message, *args, **kwargs)  # type: ignore[arg-type]
+            if "push the pad face" in str(message):
+                twin.set_placement_error(0.0, -0.0085)
 
-    monkeypatch.setattr(typer, "echo", operator_reads_and_pushes)
-    with start_on_free_loopback(pad, first=60) as server:
-        code = cli(["probe", "ur5e", "--host", server.host, "--sign-check", "--push-timeout", "10"])
+        monkeypatch.setattr(typer, "echo", operator_reads_and_pushes)
+        code = cli(["probe", "ur5e", "--host", twin.host, "--sign-check", "--push-timeout", "10"])
     out, err = capfd.readouterr()
     assert "push the pad face back toward the flange" in out
     if ok:
-        assert code == 0 and "+12.0 N along the press direction" in out and "sign OK" in out
+        assert code == 0 and "sign OK" in out
+        assert 8.0 < float(out.split(" N along the press direction")[0].split()[-1]) < 16.0
     else:
         assert code == 1 and err.count("\n") == 1
         assert err.startswith("error: wrist-force sign check failed") and "reversed" in err
@@ -120,8 +109,15 @@ def test_sign_check_without_a_push_says_so() -> None:
     states = iter(range(10**9))
 
     def still() -> ArmState:
-        return ArmState(host_t_ns=next(states) * 2_000_000, controller_t_s=0.0, tcp_pose=STILL_POSE,
-                        tcp_force=np.zeros(6), robot_mode=7, safety_mode=1, protective_stop=False)  # fmt: skip
+        return ArmState(
+            host_t_ns=next(states) * 2_000_000,
+            controller_t_s=0.0,
+            tcp_pose=STILL_POSE,
+            tcp_force=np.zeros(6),
+            robot_mode=7,
+            safety_mode=1,
+            protective_stop=False,
+        )
 
     with pytest.raises(UsageError, match="no push on the pad within 2 s"):
         run_sign_check(still, echo=lambda _: None, timeout_s=2.0, clock=VirtualClock())

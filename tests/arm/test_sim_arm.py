@@ -247,23 +247,10 @@ def test_same_seed_same_readings() -> None:
     assert not np.array_equal(run(5), run(6))
 
 
-def test_an_unchanged_force_mode_command_is_kept_and_a_changed_one_acts_at_once(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    """The host re-sends force mode every 2 ms as a ur_rtde loop does; the simulated controller keeps an unchanged
-    command instead of validating it and building its task frame again (a tenth of a simulated session)."""
-    import unitac_rig.sim.arm as sim_arm
-
-    frames_built = []
-    original = sim_arm.rotvec_to_matrix
-
-    def counting(rotvec: np.ndarray) -> np.ndarray:
-        frames_built.append(rotvec)
-        return original(rotvec)
-
-    monkeypatch.setattr(sim_arm, "rotvec_to_matrix", counting)
+def test_a_force_mode_command_resent_every_period_holds_and_a_changed_one_acts_at_once() -> None:
+    """The host re-sends force mode every 2 ms as a ur_rtde loop does: the arm settles at each set-point in turn,
+    and a bad command is still refused after good ones."""
     arm = make_arm(SpringWorld(1e4, 0.001))
-    frames_built.clear()  # the start pose's
     task_frame = np.array([0.0, 0.0, 0.2, -math.pi / 2, 0.0, 0.0])  # tool z along base +y
     selection = np.array([0, 0, 1, 0, 0, 0])
     limits = np.array([0.01, 0.01, 0.02, 0.1, 0.1, 0.1])
@@ -273,20 +260,14 @@ def test_an_unchanged_force_mode_command_is_kept_and_a_changed_one_acts_at_once(
             arm.force_mode(task_frame, selection, wrench.copy(), limits)
             arm.wait_period()
         assert press_force(arm.read_state(), PRESS_DIR) == pytest.approx(target_n, abs=0.01)
-    assert len(frames_built) == 2  # once per distinct command
-    with pytest.raises(ArmError):  # a bad command is still refused after a good one
+    with pytest.raises(ArmError):
         arm.force_mode(task_frame, selection, np.array([0.0, 0.0, np.nan, 0.0, 0.0, 0.0]), limits)
-    arm.force_mode_stop()
-    for _ in range(20):
-        arm.wait_period()
-    arm.force_mode(task_frame, selection, wrench, limits)  # force mode again after a stop: taken up anew
-    assert len(frames_built) == 3
     arm.close()
 
 
 def test_the_wrist_reading_is_the_arm_streams_draws_period_by_period() -> None:
-    """The F/T bias drift and noise are drawn in blocks; the readings are bit for bit those of drawing each period's
-    six drift and six noise values from the arm's generator in turn (worked here with the filter passing all)."""
+    """The F/T readings are bit for bit those of drawing each period's six drift and six noise values from the arm's
+    generator in turn (worked here with the filter passing all): a seed fixes a session's wrist readings."""
     params = SimArmParams(ft_filter_cutoff_hz=None, ft_latency_s=0.0)
     arm = SimArm(FreeSpace(), clock=VirtualClock(), rng=np.random.default_rng(11), params=params)
     reference = np.random.default_rng(11)

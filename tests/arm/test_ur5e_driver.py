@@ -1,8 +1,9 @@
-"""UR5eArm / UR5eReceiver where the controller twin cannot reach: a recording fake in place of the control client.
+"""UR5eArm / UR5eReceiver with a recording fake in place of the control client (the real receive client reads the
+controller twin where a test needs a controller).
 
 The fake shows the exact ur_rtde calls and argument order, and lets a test make the client refuse, raise or be
 interrupted on cue: every exit path stops the arm, a refused command becomes the right error, nothing escapes
-unwrapped. (tests/arm/test_twin_*.py drive the real control client against the controller twin.)
+unwrapped. (tests/arm/test_ur5e_twin.py drives the real control client against the controller twin.)
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from drivers.arm import Arm, ArmState
+from drivers.arm import Arm
 from drivers.clock import VirtualClock
 from drivers.errors import (
     ArmError,
@@ -28,86 +29,67 @@ from drivers.motion import move_to
 from drivers.ur5e import KEEP_ALIVE_KICK_S, REST_WATCHDOG_HZ, UR5eArm
 from drivers.ur5e_receive import STALL_TIMEOUT_S, UR5eReceiver
 from tests.arm.arm_fakes import FakeControl, FakeReceive
-from unitac_rig.sim.rtde_server import SimURController, start_on_free_loopback
+from unitac_rig.sim.twin import ControllerParams, ControllerTwin, start_twin_on_free_loopback
 
 POSE = np.array([-0.15, 0.6, 0.21, 0.0, 2.2214, -2.2214])
 
 
-class SwitchableState:
-    def __init__(self) -> None:
-        self.protective = threading.Event()
-
-    def __call__(self) -> ArmState:
-        stopped = self.protective.is_set()
-        return ArmState(
-            host_t_ns=0,
-            controller_t_s=time.monotonic(),
-            tcp_pose=POSE,
-            tcp_force=np.array([0.0, 9.5, 0.0, 0.0, 0.0, 0.0]),
-            robot_mode=7,
-            safety_mode=3 if stopped else 1,
-            protective_stop=stopped,
-        )
+@pytest.fixture(scope="module")
+def twin() -> Iterator[ControllerTwin]:
+    """A controller twin, still arm at ``POSE`` and no object: the real receive client reads it."""
+    with start_twin_on_free_loopback(40, 59, start_pose=POSE, params=ControllerParams(unlock_delay_s=0.0)) as server:
+        yield server
 
 
-@pytest.fixture
-def controller() -> Iterator[tuple[SimURController, SwitchableState]]:
-    state = SwitchableState()
-    with start_on_free_loopback(state, first=40) as server:
-        yield server, state
-
-
-def test_real_receive_and_a_protective_stop_during_move_l(controller: tuple[SimURController, SwitchableState]) -> None:
-    server, state = controller
-
+def test_real_receive_and_a_protective_stop_during_move_l(twin: ControllerTwin) -> None:
     class StoppingControl(FakeControl):
         """moveL refused because a protective stop came in (ur_rtde returns False when it sees the safety bit)."""
 
         def moveL(self, pose: list[float], speed: float, acceleration: float, asynchronous: bool) -> object:
             self._record("moveL", pose, speed, acceleration, asynchronous)
-            state.protective.set()
+            twin.trigger_protective_stop()
             deadline = time.monotonic() + 2.0  # until the real receive client has the new safety bits
             while not arm.read_state().protective_stop and time.monotonic() < deadline:
                 time.sleep(0.002)
             return False
 
     control = StoppingControl()
-    with UR5eArm(server.host, control=control) as arm:
-        assert isinstance(arm, Arm)
-        first = arm.read_state()
-        assert np.array_equal(first.tcp_pose, POSE)
-        assert first.tcp_force[1] == 9.5 and first.robot_mode == 7 and not first.protective_stop
-        target = POSE + np.array([0, 0.01, 0, 0, 0, 0])
-        with pytest.raises(ProtectiveStop) as excinfo:
-            arm.start_move_linear(target, 0.05, 0.5)
-        assert "teach pendant" in (excinfo.value.hint or "") and "same command" in (excinfo.value.hint or "")
-        assert arm.read_state().protective_stop
-        assert ("moveL", (list(target), 0.05, 0.5, True)) in control.calls  # asynchronous: stoppable
-        with pytest.raises(ProtectiveStop):  # refused up front while stopped: nothing reaches the controller
-            arm.speed_linear(np.zeros(6), 0.5)
-        assert "speedL" not in control.names()
-    assert control.names()[-3:] == ["speedStop", "stopScript", "disconnect"]
+    try:
+        with UR5eArm(twin.host, control=control) as arm:
+            assert isinstance(arm, Arm)
+            first = arm.read_state()
+            assert np.array_equal(first.tcp_pose, POSE)
+            assert first.robot_mode == 7 and not first.protective_stop
+            target = POSE + np.array([0, 0.01, 0, 0, 0, 0])
+            with pytest.raises(ProtectiveStop) as excinfo:
+                arm.start_move_linear(target, 0.05, 0.5)
+            assert "teach pendant" in (excinfo.value.hint or "") and "same command" in (excinfo.value.hint or "")
+            assert arm.read_state().protective_stop
+            assert ("moveL", (list(target), 0.05, 0.5, True)) in control.calls  # asynchronous: stoppable
+            with pytest.raises(ProtectiveStop):  # refused up front while stopped: nothing reaches the controller
+                arm.speed_linear(np.zeros(6), 0.5)
+            assert "speedL" not in control.names()
+        assert control.names()[-3:] == ["speedStop", "stopScript", "disconnect"]
+    finally:
+        twin.unlock_protective_stop()
 
 
 def test_a_controller_without_the_tcp_speed_output_is_read_without_it() -> None:
     """A controller (or a fake written from the RTDE facts) that answers NOT_FOUND for actual_TCP_speed makes ur_rtde
     refuse the whole output recipe; the receiver must connect without it rather than report no controller."""
-    state = SwitchableState()
+    params = ControllerParams(rtde_outputs_not_found=("actual_TCP_speed",))
     with (
-        start_on_free_loopback(state, first=40, outputs_not_found=frozenset({"actual_TCP_speed"})) as server,
+        start_twin_on_free_loopback(40, 59, start_pose=POSE, params=params) as server,
         UR5eReceiver(server.host) as receiver,
     ):
         read = receiver.wait_for_new_state()
-        assert np.array_equal(read.tcp_pose, POSE) and read.tcp_force[1] == 9.5
+        assert np.array_equal(read.tcp_pose, POSE) and read.robot_mode == 7
         assert read.tcp_speed is None
         assert receiver.payload_kg() is None
 
 
-def test_probe_receiver_reads_new_states_without_a_control_object(
-    controller: tuple[SimURController, SwitchableState],
-) -> None:
-    server, _ = controller
-    with UR5eReceiver(server.host) as receiver:
+def test_probe_receiver_reads_new_states_without_a_control_object(twin: ControllerTwin) -> None:
+    with UR5eReceiver(twin.host) as receiver:
         first = receiver.wait_for_new_state()
         second = receiver.wait_for_new_state()
         assert second.controller_t_s > first.controller_t_s
@@ -500,12 +482,18 @@ def test_the_watchdog_is_armed_again_as_each_motion_starts_but_not_every_period(
     names = [n for n in control.commands() if n in ("setWatchdog", "speedL", "forceMode", "moveL")]
     assert names == [
         "setWatchdog",
-        "setWatchdog", "speedL", "speedL", "speedL",
-        "setWatchdog",  # stop: the rest window
-        "setWatchdog", "forceMode", "forceMode",
         "setWatchdog",
-        "setWatchdog", "moveL",
-    ]  # fmt: skip
+        "speedL",
+        "speedL",
+        "speedL",
+        "setWatchdog",  # stop: the rest window
+        "setWatchdog",
+        "forceMode",
+        "forceMode",
+        "setWatchdog",
+        "setWatchdog",
+        "moveL",
+    ]
 
 
 def test_the_watchdog_is_tight_exactly_while_a_motion_is_commanded() -> None:

@@ -46,8 +46,10 @@ def twin() -> Iterator[ControllerTwin]:
 
 def connect(twin: ControllerTwin, **kwargs: object) -> UR5eArm:
     options: dict[str, object] = {
-        "watchdog_hz": TOLERANT_WATCHDOG_HZ, "expected_tcp_offset": TOOL, "expected_payload_kg": 0.3,
-    }  # fmt: skip
+        "watchdog_hz": TOLERANT_WATCHDOG_HZ,
+        "expected_tcp_offset": TOOL,
+        "expected_payload_kg": 0.3,
+    }
     options.update(kwargs)
     return UR5eArm(twin.host, **options)  # type: ignore[arg-type]
 
@@ -96,8 +98,9 @@ def test_a_force_mode_press_stops_at_the_threshold_and_a_host_stall_cannot_push_
         home(arm)
         arm.zero_ft()
         twin.reset_peak()
-        result = guarded_move(arm, PRESS_DIR, 0.002, 10.0, max_travel_m=0.02, hard_limit_n=25.0,
-                              force_setpoint_n=10.2, stop_samples=15)  # fmt: skip
+        result = guarded_move(
+            arm, PRESS_DIR, 0.002, 10.0, max_travel_m=0.02, hard_limit_n=25.0, force_setpoint_n=10.2, stop_samples=15
+        )
         assert result.reason == "force"
         assert 9.0 < twin.truth().peak_force_n < 11.5
         home(arm)
@@ -113,8 +116,17 @@ def test_a_force_mode_press_stops_at_the_threshold_and_a_host_stall_cannot_push_
                 time.sleep(1.0)
 
         with pytest.raises(ControlScriptStopped):
-            guarded_move(arm, PRESS_DIR, 0.002, 10.0, max_travel_m=0.02, hard_limit_n=25.0, force_setpoint_n=10.2,
-                         stop_samples=15, on_period=freeze)  # fmt: skip
+            guarded_move(
+                arm,
+                PRESS_DIR,
+                0.002,
+                10.0,
+                max_travel_m=0.02,
+                hard_limit_n=25.0,
+                force_setpoint_n=10.2,
+                stop_samples=15,
+                on_period=freeze,
+            )
         truth = twin.truth()
         assert frozen and truth.watchdog_trips >= 1 and not truth.program_running
         # the set-point (10.2 N) and its regulation noise over the 0.5 s the 2 Hz watchdog allows; a speedL press
@@ -203,8 +215,11 @@ def test_a_protective_stop_refuses_everything_until_unlocked_then_the_same_comma
         home(arm)
         twin.trigger_protective_stop("test")
         assert twin.wait_for(lambda t: t.protective_stops > 0 and not t.program_running, 2.0)
-        for command in (lambda: arm.start_move_linear(START, 0.05, 0.5), arm.zero_ft,
-                        lambda: arm.speed_linear(np.zeros(6), 0.5)):  # fmt: skip
+        for command in (
+            lambda: arm.start_move_linear(START, 0.05, 0.5),
+            arm.zero_ft,
+            lambda: arm.speed_linear(np.zeros(6), 0.5),
+        ):
             with pytest.raises(ProtectiveStop) as excinfo:
                 command()
             assert "unlock the protective stop" in (excinfo.value.hint or "")

@@ -157,7 +157,7 @@ def test_a_refused_checkpoint_never_advises_loading_it_with_the_safety_off(
 
 @pytest.mark.parametrize("frequency", [math.nan, math.inf, -1.0, 0.0, 1e9])
 def test_the_simulated_controller_never_streams_at_a_frequency_it_could_not_run(frequency: float) -> None:
-    from unitac_rig.sim.rtde_server import RtdeSession
+    from unitac_rig.sim.twin.rtde_session import RtdeSession
 
     session = RtdeSession("test", controller_version=ControllerVersion(5, 11, 0, 0), max_frequency_hz=500.0)
     (package,) = rtde.RtdePackageParser().feed(rtde.encode_setup_outputs(frequency, ["timestamp"]))

@@ -27,8 +27,8 @@ from unitac_rig.errors import UsageError
 from unitac_rig.rig.config import ObjectPlacement, load_rig_config, parse_rig_config
 from unitac_rig.rig.hardware import HardwareRig, ask_realtime, restore_scheduling
 from unitac_rig.sim.twin import first_free_loopback
-from unitac_rig.sim.twin.controller import build_scene
 from unitac_rig.sim.twin.rig import DEFAULT_HOST, RigTwin, rig_file_text
+from unitac_rig.sim.twin.world import build_scene
 from unitac_rig.storage.reader import press_summaries
 
 REPO = Path(__file__).resolve().parents[2]

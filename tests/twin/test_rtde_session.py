@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from protocols import rtde
 from protocols.rtde import ControllerVersion, PackageType
-from unitac_rig.sim.rtde_server import RtdeSession
+from unitac_rig.sim.twin.rtde_session import RtdeSession
 
 
 def _reply(session: RtdeSession, request: bytes) -> rtde.RecipeReply:

@@ -33,8 +33,8 @@ from unitac_rig.learning.live import LiveModel, json_numbers
 from unitac_rig.learning.train import TrainConfig, train
 from unitac_rig.learning.translate import Translator
 from unitac_rig.sim.twin import first_free_loopback
-from unitac_rig.sim.twin.controller import build_scene
 from unitac_rig.sim.twin.rig import RigTwin
+from unitac_rig.sim.twin.world import build_scene
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,8 @@
 
 ``probe ur5e --host 192.168.1.10`` prints one line per state (host time, controller time, TCP pose in mm/rad, TCP
 force in N, robot mode, protective stop); ``--json`` prints one JSON object per state instead. ``--simulated``
-starts a simulated controller (a still arm) on a free loopback address and reads it with the real ur_rtde client.
+starts the controller twin (a still arm, no object: the wrist reads its bias and noise) on a free loopback address
+and reads it with the real ur_rtde client.
 An unreachable host ends with one error line and exit status 1.
 
 ``probe ur5e --host ... --sign-check`` is the wrist-force sign check of the first-run checklist: it asks the operator
@@ -147,7 +148,7 @@ def register_ur5e(probe_app: typer.Typer) -> None:
         as_json: bool = typer.Option(False, "--json", help="Print one JSON object per state."),
         timeout: float = typer.Option(5.0, "--timeout", min=0.1, help="Give up when no new state arrives (s)."),
         simulated: bool = typer.Option(
-            False, "--simulated", help="Start a simulated controller (still arm) on a free loopback address."
+            False, "--simulated", help="Start the controller twin (still arm) on a free loopback address."
         ),
         sign_check: bool = typer.Option(
             False, "--sign-check", help="Check the wrist-force sign: push the pad by hand when asked (read-only)."
@@ -161,9 +162,9 @@ def register_ur5e(probe_app: typer.Typer) -> None:
             raise UsageError("probe ur5e needs --host", hint="e.g. --host 192.168.1.10, or --simulated")
         with contextlib.ExitStack() as stack:
             if simulated:
-                from unitac_rig.sim.rtde_server import start_on_free_loopback
+                from unitac_rig.sim.twin import start_twin_on_free_loopback
 
-                host = stack.enter_context(start_on_free_loopback()).host
+                host = stack.enter_context(start_twin_on_free_loopback(2)).host
             assert host is not None
             receiver = stack.enter_context(UR5eReceiver(host))
             if sign_check:

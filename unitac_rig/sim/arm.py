@@ -19,8 +19,9 @@ What is modelled (numbers and sources in :class:`SimArmParams`):
     ``wait_period`` or by anyone else (a stalled host), the arm moves on. ``speed_linear`` keeps going even with a
     time limit, because ur_rtde's speed thread repeats ``speedl(xd, a, t)`` in a loop; force mode keeps
     regulating toward its last set-point;
-  - the RTDE watchdog (``set_watchdog``): if the host writes nothing (a command, ``kick_watchdog`` or
-    ``wait_period``) for longer than 1 / frequency, the program stops and the arm brakes to rest;
+  - the RTDE watchdog (``watchdog_hz``, armed by the first motion command): if the host writes nothing (a command
+    or ``wait_period``; time inside ``keep_alive`` counts as written) for longer than 1 / frequency, the program
+    stops and the arm brakes to rest;
   - a protective stop when the true contact force exceeds ``protective_stop_n`` (or on
     :meth:`SimArm.trigger_protective_stop`): the arm brakes to rest, the program stops, and every command raises
     (:class:`~drivers.errors.ProtectiveStop` while the stop lasts, then
@@ -64,11 +65,10 @@ SAFETY_MODE_PROTECTIVE_STOP = 3
 DEFAULT_START_POSE = np.array([-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214])  # m, rad: pad facing base +y
 
 _UNLOCK_HINT = "unlock the protective stop, then re-upload the control program"
-# rad/s: no rotation. The angular part of a force-mode twist with no compliant torque axis, and the angular velocity
-# of an arm that is not turning (most periods: checking this identity replaces a reduction); read only.
+# rad/s: the angular velocity of an arm that is not turning (most periods: checking this identity replaces a
+# reduction); read only.
 _NO_TURN = np.zeros(3)
 _NO_TURN.flags.writeable = False
-_NO_FT = np.zeros(6)  # placeholder of the measured-F/T cache before its first reading (never returned)
 
 
 @dataclass(frozen=True)
@@ -166,24 +166,14 @@ class SimArm:
         initial.flags.writeable = False
         self._pose_of: tuple[np.ndarray, np.ndarray, np.ndarray] = (self._position, self._rotvec, initial)
         self._velocity = np.zeros(3)  # m/s, base frame
-        self._step_of: tuple[np.ndarray | None, np.ndarray] = (None, _NO_TURN)  # (velocity, its step in a period)
         self._speed_of: tuple[np.ndarray | None, np.ndarray | None, np.ndarray] = (None, None, _NO_TURN)
         self._angular_velocity = _NO_TURN  # rad/s, base frame
         self._mode: _Mode = "idle"
         self._target_twist = np.zeros(6)
         self._accel_m_s2 = 0.0
+        # (task frame rotation, selected axes, target wrench, speed limits) of the force mode in force
         self._force_command: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
-        # the raw bytes of the last force_mode arguments: the host re-sends an unchanged command every period (a
-        # ur_rtde loop does), and re-validating it and rebuilding its frame was a tenth of a simulated session
-        self._force_key: tuple[bytes, bytes, bytes, bytes] | None = None
-        # (gain scaling, the scaled gains, their force rows): rebuilt when the scaling changes
-        self._force_gains: tuple[float, np.ndarray, np.ndarray] | None = None
-        self._force_turns = False  # a torque axis of the force command is compliant
-        self._force_low_limits = np.zeros(6)  # -speed_limits of the force command
-        # its force rows: (rotation transposed, selection, target, -limits, limits, the twist's), each of the three
-        # force axes; the twist's rows are the command's own, written on its selected axes only (the rest stay 0.0)
-        self._force_rows: tuple[np.ndarray, ...] = (np.eye(3), *(np.zeros(3) for _ in range(5)))
-        self._twist_of: tuple[bytes, np.ndarray] = (b"", _NO_TURN)
+        self._force_key: tuple[bytes, ...] = ()  # its arguments' float64 bytes
         self._path: _Path | None = None
         self._protective_stop = False
         self._program_running = True
@@ -199,9 +189,7 @@ class SimArm:
         self._last_write_ns = self._integrated_ns
         self._kept_alive = False
 
-        self._true_wrench = np.asarray(world.wrench_on_tool(self.true_tcp_pose()), dtype=np.float64)
-        self._world_answer: np.ndarray | None = None  # the world's last read-only answer, whose copy _true_wrench is
-        self._over_force_limit = False  # the true force is above the protective-stop limit
+        self._true_wrench = np.array(world.wrench_on_tool(self.true_tcp_pose()), dtype=np.float64)
         delay_periods = max(0, round(self.params.ft_latency_s / self.control_period_s))
         # Holds the last ``delay_periods`` true wrenches: append the new one, pop the one that is now due.
         self._delay_line: deque[np.ndarray] = deque([self._true_wrench.copy()] * delay_periods)
@@ -215,7 +203,9 @@ class SimArm:
         )
         self._filtered = self._true_wrench + self._bias
         self._zero_offset = np.zeros(6)
-        self._measured_of: tuple[np.ndarray | None, np.ndarray | None, float, np.ndarray] = (None, None, 1.0, _NO_FT)
+        self._gains = np.array(
+            [self.params.force_mode_gain_m_s_per_n] * 3 + [self.params.force_mode_gain_rad_s_per_nm] * 3
+        )
         self.force_mode_damping, self.force_mode_gain_scaling = 0.005, 1.0  # the URScript defaults
         self._ft_sign = 1.0
         cutoff = self.params.ft_filter_cutoff_hz
@@ -329,10 +319,6 @@ class SimArm:
         self._note_write()
         self._begin_stop(min(decel_m_s2, self.params.max_tool_accel_m_s2))
 
-    def stop_linear(self, decel_m_s2: float = 10.0) -> None:
-        """``stopL``: end an asynchronous move (same as :meth:`stop` here)."""
-        self.stop(decel_m_s2)
-
     def zero_ft(self) -> None:
         """Take the current (filtered) F/T reading as the new zero, like ``zeroFtSensor``."""
         self._command()
@@ -352,9 +338,11 @@ class SimArm:
         are the speed limits of compliant axes (m/s, rad/s). Non-compliant axes hold still.
         """
         self._command()
-        key = (_raw(task_frame), _raw(selection), _raw(wrench), _raw(limits))
+        # The host re-sends an unchanged command every period (a ur_rtde loop does): validating it and building its
+        # frame again was half the cost of a force-mode period, so the one in force is kept.
+        key = tuple(np.asarray(v, dtype=np.float64).tobytes() for v in (task_frame, selection, wrench, limits))
         if self._mode == "force" and self._force_command is not None and key == self._force_key:
-            return  # the command in force already, validated when it was first sent
+            return
         frame = _as_vector(task_frame, 6, "task_frame")
         chosen = _as_vector(selection, 6, "selection") != 0
         target = _as_vector(wrench, 6, "wrench")
@@ -362,13 +350,6 @@ class SimArm:
         self._mode, self._path = "force", None
         self._force_command = (rotvec_to_matrix(frame[3:]), chosen, target, speed_limits)
         self._force_key = key
-        # the press's force mode is compliant along its axis only: no torque axis, no torque terms to work out
-        self._force_turns = bool(chosen[3:].any())
-        self._force_low_limits = -speed_limits
-        rotation = self._force_command[0]
-        low3, high3 = self._force_low_limits[:3], speed_limits[:3]
-        self._force_rows = (rotation.T, chosen[:3], target[:3], low3, high3, np.zeros(3))
-        self._twist_of = (b"", _NO_TURN)  # (the twist's rows' bytes, the linear twist in base axes) of this command
 
     def set_ft_sign(self, sign: float) -> None:
         """A fault hook: -1 reports the negated F/T (a flipped sensor frame); force mode regulates on the same
@@ -389,18 +370,6 @@ class SimArm:
             self._force_command = None
             if not self._protective_stop:
                 self._begin_stop(10.0)
-
-    def set_watchdog(self, min_frequency_hz: float) -> None:
-        """Arm the RTDE watchdog now: the program stops when the host writes nothing for 1 / ``min_frequency_hz``."""
-        self._command()
-        if not (math.isfinite(min_frequency_hz) and min_frequency_hz > 0):
-            raise ArmError(f"watchdog frequency must be > 0 Hz, got {min_frequency_hz}")
-        self._pending_watchdog_hz = min_frequency_hz
-        self._watchdog_ns = round(1e9 / min_frequency_hz)
-
-    def kick_watchdog(self) -> None:
-        """A host write that does nothing else (``kickWatchdog``)."""
-        self._note_write()
 
     @contextlib.contextmanager
     def keep_alive(self) -> Iterator[None]:
@@ -449,7 +418,7 @@ class SimArm:
         self._latest = self._snapshot()
 
     def reupload_script(self) -> None:
-        """Start the control program again (``reuploadScript()``); the watchdog is off until set again.
+        """Start the control program again (``reuploadScript()``); as in a fresh control script, no watchdog.
 
         Raises ProtectiveStop while a protective stop is not yet unlocked.
         """
@@ -479,10 +448,6 @@ class SimArm:
     def program_stop_reason(self) -> str | None:
         """Why the program last stopped ("watchdog", "protective stop", ...), None while it runs."""
         return self._program_stop_reason
-
-    @property
-    def watchdog_armed(self) -> bool:
-        return self._watchdog_ns is not None
 
     # ---- internals ------------------------------------------------------------------------------------------
 
@@ -565,34 +530,17 @@ class SimArm:
             self._stop_program("watchdog: the host wrote nothing in time")
 
     def _force_twist(self) -> tuple[np.ndarray, np.ndarray]:
-        """Velocity the force-mode admittance law asks for this period (base frame): (linear, angular)."""
+        """Velocity the force-mode admittance law asks for this period (base frame): (linear, angular).
+
+        On each selected task axis: gain x (target - applied), clipped to the axis' speed limit, where the wrench
+        applied to the environment is minus the measured one in task axes; unselected axes hold still."""
         assert self._force_command is not None
         rotation, chosen, target, speed_limits = self._force_command
         measured = self._measured_ft()
-        scaling = self.force_mode_gain_scaling
-        if self._force_gains is None or self._force_gains[0] != scaling:
-            gains = scaling * np.array(
-                [self.params.force_mode_gain_m_s_per_n] * 3 + [self.params.force_mode_gain_rad_s_per_nm] * 3
-            )
-            self._force_gains = (scaling, gains, gains[:3])
-        gains = self._force_gains[1]
-        if not self._force_turns:  # the torque rows would give a zero turn: only the force rows, same operations
-            # (np.dot is the same BLAS product as @ for a matrix and a vector, for a third of the call's cost)
-            rotation_t, chosen3, target3, low3, high3, twist3 = self._force_rows
-            # target - applied with applied = -(R^T m): target + R^T m, the same sum
-            gains3 = self._force_gains[2]
-            limited = np.minimum(np.maximum(gains3 * (target3 + np.dot(rotation_t, measured[:3])), low3), high3)
-            # np.where(chosen3, limited, 0.0) into the command's own zeros (a third of np.where's cost)
-            np.copyto(twist3, limited, where=chosen3)
-            key = twist3.tobytes()
-            if key != self._twist_of[0]:  # at the speed limit the same twist comes back period after period
-                self._twist_of = (key, np.dot(rotation, twist3))
-            return self._twist_of[1], _NO_TURN
-        applied_task = -np.concatenate([rotation.T @ measured[:3], rotation.T @ measured[3:]])
-        # np.minimum(np.maximum(...)) is what np.clip computes, without its wrapper's cost
-        limited = np.minimum(np.maximum(gains * (target - applied_task), self._force_low_limits), speed_limits)
-        twist_task = np.where(chosen, limited, 0.0)
-        return rotation @ twist_task[:3], rotation @ twist_task[3:]
+        applied = -np.concatenate([np.dot(rotation.T, measured[:3]), np.dot(rotation.T, measured[3:])])
+        gains = self.force_mode_gain_scaling * self._gains
+        twist = np.where(chosen, np.minimum(np.maximum(gains * (target - applied), -speed_limits), speed_limits), 0.0)
+        return np.dot(rotation, twist[:3]), np.dot(rotation, twist[3:])
 
     def _integrate_motion(self) -> None:
         self._check_watchdog()
@@ -611,7 +559,7 @@ class SimArm:
                 (linear, angular), accel = self._force_twist(), self.params.force_mode_accel_m_s2
             else:
                 linear, angular, accel = self._target_twist[:3], self._target_twist[3:], self._accel_m_s2
-            self._velocity, step = self._ramp_linear(linear, accel, dt)
+            self._velocity, step = _ramp(self._velocity, linear, accel, dt)
             turning = self._angular_velocity is not _NO_TURN and _moving(self._angular_velocity)
             if turning or (angular is not _NO_TURN and _moving(angular)):
                 self._angular_velocity, turn = _ramp(self._angular_velocity, angular, accel, dt)
@@ -622,19 +570,6 @@ class SimArm:
         self._position = self._position + step
         if turn is not _NO_TURN and _moving(turn):
             self._set_rotation(rotvec_to_matrix(turn) @ self._rotation)
-
-    def _ramp_linear(self, target: np.ndarray, accel: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`_ramp` of the linear velocity. At the target already, bit for bit (most force-mode periods, at the
-        speed limit), the same velocity array and its kept step: what _ramp answers there, without forming it again
-        (and a velocity that keeps its identity keeps the state's speed array too)."""
-        velocity = self._velocity
-        if target.tobytes() != velocity.tobytes():
-            return _ramp(velocity, target, accel, dt)
-        kept, step = self._step_of
-        if kept is not velocity:
-            step = velocity * dt  # _ramp's target x dt
-            self._step_of = (velocity, step)
-        return velocity, step
 
     def _step_path(self, path: _Path, dt: float) -> None:
         path.elapsed_s = min(path.elapsed_s + dt, path.profile.duration_s)
@@ -660,37 +595,23 @@ class SimArm:
         self._latest = self._snapshot()
 
     def _update_sensor(self) -> None:
-        """One F/T sample: true wrench -> latency -> + bias + noise -> low-pass; and the protective-stop check."""
-        answer = self.world.wrench_on_tool(self._pose())
-        if answer is not self._world_answer:  # a new wrench
-            self._world_answer = None if answer.flags.writeable else answer  # only a read-only answer is kept
-            # replaced, never changed in place: the delay line may hold the same array
-            self._true_wrench = np.array(answer, dtype=np.float64)
-            force = self._true_wrench[:3]
-            # np.linalg.norm's own sum, without its checks
-            self._over_force_limit = math.sqrt(float(force.dot(force))) > self.params.protective_stop_n
+        """One F/T sample: true wrench -> latency -> + bias (drifting) + noise -> low-pass; and the protective-stop
+        check on the true force."""
+        # a new array every period, never changed in place: the delay line holds the earlier ones
+        self._true_wrench = np.array(self.world.wrench_on_tool(self._pose()), dtype=np.float64)
         self._delay_line.append(self._true_wrench)
-        delayed = self._delay_line.popleft()
         self._bias, noise = self._ft_noise.next(self._bias)
-        raw = delayed + self._bias
+        raw = self._delay_line.popleft() + self._bias
         if noise is not None:
             raw = raw + noise
         self._filtered = self._filtered + self._filter_alpha * (raw - self._filtered)
-        if self._over_force_limit:
+        if float(np.linalg.norm(self._true_wrench[:3])) > self.params.protective_stop_n:
             self._enter_protective_stop()
 
     def _measured_ft(self) -> np.ndarray:
-        """The F/T reading the controller reports and regulates on: sign x (filtered - zero offset); read only.
-
-        Formed once for each (filtered, zero offset, sign): force mode reads in a period the reading the state
-        reported after the last one."""
-        filtered, zero_offset, sign, reading = self._measured_of
-        if filtered is not self._filtered or zero_offset is not self._zero_offset or sign != self._ft_sign:
-            reading = self._filtered - self._zero_offset
-            if self._ft_sign != 1.0:  # 1.0 x: the same numbers
-                reading = self._ft_sign * reading
-            reading.flags.writeable = False
-            self._measured_of = (self._filtered, self._zero_offset, self._ft_sign, reading)
+        """The F/T reading the controller reports and regulates on: sign x (filtered - zero offset); read only."""
+        reading = self._ft_sign * (self._filtered - self._zero_offset)
+        reading.flags.writeable = False
         return reading
 
     def _snapshot(self) -> ArmState:
@@ -723,17 +644,6 @@ def _moving(values: np.ndarray) -> bool:
     return any(values.tolist())
 
 
-_FLOAT64 = np.dtype(np.float64)
-
-
-def _raw(values: np.ndarray) -> bytes:
-    """The float64 bytes of a command argument: equal bytes, equal command. (A float64 array's own bytes without
-    ``np.asarray``'s dtype handling: the host re-sends force mode every control period.)"""
-    if type(values) is np.ndarray and values.dtype is _FLOAT64:
-        return values.tobytes()
-    return np.asarray(values, dtype=np.float64).tobytes()
-
-
 def _as_vector(values: np.ndarray, size: int, what: str) -> np.ndarray:
     vector = np.asarray(values, dtype=np.float64).reshape(-1)
     if vector.shape != (size,) or not np.all(np.isfinite(vector)):
@@ -744,9 +654,9 @@ def _as_vector(values: np.ndarray, size: int, what: str) -> np.ndarray:
 def _ramp(current: np.ndarray, target: np.ndarray, accel: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Move a velocity toward ``target`` at ``accel`` for ``dt``: -> (new velocity, exact distance covered)."""
     delta = target - current
-    change = math.sqrt(float(delta.dot(delta)))  # what np.linalg.norm computes for a vector, without its checks
-    if change == 0.0:  # already there (most force-mode periods, at the speed limit): the branch below, exactly
-        return target.copy(), target * dt  # (0.5 (current + target) x 0 s adds a zero to target x dt)
+    change = math.sqrt(float(delta.dot(delta)))
+    if change == 0.0:  # already there (most force-mode periods, at the speed limit)
+        return target.copy(), target * dt
     if change <= accel * dt:
         reach_s = change / accel if accel > 0 else 0.0
         distance = 0.5 * (current + target) * reach_s + target * (dt - reach_s)

@@ -47,11 +47,11 @@ import numpy as np
 
 from protocols import rtde
 from protocols.rtde import ControllerVersion, PackageType
-from unitac_rig.sim.arm import SimArmParams
-from unitac_rig.sim.rtde_server import RtdeSession
+from unitac_rig.sim.arm import ROBOT_MODE_RUNNING, SAFETY_MODE_NORMAL, SAFETY_MODE_PROTECTIVE_STOP, SimArm, SimArmParams
 from unitac_rig.sim.twin import dashboard
 from unitac_rig.sim.twin.motion import TwinArm, pose_matrix
 from unitac_rig.sim.twin.params import DASHBOARD_PORT, RTDE_PORT, SCRIPT_PORT, TwinSettings
+from unitac_rig.sim.twin.rtde_session import RtdeSession
 from unitac_rig.sim.twin.script import (
     ControlScript,
     OutputRegisters,
@@ -62,25 +62,19 @@ from unitac_rig.sim.twin.script import (
 )
 from unitac_rig.sim.twin.truth import TruthBlock, TwinTruth
 from unitac_rig.sim.twin.world import SceneWorld
-from unitac_rig.sim.twin.world import build_scene as build_scene  # where the twin's users import it from
 
 logger = logging.getLogger(__name__)
 
-PERIOD_S = 0.002  # UR e-Series controller cycle, 500 Hz [S: hardware-facts 3.8]
+PERIOD_S = SimArm.control_period_s  # UR e-Series controller cycle, 500 Hz [S: hardware-facts 3.8]
 
-# robot_mode values
+# robot_mode values (RUNNING and the safety modes NORMAL and PROTECTIVE_STOP are the arm model's, sim/arm.py; the
+# safety bits a client tests are protocols.rtde's)
 ROBOT_MODE_POWER_OFF = 3
 ROBOT_MODE_IDLE = 5
-ROBOT_MODE_RUNNING = 7
 # safety_mode values
-SAFETY_NORMAL = 1
-SAFETY_PROTECTIVE_STOP = 3
 SAFETY_ROBOT_EMERGENCY_STOP = 7
 # safety_status_bits
-BIT_NORMAL = 1 << 0
-BIT_PROTECTIVE = 1 << 2
 BIT_ROBOT_EMERGENCY = 1 << 6
-BIT_EMERGENCY = 1 << 7
 BIT_STOPPED_BY_SAFETY = 1 << 10
 # robot_status_bits
 STATUS_POWER_ON = 1 << 0
@@ -199,7 +193,13 @@ class Controller:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         connection = _Connection(sock, kind, f"{peer[0]}:{peer[1]}")
         if kind == "rtde":
-            connection.session = RtdeSession(connection.peer, controller_version=self.version, max_frequency_hz=500.0)
+            connection.session = RtdeSession(
+                connection.peer,
+                controller_version=self.version,
+                max_frequency_hz=500.0,
+                registers_in_use=frozenset(self.params.rtde_registers_in_use),
+                outputs_not_found=frozenset(self.params.rtde_outputs_not_found),
+            )
             connection.parser = rtde.RtdePackageParser()
         self.connections.append(connection)
         self.selector.register(sock, selectors.EVENT_READ, connection)
@@ -265,24 +265,12 @@ class Controller:
                 self._drop(connection, "quit")
                 return
 
-    def polyscope_line(self) -> str:
-        return f"URSoftware {self.params.polyscope_version} (Mar 03 2021)"
-
-    def serial_number(self) -> str:
-        return self.params.serial_number
-
-    def robot_model(self) -> str:
-        return self.params.robot_model
-
-    def in_remote_control(self) -> bool:
-        return self.remote_control
-
     def safety_mode(self) -> int:
         if self.emergency:
             return SAFETY_ROBOT_EMERGENCY_STOP
         if self.protective:
-            return SAFETY_PROTECTIVE_STOP
-        return SAFETY_NORMAL
+            return SAFETY_MODE_PROTECTIVE_STOP
+        return SAFETY_MODE_NORMAL
 
     def program_state(self) -> str:
         name = "rtde_control" if self.program is not None else "<unnamed>"
@@ -508,10 +496,10 @@ class Controller:
 
     def safety_bits(self) -> int:
         if self.emergency:
-            return BIT_ROBOT_EMERGENCY | BIT_EMERGENCY | BIT_STOPPED_BY_SAFETY
+            return BIT_ROBOT_EMERGENCY | rtde.SAFETY_BIT_EMERGENCY_STOP | BIT_STOPPED_BY_SAFETY
         if self.protective:
-            return BIT_PROTECTIVE | BIT_STOPPED_BY_SAFETY
-        return BIT_NORMAL
+            return rtde.SAFETY_BIT_PROTECTIVE_STOP | BIT_STOPPED_BY_SAFETY
+        return rtde.SAFETY_BIT_NORMAL_MODE
 
     def robot_status_bits(self) -> int:
         bits = STATUS_POWER_ON if self.robot_mode != ROBOT_MODE_POWER_OFF else 0
@@ -665,8 +653,6 @@ class Controller:
             self.remote_control = bool(request["on"])
         elif op == "pendant_tcp":
             self.arm.active_tcp = np.asarray(request["pose"], dtype=np.float64)
-        elif op == "pendant_payload":
-            self.set_payload(float(request["mass_kg"]), np.asarray(request["cog_m"], dtype=np.float64))
         elif op == "status":
             return {
                 "ok": True,

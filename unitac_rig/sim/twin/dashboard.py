@@ -10,6 +10,8 @@ from __future__ import annotations
 import logging
 from typing import Protocol
 
+from unitac_rig.sim.twin.params import ControllerParams
+
 logger = logging.getLogger(__name__)
 
 WELCOME = "Connected: Universal Robots Dashboard Server"
@@ -17,24 +19,37 @@ UNLOCK_TOO_EARLY = (
     "Cannot unlock protective stop until 5s after occurrence. Always inspect cause of protective stop before unlocking"
 )
 
+# RTDE robot_mode and safety_mode numbers as the dashboard names them
 ROBOT_MODE_NAMES = {
-    -1: "NO_CONTROLLER", 0: "DISCONNECTED", 1: "CONFIRM_SAFETY", 2: "BOOTING", 3: "POWER_OFF", 4: "POWER_ON",
-    5: "IDLE", 6: "BACKDRIVE", 7: "RUNNING", 8: "UPDATING_FIRMWARE",
-}  # fmt: skip
+    -1: "NO_CONTROLLER",
+    0: "DISCONNECTED",
+    1: "CONFIRM_SAFETY",
+    2: "BOOTING",
+    3: "POWER_OFF",
+    4: "POWER_ON",
+    5: "IDLE",
+    6: "BACKDRIVE",
+    7: "RUNNING",
+    8: "UPDATING_FIRMWARE",
+}
 SAFETY_MODE_NAMES = {
-    1: "NORMAL", 2: "REDUCED", 3: "PROTECTIVE_STOP", 4: "RECOVERY", 5: "SAFEGUARD_STOP", 6: "SYSTEM_EMERGENCY_STOP",
-    7: "ROBOT_EMERGENCY_STOP", 8: "VIOLATION", 9: "FAULT",
-}  # fmt: skip
+    1: "NORMAL",
+    2: "REDUCED",
+    3: "PROTECTIVE_STOP",
+    4: "RECOVERY",
+    5: "SAFEGUARD_STOP",
+    6: "SYSTEM_EMERGENCY_STOP",
+    7: "ROBOT_EMERGENCY_STOP",
+    8: "VIOLATION",
+    9: "FAULT",
+}
 
 
 class DashboardHost(Protocol):
     """The controller as the dashboard sees it."""
 
-    def polyscope_line(self) -> str: ...
-    def serial_number(self) -> str: ...
-    def robot_model(self) -> str: ...
-    def in_remote_control(self) -> bool: ...
-
+    params: ControllerParams
+    remote_control: bool
     robot_mode: int
 
     def safety_mode(self) -> int: ...
@@ -56,16 +71,17 @@ def answer(host: DashboardHost, line: str) -> tuple[str, bool]:
     lower = command.lower()
     if lower == "quit":
         return "Disconnected", True
+    polyscope = f"URSoftware {host.params.polyscope_version} (Mar 03 2021)"
     if lower == "polyscopeversion":
-        return host.polyscope_line(), False
+        return polyscope, False
     if lower == "version":
-        return f"Version information: {host.polyscope_line()}", False
+        return f"Version information: {polyscope}", False
     if lower == "get serial number":
-        return host.serial_number(), False
+        return host.params.serial_number, False
     if lower == "get robot model":
-        return host.robot_model(), False
+        return host.params.robot_model, False
     if lower == "is in remote control":
-        return "true" if host.in_remote_control() else "false", False
+        return "true" if host.remote_control else "false", False
     if lower == "robotmode":
         return f"Robotmode: {ROBOT_MODE_NAMES.get(host.robot_mode, 'UNKNOWN')}", False
     if lower == "safetymode":

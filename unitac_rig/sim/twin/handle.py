@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import logging
@@ -21,7 +22,6 @@ from typing import Any
 import numpy as np
 
 from drivers.errors import DeviceError
-from unitac_rig.sim.child import stop_child
 from unitac_rig.sim.twin.params import CONTROLLER_PORTS, ControllerParams, SceneSpec, TwinSettings
 from unitac_rig.sim.twin.truth import TruthBlock, TwinTruth
 
@@ -29,6 +29,7 @@ logger = logging.getLogger(__name__)
 
 _START_TIMEOUT_S = 20.0  # a fresh interpreter importing numpy and the scene on a loaded 2-core box
 _HOOK_TIMEOUT_S = 10.0
+_STOP_TIMEOUT_S = 5.0
 _PACKAGE_ROOT = str(Path(__file__).resolve().parents[3])  # the directory that holds unitac_rig/
 
 # A still pad in front of where the default object stands (m, rad): used when no start pose is given.
@@ -50,7 +51,7 @@ class ControllerTwin:
     Ground truth: :meth:`truth` (a :class:`TwinTruth` snapshot, read from shared memory without a round trip) and
     :meth:`true_pad_pose`. Test hooks: :meth:`reset_peak`, :meth:`reset_timing`, :meth:`emergency_stop`,
     :meth:`release_emergency_stop`, :meth:`trigger_protective_stop`, :meth:`set_placement_error`,
-    :meth:`set_remote_control`, :meth:`set_pendant_tcp`, :meth:`set_pendant_payload`; :meth:`status` for the program
+    :meth:`set_remote_control`, :meth:`set_pendant_tcp`; :meth:`status` for the program
     state and last error.
 
     Disconnect every ur_rtde client *before* :meth:`close`: a controller that vanishes under a connected control
@@ -227,9 +228,6 @@ class ControllerTwin:
         """Set the active TCP as an operator would on the pendant (m, rad)."""
         self._hook("pendant_tcp", pose=[float(v) for v in pose])
 
-    def set_pendant_payload(self, mass_kg: float, cog_m: tuple[float, float, float]) -> None:
-        self._hook("pendant_payload", mass_kg=mass_kg, cog_m=list(cog_m))
-
     def status(self) -> dict[str, Any]:
         """Program state, last error (a refused upload, a runtime error, why the program stopped), TCP, payload."""
         return self._hook("status")
@@ -247,8 +245,20 @@ class ControllerTwin:
         self._shut_down()
 
     def _shut_down(self) -> None:
+        """Close the process's stdin (EOF is its signal to stop), wait for it, kill it if it does not stop."""
         self._closed = True
-        stop_child(self._process, "controller twin")
+        process = self._process
+        if process.stdin is not None:
+            with contextlib.suppress(OSError):
+                process.stdin.close()
+        try:
+            process.wait(timeout=_STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:  # pragma: no cover - the controller polls stdin at least every 50 ms
+            logger.warning("controller twin process did not stop; killing it")
+            process.kill()
+            process.wait(timeout=_STOP_TIMEOUT_S)
+        if process.stdout is not None:
+            process.stdout.close()
         self._truth.close()
         self._file.close()
 

@@ -58,8 +58,6 @@ class TwinArm:
         self.period_s = self.sim.control_period_s
         self.tool_offset = np.asarray(tool_offset, dtype=np.float64).copy()
         self.active_tcp = self.tool_offset.copy()
-        self._force = False
-        self.time_s = 0.0
 
     # ---- frames ---------------------------------------------------------------------------------------------
 
@@ -88,10 +86,6 @@ class TwinArm:
         return self.sim.protective_stopped
 
     @property
-    def in_force_mode(self) -> bool:
-        return self._force
-
-    @property
     def path_active(self) -> bool:
         """A straight-line move is running."""
         return self.sim.move_running()
@@ -114,42 +108,32 @@ class TwinArm:
 
     def movel(self, tcp_goal: np.ndarray, speed_m_s: float, accel_m_s2: float) -> None:
         """Start a straight line to ``tcp_goal`` (the active TCP's pose); :attr:`path_active` until it arrives."""
-        self._force = False
         self.sim.start_move_linear(self.pad_target(np.asarray(tcp_goal, dtype=np.float64)), speed_m_s, accel_m_s2)
 
     def speedl(self, twist: np.ndarray, accel_m_s2: float) -> None:
         """Velocity command (base frame, m/s, rad/s) reached under ``accel_m_s2``; holds until the next motion."""
-        self._force = False
         self.sim.speed_linear(np.asarray(twist, dtype=np.float64), accel_m_s2)
 
     def stopl(self, decel_m_s2: float) -> None:
         """Decelerate to rest (ends a move, a speed command and force mode)."""
-        self._force = False
         self.sim.stop(decel_m_s2)
 
     def force_mode(self, task_frame: np.ndarray, selection: np.ndarray, wrench: np.ndarray, limits: np.ndarray) -> None:
         """Controller-side admittance toward ``wrench`` on the selected axes of ``task_frame`` (type 2)."""
-        self._force = True
         self.sim.force_mode(task_frame, selection, wrench, limits)
 
     def end_force_mode(self) -> None:
         """``end_force_mode()``: the force thread's velocity is no longer commanded (the arm then holds)."""
-        self._end_force()
+        self.sim.force_mode_stop()
 
     def zero_ft(self) -> None:
         self.sim.zero_ft()
-
-    def _end_force(self) -> None:
-        if self._force:
-            self._force = False
-            self.sim.force_mode_stop()
 
     # ---- safety ---------------------------------------------------------------------------------------------
 
     def protective_stop(self) -> None:
         if not self.sim.protective_stopped:
             self.sim.trigger_protective_stop()
-        self._force = False
 
     def unlock(self) -> None:
         """The controller's protective stop is unlocked: SimArm may move again (its own program restarts)."""
@@ -160,7 +144,4 @@ class TwinArm:
 
     def step(self) -> None:
         """One control period: SimArm integrates the current motion, samples the F/T and trips if it must."""
-        if self.sim.protective_stopped:
-            self._force = False
         self.sim.wait_period()
-        self.time_s += self.period_s

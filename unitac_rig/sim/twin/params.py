@@ -55,6 +55,10 @@ class ControllerParams:
     realtime_priority: bool = True
     # Which servers to start (tests leave one out to see the client's error).
     serve: tuple[str, ...] = ("dashboard", "script", "rtde")
+    # RTDE inputs held by something else (a running fieldbus adapter: ``IN_USE``) and outputs this controller does
+    # not offer (``NOT_FOUND``), to show what the clients do then.
+    rtde_registers_in_use: tuple[str, ...] = ()
+    rtde_outputs_not_found: tuple[str, ...] = ()
 
     @property
     def controller_version(self) -> tuple[int, int, int, int]:
@@ -115,7 +119,7 @@ class TwinSettings:
     def from_json(cls, text: str) -> TwinSettings:
         data: dict[str, Any] = json.loads(text)
         params = data["params"]
-        for key in ("tool_offset", "payload_cog_m", "serve"):
+        for key in ("tool_offset", "payload_cog_m", "serve", "rtde_registers_in_use", "rtde_outputs_not_found"):
             params[key] = tuple(params[key])
         if params.get("pendant_tcp") is not None:
             params["pendant_tcp"] = tuple(params["pendant_tcp"])

@@ -39,9 +39,9 @@ from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation
 from unitac_rig.rig.sensors import sensor_layout, sensor_names
 from unitac_rig.sim.fast_sensors import configured_sensors
 from unitac_rig.sim.sensor_signals import SignalSource
-from unitac_rig.sim.twin.controller import build_scene
 from unitac_rig.sim.twin.handle import ControllerTwin
 from unitac_rig.sim.twin.params import ControllerParams, SceneSpec
+from unitac_rig.sim.twin.world import build_scene
 
 logger = logging.getLogger(__name__)
 

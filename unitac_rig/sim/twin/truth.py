@@ -9,6 +9,7 @@ in the middle of a write (seen on a loaded 2-core box: half a second) leaves the
 
 from __future__ import annotations
 
+import dataclasses
 import mmap
 import struct
 import time
@@ -17,16 +18,6 @@ from dataclasses import dataclass
 import numpy as np
 
 _SEQ = struct.Struct("<Q")
-# controller time, cycles, pad pose, reported TCP pose, true wrench, reported wrench, TCP speed, |F| true, |F| peak,
-# robot mode, safety mode, safety bits, robot status bits, runtime state, program running, watchdog armed,
-# watchdog trips, protective stops, emergency stops, program starts, script uploads, RTDE clients,
-# last input write (controller s), worst lateness (s), late cycles, skipped cycles, achieved rate (Hz),
-# commands completed by the script
-_BODY = struct.Struct("<dQ6d6d6d6d6ddd iiIII BB IIIIII d d QQ d Q")
-_SLOT = _SEQ.size + _BODY.size
-_SIZE = 2 * _SLOT
-_POSE = struct.Struct("<6d")
-_POSE_AT = _SEQ.size + 16  # the pad pose within a slot: after controller time (d) and cycles (Q)
 
 
 @dataclass(frozen=True)
@@ -71,25 +62,38 @@ class TwinTruth:
         return float(np.linalg.norm(self.tcp_speed[:3]))
 
 
-def _pack(truth: TwinTruth) -> tuple[float | int | bool, ...]:
-    return (
-        truth.controller_t_s, truth.cycles, *truth.pad_pose, *truth.tcp_pose, *truth.true_wrench,
-        *truth.reported_wrench, *truth.tcp_speed, truth.force_n, truth.peak_force_n, truth.robot_mode,
-        truth.safety_mode, truth.safety_status_bits, truth.robot_status_bits, truth.runtime_state,
-        truth.program_running, truth.watchdog_armed, truth.watchdog_trips, truth.protective_stops,
-        truth.emergency_stops, truth.program_starts, truth.script_uploads, truth.rtde_clients, truth.last_input_t_s,
-        truth.worst_lateness_s, truth.late_cycles, truth.skipped_cycles, truth.achieved_rate_hz, truth.commands_done,
-    )  # fmt: skip
+# The body of a slot: the fields of TwinTruth in order, an array as its 6 numbers.
+_FORMATS = {"float": "d", "int": "q", "bool": "?", "np.ndarray": "6d"}
+_FIELDS = tuple((f.name, str(f.type)) for f in dataclasses.fields(TwinTruth))
+_BODY = struct.Struct("<" + "".join(_FORMATS[kind] for _, kind in _FIELDS))
+_SLOT = _SEQ.size + _BODY.size
+_SIZE = 2 * _SLOT
+_POSE = struct.Struct("<6d")
+_POSE_AT = _SEQ.size + struct.calcsize("<dq")  # the pad pose within a slot: after controller time and cycles
+assert _FIELDS[:3] == (("controller_t_s", "float"), ("cycles", "int"), ("pad_pose", "np.ndarray"))
 
 
-def _unpack(fields: tuple[float | int, ...]) -> TwinTruth:
-    f = fields
-    return TwinTruth(
-        float(f[0]), int(f[1]), np.array(f[2:8]), np.array(f[8:14]), np.array(f[14:20]), np.array(f[20:26]),
-        np.array(f[26:32]), float(f[32]), float(f[33]), int(f[34]), int(f[35]), int(f[36]), int(f[37]), int(f[38]),
-        bool(f[39]), bool(f[40]), int(f[41]), int(f[42]), int(f[43]), int(f[44]), int(f[45]), int(f[46]),
-        float(f[47]), float(f[48]), int(f[49]), int(f[50]), float(f[51]), int(f[52]),
-    )  # fmt: skip
+def _pack(truth: TwinTruth) -> list[float | int | bool]:
+    values: list[float | int | bool] = []
+    for name, kind in _FIELDS:
+        value = getattr(truth, name)
+        if kind == "np.ndarray":
+            values.extend(float(v) for v in value)
+        else:
+            values.append(value)
+    return values
+
+
+def _unpack(values: tuple[float | int, ...]) -> TwinTruth:
+    cast = {"float": float, "int": int, "bool": bool}
+    read: dict[str, object] = {}
+    at = 0
+    for name, kind in _FIELDS:
+        if kind == "np.ndarray":
+            read[name], at = np.array(values[at : at + 6]), at + 6
+        else:
+            read[name], at = cast[kind](values[at]), at + 1
+    return TwinTruth(**read)  # type: ignore[arg-type]
 
 
 class TruthBlock:

@@ -135,6 +135,26 @@ def test_after_a_protective_stop_commands_are_refused_until_unlocked_and_the_pro
     arm.close()
 
 
+def test_a_program_started_again_after_a_protective_stop_is_watched_by_the_watchdog_again() -> None:
+    """A resumed session's first motion arms the watchdog as the first session's did (UR5eArm re-arms it at each
+    motion start): a host that then stops writing stops the program, the arm brakes to rest."""
+    clock = VirtualClock()
+    arm = SimArm(
+        FreeSpace(), clock=clock, rng=np.random.default_rng(0), params=EXACT_FT, start_pose=START_POSE, watchdog_hz=10.0
+    )
+    arm.trigger_protective_stop()
+    arm.unlock_protective_stop()
+    arm.reupload_script()
+    arm.speed_linear(np.array([0.0, 0.01, 0.0, 0.0, 0.0, 0.0]), 0.5)
+    for _ in range(100):  # 200 ms without a host write: past the 100 ms window of 10 Hz
+        clock.advance_ns(2_000_000)
+    assert not arm.program_running and "watchdog" in (arm.program_stop_reason or "")
+    at_rest = arm.true_tcp_pose()
+    clock.advance_ns(2_000_000)
+    assert np.array_equal(arm.true_tcp_pose(), at_rest)
+    arm.close()
+
+
 def test_zero_ft_removes_the_bias() -> None:
     params = SimArmParams(**{**EXACT_FT.__dict__, "ft_bias_sigma_n": 2.0, "ft_filter_cutoff_hz": 20.0})
     arm = make_arm(SpringWorld(1e4, 0.05), params, seed=3)

@@ -184,6 +184,7 @@ class SimArm:
         self._integrated_ns = clock.now_ns()
         if watchdog_hz is not None and not watchdog_hz > 0:
             raise ArmError(f"watchdog frequency must be > 0 Hz, got {watchdog_hz}")
+        self._watchdog_hz = watchdog_hz  # what every start of the control program arms at its first motion
         self._pending_watchdog_hz = watchdog_hz
         self._watchdog_ns: int | None = None  # armed: longest allowed gap between host writes
         self._last_write_ns = self._integrated_ns
@@ -418,7 +419,8 @@ class SimArm:
         self._latest = self._snapshot()
 
     def reupload_script(self) -> None:
-        """Start the control program again (``reuploadScript()``); as in a fresh control script, no watchdog.
+        """Start the control program again (``reuploadScript()``). The watchdog is armed again by the next motion
+        command, as :class:`drivers.ur5e.UR5eArm` arms it at each motion start: a resumed session keeps its bound.
 
         Raises ProtectiveStop while a protective stop is not yet unlocked.
         """
@@ -428,7 +430,7 @@ class SimArm:
             raise ProtectiveStop("cannot start the control program during a protective stop", hint=_UNLOCK_HINT)
         self.latest_state()  # the state of the last period keeps the stopped program until the next period
         self._program_running, self._program_stop_reason = True, None
-        self._watchdog_ns, self._pending_watchdog_hz = None, None
+        self._watchdog_ns, self._pending_watchdog_hz = None, self._watchdog_hz
         self._note_write()
 
     def stop_program(self, reason: str = "stopped by the host") -> None:

@@ -42,7 +42,6 @@ from unitac_rig.sim.imperfections import (
     printed_object,
 )
 from unitac_rig.sim.scene import PressScene, SceneParams, TaxelLoads
-from unitac_rig.sim.sensor_models import timed_sampler
 from unitac_rig.sim.sensor_signals import SensorSample, SignalSource
 from unitac_rig.sim.world import NO_WRENCH
 
@@ -57,9 +56,8 @@ class SensorOutputModel(Protocol):
 
     layout: SensorLayout
 
-    def sample(self, loads: TaxelLoads) -> SensorSample:
-        """The reading for ``loads``; a model may also take the device time as ``t_ns`` (ns; the built-in ones do,
-        for the elastomer's creep and the drift: :func:`~unitac_rig.sim.sensor_models.timed_sampler`)."""
+    def sample(self, loads: TaxelLoads, t_ns: int) -> SensorSample:
+        """The reading for ``loads`` at device time ``t_ns`` (ns: the elastomer's creep and the drift need it)."""
         ...
 
 
@@ -165,7 +163,6 @@ class _SensorFeed:
         self.rig = rig
         self.sensor = sensor
         self.model = model
-        self._sample = timed_sampler(model)
 
     def sample(self, t_ns: int) -> SensorSample:
         scene = self.rig.world.scene
@@ -174,7 +171,7 @@ class _SensorFeed:
             loads = TaxelLoads(np.zeros(shape), np.zeros(shape) if self.model.layout.has_displacement else None)
         else:
             loads = scene.taxel_loads(self.rig.sim_arm.true_tcp_pose())
-        return self._sample(loads, t_ns)
+        return self.model.sample(loads, t_ns)
 
 
 class SimRig(Rig):

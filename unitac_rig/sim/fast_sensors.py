@@ -29,6 +29,7 @@ from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
+from drivers import layouts
 from drivers.clock import VirtualClock
 from drivers.sensor import TactileSensor
 from unitac_rig.errors import UsageError
@@ -176,9 +177,9 @@ class SimulatedUskin:
         name its URL, else on CAN (``can_interface`` ``"slcan"``: through a simulated SLCAN adapter)."""
         from drivers.uskin import UskinCanDriver, UskinXelaServerDriver, open_can_bus
         from unitac_rig.sim.devices import SimSlcanAdapter, SimXelaController, SimXelaServer
-        from unitac_rig.sim.synthetic_sources import UskinPressSource
+        from unitac_rig.sim.synthetic_sources import PressSource
 
-        source = UskinPressSource()
+        source = PressSource(layouts.USKIN)
         if "url" in options:
             sensor_number = int(options.get("sensor_number", 1))
             server = stack.enter_context(SimXelaServer(source=source, sensor_number=sensor_number))
@@ -240,10 +241,10 @@ class SimulatedPapillArray:
         """The driver on a simulated hub streaming a synthetic press in ``options``' slot, at its rate."""
         from drivers.papillarray import PapillArrayDriver
         from unitac_rig.sim.devices import SimPapillArrayHub
-        from unitac_rig.sim.synthetic_sources import PapillArrayPressSource
+        from unitac_rig.sim.synthetic_sources import PressSource
 
         slot = int(options.get("slot", 0))
-        hub = stack.enter_context(SimPapillArrayHub(source=PapillArrayPressSource(), slot=slot))
+        hub = stack.enter_context(SimPapillArrayHub(source=PressSource(layouts.PAPILLARRAY), slot=slot))
         return PapillArrayDriver(hub.url, slot=slot, rate_hz=int(options.get("rate_hz", 100)))
 
 

@@ -251,9 +251,6 @@ class SimSerialPort(SerialBase):
     def reset_input_buffer(self) -> None:
         self._require().host_reset_input(self._generation)
 
-    def reset_output_buffer(self) -> None:
-        self._require()
-
     def _reconfigure_port(self, *args: Any, **kwargs: Any) -> None:
         """Baud rate and framing mean nothing to a simulated USB CDC device."""
 
@@ -265,19 +262,3 @@ class SimSerialPort(SerialBase):
 
     def _update_break_state(self) -> None:
         pass
-
-    @property
-    def cts(self) -> bool:
-        return True
-
-    @property
-    def dsr(self) -> bool:
-        return True
-
-    @property
-    def ri(self) -> bool:
-        return False
-
-    @property
-    def cd(self) -> bool:
-        return True

@@ -15,7 +15,7 @@ import itertools
 import logging
 import zlib
 from collections.abc import Mapping
-from dataclasses import fields, is_dataclass, replace
+from dataclasses import replace
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
@@ -207,8 +207,8 @@ class SimRig(Rig):
         self.sim_arm = SimArm(self.world, clock=self.clock, rng=np.random.default_rng([seed, 1]), start_pose=home)
         self.imperfections = as_imperfections(imperfections)
         self._simulated: dict[str, SimulatedSensor] = {
-            name: _simulated_sensor(SENSORS[name], self._with_imperfections(device, (sensor_options or {}).get(name)))
-            for name, device in configured_sensors(sensor_options).items()
+            name: _simulated_sensor(SENSORS[name], device)
+            for name, device in configured_sensors(sensor_options, self.imperfections.text).items()
         }
         self._models = {
             name: device.model(np.random.default_rng([seed, device.rng_stream]))
@@ -218,14 +218,6 @@ class SimRig(Rig):
         self._devices: list[Any] = []
         self._object: ObjectSpec | None = None
         self._rotation = 0.0
-
-    def _with_imperfections(self, device: Any, options: Mapping[str, Any] | None) -> Any:
-        """``device`` with the rig's imperfections, where it has that option and its own options do not set it."""
-        if "imperfections" in (options or {}) or not (is_dataclass(device) and not isinstance(device, type)):
-            return device
-        if "imperfections" not in {f.name for f in fields(device)}:
-            return device
-        return replace(device, imperfections=self.imperfections.text)
 
     def _home_pose(self) -> np.ndarray:
         placement = self.config.object

@@ -10,7 +10,7 @@ Each one serves three places, so none of them names a sensor:
 * ``unitac-rig probe <sensor> --simulated`` calls ``probe`` for a device streaming a synthetic press.
 
 An object's dataclass fields other than ``rng_stream`` are its simulation options (``SimRig(sensor_options=...)``,
-``RigTwin(sensor_options=...)``; :func:`~unitac_rig.sim.fast_rig.with_options`). Both sensors' ``imperfections``
+``RigTwin(sensor_options=...)``; :func:`with_options`). Both sensors' ``imperfections``
 option says which of the real sensor's imperfections its output model has (sim/imperfections.py: ``"all"``, the
 default, ``"none"`` for the clean twin, ``"all,-creep"``, ...; ``SimRig(imperfections=...)`` sets it for every
 sensor at once). A new sensor's simulated side can

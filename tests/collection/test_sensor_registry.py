@@ -104,7 +104,8 @@ class FakeModel:
     def __init__(self, rng: np.random.Generator) -> None:
         self.rng = rng
 
-    def sample(self, loads: TaxelLoads) -> SensorSample:
+    def sample(self, loads: TaxelLoads, t_ns: int) -> SensorSample:
+        """The reading at device time ``t_ns`` (ns; this model has no memory, so it ignores it)."""
         return SensorSample(values=np.asarray(loads.forces_n) + self.rng.normal(0.0, 0.01, FAKE.frame_shape))
 
 

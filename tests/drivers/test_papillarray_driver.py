@@ -14,13 +14,15 @@ from hypothesis import strategies as st
 from drivers.clock import VirtualClock
 from drivers.errors import DeviceError, DeviceNotFound
 from drivers.frames import TactileFrame
+from drivers.layouts import PAPILLARRAY
 from drivers.papillarray import WRONG_SHAPE_LIMIT, PapillArrayDriver, implausible_pillars
 from protocols.papillarray import PapillArrayPacket, PillarSensorData, encode_packet
 from tests.drivers.driver_helpers import PERIOD_NS, run_mode, step
 from unitac_rig.sim.devices import SimPapillArrayHub
 from unitac_rig.sim.faults import FaultPlan
+from unitac_rig.sim.sensor_models import PapillArrayParams
 from unitac_rig.sim.sensor_signals import SensorSample, SignalSource
-from unitac_rig.sim.synthetic_sources import PapillArrayPressSource, RecordingSource
+from unitac_rig.sim.synthetic_sources import PressSource, RecordingSource
 
 
 @contextlib.contextmanager
@@ -56,7 +58,7 @@ def assert_frames_match_source(frames: list[TactileFrame], source: RecordingSour
 @pytest.mark.parametrize("slot", [0, 1])
 def test_frames_carry_the_source_forces_and_displacements_with_hub_counter_and_time(mode: str, slot: int) -> None:
     clock = VirtualClock()
-    source = RecordingSource(PapillArrayPressSource(seed=2))
+    source = RecordingSource(PressSource(PAPILLARRAY, seed=2))
     with hub_rig(clock, source, slot=slot) as (driver, hub):
         assert hub.rate_hz == 100  # the driver set it on connect
         frames = run_mode(mode, clock, driver, 30)
@@ -70,7 +72,7 @@ def test_frames_carry_the_source_forces_and_displacements_with_hub_counter_and_t
 
 def test_corrupted_packets_and_garbage_lose_only_the_damaged_packets() -> None:
     clock = VirtualClock()
-    source = RecordingSource(PapillArrayPressSource())
+    source = RecordingSource(PressSource(PAPILLARRAY))
     plan = FaultPlan(seed=9, corrupt_prob=0.1, garbage_prob=0.1, split_max_bytes=300)
     with hub_rig(clock, source, faults=plan) as (driver, hub):
         frames = step(clock, driver, 100)
@@ -89,7 +91,7 @@ def test_corrupted_packets_and_garbage_lose_only_the_damaged_packets() -> None:
 
 def test_dropped_packets_show_up_as_counter_gaps() -> None:
     clock = VirtualClock()
-    with hub_rig(clock, PapillArrayPressSource(), faults=FaultPlan(seed=1, drop_message_prob=0.1)) as (driver, hub):
+    with hub_rig(clock, PressSource(PAPILLARRAY), faults=FaultPlan(seed=1, drop_message_prob=0.1)) as (driver, hub):
         frames = step(clock, driver, 100)
         dropped = hub.faults.counts.dropped_indices
     assert dropped
@@ -104,7 +106,7 @@ def test_dropped_packets_show_up_as_counter_gaps() -> None:
 def test_any_chunking_of_the_stream_yields_every_packet_in_order(seed: int, split_max_bytes: int) -> None:
     clock = VirtualClock()
     plan = FaultPlan(seed=seed, split_max_bytes=split_max_bytes)
-    with hub_rig(clock, PapillArrayPressSource(seed=seed), faults=plan) as (driver, _):
+    with hub_rig(clock, PressSource(PAPILLARRAY, seed=seed), faults=plan) as (driver, _):
         frames = step(clock, driver, 8)
         for _ in range(200):
             if len(frames) == 8:
@@ -117,7 +119,7 @@ def test_any_chunking_of_the_stream_yields_every_packet_in_order(seed: int, spli
 
 def test_stall_detected_then_cleared() -> None:
     clock = VirtualClock()
-    with hub_rig(clock, PapillArrayPressSource()) as (driver, hub):
+    with hub_rig(clock, PressSource(PAPILLARRAY)) as (driver, hub):
         step(clock, driver, 5)
         hub.faults.force_stall()
         assert step(clock, driver, 60) == []
@@ -132,7 +134,7 @@ def test_stall_detected_then_cleared() -> None:
 @pytest.mark.parametrize("mode", ["poll", "reader"])
 def test_unplugged_hub_raises_and_reconnect_after_replug_restores_rate_and_stream(mode: str) -> None:
     clock = VirtualClock()
-    with hub_rig(clock, PapillArrayPressSource()) as (driver, hub):
+    with hub_rig(clock, PressSource(PAPILLARRAY)) as (driver, hub):
         step(clock, driver, 3)
         if mode == "reader":
             driver.start_reader()
@@ -156,10 +158,12 @@ def test_unplugged_hub_raises_and_reconnect_after_replug_restores_rate_and_strea
 
 def test_tare_biases_the_hub_when_unloaded_and_refuses_under_load_or_motion() -> None:
     clock = VirtualClock()
-    source = PapillArrayPressSource(period_s=8.0, rest_fraction=0.5, offset_n=0.2)  # press from 4 s on
+    source = PressSource(PAPILLARRAY, period_s=8.0, rest_fraction=0.5, params=PapillArrayParams(offset_sd_mm=0.03))
+    offset_n = source.model.offset_n[4, 2]  # the unbiased hub's offset on the centre pillar's z, N
     with hub_rig(clock, source) as (driver, hub):
         idle = step(clock, driver, 50)
-        assert np.mean([f.values[4, 2] for f in idle]) == pytest.approx(0.2, abs=0.02)
+        assert abs(offset_n) > 0.05
+        assert np.mean([f.values[4, 2] for f in idle]) == pytest.approx(offset_n, abs=0.02)
         record = driver.tare(idle)
         assert hub.biased and record.method == "device-bias" and record.spread < 0.1
         np.testing.assert_array_equal(record.baseline, np.zeros((9, 3)))
@@ -169,7 +173,10 @@ def test_tare_biases_the_hub_when_unloaded_and_refuses_under_load_or_motion() ->
         loaded = step(clock, driver, 20)
         with pytest.raises(DeviceError, match="contact"):
             driver.tare(loaded)
-    with hub_rig(VirtualClock(), PapillArrayPressSource(peak_load_n=0.0, noise_n=0.12, offset_n=0.0)) as (
+    with hub_rig(
+        VirtualClock(),
+        PressSource(PAPILLARRAY, peak_load_n=0.0, params=PapillArrayParams(noise_mm=0.02, offset_sd_mm=0.0)),
+    ) as (
         driver,
         hub,
     ):

@@ -14,12 +14,13 @@ import pytest
 from drivers.clock import VirtualClock
 from drivers.errors import DeviceError, DeviceNotFound
 from drivers.frames import TactileFrame
+from drivers.layouts import USKIN
 from drivers.uskin import UskinCanDriver, open_can_bus
 from tests.drivers.driver_helpers import PERIOD_NS, collect, run_mode, step
 from unitac_rig.sim.devices import SimSlcanAdapter, SimXelaController, counts_from_sample
 from unitac_rig.sim.faults import FaultPlan
 from unitac_rig.sim.sensor_signals import SensorSample, SignalSource
-from unitac_rig.sim.synthetic_sources import RecordingSource, UskinPressSource
+from unitac_rig.sim.synthetic_sources import PressSource, RecordingSource
 
 _channels = itertools.count()
 
@@ -78,7 +79,7 @@ def assert_every_row_was_sent(frames: list[TactileFrame], sent: list[np.ndarray]
 @pytest.mark.parametrize("mode", ["poll", "reader"])
 def test_frames_carry_exactly_the_counts_the_controller_sent(transport: str, mode: str) -> None:
     clock = VirtualClock()
-    source = RecordingSource(UskinPressSource(seed=5))
+    source = RecordingSource(PressSource(USKIN, seed=5))
     with can_rig(transport, clock, source) as (driver, _, _):
         frames = run_mode(mode, clock, driver, 40)
         assert len(frames) == 40
@@ -98,7 +99,7 @@ def test_a_board_sending_in_another_order_gives_the_same_frames(order: Literal["
     """No source states the order a board sends a cycle in: XELA's map order (0x135 first) or a new order every
     cycle give every frame whole, each with exactly one sample's counts, and a lost message flags one frame."""
     clock = VirtualClock()
-    source = RecordingSource(UskinPressSource(seed=5))
+    source = RecordingSource(PressSource(USKIN, seed=5))
     plan = FaultPlan(seed=4, drop_message_prob=0.004)
     with can_rig("virtual", clock, source, can_faults=plan, send_order=order) as (driver, controller, _):
         frames = step(clock, driver, 60)
@@ -113,7 +114,7 @@ def test_a_board_sending_in_another_order_gives_the_same_frames(order: Literal["
 
 def test_a_silent_taxel_flags_every_frame_and_names_the_taxel() -> None:
     clock = VirtualClock()
-    with can_rig("virtual", clock, UskinPressSource(), missing_taxels=(7,)) as (driver, _, _):
+    with can_rig("virtual", clock, PressSource(USKIN), missing_taxels=(7,)) as (driver, _, _):
         frames = step(clock, driver, 20)
     # each cycle closes when taxel 0 reports again, so the frame of the last sample is still open
     assert len(frames) == 19
@@ -127,7 +128,7 @@ def test_a_silent_taxel_flags_every_frame_and_names_the_taxel() -> None:
 
 def test_dropped_can_messages_flag_frames_and_never_invent_counts() -> None:
     clock = VirtualClock()
-    source = RecordingSource(UskinPressSource())
+    source = RecordingSource(PressSource(USKIN))
     plan = FaultPlan(seed=11, drop_message_prob=0.005)
     with can_rig("virtual", clock, source, can_faults=plan) as (driver, controller, _):
         frames = step(clock, driver, 100)
@@ -141,7 +142,7 @@ def test_dropped_can_messages_flag_frames_and_never_invent_counts() -> None:
 
 def test_stall_is_detected_by_the_clock_and_clears_when_frames_return() -> None:
     clock = VirtualClock()
-    with can_rig("virtual", clock, UskinPressSource()) as (driver, controller, _):
+    with can_rig("virtual", clock, PressSource(USKIN)) as (driver, controller, _):
         assert len(step(clock, driver, 5)) == 5
         controller.faults.force_stall()
         assert step(clock, driver, 60) == []  # 0.6 s > 0.5 s stall timeout
@@ -153,7 +154,7 @@ def test_stall_is_detected_by_the_clock_and_clears_when_frames_return() -> None:
 
 def test_controller_power_loss_needs_a_reconnect_to_stream_again() -> None:
     clock = VirtualClock()
-    with can_rig("virtual", clock, UskinPressSource()) as (driver, controller, _):
+    with can_rig("virtual", clock, PressSource(USKIN)) as (driver, controller, _):
         step(clock, driver, 3)
         controller.faults.force_disconnect()
         step(clock, driver, 5)
@@ -168,7 +169,7 @@ def test_controller_power_loss_needs_a_reconnect_to_stream_again() -> None:
 @pytest.mark.parametrize("mode", ["poll", "reader"])
 def test_unplugged_slcan_adapter_raises_and_a_new_bus_works_after_replug(mode: str) -> None:
     clock = VirtualClock()
-    with can_rig("slcan", clock, UskinPressSource()) as (driver, _, adapter):
+    with can_rig("slcan", clock, PressSource(USKIN)) as (driver, _, adapter):
         assert adapter is not None
         if mode == "reader":
             driver.start_reader()
@@ -193,7 +194,7 @@ def test_unplugged_slcan_adapter_raises_and_a_new_bus_works_after_replug(mode: s
 
 def test_split_reads_and_lost_slcan_lines_keep_intact_frames_exact() -> None:
     clock = VirtualClock()
-    source = RecordingSource(UskinPressSource())
+    source = RecordingSource(PressSource(USKIN))
     plan = FaultPlan(seed=3, split_max_bytes=7, drop_message_prob=0.003)
     with can_rig("slcan", clock, source, serial_faults=plan) as (driver, _, adapter):
         frames = step(clock, driver, 60)
@@ -211,7 +212,7 @@ def test_split_reads_and_lost_slcan_lines_keep_intact_frames_exact() -> None:
 
 def test_garbage_on_the_slcan_line_is_skipped_and_counted() -> None:
     clock = VirtualClock()
-    source = RecordingSource(UskinPressSource())
+    source = RecordingSource(PressSource(USKIN))
     plan = FaultPlan(seed=4, garbage_prob=0.01)
     with can_rig("slcan", clock, source, serial_faults=plan) as (driver, _, _):
         frames = step(clock, driver, 60)
@@ -247,7 +248,7 @@ def test_health_names_saturated_and_dead_taxels() -> None:
 
 def test_tare_takes_the_unloaded_median_and_refuses_during_a_press() -> None:
     clock = VirtualClock()
-    source = RecordingSource(UskinPressSource(period_s=2.0, rest_fraction=0.5))
+    source = RecordingSource(PressSource(USKIN, period_s=2.0, rest_fraction=0.5))
     with can_rig("virtual", clock, source) as (driver, _, _):
         rest = step(clock, driver, 50)  # 0..0.5 s: unloaded
         record = driver.tare(rest)
@@ -289,7 +290,7 @@ def test_open_can_bus_wraps_python_can_errors_with_a_hint() -> None:
 def test_collect_helper_on_reader_mode_matches_poll_after_stop() -> None:
     """Frames queued by the reader before stop_reader() are still handed out by poll()."""
     clock = VirtualClock()
-    with can_rig("virtual", clock, UskinPressSource()) as (driver, _, _):
+    with can_rig("virtual", clock, PressSource(USKIN)) as (driver, _, _):
         driver.start_reader()
         for _ in range(10):
             clock.advance_ns(PERIOD_NS)
@@ -323,5 +324,5 @@ def test_slcan_serial_side_defaults_to_the_kits_3_mbaud_with_rts_cts_unless_the_
 @pytest.mark.parametrize(("transport", "checksum"), [("virtual", "CAN CRC"), ("slcan", "none (slcan serial lines)")])
 def test_the_driver_says_whether_its_wire_carries_a_checksum(transport: str, checksum: str) -> None:
     """Over slcan the ASCII lines carry no checksum: the session's sensor identity records what `valid` rests on."""
-    with can_rig(transport, VirtualClock(), UskinPressSource()) as (driver, _, _):
+    with can_rig(transport, VirtualClock(), PressSource(USKIN)) as (driver, _, _):
         assert driver.identity()["wire_checksum"] == checksum

@@ -13,6 +13,7 @@ import pytest
 from websockets.sync.server import ServerConnection, serve
 
 from drivers.errors import DeviceError, DeviceNotFound
+from drivers.layouts import USKIN
 from drivers.uskin import WRONG_SHAPE_LIMIT, UskinXelaServerDriver
 from protocols.xela_ws import XelaSensorData, encode_data_message, encode_welcome
 from tests.drivers.driver_helpers import collect
@@ -20,7 +21,7 @@ from unitac_rig.sim.devices import counts_from_sample
 from unitac_rig.sim.devices.xela_server import SimXelaServer
 from unitac_rig.sim.faults import FaultPlan
 from unitac_rig.sim.sensor_signals import SensorSample
-from unitac_rig.sim.synthetic_sources import RecordingSource, UskinPressSource
+from unitac_rig.sim.synthetic_sources import PressSource, RecordingSource
 
 RATE_HZ = 500  # fast, to keep the real-time tests short
 
@@ -43,7 +44,7 @@ def server_rig(
 def test_frames_carry_the_server_counts_and_message_numbers_in_poll_and_reader_mode(batched: bool) -> None:
     """``in-batches``: every read finds several messages waiting, as on a loaded box (the reads are made late on
     purpose; what is asserted holds however the messages are batched)."""
-    source = RecordingSource(UskinPressSource(seed=8))
+    source = RecordingSource(PressSource(USKIN, seed=8))
     with server_rig(source, calibrated_n_per_count=0.001) as (driver, _):
         if batched:
             pump = driver._pump
@@ -76,7 +77,7 @@ def test_frames_carry_the_server_counts_and_message_numbers_in_poll_and_reader_m
 
 
 def test_dropped_messages_are_counted_as_sequence_gaps_and_bad_json_as_errors() -> None:
-    source = RecordingSource(UskinPressSource())
+    source = RecordingSource(PressSource(USKIN))
     plan = FaultPlan(seed=5, drop_message_prob=0.2, corrupt_prob=0.3)
     with server_rig(source, faults=plan) as (driver, _):
         frames = driver.wait_frames(60, timeout_s=10.0)
@@ -90,7 +91,7 @@ def test_dropped_messages_are_counted_as_sequence_gaps_and_bad_json_as_errors() 
 
 
 def test_server_going_away_raises_and_reconnect_works_once_it_is_back() -> None:
-    source = RecordingSource(UskinPressSource())
+    source = RecordingSource(PressSource(USKIN))
     with server_rig(source) as (driver, server):
         driver.wait_frames(5, timeout_s=5.0)
         server.faults.force_disconnect()
@@ -108,7 +109,7 @@ def test_server_going_away_raises_and_reconnect_works_once_it_is_back() -> None:
 
 
 def test_a_silent_server_is_reported_as_a_stall() -> None:
-    with server_rig(RecordingSource(UskinPressSource())) as (driver, server):
+    with server_rig(RecordingSource(PressSource(USKIN))) as (driver, server):
         driver.wait_frames(3, timeout_s=5.0)
         server.faults.force_stall()
         collect(driver, 10_000, timeout_s=0.4)  # 0.4 s > 0.1 s stall timeout
@@ -129,7 +130,7 @@ def test_no_server_is_device_not_found_with_a_hint() -> None:
 
 
 def test_tare_over_the_server_frames() -> None:
-    with server_rig(RecordingSource(UskinPressSource(peak_load_n=0.0))) as (driver, _):
+    with server_rig(RecordingSource(PressSource(USKIN, peak_load_n=0.0))) as (driver, _):
         frames = driver.wait_frames(20, timeout_s=5.0)
         record = driver.tare(frames)
     np.testing.assert_allclose(record.baseline, np.median([f.values for f in frames], axis=0))

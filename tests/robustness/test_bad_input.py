@@ -12,6 +12,7 @@ import h5py
 import numpy as np
 import pytest
 
+from drivers.layouts import PAPILLARRAY
 from tests.helpers import cli
 from tests.robustness.robustness_helpers import few_angles, one_error_line, tree_hashes, write_synthetic_sessions
 from unitac_rig.collection.session import collect_session
@@ -20,7 +21,7 @@ from unitac_rig.rig.hardware import HardwareRig
 from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.devices import SimPapillArrayHub
 from unitac_rig.sim.fast_rig import SimRig
-from unitac_rig.sim.synthetic_sources import PapillArrayPressSource
+from unitac_rig.sim.synthetic_sources import PressSource
 from unitac_rig.storage.reader import read_presses
 from unitac_rig.storage.recorder import session_path
 
@@ -141,7 +142,7 @@ def wrong_sensor_rig(tmp_path: Path) -> Iterator[Path]:
 
     The arm is never contacted: sensor detection and checks happen before the arm moves.
     """
-    hub = SimPapillArrayHub(source=PapillArrayPressSource(seed=0))  # streams on the host clock, like hardware
+    hub = SimPapillArrayHub(source=PressSource(PAPILLARRAY, seed=0))  # streams on the host clock, like hardware
     rig_file = tmp_path / "rig.toml"
     rig_file.write_text(
         "[arm]\nhost = '127.0.0.1'\nunchecked_tool = true\n"

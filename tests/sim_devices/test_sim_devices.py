@@ -17,13 +17,15 @@ from websockets.sync.client import connect as ws_connect
 
 import unitac_rig.sim  # noqa: F401  (registers the simpapill:// and simslcan:// URL handlers)
 from drivers.clock import VirtualClock
+from drivers.layouts import PAPILLARRAY, USKIN
 from protocols.papillarray import PacketParser
 from protocols.xela_can import USPA46_ID_MAP, decode_taxel_message
 from unitac_rig.sim.devices import SimPapillArrayHub, SimSlcanAdapter, SimXelaController
 from unitac_rig.sim.devices.xela_server import SimXelaServer
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
+from unitac_rig.sim.sensor_models import PapillArrayParams
 from unitac_rig.sim.sensor_signals import SensorSample
-from unitac_rig.sim.synthetic_sources import PapillArrayPressSource, UskinPressSource
+from unitac_rig.sim.synthetic_sources import PressSource
 
 _channels = itertools.count()
 MS = 1_000_000
@@ -88,7 +90,7 @@ def test_a_plan_that_damages_nothing_counts_every_message_without_mangling_each(
     mangled: list[bytes] = []
     monkeypatch.setattr(FaultInjector, "mangle", lambda self, message: mangled.append(message) or message)
     clock = VirtualClock()
-    with SimXelaController(channel, source=UskinPressSource(), clock=clock, faults=plan) as controller:
+    with SimXelaController(channel, source=PressSource(USKIN), clock=clock, faults=plan) as controller:
         host_bus.send(can.Message(arbitration_id=0x201, data=b"\x07\x00", is_extended_id=False))
         clock.advance_ns(50 * MS)
         host_bus.send(can.Message(arbitration_id=0x201, data=b"\x07\x01", is_extended_id=False))
@@ -101,7 +103,7 @@ def test_a_plan_that_damages_nothing_counts_every_message_without_mangling_each(
 def test_slcan_adapter_speaks_lawicel_and_bridges_to_can(channel: str) -> None:
     clock = VirtualClock()
     with (
-        SimXelaController(channel, source=UskinPressSource(), clock=clock),
+        SimXelaController(channel, source=PressSource(USKIN), clock=clock),
         SimSlcanAdapter(channel, clock=clock) as adapter,
     ):
         port = serial.serial_for_url(adapter.url, timeout=0)
@@ -128,7 +130,7 @@ def test_serial_url_errors_busy_port_and_unplug() -> None:
     with pytest.raises(serial.SerialException, match="no simulated device"):
         serial.serial_for_url("simpapill://nobody-here")
     clock = VirtualClock()
-    with SimPapillArrayHub(source=PapillArrayPressSource(), clock=clock) as hub:
+    with SimPapillArrayHub(source=PressSource(PAPILLARRAY), clock=clock) as hub:
         port = serial.serial_for_url(hub.url, timeout=0)
         try:
             with pytest.raises(serial.SerialException, match="busy"):
@@ -149,7 +151,8 @@ def test_serial_url_errors_busy_port_and_unplug() -> None:
 
 def test_hub_streams_only_to_an_open_port_at_1khz_and_obeys_rate_and_bias() -> None:
     clock = VirtualClock()
-    source = PapillArrayPressSource(peak_load_n=0.0, noise_n=0.0, offset_n=0.2)
+    source = PressSource(PAPILLARRAY, peak_load_n=0.0, params=PapillArrayParams(noise_mm=0.0, offset_sd_mm=0.03))
+    offset_z = source.model.offset_n[:, 2]  # what the unbiased hub reads, N
     with SimPapillArrayHub(source=source, clock=clock, slot=1, bias_delay_s=1.0) as hub:
         clock.advance_ns(50 * MS)
         assert hub.packets_sent == 0  # waiting for a serial connection
@@ -161,14 +164,17 @@ def test_hub_streams_only_to_an_open_port_at_1khz_and_obeys_rate_and_bias() -> N
             assert len(packets) == 10  # 1000 Hz after power-up
             assert [p.counter for p in packets] == list(range(10))
             assert np.diff([p.timestamp_us for p in packets]).tolist() == [1000] * 9
-            assert packets[0].sensors[1].forces_n[:, 2] == pytest.approx(np.full(9, 0.2))
+            assert np.abs(offset_z).max() > 0.05
+            assert packets[0].sensors[1].forces_n[:, 2] == pytest.approx(offset_z, abs=1e-3)
             assert not np.any(packets[0].sensors[0].forces_n)  # the other slot is idle
             port.write(b"f100\n")
             clock.advance_ns(100 * MS)
             assert len(parser.feed(port.read(1_000_000))) == 10
             port.write(b"z\n")
             clock.advance_ns(900 * MS)
-            assert parser.feed(port.read(1_000_000))[-1].sensors[1].forces_n[4, 2] == pytest.approx(0.2)
+            assert parser.feed(port.read(1_000_000))[-1].sensors[1].forces_n[4, 2] == pytest.approx(
+                offset_z[4], abs=1e-3
+            )
             clock.advance_ns(200 * MS)
             after = parser.feed(port.read(1_000_000))[-1].sensors[1]
             assert after.forces_n == pytest.approx(np.zeros((9, 3)))

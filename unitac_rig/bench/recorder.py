@@ -200,11 +200,12 @@ def measure_recorder(plan: RecorderPlan, work_dir: Path) -> dict[str, Any]:
 
 def measure_live_papillarray(seconds: float, poll_period_s: float = 0.002) -> dict[str, Any]:
     """A real-time simulated hub at 1000 Hz read by the driver's reader thread for ``seconds``; sent vs delivered."""
+    from drivers.layouts import PAPILLARRAY
     from drivers.papillarray import PapillArrayDriver
     from unitac_rig.sim.devices.papillarray import SimPapillArrayHub
-    from unitac_rig.sim.synthetic_sources import PapillArrayPressSource
+    from unitac_rig.sim.synthetic_sources import PressSource
 
-    hub = SimPapillArrayHub(source=PapillArrayPressSource(), rate_hz=1000)
+    hub = SimPapillArrayHub(source=PressSource(PAPILLARRAY), rate_hz=1000)
     driver = PapillArrayDriver(hub.url, rate_hz=1000)
     frames = []
     poll_gaps = []

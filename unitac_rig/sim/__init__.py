@@ -6,5 +6,5 @@ Shipped in the package (not in tests) because users run it too: with no rig file
 import serial as _serial
 
 # Make the simulated serial devices reachable through pyserial URLs (simpapill://NAME, simslcan://NAME).
-if "unitac_rig.sim.serial_urls" not in _serial.protocol_handler_packages:
-    _serial.protocol_handler_packages.append("unitac_rig.sim.serial_urls")
+if "unitac_rig.sim.devices" not in _serial.protocol_handler_packages:
+    _serial.protocol_handler_packages.append("unitac_rig.sim.devices")

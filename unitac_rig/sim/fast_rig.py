@@ -15,7 +15,7 @@ import itertools
 import logging
 import zlib
 from collections.abc import Mapping
-from dataclasses import fields, is_dataclass, replace
+from dataclasses import replace
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
@@ -42,7 +42,6 @@ from unitac_rig.sim.imperfections import (
     printed_object,
 )
 from unitac_rig.sim.scene import PressScene, SceneParams, TaxelLoads
-from unitac_rig.sim.sensor_models import timed_sampler
 from unitac_rig.sim.sensor_signals import SensorSample, SignalSource
 from unitac_rig.sim.world import NO_WRENCH
 
@@ -57,9 +56,8 @@ class SensorOutputModel(Protocol):
 
     layout: SensorLayout
 
-    def sample(self, loads: TaxelLoads) -> SensorSample:
-        """The reading for ``loads``; a model may also take the device time as ``t_ns`` (ns; the built-in ones do,
-        for the elastomer's creep and the drift: :func:`~unitac_rig.sim.sensor_models.timed_sampler`)."""
+    def sample(self, loads: TaxelLoads, t_ns: int) -> SensorSample:
+        """The reading for ``loads`` at device time ``t_ns`` (ns: the elastomer's creep and the drift need it)."""
         ...
 
 
@@ -165,7 +163,6 @@ class _SensorFeed:
         self.rig = rig
         self.sensor = sensor
         self.model = model
-        self._sample = timed_sampler(model)
 
     def sample(self, t_ns: int) -> SensorSample:
         scene = self.rig.world.scene
@@ -174,7 +171,7 @@ class _SensorFeed:
             loads = TaxelLoads(np.zeros(shape), np.zeros(shape) if self.model.layout.has_displacement else None)
         else:
             loads = scene.taxel_loads(self.rig.sim_arm.true_tcp_pose())
-        return self._sample(loads, t_ns)
+        return self.model.sample(loads, t_ns)
 
 
 class SimRig(Rig):
@@ -210,8 +207,8 @@ class SimRig(Rig):
         self.sim_arm = SimArm(self.world, clock=self.clock, rng=np.random.default_rng([seed, 1]), start_pose=home)
         self.imperfections = as_imperfections(imperfections)
         self._simulated: dict[str, SimulatedSensor] = {
-            name: _simulated_sensor(SENSORS[name], self._with_imperfections(device, (sensor_options or {}).get(name)))
-            for name, device in configured_sensors(sensor_options).items()
+            name: _simulated_sensor(SENSORS[name], device)
+            for name, device in configured_sensors(sensor_options, self.imperfections.text).items()
         }
         self._models = {
             name: device.model(np.random.default_rng([seed, device.rng_stream]))
@@ -221,14 +218,6 @@ class SimRig(Rig):
         self._devices: list[Any] = []
         self._object: ObjectSpec | None = None
         self._rotation = 0.0
-
-    def _with_imperfections(self, device: Any, options: Mapping[str, Any] | None) -> Any:
-        """``device`` with the rig's imperfections, where it has that option and its own options do not set it."""
-        if "imperfections" in (options or {}) or not (is_dataclass(device) and not isinstance(device, type)):
-            return device
-        if "imperfections" not in {f.name for f in fields(device)}:
-            return device
-        return replace(device, imperfections=self.imperfections.text)
 
     def _home_pose(self) -> np.ndarray:
         placement = self.config.object

@@ -10,7 +10,7 @@ Each one serves three places, so none of them names a sensor:
 * ``unitac-rig probe <sensor> --simulated`` calls ``probe`` for a device streaming a synthetic press.
 
 An object's dataclass fields other than ``rng_stream`` are its simulation options (``SimRig(sensor_options=...)``,
-``RigTwin(sensor_options=...)``; :func:`~unitac_rig.sim.fast_rig.with_options`). Both sensors' ``imperfections``
+``RigTwin(sensor_options=...)``; :func:`with_options`). Both sensors' ``imperfections``
 option says which of the real sensor's imperfections its output model has (sim/imperfections.py: ``"all"``, the
 default, ``"none"`` for the clean twin, ``"all,-creep"``, ...; ``SimRig(imperfections=...)`` sets it for every
 sensor at once). A new sensor's simulated side can
@@ -29,6 +29,7 @@ from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
+from drivers import layouts
 from drivers.clock import VirtualClock
 from drivers.sensor import TactileSensor
 from unitac_rig.errors import UsageError
@@ -54,17 +55,20 @@ class LockstepHost(Protocol):
     def serve(self, device: _Device) -> _Device: ...
 
 
+def _option_names(device: object) -> list[str]:
+    """A simulated side's options: its dataclass fields other than ``rng_stream``."""
+    if not dataclasses.is_dataclass(device) or isinstance(device, type):
+        return []
+    return sorted(f.name for f in dataclasses.fields(device) if f.name != "rng_stream")
+
+
 def with_options(device: _Device, sensor: str, options: Mapping[str, Any] | None) -> _Device:
     """``device`` (a sensor's simulated side) with ``options`` set: its dataclass fields other than ``rng_stream``
     (e.g. ``{"transport": "slcan"}`` for the uSkin, ``{"rate_hz": 1000}`` for the PapillArray). A usage error names
     the options the sensor has when one is not among them."""
     if not options:
         return device
-    names = (
-        sorted(f.name for f in dataclasses.fields(device) if f.name != "rng_stream")
-        if dataclasses.is_dataclass(device) and not isinstance(device, type)
-        else []
-    )
+    names = _option_names(device)
     unknown = sorted(set(options) - set(names))
     if unknown:
         raise UsageError(
@@ -74,17 +78,25 @@ def with_options(device: _Device, sensor: str, options: Mapping[str, Any] | None
     return result
 
 
-def configured_sensors(options: Mapping[str, Mapping[str, Any]] | None) -> dict[str, Any]:
+def configured_sensors(
+    options: Mapping[str, Mapping[str, Any]] | None, imperfections: str | None = None
+) -> dict[str, Any]:
     """Every registered sensor's simulated side (registry order), each with its ``options[name]`` set; options for
-    a sensor the registry does not know, or that cannot be simulated, are a usage error."""
+    a sensor the registry does not know, or that cannot be simulated, are a usage error. ``imperfections``
+    (sim/imperfections.py's text) goes to every sensor that has that option and whose own options do not set it."""
     for name in options or {}:
         if get_sensor(name).simulated is None:
             raise UsageError(f"sensor {name!r} has no simulated device", hint="its options need a simulated sensor")
-    return {
-        name: with_options(spec.simulated_device(), name, (options or {}).get(name))
-        for name, spec in SENSORS.items()
-        if spec.simulated is not None
-    }
+    sensors = {}
+    for name, spec in SENSORS.items():
+        if spec.simulated is None:
+            continue
+        device = spec.simulated_device()
+        own = dict((options or {}).get(name) or {})
+        if imperfections is not None and "imperfections" in _option_names(device):
+            own.setdefault("imperfections", imperfections)
+        sensors[name] = with_options(device, name, own)
+    return sensors
 
 
 _twin_channels = itertools.count(1)
@@ -176,9 +188,9 @@ class SimulatedUskin:
         name its URL, else on CAN (``can_interface`` ``"slcan"``: through a simulated SLCAN adapter)."""
         from drivers.uskin import UskinCanDriver, UskinXelaServerDriver, open_can_bus
         from unitac_rig.sim.devices import SimSlcanAdapter, SimXelaController, SimXelaServer
-        from unitac_rig.sim.synthetic_sources import UskinPressSource
+        from unitac_rig.sim.synthetic_sources import PressSource
 
-        source = UskinPressSource()
+        source = PressSource(layouts.USKIN)
         if "url" in options:
             sensor_number = int(options.get("sensor_number", 1))
             server = stack.enter_context(SimXelaServer(source=source, sensor_number=sensor_number))
@@ -240,10 +252,10 @@ class SimulatedPapillArray:
         """The driver on a simulated hub streaming a synthetic press in ``options``' slot, at its rate."""
         from drivers.papillarray import PapillArrayDriver
         from unitac_rig.sim.devices import SimPapillArrayHub
-        from unitac_rig.sim.synthetic_sources import PapillArrayPressSource
+        from unitac_rig.sim.synthetic_sources import PressSource
 
         slot = int(options.get("slot", 0))
-        hub = stack.enter_context(SimPapillArrayHub(source=PapillArrayPressSource(), slot=slot))
+        hub = stack.enter_context(SimPapillArrayHub(source=PressSource(layouts.PAPILLARRAY), slot=slot))
         return PapillArrayDriver(hub.url, slot=slot, rate_hz=int(options.get("rate_hz", 100)))
 
 

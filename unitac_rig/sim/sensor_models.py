@@ -15,15 +15,12 @@ drawn once from ``rng``; noise is drawn from the same generator per sample, so a
 
 from __future__ import annotations
 
-import inspect
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
-from unitac_rig.sim.ft_noise import NormalBlocks
 from unitac_rig.sim.imperfections import CLEAN, ElastomerMemory, Imperfections, RandomWalk
 from unitac_rig.sim.scene import SceneParams, TaxelLoads
 from unitac_rig.sim.sensor_signals import SensorSample
@@ -155,8 +152,6 @@ class UskinModel:
         self.elastomer = elastomer_for(n, p, imperfections)
         self.drift = RandomWalk((n, 3), p.drift_counts_per_sqrt_s) if imperfections.drift else None
         self._t_ns = 0  # the sample clock when a caller gives none: 100 Hz
-        # every sample's noise from here on: the same normals rng.normal drew one sample at a time, a block at once
-        self._normals = NormalBlocks(self.rng)
 
     def signal_counts(self, forces_n: np.ndarray) -> np.ndarray:
         """Noise-free counts above the baseline for taxel forces (..., n, 3) N: per-taxel gain, then cross-talk
@@ -170,9 +165,13 @@ class UskinModel:
         """Noise-free counts (n, 3) for these loads, before clipping (and before the elastomer's memory)."""
         return self.baseline_counts + self.signal_counts(loads.forces_n)
 
-    def sample(self, loads: TaxelLoads, t_ns: int | None = None) -> SensorSample:
+    def sample(
+        self, loads: TaxelLoads, t_ns: int | None = None, noise_rng: np.random.Generator | None = None
+    ) -> SensorSample:
         """The reading for ``loads`` at device time ``t_ns`` (creep and drift need it; None: 10 ms after the
-        previous sample). Samples must come in time order: the elastomer and the drift carry state."""
+        previous sample). Samples must come in time order: the elastomer and the drift carry state. The noise is
+        drawn from ``noise_rng`` when given (a synthetic source's per-instant generator), else from the model's."""
+        normals = (noise_rng or self.rng).standard_normal
         t_ns = self._clock(t_ns)
         if self.elastomer is not None:
             forces = np.asarray(loads.forces_n)
@@ -180,10 +179,9 @@ class UskinModel:
             loads = TaxelLoads(read, loads.displacement_mm)
         # nothing pressing (the approach, the transits): the signal is zero and the expected counts the baseline
         expected = self.expected_counts(loads) if np.count_nonzero(loads.forces_n) else self.baseline_counts
-        noise = self.params.noise_counts * self._normals.take(3 * self.layout.n_taxels).reshape(self.layout.frame_shape)
-        counts = expected + noise  # rng.normal(0, s, shape) is s x the next standard normals, to the bit
+        counts = expected + self.params.noise_counts * normals(self.layout.frame_shape)
         if self.drift is not None:
-            counts = counts + self.drift.step(t_ns, self._normals.take(3 * self.layout.n_taxels))
+            counts = counts + self.drift.step(t_ns, normals(3 * self.layout.n_taxels))
         return SensorSample(values=np.clip(counts, 0.0, COUNTS_MAX))
 
     def _clock(self, t_ns: int | None) -> int:
@@ -229,12 +227,15 @@ class PapillArrayModel:
         self.elastomer = elastomer_for(n, p, imperfections)
         self.drift = RandomWalk((n, 3), p.drift_mm_per_sqrt_s) if imperfections.drift else None
         self._t_ns = 0
-        self._normals = NormalBlocks(self.rng)  # every sample's noise from here on (see UskinModel)
 
-    def sample(self, loads: TaxelLoads, t_ns: int | None = None) -> SensorSample:
-        """The reading at device time ``t_ns`` (None: 10 ms after the previous sample); in time order."""
+    def sample(
+        self, loads: TaxelLoads, t_ns: int | None = None, noise_rng: np.random.Generator | None = None
+    ) -> SensorSample:
+        """The reading at device time ``t_ns`` (None: 10 ms after the previous sample), in time order; the noise
+        from ``noise_rng`` when given, else from the model's generator (see :meth:`UskinModel.sample`)."""
         p = self.params
         shape = self.layout.frame_shape
+        normals = (noise_rng or self.rng).standard_normal
         self._t_ns = self._t_ns + 10_000_000 if t_ns is None else int(t_ns)
         forces_true = np.asarray(loads.forces_n)
         disp_true = None if loads.displacement_mm is None else np.asarray(loads.displacement_mm)
@@ -243,9 +244,9 @@ class PapillArrayModel:
                 (forces_true,) = self.elastomer.read(self._t_ns, forces_true[:, 2], forces_true)
             else:
                 forces_true, disp_true = self.elastomer.read(self._t_ns, forces_true[:, 2], forces_true, disp_true)
-        error_mm = self.offset_mm + p.noise_mm * self._normals.take(3 * self.layout.n_taxels).reshape(shape)
+        error_mm = self.offset_mm + p.noise_mm * normals(shape)
         if self.drift is not None:
-            error_mm = error_mm + self.drift.step(self._t_ns, self._normals.take(3 * self.layout.n_taxels))
+            error_mm = error_mm + self.drift.step(self._t_ns, normals(3 * self.layout.n_taxels))
         disp = np.zeros(shape) if disp_true is None else disp_true
         disp = disp + error_mm
         if self.force_map is not None:
@@ -254,16 +255,6 @@ class PapillArrayModel:
         return SensorSample(
             values=_quantise(forces, p.force_quantum_n), displacement_mm=_quantise(disp, p.displacement_quantum_mm)
         )
-
-
-def timed_sampler(model: Any) -> Callable[[TaxelLoads, int], SensorSample]:
-    """``model.sample`` as ``f(loads, t_ns)``: the device time goes to a model that takes it (these ones: the
-    elastomer's creep and the drift need it), a model that does not (a sensor's own, registered outside this
-    package) is called with the loads alone."""
-    sample = model.sample
-    if "t_ns" in inspect.signature(sample).parameters:
-        return lambda loads, t_ns: sample(loads, t_ns=t_ns)
-    return lambda loads, t_ns: sample(loads)
 
 
 def _quantise(values: np.ndarray, step: float) -> np.ndarray:

@@ -13,7 +13,7 @@ import numpy as np
 
 from unitac_rig.errors import ConfigError
 from unitac_rig.sim.scene import PressScene
-from unitac_rig.sim.sensor_models import PapillArrayModel, UskinModel, model_for, timed_sampler
+from unitac_rig.sim.sensor_models import PapillArrayModel, UskinModel, model_for
 from unitac_rig.sim.sensor_signals import SensorSample
 
 
@@ -35,10 +35,9 @@ class SceneSensorSource:
             )
         self.pose_provider = pose_provider
         self.samples = 0
-        self._sample = timed_sampler(self.model)
 
     def sample(self, t_ns: int) -> SensorSample:
         """The reading at device time ``t_ns`` (the scene is quasi-static: only the current pose matters)."""
         loads = self.scene.taxel_loads(np.asarray(self.pose_provider(), dtype=np.float64))
         self.samples += 1
-        return self._sample(loads, t_ns)
+        return self.model.sample(loads, t_ns)

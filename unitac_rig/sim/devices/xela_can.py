@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import collections
 import logging
-from types import TracebackType
 from typing import ClassVar, Literal
 
 import can
@@ -27,11 +26,11 @@ from protocols.xela_can import (
     decode_stream_command,
     encode_taxel_message,
 )
-from unitac_rig.sim.devices._timing import SampleTimer
+from unitac_rig.sim.devices.base import SampleTimer, SimDevice
 from unitac_rig.sim.devices.lockstep_can import LockstepCanBus
+from unitac_rig.sim.devices.serial_port import SimSerialEndpoint, unique_name
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
 from unitac_rig.sim.sensor_signals import SignalSource
-from unitac_rig.sim.serial_urls import SimSerialEndpoint, unique_name
 
 logger = logging.getLogger(__name__)
 
@@ -41,21 +40,20 @@ def counts_from_sample(values: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(np.asarray(values, dtype=np.float64)), 0, 0xFFFF).astype(np.int64)
 
 
-def taxel_payloads(counts: np.ndarray, byte0: int = 0) -> list[bytes]:
-    """The 8-byte payload of every taxel of one sample at once: row i is
-    ``encode_taxel_message(id, *counts[i], byte0=byte0)`` (byte0, X, Y, Z big-endian u16, a zero byte).
+def taxel_payloads(counts: np.ndarray) -> list[bytes]:
+    """The 8-byte payload of every taxel of one sample at once: row i is ``encode_taxel_message(id, *counts[i])``
+    (a zero byte, X, Y, Z big-endian u16, a zero byte).
 
     ``counts`` (n, 3) must already be 0..65535 (:func:`counts_from_sample`). One numpy pass instead of a validated
     encode per message: at 24 messages a sample that encoding was the largest part of the simulated uSkin.
     """
     rows = np.zeros((len(counts), 8), dtype=np.uint8)
-    rows[:, 0] = byte0
     rows[:, 1:7] = np.asarray(counts, dtype=">u2").view(np.uint8).reshape(len(counts), 6)
     blob = rows.tobytes()
     return [blob[i : i + 8] for i in range(0, len(blob), 8)]
 
 
-class SimXelaController:
+class SimXelaController(SimDevice):
     """A uSkin controller board on a python-can bus, streaming ``source`` at ``rate_hz`` once started.
 
     The bus is ``can.Bus(interface=interface, channel=bus_channel)`` unless ``bus`` hands an open one (the fast twin
@@ -75,9 +73,7 @@ class SimXelaController:
         id_map: TaxelIdMap = USPA46_ID_MAP,
         faults: FaultPlan | None = None,
         missing_taxels: tuple[int, ...] = (),
-        byte0: int = 0,
         send_order: Literal["id", "map", "shuffled"] = "id",
-        order_seed: int = 0,
     ) -> None:
         self.controller_id = controller_id
         self.source = source
@@ -86,19 +82,18 @@ class SimXelaController:
         # CAN arbitration gives a board that queues a whole cycle at once, "map" the order of XELA's map file (s1 =
         # 0x135 first), "shuffled" a new order every cycle (the host must not depend on one)
         self.send_order = send_order
-        self._order_rng = np.random.default_rng(order_seed)
+        self._order_rng = np.random.default_rng(0)
         by_id = sorted(enumerate(id_map.ids), key=lambda item: item[1])
         self._send_order = list(enumerate(id_map.ids)) if send_order == "map" else by_id
         self.faults = FaultInjector(faults)
         self.missing_taxels = frozenset(missing_taxels)
-        self.byte0 = byte0
         self.streaming = False
         self.samples_sent = 0
         self._powered_off = False
         # (release time ns, arbitration id, payload): a Message is built only when it goes on the bus
         self._delayed: collections.deque[tuple[int, int, bytes]] = collections.deque()
-        for arbitration_id in id_map.ids:  # the codec's checks of the ids and byte0, once instead of per message
-            encode_taxel_message(arbitration_id, 0, 0, 0, byte0=byte0)
+        for arbitration_id in id_map.ids:  # the codec's checks of the ids, once instead of per message
+            encode_taxel_message(arbitration_id, 0, 0, 0)
         # ``bus``: an open bus on ``bus_channel`` to use instead (the fast twin's LockstepCanBus); closed with us
         if bus is None:
             bus = can.Bus(interface=interface, channel=bus_channel, receive_own_messages=False)
@@ -133,11 +128,9 @@ class SimXelaController:
         self._send_due(t_ns)
         if not self.streaming:
             return
-        self.faults.start(t_ns)
-        if self.faults.is_stalled(t_ns):
-            self.faults.note_stalled()
+        if self.stalled(t_ns):
             return
-        payloads = taxel_payloads(counts_from_sample(self.source.sample(t_ns).values), self.byte0)
+        payloads = taxel_payloads(counts_from_sample(self.source.sample(t_ns).values))
         release_ns = self.faults.release_t_ns(t_ns)
         order = self._send_order
         if self.send_order == "shuffled":
@@ -176,14 +169,6 @@ class SimXelaController:
         self._timer.close()
         self._bus.shutdown()
 
-    def __enter__(self) -> SimXelaController:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
-
 
 class SimSlcanAdapter(SimSerialEndpoint):
     """A Lawicel/SLCAN USB-CAN adapter: ``simslcan://NAME`` on the host side, a virtual CAN channel on the other.
@@ -205,9 +190,7 @@ class SimSlcanAdapter(SimSerialEndpoint):
     ) -> None:
         self._bus = can.Bus(interface="virtual", channel=can_channel, receive_own_messages=False)
         self.channel_open = False
-        self.bitrate_command: str | None = None
         self._line = bytearray()
-        self.lines_forwarded = 0
         super().__init__(
             self.SCHEME,
             name or unique_name("slcan"),
@@ -226,7 +209,6 @@ class SimSlcanAdapter(SimSerialEndpoint):
             line = f"t{message.arbitration_id:03X}{message.dlc:d}{bytes(message.data).hex().upper()}\r"
             self.faults.start(self.clock.now_ns())
             self._push(line.encode("ascii"), self.clock.now_ns(), faulted=True)
-            self.lines_forwarded += 1
 
     # ---- host -> adapter ------------------------------------------------------------------------------------------
     def on_attach(self) -> None:
@@ -258,10 +240,7 @@ class SimSlcanAdapter(SimSerialEndpoint):
             self.channel_open = False
             return ok
         if line in self.BITRATE_COMMANDS:
-            if self.channel_open:
-                return error
-            self.bitrate_command = line
-            return ok
+            return error if self.channel_open else ok
         if line == "V":
             return "V1013\r"
         if line == "N":
@@ -285,11 +264,3 @@ class SimSlcanAdapter(SimSerialEndpoint):
         """Unplug the adapter for good and leave the CAN channel."""
         self.close_endpoint()
         self._bus.shutdown()
-
-    def __enter__(self) -> SimSlcanAdapter:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()

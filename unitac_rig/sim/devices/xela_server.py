@@ -12,7 +12,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from types import TracebackType
 
 import numpy as np
 from websockets.datastructures import Headers
@@ -22,7 +21,7 @@ from websockets.sync.server import Server, ServerConnection, serve
 
 from drivers.clock import Clock, MonotonicClock
 from protocols.xela_ws import XelaSensorData, encode_data_message, encode_welcome
-from unitac_rig.sim.devices._timing import SampleTimer
+from unitac_rig.sim.devices.base import SampleTimer, SimDevice
 from unitac_rig.sim.devices.xela_can import counts_from_sample
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
 from unitac_rig.sim.sensor_signals import SignalSource
@@ -30,7 +29,7 @@ from unitac_rig.sim.sensor_signals import SignalSource
 logger = logging.getLogger(__name__)
 
 
-class SimXelaServer:
+class SimXelaServer(SimDevice):
     """xela_server on ``host:port`` (0 picks a free port; see :attr:`url`) streaming ``source`` at ``rate_hz``.
 
     ``calibrated_n_per_count``: when set, messages also carry ``calibrated`` forces in N, (counts - the counts at
@@ -58,7 +57,6 @@ class SimXelaServer:
         self.calibrated_n_per_count = calibrated_n_per_count
         self.faults = FaultInjector(faults)
         self.seq = 0
-        self.messages_sent = 0
         self._zero_counts: np.ndarray | None = None
         self._lock = threading.Lock()
         self._closed = False
@@ -108,9 +106,7 @@ class SimXelaServer:
             for connection in self._server.connections:
                 connection.close(1011, "simulated disconnect")
             return
-        self.faults.start(t_ns)
-        if self.faults.is_stalled(t_ns):
-            self.faults.note_stalled()
+        if self.stalled(t_ns):
             return
         counts = counts_from_sample(self.source.sample(t_ns).values)
         calibrated = None
@@ -131,7 +127,6 @@ class SimXelaServer:
                 connection.send(damaged.decode("utf-8", errors="replace"))
             except ConnectionClosed:
                 continue
-        self.messages_sent += 1
 
     def close(self) -> None:
         """Stop broadcasting, close every connection and the listening socket."""
@@ -142,11 +137,3 @@ class SimXelaServer:
         self._timer.close()
         self._server.shutdown()
         self._serve_thread.join(timeout=5.0)
-
-    def __enter__(self) -> SimXelaServer:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()

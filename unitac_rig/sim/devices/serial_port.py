@@ -1,9 +1,10 @@
-"""pyserial URL handlers for the simulated serial devices, so a simulator is "just another port".
+"""The simulated serial port, so a simulated device is "just another port" behind a pyserial URL.
 
 pyserial's ``serial_for_url("simpapill://hub0")`` imports ``<package>.protocol_simpapill`` from every package in
-``serial.protocol_handler_packages``; importing :mod:`unitac_rig.sim` appends this package there. Each scheme module
-holds a :class:`SimSerialPort` subclass; the far end of the port is a :class:`SimSerialEndpoint` registered under a
-name by the simulated device (the PapillArray hub, the SLCAN adapter).
+``serial.protocol_handler_packages``; importing :mod:`unitac_rig.sim` appends :mod:`unitac_rig.sim.devices` there.
+Each scheme module (``protocol_simpapill``, ``protocol_simslcan``) holds a :class:`SimSerialPort` subclass; the far
+end of the port is a :class:`SimSerialEndpoint` registered under a name by the simulated device (the PapillArray
+hub, the SLCAN adapter).
 
 The endpoint keeps the device-to-host byte stream: messages go through the device's
 :class:`~unitac_rig.sim.faults.FaultInjector` (drop, corrupt, garbage, delay), host reads take random chunks when a
@@ -23,6 +24,7 @@ from serial import SerialBase, SerialException
 from serial.serialutil import PortNotOpenError, to_bytes
 
 from drivers.clock import Clock
+from unitac_rig.sim.devices.base import SimDevice
 from unitac_rig.sim.faults import FaultInjector
 
 _registry_lock = threading.Lock()
@@ -35,30 +37,12 @@ def unique_name(prefix: str) -> str:
     return f"{prefix}-{next(_name_counter)}"
 
 
-def register(scheme: str, name: str, endpoint: SimSerialEndpoint) -> None:
-    with _registry_lock:
-        if (scheme, name) in _registry:
-            raise ValueError(f"a simulated device is already registered as {scheme}://{name}")
-        _registry[(scheme, name)] = endpoint
-
-
-def unregister(scheme: str, name: str) -> None:
-    with _registry_lock:
-        _registry.pop((scheme, name), None)
-
-
 def lookup(scheme: str, name: str) -> SimSerialEndpoint | None:
     with _registry_lock:
         return _registry.get((scheme, name))
 
 
-def name_from_url(url: str) -> tuple[str, str]:
-    """(scheme, name) from ``scheme://name[?options]``."""
-    scheme, _, rest = url.partition("://")
-    return scheme.lower(), rest.split("?", 1)[0].strip("/")
-
-
-class SimSerialEndpoint:
+class SimSerialEndpoint(SimDevice):
     """The device side of one simulated serial port (one host may have it open at a time).
 
     Subclasses override :meth:`on_host_bytes` (commands from the host), and optionally :meth:`on_attach`,
@@ -75,8 +59,10 @@ class SimSerialEndpoint:
         self._ready = bytearray()
         self._generation = 0
         self._attached = False
-        self._refills = type(self).refill is not SimSerialEndpoint.refill  # pulls output made elsewhere
-        register(scheme, name, self)
+        with _registry_lock:
+            if (scheme, name) in _registry:
+                raise ValueError(f"a simulated device is already registered as {scheme}://{name}")
+            _registry[(scheme, name)] = self
 
     @property
     def url(self) -> str:
@@ -88,7 +74,8 @@ class SimSerialEndpoint:
 
     def close_endpoint(self) -> None:
         """Remove the port: open host ports fail from now on, reopening says the port does not exist."""
-        unregister(self.scheme, self.name)
+        with _registry_lock:
+            _registry.pop((self.scheme, self.name), None)
         with self._cond:
             if self._attached:
                 self._drop_host()
@@ -190,20 +177,6 @@ class SimSerialEndpoint:
 
     def host_read(self, generation: int, size: int, timeout_s: float | None) -> bytes:
         """pyserial read semantics: up to ``size`` bytes, waiting at most ``timeout_s`` (None: until ``size``)."""
-        if timeout_s == 0:  # a non-blocking read (a driver's poll, every control period): what is there, at once
-            self.check_disconnect()
-            if not (self._ready or self._pending or self._refills):  # most polls: nothing sent since the last one
-                self._alive(generation)
-                return b""
-            with self._cond:
-                self._alive(generation)
-                self._release_due()
-                take = self.faults.chunk_size(min(len(self._ready), size))
-                if not take:
-                    return b""
-                chunk = bytes(self._ready[:take])
-                del self._ready[:take]
-                return chunk
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         out = bytearray()
         while True:
@@ -215,9 +188,7 @@ class SimSerialEndpoint:
                     take = self.faults.chunk_size(min(len(self._ready), size - len(out)))
                     out += self._ready[:take]
                     del self._ready[:take]
-                    if len(out) >= size or timeout_s == 0:
-                        return bytes(out)
-                elif timeout_s == 0:
+                if len(out) >= size or timeout_s == 0:
                     return bytes(out)
                 remaining = None if deadline is None else deadline - time.monotonic()
                 if remaining is not None and remaining <= 0:
@@ -242,7 +213,8 @@ class SimSerialPort(SerialBase):
             raise SerialException("Port is already open.")
         if self._port is None:
             raise SerialException("Port must be configured before it can be used.")
-        scheme, name = name_from_url(str(self._port))
+        scheme, _, rest = str(self._port).partition("://")  # scheme://name[?options]
+        scheme, name = scheme.lower(), rest.split("?", 1)[0].strip("/")
         if scheme != self.SCHEME:
             raise SerialException(f"expected a {self.SCHEME}:// URL, got {self._port!r}")
         endpoint = lookup(scheme, name)
@@ -279,9 +251,6 @@ class SimSerialPort(SerialBase):
     def reset_input_buffer(self) -> None:
         self._require().host_reset_input(self._generation)
 
-    def reset_output_buffer(self) -> None:
-        self._require()
-
     def _reconfigure_port(self, *args: Any, **kwargs: Any) -> None:
         """Baud rate and framing mean nothing to a simulated USB CDC device."""
 
@@ -293,19 +262,3 @@ class SimSerialPort(SerialBase):
 
     def _update_break_state(self) -> None:
         pass
-
-    @property
-    def cts(self) -> bool:
-        return True
-
-    @property
-    def dsr(self) -> bool:
-        return True
-
-    @property
-    def ri(self) -> bool:
-        return False
-
-    @property
-    def cd(self) -> bool:
-        return True

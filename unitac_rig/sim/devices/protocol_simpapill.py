@@ -1,6 +1,6 @@
 """pyserial URL ``simpapill://NAME``: the port of a simulated PapillArray hub (unitac_rig.sim.devices)."""
 
-from unitac_rig.sim.serial_urls import SimSerialPort
+from unitac_rig.sim.devices.serial_port import SimSerialPort
 
 
 class Serial(SimSerialPort):

@@ -1,4 +1,5 @@
-"""When a simulated device samples: lockstep with a virtual clock, or a real-time thread.
+"""What every simulated device shares: when it samples (:class:`SampleTimer`), how a fault plan gates a sample and
+how it closes (:class:`SimDevice`).
 
 With a clock that has ``on_advance`` (:class:`drivers.clock.VirtualClock`) the device emits, inside the advance call,
 every sample that fell due (deterministic and as fast as the caller advances). With any other clock (or none) a
@@ -10,16 +11,15 @@ from __future__ import annotations
 import logging
 import threading
 from collections.abc import Callable
+from types import TracebackType
+from typing import Self
 
 from drivers.clock import Clock, MonotonicClock
+from unitac_rig.sim.faults import FaultInjector
 
 logger = logging.getLogger(__name__)
 
 MAX_CATCH_UP_PERIODS = 5  # a real-time thread that fell further behind skips ahead instead of bursting
-
-
-def is_virtual(clock: Clock | None) -> bool:
-    return clock is not None and hasattr(clock, "on_advance") and hasattr(clock, "remove_listener")
 
 
 class SampleTimer:
@@ -29,7 +29,7 @@ class SampleTimer:
         if rate_hz <= 0:
             raise ValueError(f"sample rate must be positive, got {rate_hz} Hz")
         self.clock: Clock = clock if clock is not None else MonotonicClock()
-        self._virtual = is_virtual(clock)
+        self._virtual = hasattr(clock, "on_advance") and hasattr(clock, "remove_listener")
         self._tick = tick
         self._period_ns = round(1e9 / rate_hz)
         self._next_ns = self.clock.now_ns() + self._period_ns
@@ -41,14 +41,6 @@ class SampleTimer:
         else:
             self._thread = threading.Thread(target=self._run, name=thread_name, daemon=True)
             self._thread.start()
-
-    @property
-    def virtual(self) -> bool:
-        return self._virtual
-
-    @property
-    def period_ns(self) -> int:
-        return self._period_ns
 
     def set_rate(self, rate_hz: float) -> None:
         """Change the sample rate from the next sample on."""
@@ -97,3 +89,30 @@ class SampleTimer:
         elif self._thread is not None:
             self._thread.join(timeout=5.0)
             self._thread = None
+
+
+class SimDevice:
+    """The base of every simulated device: ``faults`` (its fault injector), :meth:`close`, and a context manager that
+    closes it."""
+
+    faults: FaultInjector
+
+    def stalled(self, t_ns: int) -> bool:
+        """Start the fault plan's clock at the first streamed sample, and say (and count) whether ``t_ns`` falls in
+        a planned or forced stall, when the device sends nothing."""
+        self.faults.start(t_ns)
+        if self.faults.is_stalled(t_ns):
+            self.faults.note_stalled()
+            return True
+        return False
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()

@@ -45,7 +45,7 @@ from torch import nn
 
 from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.data import DEFAULT_GAP_DEG, PairedDataset, hold_out_rays, object_symmetry
-from unitac_rig.learning.engine import UNITAC_GROUP
+from unitac_rig.learning.network import UNITAC_GROUP, StackedLinear, member_mlp, stacked_mlp
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM
 from unitac_rig.learning.run import LoadedRun, computing_on, load_run, load_test_set, safe_torch_load
 
@@ -156,11 +156,9 @@ class GeometryConfig:
 
 
 class StackedProfileMLP(nn.Module):
-    """K independent MLPs (one per training sensor) evaluated together with batched matmuls.
-
-    Member ``k``: latent -> hidden... -> outputs, ReLU and dropout ``dropouts[k]`` after every hidden layer.
-    Initialised like ``nn.Linear`` (uniform +-1/sqrt(fan_in)).
-    """
+    """K independent profile MLPs (one per training sensor), the package's MLP run stacked
+    (:func:`~unitac_rig.learning.network.stacked_mlp`): member ``k`` is latent -> hidden... -> outputs with ReLU and
+    dropout ``dropouts[k]`` after every hidden layer, initialised like ``nn.Linear`` (uniform +-1/sqrt(fan_in))."""
 
     def __init__(
         self,
@@ -173,31 +171,25 @@ class StackedProfileMLP(nn.Module):
     ) -> None:
         super().__init__()
         widths = [latent_dim, *hidden, outputs]
-        self.weights = nn.ParameterList()
-        self.biases = nn.ParameterList()
-        for fan_in, fan_out in itertools.pairwise(widths):
-            bound = 1.0 / fan_in**0.5
-            self.weights.append(
-                nn.Parameter(torch.empty(members, fan_in, fan_out).uniform_(-bound, bound, generator=generator))
-            )
-            self.biases.append(
-                nn.Parameter(torch.empty(members, 1, fan_out).uniform_(-bound, bound, generator=generator))
-            )
+        self.linears = [StackedLinear(members, i, o) for i, o in itertools.pairwise(widths)]
+        self.layers = nn.ModuleList(self.linears)  # registers them (parameters, state_dict)
+        with torch.no_grad():
+            for fan_in, layer in zip(widths, self.linears, strict=False):
+                bound = 1.0 / fan_in**0.5
+                layer.weight.uniform_(-bound, bound, generator=generator)
+                layer.bias.uniform_(-bound, bound, generator=generator)
         self.keep = 1.0 - torch.tensor(list(dropouts), dtype=torch.float32).view(members, 1, 1)
         self.generator = generator
 
     def forward(self, z: torch.Tensor) -> torch.Tensor:
         """(members, B, latent) -> (members, B, outputs)."""
-        h = z
-        last = len(self.weights) - 1
-        for k, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
-            h = torch.baddbmm(bias, h, weight)
-            if k < last:
-                h = torch.relu(h)
-                if self.training:
-                    noise = torch.rand(h.shape, generator=self.generator)
-                    h = h * (noise < self.keep) / self.keep
-        return h
+        return stacked_mlp(self.linears, z, dropout=self._dropout if self.training else None)
+
+    def _dropout(self, index: int, h: torch.Tensor) -> torch.Tensor:
+        if index == len(self.linears) - 1:
+            return h
+        noise = torch.rand(h.shape, generator=self.generator)
+        return h * (noise < self.keep) / self.keep
 
 
 def fit_profile_mlps(
@@ -591,7 +583,7 @@ def save_estimator(run: LoadedRun, result: GeometryResult) -> tuple[Path, Path]:
         "member": result.member,
         "seed": result.seed,
         "train_sensors": list(result.sensors),
-        "latent_dim": int(result.model.weights[0].shape[1]),
+        "latent_dim": int(result.model.linears[0].weight.shape[1]),
         "hidden": list(result.config.hidden),
         "offsets_mm": result.offsets_mm.tolist(),
         "points": result.config.points,
@@ -606,8 +598,8 @@ def save_estimator(run: LoadedRun, result: GeometryResult) -> tuple[Path, Path]:
     payload = {
         "format": ESTIMATOR_FORMAT,
         "version": ESTIMATOR_VERSION,
-        "weights": [w.detach().cpu().clone() for w in result.model.weights],
-        "biases": [b.detach().cpu().clone() for b in result.model.biases],
+        "weights": [layer.weight.detach().cpu().clone() for layer in result.model.linears],
+        "biases": [layer.bias.detach().cpu().clone() for layer in result.model.linears],
         "meta": meta,
     }
     pt_path, json_path = run.run_dir / ESTIMATOR_PT, run.run_dir / ESTIMATOR_JSON
@@ -648,20 +640,24 @@ class GeometryEstimator:
     def train_sensors(self) -> tuple[str, ...]:
         return tuple(self.meta["train_sensors"])
 
-    def predict(self, latents: np.ndarray, trained_on: str) -> np.ndarray:
-        """(M, latent) -> (M, points) profile depths in mm, with the MLP trained on ``trained_on``'s latents."""
+    def head(self, trained_on: str) -> nn.Sequential:
+        """The MLP trained on ``trained_on``'s latents as the plain :func:`~unitac_rig.learning.network.mlp`
+        (eval mode): latents (M, latent) -> profile depths (M, points), mm."""
         if trained_on not in self.train_sensors:
             raise UsageError(
                 f"no geometry MLP was trained on {trained_on!r}", hint=f"choose one of {', '.join(self.train_sensors)}"
             )
-        k = self.train_sensors.index(trained_on)
-        h = torch.as_tensor(np.asarray(latents, dtype=np.float32))
+        layers = []
+        for weight, bias in zip(self.weights, self.biases, strict=True):
+            layer = StackedLinear(*weight.shape)
+            layer.load_state_dict({"weight": weight.to(torch.float32), "bias": bias.to(torch.float32)})
+            layers.append(layer)
+        return member_mlp(layers, self.train_sensors.index(trained_on)).eval()
+
+    def predict(self, latents: np.ndarray, trained_on: str) -> np.ndarray:
+        """(M, latent) -> (M, points) profile depths in mm, with the MLP trained on ``trained_on``'s latents."""
         with torch.no_grad():
-            for index, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
-                h = torch.addmm(bias[k, 0], h, weight[k])
-                if index < len(self.weights) - 1:
-                    h = torch.relu(h)
-        return h.numpy()
+            return self.head(trained_on)(torch.as_tensor(np.asarray(latents, dtype=np.float32))).numpy()
 
 
 @dataclass

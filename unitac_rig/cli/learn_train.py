@@ -527,7 +527,6 @@ def _train_new_sensor(
 ) -> None:
     """``train --from RUN --new-sensor NAME``: the new sensor's encoder and output layer against the frozen model."""
     from rich.console import Console
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
     from rich.table import Table
 
     from unitac_rig.learning.data import load_sets
@@ -551,14 +550,7 @@ def _train_new_sensor(
     params = {name: value for name, value in ctx.params.items() if source is None or "DEFAULT" not in str(source(name))}
     console = Console()
     sets = load_sets(data)
-    with Progress(
-        TextColumn(f"[bold]train {new_sensor}"),
-        BarColumn(),
-        TextColumn("epoch {task.completed}/{task.total}"),
-        TextColumn("{task.fields[status]}"),
-        TimeRemainingColumn(),
-        console=console,
-    ) as progress:
+    with _progress(console, f"[bold]train {new_sensor}", log_lines=False) as progress:
         task = progress.add_task("extend", total=None, status="")
 
         def on_epoch(record: dict[str, Any]) -> None:

@@ -493,8 +493,9 @@ def plot_geometry(result: GeometryResult, outline: OutlineGeometry, sensors: Seq
             lines.set_clim(0.0, 1.0)
             ax.add_collection(lines)
             ax.set_aspect("equal")
-            ax.set_title(f"train {train_sensor} / test {test_sensor}: MAE {result.scenarios[name]['mae_mm']:.3f} mm",
-                         fontsize=9)  # fmt: skip
+            ax.set_title(
+                f"train {train_sensor} / test {test_sensor}: MAE {result.scenarios[name]['mae_mm']:.3f} mm", fontsize=9
+            )
             ax.tick_params(labelsize=8)
             ax.set_xlabel("x (mm)", fontsize=8)
             ax.set_ylabel("y (mm)", fontsize=8)

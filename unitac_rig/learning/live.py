@@ -299,8 +299,17 @@ def _stream(
             stats.steady_ns = frames[0].host_t_ns
         output = model(values)
         for row, frame in enumerate(frames):
-            line = frame_line(stats.frames_out, frame, output, row, model, clock_ns(), tared=values[row],
-                              epoch_offset_ns=epoch_offset_ns, warmup=warm)  # fmt: skip
+            line = frame_line(
+                stats.frames_out,
+                frame,
+                output,
+                row,
+                model,
+                clock_ns(),
+                tared=values[row],
+                epoch_offset_ns=epoch_offset_ns,
+                warmup=warm,
+            )
             write(line)
             done_ns = clock_ns()
             (stats.warmup_latencies_ns if warm else stats.latencies_ns).append(done_ns - frame.host_t_ns)

@@ -160,7 +160,7 @@ def member_mlp(layers: Sequence[StackedLinear], member: int) -> nn.Sequential:
     """Member ``member`` of ``layers`` as the plain :func:`mlp` (a copy, no dropout)."""
     widths = [layers[0].weight.shape[1], *(layer.weight.shape[2] for layer in layers)]
     net = mlp(widths).to(layers[0].weight.device)
-    for layer, linear in zip(layers, _linears(net), strict=True):
+    for layer, linear in zip(layers, linear_layers(net), strict=True):
         layer.copy_into(linear, member)
     return net
 
@@ -197,10 +197,10 @@ class Autoencoder(nn.Module):
         ``head_<sensors>/<i>``)."""
         out: dict[str, nn.Linear] = {}
         for sensor, mlp in self.encoders.items():
-            out |= {f"enc_{sensor}/{i}": m for i, m in enumerate(_linears(mlp))}
-        hidden = _linears(self.decoder)
+            out |= {f"enc_{sensor}/{i}": m for i, m in enumerate(linear_layers(mlp))}
+        hidden = linear_layers(self.decoder)
         out |= {f"dec/{i}": m for i, m in enumerate(hidden)}
-        for h, (head, linear) in enumerate(zip(self.output_heads, _linears(self.heads), strict=True)):
+        for h, (head, linear) in enumerate(zip(self.output_heads, linear_layers(self.heads), strict=True)):
             out[f"{head_part(head, h)}/{len(hidden)}"] = linear
         return out
 
@@ -244,12 +244,18 @@ class Autoencoder(nn.Module):
         return nn.Sequential(*hidden, out)
 
 
-def _linears(module: nn.Module) -> list[nn.Linear]:
+def linear_layers(module: nn.Module) -> list[nn.Linear]:
+    """The ``nn.Linear`` layers of ``module``, in order."""
     return [m for m in module.modules() if isinstance(m, nn.Linear)]
 
 
-class UniTacNV(nn.Module, PyTorchModelHubMixin, library_name="unitac-rig", pipeline_tag="feature-extraction",
-               tags=["tactile", "robotics", "cross-sensor", "unitac-nv"]):  # fmt: skip
+class UniTacNV(
+    nn.Module,
+    PyTorchModelHubMixin,
+    library_name="unitac-rig",
+    pipeline_tag="feature-extraction",
+    tags=["tactile", "robotics", "cross-sensor", "unitac-nv"],
+):
     """One member of a trained UniTac-NV model as ``export-model`` writes it: per sensor an encoder (frames (B,
     n_taxels, 3) in the sensor's units -> latent) and a decoder (latent -> that sensor's frames), each a plain
     :func:`mlp` with the normaliser folded into its first/last layer, so nothing happens outside the networks.

@@ -243,10 +243,6 @@ PREPROCESSING_TEXT = {
 }
 
 
-def _mean_over_members(values: Any) -> float | None:
-    return None if values is None else float(np.mean(values))
-
-
 def simple_baseline_table(
     evaluator: Evaluator, rows: list[tuple[str, np.ndarray]], predictions: SimplePredictions
 ) -> dict[str, Any]:

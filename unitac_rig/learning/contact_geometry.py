@@ -48,6 +48,7 @@ from unitac_rig.learning.data import DEFAULT_GAP_DEG, PairedDataset, hold_out_ra
 from unitac_rig.learning.network import UNITAC_GROUP, StackedLinear, member_mlp, stacked_mlp
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM
 from unitac_rig.learning.run import LoadedRun, computing_on, load_run, load_test_set, safe_torch_load
+from unitac_rig.learning.translate import Translator, read_frames
 
 log = logging.getLogger(__name__)
 
@@ -368,11 +369,8 @@ def member_latents(run: LoadedRun, member: int, frames: dict[str, np.ndarray]) -
     """One member's UniTac-NV latents (M, latent) of each sensor's frames (M, n_taxels, 3), sensor units."""
     if not 0 <= member < run.engine.members:
         raise ModelError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
-    engine = run.engine.member(member, groups=[UNITAC_GROUP])
-    return {
-        s: engine.encode(UNITAC_GROUP, s, torch.from_numpy(run.normaliser.normalise(s, frames[s])))[0].numpy()
-        for s in frames
-    }
+    translator = Translator(run.engine.member(member, groups=[UNITAC_GROUP]), run.normaliser)
+    return {s: translator.encode(frames[s], s) for s in frames}
 
 
 def fit_single_thread(*args: Any, **kwargs: Any) -> StackedProfileMLP:
@@ -676,8 +674,6 @@ def predict_geometry(
     """Local surface profiles under the pad for ``frames`` (M, n_taxels, 3) of ``sensor`` (sensor units): encoded
     by the run member the estimator was trained with, then its MLP for ``trained_on`` (default: ``sensor`` itself
     when an MLP was trained on it, the paper's within-sensor case; else the first training sensor)."""
-    from unitac_rig.learning.translate import Translator
-
     estimator = GeometryEstimator.load(run_dir)
     member = int(estimator.meta["member"])
     translator = Translator.load(run_dir, member=member)
@@ -701,8 +697,6 @@ def predict_file(
 ) -> tuple[GeometryPrediction, Path]:
     """Profiles for the frames in ``input_path`` (as ``translate`` reads them); writes ``<input>_geometry.npz``
     (``profiles_mm``, ``offsets_mm``, sensors, and the input's keys) or ``output_path``."""
-    from unitac_rig.learning.translate import read_frames
-
     data = read_frames(Path(input_path), sensor)
     prediction = predict_geometry(run_dir, data.frames, sensor, trained_on)
     out = Path(output_path) if output_path else Path(input_path).with_name(f"{Path(input_path).stem}_geometry.npz")

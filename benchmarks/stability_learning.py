@@ -228,7 +228,7 @@ def stability_report(
     run = load_run(Path(run_dir)).scored_under(nmae_normaliser, ssim_range)
     test = load_test_set(Path(run_dir))
     evaluator = Evaluator.for_run(run, test)  # scored under the given (default: the run's) metric options
-    scores, latent_distance = evaluator.per_frame(run.engine)
+    scores, latent_distance = evaluator.per_frame(run.engine), evaluator.latent_distance(run.engine)
     columns = [c for c in table_columns(run.sensors, set(scores)) if c in scores]
 
     object_id = object_id or _default_object(run, test)

@@ -3,13 +3,8 @@
 from __future__ import annotations
 
 from unitac_rig.cli import learn
-from unitac_rig.learning.data import PREPROCESSING
-from unitac_rig.learning.metrics import NMAE_NORMALISERS, SSIM_RANGES
 from unitac_rig.learning.run import CHECKPOINT_NAME
 
 
 def test_the_cli_checks_against_the_library_tables() -> None:
     assert learn.RUN_MARKER == CHECKPOINT_NAME
-    assert learn.PREPROCESSING_NAMES == PREPROCESSING
-    assert learn.NMAE_NORMALISER_NAMES == NMAE_NORMALISERS
-    assert learn.SSIM_RANGE_NAMES == SSIM_RANGES

@@ -64,7 +64,13 @@ def _metrics(run: Path, sensors: tuple[str, ...]) -> dict[str, str]:
     }
     run.mkdir()
     (run / "metrics.json").write_text(
-        json.dumps({"sensors": list(sensors), "table1": table, "latent_l1": {"first_epoch": 2.5, "final": 0.25}})
+        json.dumps(
+            {
+                "sensors": list(sensors),
+                "table1": table,
+                "alignment": {"per_subset": {"all": {"latent_l1": {"first_epoch": [2.5], "final": [0.25]}}}},
+            }
+        )
     )
     cells = {f"{row}/{c}": f"{v['nmae']:.3f}/{v['ssim']:.3f}" for row, cs in table.items() for c, v in cs.items()}
     cells.update(

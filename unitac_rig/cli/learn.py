@@ -14,9 +14,6 @@ from unitac_rig.errors import UsageError
 # What the checks before the heavy imports compare with (tests keep them equal to the library's own tables).
 RUN_MARKER = "checkpoint.pt"  # learning.run.CHECKPOINT_NAME: a folder holding it is a trained run
 DEVICES = ("auto", "cpu", "cuda")
-PREPROCESSING_NAMES = ("channel_z", "sensor_minmax", "sensor_scale", "raw")  # learning.data.PREPROCESSING
-NMAE_NORMALISER_NAMES = ("channel_range", "sensor_range", "channel_std", "frame_range")  # metrics.NMAE_NORMALISERS
-SSIM_RANGE_NAMES = ("channel_range", "sensor_range", "z_range")  # metrics.SSIM_RANGES
 
 
 def stage_printer(console: Any) -> Any:
@@ -165,23 +162,21 @@ def _print_table(console: Any, run: Path) -> None:
             f"preprocessing {metrics.get('preprocessing', {}).get('scaling', '?')} (see report.md)",
             style="dim",
         )
-    latent = metrics["latent_l1"]
-    if latent["final"] is not None:
-        first = "–" if latent["first_epoch"] is None else f"{latent['first_epoch']:.3f}"
-        line = f"latent L1 between matched contacts: {first} -> {latent['final']:.3f}"
-        aligned = metrics.get("alignment", {}).get("per_subset", {}).get("all")
-        if aligned:
-            ratio, mixing = aligned["latent_ratio"], aligned["mixing"]
+    aligned = metrics.get("alignment", {}).get("per_subset", {}).get("all")
+    if aligned:  # per member, after epoch 1 and at the end: the means over members
 
-            def mean(values: Any) -> str:
-                return "–" if values is None else f"{sum(values) / len(values):.3f}"
+        def mean(values: Any) -> str:
+            return "–" if not values else f"{sum(values) / len(values):.3f}"
 
-            line += (
-                f"; matched/unmatched {mean(ratio['first_epoch'])} -> {mean(ratio['final'])}; "
-                f"sensor mixing {mean(mixing['first_epoch'])} -> {mean(mixing['final'])} "
-                f"(perfect {mean(aligned['mixing_expected']['final'])})"
-            )
-        console.print(line)
+        def change(name: str) -> str:
+            entry = aligned.get(name) or {}
+            return f"{mean(entry.get('first_epoch'))} -> {mean(entry.get('final'))}"
+
+        perfect = mean((aligned.get("mixing_expected") or {}).get("final"))
+        console.print(
+            f"latent L1 between matched contacts: {change('latent_l1')}; matched/unmatched {change('latent_ratio')}; "
+            f"sensor mixing {change('mixing')} (perfect {perfect})"
+        )
 
 
 def _sensor_of(path: Path, given: str | None, option: str) -> str:

@@ -40,6 +40,7 @@ _TRAINING = "Training"
 _MODEL = "Model (the paper's shape by default)"
 _SPLIT = "Split, preprocessing and metrics"
 _REPORT = "Evaluation and report"
+_SEEDS = train_config.TrainingSection.model_fields["seeds"].default  # --seed and --n-seeds start from these
 _BOUNDS = ("gt", "ge", "lt", "le")  # pydantic's (annotated_types') bound attributes
 _PANELS = {
     "model": _MODEL,
@@ -212,7 +213,7 @@ class TrainRequest:
                 sections.setdefault(option.section, {})[option.key] = value
                 given[option.section, option.key] = option.typed(value)
         if self.seed is not None or self.n_seeds is not None:
-            first = self.seed if self.seed is not None else int(sections.get("training", {}).get("seeds", [0])[0])
+            first = self.seed if self.seed is not None else int(sections.get("training", {}).get("seeds", _SEEDS)[0])
             sections.setdefault("training", {})["seeds"] = list(range(first, first + (self.n_seeds or 1)))
             given["training", "seeds"] = f"--seed {first} --n-seeds {self.n_seeds or 1}"
         try:
@@ -303,7 +304,7 @@ _Seed = Annotated[
     int | None,
     typer.Option(
         "--seed",
-        show_default="0",
+        show_default=str(_SEEDS[0]),
         help="Seed of the first model (initialisation, shuffling, dropout).",
         rich_help_panel=_TRAINING,
     ),
@@ -313,7 +314,7 @@ _NSeeds = Annotated[
     typer.Option(
         "--n-seeds",
         min=1,
-        show_default="1",
+        show_default=str(len(_SEEDS)),
         help="Train seeds SEED..SEED+N-1 together in one batched run.",
         rich_help_panel=_TRAINING,
     ),
@@ -527,7 +528,6 @@ def _train_new_sensor(
 ) -> None:
     """``train --from RUN --new-sensor NAME``: the new sensor's encoder and output layer against the frozen model."""
     from rich.console import Console
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
     from rich.table import Table
 
     from unitac_rig.learning.data import load_sets
@@ -551,14 +551,7 @@ def _train_new_sensor(
     params = {name: value for name, value in ctx.params.items() if source is None or "DEFAULT" not in str(source(name))}
     console = Console()
     sets = load_sets(data)
-    with Progress(
-        TextColumn(f"[bold]train {new_sensor}"),
-        BarColumn(),
-        TextColumn("epoch {task.completed}/{task.total}"),
-        TextColumn("{task.fields[status]}"),
-        TimeRemainingColumn(),
-        console=console,
-    ) as progress:
+    with _progress(console, f"[bold]train {new_sensor}", log_lines=False) as progress:
         task = progress.add_task("extend", total=None, status="")
 
         def on_epoch(record: dict[str, Any]) -> None:

@@ -36,7 +36,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from dataclasses import fields as dataclass_fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal, get_args
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
 from pydantic.fields import FieldInfo
@@ -48,6 +48,13 @@ if TYPE_CHECKING:  # the model's module imports torch; the CLI reads these field
     from unitac_rig.learning.network import ModelShape
 
 CONFIG_TOML = "config.toml"
+# The readings offered for the preprocessing and the two metrics' open constants (docs/learning.md): named once here.
+Preprocessing = Literal["channel_z", "sensor_minmax", "sensor_scale", "raw"]
+NmaeNormaliser = Literal["channel_range", "sensor_range", "channel_std", "frame_range"]
+SsimRange = Literal["channel_range", "sensor_range", "z_range"]
+PREPROCESSING: tuple[str, ...] = get_args(Preprocessing)
+NMAE_NORMALISERS: tuple[str, ...] = get_args(NmaeNormaliser)
+SSIM_RANGES: tuple[str, ...] = get_args(SsimRange)
 _HINT = "see docs/learning.md (Training configuration) for every key"
 
 
@@ -134,16 +141,14 @@ class EvaluationSection(_Section):
 
 
 class PreprocessingSection(_Section):
-    scaling: Literal["channel_z", "sensor_minmax", "sensor_scale", "raw"] = _field(
+    scaling: Preprocessing = _field(
         "sensor_scale", "How frames are scaled for the network.", key="preprocessing", cli="--preprocessing"
     )
 
 
 class MetricsSection(_Section):
-    nmae_normaliser: Literal["channel_range", "sensor_range", "channel_std", "frame_range"] = _field(
-        "channel_range", "What the NMAE divides by."
-    )
-    ssim_range: Literal["channel_range", "sensor_range", "z_range"] = _field("sensor_range", "SSIM data range.")
+    nmae_normaliser: NmaeNormaliser = _field("channel_range", "What the NMAE divides by.")
+    ssim_range: SsimRange = _field("sensor_range", "SSIM data range.")
 
 
 class ConfigFile(_Section):

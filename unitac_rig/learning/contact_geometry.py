@@ -45,9 +45,10 @@ from torch import nn
 
 from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.data import DEFAULT_GAP_DEG, PairedDataset, hold_out_rays, object_symmetry
-from unitac_rig.learning.engine import UNITAC_GROUP
+from unitac_rig.learning.network import UNITAC_GROUP, StackedLinear, member_mlp, stacked_mlp
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM
 from unitac_rig.learning.run import LoadedRun, computing_on, load_run, load_test_set, safe_torch_load
+from unitac_rig.learning.translate import Translator, read_frames
 
 log = logging.getLogger(__name__)
 
@@ -156,11 +157,9 @@ class GeometryConfig:
 
 
 class StackedProfileMLP(nn.Module):
-    """K independent MLPs (one per training sensor) evaluated together with batched matmuls.
-
-    Member ``k``: latent -> hidden... -> outputs, ReLU and dropout ``dropouts[k]`` after every hidden layer.
-    Initialised like ``nn.Linear`` (uniform +-1/sqrt(fan_in)).
-    """
+    """K independent profile MLPs (one per training sensor), the package's MLP run stacked
+    (:func:`~unitac_rig.learning.network.stacked_mlp`): member ``k`` is latent -> hidden... -> outputs with ReLU and
+    dropout ``dropouts[k]`` after every hidden layer, initialised like ``nn.Linear`` (uniform +-1/sqrt(fan_in))."""
 
     def __init__(
         self,
@@ -173,31 +172,25 @@ class StackedProfileMLP(nn.Module):
     ) -> None:
         super().__init__()
         widths = [latent_dim, *hidden, outputs]
-        self.weights = nn.ParameterList()
-        self.biases = nn.ParameterList()
-        for fan_in, fan_out in itertools.pairwise(widths):
-            bound = 1.0 / fan_in**0.5
-            self.weights.append(
-                nn.Parameter(torch.empty(members, fan_in, fan_out).uniform_(-bound, bound, generator=generator))
-            )
-            self.biases.append(
-                nn.Parameter(torch.empty(members, 1, fan_out).uniform_(-bound, bound, generator=generator))
-            )
+        self.linears = [StackedLinear(members, i, o) for i, o in itertools.pairwise(widths)]
+        self.layers = nn.ModuleList(self.linears)  # registers them (parameters, state_dict)
+        with torch.no_grad():
+            for fan_in, layer in zip(widths, self.linears, strict=False):
+                bound = 1.0 / fan_in**0.5
+                layer.weight.uniform_(-bound, bound, generator=generator)
+                layer.bias.uniform_(-bound, bound, generator=generator)
         self.keep = 1.0 - torch.tensor(list(dropouts), dtype=torch.float32).view(members, 1, 1)
         self.generator = generator
 
     def forward(self, z: torch.Tensor) -> torch.Tensor:
         """(members, B, latent) -> (members, B, outputs)."""
-        h = z
-        last = len(self.weights) - 1
-        for k, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
-            h = torch.baddbmm(bias, h, weight)
-            if k < last:
-                h = torch.relu(h)
-                if self.training:
-                    noise = torch.rand(h.shape, generator=self.generator)
-                    h = h * (noise < self.keep) / self.keep
-        return h
+        return stacked_mlp(self.linears, z, dropout=self._dropout if self.training else None)
+
+    def _dropout(self, index: int, h: torch.Tensor) -> torch.Tensor:
+        if index == len(self.linears) - 1:
+            return h
+        noise = torch.rand(h.shape, generator=self.generator)
+        return h * (noise < self.keep) / self.keep
 
 
 def fit_profile_mlps(
@@ -376,11 +369,8 @@ def member_latents(run: LoadedRun, member: int, frames: dict[str, np.ndarray]) -
     """One member's UniTac-NV latents (M, latent) of each sensor's frames (M, n_taxels, 3), sensor units."""
     if not 0 <= member < run.engine.members:
         raise ModelError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
-    engine = run.engine.member(member, groups=[UNITAC_GROUP])
-    return {
-        s: engine.encode(UNITAC_GROUP, s, torch.from_numpy(run.normaliser.normalise(s, frames[s])))[0].numpy()
-        for s in frames
-    }
+    translator = Translator(run.engine.member(member, groups=[UNITAC_GROUP]), run.normaliser)
+    return {s: translator.encode(frames[s], s) for s in frames}
 
 
 def fit_single_thread(*args: Any, **kwargs: Any) -> StackedProfileMLP:
@@ -501,8 +491,9 @@ def plot_geometry(result: GeometryResult, outline: OutlineGeometry, sensors: Seq
             lines.set_clim(0.0, 1.0)
             ax.add_collection(lines)
             ax.set_aspect("equal")
-            ax.set_title(f"train {train_sensor} / test {test_sensor}: MAE {result.scenarios[name]['mae_mm']:.3f} mm",
-                         fontsize=9)  # fmt: skip
+            ax.set_title(
+                f"train {train_sensor} / test {test_sensor}: MAE {result.scenarios[name]['mae_mm']:.3f} mm", fontsize=9
+            )
             ax.tick_params(labelsize=8)
             ax.set_xlabel("x (mm)", fontsize=8)
             ax.set_ylabel("y (mm)", fontsize=8)
@@ -591,7 +582,7 @@ def save_estimator(run: LoadedRun, result: GeometryResult) -> tuple[Path, Path]:
         "member": result.member,
         "seed": result.seed,
         "train_sensors": list(result.sensors),
-        "latent_dim": int(result.model.weights[0].shape[1]),
+        "latent_dim": int(result.model.linears[0].weight.shape[1]),
         "hidden": list(result.config.hidden),
         "offsets_mm": result.offsets_mm.tolist(),
         "points": result.config.points,
@@ -606,8 +597,8 @@ def save_estimator(run: LoadedRun, result: GeometryResult) -> tuple[Path, Path]:
     payload = {
         "format": ESTIMATOR_FORMAT,
         "version": ESTIMATOR_VERSION,
-        "weights": [w.detach().cpu().clone() for w in result.model.weights],
-        "biases": [b.detach().cpu().clone() for b in result.model.biases],
+        "weights": [layer.weight.detach().cpu().clone() for layer in result.model.linears],
+        "biases": [layer.bias.detach().cpu().clone() for layer in result.model.linears],
         "meta": meta,
     }
     pt_path, json_path = run.run_dir / ESTIMATOR_PT, run.run_dir / ESTIMATOR_JSON
@@ -648,20 +639,24 @@ class GeometryEstimator:
     def train_sensors(self) -> tuple[str, ...]:
         return tuple(self.meta["train_sensors"])
 
-    def predict(self, latents: np.ndarray, trained_on: str) -> np.ndarray:
-        """(M, latent) -> (M, points) profile depths in mm, with the MLP trained on ``trained_on``'s latents."""
+    def head(self, trained_on: str) -> nn.Sequential:
+        """The MLP trained on ``trained_on``'s latents as the plain :func:`~unitac_rig.learning.network.mlp`
+        (eval mode): latents (M, latent) -> profile depths (M, points), mm."""
         if trained_on not in self.train_sensors:
             raise UsageError(
                 f"no geometry MLP was trained on {trained_on!r}", hint=f"choose one of {', '.join(self.train_sensors)}"
             )
-        k = self.train_sensors.index(trained_on)
-        h = torch.as_tensor(np.asarray(latents, dtype=np.float32))
+        layers = []
+        for weight, bias in zip(self.weights, self.biases, strict=True):
+            layer = StackedLinear(*weight.shape)
+            layer.load_state_dict({"weight": weight.to(torch.float32), "bias": bias.to(torch.float32)})
+            layers.append(layer)
+        return member_mlp(layers, self.train_sensors.index(trained_on)).eval()
+
+    def predict(self, latents: np.ndarray, trained_on: str) -> np.ndarray:
+        """(M, latent) -> (M, points) profile depths in mm, with the MLP trained on ``trained_on``'s latents."""
         with torch.no_grad():
-            for index, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
-                h = torch.addmm(bias[k, 0], h, weight[k])
-                if index < len(self.weights) - 1:
-                    h = torch.relu(h)
-        return h.numpy()
+            return self.head(trained_on)(torch.as_tensor(np.asarray(latents, dtype=np.float32))).numpy()
 
 
 @dataclass
@@ -679,8 +674,6 @@ def predict_geometry(
     """Local surface profiles under the pad for ``frames`` (M, n_taxels, 3) of ``sensor`` (sensor units): encoded
     by the run member the estimator was trained with, then its MLP for ``trained_on`` (default: ``sensor`` itself
     when an MLP was trained on it, the paper's within-sensor case; else the first training sensor)."""
-    from unitac_rig.learning.translate import Translator
-
     estimator = GeometryEstimator.load(run_dir)
     member = int(estimator.meta["member"])
     translator = Translator.load(run_dir, member=member)
@@ -704,8 +697,6 @@ def predict_file(
 ) -> tuple[GeometryPrediction, Path]:
     """Profiles for the frames in ``input_path`` (as ``translate`` reads them); writes ``<input>_geometry.npz``
     (``profiles_mm``, ``offsets_mm``, sensors, and the input's keys) or ``output_path``."""
-    from unitac_rig.learning.translate import read_frames
-
     data = read_frames(Path(input_path), sensor)
     prediction = predict_geometry(run_dir, data.frames, sensor, trained_on)
     out = Path(output_path) if output_path else Path(input_path).with_name(f"{Path(input_path).stem}_geometry.npz")

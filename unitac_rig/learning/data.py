@@ -13,11 +13,12 @@ import logging
 import zlib
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
 from unitac_rig.errors import DataError, UnitacError
+from unitac_rig.learning.config import PREPROCESSING
 from unitac_rig.learning.paper import PAPER_UNSEEN_OBJECTS
 from unitac_rig.storage.paired import (
     JoinKey,
@@ -461,10 +462,6 @@ def split_by_direction(
     )
 
 
-PREPROCESSING: tuple[str, ...] = ("channel_z", "sensor_minmax", "sensor_scale", "raw")
-Preprocessing = Literal["channel_z", "sensor_minmax", "sensor_scale", "raw"]
-
-
 @dataclass(frozen=True)
 class Normaliser:
     """What the network sees of a frame: per sensor and force channel (x, y, z), ``(value - mean) / std``, where
@@ -487,9 +484,9 @@ class Normaliser:
     mean: dict[str, np.ndarray]  # (3,) offset
     std: dict[str, np.ndarray]  # (3,) scale
     data_range: dict[str, np.ndarray]  # (3,) each channel's training range
-    mode: str = "channel_z"
-    channel_std: dict[str, np.ndarray] = field(default_factory=dict)  # (3,)
-    sensor_range: dict[str, float] = field(default_factory=dict)
+    mode: str
+    channel_std: dict[str, np.ndarray]  # (3,)
+    sensor_range: dict[str, float]
 
     @classmethod
     def fit(cls, dataset: PairedDataset, rows: np.ndarray, mode: str = "channel_z") -> Normaliser:
@@ -519,16 +516,13 @@ class Normaliser:
         return cls(mean, std, data_range, mode, channel_std, sensor_range)
 
     def metric_stats(self, sensor: str) -> dict[str, np.ndarray]:
-        """The training statistics the metrics' normalisers use (``unitac_rig.learning.metrics.nmae_scale``):
-        ``channel_range`` always, ``channel_std`` and ``sensor_range`` where stored (runs from before the metric
-        options lack the sensor range)."""
+        """The training statistics the metrics' normalisers use (``unitac_rig.learning.metrics.nmae_scale``)."""
         self._check(sensor)
-        stats = {"channel_range": np.asarray(self.data_range[sensor], dtype=np.float64)}
-        if sensor in self.channel_std:
-            stats["channel_std"] = np.asarray(self.channel_std[sensor], dtype=np.float64)
-        if sensor in self.sensor_range:
-            stats["sensor_range"] = np.asarray(self.sensor_range[sensor], dtype=np.float64)
-        return stats
+        return {
+            "channel_range": np.asarray(self.data_range[sensor], dtype=np.float64),
+            "channel_std": np.asarray(self.channel_std[sensor], dtype=np.float64),
+            "sensor_range": np.asarray(self.sensor_range[sensor], dtype=np.float64),
+        }
 
     def normalise(self, sensor: str, frames: np.ndarray) -> np.ndarray:
         """(..., n_taxels, 3) sensor units -> (..., n_taxels * 3) float32, taxel-major."""
@@ -551,41 +545,30 @@ class Normaliser:
             raise ModelError(f"no normalisation for sensor {sensor!r}", hint=f"known: {', '.join(self.mean)}")
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
-        out: dict[str, dict[str, Any]] = {}
-        for s in self.mean:
-            entry: dict[str, Any] = {
+        return {
+            s: {
                 "mean": self.mean[s].tolist(),
                 "std": self.std[s].tolist(),
                 "data_range": self.data_range[s].tolist(),
                 "mode": self.mode,
+                "channel_std": self.channel_std[s].tolist(),
+                "sensor_range": float(self.sensor_range[s]),
             }
-            if s in self.channel_std:
-                entry["channel_std"] = self.channel_std[s].tolist()
-            if s in self.sensor_range:
-                entry["sensor_range"] = float(self.sensor_range[s])
-            out[s] = entry
-        return out
+            for s in self.mean
+        }
 
     @classmethod
     def from_dict(cls, d: dict[str, dict[str, Any]]) -> Normaliser:
-        """Also reads the dicts of runs from before the preprocessing options (per-channel z-score, no sensor range:
-        their ``std`` is the channel standard deviation)."""
-        modes = {str(v.get("mode", "channel_z")) for v in d.values()}
-        if len(modes) > 1:
-            raise DataError(f"a normaliser mixes preprocessing modes {sorted(modes)}")
-        mode = modes.pop() if modes else "channel_z"
-        channel_std = {
-            s: np.asarray(v["channel_std"] if "channel_std" in v else v["std"], dtype=np.float64)
-            for s, v in d.items()
-            if "channel_std" in v or mode == "channel_z"
-        }
+        modes = {str(v["mode"]) for v in d.values()}
+        if len(modes) != 1:
+            raise DataError(f"a normaliser needs one preprocessing mode, not {sorted(modes)}")
+
+        def arrays(key: str) -> dict[str, np.ndarray]:
+            return {s: np.asarray(v[key], dtype=np.float64) for s, v in d.items()}
+
+        sensor_range = {s: float(v["sensor_range"]) for s, v in d.items()}
         return cls(
-            {s: np.asarray(v["mean"], dtype=np.float64) for s, v in d.items()},
-            {s: np.asarray(v["std"], dtype=np.float64) for s, v in d.items()},
-            {s: np.asarray(v["data_range"], dtype=np.float64) for s, v in d.items()},
-            mode,
-            channel_std,
-            {s: float(v["sensor_range"]) for s, v in d.items() if "sensor_range" in v},
+            arrays("mean"), arrays("std"), arrays("data_range"), modes.pop(), arrays("channel_std"), sensor_range
         )
 
 

@@ -54,9 +54,11 @@ from unitac_rig.learning.network import (
     Autoencoder,
     GroupSpec,
     ModelShape,
+    StackedLinear,
     baseline_name,
     default_groups,
     head_part,
+    stacked_mlp,
 )
 
 __all__ = [
@@ -129,28 +131,6 @@ def _alignment_term(latents: Sequence[torch.Tensor], present: torch.Tensor | Non
     return torch.stack(terms).mean(dim=0)
 
 
-class StackedLinear(nn.Module):
-    """``members`` independent ``nn.Linear`` layers of one shape, run by one ``baddbmm``: ``weight`` (members, in,
-    out) and ``bias`` (members, 1, out). Member ``m`` computes ``x @ weight[m] + bias[m]``, i.e. ``nn.Linear`` with
-    ``weight[m].T``."""
-
-    def __init__(self, members: int, fan_in: int, fan_out: int, device: torch.device) -> None:
-        super().__init__()
-        self.weight = nn.Parameter(torch.zeros(members, fan_in, fan_out, device=device))
-        self.bias = nn.Parameter(torch.zeros(members, 1, fan_out, device=device))
-
-    def forward(self, h: torch.Tensor) -> torch.Tensor:
-        """(members, rows, in) -> (members, rows, out)."""
-        return torch.baddbmm(self.bias, h, self.weight)
-
-    def copy_into(self, linear: nn.Linear, member: int, columns: slice = slice(None)) -> nn.Linear:
-        """Member ``member``'s layer (optionally only some output ``columns``) written into ``linear``."""
-        with torch.no_grad():
-            linear.weight.copy_(self.weight[member, :, columns].T)
-            linear.bias.copy_(self.bias[member, 0, columns])
-        return linear
-
-
 class StackedAutoencoders(nn.Module):
     """Every group x member of a run, trained in lock-step: one ``nn.Module`` whose ``layers`` (a ``ModuleDict`` of
     :class:`StackedLinear`, keyed ``<group>/<part>/<index>``) are all its parameters.
@@ -197,9 +177,10 @@ class StackedAutoencoders(nn.Module):
         self.layers = nn.ModuleDict(
             {k: StackedLinear(self.members, n.fan_in, n.fan_out, self.device) for k, n in self._layers.items()}
         )
-        # plain dicts of the same Parameter objects: the hot loop looks them up without nn.Module's __getattr__
-        self.weights: dict[str, nn.Parameter] = {k: layer.weight for k, layer in self._stacked().items()}
-        self.biases: dict[str, nn.Parameter] = {k: layer.bias for k, layer in self._stacked().items()}
+        # plain dicts of the same layers and Parameters: the hot loop looks them up without nn.Module's __getattr__
+        self._linear = {k: layer for k, layer in self.layers.items() if isinstance(layer, StackedLinear)}
+        self.weights: dict[str, nn.Parameter] = {k: layer.weight for k, layer in self._linear.items()}
+        self.biases: dict[str, nn.Parameter] = {k: layer.bias for k, layer in self._linear.items()}
         unknown_frozen = sorted(set(frozen) - set(self._layers))
         if unknown_frozen:
             raise ModelError(f"cannot freeze unknown layer(s) {unknown_frozen}")
@@ -217,9 +198,6 @@ class StackedAutoencoders(nn.Module):
         ]
         if initialise:
             self._initialise()
-
-    def _stacked(self) -> dict[str, StackedLinear]:
-        return {key: layer for key, layer in self.layers.items() if isinstance(layer, StackedLinear)}
 
     # ---- structure -------------------------------------------------------------------------------------------
     def group(self, name: str) -> GroupSpec:
@@ -379,21 +357,19 @@ class StackedAutoencoders(nn.Module):
     def _mlp(
         self, keys: Sequence[str], h: torch.Tensor, masks: Mapping[str, torch.Tensor] | None, *, hidden: bool = False
     ) -> torch.Tensor:
-        """ReLU between layers (and after the last one too when ``hidden``); each layer's output is multiplied by
-        its dropout mask when there is one."""
-        last = len(keys) if hidden else len(keys) - 1
-        for k, key in enumerate(keys):
-            h = torch.baddbmm(self.biases[key], h, self.weights[key])
-            if k < last:
-                h = torch.relu_(h)  # in place on baddbmm's output, which its backward does not need
-            if masks is not None and key in masks:
-                h = h * masks[key]
-        return h
+        """:func:`~unitac_rig.learning.network.stacked_mlp` over the layers ``keys``, each layer's output multiplied
+        by its dropout mask when there is one."""
+
+        def drop(i: int, x: torch.Tensor) -> torch.Tensor:
+            mask = masks.get(keys[i]) if masks is not None else None
+            return x if mask is None else x * mask
+
+        return stacked_mlp([self._linear[k] for k in keys], h, hidden=hidden, dropout=drop if masks else None)
 
     def _decode(self, group: _Group, z: torch.Tensor, masks: Mapping[str, torch.Tensor] | None) -> torch.Tensor:
         """The group's decoder: hidden layers, then every output head (no ReLU, no dropout), concatenated."""
         h = self._mlp(group.trunk, z, masks, hidden=True)
-        outs = [torch.baddbmm(self.biases[key], h, self.weights[key]) for key in group.heads]
+        outs = [self._linear[key](h) for key in group.heads]
         return outs[0] if len(outs) == 1 else torch.cat(outs, dim=-1)
 
     def forward(
@@ -620,9 +596,8 @@ class StackedAutoencoders(nn.Module):
         network ``export-model`` writes)."""
         spec = self.group(group)
         net = Autoencoder(self.feature_dims, spec, self.shape, dropout).to(self.device)
-        stacked = self._stacked()
         for key, linear in net.linears().items():
-            stacked[f"{group}/{key}"].copy_into(linear, member)
+            self._linear[f"{group}/{key}"].copy_into(linear, member)
         return net
 
     def with_new_sensor(self, sensor: str, feature_dim: int, group: str = UNITAC_GROUP) -> StackedAutoencoders:

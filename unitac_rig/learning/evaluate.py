@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 import torch
 
-from unitac_rig.errors import ModelError
 from unitac_rig.learning.data import Normaliser, PairedDataset
 from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders, baseline_name
 from unitac_rig.learning.metric_table import METRICS, alignment_metrics, frame_metrics
@@ -89,8 +88,7 @@ class Evaluator:
         }
 
     def stats(self, sensor: str) -> dict[str, torch.Tensor]:
-        """The training statistics behind the metric options, as tensors on the device (channel range always;
-        channel std and sensor range where the run stored them)."""
+        """The training statistics behind the metric options, as tensors on the device."""
         raw = self._normaliser.metric_stats(sensor)
         return {k: torch.as_tensor(v, dtype=torch.float32, device=self.device) for k, v in raw.items()}
 
@@ -122,21 +120,23 @@ class Evaluator:
         return out
 
     @torch.no_grad()
-    def per_frame(self, engine: StackedAutoencoders) -> tuple[dict[str, dict[str, torch.Tensor]], torch.Tensor | None]:
-        """{column: {frame metric name: (members, M)}} for every frame metric of the table, and the mean pairwise
-        latent L1 (members, M) (None for 1 sensor).
-
-        Columns: ``<src>_to_<dst>`` for UniTac-NV, ``ae_<sensor>`` for baselines the run trained.
-        """
-        out = {
-            column: self._scores(target, frames) for column, (target, frames) in self.reconstructions(engine).items()
+    def per_frame(self, engine: StackedAutoencoders) -> dict[str, dict[str, torch.Tensor]]:
+        """{column: {frame metric name: (members, M)}} for every frame metric of the table. Columns:
+        ``<src>_to_<dst>`` for UniTac-NV, ``ae_<sensor>`` for baselines the run trained."""
+        return {
+            column: self.score_frames(target, frames)
+            for column, (target, frames) in self.reconstructions(engine).items()
         }
-        latents = self.latents(engine)
+
+    @torch.no_grad()
+    def latent_distance(self, engine: StackedAutoencoders) -> torch.Tensor | None:
+        """(members, M): each row's matched-latent L1, the mean over sensor pairs (None for one sensor); the
+        ``latent_l1`` metric is its mean over rows."""
         pairs = self.sensor_pairs()
-        distance = None
-        if pairs:
-            distance = torch.stack([latent_l1_per_pair(latents[a], latents[b]) for a, b in pairs]).mean(dim=0)
-        return out, distance
+        if not pairs:
+            return None
+        latents = self.latents(engine)
+        return torch.stack([latent_l1_per_pair(latents[a], latents[b]) for a, b in pairs]).mean(dim=0)
 
     def sensor_pairs(self) -> list[tuple[str, str]]:
         return [(a, b) for i, a in enumerate(self.sensors) for b in self.sensors[i + 1 :]]
@@ -148,17 +148,8 @@ class Evaluator:
     def score_frames(self, sensor: str, estimate: torch.Tensor) -> dict[str, torch.Tensor]:
         """Every frame metric of ``estimate`` (members, M, n_taxels, 3) in sensor units against ``sensor``'s true
         frames: {metric name: (members, M)}."""
-        return self._scores(sensor, estimate.to(self.device, torch.float32))
-
-    def _scores(self, sensor: str, estimate: torch.Tensor) -> dict[str, torch.Tensor]:
-        scoring = self.scoring(sensor)
-        try:
-            return {metric.name: metric.score(estimate, scoring, None) for metric in frame_metrics()}
-        except KeyError as exc:
-            raise ModelError(
-                f"this run stored no {exc.args[0]} for {sensor} (it predates the metric options)",
-                hint="score it with the channel_range options, or retrain",
-            ) from exc
+        scoring, estimate = self.scoring(sensor), estimate.to(self.device, torch.float32)
+        return {metric.name: metric.score(estimate, scoring, None) for metric in frame_metrics()}
 
     @torch.no_grad()
     def alignment(self, engine: StackedAutoencoders, mask: torch.Tensor | None = None) -> dict[str, Any]:
@@ -177,7 +168,7 @@ class Evaluator:
     def summary(self, engine: StackedAutoencoders) -> dict[str, Any]:
         """Means over the subsets ("all", "seen" objects' held-out angles, "unseen" objects), per member, with the
         latent alignment of each subset."""
-        scores, _ = self.per_frame(engine)
+        scores = self.per_frame(engine)
         summary: dict[str, Any] = {}
         for subset, mask in self.subsets.items():
             if not bool(mask.any()):
@@ -203,13 +194,10 @@ class Evaluator:
         for metric in (m for m in frame_metrics() if m.variants):
             out[metric.name] = {}
             for variant in metric.variants:
-                try:
-                    out[metric.name][variant] = {
-                        column: metric.score(frames, self.scoring(t), variant)[:, mask].mean(dim=1).tolist()
-                        for column, (t, frames) in reconstructions.items()
-                    }
-                except KeyError:  # a statistic this (older) run did not store
-                    continue
+                out[metric.name][variant] = {
+                    column: metric.score(frames, self.scoring(t), variant)[:, mask].mean(dim=1).tolist()
+                    for column, (t, frames) in reconstructions.items()
+                }
         return out
 
 
@@ -255,10 +243,6 @@ PREPROCESSING_TEXT = {
 }
 
 
-def _mean_over_members(values: Any) -> float | None:
-    return None if values is None else float(np.mean(values))
-
-
 def simple_baseline_table(
     evaluator: Evaluator, rows: list[tuple[str, np.ndarray]], predictions: SimplePredictions
 ) -> dict[str, Any]:
@@ -283,7 +267,7 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
     baselines' Table I (``simple_baselines``)."""
     config = run.config
     evaluator = Evaluator.for_run(run, test)
-    scores, distance = evaluator.per_frame(run.engine)
+    scores = evaluator.per_frame(run.engine)
     members = run.engine.members
     table: dict[str, dict[str, dict[str, float]]] = {}
     table_std: dict[str, dict[str, dict[str, float]]] = {}
@@ -301,11 +285,9 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
 
     history = run.history
     first_test = history[0].get("test", {}) if history else {}
-    first = first_test.get("all", {}).get("latent_l1")
-    final = distance.mean(dim=1).numpy() if distance is not None else None
     alignment: dict[str, Any] = {}
     for subset, subset_mask in evaluator.subsets.items():
-        if not bool(subset_mask.any()) or distance is None:
+        if not bool(subset_mask.any()) or not evaluator.sensor_pairs():
             continue
         now = evaluator.alignment(run.engine, subset_mask)
         then = first_test.get(subset, {})
@@ -315,13 +297,6 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
         }
     result: dict[str, Any] = {
         "table1": table,
-        "latent_l1": {
-            "first_epoch": float(np.mean(first)) if first is not None else None,
-            "final": float(final.mean()) if final is not None else None,
-            "final_per_member": final.tolist() if final is not None else None,
-            "definition": "mean over test contacts of the Manhattan distance between matched UniTac-NV latents "
-            "(averaged over sensor pairs)",
-        },
         "alignment": {
             "per_subset": alignment,
             "definition": {metric.name: metric.description for metric in alignment_metrics()},
@@ -349,7 +324,6 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
             m.name: {"label": m.label, "direction": m.direction, "units": m.units, "scope": m.scope}
             for m in METRICS.values()
         },
-        "normaliser": NMAE_TEXT[config.nmae_normaliser],
         "config": config.to_dict(),
     }
     variants = next((h["val_metric_variants"] for h in reversed(history) if "val_metric_variants" in h), None)

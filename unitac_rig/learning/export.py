@@ -48,9 +48,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from unitac_rig.errors import ModelError, UsageError
+from unitac_rig.errors import UsageError
 from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
-from unitac_rig.learning.run import provenance
+from unitac_rig.learning.network import linear_layers
+from unitac_rig.learning.run import provenance, read_metrics
 from unitac_rig.learning.train import LoadedRun, load_run
 from unitac_rig.storage.export import publish_when_done
 
@@ -70,60 +71,26 @@ CONFIG_NAME = "config.json"
 LICENSE = "mit"  # the package's licence (pyproject.toml), which the exported weights are shared under
 
 
-def _folded(
-    linear: nn.Linear,
-    scale_in: np.ndarray | None,
-    shift_in: np.ndarray | None,
+def _fold_into(
+    target: nn.Linear,
+    source: nn.Linear,
+    scale_in: np.ndarray | None = None,
+    shift_in: np.ndarray | None = None,
     scale_out: np.ndarray | None = None,
     shift_out: np.ndarray | None = None,
-) -> nn.Linear:
-    """A copy of ``linear`` with the normaliser folded in, computed in float64: ``W ((x - shift_in) * scale_in) + b``
-    for an input layer, ``(W z + b) * scale_out + shift_out`` for an output layer."""
-    weight = linear.weight.detach().cpu().double().numpy().T  # (in, out)
-    bias = linear.bias.detach().cpu().double().numpy()
+) -> None:
+    """``source`` written into ``target`` with the normaliser folded in, computed in float64:
+    ``W ((x - shift_in) * scale_in) + b`` for an input layer, ``(W z + b) * scale_out + shift_out`` for an output
+    layer, ``source`` itself for any other."""
+    weight = source.weight.detach().cpu().double().numpy().T  # (in, out)
+    bias = source.bias.detach().cpu().double().numpy()
     if scale_in is not None and shift_in is not None:
         weight, bias = weight * scale_in[:, None], bias - (shift_in * scale_in) @ weight
     if scale_out is not None and shift_out is not None:
         weight, bias = weight * scale_out[None, :], bias * scale_out + shift_out
-    out = nn.Linear(*weight.shape)
     with torch.no_grad():
-        out.weight.copy_(torch.from_numpy(weight.T.copy()))
-        out.bias.copy_(torch.from_numpy(bias.copy()))
-    return out
-
-
-def encoder_module(
-    engine: StackedAutoencoders, mean: np.ndarray, std: np.ndarray, sensor: str, member: int = 0
-) -> nn.Sequential:
-    """``nn.Sequential``: frames (B, n_taxels, 3) in sensor units -> latent (B, latent_dim): the member's plain
-    UniTac-NV encoder (:meth:`StackedAutoencoders.network`) with the normaliser folded into its first layer."""
-    net = engine.network(UNITAC_GROUP, member, dropout=0.0)
-    if sensor not in net.sensors:
-        raise ModelError(f"the model has no encoder for {sensor!r}", hint=f"it has {', '.join(engine.sensors)}")
-    layers = list(net.encoder(sensor).cpu())
-    first = layers[0]
-    assert isinstance(first, nn.Linear)
-    scale = np.tile(1.0 / np.asarray(std, dtype=np.float64), first.in_features // 3)  # per input column
-    shift = np.tile(np.asarray(mean, dtype=np.float64), first.in_features // 3)
-    return nn.Sequential(nn.Flatten(1), _folded(first, scale, shift), *layers[1:]).eval()
-
-
-def decoder_module(
-    engine: StackedAutoencoders, mean: np.ndarray, std: np.ndarray, sensor: str, member: int = 0
-) -> nn.Sequential:
-    """``nn.Sequential``: latent (B, latent_dim) -> frames (B, n_taxels, 3) in ``sensor``'s units: the member's plain
-    shared hidden layers, then the sensor's columns of the output layer with the de-normalisation folded in."""
-    spec = engine.group(UNITAC_GROUP)
-    if sensor not in spec.sensors:
-        raise ModelError(f"the model has no decoder output for {sensor!r}", hint=f"it has {', '.join(spec.sensors)}")
-    layers = list(engine.network(UNITAC_GROUP, member, dropout=0.0).decoder_for(sensor).cpu())
-    last = layers[-1]
-    assert isinstance(last, nn.Linear)
-    width = last.out_features
-    scale = np.tile(np.asarray(std, dtype=np.float64), width // 3)
-    shift = np.tile(np.asarray(mean, dtype=np.float64), width // 3)
-    folded = _folded(last, None, None, scale, shift)
-    return nn.Sequential(*layers[:-1], folded, nn.Unflatten(1, (width // 3, 3))).eval()
+        target.weight.copy_(torch.from_numpy(weight.T.copy()))
+        target.bias.copy_(torch.from_numpy(bias.copy()))
 
 
 @contextlib.contextmanager
@@ -220,61 +187,65 @@ def export_model(run_dir: Path, out: Path, fmt: str, member: int = 0) -> dict[st
     run = load_run(Path(run_dir))
     if not 0 <= member < run.engine.members:
         raise UsageError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
-    engine = run.engine
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = out.parent / f".{out.name}.export-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     staging.mkdir()  # not tempfile.mkdtemp: that is private (0700), and the export is meant to be shared
     with publish_when_done(staging, out):
         if fmt == "safetensors":
-            document = _export_safetensors(run, engine, staging, member)
+            document = _export_safetensors(run, staging, member)
         else:
-            document = _export_into(run, engine, staging, fmt, member)
+            document = _export_into(run, staging, fmt, member)
     return document
 
 
-def _export_into(run: LoadedRun, engine: StackedAutoencoders, staging: Path, fmt: str, member: int) -> dict[str, Any]:
-    sensors = engine.group(UNITAC_GROUP).sensors
-    latent = engine.shape.latent_dim
+def _sensor_entry(run: LoadedRun, sensor: str, files: dict[str, str]) -> dict[str, Any]:
+    """What model.json / config.json say of one sensor: shape, units, layout, where its networks are (``files``),
+    their layer widths and the normaliser folded into them."""
+    engine, latent = run.engine, run.engine.shape.latent_dim
+    n_taxels = engine.feature_dims[sensor] // 3
+    return {
+        "n_taxels": n_taxels,
+        "frame_shape": [n_taxels, 3],
+        "units": _units(sensor),
+        "layout": _layout(sensor),
+        **files,
+        "encoder_widths": [n_taxels * 3, *engine.shape.encoder_hidden, latent],
+        "decoder_widths": [latent, *engine.shape.decoder_hidden, n_taxels * 3],
+        "normaliser_folded_in": {
+            "mean": np.asarray(run.normaliser.mean[sensor], dtype=float).tolist(),
+            "std": np.asarray(run.normaliser.std[sensor], dtype=float).tolist(),
+            "mode": run.normaliser.mode,
+        },
+    }
+
+
+def _export_into(run: LoadedRun, staging: Path, fmt: str, member: int) -> dict[str, Any]:
+    """One file per network in ``fmt``: the exported module's (:func:`hub_model`) encoder behind ``Flatten`` and
+    decoder before ``Unflatten``, so each takes and gives frames (B, n_taxels, 3)."""
+    model = hub_model(run, member)
     files: dict[str, str] = {}
     entries: dict[str, Any] = {}
-    for sensor in sensors:
-        n_taxels = engine.feature_dims[sensor] // 3
-        mean, std = run.normaliser.mean[sensor], run.normaliser.std[sensor]
-        encoder = encoder_module(engine, mean, std, sensor, member)
-        decoder = decoder_module(engine, mean, std, sensor, member)
+    for sensor in model.sensors:
+        n_taxels = model.n_taxels[sensor]
         names = {"encoder": f"encoder_{sensor}{SUFFIX[fmt]}", "decoder": f"decoder_{sensor}{SUFFIX[fmt]}"}
+        encoder = nn.Sequential(nn.Flatten(1), *model.encoders[sensor].children()).eval()
+        decoder = nn.Sequential(*model.decoders[sensor].children(), nn.Unflatten(1, (n_taxels, 3))).eval()
         _write(encoder, torch.zeros(2, n_taxels, 3), staging / names["encoder"], fmt, ("frames", "latent"))
-        _write(decoder, torch.zeros(2, latent), staging / names["decoder"], fmt, ("latent", "frames"))
+        _write(decoder, torch.zeros(2, model.latent_dim), staging / names["decoder"], fmt, ("latent", "frames"))
         for name in names.values():
             files[name] = _sha256(staging / name)
-        entries[sensor] = {
-            "n_taxels": n_taxels,
-            "frame_shape": [n_taxels, 3],
-            "units": _units(sensor),
-            "layout": _layout(sensor),
-            "encoder": names["encoder"],
-            "decoder": names["decoder"],
-            "encoder_widths": [n_taxels * 3, *engine.shape.encoder_hidden, latent],
-            "decoder_widths": [latent, *engine.shape.decoder_hidden, n_taxels * 3],
-            "normaliser_folded_in": {
-                "mean": np.asarray(mean, dtype=float).tolist(),
-                "std": np.asarray(std, dtype=float).tolist(),
-                "mode": getattr(run.normaliser, "mode", "channel_z"),
-            },
-        }
-    payload = run.payload
-    metrics_path = run.run_dir / "metrics.json"
-    metrics = json.loads(metrics_path.read_text(encoding="utf-8")) if metrics_path.is_file() else None
+        entries[sensor] = _sensor_entry(run, sensor, names)
+    metrics = read_metrics(run.run_dir)
     document: dict[str, Any] = {
         "format": EXPORT_FORMAT,
         "version": EXPORT_VERSION,
         "export_format": fmt,
         "model": "UniTac-NV (Hou et al., IROS 2025): one encoder per sensor, one shared decoder",
-        "latent_dim": latent,
+        "latent_dim": model.latent_dim,
         "sensors": entries,
         "frame": "(B, n_taxels, 3) float32; taxel i at (row, col) = divmod(i, cols); channels x, y, z",
         "translate": "decoder_<target>(encoder_<source>(frames))",
-        **run_fields(payload, engine, member),
+        **run_fields(run.payload, run.engine, member),
         "files": files,
     }
     (staging / MODEL_JSON).write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
@@ -300,25 +271,18 @@ def _metrics_lines(metrics: dict[str, Any] | None) -> list[str]:
         values = [cells.get(c) for c in columns]
         rendered = ["–" if v is None else f"{v['nmae']:.3f} / {v['ssim']:.3f}" for v in values]
         lines.append(f"| {row} | " + " | ".join(rendered) + " |")
-    options = [f"{k}: {_words(metrics[k])}" for k in ("nmae_normaliser", "ssim_range", "preprocessing") if k in metrics]
+    described = metrics.get("metrics") or {}
+    settings = [f"{m.upper()}: {described[m]}" for m in ("nmae", "ssim") if m in described]
+    if "preprocessing" in metrics:
+        settings.append(f"preprocessing: {metrics['preprocessing']['text']}")
     lines += ["", "NMAE is the mean absolute error over a training range (docs/learning.md, Metrics)."]
-    if options:
-        lines.append("Metric settings: " + "; ".join(options) + ".")
-    latent = metrics.get("latent_l1", {}).get("final")
-    if latent is not None:
-        lines.append(f"Mean L1 distance between two sensors' latents of the same contact: {latent:.3f}.")
+    if settings:
+        lines.append("Metric settings: " + "; ".join(settings) + ".")
+    latent = metrics.get("alignment", {}).get("per_subset", {}).get("all", {}).get("latent_l1", {}).get("final")
+    if latent:
+        mean = sum(latent) / len(latent)
+        lines.append(f"Mean L1 distance between two sensors' latents of the same contact: {mean:.3f}.")
     return lines
-
-
-def _words(value: Any) -> str:
-    """A metric setting as prose, never a Python repr: a document's ``text`` when it has one, else its items."""
-    if isinstance(value, dict):
-        if isinstance(value.get("text"), str):
-            return value["text"]
-        return ", ".join(f"{k} {_words(v)}" for k, v in value.items())
-    if isinstance(value, list | tuple):
-        return ", ".join(_words(v) for v in value)
-    return str(value)
 
 
 def run_fields(payload: dict[str, Any], engine: StackedAutoencoders, member: int) -> dict[str, Any]:
@@ -477,67 +441,41 @@ def _loading_snippet(fmt: str, source: str, target: str, src: dict[str, Any], ds
 
 
 def hub_model(run: LoadedRun, member: int = 0) -> UniTacNV:
-    """Member ``member`` of ``run`` as the exported module (normaliser folded in, no dropout, eval mode, CPU)."""
+    """Member ``member`` of ``run`` as the exported module (normaliser folded in, no dropout, eval mode, CPU): per
+    sensor, the member's plain encoder (:meth:`StackedAutoencoders.network`) with ``(x - mean) / std`` folded into
+    its first layer, and the shared hidden layers plus that sensor's columns of the output layer with ``y * std +
+    mean`` folded into the last."""
     from unitac_rig.learning.network import UniTacNV  # imports huggingface_hub: only when asked
 
     engine = run.engine
     sensors = engine.group(UNITAC_GROUP).sensors
-    latent = engine.shape.latent_dim
-    specs = {
-        s: {
-            "n_taxels": engine.feature_dims[s] // 3,
-            "encoder_widths": [engine.feature_dims[s], *engine.shape.encoder_hidden, latent],
-            "decoder_widths": [latent, *engine.shape.decoder_hidden, engine.feature_dims[s]],
-        }
-        for s in sensors
-    }
-    model = UniTacNV(specs, latent)
+    net = engine.network(UNITAC_GROUP, member, dropout=0.0).cpu()
+    model = UniTacNV({s: _sensor_entry(run, s, {}) for s in sensors}, engine.shape.latent_dim)
     for sensor in sensors:
-        mean, std = run.normaliser.mean[sensor], run.normaliser.std[sensor]
-        parts = {
-            "encoders": encoder_module(engine, mean, std, sensor, member),
-            "decoders": decoder_module(engine, mean, std, sensor, member),
-        }
-        for part, folded in parts.items():
-            target = getattr(model, part)[sensor]
-            source = [m for m in folded if isinstance(m, torch.nn.Linear)]
-            mine = [m for m in target if isinstance(m, torch.nn.Linear)]
-            with torch.no_grad():
-                for a, b in zip(mine, source, strict=True):
-                    a.weight.copy_(b.weight.to(torch.float32))
-                    a.bias.copy_(b.bias.to(torch.float32))
+        taxels = engine.feature_dims[sensor] // 3
+        mean = np.tile(np.asarray(run.normaliser.mean[sensor], dtype=np.float64), taxels)  # per frame column
+        std = np.tile(np.asarray(run.normaliser.std[sensor], dtype=np.float64), taxels)
+        pairs = [
+            *zip(linear_layers(model.encoders[sensor]), linear_layers(net.encoder(sensor)), strict=True),
+            *zip(linear_layers(model.decoders[sensor]), linear_layers(net.decoder_for(sensor)), strict=True),
+        ]
+        for i, (target, source) in enumerate(pairs):
+            if i == 0:
+                _fold_into(target, source, scale_in=1.0 / std, shift_in=mean)
+            elif i == len(pairs) - 1:
+                _fold_into(target, source, scale_out=std, shift_out=mean)
+            else:
+                _fold_into(target, source)
     return model.eval()
 
 
-def _export_safetensors(run: LoadedRun, engine: StackedAutoencoders, staging: Path, member: int) -> dict[str, Any]:
+def _export_safetensors(run: LoadedRun, staging: Path, member: int) -> dict[str, Any]:
     """Write model.safetensors, config.json and README.md into ``staging``; returns the config document."""
     model = hub_model(run, member)
-    entries: dict[str, Any] = {}
-    for sensor in model.sensors:
-        n_taxels = model.n_taxels[sensor]
-        mean, std = run.normaliser.mean[sensor], run.normaliser.std[sensor]
-        widths = {
-            part: [layers[0].in_features, *(m.out_features for m in layers)]
-            for part, net in (("encoder", model.encoders[sensor]), ("decoder", model.decoders[sensor]))
-            if (layers := [m for m in net.modules() if isinstance(m, torch.nn.Linear)])
-        }
-        entries[sensor] = {
-            "n_taxels": n_taxels,
-            "frame_shape": [n_taxels, 3],
-            "units": _units(sensor),
-            "layout": _layout(sensor),
-            "encoder_widths": widths["encoder"],
-            "decoder_widths": widths["decoder"],
-            "encoder": f"encoders.{sensor}.*",  # tensors of model.encoders[sensor], an nn.Sequential
-            "decoder": f"decoders.{sensor}.*",
-            "normaliser_folded_in": {
-                "mean": np.asarray(mean, dtype=float).tolist(),
-                "std": np.asarray(std, dtype=float).tolist(),
-                "mode": getattr(run.normaliser, "mode", "channel_z"),
-            },
-        }
-    metrics_path = run.run_dir / "metrics.json"
-    metrics = json.loads(metrics_path.read_text(encoding="utf-8")) if metrics_path.is_file() else None
+    entries = {  # the tensors of model.encoders[sensor] and model.decoders[sensor], each an nn.Sequential
+        s: _sensor_entry(run, s, {"encoder": f"encoders.{s}.*", "decoder": f"decoders.{s}.*"}) for s in model.sensors
+    }
+    metrics = read_metrics(run.run_dir)
     document: dict[str, Any] = {
         "format": EXPORT_FORMAT,
         "version": EXPORT_VERSION,
@@ -551,7 +489,7 @@ def _export_safetensors(run: LoadedRun, engine: StackedAutoencoders, staging: Pa
         "frame": "(B, n_taxels, 3) float32, tare-subtracted, sensor units; taxel i at (row, col) = divmod(i, cols); "
         "channels x, y, z",
         "translate": "model(frames, source, target) = model.decode(model.encode(frames, source), target)",
-        **run_fields(run.payload, engine, member),
+        **run_fields(run.payload, run.engine, member),
     }
     (staging / CARD_NAME).write_text(_hub_card(document, metrics), encoding="utf-8")  # before: the mixin keeps it
     model.save_pretrained(staging, config=document)  # its config.json sorts keys: rewritten below in sensor order

@@ -42,7 +42,7 @@ from unitac_rig.learning.data import (
     held_out_directions,
 )
 from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
-from unitac_rig.learning.metrics import nmae_per_frame, nmae_scale, ssim_per_frame, ssim_scale
+from unitac_rig.learning.evaluate import Evaluator, direction_name
 from unitac_rig.learning.run import (
     LoadedRun,
     checkpoint_path,
@@ -140,7 +140,7 @@ def _test_mask(dataset: PairedDataset, split: dict[str, Any]) -> np.ndarray:
 
 def _fit_new_sensor(run: LoadedRun, dataset: PairedDataset, sensor: str, rows: np.ndarray) -> Normaliser:
     """The run's normaliser plus the new sensor's statistics, fitted on its training frames with the run's
-    preprocessing (runs from before the preprocessing options have no ``mode``: the per-channel z-score)."""
+    preprocessing."""
     only = PairedDataset(
         sensors=(sensor,),
         object_id=dataset.object_id[rows],
@@ -151,9 +151,7 @@ def _fit_new_sensor(run: LoadedRun, dataset: PairedDataset, sensor: str, rows: n
         force_n={sensor: dataset.force_n[sensor][rows]},
         simulated=dataset.simulated,
     )
-    mode = getattr(run.normaliser, "mode", None)
-    everything = np.ones(len(only), dtype=bool)
-    fitted = Normaliser.fit(only, everything) if mode is None else Normaliser.fit(only, everything, mode=mode)
+    fitted = Normaliser.fit(only, np.ones(len(only), dtype=bool), mode=run.normaliser.mode)
     return Normaliser.from_dict({**run.normaliser.to_dict(), **fitted.to_dict()})
 
 
@@ -182,30 +180,27 @@ def evaluate_new_sensor(
     nmae_normaliser: str = "channel_range",
     ssim_range: str = "channel_range",
 ) -> dict[str, dict[str, Any]]:
-    """``<src>_to_<dst>`` for every direction involving ``new_sensor``: per-member mean NMAE and SSIM over the test
-    contacts that have both sensors, and how many there are; scored under the base run's NMAE normaliser and SSIM
-    range (``unitac_rig.learning.metrics``), so the numbers read like the run's own report."""
+    """``<src>_to_<dst>`` for every direction involving ``new_sensor``: per-member mean of every frame metric (NMAE
+    and SSIM) over the test contacts that have both sensors, and how many there are; scored by the run's
+    :class:`~unitac_rig.learning.evaluate.Evaluator` under the base run's NMAE normaliser and SSIM range, so the
+    numbers read like the run's own report."""
     out: dict[str, dict[str, Any]] = {}
     sensors = [s for s in engine.sensors if s in test.values]
-    with torch.no_grad():
-        for source in sensors:
-            for target in sensors:
-                if new_sensor not in (source, target):
-                    continue
-                rows = test.has(source) & test.has(target)
-                if not rows.any():
-                    continue
-                x = torch.from_numpy(normaliser.normalise(source, test.values[source][rows]))
-                decoded = engine.decode(UNITAC_GROUP, engine.encode(UNITAC_GROUP, source, x))[target]
-                estimate = torch.from_numpy(normaliser.denormalise(target, decoded.cpu().numpy()))
-                truth = torch.from_numpy(test.values[target][rows]).to(torch.float32)
-                stats = {k: torch.as_tensor(v, dtype=torch.float32) for k, v in normaliser.metric_stats(target).items()}
-                nmae_range = nmae_scale(nmae_normaliser, stats, truth)
-                out[f"{source}_to_{target}"] = {
-                    "nmae": nmae_per_frame(truth, estimate, nmae_range).mean(dim=-1).tolist(),
-                    "ssim": ssim_per_frame(truth, estimate, ssim_scale(ssim_range, stats)).mean(dim=-1).tolist(),
-                    "contacts": int(rows.sum()),
-                }
+    for source in sensors:
+        for target in sensors:
+            rows = test.has(source) & test.has(target)
+            if new_sensor not in (source, target) or not rows.any():
+                continue
+            both = test.subset(rows)
+            evaluator = Evaluator(both, normaliser, (), engine.device, nmae_normaliser, ssim_range)
+            with torch.no_grad():
+                latent = engine.encode(UNITAC_GROUP, source, evaluator.inputs[source])
+                estimate = evaluator.to_frames(target, engine.decode(UNITAC_GROUP, latent)[target])
+            scores = evaluator.score_frames(target, estimate)
+            out[direction_name(source, target)] = {
+                **{name: values.mean(dim=-1).tolist() for name, values in scores.items()},
+                "contacts": int(rows.sum()),
+            }
     return out
 
 
@@ -335,8 +330,12 @@ def _train_new_sensor(
             losses = engine.train_step(xs[:, chunk], optimizer, present=ps[:, chunk])
             loss_sum += losses[unitac] * xs[:, chunk].shape[1]
         seconds += time.perf_counter() - began
-        record = {"epoch": epoch, "epochs": settings["epochs"], "seconds": seconds,
-                  "train_loss": (loss_sum / n).cpu().tolist()}  # fmt: skip
+        record = {
+            "epoch": epoch,
+            "epochs": settings["epochs"],
+            "seconds": seconds,
+            "train_loss": (loss_sum / n).cpu().tolist(),
+        }
         history.append(record)
         if progress is not None:
             progress(record)

@@ -33,7 +33,6 @@ from torch import nn
 
 from drivers.frames import TactileFrame
 from unitac_rig.errors import ModelError, UsageError
-from unitac_rig.learning.network import mlp
 
 
 @dataclass
@@ -86,18 +85,12 @@ class LiveModel:
                 hint=f"use --member {estimator.meta['member']}, --no-geometry, or refit: unitac-rig geometry RUN",
             )
         chosen = self.sensor if self.sensor in estimator.train_sensors else estimator.train_sensors[0]
-        k = estimator.train_sensors.index(chosen)
-        widths = [int(estimator.weights[0][k].shape[0]), *(int(w[k].shape[1]) for w in estimator.weights)]
-        head = mlp(widths)
-        with torch.no_grad():
-            for linear, w, b in zip(
-                [m for m in head if isinstance(m, nn.Linear)], estimator.weights, estimator.biases, strict=True
-            ):
-                linear.weight.copy_(w[k].T.to(torch.float32))
-                linear.bias.copy_(b[k, 0].reshape(-1).to(torch.float32))
-        self.geometry = head.eval()
-        self.geometry_meta = {"trained_on": chosen, "offsets_mm": list(estimator.meta["offsets_mm"]),
-                              "object": estimator.meta.get("object")}  # fmt: skip
+        self.geometry = estimator.head(chosen)
+        self.geometry_meta = {
+            "trained_on": chosen,
+            "offsets_mm": list(estimator.meta["offsets_mm"]),
+            "object": estimator.meta.get("object"),
+        }
 
     def __call__(self, frames: np.ndarray) -> LiveOutput:
         """``frames`` (B, n_taxels, 3) of the mounted sensor -> latents, translations and geometry."""
@@ -306,8 +299,17 @@ def _stream(
             stats.steady_ns = frames[0].host_t_ns
         output = model(values)
         for row, frame in enumerate(frames):
-            line = frame_line(stats.frames_out, frame, output, row, model, clock_ns(), tared=values[row],
-                              epoch_offset_ns=epoch_offset_ns, warmup=warm)  # fmt: skip
+            line = frame_line(
+                stats.frames_out,
+                frame,
+                output,
+                row,
+                model,
+                clock_ns(),
+                tared=values[row],
+                epoch_offset_ns=epoch_offset_ns,
+                warmup=warm,
+            )
             write(line)
             done_ns = clock_ns()
             (stats.warmup_latencies_ns if warm else stats.latencies_ns).append(done_ns - frame.host_t_ns)

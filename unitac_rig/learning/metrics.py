@@ -41,13 +41,11 @@ from typing import Any, Literal
 import numpy as np
 import torch
 
+from unitac_rig.learning.config import NMAE_NORMALISERS, SSIM_RANGES
+
 SSIM_K1 = 0.01
 SSIM_K2 = 0.03
 
-NmaeNormaliser = Literal["channel_range", "sensor_range", "channel_std", "frame_range"]
-SsimRange = Literal["channel_range", "sensor_range", "z_range"]
-NMAE_NORMALISERS: tuple[str, ...] = ("channel_range", "sensor_range", "channel_std", "frame_range")
-SSIM_RANGES: tuple[str, ...] = ("channel_range", "sensor_range", "z_range")
 
 # rows of the unmatched-pair and neighbour computations (all pairs of a subset this size; beyond it a seeded subset)
 MAX_PAIR_ROWS = 2048
@@ -290,34 +288,64 @@ def _mixing_both(latents: LatentPairs) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 NMAE = Metric(
-    "nmae", "NMAE", "lower", "dimensionless (error / a training range)", "frame", _nmae,
+    "nmae",
+    "NMAE",
+    "lower",
+    "dimensionless (error / a training range)",
+    "frame",
+    _nmae,
     "mean |error| per channel over a training range (the run's nmae_normaliser), mean over channels",
-    option="nmae_normaliser", variants=NMAE_NORMALISERS,
-)  # fmt: skip
+    option="nmae_normaliser",
+    variants=NMAE_NORMALISERS,
+)
 SSIM = Metric(
-    "ssim", "SSIM", "higher", "dimensionless (1 = identical)", "frame", _ssim,
+    "ssim",
+    "SSIM",
+    "higher",
+    "dimensionless (1 = identical)",
+    "frame",
+    _ssim,
     "structural similarity over the taxel grid per channel (the run's ssim_range), mean over channels",
-    option="ssim_range", variants=SSIM_RANGES,
-)  # fmt: skip
+    option="ssim_range",
+    variants=SSIM_RANGES,
+)
 LATENT_L1 = Metric(
-    "latent_l1", "matched L1 (paper's)", "lower", "latent units", "alignment", _latent_l1,
+    "latent_l1",
+    "matched L1 (paper's)",
+    "lower",
+    "latent units",
+    "alignment",
+    _latent_l1,
     "mean Manhattan distance between the two sensors' latents of the same test contact (the paper's alignment "
     "measure; it also changes with the latents' scale)",
-)  # fmt: skip
+)
 LATENT_RATIO = Metric(
-    "latent_ratio", "matched / unmatched L1", "lower", "dimensionless (1 = chance, 0 = identical)", "alignment",
+    "latent_ratio",
+    "matched / unmatched L1",
+    "lower",
+    "dimensionless (1 = chance, 0 = identical)",
+    "alignment",
     _latent_ratio,
     "mean matched L1 / mean L1 between one sensor's latent of contact i and the other's of contact j != i "
     "(scale-free: 1 = no closer than any other contact, 0 = identical)",
-)  # fmt: skip
+)
 MIXING = Metric(
-    "mixing", f"sensor mixing ({MIXING_K} NN)", "higher", "fraction of neighbours", "alignment",
+    "mixing",
+    f"sensor mixing ({MIXING_K} NN)",
+    "higher",
+    "fraction of neighbours",
+    "alignment",
     lambda latents: _mixing_both(latents)[0],
     f"fraction of each latent's {MIXING_K} nearest neighbours (Euclidean, both sensors pooled) that come from the "
     "other sensor, averaged over latents",
-)  # fmt: skip
+)
 MIXING_EXPECTED = Metric(
-    "mixing_expected", "perfect mixing", "higher", "fraction of neighbours", "alignment",
+    "mixing_expected",
+    "perfect mixing",
+    "higher",
+    "fraction of neighbours",
+    "alignment",
     lambda latents: _mixing_both(latents)[1],
-    "the same fraction with the sensor labels shuffled (perfect mixing)", reference_for="mixing",
-)  # fmt: skip
+    "the same fraction with the sensor labels shuffled (perfect mixing)",
+    reference_for="mixing",
+)

@@ -1,16 +1,17 @@
-"""The model's shape and one member of it as ordinary PyTorch.
+"""The model's shape and its one multilayer perceptron, as ordinary PyTorch.
 
 :class:`ModelShape` (layer widths, dropout) and :class:`GroupSpec` (which sensors one autoencoder encodes) describe
-every model of a run; :class:`Autoencoder` is one member of one group as a plain ``nn.Module`` (``nn.Linear``,
-``nn.ReLU``, ``nn.Dropout``). The stacked model that trains every member at once
-(:class:`unitac_rig.learning.engine.StackedAutoencoders`) hands one out with ``network(group, member)``; that network is
-what ``export-model`` writes, per sensor, and what the training benchmark's plain loop trains.
-"""
+every model of a run. :func:`mlp` is the MLP of this package for one member (``nn.Linear``, ``nn.ReLU``,
+``nn.Dropout``); :class:`StackedLinear` and :func:`stacked_mlp` are the same layers and forward with a members
+dimension, so the trainer (:class:`unitac_rig.learning.engine.StackedAutoencoders`) and the geometry head
+(:mod:`unitac_rig.learning.contact_geometry`) train every seed or sensor at once, and :func:`member_mlp` /
+``StackedAutoencoders.network`` hand one member back as the plain :func:`mlp`. :class:`Autoencoder` is one member of
+one group; :class:`UniTacNV` is what ``export-model`` writes and ``stream`` runs."""
 
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -99,10 +100,10 @@ def default_groups(sensors: Sequence[str], baselines: bool) -> list[GroupSpec]:
 
 
 def mlp(widths: Sequence[int], dropout: float = 0.0, *, hidden: bool = False) -> nn.Sequential:
-    """THE multilayer perceptron of this package: ``nn.Linear`` layers of ``widths``, ReLU between them (after the
-    last too when ``hidden``) and ``nn.Dropout`` after every layer (when ``dropout`` > 0), as
-    :meth:`StackedAutoencoders._mlp` runs them for every member at once. The trainer's per-seed network, the
-    exported model, ``stream`` and the geometry head's live forward are all built by it."""
+    """THE multilayer perceptron of this package, one member: ``nn.Linear`` layers of ``widths``, ReLU between them
+    (after the last too when ``hidden``) and ``nn.Dropout`` after every layer (when ``dropout`` > 0). The exported
+    model, ``stream``, the per-seed network and the saved geometry head are built by it; :func:`stacked_mlp` runs
+    the same layers for many members at once."""
     modules: list[nn.Module] = []
     for i in range(len(widths) - 1):
         modules.append(nn.Linear(widths[i], widths[i + 1]))
@@ -111,6 +112,57 @@ def mlp(widths: Sequence[int], dropout: float = 0.0, *, hidden: bool = False) ->
         if dropout > 0.0:
             modules.append(nn.Dropout(dropout))
     return nn.Sequential(*modules)
+
+
+class StackedLinear(nn.Module):
+    """``members`` independent ``nn.Linear`` layers of one shape, run by one ``baddbmm``: ``weight`` (members, in,
+    out) and ``bias`` (members, 1, out). Member ``m`` computes ``x @ weight[m] + bias[m]``, i.e. ``nn.Linear`` with
+    ``weight[m].T``."""
+
+    def __init__(self, members: int, fan_in: int, fan_out: int, device: torch.device | str = "cpu") -> None:
+        super().__init__()
+        self.weight = nn.Parameter(torch.zeros(members, fan_in, fan_out, device=device))
+        self.bias = nn.Parameter(torch.zeros(members, 1, fan_out, device=device))
+
+    def forward(self, h: torch.Tensor) -> torch.Tensor:
+        """(members, rows, in) -> (members, rows, out)."""
+        return torch.baddbmm(self.bias, h, self.weight)
+
+    def copy_into(self, linear: nn.Linear, member: int, columns: slice = slice(None)) -> nn.Linear:
+        """Member ``member``'s layer (optionally only some output ``columns``) written into ``linear``."""
+        with torch.no_grad():
+            linear.weight.copy_(self.weight[member, :, columns].T)
+            linear.bias.copy_(self.bias[member, 0, columns])
+        return linear
+
+
+def stacked_mlp(
+    layers: Sequence[StackedLinear],
+    h: torch.Tensor,
+    *,
+    hidden: bool = False,
+    dropout: Callable[[int, torch.Tensor], torch.Tensor] | None = None,
+) -> torch.Tensor:
+    """:func:`mlp`'s forward for every member at once: (members, rows, in) -> (members, rows, out), ReLU between the
+    layers (after the last too when ``hidden``); ``dropout(i, h)`` (when given) drops out layer ``i``'s output, from
+    each member's own random stream (the trainer's sparse masks, the geometry head's per-sensor rate)."""
+    last = len(layers) if hidden else len(layers) - 1
+    for i, layer in enumerate(layers):
+        h = layer(h)
+        if i < last:
+            h = torch.relu_(h)  # in place on baddbmm's output, which its backward does not need
+        if dropout is not None:
+            h = dropout(i, h)
+    return h
+
+
+def member_mlp(layers: Sequence[StackedLinear], member: int) -> nn.Sequential:
+    """Member ``member`` of ``layers`` as the plain :func:`mlp` (a copy, no dropout)."""
+    widths = [layers[0].weight.shape[1], *(layer.weight.shape[2] for layer in layers)]
+    net = mlp(widths).to(layers[0].weight.device)
+    for layer, linear in zip(layers, linear_layers(net), strict=True):
+        layer.copy_into(linear, member)
+    return net
 
 
 class Autoencoder(nn.Module):
@@ -145,10 +197,10 @@ class Autoencoder(nn.Module):
         ``head_<sensors>/<i>``)."""
         out: dict[str, nn.Linear] = {}
         for sensor, mlp in self.encoders.items():
-            out |= {f"enc_{sensor}/{i}": m for i, m in enumerate(_linears(mlp))}
-        hidden = _linears(self.decoder)
+            out |= {f"enc_{sensor}/{i}": m for i, m in enumerate(linear_layers(mlp))}
+        hidden = linear_layers(self.decoder)
         out |= {f"dec/{i}": m for i, m in enumerate(hidden)}
-        for h, (head, linear) in enumerate(zip(self.output_heads, _linears(self.heads), strict=True)):
+        for h, (head, linear) in enumerate(zip(self.output_heads, linear_layers(self.heads), strict=True)):
             out[f"{head_part(head, h)}/{len(hidden)}"] = linear
         return out
 
@@ -192,12 +244,18 @@ class Autoencoder(nn.Module):
         return nn.Sequential(*hidden, out)
 
 
-def _linears(module: nn.Module) -> list[nn.Linear]:
+def linear_layers(module: nn.Module) -> list[nn.Linear]:
+    """The ``nn.Linear`` layers of ``module``, in order."""
     return [m for m in module.modules() if isinstance(m, nn.Linear)]
 
 
-class UniTacNV(nn.Module, PyTorchModelHubMixin, library_name="unitac-rig", pipeline_tag="feature-extraction",
-               tags=["tactile", "robotics", "cross-sensor", "unitac-nv"]):  # fmt: skip
+class UniTacNV(
+    nn.Module,
+    PyTorchModelHubMixin,
+    library_name="unitac-rig",
+    pipeline_tag="feature-extraction",
+    tags=["tactile", "robotics", "cross-sensor", "unitac-nv"],
+):
     """One member of a trained UniTac-NV model as ``export-model`` writes it: per sensor an encoder (frames (B,
     n_taxels, 3) in the sensor's units -> latent) and a decoder (latent -> that sensor's frames), each a plain
     :func:`mlp` with the normaliser folded into its first/last layer, so nothing happens outside the networks.

@@ -47,7 +47,7 @@ def table_columns(sensors: tuple[str, ...], trained: set[str]) -> list[str]:
 
 
 def _evaluated(history: list[dict[str, Any]]) -> tuple[str, list[dict[str, Any]]]:
-    """("val", records with validation scores), or ("test", ...) for runs from before the validation split."""
+    """("val", records with validation scores), or ("test", ...) for a run that kept no validation rows."""
     validated = [h for h in history if "val" in h]
     if validated:
         return "val", validated
@@ -284,17 +284,8 @@ def alignment_lines(metrics: dict[str, Any]) -> list[str]:
     """The latent alignment section: raw L1, scale-free ratio and sensor mixing on the test contacts after epoch 1
     and at the end, and the t-SNE's mixing when the figures were drawn."""
     per_subset = metrics.get("alignment", {}).get("per_subset", {})
-    if not per_subset:
-        latent = metrics.get("latent_l1", {})
-        if latent.get("final") is None:
-            return []
-        return [
-            "",
-            "## Latent alignment",
-            "",
-            f"Mean Manhattan distance between matched test latents: {_fmt(latent['first_epoch'])} after epoch 1, "
-            f"{_fmt(latent['final'])} after epoch {metrics['epochs']}.",
-        ]
+    if not per_subset:  # one sensor: nothing to align
+        return []
     shown = [m for m in alignment_metrics() if any(m.name in entry for entry in per_subset.values())]
     lines = [
         "",
@@ -461,7 +452,7 @@ def write_report(
                 "last_epoch": embedding_mixing(embeddings["last"], len(sensors)),
             }
         stage("drawing example reconstructions")
-        scores, _ = evaluator.per_frame(run.engine.member(0, groups=[UNITAC_GROUP]))
+        scores = evaluator.per_frame(run.engine.member(0, groups=[UNITAC_GROUP]))
         cross = [direction_name(a, b) for a in run.sensors for b in run.sensors if a != b]
         cross_nmae = torch.stack([scores[c]["nmae"][0] for c in cross]).mean(dim=0).numpy()
         for subset, rows_picked in pick_examples(test, cross_nmae, run.unseen_objects).items():

@@ -37,7 +37,6 @@ from unitac_rig.learning.run import (
     load_run,
     load_test_set,
     provenance,
-    readable,
     resolve_device,
     save_checkpoint,
     save_test_set,
@@ -305,7 +304,8 @@ def _start_run(
 
 def _resume_run(dataset: PairedDataset, run_dir: Path, epochs: int | None, device: torch.device) -> _Run:
     """The run in ``run_dir`` as its last checkpoint left it; ``epochs`` extends (never shortens) its budget."""
-    payload = readable(load_checkpoint(run_dir))
+    loaded = load_run(run_dir, device.type)
+    payload = loaded.payload
     if payload.get("extension"):
         raise UsageError(
             f"{run_dir} added a sensor to a trained run: it is trained in one go and cannot be resumed",
@@ -317,17 +317,17 @@ def _resume_run(dataset: PairedDataset, run_dir: Path, epochs: int | None, devic
             f"the data differs from the data {run_dir} was trained on (content hash changed)",
             hint="resume with the same --data, or start a new run with another --out",
         )
-    config = TrainConfig.from_dict(payload["config"])
+    config = loaded.config
     if epochs is not None:
         config = replace(config, epochs=max(epochs, int(payload["epoch"])))
-    engine = StackedAutoencoders.from_state(payload["engine"], device)
+    engine = loaded.engine
     run = _Run(
         run_dir=run_dir,
         config=config,
         dataset_hash=dataset_hash,
         dataset_summary=dict(payload["dataset_summary"]),
         split=_stored_split(payload),
-        normaliser=Normaliser.from_dict(payload["normaliser"]),
+        normaliser=loaded.normaliser,
         engine=engine,
         optimizer=engine.make_optimizer(config.learning_rate),
         shuffle_rngs=[_restored_rng(state) for state in payload["shuffle_rng"]],

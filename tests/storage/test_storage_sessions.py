@@ -146,7 +146,7 @@ def test_set_aside_copies_never_overwrite_each_other_within_one_second(tmp_path:
     names = []
     for content in (b"first", b"second", b"third"):
         path.write_bytes(content)
-        names.append(keep_aside(path, move=True))
+        names.append(keep_aside(path))
     assert len(set(names)) == 3
     assert [n.read_bytes() for n in names] == [b"first", b"second", b"third"]
 

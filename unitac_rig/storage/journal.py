@@ -177,8 +177,13 @@ def settings_of(value: Any) -> dict[str, Any] | None:
 
 def reextracted(rec: PressRecord, settings: Mapping[str, Any]) -> PressRecord:
     """``rec`` with its extraction recomputed under ``settings`` (the raw streams are unchanged)."""
-    extraction = extract_press(rec.robot_t_s, rec.press_force_n, rec.tactile_t_s, rec.tactile_valid,
-                               ExtractionSettings.from_dict(dict(settings)))  # fmt: skip
+    extraction = extract_press(
+        rec.robot_t_s,
+        rec.press_force_n,
+        rec.tactile_t_s,
+        rec.tactile_valid,
+        ExtractionSettings.from_dict(dict(settings)),
+    )
     return dataclasses.replace(rec, extraction=extraction)
 
 

@@ -195,7 +195,7 @@ def press_seal(path: Path, presses: h5py.Group, pid: str) -> str | None:
         link = presses.get(pid, getlink=True)
         if isinstance(link, h5py.ExternalLink):
             seal += f"|{link.filename}|{file_stamp(Path(path).parent / str(link.filename))}"
-        else:  # a group inside the session file (older layout): trusted only while that file is unchanged
+        else:  # a group inside the session file (an export's copy): trusted only while that file is unchanged
             seal += f"|.|{file_stamp(Path(path))}"
     except Exception:  # damaged metadata raises anything: the press is then read in full
         return None

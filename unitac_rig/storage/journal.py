@@ -1,7 +1,7 @@
 """The journal: each press's durable log and repair copy (``DATA/.journal/<object>__<sensor>/<press_id>.h5``) and
 the session's header (``_session.json``), checked like the data they protect.
 
-An entry is verified against its checksums and, for a session with an identity (schema 3), against the press its
+An entry is verified against its checksums and, given the session's identity, against the press its
 name says and the session's object, sensor and session id (:func:`journal_entry_check`); readers ask
 :func:`journal_problems` which presses have lost their repair copy. A session file's extraction settings are the
 newer side when ``extract`` was killed between its renames (:func:`settings_of` compares them). The writer that

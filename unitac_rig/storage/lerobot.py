@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -98,13 +98,8 @@ class _Feature:
     description: str
 
     def info(self) -> dict[str, Any]:
-        return {
-            "dtype": self.dtype,
-            "shape": list(self.shape),
-            "names": self.names,
-            "unit": self.unit,
-            "description": self.description,
-        }
+        """Its ``meta/info.json`` entry: dtype, shape, names, unit, description."""
+        return {key: list(v) if key == "shape" else v for key, v in asdict(self).items() if key != "name"}
 
 
 def _tactile_key(sensor: str) -> str:

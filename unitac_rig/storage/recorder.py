@@ -239,13 +239,13 @@ def _describe_rig(attrs: Mapping[str, Any]) -> str:
 
 def check_same_rig(existing: Mapping[str, Any], new: Mapping[str, Any], where: Path) -> str | None:
     """DataError when ``existing`` (a session's attributes) says another rig recorded it than ``new`` describes
-    (simulated or not, the rig file's ``name``, imported or recorded); a note instead when ``existing`` predates
-    rig identities and cannot tell. A writer that claims no identity at all (a script) is not checked."""
+    (simulated or not, the rig file's ``name``, imported or recorded); a note instead when ``existing`` names no
+    rig (a script started it) and cannot tell. A writer that claims no identity at all (a script) is not checked."""
     if not any(k in new for k in RIG_IDENTITY_KEYS):
         return None
     if "simulated" not in existing and "source" not in existing:
         return (
-            f"{where.name} does not record which rig it was recorded on (written by an older unitac-rig): collecting "
+            f"{where.name} does not record which rig it was recorded on (a script started it naming none): collecting "
             f"into it from {_describe_rig(new)} is not checked"
         )
     differs = existing.get("source") != new.get("source") or any(

@@ -163,7 +163,7 @@ def test_pairs_join_only_within_one_rig_and_say_why_not() -> None:
 def test_temporary_files_of_killed_processes_are_removed_by_the_next_run(data: Path, tmp_path: Path) -> None:
     """What kill -9 leaves (a journal header's private copy, a press file's, a half-built export) is gone after the
     next extract or export; a live export's staging folder is left alone."""
-    from unitac_rig.storage.export import remove_dead_staging
+    from unitac_rig.storage.manifest import remove_dead_staging
 
     journal = journal_dir(data, OBJ, SENSOR)
     leftovers = [journal / "._session.json.4194305.tmp", journal / "._verified.json.4194305.tmp"]

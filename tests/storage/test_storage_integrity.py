@@ -177,34 +177,6 @@ def test_a_torn_journal_entry_is_rewritten_from_the_intact_session_file(
     assert _matches_journal(data)
 
 
-def _as_schema_1(path: Path) -> None:
-    """What an older unitac-rig wrote: no checksums anywhere, schema version 1."""
-    with h5py.File(path, "a") as f:
-        f.attrs["schema_version"] = 1
-        del f.attrs["attrs_sha256"]
-        for g in f["presses"].values():
-            del g.attrs["checksums"]
-
-
-def test_old_session_files_without_checksums_still_read_and_say_they_are_not_verified(
-    data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
-) -> None:
-    for path in data.glob("*__*.h5"):
-        _as_schema_1(path)
-    shutil.rmtree(data / ".journal")  # their journals were not kept either
-    assert cli(["inspect", str(data)]) == 0
-    out = capsys.readouterr().out
-    assert f"{OBJ}/{SENSOR}: not verified:" in out and "have no checksums" in " ".join(out.split())
-    assert cli(["inspect", str(data), "--json"]) == 0
-    report = json.loads(capsys.readouterr().out)
-    assert all(s["integrity"].startswith("not verified") for s in report["sessions"])
-    assert cli(_command("export", data, tmp_path)) == 0
-    manifest = json.loads((tmp_path / "export" / "manifest.json").read_text())
-    assert all(s["integrity"].startswith("not verified") for s in manifest["sessions"])
-    assert "**Not verified:**" in (tmp_path / "export" / "README.md").read_text()
-    assert any("read without verification" in r.getMessage() for r in caplog.records)
-
-
 def test_verify_fails_on_a_file_the_manifest_does_not_list(
     data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -131,10 +131,10 @@ def test_another_sensor_serial_is_refused_when_both_are_known(tmp_path: Path) ->
             writer.update_root_attrs({"sensor_identity": {"model": "uSPa46", "serial": "B02"}})
 
 
-def test_a_session_from_before_rig_identities_is_continued_with_a_note(tmp_path: Path) -> None:
+def test_a_session_a_script_started_without_a_rig_is_continued_with_a_note(tmp_path: Path) -> None:
     SessionWriter(tmp_path, "hex_tpu", "uskin", {"object": "hex_tpu", "sensor": "uskin"}).close()
-    with SessionWriter(tmp_path, "hex_tpu", "uskin", {"object": "hex_tpu", "sensor": "uskin", "simulated": True,
-                                                      "rig": "rig"}) as writer:  # fmt: skip
+    attrs = {"object": "hex_tpu", "sensor": "uskin", "simulated": True, "rig": "rig"}
+    with SessionWriter(tmp_path, "hex_tpu", "uskin", attrs) as writer:
         assert any("does not record which rig it was recorded on" in n for n in writer.recovery_notes)
 
 
@@ -146,7 +146,7 @@ def test_set_aside_copies_never_overwrite_each_other_within_one_second(tmp_path:
     names = []
     for content in (b"first", b"second", b"third"):
         path.write_bytes(content)
-        names.append(keep_aside(path, move=True))
+        names.append(keep_aside(path))
     assert len(set(names)) == 3
     assert [n.read_bytes() for n in names] == [b"first", b"second", b"third"]
 

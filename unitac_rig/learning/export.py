@@ -53,7 +53,7 @@ from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
 from unitac_rig.learning.network import linear_layers
 from unitac_rig.learning.run import provenance, read_metrics
 from unitac_rig.learning.train import LoadedRun, load_run
-from unitac_rig.storage.export import publish_when_done
+from unitac_rig.storage.manifest import publish_when_done
 
 if TYPE_CHECKING:
     from unitac_rig.learning.network import UniTacNV

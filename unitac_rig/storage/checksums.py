@@ -8,8 +8,8 @@ hex}``. An array's digest covers its dtype, shape and bytes as written (events: 
 are computed from the in-memory arrays when the press is first written (to the journal) and verified whenever a copy
 is read; a copy is only ever made from a verified read, so the digests of a press never change after recording,
 except the extraction's (``unitac-rig extract`` verifies the raw arrays, then recomputes the extraction and seals it
-again). A session file's root carries ``attrs_sha256`` over its root attributes (schema version 2 on) and, from
-schema version 3 on, over the sorted list of its press ids, so a press link removed, added or renamed is damage too.
+again). A session file's root carries ``attrs_sha256`` over its root attributes and the sorted list of its press
+ids, so a press link removed, added or renamed is damage too.
 A press's identity (object, sensor, session id, press id, angle) is in its attributes, so its seal covers it; the
 checks that a press is in its right place are :func:`unitac_rig.storage.integrity.press_identity_problem`'s.
 """
@@ -88,34 +88,19 @@ def dataset_paths(group: h5py.Group) -> list[str]:
 
 def seal_press_group(group: h5py.Group, arrays: Mapping[str, str]) -> None:
     """Store the array digests (computed by the writer from what it wrote) and the digest of the attributes now."""
-    document = {"algorithm": ALGORITHM, "arrays": dict(sorted(arrays.items())),
-                "attrs": attrs_digest(_group_attr_items(group))}  # fmt: skip
-    group.attrs[PRESS_ATTR] = json.dumps(document)
+    document = {"algorithm": ALGORITHM, "arrays": dict(sorted(arrays.items()))}
+    group.attrs[PRESS_ATTR] = json.dumps({**document, "attrs": attrs_digest(_group_attr_items(group))})
 
 
-def sealed_arrays(group: h5py.Group) -> dict[str, str] | None:
-    """The array digests a press group carries (None when it has none)."""
-    raw = group.attrs.get(PRESS_ATTR)
-    if raw is None:
-        return None
-    document = json.loads(raw.decode() if isinstance(raw, bytes) else str(raw))
-    return dict(document["arrays"])
-
-
-def content_seal(group: h5py.Group) -> str:
-    """The ``checksums`` document of a press group: the one it carries, or for an unsealed (schema 1) press the one
-    it would carry, computed from what is stored. Equal for two copies of one press in any file or layout."""
-    raw = group.attrs.get(PRESS_ATTR)
-    if raw is not None:
-        return raw.decode() if isinstance(raw, bytes) else str(raw)
-    arrays = {path: array_digest(group[path][()]) for path in dataset_paths(group)}
-    return json.dumps({"algorithm": ALGORITHM, "arrays": dict(sorted(arrays.items())),
-                       "attrs": attrs_digest(_group_attr_items(group))})  # fmt: skip
+def sealed_arrays(group: h5py.Group) -> dict[str, str]:
+    """The array digests a (verified) press group carries."""
+    raw = group.attrs[PRESS_ATTR]
+    return dict(json.loads(raw.decode() if isinstance(raw, bytes) else str(raw))["arrays"])
 
 
 @dataclass(frozen=True)
 class PressCheck:
-    """The outcome of verifying one press group: ``ok``, ``unsealed`` (no checksums: an older file) or ``damaged``."""
+    """The outcome of verifying one press group or a root: ``ok`` or ``damaged`` (why: ``detail``)."""
 
     state: str
     detail: str = ""
@@ -133,7 +118,7 @@ def check_press_group(group: h5py.Group) -> PressCheck:
     except Exception as exc:  # h5py raises many types for damaged metadata
         return PressCheck("damaged", f"attributes unreadable ({_short(exc)})")
     if raw is None:
-        return PressCheck("unsealed")
+        return PressCheck("damaged", "it has no checksums")
     try:
         document = json.loads(raw.decode() if isinstance(raw, bytes) else str(raw))
         expected = dict(document["arrays"])
@@ -170,13 +155,9 @@ def root_attr_items(f: h5py.File) -> list[tuple[str, Any]]:
 
 
 def _root_sealed_items(f: h5py.File) -> list[tuple[str, Any]]:
-    """What a root seal covers: the root attributes and, from schema version 3 on, the sorted press ids."""
-    items = root_attr_items(f)
-    version = dict(items).get("schema_version")
-    if version is not None and int(version) >= 3:
-        presses = f.get("presses")
-        items.append((" presses", sorted(presses) if presses is not None else []))
-    return items
+    """What a root seal covers: the root attributes and the sorted press ids."""
+    presses = f.get("presses")
+    return [*root_attr_items(f), (" presses", sorted(presses) if presses is not None else [])]
 
 
 def seal_root(f: h5py.File) -> None:
@@ -184,12 +165,12 @@ def seal_root(f: h5py.File) -> None:
 
 
 def check_root(f: h5py.File) -> PressCheck:
-    """Verify a session file's root attributes (and press list) against ``attrs_sha256`` (``unsealed`` when it has
-    none: the caller decides whether a file of its version must have one)."""
+    """Verify a session file's root attributes (and press list) against ``attrs_sha256``; a missing seal is damage
+    (a damaged attribute heap can hide it), never "unsealed"."""
     try:
         names = list(f.attrs)
         if ROOT_ATTR not in names:
-            return PressCheck("unsealed")
+            return PressCheck("damaged", "its root seal (attrs_sha256) is missing or unreadable")
         expected = f.attrs[ROOT_ATTR]
         expected = expected.decode() if isinstance(expected, bytes) else str(expected)
         if attrs_digest(_root_sealed_items(f)) != expected:

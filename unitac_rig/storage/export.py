@@ -17,23 +17,25 @@ The join (which contacts every sensor recorded) is :func:`unitac_rig.storage.pai
 
 from __future__ import annotations
 
-import contextlib
 import logging
-import os
-import shutil
-import sys
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from unitac_rig.errors import DataError
-from unitac_rig.provenance import git_commit, package_version
 from unitac_rig.storage.lease import lease_holder
-from unitac_rig.storage.manifest import MANIFEST_NAME, sha256_file, write_manifest
+from unitac_rig.storage.manifest import (
+    MANIFEST_NAME,
+    exported_by,
+    publish_when_done,
+    sensor_layout_info,
+    sha256_file,
+    staging_for,
+    write_manifest,
+)
 from unitac_rig.storage.paired import PairedDataset, build_paired_dataset
 from unitac_rig.storage.pooling import PooledSession, pool_sessions
 from unitac_rig.storage.reader import (
@@ -85,25 +87,15 @@ class ExportSummary:
     incomplete: tuple[str, ...] = ()  # "object/sensor finished/planned" of each session with presses still to do
 
 
-def _sensor_layout_info(sensor: str) -> dict[str, Any]:
-    from unitac_rig.rig.sensors import SENSORS
-
-    spec = SENSORS.get(sensor)
-    if spec is None:
-        return {"units": "sensor units", "model": "unknown"}
-    layout = spec.layout
-    return {"model": layout.model, "rows": layout.rows, "cols": layout.cols, "n_taxels": layout.n_taxels,
-            "pitch_mm": layout.pitch_mm, "units": layout.units}  # fmt: skip
-
-
 def _frames_array(values: np.ndarray) -> Any:
     """(M, n_taxels, 3) float32 -> an Arrow list<list<float32>> array of M frames, without Python loops."""
     import pyarrow as pa
 
     values = np.ascontiguousarray(values, dtype=np.float32)
     m, n = int(values.shape[0]), int(values.shape[1])
-    inner = pa.ListArray.from_arrays(pa.array(np.arange(0, m * n * 3 + 1, 3, dtype=np.int32)),
-                                     pa.array(values.reshape(-1)))  # fmt: skip
+    inner = pa.ListArray.from_arrays(
+        pa.array(np.arange(0, m * n * 3 + 1, 3, dtype=np.int32)), pa.array(values.reshape(-1))
+    )
     return pa.ListArray.from_arrays(pa.array(np.arange(0, m * n + 1, n, dtype=np.int32)), inner)
 
 
@@ -113,17 +105,27 @@ def _arrow_schema(sensors: Sequence[str], extra: dict[str, Any]) -> Any:
     import pyarrow as pa
 
     types = {
-        "contact": pa.int64(), "object": pa.string(), "shape": pa.string(), "material": pa.string(),
-        "rotation_deg": pa.float64(), "angle_deg": pa.float64(), "target_n": pa.float64(), "sensor": pa.string(),
-        "force_n": pa.float64(), "error_n": pa.float64(), "frame": pa.list_(pa.list_(pa.float32())),
-        "frame_unit": pa.string(), "session": pa.string(), "simulated": pa.bool_(),
-    }  # fmt: skip
+        "contact": pa.int64(),
+        "object": pa.string(),
+        "shape": pa.string(),
+        "material": pa.string(),
+        "rotation_deg": pa.float64(),
+        "angle_deg": pa.float64(),
+        "target_n": pa.float64(),
+        "sensor": pa.string(),
+        "force_n": pa.float64(),
+        "error_n": pa.float64(),
+        "frame": pa.list_(pa.list_(pa.float32())),
+        "frame_unit": pa.string(),
+        "session": pa.string(),
+        "simulated": pa.bool_(),
+    }
     fields = [pa.field(name, types[name], metadata={"unit": unit, "description": text}) for name, unit, text in COLUMNS]
     metadata = {
         "units": {name: unit for name, unit, _ in COLUMNS if unit},
         "frame_layout": "frame[k][c]: taxel k (row k // cols, column k % cols of the sensor's grid), channel c "
         "(0 x, 1 y, 2 z in the sensor's frame); tare-subtracted",
-        "sensors": {s: _sensor_layout_info(s) for s in sensors},
+        "sensors": {s: sensor_layout_info(s) for s in sensors},
         **extra,
     }
     return pa.schema(fields, metadata={METADATA_KEY: json.dumps(metadata).encode("utf-8")})
@@ -157,7 +159,7 @@ def paired_table(paired: PairedDataset, sessions: dict[tuple[str, str], dict[str
                     "force_n": pa.array(force),
                     "error_n": pa.array(force - np.asarray(paired.target_n, dtype=np.float64)),
                     "frame": _frames_array(paired.values[sensor]),
-                    "frame_unit": pa.array([str(_sensor_layout_info(sensor)["units"])] * m, pa.string()),
+                    "frame_unit": pa.array([str(sensor_layout_info(sensor)["units"])] * m, pa.string()),
                     "session": pa.array([i.get("file") for i in info], pa.string()),
                     "simulated": pa.array([bool(i.get("simulated", simulated)) for i in info], pa.bool_()),
                 }
@@ -175,8 +177,17 @@ def _session_provenance(item: PooledSession, copy: Path, sha256: str) -> dict[st
     presses = press_summaries(copy)
     planned = attrs.get("planned_presses") or []
     writer = lease_holder(journal_dir(item.source, item.info.object_id, item.info.sensor))
-    keep = ("rig", "created_unix", "package_version", "git_commit", "sensor_identity", "layout",
-            "extraction_settings", "object_spec", "rotations_deg")  # fmt: skip
+    keep = (
+        "rig",
+        "created_unix",
+        "package_version",
+        "git_commit",
+        "sensor_identity",
+        "layout",
+        "extraction_settings",
+        "object_spec",
+        "rotations_deg",
+    )
     return {
         "file": f"{RAW_DIR}/{copy.name}",
         "object": item.info.object_id,
@@ -197,62 +208,6 @@ def _session_provenance(item: PooledSession, copy: Path, sha256: str) -> dict[st
         },
         **{key: attrs[key] for key in keep if key in attrs},
     }
-
-
-def staging_for(out: Path) -> Path:
-    """A fresh hidden sibling of ``out`` to build an export in (renamed into place when complete, so ``out`` is
-    complete or absent); refuses an ``out`` that exists and is not an empty directory."""
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise DataError(
-            f"{out} already exists and is not an empty directory",
-            hint="choose a new --out directory (an export is never merged into another one)",
-        )
-    out.parent.mkdir(parents=True, exist_ok=True)
-    remove_dead_staging(out.parent)
-    staging = out.parent / f".{out.name}.partial-{os.getpid()}"
-    if staging.exists():
-        shutil.rmtree(staging)
-    staging.mkdir(parents=True)
-    return staging
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # EPERM: it exists, run by someone else
-        return True
-    return True
-
-
-def remove_dead_staging(folder: Path) -> list[Path]:
-    """Remove the half-built exports (``.<out>.partial-<pid>``) in ``folder`` whose process is gone (killed during
-    an export): a staging folder never outlives the process that built it by more than the next export's start.
-    Returns what was removed."""
-    removed = []
-    for staging in folder.glob(".*.partial-*"):
-        pid = staging.name.rsplit("-", 1)[-1]
-        if staging.is_dir() and pid.isdigit() and not _pid_alive(int(pid)):
-            shutil.rmtree(staging, ignore_errors=True)
-            removed.append(staging)
-            log.info("removed %s, left by an export that was killed (pid %s)", staging, pid)
-    return removed
-
-
-@contextlib.contextmanager
-def publish_when_done(staging: Path, out: Path) -> Iterator[Path]:
-    """Build an export in ``staging`` inside the block; when it ends, rename ``staging`` to ``out`` (an empty ``out``
-    directory is replaced), and when it raises, remove ``staging``: ``out`` is complete or absent, never half-written.
-    Every export (Parquet, LeRobot, a trained model) publishes through this."""
-    try:
-        yield staging
-        if out.exists():
-            out.rmdir()  # empty: the caller refused anything else before building
-        os.replace(staging, out)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
 
 
 def _prepare_out(out: Path) -> Path:
@@ -281,8 +236,10 @@ def export_dataset(data_dirs: Sequence[Path], out: Path) -> ExportSummary:
             snapshot_session(item.info.path, copy)  # one self-contained file, whatever the session's layout
             digest = sha256_file(copy)
             if session_digest(copy) != item.sha256:
-                log.warning("%s changed while it was exported (a collection is running); exported the newer version",
-                            item.info.path)  # fmt: skip
+                log.warning(
+                    "%s changed while it was exported (a collection is running); exported the newer version",
+                    item.info.path,
+                )
             provenance.append(_session_provenance(item, copy, digest))
             sets.append(load_matched_set(copy))
         paired = build_paired_dataset(sets)
@@ -309,40 +266,49 @@ def export_dataset(data_dirs: Sequence[Path], out: Path) -> ExportSummary:
             "sessions": len(provenance),
         }
         incomplete = [
-            {"file": e["file"], "object": e["object"], "sensor": e["sensor"],
-             "finished": e["presses"]["complete"] + e["presses"]["failed"], "planned": e["presses"]["planned"]}
+            {
+                "file": e["file"],
+                "object": e["object"],
+                "sensor": e["sensor"],
+                "finished": e["presses"]["complete"] + e["presses"]["failed"],
+                "planned": e["presses"]["planned"],
+            }
             for e in provenance
             if e["presses"]["complete"] + e["presses"]["failed"] < e["presses"]["planned"]
-        ]  # fmt: skip
+        ]
         schema = _arrow_schema(sensors, {"join": ["object", "rotation_deg", "angle_deg", "target_n"]})
         table = paired_table(paired, by_key, simulated).cast(schema)
         pq.write_table(table, staging / PARQUET_NAME, compression="zstd")
         document = {
             "format": "unitac-rig paired tactile dataset",
             "created_unix": time.time(),
-            "exported_by": {"package_version": package_version(), "git_commit": git_commit(),
-                            "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else ""},
+            "exported_by": exported_by(),
             "paired_content_hash": paired.content_hash(),
             "parquet": PARQUET_NAME,
             "schema": [
-                {"name": f.name, "type": str(f.type), "unit": f.metadata[b"unit"].decode(),
-                 "description": f.metadata[b"description"].decode()}
+                {
+                    "name": f.name,
+                    "type": str(f.type),
+                    "unit": f.metadata[b"unit"].decode(),
+                    "description": f.metadata[b"description"].decode(),
+                }
                 for f in schema
             ],
             "units": {name: unit for name, unit, _ in COLUMNS if unit},
-            "sensors": {s: _sensor_layout_info(s) for s in sensors},
+            "sensors": {s: sensor_layout_info(s) for s in sensors},
             "simulated": simulated,
             "counts": counts,
             "incomplete_sessions": incomplete,  # collected only in part: resume them with the same collect command
             "sessions": provenance,
-        }  # fmt: skip
+        }
         (staging / CARD_NAME).write_text(render_card(document), encoding="utf-8")
         files = [PARQUET_NAME, CARD_NAME, *(entry["file"] for entry in provenance)]
         write_manifest(staging, document, files)
     total = sum((out / rel).stat().st_size for rel in files)
     partial = tuple(f"{e['object']}/{e['sensor']} {e['finished']}/{e['planned']}" for e in incomplete)
-    return ExportSummary(out, len(paired), len(paired) * len(sensors), len(provenance), len(files) + 1, total,
-                         sensors, objects, partial)  # fmt: skip
+    return ExportSummary(
+        out, len(paired), len(paired) * len(sensors), len(provenance), len(files) + 1, total, sensors, objects, partial
+    )
 
 
 def render_card(doc: dict[str, Any]) -> str:
@@ -461,13 +427,6 @@ def _card_limits(doc: dict[str, Any]) -> list[str]:
         "- No train/test split is given. Do not split rows at random: the forces of one press are near-identical "
         "frames. Split by approach direction (object, rotation, angle), as unitac-rig's `train` does.",
     ]
-    unverified = [s["file"] for s in doc["sessions"] if s.get("integrity", "verified") != "verified"]
-    if unverified:
-        lines.append(
-            "- **Not verified:** " + ", ".join(f"`{f}`" for f in unverified) + " carry no checksums (recorded by an "
-            "older unitac-rig), so a change to them since recording could not be ruled out; every other session "
-            "matched the SHA-256 checksums its presses were recorded with."
-        )
     if doc["simulated"]:
         lines.append(
             "- **Simulated.** Recorded on the project's simulated rig: contact mechanics and sensor responses are "

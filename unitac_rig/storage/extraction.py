@@ -79,11 +79,16 @@ class ExtractionSettings:
         if not (math.isfinite(self.tolerance_n) and self.tolerance_n > 0):
             found.append(("tolerance_n", f"must be a positive number of newtons, got {self.tolerance_n:g}"))
         if not 1 <= self.smoothing_samples <= MAX_SMOOTHING_SAMPLES:
-            found.append(("smoothing_samples", f"must be 1 to {MAX_SMOOTHING_SAMPLES} samples, got "
-                          f"{self.smoothing_samples}"))  # fmt: skip
+            found.append(
+                ("smoothing_samples", f"must be 1 to {MAX_SMOOTHING_SAMPLES} samples, got {self.smoothing_samples}")
+            )
         if not (math.isfinite(self.tactile_latency_s) and abs(self.tactile_latency_s) <= MAX_LATENCY_S):
-            found.append(("tactile_latency_s", f"must be a number of seconds within ±{MAX_LATENCY_S:g}, got "
-                          f"{self.tactile_latency_s:g}"))  # fmt: skip
+            found.append(
+                (
+                    "tactile_latency_s",
+                    f"must be a number of seconds within ±{MAX_LATENCY_S:g}, got {self.tactile_latency_s:g}",
+                )
+            )
         if not (math.isfinite(self.max_frame_gap_s) and self.max_frame_gap_s > 0):
             found.append(("max_frame_gap_s", f"must be a positive number of seconds, got {self.max_frame_gap_s:g}"))
         if not self.targets_n or not all(math.isfinite(t) and t > 0 for t in self.targets_n):

@@ -17,11 +17,10 @@ import h5py
 
 from unitac_rig.storage.checksums import PRESS_ATTR, PressCheck, check_press_group, check_root
 
-#: 2: SHA-256 checksums on every press and on the root attributes; 3: every press carries its identity
-#: (IDENTITY_KEYS, press id, angle) under its seal and the root seal covers the list of presses
+#: the one session format: SHA-256 checksums on every press and on the root attributes, every press carrying its
+#: identity (IDENTITY_KEYS, press id, angle) under its seal, the root seal covering the list of presses
 SCHEMA_VERSION = 3
-READABLE_SCHEMA_VERSIONS = (1, 2, 3)  # 1: no checksums (read and resumed, reported as not verified)
-#: what names the session a press belongs to: in the session's root attributes and in every press's (schema 3 on)
+#: what names the session a press belongs to: in the session's root attributes and in every press's
 IDENTITY_KEYS = ("object", "sensor", "session_id")
 PRESS_DIR_SUFFIX = ".presses"  # a session's press files: ``<object>__<sensor>.presses/<press_id>-<sha12>.h5``
 
@@ -49,7 +48,7 @@ def press_identity_problem(group: h5py.Group, pid: str, identity: dict[str, str]
         return f"its identity attributes are unreadable ({_one_line(exc)})"
     for key, expected in identity.items():
         if key not in attrs:
-            return f"it carries no {key} (a press of a session written before identities were sealed)"
+            return f"it carries no {key}"
         if attrs[key] != expected:
             return f"it is a press of {key} {attrs[key]!r}, not of {expected!r}: in the wrong place"
     if attrs.get("press_id") != pid:
@@ -68,7 +67,7 @@ def press_identity_problem(group: h5py.Group, pid: str, identity: dict[str, str]
 
 
 def root_identity(f: h5py.File, path: Path) -> tuple[dict[str, str], str | None]:
-    """(the session identity a schema-3 file's verified root names, why it does not fit the file's name or None)."""
+    """(the session identity a file's verified root names, why it does not fit the file's name or None)."""
     try:
         identity = {key: _text(f.attrs[key]) for key in IDENTITY_KEYS if key in f.attrs}
     except Exception as exc:
@@ -91,14 +90,9 @@ class SessionCheck:
     file_problem: str | None = None  # the file cannot be used at all (does not open, foreign, index unreadable)
     root_problem: str | None = None  # the root attributes differ from their checksum
     damaged: dict[str, str] = field(default_factory=dict)  # press id -> what is wrong
-    unsealed: list[str] = field(default_factory=list)  # presses without checksums (schema 1): not verified
     verified: list[str] = field(default_factory=list)  # presses whose every array and attribute matched
     half_written: list[str] = field(default_factory=list)  # groups without write_complete (readers skip them)
     statuses: dict[str, str] = field(default_factory=dict)  # status of every intact, complete-written press
-
-    @property
-    def readable_version(self) -> bool:
-        return self.version in READABLE_SCHEMA_VERSIONS
 
     @property
     def needs_repair(self) -> bool:
@@ -115,15 +109,8 @@ class SessionCheck:
         return f"{self.path}: press {pid}: {what}{more}"
 
     def describe(self) -> str:
-        """A few words for ``inspect`` and export manifests: ``verified``, or why not."""
-        if self.needs_repair:
-            return "damaged"
-        if self.unsealed:
-            return (
-                f"not verified: {len(self.unsealed)} of {len(self.unsealed) + len(self.verified)} presses have no "
-                "checksums (recorded by an older unitac-rig)"
-            )
-        return "verified"
+        """A word for ``inspect`` and export manifests: ``verified`` or ``damaged``."""
+        return "damaged" if self.needs_repair else "verified"
 
 
 def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> SessionCheck:
@@ -150,18 +137,14 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
         if check.version is None:
             check.file_problem = "is not a unitac-rig session file (no schema_version attribute)"
             return check
-        if not check.readable_version:
+        if check.version != SCHEMA_VERSION:
             return check  # another format: not ours to judge (the readers say which version it is)
         identity: dict[str, str] = {}
-        if check.version >= 2:
-            root = check_root(f)
-            if root.damaged:
-                check.root_problem = root.detail
-            elif root.state == "unsealed":  # a damaged attribute heap can hide the seal: never "unsealed" here
-                check.root_problem = "its root seal (attrs_sha256) is missing or unreadable"
-            elif check.version >= 3:
-                identity, problem = root_identity(f, path)
-                check.root_problem = problem
+        root = check_root(f)
+        if root.damaged:
+            check.root_problem = root.detail
+        else:
+            identity, check.root_problem = root_identity(f, path)
         try:
             presses = f["presses"]
             names = sorted(presses)
@@ -185,9 +168,7 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
             seal = press_seal(path, presses, pid) if known_good else None
             trusted = seal is not None and (pid, seal) in known_good
             result = PressCheck("ok") if trusted else check_press_group(g)
-            if result.state == "unsealed" and check.version >= 2:
-                check.damaged[pid] = "it has no checksums in a file whose presses all carry them"
-            elif result.damaged:
+            if result.damaged:
                 check.damaged[pid] = result.detail
             elif identity and (wrong := press_identity_problem(g, pid, identity, _link_name(presses, pid))):
                 check.damaged[pid] = wrong
@@ -195,10 +176,10 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
                 try:
                     status = g.attrs["status"]
                     check.statuses[pid] = status.decode() if isinstance(status, bytes) else str(status)
-                except Exception as exc:  # only an unsealed press can get here with a damaged status
+                except Exception as exc:  # a press trusted from an earlier read whose file changed since
                     check.damaged[pid] = f"its status could not be read ({_one_line(exc)})"
                     continue
-                (check.verified if result.state == "ok" else check.unsealed).append(pid)
+                check.verified.append(pid)
     return check
 
 
@@ -214,7 +195,7 @@ def press_seal(path: Path, presses: h5py.Group, pid: str) -> str | None:
         link = presses.get(pid, getlink=True)
         if isinstance(link, h5py.ExternalLink):
             seal += f"|{link.filename}|{file_stamp(Path(path).parent / str(link.filename))}"
-        else:  # a group inside the session file (older layout): trusted only while that file is unchanged
+        else:  # a group inside the session file (an export's copy): trusted only while that file is unchanged
             seal += f"|.|{file_stamp(Path(path))}"
     except Exception:  # damaged metadata raises anything: the press is then read in full
         return None

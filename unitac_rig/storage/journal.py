@@ -1,7 +1,7 @@
 """The journal: each press's durable log and repair copy (``DATA/.journal/<object>__<sensor>/<press_id>.h5``) and
 the session's header (``_session.json``), checked like the data they protect.
 
-An entry is verified against its checksums and, for a session with an identity (schema 3), against the press its
+An entry is verified against its checksums and, given the session's identity, against the press its
 name says and the session's object, sensor and session id (:func:`journal_entry_check`); readers ask
 :func:`journal_problems` which presses have lost their repair copy. A session file's extraction settings are the
 newer side when ``extract`` was killed between its renames (:func:`settings_of` compares them). The writer that
@@ -177,8 +177,13 @@ def settings_of(value: Any) -> dict[str, Any] | None:
 
 def reextracted(rec: PressRecord, settings: Mapping[str, Any]) -> PressRecord:
     """``rec`` with its extraction recomputed under ``settings`` (the raw streams are unchanged)."""
-    extraction = extract_press(rec.robot_t_s, rec.press_force_n, rec.tactile_t_s, rec.tactile_valid,
-                               ExtractionSettings.from_dict(dict(settings)))  # fmt: skip
+    extraction = extract_press(
+        rec.robot_t_s,
+        rec.press_force_n,
+        rec.tactile_t_s,
+        rec.tactile_valid,
+        ExtractionSettings.from_dict(dict(settings)),
+    )
     return dataclasses.replace(rec, extraction=extraction)
 
 

@@ -21,22 +21,26 @@ pairs as the Parquet export of the same data (the frames are the rows the press'
 from __future__ import annotations
 
 import json
-import sys
 import time
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from unitac_rig.errors import DataError
-from unitac_rig.provenance import git_commit, package_version
-from unitac_rig.storage.export import publish_when_done, staging_for
-from unitac_rig.storage.manifest import MANIFEST_NAME, write_manifest
+from unitac_rig.storage.manifest import (
+    MANIFEST_NAME,
+    exported_by,
+    publish_when_done,
+    sensor_layout_info,
+    staging_for,
+    write_manifest,
+)
 from unitac_rig.storage.pooling import pool_sessions
 from unitac_rig.storage.press_record import PressRecord
-from unitac_rig.storage.reader import MatchedSet, read_presses, read_session_info
+from unitac_rig.storage.reader import MatchedSet, PressMatches, matched_set, read_presses, read_session_info
 
 CODEBASE_VERSION = "v3.0"  # LeRobotDataset format version (lerobot-dataset 0.4.x reads v3.0)
 CHUNKS_SIZE = 1000  # files per chunk directory (LeRobot's default)
@@ -94,8 +98,8 @@ class _Feature:
     description: str
 
     def info(self) -> dict[str, Any]:
-        return {"dtype": self.dtype, "shape": list(self.shape), "names": self.names, "unit": self.unit,
-                "description": self.description}  # fmt: skip
+        """Its ``meta/info.json`` entry: dtype, shape, names, unit, description."""
+        return {key: list(v) if key == "shape" else v for key, v in asdict(self).items() if key != "name"}
 
 
 def _tactile_key(sensor: str) -> str:
@@ -106,53 +110,93 @@ def _features(sensor: str, layout: dict[str, Any], targets: Sequence[float], dis
     n = int(layout["n_taxels"])
     key = _tactile_key(sensor)
     units = str(layout["units"])
-    grid = f"taxel k at row k // {layout['cols']}, column k % {layout['cols']} of the {layout['rows']} x " \
-           f"{layout['cols']} grid"  # fmt: skip
+    grid = (
+        f"taxel k at row k // {layout['cols']}, column k % {layout['cols']} of the {layout['rows']} x "
+        f"{layout['cols']} grid"
+    )
     features = [
-        _Feature(key, "float32", (n, 3), ["taxel", "channel"], units,
-                 f"tare-subtracted tactile frame: {grid}; channels x, y, z in the sensor's frame"),
+        _Feature(
+            key,
+            "float32",
+            (n, 3),
+            ["taxel", "channel"],
+            units,
+            f"tare-subtracted tactile frame: {grid}; channels x, y, z in the sensor's frame",
+        ),
         _Feature(f"{key}.valid", "bool", (1,), None, "", "false where a taxel was missing or stale"),
         _Feature(f"{key}.seq", "int64", (1,), None, "", "the device's frame counter (-1: the protocol has none)"),
         _Feature(f"{key}.device_t_us", "int64", (1,), None, "us", "the device's own clock (-1: none)"),
-    ]  # fmt: skip
+    ]
     if displacement:
-        features.append(_Feature(f"{key}.displacement_mm", "float32", (n, 3), ["taxel", "channel"], "mm",
-                                 "pillar displacement x, y, z (PapillArray)"))  # fmt: skip
+        features.append(
+            _Feature(
+                f"{key}.displacement_mm",
+                "float32",
+                (n, 3),
+                ["taxel", "channel"],
+                "mm",
+                "pillar displacement x, y, z (PapillArray)",
+            )
+        )
     features += [
-        _Feature("observation.wrench", "float32", (6,), ["fx", "fy", "fz", "tx", "ty", "tz"], "N, N m",
-                 "wrist wrench on the tool, base axes, after the press's F/T zero (nearest arm sample)"),
-        _Feature("observation.tcp_pose", "float32", (6,), ["x", "y", "z", "rx", "ry", "rz"], "m, rad",
-                 "TCP pose in the base frame, rotation vector (nearest arm sample)"),
-        _Feature("observation.press_force_n", "float32", (1,), None, "N",
-                 "wrist force along the press direction, positive while pressing (nearest arm sample)"),
-        _Feature("observation.arm_dt_s", "float32", (1,), None, "s",
-                 "host time of the arm sample used minus the tactile frame's host time"),
+        _Feature(
+            "observation.wrench",
+            "float32",
+            (6,),
+            ["fx", "fy", "fz", "tx", "ty", "tz"],
+            "N, N m",
+            "wrist wrench on the tool, base axes, after the press's F/T zero (nearest arm sample)",
+        ),
+        _Feature(
+            "observation.tcp_pose",
+            "float32",
+            (6,),
+            ["x", "y", "z", "rx", "ry", "rz"],
+            "m, rad",
+            "TCP pose in the base frame, rotation vector (nearest arm sample)",
+        ),
+        _Feature(
+            "observation.press_force_n",
+            "float32",
+            (1,),
+            None,
+            "N",
+            "wrist force along the press direction, positive while pressing (nearest arm sample)",
+        ),
+        _Feature(
+            "observation.arm_dt_s",
+            "float32",
+            (1,),
+            None,
+            "s",
+            "host time of the arm sample used minus the tactile frame's host time",
+        ),
         _Feature("annotation.object", "string", (1,), None, "", "object id (see `unitac-rig objects`)"),
         _Feature("annotation.rotation_deg", "float32", (1,), None, "deg", "rotation of the object on its mount"),
         _Feature("annotation.angle_deg", "float32", (1,), None, "deg", "approach angle of the press"),
-        _Feature("annotation.matched_targets", "bool", (len(targets),), [f"{t:.2f} N" for t in targets], "",
-                 "true for each target force this frame was force-matched to (the press's extraction; misses "
-                 "false): the frames the paired dataset is built from"),
-        _Feature("timestamp", "float32", (1,), None, "s",
-                 "host time of the tactile frame minus that of the episode's first frame (measured, not index/fps)"),
+        _Feature(
+            "annotation.matched_targets",
+            "bool",
+            (len(targets),),
+            [f"{t:.2f} N" for t in targets],
+            "",
+            "true for each target force this frame was force-matched to (the press's extraction; misses "
+            "false): the frames the paired dataset is built from",
+        ),
+        _Feature(
+            "timestamp",
+            "float32",
+            (1,),
+            None,
+            "s",
+            "host time of the tactile frame minus that of the episode's first frame (measured, not index/fps)",
+        ),
         _Feature("frame_index", "int64", (1,), None, "", "frame number within the episode"),
         _Feature("episode_index", "int64", (1,), None, "", "episode (press) number"),
         _Feature("index", "int64", (1,), None, "", "frame number within the dataset"),
         _Feature("task_index", "int64", (1,), None, "", "row of meta/tasks.parquet"),
-    ]  # fmt: skip
+    ]
     return features
-
-
-def _layout_info(sensor: str, n_taxels: int) -> dict[str, Any]:
-    from unitac_rig.rig.sensors import SENSORS
-
-    spec = SENSORS.get(sensor)
-    if spec is None:
-        return {"model": "unknown", "rows": n_taxels, "cols": 1, "n_taxels": n_taxels, "pitch_mm": None,
-                "units": "sensor units"}  # fmt: skip
-    layout = spec.layout
-    return {"model": layout.model, "rows": layout.rows, "cols": layout.cols, "n_taxels": layout.n_taxels,
-            "pitch_mm": layout.pitch_mm, "units": layout.units}  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -210,8 +254,10 @@ def _column(feature: _Feature, values: Any) -> tuple[Any, Any]:
     n, c = feature.shape
     inner = pa.ListArray.from_arrays(pa.array(np.arange(0, m * n * c + 1, c, dtype=np.int32)), flat)
     outer = pa.ListArray.from_arrays(pa.array(np.arange(0, m * n + 1, n, dtype=np.int32)), inner)
-    metadata = {b"ARROW:extension:name": ARRAY2D.encode(),
-                b"ARROW:extension:metadata": json.dumps([[n, c], feature.dtype]).encode()}  # fmt: skip
+    metadata = {
+        b"ARROW:extension:name": ARRAY2D.encode(),
+        b"ARROW:extension:metadata": json.dumps([[n, c], feature.dtype]).encode(),
+    }
     return outer, pa.field(feature.name, pa.list_(pa.list_(value_type)), metadata=metadata)
 
 
@@ -254,8 +300,9 @@ def _nearest(sorted_t: np.ndarray, query: np.ndarray) -> np.ndarray:
     return np.where(np.abs(sorted_t[right] - query) < np.abs(sorted_t[left] - query), right, left)
 
 
-def _episode(rec: PressRecord, session: dict[str, Any], sensor: str, targets: Sequence[float],
-             displacement: bool) -> _Episode:  # fmt: skip
+def _episode(
+    rec: PressRecord, session: dict[str, Any], sensor: str, targets: Sequence[float], displacement: bool
+) -> _Episode:
     t = np.asarray(rec.tactile_t_s, dtype=np.float64)
     m = int(t.size)
     key = _tactile_key(sensor)
@@ -313,15 +360,17 @@ def _episode(rec: PressRecord, session: dict[str, Any], sensor: str, targets: Se
         "unitac/tare_baseline": tare.reshape(-1),
     }
     if ex is not None:
-        meta.update({
-            "extraction/targets_n": np.asarray(ex.targets_n, np.float64),
-            "extraction/crossing_t_s": np.asarray(ex.crossing_t_s, np.float64),
-            "extraction/frame_index": np.asarray(ex.frame_index, np.int64),
-            "extraction/force_at_frame_n": np.asarray(ex.force_at_frame_n, np.float64),
-            "extraction/error_n": np.asarray(ex.error_n, np.float64),
-            "extraction/miss": np.asarray(ex.miss, bool),
-            "extraction/settings": json.dumps(ex.settings.to_dict()),
-        })  # fmt: skip
+        meta.update(
+            {
+                "extraction/targets_n": np.asarray(ex.targets_n, np.float64),
+                "extraction/crossing_t_s": np.asarray(ex.crossing_t_s, np.float64),
+                "extraction/frame_index": np.asarray(ex.frame_index, np.int64),
+                "extraction/force_at_frame_n": np.asarray(ex.force_at_frame_n, np.float64),
+                "extraction/error_n": np.asarray(ex.error_n, np.float64),
+                "extraction/miss": np.asarray(ex.miss, bool),
+                "extraction/settings": json.dumps(ex.settings.to_dict()),
+            }
+        )
     shape = session.get("shape")
     material = session.get("material")
     what = f" ({' '.join(str(x) for x in (shape, material) if x)})" if shape or material else ""
@@ -435,7 +484,7 @@ def _write_sensor_dataset(root: Path, sensor: str, pooled: Sequence[Any]) -> dic
     if not presses:
         raise DataError(f"no presses with tactile frames for {sensor}")
     n_taxels = int(np.asarray(presses[0].tactile_values).shape[1])
-    layout = _layout_info(sensor, n_taxels)
+    layout = sensor_layout_info(sensor, n_taxels)
     targets = sorted({round(float(x), 2) for p in presses if p.extraction is not None for x in p.extraction.targets_n})
     displacement = all(p.tactile_displacement_mm is not None for p in presses)
     intervals = np.concatenate([np.diff(np.asarray(p.tactile_t_s, np.float64)) for p in presses])
@@ -467,19 +516,21 @@ def _write_sensor_dataset(root: Path, sensor: str, pooled: Sequence[Any]) -> dic
                 stats = {f.name: feature_stats(cols[f.name]) for f in features if f.dtype != "string"}
                 for name in all_columns:
                     all_columns[name].append(cols[name])
-                episode_rows.append({
-                    "episode_index": index,
-                    "tasks": [episode.task],
-                    "length": episode.length,
-                    "data/chunk_index": chunk,
-                    "data/file_index": file_index,
-                    "dataset_from_index": total,
-                    "dataset_to_index": total + episode.length,
-                    **{f"stats/{name}/{stat}": value for name, s in stats.items() for stat, value in s.items()},
-                    "meta/episodes/chunk_index": 0,
-                    "meta/episodes/file_index": 0,
-                    **episode.meta,
-                })  # fmt: skip
+                episode_rows.append(
+                    {
+                        "episode_index": index,
+                        "tasks": [episode.task],
+                        "length": episode.length,
+                        "data/chunk_index": chunk,
+                        "data/file_index": file_index,
+                        "dataset_from_index": total,
+                        "dataset_to_index": total + episode.length,
+                        **{f"stats/{name}/{stat}": value for name, s in stats.items() for stat, value in s.items()},
+                        "meta/episodes/chunk_index": 0,
+                        "meta/episodes/file_index": 0,
+                        **episode.meta,
+                    }
+                )
                 total += episode.length
     finally:
         files.close()
@@ -494,9 +545,17 @@ def _write_sensor_dataset(root: Path, sensor: str, pooled: Sequence[Any]) -> dic
     info = _info_json(sensor, layout, features, targets, sessions, len(episode_rows), total, len(tasks), fps)
     (root / "meta" / "info.json").write_text(json.dumps(info, indent=1) + "\n", encoding="utf-8")
     objects = sorted({s["object"] for s, _ in sessions})
-    return {"episodes": len(episode_rows), "frames": total, "fps": int(fps), "objects": objects,
-            "tasks": len(tasks), "layout": layout, "simulated": simulated, "displacement": displacement,
-            "sessions": [s["file"] for s, _ in sessions]}  # fmt: skip
+    return {
+        "episodes": len(episode_rows),
+        "frames": total,
+        "fps": int(fps),
+        "objects": objects,
+        "tasks": len(tasks),
+        "layout": layout,
+        "simulated": simulated,
+        "displacement": displacement,
+        "sessions": [s["file"] for s, _ in sessions],
+    }
 
 
 def _write_episodes(root: Path, rows: list[dict[str, Any]], features: dict[str, _Feature]) -> None:
@@ -538,20 +597,39 @@ def _write_tasks(root: Path, tasks: dict[str, int]) -> None:
     ordered = sorted(tasks, key=tasks.__getitem__)
     pandas_meta = {
         "index_columns": ["__index_level_0__"],
-        "column_indexes": [{"name": None, "field_name": None, "pandas_type": "unicode", "numpy_type": "object",
-                            "metadata": {"encoding": "UTF-8"}}],
+        "column_indexes": [
+            {
+                "name": None,
+                "field_name": None,
+                "pandas_type": "unicode",
+                "numpy_type": "object",
+                "metadata": {"encoding": "UTF-8"},
+            }
+        ],
         "columns": [
-            {"name": "task_index", "field_name": "task_index", "pandas_type": "int64", "numpy_type": "int64",
-             "metadata": None},
-            {"name": None, "field_name": "__index_level_0__", "pandas_type": "unicode", "numpy_type": "object",
-             "metadata": None},
+            {
+                "name": "task_index",
+                "field_name": "task_index",
+                "pandas_type": "int64",
+                "numpy_type": "int64",
+                "metadata": None,
+            },
+            {
+                "name": None,
+                "field_name": "__index_level_0__",
+                "pandas_type": "unicode",
+                "numpy_type": "object",
+                "metadata": None,
+            },
         ],
         "attributes": {},
         "creator": {"library": "pyarrow", "version": pa.__version__},
         "pandas_version": "2.2.0",
-    }  # fmt: skip
-    schema = pa.schema([pa.field("task_index", pa.int64()), pa.field("__index_level_0__", pa.string())],
-                       metadata={b"pandas": json.dumps(pandas_meta).encode()})  # fmt: skip
+    }
+    schema = pa.schema(
+        [pa.field("task_index", pa.int64()), pa.field("__index_level_0__", pa.string())],
+        metadata={b"pandas": json.dumps(pandas_meta).encode()},
+    )
     table = pa.Table.from_arrays([pa.array([tasks[t] for t in ordered], pa.int64()), pa.array(ordered)], schema=schema)
     pq.write_table(table, root / "meta" / "tasks.parquet")
 
@@ -575,13 +653,20 @@ def export_lerobot(data_dirs: Sequence[Path], out: Path) -> LeRobotExportSummary
         document = {
             "format": EXPORT_FORMAT,
             "created_unix": time.time(),
-            "exported_by": {"package_version": package_version(), "git_commit": git_commit(),
-                            "command": " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else ""},
+            "exported_by": exported_by(),
             "lerobot_codebase_version": CODEBASE_VERSION,
             "datasets": {s: {k: v for k, v in summary.items()} for s, summary in summaries.items()},
-            "sessions": [{"file": item.info.path.name, "object": item.info.object_id, "sensor": item.info.sensor,
-                          "sha256": item.sha256, "source": str(item.source)} for item in pooled],
-        }  # fmt: skip
+            "sessions": [
+                {
+                    "file": item.info.path.name,
+                    "object": item.info.object_id,
+                    "sensor": item.info.sensor,
+                    "sha256": item.sha256,
+                    "source": str(item.source),
+                }
+                for item in pooled
+            ],
+        }
         (staging / CARD_NAME).write_text(render_card(document), encoding="utf-8")
         for sensor, summary in summaries.items():
             (staging / sensor / CARD_NAME).write_text(render_sensor_card(sensor, summary, document), encoding="utf-8")
@@ -605,10 +690,24 @@ def size_category(n: int) -> str:
 
 def _load_and_cite(loading: list[str]) -> list[str]:
     """A card's guarded loading code (``loading``: the lines after the import) and the paper's citation."""
-    return ["```python", TORCHVISION_GUARD.rstrip(), "", *loading, "```", "",
-            "The `except` branch is for torch's CPU build beside PyPI's torchvision (a CUDA build, whose extension "
-            "then fails with `operator torchvision::nms does not exist`); these datasets hold no images, so no "
-            "torchvision op is called.", "", "## Citation", "", "```bibtex", CITATION, "```", ""]  # fmt: skip
+    return [
+        "```python",
+        TORCHVISION_GUARD.rstrip(),
+        "",
+        *loading,
+        "```",
+        "",
+        "The `except` branch is for torch's CPU build beside PyPI's torchvision (a CUDA build, whose extension "
+        "then fails with `operator torchvision::nms does not exist`); these datasets hold no images, so no "
+        "torchvision op is called.",
+        "",
+        "## Citation",
+        "",
+        "```bibtex",
+        CITATION,
+        "```",
+        "",
+    ]
 
 
 def render_sensor_card(sensor: str, d: dict[str, Any], doc: dict[str, Any]) -> str:
@@ -740,52 +839,49 @@ def load_matched_sets(directory: Path) -> list[MatchedSet]:
     import pyarrow.parquet as pq
 
     directory = Path(directory)
-    infos = [(p.parents[1], info) for p in sorted(directory.glob("*/meta/info.json"))
-             if (info := _export_info(p)) is not None]  # fmt: skip
+    infos = [
+        (p.parents[1], info)
+        for p in sorted(directory.glob("*/meta/info.json"))
+        if (info := _export_info(p)) is not None
+    ]
     if not infos:
-        raise DataError(f"{directory} holds no unitac-rig LeRobot export (no <sensor>/meta/info.json of one)",
-                        hint="pass the --out directory of `unitac-rig export --format lerobot`")  # fmt: skip
+        raise DataError(
+            f"{directory} holds no unitac-rig LeRobot export (no <sensor>/meta/info.json of one)",
+            hint="pass the --out directory of `unitac-rig export --format lerobot`",
+        )
     sets: list[MatchedSet] = []
     for root, info in infos:
         sensor = str(info["unitac_rig"]["sensor"])
         key = _tactile_key(sensor)
+        n_taxels = int(info["features"][key]["shape"][0])
         episodes = pq.read_table(sorted((root / "meta" / "episodes").glob("*/*.parquet"))).to_pylist()
         frames_by_file: dict[tuple[int, int], Any] = {}
-        parts: dict[str, dict[str, list[Any]]] = {}
+        parts: dict[str, tuple[list[PressMatches], list[bool]]] = {}
         for ep in sorted(episodes, key=lambda e: e["episode_index"]):
             if ep.get("unitac/status") != "complete" or ep.get("extraction/miss") is None:
                 continue
             where = (int(ep["data/chunk_index"]), int(ep["data/file_index"]))
             if where not in frames_by_file:
-                table = pq.read_table(root / DATA_PATH.format(chunk_index=where[0], file_index=where[1]),
-                                      columns=["index", key])  # fmt: skip
-                n_taxels = int(info["features"][key]["shape"][0])
+                table = pq.read_table(
+                    root / DATA_PATH.format(chunk_index=where[0], file_index=where[1]), columns=["index", key]
+                )
                 flat = table.column(key).combine_chunks().flatten().flatten().to_numpy(zero_copy_only=False)
                 frames_by_file[where] = (table.column("index").to_numpy(), flat.reshape(-1, n_taxels, 3))
             index, frames = frames_by_file[where]
             keep = ~np.asarray(ep["extraction/miss"], bool)
             rows = int(ep["dataset_from_index"]) + np.asarray(ep["extraction/frame_index"], np.int64)[keep]
             picked = frames[np.searchsorted(index, rows)]
-            part = parts.setdefault(str(ep["unitac/object"]), {k: [] for k in ("rot", "ang", "tgt", "val", "f", "e")})
-            part["rot"].append(np.full(int(keep.sum()), float(ep["unitac/rotation_deg"])))
-            part["ang"].append(np.full(int(keep.sum()), float(ep["unitac/angle_deg"])))
-            part["tgt"].append(np.asarray(ep["extraction/targets_n"], np.float64)[keep])
-            part["val"].append(picked.astype(np.float32))
-            part["f"].append(np.asarray(ep["extraction/force_at_frame_n"], np.float64)[keep])
-            part["e"].append(np.asarray(ep["extraction/error_n"], np.float64)[keep])
-            part.setdefault("simulated", []).append(bool(ep["unitac/simulated"]))
-        for object_id, part in sorted(parts.items()):
-            sets.append(
-                MatchedSet(
-                    object_id=object_id,
-                    sensor=sensor,
-                    simulated=all(part["simulated"]),
-                    rotation_deg=np.concatenate(part["rot"]),
-                    angle_deg=np.concatenate(part["ang"]),
-                    target_n=np.concatenate(part["tgt"]),
-                    values=np.concatenate(part["val"]),
-                    force_n=np.concatenate(part["f"]),
-                    error_n=np.concatenate(part["e"]),
-                )
+            press = (
+                float(ep["unitac/rotation_deg"]),
+                float(ep["unitac/angle_deg"]),
+                np.asarray(ep["extraction/targets_n"], np.float64)[keep],
+                picked.astype(np.float32),
+                np.asarray(ep["extraction/force_at_frame_n"], np.float64)[keep],
+                np.asarray(ep["extraction/error_n"], np.float64)[keep],
             )
+            presses, simulated = parts.setdefault(str(ep["unitac/object"]), ([], []))
+            presses.append(press)
+            simulated.append(bool(ep["unitac/simulated"]))
+        for object_id, (presses, simulated) in sorted(parts.items()):
+            sets.append(matched_set(object_id, sensor, all(simulated), presses, n_taxels))
     return sets

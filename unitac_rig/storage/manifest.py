@@ -1,4 +1,6 @@
-"""``manifest.json``: what a dataset export holds, and the SHA-256 of every file in it, so a copy can be checked.
+"""What every export shares: building it in a hidden sibling folder and publishing it whole (:func:`staging_for`,
+:func:`publish_when_done`), what it says about its maker and sensors, and ``manifest.json``: what it holds and the
+SHA-256 of every file in it, so a copy can be checked.
 
 The manifest lists every file of the export (relative path, size in bytes, SHA-256) except itself, plus whatever
 the exporter describes (schema, units, counts, provenance; see :mod:`unitac_rig.storage.export`).
@@ -8,15 +10,22 @@ another hash, and refuses a directory holding files the manifest does not list (
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+import logging
 import os
-from collections.abc import Iterable, Mapping
+import shutil
+import sys
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
 
 from unitac_rig.errors import DataError
+from unitac_rig.provenance import git_commit, package_version
+
+log = logging.getLogger(__name__)
 
 MANIFEST_NAME = "manifest.json"
 MANIFEST_VERSION = 1
@@ -125,3 +134,91 @@ def verify_manifest(root: Path) -> VerifyReport:
             hint="remove what was added, or copy the export again",
         )
     return VerifyReport(files=len(listed), bytes=total, unlisted=unlisted)
+
+
+def sensor_layout_info(sensor: str, n_taxels: int = 0) -> dict[str, Any]:
+    """A sensor's taxel grid for manifests and cards (model, rows, cols, n_taxels, pitch_mm, units); a sensor the
+    registry does not know is one column of ``n_taxels``."""
+    from unitac_rig.rig.sensors import SENSORS
+
+    spec = SENSORS.get(sensor)
+    if spec is None:
+        return {
+            "model": "unknown",
+            "rows": n_taxels,
+            "cols": 1,
+            "n_taxels": n_taxels,
+            "pitch_mm": None,
+            "units": "sensor units",
+        }
+    layout = spec.layout
+    return {
+        "model": layout.model,
+        "rows": layout.rows,
+        "cols": layout.cols,
+        "n_taxels": layout.n_taxels,
+        "pitch_mm": layout.pitch_mm,
+        "units": layout.units,
+    }
+
+
+def exported_by() -> dict[str, str]:
+    """Which unitac-rig wrote an export, and the command line that asked for it."""
+    command = " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else ""
+    return {"package_version": package_version(), "git_commit": git_commit(), "command": command}
+
+
+def staging_for(out: Path) -> Path:
+    """A fresh hidden sibling of ``out`` to build an export in (renamed into place when complete, so ``out`` is
+    complete or absent); refuses an ``out`` that exists and is not an empty directory."""
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise DataError(
+            f"{out} already exists and is not an empty directory",
+            hint="choose a new --out directory (an export is never merged into another one)",
+        )
+    out.parent.mkdir(parents=True, exist_ok=True)
+    remove_dead_staging(out.parent)
+    staging = out.parent / f".{out.name}.partial-{os.getpid()}"
+    if staging.exists():
+        shutil.rmtree(staging)
+    staging.mkdir(parents=True)
+    return staging
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: it exists, run by someone else
+        return True
+    return True
+
+
+def remove_dead_staging(folder: Path) -> list[Path]:
+    """Remove the half-built exports (``.<out>.partial-<pid>``) in ``folder`` whose process is gone (killed during
+    an export): a staging folder never outlives the process that built it by more than the next export's start.
+    Returns what was removed."""
+    removed = []
+    for staging in folder.glob(".*.partial-*"):
+        pid = staging.name.rsplit("-", 1)[-1]
+        if staging.is_dir() and pid.isdigit() and not _pid_alive(int(pid)):
+            shutil.rmtree(staging, ignore_errors=True)
+            removed.append(staging)
+            log.info("removed %s, left by an export that was killed (pid %s)", staging, pid)
+    return removed
+
+
+@contextlib.contextmanager
+def publish_when_done(staging: Path, out: Path) -> Iterator[Path]:
+    """Build an export in ``staging`` inside the block; when it ends, rename ``staging`` to ``out`` (an empty ``out``
+    directory is replaced), and when it raises, remove ``staging``: ``out`` is complete or absent, never half-written.
+    Every export (Parquet, LeRobot, a trained model) publishes through this."""
+    try:
+        yield staging
+        if out.exists():
+            out.rmdir()  # empty: the caller refused anything else before building
+        os.replace(staging, out)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise

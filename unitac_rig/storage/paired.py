@@ -17,7 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.reader import MatchedSet
+from unitac_rig.storage import lerobot
+from unitac_rig.storage.pooling import pool_sessions
+from unitac_rig.storage.reader import MatchedSet, load_matched_set, load_matched_sets
 
 log = logging.getLogger(__name__)
 
@@ -32,16 +34,11 @@ def load_sets(data_dir: Path | Sequence[Path]) -> list[MatchedSet]:
     Several directories are pooled by :func:`unitac_rig.storage.pooling.pool_sessions` (the rule ``export`` uses): a
     byte-identical copy of a session counts once, two different files for one (object, sensor) are a DataError.
     """
-    from unitac_rig.storage.pooling import pool_sessions
-    from unitac_rig.storage.reader import load_matched_set, load_matched_sets
-
     dirs = [Path(data_dir)] if isinstance(data_dir, str | Path) else [Path(d) for d in data_dir]
     for directory in dirs:
         if not directory.is_dir():
             raise DataError(f"data directory {directory} does not exist", hint="pass the --data folder `collect` wrote")
     if len(dirs) == 1:
-        from unitac_rig.storage import lerobot
-
         if lerobot.is_lerobot_export(dirs[0]):  # `export --format lerobot` read back: the same matched frames
             return list(lerobot.load_matched_sets(dirs[0]))
         return list(load_matched_sets(dirs[0]))

@@ -90,11 +90,15 @@ def write_extraction(group: h5py.Group, extraction: Extraction, tared_values: np
     if chosen.any() and tared_values.size:
         frames[chosen] = tared_values[extraction.frame_index[chosen]]
     arrays = {
-        "targets_n": extraction.targets_n, "crossing_t_s": extraction.crossing_t_s,
-        "frame_index": extraction.frame_index, "frame_t_s": extraction.frame_t_s,
-        "force_at_frame_n": extraction.force_at_frame_n, "error_n": extraction.error_n, "miss": extraction.miss,
+        "targets_n": extraction.targets_n,
+        "crossing_t_s": extraction.crossing_t_s,
+        "frame_index": extraction.frame_index,
+        "frame_t_s": extraction.frame_t_s,
+        "force_at_frame_n": extraction.force_at_frame_n,
+        "error_n": extraction.error_n,
+        "miss": extraction.miss,
         "values": frames,
-    }  # fmt: skip
+    }
     digests = {}
     for name, value in arrays.items():
         data = np.asarray(value)
@@ -105,11 +109,8 @@ def write_extraction(group: h5py.Group, extraction: Extraction, tared_values: np
 
 def reseal_extraction(group: h5py.Group, digests: dict[str, str]) -> None:
     """After ``write_extraction`` on a sealed press (``unitac-rig extract``, raw arrays verified first): replace the
-    extraction's digests in the seal and seal the attributes again. An unsealed (older) press stays unsealed."""
-    arrays = sealed_arrays(group)
-    if arrays is None:
-        return
-    kept = {k: v for k, v in arrays.items() if not k.startswith("extraction/")}
+    extraction's digests in the seal and seal the attributes again."""
+    kept = {k: v for k, v in sealed_arrays(group).items() if not k.startswith("extraction/")}
     seal_press_group(group, {**kept, **digests})
 
 
@@ -234,8 +235,18 @@ def decode_attr(value: Any) -> Any:
 
 def record_nbytes(rec: PressRecord) -> int:
     """Uncompressed size of a press's arrays (bytes): an upper bound on what writing it adds to a file."""
-    arrays = [rec.robot_t_s, rec.robot_force, rec.robot_pose, rec.press_force_n, rec.tactile_t_s, rec.tactile_values,
-              rec.tactile_seq, rec.tactile_device_t_us, rec.tactile_valid, rec.tare_baseline]  # fmt: skip
+    arrays = [
+        rec.robot_t_s,
+        rec.robot_force,
+        rec.robot_pose,
+        rec.press_force_n,
+        rec.tactile_t_s,
+        rec.tactile_values,
+        rec.tactile_seq,
+        rec.tactile_device_t_us,
+        rec.tactile_valid,
+        rec.tare_baseline,
+    ]
     if rec.tactile_displacement_mm is not None:
         arrays.append(rec.tactile_displacement_mm)
     total = sum(np.asarray(a).nbytes for a in arrays)

@@ -1,18 +1,16 @@
 """Reading sessions: listing them, reading presses, and the force-matched frames learning trains on.
 
-Every reader goes through here, so it reads both storage layouts (docs/dataset.md, "Storage layout"): a session file
-whose presses are links to press files, and the older single file holding every press. :func:`session_files` names
-the files a session is stored in, :func:`session_digest` identifies its content whatever the layout (pooling), and
-:func:`snapshot_session` writes it as one self-contained file (export).
+Every reader goes through here (docs/dataset.md, "Session file"): a session file whose presses are links to press
+files, or an export's self-contained copy of one (every press a group inside it, :func:`snapshot_session`); h5py
+reads both the same way. :func:`session_files` names the files a session is stored in and :func:`session_digest`
+identifies its content in either (pooling).
 """
 
 from __future__ import annotations
 
 import hashlib
-import json
 import logging
 import os
-import shutil
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,10 +21,9 @@ import numpy as np
 
 from unitac_rig.errors import DataError
 from unitac_rig.rig.sensors import SENSORS
-from unitac_rig.storage.checksums import attrs_digest, content_seal, root_attr_items
+from unitac_rig.storage.checksums import PRESS_ATTR, attrs_digest, root_attr_items
 from unitac_rig.storage.integrity import (
     IDENTITY_KEYS,
-    READABLE_SCHEMA_VERSIONS,
     SCHEMA_VERSION,
     SessionCheck,
     check_session,
@@ -97,7 +94,6 @@ class Verified:
 _VERIFIED: dict[tuple[Any, ...], Verified] = {}
 _VERIFIED_GUARD = threading.Lock()
 _PRESSES_OK: dict[str, set[tuple[str, str]]] = {}  # file -> (press id, checksums) verified by this process
-_WARNED_UNSEALED: set[str] = set()
 
 
 def _version_key(path: Path) -> tuple[Any, ...] | None:
@@ -124,10 +120,8 @@ def verified_session(path: Path) -> Verified:
     """Verify every press of ``path`` against its checksums and identity (once per file version: what an earlier
     process verified and has not changed since is trusted, :mod:`unitac_rig.storage.trust`), and that each press
     still has its repair copy in the journal; repair from the journal what is damaged or missing, and raise a
-    DataError naming the file and press when it cannot be repaired.
-
-    A file without checksums (schema 1) is read unverified and says so (a warning, and ``integrity`` in
-    ``inspect`` and export manifests); a file of another schema version is left to the caller's version check.
+    DataError naming the file and press when it cannot be repaired. A file of another schema version is left to
+    the caller's version check.
     """
     path = Path(path)
     key = _version_key(path)
@@ -167,9 +161,6 @@ def verified_session(path: Path) -> Verified:
         issues, good = _journal_issues(path, check, stored_journal)
         for issue in issues.values():
             log.warning("%s: %s", path, issue)
-    if check.unsealed and str(path) not in _WARNED_UNSEALED:
-        _WARNED_UNSEALED.add(str(path))
-        log.warning("%s: %s: read without verification", path, check.describe())
     result = Verified(check, repairs)
     seals = _press_seals(path, check.verified)
     save_trust(path, seals, good)
@@ -182,11 +173,9 @@ def verified_session(path: Path) -> Verified:
 
 
 def _journal_issues(path: Path, check: SessionCheck, trusted: dict[str, str]) -> tuple[dict[str, str], dict[str, str]]:
-    """:func:`journal_problems` for an intact session file: its identity (schema 3) from its verified root."""
-    identity: dict[str, str] = {}
-    if check.version is not None and check.version >= 3:
-        with h5py.File(path, "r") as f:
-            identity = {k: as_str(f.attrs[k]) for k in IDENTITY_KEYS}
+    """:func:`journal_problems` for an intact session file: its identity from its verified root."""
+    with h5py.File(path, "r") as f:
+        identity = {k: as_str(f.attrs[k]) for k in IDENTITY_KEYS}
     return journal_problems(path, sorted(check.statuses), identity, trusted)
 
 
@@ -211,11 +200,11 @@ def _open(path: Path) -> h5py.File:
             hint="rerun the collect command on that directory to rebuild it from the journal",
         ) from exc
     version = f.attrs.get("schema_version")
-    if version is None or int(version) not in READABLE_SCHEMA_VERSIONS:
+    if version is None or int(version) != SCHEMA_VERSION:
         f.close()
         raise DataError(
             f"{path} has session schema version {'none' if version is None else int(version)}, this unitac-rig "
-            f"reads versions {READABLE_SCHEMA_VERSIONS[0]} to {SCHEMA_VERSION}",
+            f"reads version {SCHEMA_VERSION}",
             hint="re-collect or re-import the data with this version",
         )
     return f
@@ -302,44 +291,46 @@ def rig_label(attrs: dict[str, Any]) -> str:
     return f"{kind} rig '{attrs['rig']}'"
 
 
+#: one press's force-matched targets, misses dropped: (rotation_deg, angle_deg, target_n, frames, force_n, error_n)
+PressMatches = tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def matched_set(
+    object_id: str, sensor: str, simulated: bool, presses: list[PressMatches], n_taxels: int, rig: str = ""
+) -> MatchedSet:
+    """A MatchedSet of ``presses`` in order (the one way a session and a LeRobot export both build one)."""
+
+    def cat(i: int, shape: tuple[int, ...] = ()) -> np.ndarray:
+        parts = [np.full(len(p[2]), p[i]) if i < 2 else np.asarray(p[i]) for p in presses]
+        return np.concatenate(parts) if parts else np.zeros((0, *shape))
+
+    values = cat(3, (n_taxels, 3)).astype(np.float32)
+    return MatchedSet(object_id, sensor, simulated, cat(0), cat(1), cat(2), values, cat(4), cat(5), rig)
+
+
 def load_matched_set(path: Path) -> MatchedSet:
     info = read_session_info(path)
-    rot, ang, tgt, vals, force, err = [], [], [], [], [], []
+    presses: list[PressMatches] = []
     with _open(path) as f:
         for _, g in iter_press_groups(f):
-            if as_str(g.attrs["status"]) != "complete":
-                continue
-            ex = read_extraction(g)
-            if ex is None:
+            if as_str(g.attrs["status"]) != "complete" or (ex := read_extraction(g)) is None:
                 continue
             extraction, frames = ex
             keep = ~extraction.miss
-            k = int(keep.sum())
-            rot.append(np.full(k, float(g.attrs["rotation_deg"])))
-            ang.append(np.full(k, float(g.attrs["angle_deg"])))
-            tgt.append(extraction.targets_n[keep])
-            vals.append(frames[keep])
-            force.append(extraction.force_at_frame_n[keep])
-            err.append(extraction.error_n[keep])
+            rotation, angle = float(g.attrs["rotation_deg"]), float(g.attrs["angle_deg"])
+            presses.append(
+                (
+                    rotation,
+                    angle,
+                    extraction.targets_n[keep],
+                    frames[keep],
+                    extraction.force_at_frame_n[keep],
+                    extraction.error_n[keep],
+                )
+            )
     spec = SENSORS.get(info.sensor)
-    layout = spec.layout if spec else None
-    n_taxels = layout.n_taxels if layout else (vals[0].shape[1] if vals else 0)
-
-    def cat(parts: list[np.ndarray], shape: tuple[int, ...] = ()) -> np.ndarray:
-        return np.concatenate(parts) if parts else np.zeros((0, *shape))
-
-    return MatchedSet(
-        object_id=info.object_id,
-        sensor=info.sensor,
-        simulated=info.simulated,
-        rotation_deg=cat(rot),
-        angle_deg=cat(ang),
-        target_n=cat(tgt),
-        values=cat(vals, (n_taxels, 3)).astype(np.float32),
-        force_n=cat(force),
-        error_n=cat(err),
-        rig=rig_label(info.attrs),
-    )
+    n_taxels = spec.layout.n_taxels if spec else (presses[0][3].shape[1] if presses else 0)
+    return matched_set(info.object_id, info.sensor, info.simulated, presses, n_taxels, rig_label(info.attrs))
 
 
 def load_matched_sets(data_dir: Path) -> list[MatchedSet]:
@@ -350,16 +341,9 @@ def load_matched_sets(data_dir: Path) -> list[MatchedSet]:
     return [load_matched_set(s.path) for s in sessions]
 
 
-def root_config(path: Path) -> dict[str, Any]:
-    with _open(path) as f:
-        raw = f.attrs.get("config", "{}")
-    value = json.loads(as_str(raw)) if isinstance(raw, bytes | str) else {}
-    return value if isinstance(value, dict) else {}
-
-
 def session_files(path: Path) -> list[Path]:
-    """The files a session is stored in: the session file and every press file it links (none in the older
-    single-file layout). Copy all of them (or use :func:`snapshot_session`) to move a session elsewhere."""
+    """The files a session is stored in: the session file and every press file it links (none in an export's
+    self-contained copy). Copy all of them (or use :func:`snapshot_session`) to move a session elsewhere."""
     path = Path(path)
     with _open(path) as f:
         links = session_layout(f)[0]
@@ -367,38 +351,29 @@ def session_files(path: Path) -> list[Path]:
 
 
 def session_digest(path: Path) -> str:
-    """Hex SHA-256 of a session's content: its root attributes and every press's checksums (computed for presses
-    recorded without). The same for two copies of one session whatever their layout (single file, press files, an
-    export's snapshot), different as soon as one press or attribute differs; what pooling calls one session."""
+    """Hex SHA-256 of a session's content: its root attributes and every press's checksums. The same for a session
+    and its export's snapshot, different as soon as one press or attribute differs; what pooling calls one session."""
     digest = hashlib.sha256()
     with _open(path) as f:
         digest.update(attrs_digest((k, v) for k, v in root_attr_items(f)).encode())
         for pid, group in iter_press_groups(f):
-            digest.update(f"\n{pid}\n{content_seal(group)}".encode())
+            digest.update(f"\n{pid}\n{as_str(group.attrs[PRESS_ATTR])}".encode())
     return digest.hexdigest()
 
 
 def snapshot_session(path: Path, dest: Path) -> None:
-    """Write the session ``path`` to ``dest`` as one self-contained HDF5 file (every press a group inside it, checksums
-    as recorded): what an export ships. A single-file session is copied byte for byte; a session with press files is
-    read from one version of its session file, so a collection writing it meanwhile changes nothing in the copy."""
+    """Write the session ``path`` to ``dest`` as one self-contained HDF5 file (every press a group inside it,
+    checksums as recorded): what an export ships. Read from one version of the session file, so a collection writing
+    it meanwhile changes nothing in the copy; a snapshot of a snapshot is the same content."""
     path, dest = Path(path), Path(dest)
     tmp = private_copy_path(dest)
     try:
-        for _ in range(3):  # a single-file session may be moved into press files (by a writer) between two reads
-            with _open(path) as f:
-                if session_layout(f)[0]:
-                    with h5py.File(tmp, "w") as out:
-                        for key, value in f.attrs.items():
-                            out.attrs[key] = value
-                        presses = out.create_group("presses")
-                        for pid, group in iter_press_groups(f):
-                            f.copy(group, presses, pid)
-                    break
-            shutil.copyfile(path, tmp)
-            with h5py.File(tmp, "r") as copied:
-                if not session_layout(copied)[0]:
-                    break
+        with _open(path) as f, h5py.File(tmp, "w") as out:
+            for key, value in f.attrs.items():
+                out.attrs[key] = value
+            presses = out.create_group("presses")
+            for pid, group in iter_press_groups(f):
+                f.copy(group, presses, pid)
         os.replace(tmp, dest)
     except OSError as exc:
         raise DataError(f"could not copy {path} to {dest}: {exc}") from exc

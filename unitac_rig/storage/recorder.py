@@ -12,9 +12,9 @@ Layout (docs/dataset.md, "Storage layout"):
 * ``DATA/.journal/<object>__<sensor>/<press_id>.h5``: the durable log and repair copy of every press (the same
   ``/press`` group), written first, fsynced, atomically renamed.
 
-Every byte of a press is written twice (journal entry, press file); the session file adds its links. The single-file
-layout before it copied the whole session file for every press, so its bytes written grew with the square of the
-presses (docs/benchmarks.md, "Storage: bytes written").
+Every byte of a press is written twice, each for its own reason: the journal entry (fsynced: what makes the press
+durable, and its repair copy) and the press file (what readers open); the session file adds a link of a few hundred
+bytes (docs/benchmarks.md, "Storage: bytes written").
 
 Durability: killing the process at any moment loses at most the press in progress, every file stays readable, and the
 same command resumes without duplicating a finished press. A press is durable once its journal entry is renamed,
@@ -22,8 +22,8 @@ then written to its press file, then published by the session file's rename. On 
 press files and the journal are checked against their checksums and each is repaired from the other: a session file
 that no longer opens is moved aside (``*.broken-<time>.h5``) and rebuilt from the journal; a press whose file is
 damaged or missing is rewritten from its journal entry; a journalled press the session file does not link yet (a
-kill between the steps) is added. A session in the older single-file layout (every press a group inside the session
-file) still reads as it is; the first time it is written again its presses move out into press files.
+kill between the steps) is added. An export's self-contained copy of a session (every press a group inside the
+file, :func:`unitac_rig.storage.reader.snapshot_session`) is read-only: no writer continues it.
 
 Readers never disturb the writer, and the writer never disturbs readers: no published file is ever opened for
 writing, so ``inspect``, ``train``, ``extract``'s reader path or a notebook's plain ``h5py.File(path, "r")`` can open
@@ -42,10 +42,9 @@ import errno
 import itertools
 import logging
 import os
-import shutil
 import time
 import uuid
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
@@ -56,7 +55,6 @@ from unitac_rig.storage.checksums import ROOT_ATTR, check_root, seal_root
 from unitac_rig.storage.integrity import (
     IDENTITY_KEYS,
     PRESS_DIR_SUFFIX,
-    READABLE_SCHEMA_VERSIONS,
     SCHEMA_VERSION,
     SessionCheck,
     check_session,
@@ -106,57 +104,41 @@ def press_dir(path: Path) -> Path:
 def remove_stale_copies(path: Path, journal: Path) -> None:
     """Delete private copies of the session file, its press files, its journal entries and journal header left by a
     killed writer or ``extract`` (call only while holding the session's lease: no live process writes them then)."""
-    leftovers = [*path.parent.glob(f".{path.name}.*.tmp"), *journal.glob(".*.h5.*.tmp"), *journal.glob("*.h5.tmp"),
-                 *journal.glob("._session.json.*.tmp"), *journal.glob("_session.tmp"),
-                 *journal.glob("._verified.json.*.tmp"),
-                 *press_dir(path).glob(".*.tmp")]  # fmt: skip
+    leftovers = [
+        *path.parent.glob(f".{path.name}.*.tmp"),
+        *journal.glob(".*.h5.*.tmp"),
+        *journal.glob("*.h5.tmp"),
+        *journal.glob("._session.json.*.tmp"),
+        *journal.glob("_session.tmp"),
+        *journal.glob("._verified.json.*.tmp"),
+        *press_dir(path).glob(".*.tmp"),
+    ]
     for leftover in leftovers:
         leftover.unlink(missing_ok=True)
 
 
-def write_press_file(folder: Path, press_id: str, fill: Callable[[h5py.File], None], *, durable: bool = False) -> str:
-    """Write one immutable press file into ``folder``: ``fill`` writes the ``press`` group into a private file, which
-    is renamed to ``<press_id>-<sha12>.h5`` (the start of its SHA-256). Returns the file name.
+def write_press_file(folder: Path, rec: PressRecord) -> str:
+    """Write one immutable press file into ``folder`` (the group ``press``, checksums computed from memory) under a
+    private name, renamed to ``<press_id>-<sha12>.h5`` (the start of its SHA-256). Returns the file name.
 
-    Not fsynced unless ``durable``: the journal entry is the durable copy, and a press file torn by a power cut is
-    rewritten from it on the next open.
+    Not fsynced: the journal entry is the durable copy, and a press file torn by a power cut is rewritten from it on
+    the next open.
     """
     folder.mkdir(exist_ok=True)
-    tmp = folder / f".{press_id}.{os.getpid()}.tmp"
+    tmp = folder / f".{rec.press_id}.{os.getpid()}.tmp"
     try:
         with h5py.File(tmp, "w") as pf:
-            fill(pf)
-        if durable:
-            with open(tmp, "rb+") as fh:
-                os.fsync(fh.fileno())
-        name = f"{press_id}-{sha256_file(tmp)[:12]}.h5"
+            write_press_group(pf, rec, name=PRESS_GROUP)
+        name = f"{rec.press_id}-{sha256_file(tmp)[:12]}.h5"
         os.replace(tmp, folder / name)
     finally:
         tmp.unlink(missing_ok=True)
     return name
 
 
-def writing(rec: PressRecord) -> Callable[[h5py.File], None]:
-    """A press file's content written from a record (checksums computed from memory)."""
-
-    def fill(pf: h5py.File) -> None:
-        write_press_group(pf, rec, name=PRESS_GROUP)
-
-    return fill
-
-
-def copying(group: h5py.Group) -> Callable[[h5py.File], None]:
-    """A press file's content copied from a press group as it is stored (its checksums with it)."""
-
-    def fill(pf: h5py.File) -> None:
-        group.file.copy(group, pf, PRESS_GROUP)
-
-    return fill
-
-
 def session_layout(f: h5py.File) -> tuple[dict[str, str], list[str]]:
     """(press id -> linked press file, relative to the session file's folder; press ids stored as groups inside the
-    session file itself: the single-file layout) of an open session file."""
+    session file itself: an export's self-contained copy) of an open session file."""
     links: dict[str, str] = {}
     groups: list[str] = []
     presses = f.get("presses")
@@ -171,9 +153,19 @@ def session_layout(f: h5py.File) -> tuple[dict[str, str], list[str]]:
     return links, groups
 
 
+def _holds_groups(path: Path) -> bool:
+    """Whether the session file ``path`` stores presses inside it (an export's copy); False when it does not open
+    (the writer's checks say what is wrong with it)."""
+    try:
+        with h5py.File(path, "r") as f:
+            return bool(session_layout(f)[1])
+    except Exception:
+        return False
+
+
 def write_session_file(path: Path, root: Mapping[str, Any], links: Mapping[str, str]) -> Path:
-    """Write a session file (``root`` attributes, sealed from schema 2 on, and one external link per press) under a
-    private name beside ``path`` and return that name; the caller renames it over ``path``."""
+    """Write a session file (``root`` attributes, sealed, and one external link per press) under a private name
+    beside ``path`` and return that name; the caller renames it over ``path``."""
     tmp = private_copy_path(path)
     try:
         with h5py.File(tmp, "w") as f:
@@ -182,8 +174,7 @@ def write_session_file(path: Path, root: Mapping[str, Any], links: Mapping[str, 
             presses = f.create_group("presses")
             for pid in sorted(links):
                 presses[pid] = h5py.ExternalLink(links[pid], f"/{PRESS_GROUP}")
-            if int(root.get("schema_version", SCHEMA_VERSION)) >= 2:  # a schema-1 session stays unsealed
-                seal_root(f)
+            seal_root(f)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -218,14 +209,10 @@ def ensure_room(path: Path, extra_bytes: int) -> None:
                 path.unlink(missing_ok=True)
 
 
-def keep_aside(path: Path, *, move: bool) -> Path:
-    """Give the current version of ``path`` a new, unused name beside it (``<stem>.broken-<time>[-n]<suffix>``) and
-    return it; never overwrites: a second one in the same second gets ``-2``, and so on.
-
-    ``move``: the original name is freed (the file is rebuilt there); otherwise both names hold the file until the
-    caller replaces ``path`` (copy-on-write), so the damaged version survives that replacement. A hard link where
-    the filesystem has them, else a rename (``move``) or a copy.
-    """
+def keep_aside(path: Path) -> Path:
+    """Move ``path`` to a new, unused name beside it (``<stem>.broken-<time>[-n]<suffix>``) and return it; never
+    overwrites: a second one in the same second gets ``-2``, and so on. A hard link then an unlink where the
+    filesystem has them, else a rename (we hold the session's lease: nobody creates the target meanwhile)."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
     for n in itertools.count(1):
         target = path.with_name(f"{path.stem}.broken-{stamp}{'' if n == 1 else f'-{n}'}{path.suffix}")
@@ -236,13 +223,9 @@ def keep_aside(path: Path, *, move: bool) -> Path:
         except OSError:  # no hard links here (FAT, some network filesystems)
             if target.exists():
                 continue
-            if move:
-                os.rename(path, target)  # we hold the session's lease: nobody creates ``target`` meanwhile
-            else:
-                shutil.copyfile(path, target)
+            os.rename(path, target)
             return target
-        if move:
-            path.unlink()
+        path.unlink()
         return target
     raise AssertionError("unreachable")
 
@@ -256,13 +239,13 @@ def _describe_rig(attrs: Mapping[str, Any]) -> str:
 
 def check_same_rig(existing: Mapping[str, Any], new: Mapping[str, Any], where: Path) -> str | None:
     """DataError when ``existing`` (a session's attributes) says another rig recorded it than ``new`` describes
-    (simulated or not, the rig file's ``name``, imported or recorded); a note instead when ``existing`` predates
-    rig identities and cannot tell. A writer that claims no identity at all (a script) is not checked."""
+    (simulated or not, the rig file's ``name``, imported or recorded); a note instead when ``existing`` names no
+    rig (a script started it) and cannot tell. A writer that claims no identity at all (a script) is not checked."""
     if not any(k in new for k in RIG_IDENTITY_KEYS):
         return None
     if "simulated" not in existing and "source" not in existing:
         return (
-            f"{where.name} does not record which rig it was recorded on (written by an older unitac-rig): collecting "
+            f"{where.name} does not record which rig it was recorded on (a script started it naming none): collecting "
             f"into it from {_describe_rig(new)} is not checked"
         )
     differs = existing.get("source") != new.get("source") or any(
@@ -309,12 +292,16 @@ class SessionWriter:
         self.recovery_notes: list[str] = []
         # True when this writer started the session (no file, no journal yet): see discard_if_unused()
         self.created = not self.path.exists() and not (self.journal / "_session.json").exists()
+        if not self.created and _holds_groups(self.path):
+            raise DataError(
+                f"{self.path} holds its presses inside it: an export's read-only copy of a session",
+                hint="collect into the --data directory it was exported from, or into a new one",
+            )
         self._presses_written = 0
-        # what the published session file holds: its root attributes (as stored, schema_version included), the press
-        # file each press links to (relative to the data directory), and presses still stored inside it (older layout)
+        # what the published session file holds: its root attributes (as stored, schema_version included) and the
+        # press file each press links to (relative to the data directory)
         self._root: dict[str, Any] = {}
         self._links: dict[str, str] = {}
-        self._groups: list[str] = []
         try:
             self.journal.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -372,8 +359,9 @@ class SessionWriter:
         note = check_same_rig(existing, self.root_attrs, self.path)
         if note:
             self._note(note)
-        # a session begun before session ids (schema 2 or older) stays as it was: its presses carry no identity
-        self.identity = {key: str(existing[key]) for key in IDENTITY_KEYS} if "session_id" in existing else {}
+        if "session_id" not in existing:
+            raise DataError(f"{self.journal / header.name} names no session_id: it is not a unitac-rig 0.1 journal")
+        self.identity = {key: str(existing[key]) for key in IDENTITY_KEYS}
 
     def _stamped(self, rec: PressRecord) -> PressRecord:
         """``rec`` carrying this session's identity in its attributes (under its seal once written)."""
@@ -387,41 +375,31 @@ class SessionWriter:
     def _journal_press_files(self) -> dict[str, Path]:
         return {p.stem: p for p in sorted(self.journal.glob("*.h5")) if ".broken-" not in p.name}
 
-    def _header_root(self, version: int = SCHEMA_VERSION) -> dict[str, Any]:
+    def _header_root(self) -> dict[str, Any]:
         """Root attributes from the journal header (the session file's are rebuilt from it when damaged)."""
         root = {key: attr_value(value) for key, value in self._journal_header().items()}
-        root["schema_version"] = version
+        root["schema_version"] = SCHEMA_VERSION
         return root
 
     def _press_file(self, pid: str) -> Path:
         return self.data_dir / self._links[pid]
 
-    def _new_press_file(self, pid: str, fill: Callable[[h5py.File], None]) -> str:
-        """Write a press file for ``pid`` and return the link to it (relative to the data directory)."""
-        return f"{self.press_dir.name}/{write_press_file(self.press_dir, pid, fill)}"
+    def _new_press_file(self, rec: PressRecord) -> str:
+        """Write a press file for ``rec`` and return the link to it (relative to the data directory)."""
+        return f"{self.press_dir.name}/{write_press_file(self.press_dir, rec)}"
 
     def _publish(self) -> None:
         """Publish a new version of the session file: its root attributes and one link per press, written under a
-        private name and renamed over the published one. Presses still stored inside the session file (the older
-        single-file layout) are first copied out, as they are (checksums with them), into press files."""
-        if self._groups:
-            self.press_dir.mkdir(exist_ok=True)
-            self._room(self.press_dir / ".room.tmp", self.path.stat().st_size, "the session's press files",
-                       shown=self.press_dir)  # fmt: skip
-            with h5py.File(self.path, "r") as src:
-                for pid in list(self._groups):
-                    group = src["presses"][pid]
-                    self._links[pid] = self._new_press_file(pid, copying(group))
-                    self._groups.remove(pid)
+        private name and renamed over the published one."""
         tmp = private_copy_path(self.path)
         root_bytes = sum(len(str(value)) for value in self._root.values())
         self._room(tmp, root_bytes + LINK_BYTES * len(self._links), shown=self.path)
         os.replace(write_session_file(self.path, self._root, self._links), self.path)
 
     def _load(self) -> None:
-        """Read what the published session file holds (see ``_root``, ``_links``, ``_groups``)."""
+        """Read what the published session file holds (see ``_root``, ``_links``)."""
         with h5py.File(self.path, "r") as f:
-            self._links, self._groups = session_layout(f)
+            self._links = session_layout(f)[0]
             try:
                 self._root = {key: f.attrs[key] for key in f.attrs if key != ROOT_ATTR}
             except Exception:  # a damaged attribute heap: the check reports it, the journal header replaces them
@@ -436,7 +414,7 @@ class SessionWriter:
                 if raw is None:
                     return "is not a unitac-rig session file (no schema_version attribute)"
                 version = int(raw)
-                if version not in READABLE_SCHEMA_VERSIONS:
+                if version != SCHEMA_VERSION:
                     raise DataError(
                         f"{self.path} has schema version {version}; this unitac-rig writes {SCHEMA_VERSION}",
                         hint="collect into a new --data directory",
@@ -467,33 +445,33 @@ class SessionWriter:
         if self.path.exists():
             problem = self._unusable()
             if problem is not None:
-                broken = keep_aside(self.path, move=True)
+                broken = keep_aside(self.path)
                 self._note(f"{self.path.name} {problem}; moved aside to {broken.name} and rebuilt from the journal")
         if self.path.exists():
             self._load()
         else:
-            self._root, self._links, self._groups = self._header_root(), {}, []
+            self._root, self._links = self._header_root(), {}
             self._publish()
         self._reconcile_with_journal()
 
     def _reconcile_with_journal(self) -> None:
         """Make the session and the journal agree, each verified against its checksums, each repaired from the other.
 
-        In the session: a half-written press (older layout) is dropped, and replaced from the journal when it has a
-        copy there; a damaged or missing press file is replaced by its intact journal copy; a journalled press the
+        In the session: a half-written press is dropped, and replaced from the journal when it has a copy there; a
+        damaged or missing press file is replaced by its intact journal copy; a journalled press the
         session file does not link (a kill between the writes) is added; damaged root attributes are rewritten from
         the journal header. In the journal: a torn or damaged entry whose press the session holds intact is
         rewritten from it. The session file is republished only when something changes.
         """
         check = check_session(self.path)
         if check.file_problem:  # the index went bad since _unusable() looked (or a race with a disk error)
-            broken = keep_aside(self.path, move=True)
+            broken = keep_aside(self.path)
             self._note(f"{self.path.name} {check.file_problem}; moved aside to {broken.name}, rebuilt from the journal")
-            self._root, self._links, self._groups = self._header_root(), {}, []
+            self._root, self._links = self._header_root(), {}
             self._publish()
             check = check_session(self.path)
         if check.root_problem:
-            self._root = self._header_root(check.version or SCHEMA_VERSION)
+            self._root = self._header_root()
         # the session file's extraction settings are the newer side: extract renames it before the journal's copies
         settings = settings_of(self._root.get("extraction_settings"))
         journal = self._journal_press_files()
@@ -507,17 +485,12 @@ class SessionWriter:
                 "are kept aside), or restore the file from a backup",
             )
         kept_as: dict[str, str] = {}
-        if lost:
-            session_aside: Path | None = None
-            for pid in lost:
-                ours = pid in self._links and self._press_file(pid).parent == self.press_dir  # never a file elsewhere
-                if ours and self._press_file(pid).is_file():
-                    kept_as[pid] = keep_aside(self._press_file(pid), move=True).name
-                elif pid in self._groups:  # the older layout: the damaged version of the whole file survives
-                    session_aside = session_aside or keep_aside(self.path, move=False)
-                    kept_as[pid] = session_aside.name
-            for entry_path in broken_entries:
-                keep_aside(entry_path, move=True)
+        for pid in lost:
+            ours = pid in self._links and self._press_file(pid).parent == self.press_dir  # never a file elsewhere
+            if ours and self._press_file(pid).is_file():
+                kept_as[pid] = keep_aside(self._press_file(pid)).name
+        for entry_path in broken_entries:
+            keep_aside(entry_path)
         restore = [self._stamped(r) for r in restore]
         if settings is not None:  # a journal copy older than the session's extraction is re-extracted
             stale = {
@@ -530,9 +503,8 @@ class SessionWriter:
         gone = set(check.half_written) | set(lost) | set(check.damaged) | {rec.press_id for rec in restore}
         for pid in gone:
             self._links.pop(pid, None)
-        self._groups = [pid for pid in self._groups if pid not in gone]
         for rec in restore:
-            self._links[rec.press_id] = self._new_press_file(rec.press_id, writing(rec))
+            self._links[rec.press_id] = self._new_press_file(rec)
         if gone or check.root_problem:
             self._publish()
         for pid, why in lost.items():
@@ -601,7 +573,7 @@ class SessionWriter:
             else:
                 lost[pid] = f"{what}, and it has no journal copy"
         for pid in check.statuses:
-            if pid not in journal and pid not in journal_fix and check.version and check.version >= 2:
+            if pid not in journal and pid not in journal_fix:
                 journal_fix[pid] = "was missing (the press had no repair copy)"
         return restore, journal_fix, lost, broken_entries
 
@@ -681,9 +653,7 @@ class SessionWriter:
             write_journal_entry(self.journal, rec)
             self._presses_written += 1
             # durable from here on: a failure below only delays the press file and its link to the next open
-            self._links[rec.press_id] = self._new_press_file(rec.press_id, writing(rec))
-            if rec.press_id in self._groups:  # an older version inside a single-file session: this one replaces it
-                self._groups.remove(rec.press_id)
+            self._links[rec.press_id] = self._new_press_file(rec)
             self._publish()
         except OSError as exc:
             raise DataError(

@@ -61,8 +61,8 @@ def _reextract_copy(path: Path, settings: ExtractionSettings) -> tuple[Path, int
 
 def _reextract_session(path: Path, settings: ExtractionSettings, copies: list[tuple[Path, Path]]) -> tuple[int, int]:
     """Private copies of every press file of the session file ``path`` with the extraction recomputed, and of the
-    session file linking them: appended to ``copies`` as (copy, where it goes), the session file last. Presses
-    stored inside the session file (older layout) are copied out into press files first. Returns (presses, targets
+    session file linking them: appended to ``copies`` as (copy, where it goes), the session file last. The presses of
+    an export's self-contained copy are copied out into press files first. Returns (presses, targets
     matched in complete presses: the count ``inspect`` shows and training uses).
     """
     folder = press_dir(path)
@@ -76,7 +76,7 @@ def _reextract_session(path: Path, settings: ExtractionSettings, copies: list[tu
             complete = group.attrs.get("status") in ("complete", b"complete")
             if pid in stored:
                 tmp, n = _reextract_copy(path.parent / stored[pid], settings)
-            else:  # the single-file layout: the group is copied out into a press file of its own first
+            else:  # an export's self-contained copy: the group is copied out into a press file of its own first
                 source = folder / f".{pid}.{os.getpid()}.group.tmp"
                 try:
                     with h5py.File(source, "w") as pf:
@@ -129,8 +129,8 @@ def reextract_sessions(
         for path in paths:
             header = session_header(path)
             if header is not None:
-                writer = SessionWriter(path.parent, str(header["object"]), str(header["sensor"]), header,
-                                       unrepairable="refuse")  # fmt: skip
+                object_id, sensor = str(header["object"]), str(header["sensor"])
+                writer = SessionWriter(path.parent, object_id, sensor, header, unrepairable="refuse")
                 writers.append(writer)
                 entries = [p for p in writer._journal_press_files().values() if journal_check(p)[0] != "damaged"]
             else:
@@ -178,14 +178,8 @@ def reextract_sessions(
             tmp.unlink(missing_ok=True)
         for path in paths:
             with contextlib.suppress(OSError):
-                press_dir(path).rmdir()  # only when empty: a single-file session that was not rewritten
+                press_dir(path).rmdir()  # only when empty: an export's copy that was not rewritten
         for writer in writers:
             writer.close()
         for lease in leases:
             lease.release()
-
-
-def reextract_session(path: Path, settings: ExtractionSettings) -> tuple[int, int]:
-    """One session (see :func:`reextract_sessions`); returns (presses, targets matched)."""
-    ((_, presses, matched),) = reextract_sessions([Path(path)], settings)
-    return presses, matched

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.export import publish_when_done, staging_for
+from unitac_rig.storage.manifest import publish_when_done, staging_for
 from unitac_rig.storage.pooling import pool_sessions
 from unitac_rig.storage.reader import read_presses
 
@@ -140,10 +140,13 @@ def _layout(sensor: str, types: Any) -> Any:
     rows, cols = spec.layout.rows, spec.layout.cols
     dim, layout = types["std_msgs/msg/MultiArrayDimension"], types["std_msgs/msg/MultiArrayLayout"]
     return layout(
-        dim=[dim(label="row", size=rows, stride=rows * cols * 3), dim(label="col", size=cols, stride=cols * 3),
-             dim(label="channel_xyz", size=3, stride=3)],
+        dim=[
+            dim(label="row", size=rows, stride=rows * cols * 3),
+            dim(label="col", size=cols, stride=cols * 3),
+            dim(label="channel_xyz", size=3, stride=3),
+        ],
         data_offset=0,
-    )  # fmt: skip
+    )
 
 
 def export_rosbag2(data_dirs: Sequence[Path], out: Path) -> RosbagExportSummary:

@@ -182,8 +182,8 @@ def broken_header(data: Path) -> None:
     (journal_dir(data, *TARGET) / "_session.json").write_text('{"object": "circle_pla", "sens')
 
 
-def no_checksums(data: Path) -> None:
-    """What an older unitac-rig wrote (schema 1): no checksums anywhere."""
+def checksums_stripped(data: Path) -> None:
+    """Every checksum and the root seal removed (what schema 1 wrote): only schema 3 is read, so this is damage."""
     for path in data.glob("*__*.h5"):
         with h5py.File(path, "a") as f:
             f.attrs["schema_version"] = 1
@@ -271,7 +271,10 @@ CASES: dict[str, tuple[str, Callable[[Path], None]]] = {
     "torn_journal": ("journal entry torn (1.5 kB left); session file intact", torn_journal_entry),
     "foreign": ("a foreign HDF5 file under the session's name; journal intact", foreign_file),
     "broken_header": ("journal header (_session.json) cut short", broken_header),
-    "no_checksums": ("files from an older unitac-rig (schema 1: no checksums), not damaged", no_checksums),
+    "checksums_stripped": (
+        "every checksum and the root seal stripped, schema_version 1 (one format is read: damage)",
+        checksums_stripped,
+    ),
     "other_object_press": (
         "irregular_pla's press file copied over circle_pla's file of that press",
         other_object_press,

@@ -23,8 +23,8 @@ from hypothesis import strategies as st
 
 from drivers.arm import ArmState
 from drivers.errors import ControlScriptStopped
+from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.session import collect_session, plan_presses
-from unitac_rig.collection.streams import TickInfo
 from unitac_rig.collection.transit import approach_legs, check_session_plan, clearance_waypoints, retract_from_object
 from unitac_rig.errors import ConfigError, SafetyLimit, UnitacError
 from unitac_rig.interrupts import forget_interrupts, note_interrupt

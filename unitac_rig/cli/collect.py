@@ -20,9 +20,9 @@ from rich.text import Text
 
 from unitac_rig.cli.pace import spoken_duration
 from unitac_rig.cli.paths import path_text, require_data_folder, require_directory
+from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.sensor_choice import choose_sensor, collection_order, session_complete
 from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session, dry_run
-from unitac_rig.collection.streams import TickInfo
 from unitac_rig.collection.transit import PressPlan
 from unitac_rig.errors import ConfigError, SessionStopped, UsageError
 from unitac_rig.interrupts import immediate_interrupts, termination_as_interrupt

@@ -10,11 +10,11 @@ around it, and every check while it runs, is this press's, the same for every st
   run in the controller's force mode with a set-point just above the threshold (``press.setpoint_margin_n``), so a
   host that freezes mid-press cannot push past it and a host that dies stops the program through the RTDE watchdog
   (docs/real-rig.md, "Safety"); and every control period goes through
-  :meth:`~unitac_rig.collection.streams.PressStreams.tick`: |F| and |T| against the hard limits, travel beyond first
+  :meth:`~.safety_check.PressStreams.tick`: |F| and |T| against the hard limits, travel beyond first
   contact (a soft object fails the press instead of being crushed), protective stops, the tactile stream, host stalls;
 * after it: the dwell, the retract until the pad is unloaded, the move back to the stand-off, the record.
 
-Every path out stops the arm (``drivers.motion`` and the ``finally`` blocks here), Ctrl-C included, and whatever
+Every path out stops the arm (``guarded_motion`` and the ``finally`` blocks here), Ctrl-C included, and whatever
 was recorded is kept.
 """
 
@@ -30,10 +30,10 @@ import numpy as np
 from drivers.arm import Arm, ArmState
 from drivers.errors import ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop, RobotStateLost
 from drivers.frames import TactileFrame
-from drivers.motion import move_to, stop_arm, wait_until_at_rest
 from drivers.sensor import TactileSensor
+from unitac_rig.collection.guarded_motion import move_to, stop_arm, wait_until_at_rest
+from unitac_rig.collection.safety_check import OffAxisLimit, PressStreams, TickInfo, TravelLimit
 from unitac_rig.collection.strategy import PressContext, press_strategy
-from unitac_rig.collection.streams import OffAxisLimit, PressStreams, TickInfo, TravelLimit
 from unitac_rig.collection.transit import (
     TRANSIT_ACCEL_M_S2,
     UNLOADED_FORCE_N,

@@ -35,10 +35,10 @@ import numpy as np
 
 from drivers.arm import Arm
 from drivers.errors import ArmError, ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop
-from drivers.motion import settle
 from drivers.sensor import TactileSensor
+from unitac_rig.collection.guarded_motion import settle
 from unitac_rig.collection.press import run_press, zero_wrist
-from unitac_rig.collection.streams import TickInfo
+from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.transit import (
     PressPlan,
     check_session_plan,
@@ -584,7 +584,7 @@ def _save(
         record.attrs.setdefault("sensor_health", sensor.health().as_dict())
     except DeviceError as exc:
         log.info("no sensor health for press %s: %s", record.press_id, exc)
-    if record.reason != "off_axis":  # a press off the object's face never feeds extraction (collection/streams.py)
+    if record.reason != "off_axis":  # a press off the object's face never feeds extraction (collection/safety_check.py)
         record.extraction = extract_press(
             record.robot_t_s, record.press_force_n, record.tactile_t_s, record.tactile_valid, settings
         )

@@ -18,7 +18,7 @@ import numpy as np
 
 from drivers.arm import Arm, ArmState
 from drivers.errors import ControlScriptStopped, ProtectiveStop
-from drivers.motion import check_controller, move_to
+from unitac_rig.collection.guarded_motion import check_controller, move_to
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.interrupts import raise_if_interrupted
 from unitac_rig.rig.config import LimitsConfig

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers.arm import Arm
-from drivers.motion import wait_until_at_rest
+from unitac_rig.collection.guarded_motion import wait_until_at_rest
 from unitac_rig.collection.transit import UNLOADED_FORCE_N, move_within_limits
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.rig.config import LimitsConfig

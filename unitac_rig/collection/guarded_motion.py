@@ -1,4 +1,5 @@
-"""Motion primitives on top of :class:`drivers.arm.Arm`: watched moves, the guarded (force-terminated) move, settling.
+"""The press's force policy and every other motion of a session, on top of :class:`drivers.arm.Arm`: watched moves,
+the guarded (force-terminated) move, settling, stopping. Policy, not I/O: the driver only carries the commands.
 
 Every motion here is started and then watched one control period at a time (``wait_period`` also feeds the
 controller's watchdog), and every way out (a reached condition, an exception from a callback or the arm, Ctrl-C, a

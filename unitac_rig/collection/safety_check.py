@@ -30,8 +30,8 @@ import numpy as np
 from drivers.arm import Arm, ArmState
 from drivers.errors import DeviceTimeout
 from drivers.frames import TactileFrame
-from drivers.motion import check_controller, force_magnitude
 from drivers.sensor import TactileSensor
+from unitac_rig.collection.guarded_motion import check_controller, force_magnitude
 from unitac_rig.collection.transit import PressPlan
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.interrupts import raise_if_interrupted

@@ -253,10 +253,6 @@ def test_a_real_arm_needs_its_tcp_and_payload_or_a_loud_opt_out() -> None:
     assert config.arm is not None and config.arm.unchecked_tool
 
 
-def test_the_old_name_of_the_failure_streak_limit_still_reads() -> None:
-    assert parse_rig_config({"limits": {"max_presses_without_contact": 2}}).limits.max_failed_in_a_row == 2
-
-
 # ---- every failed press counts; a settled force ends within seconds --------------------------------------------
 
 

@@ -33,6 +33,7 @@ import numpy as np
 from drivers.arm import Arm, ArmState
 from drivers.errors import ArmError, ControlScriptStopped, ProtectiveStop
 from drivers.rotations import angle_between, matrix_to_rotvec
+from unitac_rig.rig.poses import press_force_n
 
 logger = logging.getLogger(__name__)
 
@@ -79,7 +80,7 @@ class GuardedMoveResult:
 
 def press_force(state: ArmState, direction: np.ndarray) -> float:
     """Press force (N) along the unit ``direction``: positive while the tool pushes into something."""
-    return -float(np.dot(np.asarray(state.tcp_force, dtype=np.float64)[:3], direction))
+    return press_force_n(state.tcp_force, direction)
 
 
 def force_magnitude(state: ArmState) -> tuple[float, float]:

@@ -18,7 +18,7 @@ import numpy as np
 
 from drivers.arm import Arm, ArmState
 from drivers.errors import ControlScriptStopped, ProtectiveStop
-from unitac_rig.collection.guarded_motion import check_controller, move_to
+from unitac_rig.collection.guarded_motion import check_controller, force_magnitude, move_to
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.interrupts import raise_if_interrupted
 from unitac_rig.rig.config import LimitsConfig
@@ -144,13 +144,11 @@ def transit_guard(arm: Arm, limits: LimitsConfig) -> Callable[[ArmState], None]:
     Growth, not any change: a move that starts with the pad still loaded (a session resumed after Ctrl-C stopped it
     mid-press) unloads on its way out, and that must not read as a collision.
     """
-    start = np.asarray(arm.read_state().tcp_force, dtype=np.float64)
-    start_force, start_torque = float(np.linalg.norm(start[:3])), float(np.linalg.norm(start[3:]))
+    start_force, start_torque = force_magnitude(arm.read_state())
 
     def guard(state: ArmState) -> None:
         raise_if_interrupted()
-        wrench = np.asarray(state.tcp_force, dtype=np.float64)
-        force, torque = float(np.linalg.norm(wrench[:3])), float(np.linalg.norm(wrench[3:]))
+        force, torque = force_magnitude(state)
         if force - start_force > limits.move_force_n or torque - start_torque > 0.1 * limits.move_force_n:
             raise SafetyLimit(
                 f"the wrist felt {force:.1f} N / {torque:.2f} N*m during a transit move at "
@@ -325,7 +323,7 @@ def retract_from_object(
     here = np.asarray(state.tcp_pose, dtype=np.float64)
     center = np.asarray(plan.center_xy_m, dtype=np.float64)
     radius = float(np.linalg.norm(here[:2] - center))
-    loaded = float(np.linalg.norm(np.asarray(state.tcp_force, dtype=np.float64)[:3])) > UNLOADED_FORCE_N
+    loaded = force_magnitude(state)[0] > UNLOADED_FORCE_N
     back_m = max(standoff_radius_m(plan) - radius, 0.0)
     if loaded:
         back_m = max(back_m, standoff_m)

@@ -117,9 +117,7 @@ def test_the_retract_goes_back_along_the_pad_and_out_never_to_the_unreached_stan
         short = plan.start_pose.copy()
         short[:3] -= plan.direction * 0.020
         rig.sim_arm.move_linear(short, 0.05, 0.5)
-        moved = retract_from_object(
-            rig.arm, plan, config.limits, standoff_m=0.008, clearance_m=0.09, transit_speed_m_s=0.05
-        )
+        moved = retract_from_object(rig.arm, plan, config)
         end = rig.sim_arm.true_tcp_pose()
     center = np.asarray(plan.center_xy_m)
     # not loaded and already outside the stand-off radius: no move along the pad; one move out to the clearance
@@ -136,7 +134,7 @@ def test_a_retract_that_would_leave_the_workspace_stops_at_its_edge() -> None:
     with SimRig(config, seed=0) as rig:
         rig.mount(obj, 0.0, "uskin")
         rig.sim_arm.move_linear(plan.start_pose, 0.05, 0.5)
-        retract_from_object(rig.arm, plan, box, standoff_m=0.008, clearance_m=0.09, transit_speed_m_s=0.05)
+        retract_from_object(rig.arm, plan, config.model_copy(update={"limits": box}))
         end = rig.sim_arm.true_tcp_pose()
     assert end[1] >= 0.55 - 1e-6 and end[1] < 0.56
 

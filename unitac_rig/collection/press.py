@@ -80,16 +80,7 @@ class ZeroedArm:
         return getattr(self._arm, name)
 
 
-def settle_frames(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[list[TactileFrame], np.ndarray]:
-    """Wait ``seconds`` at rest; returns the frames seen and the mean wrench (6,) over the window (N, N*m).
-
-    The mean, not the largest sample: a UR's F/T has ~1 N of sample noise, while a real contact shifts the mean.
-    """
-    frames, wrenches = _settle_window(arm, sensor, seconds)
-    return frames, wrenches.mean(axis=0)
-
-
-def _settle_window(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[list[TactileFrame], np.ndarray]:
+def settle_window(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[list[TactileFrame], np.ndarray]:
     """Wait ``seconds`` at rest; -> (frames seen, every wrench read (K, 6) in N, N*m)."""
     sensor.poll()  # drop anything queued during the transit move
     frames: list[TactileFrame] = []
@@ -121,16 +112,17 @@ def zero_wrist(
     the window's mean must be near zero.
     """
     wait_until_at_rest(arm)
-    before, mean_wrench = settle_frames(arm, sensor, settle_s if check_s is None else check_s)
-    mean_force = force_n(mean_wrench, reference)
+    before, wrenches = settle_window(arm, sensor, settle_s if check_s is None else check_s)
+    # the mean, not the largest sample: a UR's F/T has ~1 N of sample noise, while a real contact shifts the mean
+    mean_force = force_n(wrenches.mean(axis=0), reference)
     if mean_force > UNLOADED_FORCE_N:
         raise SafetyLimit(
             f"wrist reads {mean_force:.2f} N at {where}: the pad is touching something, refusing to zero the F/T",
             hint="check the object's position (object.center_m) and the stand-off in the rig file",
         )
     arm.zero_ft()
-    frames, wrenches = _settle_window(arm, sensor, settle_s)
-    left = float(np.linalg.norm(wrenches[:, :3].mean(axis=0)))
+    frames, wrenches = settle_window(arm, sensor, settle_s)
+    left = force_n(wrenches.mean(axis=0))
     if left > ZEROED_FORCE_N:
         raise SafetyLimit(
             f"wrist still reads {left:.2f} N after zeroing at {where}: the F/T zero did not take",

@@ -1,5 +1,5 @@
-"""One press's record in the making: the robot and tactile streams, one control period at a time, and the checks
-every control period of every press goes through, whatever its strategy.
+"""The safety check every control period of every press goes through, whatever its strategy, and the press's
+record it keeps while checking: the robot and tactile streams, one control period at a time.
 
 :meth:`PressStreams.tick` is handed to every motion of a press as its ``on_period``. It raises on a stopped controller
 (protective stop, the RTDE watchdog), a tactile stream that stalls, a wrist force that points the wrong way, travel

@@ -232,9 +232,20 @@ def guarded_move(
             reason: StopReason = "protective_stop"
             trigger = start_state
         else:
-            reason, trigger, peak = _approach(arm, command, unit, start_position, max_travel_m, force_threshold_n,
-                                             hard_limit_n, hard_torque_nm, stop_samples, max_duration_s, on_period,
-                                             peak)  # fmt: skip
+            reason, trigger, peak = _approach(
+                arm,
+                command,
+                unit,
+                start_position,
+                max_travel_m,
+                force_threshold_n,
+                hard_limit_n,
+                hard_torque_nm,
+                stop_samples,
+                max_duration_s,
+                on_period,
+                peak,
+            )
         if keep_moving and reason == "force":
             stop_sent = True  # nothing to stop: the next guarded move takes over within one control period
             travel = float(np.dot(np.asarray(trigger.tcp_pose[:3]) - start_position, unit))

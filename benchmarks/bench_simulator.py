@@ -118,7 +118,7 @@ def with_sim_arm(angles: list[int]) -> dict[str, Any] | None:
     """Presses through SimArm + guarded_move (the real press path's motion code), if those modules exist."""
     try:
         from drivers.clock import VirtualClock
-        from drivers.motion import guarded_move
+        from unitac_rig.collection.guarded_motion import guarded_move
         from unitac_rig.sim.arm import SimArm
     except ImportError:
         return None

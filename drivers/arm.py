@@ -8,7 +8,7 @@ The protocol has no blocking move on purpose. A controller executes what it was 
 still there, so every motion is started and then watched one control period at a time (``wait_period`` feeds the
 controller's RTDE watchdog, which stops the program when the host stops writing): a straight-line move is started
 asynchronously (``start_move_linear``) and polled (``move_running``), so the host can stop it (``stop``) the
-moment something is wrong, Ctrl-C included. ``drivers.motion.move_to`` is that loop.
+moment something is wrong, Ctrl-C included. The application's ``collection/guarded_motion.py`` is that loop.
 """
 
 from __future__ import annotations

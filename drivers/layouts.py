@@ -42,10 +42,6 @@ class SensorLayout:
     def frame_shape(self) -> tuple[int, int]:
         return (self.n_taxels, 3)
 
-    @property
-    def grid_shape(self) -> tuple[int, int, int]:
-        return (self.rows, self.cols, 3)
-
     def taxel_xy_mm(self) -> np.ndarray:
         """Taxel centres, shape (n_taxels, 2), in mm, origin at the pad centre (x right, y up)."""
         rows, cols = np.divmod(np.arange(self.n_taxels), self.cols)

@@ -15,12 +15,12 @@ from typing import Any
 import numpy as np
 import serial
 
-from drivers._reader import PumpedSensor
 from drivers.clock import Clock
 from drivers.errors import DeviceError, DeviceNotFound
 from drivers.frames import TactileFrame
 from drivers.layouts import PAPILLARRAY
 from drivers.sensor import TareRecord
+from drivers.sensor_base import PumpedSensor
 from protocols.papillarray import N_SENSOR_SLOTS, PacketParser
 from protocols.papillarray_commands import VALID_RATES_HZ, Command, encode_command
 

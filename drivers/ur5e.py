@@ -449,8 +449,9 @@ class UR5eArm:
         is a TCP to check it against.
         """
         if expected_tcp is None:
-            logger.warning("arm.tcp_offset is not set in the rig file: the UR at %s runs with an unchecked TCP",
-                           self.host)  # fmt: skip
+            logger.warning(
+                "arm.tcp_offset is not set in the rig file: the UR at %s runs with an unchecked TCP", self.host
+            )
         else:
             actual = np.asarray(self._call("getTCPOffset", self._control.getTCPOffset), dtype=np.float64).reshape(-1)
             self.tcp_offset = actual
@@ -619,8 +620,9 @@ class UR5eArm:
         except DeviceError:
             stopped = False
         if stopped:
-            raise ProtectiveStop(f"{what}: the UR at {self.host} stopped (protective/emergency stop)",
-                                 hint=STOPPED_HINT)  # fmt: skip
+            raise ProtectiveStop(
+                f"{what}: the UR at {self.host} stopped (protective/emergency stop)", hint=STOPPED_HINT
+            )
         try:
             running = bool(self._control.isProgramRunning())
         except (RuntimeError, ValueError):

@@ -35,7 +35,7 @@ RECEIVE_VARIABLES = (
 )
 # Subscribed too where the controller offers them; one answered NOT_FOUND fails the whole recipe, so the receiver
 # then connects with RECEIVE_VARIABLES alone.
-SPEED_VARIABLE = "actual_TCP_speed"  # m/s, rad/s; without it motion.py tells rest from the pose's change
+SPEED_VARIABLE = "actual_TCP_speed"  # m/s, rad/s; without it the moves tell rest from the pose's change
 PAYLOAD_VARIABLE = "payload"  # kg; subscribed only when the rig file gives a payload to check
 STALL_TIMEOUT_S = 0.5  # no new controller timestamp for this long = the RTDE stream stalled
 

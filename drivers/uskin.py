@@ -18,12 +18,12 @@ from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
 from websockets.sync.client import ClientConnection
 from websockets.sync.client import connect as ws_connect
 
-from drivers._reader import PumpedSensor
 from drivers.clock import Clock
 from drivers.errors import DeviceError, DeviceNotFound, DeviceTimeout
 from drivers.frames import TactileFrame
 from drivers.layouts import USKIN
 from drivers.sensor import TareRecord
+from drivers.sensor_base import PumpedSensor
 from protocols.errors import ProtocolError
 from protocols.xela_can import (
     USPA46_ID_MAP,

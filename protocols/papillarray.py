@@ -703,8 +703,8 @@ class PacketParser:
     def _give_up(self, start: int, stop: int) -> None:
         """Count a start marker with no intact packet ending by ``stop``: a framing error when a body with the right
         checksum did not decode or no end marker came; a checksum error when only checksums failed."""
-        decode_failed = any(self._decoded.get((start, end), 0) is None for end in self._matches.get(start, ()) if
-                            end + len(END_MARKER) <= stop)  # fmt: skip
+        closed = [end for end in self._matches.get(start, ()) if end + len(END_MARKER) <= stop]
+        decode_failed = any(self._decoded.get((start, end), 0) is None for end in closed)
         first_end = bisect_left(self._ends, start + len(START_MARKER) + 3)
         any_end = first_end < len(self._ends) and self._ends[first_end] + len(END_MARKER) <= stop
         if any_end and not decode_failed:

@@ -52,7 +52,6 @@ MAX_CONTROLLER_ID = 15
 MAX_STANDARD_ID = 0x7FF
 MAX_COUNT = 0xFFFF  # counts are unsigned 16-bit
 INVALID_X_MSB = 0xFA  # payload byte 1 (X MSB) at or above this marks a "no data" sentinel
-TAXEL_PAYLOAD_LEN = 8
 MIN_TAXEL_PAYLOAD_LEN = 7  # byte 0 + three big-endian uint16 axes
 # Learning where a cycle starts: one gap this many times any other in each of this many windows of one cycle's worth
 # of messages in a row. A burst of 24 messages at 1 Mbit/s takes ~3 ms; at 100 frames/s the pause before the next

@@ -28,8 +28,8 @@ from typing import Any, TypeGuard
 import numpy as np
 
 from protocols.errors import ProtocolError
+from protocols.xela_can import MAX_COUNT  # the uSkin's counts, unsigned 16-bit on either wire
 
-MAX_COUNT = 0xFFFF
 HEX_DIGITS = frozenset(
     "0123456789ABCDEFabcdef"
 )  # ASCII only: int(..., 16) would also take "-FFF", "0x1F", "F_FF", "١٢"

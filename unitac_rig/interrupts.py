@@ -49,11 +49,6 @@ def note_interrupt(signal_number: int) -> None:
     _noted.append(signal_number)
 
 
-def noted_interrupt() -> int | None:
-    """The last interrupt noted in this process, if any."""
-    return _noted[-1] if _noted else None
-
-
 def interrupt_for(signal_number: int) -> KeyboardInterrupt:
     """The exception an interrupt is raised as: KeyboardInterrupt for SIGINT, :class:`Terminated` otherwise."""
     return KeyboardInterrupt() if signal_number == signal.SIGINT else Terminated(signal_number)

@@ -84,8 +84,9 @@ def log_session(rec: Any, session: Path) -> dict[str, int]:
             if hit.size:
                 when = t[np.asarray(ex.frame_index, np.int64)[hit]]
                 targets = rr.Scalars.columns(scalars=np.asarray(ex.targets_n, np.float64)[hit])
-                rec.send_columns(f"tactile/{sensor}/matched", indexes=[rr.TimeColumn(TIMELINE, duration=when)],
-                                 columns=targets)  # fmt: skip
+                rec.send_columns(
+                    f"tactile/{sensor}/matched", indexes=[rr.TimeColumn(TIMELINE, duration=when)], columns=targets
+                )
             counts["matched"] += int(hit.size)
         counts["presses"] += 1
         counts["frames"] += int(t.size)
@@ -93,8 +94,16 @@ def log_session(rec: Any, session: Path) -> dict[str, int]:
     return counts
 
 
-def log_stream(rec: Any, sensor_name: str, driver: Any, *, tare_frames: int, max_frames: int | None,
-               duration_s: float | None, should_stop: Callable[[], bool]) -> int:  # fmt: skip
+def log_stream(
+    rec: Any,
+    sensor_name: str,
+    driver: Any,
+    *,
+    tare_frames: int,
+    max_frames: int | None,
+    duration_s: float | None,
+    should_stop: Callable[[], bool],
+) -> int:
     """Live frames of ``driver`` (``poll_wait``), tared on the first ``tare_frames`` (median), until ``max_frames``
     were logged, ``duration_s`` passed or ``should_stop()``; returns the frames logged."""
     import time

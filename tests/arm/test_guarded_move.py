@@ -7,8 +7,8 @@ import pytest
 
 from drivers.arm import ArmState
 from drivers.errors import ArmError, ProtectiveStop
-from drivers.motion import guarded_move, settle
 from tests.arm.arm_fakes import PRESS_DIR, SpringWorld, make_arm
+from unitac_rig.collection.guarded_motion import guarded_move, settle
 from unitac_rig.sim.arm import SimArm
 
 

@@ -10,8 +10,8 @@ import pytest
 from drivers.arm import Arm
 from drivers.clock import VirtualClock
 from drivers.errors import ArmError, ControlScriptStopped, ProtectiveStop
-from drivers.motion import guarded_move, press_force
 from tests.arm.arm_fakes import EXACT_FT, PRESS_DIR, START_POSE, SpringWorld, make_arm
+from unitac_rig.collection.guarded_motion import guarded_move, press_force
 from unitac_rig.sim.arm import SimArm, SimArmParams
 from unitac_rig.sim.world import FreeSpace
 

@@ -25,10 +25,10 @@ from drivers.errors import (
     ProtectiveStop,
     RobotStateLost,
 )
-from drivers.motion import move_to
 from drivers.ur5e import KEEP_ALIVE_KICK_S, REST_WATCHDOG_HZ, UR5eArm
 from drivers.ur5e_receive import STALL_TIMEOUT_S, UR5eReceiver
 from tests.arm.arm_fakes import FakeControl, FakeReceive
+from unitac_rig.collection.guarded_motion import move_to
 from unitac_rig.sim.twin import ControllerParams, ControllerTwin, start_twin_on_free_loopback
 
 POSE = np.array([-0.15, 0.6, 0.21, 0.0, 2.2214, -2.2214])

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from drivers.errors import ArmError, ControlScriptStopped, ProtectiveStop
-from drivers.motion import guarded_move, move_to, press_force, stop_arm
 from drivers.ur5e import UR5eArm
+from unitac_rig.collection.guarded_motion import guarded_move, move_to, press_force, stop_arm
 from unitac_rig.sim.scene import press_pose
 from unitac_rig.sim.twin import ControllerParams, ControllerTwin, SceneSpec, start_twin_on_free_loopback
 

@@ -26,11 +26,11 @@ import numpy as np
 import pytest
 from pydantic import Field
 
-from drivers._reader import PumpedSensor
 from drivers.clock import Clock, MonotonicClock
 from drivers.frames import TactileFrame
 from drivers.layouts import SensorLayout
 from drivers.sensor import TactileSensor, TareRecord
+from drivers.sensor_base import PumpedSensor
 from tests.helpers import cli
 from unitac_rig.learning.synthetic_data import synthetic_matched_sets
 from unitac_rig.rig.objects import get_object

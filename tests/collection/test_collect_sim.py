@@ -15,8 +15,8 @@ import pytest
 
 from drivers.errors import ProtectiveStop
 from tests.helpers import cli, console_script
+from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.session import collect_session
-from unitac_rig.collection.streams import TickInfo
 from unitac_rig.rig.config import RigConfig, parse_rig_config
 from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.fast_rig import SimRig

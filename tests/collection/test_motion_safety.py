@@ -23,8 +23,8 @@ from hypothesis import strategies as st
 
 from drivers.arm import ArmState
 from drivers.errors import ControlScriptStopped
+from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.session import collect_session, plan_presses
-from unitac_rig.collection.streams import TickInfo
 from unitac_rig.collection.transit import approach_legs, check_session_plan, clearance_waypoints, retract_from_object
 from unitac_rig.errors import ConfigError, SafetyLimit, UnitacError
 from unitac_rig.interrupts import forget_interrupts, note_interrupt
@@ -117,9 +117,7 @@ def test_the_retract_goes_back_along_the_pad_and_out_never_to_the_unreached_stan
         short = plan.start_pose.copy()
         short[:3] -= plan.direction * 0.020
         rig.sim_arm.move_linear(short, 0.05, 0.5)
-        moved = retract_from_object(
-            rig.arm, plan, config.limits, standoff_m=0.008, clearance_m=0.09, transit_speed_m_s=0.05
-        )
+        moved = retract_from_object(rig.arm, plan, config)
         end = rig.sim_arm.true_tcp_pose()
     center = np.asarray(plan.center_xy_m)
     # not loaded and already outside the stand-off radius: no move along the pad; one move out to the clearance
@@ -136,7 +134,7 @@ def test_a_retract_that_would_leave_the_workspace_stops_at_its_edge() -> None:
     with SimRig(config, seed=0) as rig:
         rig.mount(obj, 0.0, "uskin")
         rig.sim_arm.move_linear(plan.start_pose, 0.05, 0.5)
-        retract_from_object(rig.arm, plan, box, standoff_m=0.008, clearance_m=0.09, transit_speed_m_s=0.05)
+        retract_from_object(rig.arm, plan, config.model_copy(update={"limits": box}))
         end = rig.sim_arm.true_tcp_pose()
     assert end[1] >= 0.55 - 1e-6 and end[1] < 0.56
 
@@ -251,10 +249,6 @@ def test_a_real_arm_needs_its_tcp_and_payload_or_a_loud_opt_out() -> None:
         parse_rig_config({"arm": {"host": "10.0.0.2", "tcp_offset": [0, 0, 0.1, 0, 0, 0]}, "sensors": sensors})
     config = parse_rig_config({"arm": {"host": "10.0.0.2", "unchecked_tool": True}, "sensors": sensors})
     assert config.arm is not None and config.arm.unchecked_tool
-
-
-def test_the_old_name_of_the_failure_streak_limit_still_reads() -> None:
-    assert parse_rig_config({"limits": {"max_presses_without_contact": 2}}).limits.max_failed_in_a_row == 2
 
 
 # ---- every failed press counts; a settled force ends within seconds --------------------------------------------

@@ -16,8 +16,8 @@ import pytest
 from drivers.errors import ControlScriptStopped, ProtectiveStop, RobotStateLost
 from tests.helpers import cli
 from unitac_rig.collection.press import run_press
+from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.session import collect_session, dry_run, plan_presses, session_tare
-from unitac_rig.collection.streams import TickInfo
 from unitac_rig.collection.transit import PressPlan, check_waypoint, clearance_waypoints, make_plan, move_clear
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.rig.config import LimitsConfig, PressConfig, RigConfig, parse_rig_config

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from unitac_rig.collection.press import run_press
+from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.session import collect_session, confirmed_standoff_mm, plan_presses, session_tare
-from unitac_rig.collection.streams import TickInfo
 from unitac_rig.collection.transit import make_plan, with_standoff
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.config import RigConfig, parse_rig_config

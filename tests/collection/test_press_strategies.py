@@ -9,12 +9,12 @@ import pytest
 from drivers.clock import VirtualClock
 from drivers.frames import TactileFrame
 from drivers.layouts import PAPILLARRAY
-from drivers.motion import move_to
-from unitac_rig.collection.press import run_press, settle_frames
+from unitac_rig.collection.guarded_motion import move_to
+from unitac_rig.collection.press import run_press, settle_window
+from unitac_rig.collection.safety_check import PressStreams, TickInfo
 from unitac_rig.collection.session import plan_presses
 from unitac_rig.collection.strategies.force_ramp import RAMP_MAX_LEAD_N, ramp
 from unitac_rig.collection.strategy import PressContext
-from unitac_rig.collection.streams import PressStreams, TickInfo
 from unitac_rig.collection.transit import PressPlan
 from unitac_rig.rig.config import LimitsConfig, PressConfig, parse_rig_config
 from unitac_rig.rig.objects import get_object
@@ -41,7 +41,7 @@ def test_first_contact_is_declared_only_when_the_pad_touches(strategy: str) -> N
             rig.mount(obj, 0.0, "papillarray")
             move_to(rig.arm, plans[0].start_pose, 0.05, 0.5)
             rig.arm.zero_ft()
-            settle_frames(rig.arm, sensor, 0.2)
+            settle_window(rig.arm, sensor, 0.2)
             for plan in plans:
                 truth: list[tuple[float, float]] = []
 
@@ -70,7 +70,7 @@ def test_force_ramp_rises_at_about_the_asked_rate() -> None:
             rig.mount(obj, 0.0, "uskin")
             move_to(rig.arm, plans[0].start_pose, 0.05, 0.5)
             rig.arm.zero_ft()
-            settle_frames(rig.arm, sensor, 0.2)
+            settle_window(rig.arm, sensor, 0.2)
             for plan in plans:
                 record = run_press(rig.arm, sensor, plan, config.press, config.limits)
                 t = record.robot_t_s

@@ -11,11 +11,11 @@ from typing import Literal
 import numpy as np
 import pytest
 
-from drivers._reader import PumpedSensor
 from drivers.clock import Clock
 from drivers.frames import TactileFrame
 from drivers.layouts import SensorLayout
 from drivers.sensor import TactileSensor, TareRecord
+from drivers.sensor_base import PumpedSensor
 from tests.helpers import cli
 from unitac_rig.collection.sensor_choice import choose_sensor, collection_order
 from unitac_rig.errors import ConfigError, UsageError

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.session import collect_session
 from unitac_rig.collection.strategy import PressContext
-from unitac_rig.collection.streams import TickInfo
 from unitac_rig.errors import ConfigError, SafetyLimit
 from unitac_rig.rig.config import RigConfig, load_rig_config
 from unitac_rig.rig.objects import get_object

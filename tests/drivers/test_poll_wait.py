@@ -9,10 +9,10 @@ import threading
 import numpy as np
 import pytest
 
-from drivers._reader import PumpedSensor
 from drivers.errors import DeviceError
 from drivers.frames import TactileFrame
 from drivers.layouts import PAPILLARRAY
+from drivers.sensor_base import PumpedSensor
 
 LONG_S = 120.0  # how long a poll_wait may wait; a reader not woken by the frame is still waiting at LONG_S / 2
 

@@ -187,6 +187,7 @@ def test_the_printed_conventions_read_back_unchanged(tmp_path: Path) -> None:
         ("[tactile_mapping.uskin]\naxis_signs = [1, 2, 1]\n", "axis_signs"),
         ("[sensor_names]\nxela = 'digit'\n", "sensor_names.xela"),
         ("drop_first_rows = \n", "not valid TOML"),
+        ("ft_rotation_deg = nan\n", "ft_rotation_deg: Input should be a finite number"),  # as the rig file refuses
     ],
 )
 def test_bad_conventions_files_are_refused_by_name(tmp_path: Path, text: str, message: str) -> None:

@@ -130,7 +130,7 @@ def test_press_through_the_simulated_arm_overshoots_the_stop_like_the_recordings
     # recorded peaks overshoot the 10 N stop by 0.6-1.8 N; the overshoot comes from the arm's stop latency and F/T
     # filter (unitac_rig.sim.arm) acting on this scene's stiffness
     clock_mod = pytest.importorskip("drivers.clock")
-    motion = pytest.importorskip("drivers.motion")
+    motion = pytest.importorskip("unitac_rig.collection.guarded_motion")
     sim_arm = pytest.importorskip("unitac_rig.sim.arm")
     for object_id in ("square_pla", "circle_tpu"):
         for layout in (USKIN, PAPILLARRAY):

@@ -17,9 +17,8 @@ from typing import NoReturn
 
 import typer
 
-from protocols.errors import UnitacError
 from unitac_rig.cli.help import use_plain_help
-from unitac_rig.errors import ConfigError, UsageError
+from unitac_rig.errors import ConfigError, UnitacError, UsageError
 from unitac_rig.interrupts import last_termination_signal, termination_signal
 from unitac_rig.provenance import package_version
 

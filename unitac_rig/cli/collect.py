@@ -20,22 +20,21 @@ from rich.text import Text
 
 from unitac_rig.cli.pace import spoken_duration
 from unitac_rig.cli.paths import path_text, require_data_folder, require_directory
-from unitac_rig.collection.sensor_choice import choose_sensor, collection_order, session_complete
+from unitac_rig.collection.safety_check import TickInfo
+from unitac_rig.collection.sensor_choice import choose_sensor, collection_order, session_complete, session_presses
 from unitac_rig.collection.session import PressDone, SessionOutcome, collect_session, dry_run
-from unitac_rig.collection.streams import TickInfo
 from unitac_rig.collection.transit import PressPlan
 from unitac_rig.errors import ConfigError, SessionStopped, UsageError
 from unitac_rig.interrupts import immediate_interrupts, termination_as_interrupt
 from unitac_rig.rig.backends import open_rig
 from unitac_rig.rig.base import Rig
-from unitac_rig.rig.config import RigConfig, load_rig_config, parse_rig_config
+from unitac_rig.rig.config import RigConfig, load_rig_config, parse_rig_config, spoken
 from unitac_rig.rig.objects import ObjectSpec, get_object, list_objects
 from unitac_rig.rig.sensors import sensor_layout, sensor_names
 from unitac_rig.rig.strategies import PRESS_STRATEGIES
 from unitac_rig.sim.imperfections import Imperfections
 from unitac_rig.storage.extraction import ExtractionSettings
-from unitac_rig.storage.press_record import FINISHED_STATUSES
-from unitac_rig.storage.reader import list_sessions, press_summaries, read_session_info
+from unitac_rig.storage.reader import list_sessions
 from unitac_rig.storage.recorder import session_path
 from unitac_rig.storage.reextract import reextract_sessions
 
@@ -51,11 +50,6 @@ DATA_OPTION = typer.Option(
 RIG_OPTION = typer.Option(
     None, "--rig", metavar="FILE", help="Rig file (TOML). Without one, the simulated rig is used."
 )
-
-
-def _spoken(names: list[str]) -> str:
-    """``a, b or c``: the registered names for a help line (the registries name them, this file does not)."""
-    return f"{', '.join(names[:-1])} or {names[-1]}" if len(names) > 1 else names[0]
 
 
 IMPERFECTIONS_OPTION = typer.Option(
@@ -97,50 +91,39 @@ def _check_counts(**options: int | None) -> None:
 def _configure(
     rig_file: Path | None, strategy: str | None, speed: float | None, angles: int | None, standoff: float | None
 ) -> RigConfig:
+    """The rig file with the options typed on top (``OVERRIDE_OPTIONS``), validated as one rig file."""
     config = load_rig_config(rig_file)
     if angles is not None and not 1 <= angles <= config.press.max_angle_count():
         raise UsageError(
             f"--angles must be 1 to {config.press.max_angle_count()}, got {angles}",
             hint="press ids are whole degrees: more angles than degrees in the arc would repeat presses",
         )
-    if strategy is None and speed is None and angles is None and standoff is None:
+    typed = dict(zip(OVERRIDE_OPTIONS, (strategy, speed, angles, standoff), strict=True))
+    given = {field: value for field, value in typed.items() if value is not None}
+    if not given:
         return config
-    given = {"--strategy": strategy, "--speed": speed, "--angles": angles, "--standoff": standoff}
+    data = config.model_dump(mode="json")
+    for field, value in given.items():
+        table, key = field.split(".")
+        data[table][key] = value
     try:
-        return _override(config, strategy, speed, angles, standoff)
+        return parse_rig_config(data, source="command-line options")
     except ConfigError as exc:
         raise UsageError(_option_error(exc, given)) from exc
 
 
 def _option_error(exc: ConfigError, given: Mapping[str, object]) -> str:
-    """A rig-file validation error caused by an override, named by the option typed (``--angles 0: ...``)."""
+    """A rig-file validation error caused by an override (``given``: field -> value), named by the option typed
+    (``--angles 0: ...``)."""
     cause = exc.__cause__
     errors = cause.errors() if isinstance(cause, ValidationError) else []
     if errors:
         field = ".".join(str(p) for p in errors[0]["loc"])
-        option = OVERRIDE_OPTIONS.get(field)
         message = str(errors[0]["msg"]).removeprefix("Value error, ")
-        if option is not None:
-            return f"{option} {given[option]}: {message[:1].lower()}{message[1:]}"
-    typed = " ".join(f"{name} {value}" for name, value in given.items() if value is not None)
+        if field in given:
+            return f"{OVERRIDE_OPTIONS[field]} {given[field]}: {message[:1].lower()}{message[1:]}"
+    typed = " ".join(f"{OVERRIDE_OPTIONS[field]} {value}" for field, value in given.items())
     return f"{typed}: {exc}"
-
-
-def _override(
-    config: RigConfig, strategy: str | None, speed: float | None, angles: int | None, standoff: float | None
-) -> RigConfig:
-    data = config.model_dump(mode="json")
-    if strategy is not None:
-        if strategy not in PRESS_STRATEGIES:
-            raise UsageError(f"unknown strategy {strategy!r}", hint=f"use one of: {', '.join(PRESS_STRATEGIES)}")
-        data["press"]["strategy"] = strategy
-    if speed is not None:
-        data["press"]["speed_mm_s"] = speed
-    if angles is not None:
-        data["press"]["angle_count"] = angles
-    if standoff is not None:
-        data["object"]["standoff_mm"] = standoff
-    return parse_rig_config(data, source="command-line options")
 
 
 class LivePanel:
@@ -230,27 +213,13 @@ class ProgressLines:
         )
 
 
-def _finished_presses(data_dir: Path, object_id: str, sensor: str) -> tuple[int, int] | None:
-    """(finished, planned) presses of a session, read back from its file; None when there is no readable file."""
-    path = session_path(data_dir, object_id, sensor)
-    if not path.exists():
-        return None
-    try:
-        finished = sum(p["status"] in FINISHED_STATUSES for p in press_summaries(path))
-        planned = len(read_session_info(path).attrs.get("planned_presses", []))
-    except Exception:  # the file is mid-recovery: the journal keeps what was pressed, the next collect repairs it
-        return None
-    return finished, planned
-
-
 def _kept_line(data_dir: Path, object_id: str, sensor: str) -> str:
     """What an interrupted session kept, read back from its file: ``kept 12/91 presses in data/...``."""
-    counts = _finished_presses(data_dir, object_id, sensor)
-    if counts is None:  # nothing written yet, or the file is mid-recovery: the journal keeps what was pressed
+    found = session_presses(data_dir, object_id, sensor)
+    if found is None:  # nothing written yet, or the file is mid-recovery: the journal keeps what was pressed
         return f"{object_id} / {sensor}: the presses recorded so far are kept under {data_dir}"
-    return (
-        f"{object_id} / {sensor}: kept {counts[0]}/{counts[1]} presses in {session_path(data_dir, object_id, sensor)}"
-    )
+    path = session_path(data_dir, object_id, sensor)
+    return f"{object_id} / {sensor}: kept {len(found[0])}/{len(found[1])} presses in {path}"
 
 
 def _run_session(
@@ -320,7 +289,7 @@ def collect(
         ..., "--object", metavar="ID", help="Object id, e.g. hex_tpu (see `unitac-rig objects`)."
     ),
     sensor: str | None = typer.Option(
-        None, "--sensor", metavar="SENSOR", show_default="detected", help=f"{_spoken(sensor_names())}."
+        None, "--sensor", metavar="SENSOR", show_default="detected", help=f"{spoken(sensor_names())}."
     ),
     rig_file: Path | None = RIG_OPTION,
     data: Path = DATA_OPTION,
@@ -329,7 +298,7 @@ def collect(
         "--strategy",
         metavar="NAME",
         show_default=f"the rig file's, else {_PRESS.strategy}",
-        help=f"{_spoken(list(PRESS_STRATEGIES))}.",
+        help=f"{spoken(list(PRESS_STRATEGIES))}.",
     ),
     speed: float | None = typer.Option(
         None,
@@ -441,9 +410,9 @@ def campaign(
         )
         for obj in catalogue:  # presses finished by earlier runs count as done from the first line on
             for sensor in sensors:
-                counts = _finished_presses(data, obj.id, sensor)
-                if counts is not None:
-                    progress.found(obj.id, sensor, counts[0])
+                found = session_presses(data, obj.id, sensor)
+                if found is not None:
+                    progress.found(obj.id, sensor, len(found[0]))
         for sensor in sensors:
             if not rig.simulated:
                 _ask_operator(rig, f"Mount the {sensor} on the arm, then press Enter")

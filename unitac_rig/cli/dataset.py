@@ -67,8 +67,10 @@ def inspect_tables(report: dict[str, Any], data: Path) -> RenderableType:
         notes.append("* simulated rig")
     rigs = sorted({s.get("rig", "") for s in sessions} - {""})
     if len(rigs) > 1:  # pairs join only within one rig: say which session is whose
-        notes.extend(f"{rig}: " + ", ".join(f"{s['object']}/{s['sensor']}" for s in sessions if s.get("rig") == rig)
-                     for rig in rigs)  # fmt: skip
+        for rig in rigs:
+            notes.append(
+                f"{rig}: " + ", ".join(f"{s['object']}/{s['sensor']}" for s in sessions if s.get("rig") == rig)
+            )
         notes.append("pairs join only within one rig: train and export one rig's --data at a time")
     elif rigs:
         notes.append(f"recorded on: {rigs[0]}")

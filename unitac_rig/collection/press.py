@@ -10,11 +10,11 @@ around it, and every check while it runs, is this press's, the same for every st
   run in the controller's force mode with a set-point just above the threshold (``press.setpoint_margin_n``), so a
   host that freezes mid-press cannot push past it and a host that dies stops the program through the RTDE watchdog
   (docs/real-rig.md, "Safety"); and every control period goes through
-  :meth:`~unitac_rig.collection.streams.PressStreams.tick`: |F| and |T| against the hard limits, travel beyond first
+  :meth:`~.safety_check.PressStreams.tick`: |F| and |T| against the hard limits, travel beyond first
   contact (a soft object fails the press instead of being crushed), protective stops, the tactile stream, host stalls;
 * after it: the dwell, the retract until the pad is unloaded, the move back to the stand-off, the record.
 
-Every path out stops the arm (``drivers.motion`` and the ``finally`` blocks here), Ctrl-C included, and whatever
+Every path out stops the arm (``guarded_motion`` and the ``finally`` blocks here), Ctrl-C included, and whatever
 was recorded is kept.
 """
 
@@ -30,10 +30,10 @@ import numpy as np
 from drivers.arm import Arm, ArmState
 from drivers.errors import ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop, RobotStateLost
 from drivers.frames import TactileFrame
-from drivers.motion import move_to, stop_arm, wait_until_at_rest
 from drivers.sensor import TactileSensor
+from unitac_rig.collection.guarded_motion import move_to, stop_arm, wait_until_at_rest
+from unitac_rig.collection.safety_check import OffAxisLimit, PressStreams, TickInfo, TravelLimit
 from unitac_rig.collection.strategy import PressContext, press_strategy
-from unitac_rig.collection.streams import OffAxisLimit, PressStreams, TickInfo, TravelLimit
 from unitac_rig.collection.transit import (
     TRANSIT_ACCEL_M_S2,
     UNLOADED_FORCE_N,
@@ -80,16 +80,7 @@ class ZeroedArm:
         return getattr(self._arm, name)
 
 
-def settle_frames(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[list[TactileFrame], np.ndarray]:
-    """Wait ``seconds`` at rest; returns the frames seen and the mean wrench (6,) over the window (N, N*m).
-
-    The mean, not the largest sample: a UR's F/T has ~1 N of sample noise, while a real contact shifts the mean.
-    """
-    frames, wrenches = _settle_window(arm, sensor, seconds)
-    return frames, wrenches.mean(axis=0)
-
-
-def _settle_window(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[list[TactileFrame], np.ndarray]:
+def settle_window(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[list[TactileFrame], np.ndarray]:
     """Wait ``seconds`` at rest; -> (frames seen, every wrench read (K, 6) in N, N*m)."""
     sensor.poll()  # drop anything queued during the transit move
     frames: list[TactileFrame] = []
@@ -121,16 +112,17 @@ def zero_wrist(
     the window's mean must be near zero.
     """
     wait_until_at_rest(arm)
-    before, mean_wrench = settle_frames(arm, sensor, settle_s if check_s is None else check_s)
-    mean_force = force_n(mean_wrench, reference)
+    before, wrenches = settle_window(arm, sensor, settle_s if check_s is None else check_s)
+    # the mean, not the largest sample: a UR's F/T has ~1 N of sample noise, while a real contact shifts the mean
+    mean_force = force_n(wrenches.mean(axis=0), reference)
     if mean_force > UNLOADED_FORCE_N:
         raise SafetyLimit(
             f"wrist reads {mean_force:.2f} N at {where}: the pad is touching something, refusing to zero the F/T",
             hint="check the object's position (object.center_m) and the stand-off in the rig file",
         )
     arm.zero_ft()
-    frames, wrenches = _settle_window(arm, sensor, settle_s)
-    left = float(np.linalg.norm(wrenches[:, :3].mean(axis=0)))
+    frames, wrenches = settle_window(arm, sensor, settle_s)
+    left = force_n(wrenches.mean(axis=0))
     if left > ZEROED_FORCE_N:
         raise SafetyLimit(
             f"wrist still reads {left:.2f} N after zeroing at {where}: the F/T zero did not take",

@@ -32,19 +32,25 @@ def collection_order(rig: Rig) -> list[str]:
     return [name for name in SENSORS if name in available]
 
 
-def session_complete(data_dir: Path, object_id: str, sensor: str) -> bool:
-    """True when the session file holds a finished press for every press it planned."""
+def session_presses(data_dir: Path, object_id: str, sensor: str) -> tuple[set[str], list[str]] | None:
+    """(the finished presses' ids, the planned ones) of a session, read back from its file; None when there is no
+    readable file (none yet, or mid-recovery: the journal keeps what was pressed and the next collect repairs it)."""
     path = session_path(data_dir, object_id, sensor)
     if not path.exists():
-        return False
+        return None
     try:
         presses = press_summaries(path)
-        planned = read_session_info(path).attrs.get("planned_presses", [])
-    except Exception as exc:  # an unreadable file is not complete; collect will recover it from the journal
-        log.info("%s counts as incomplete: %s", path, exc)
-        return False
-    done = {p["press_id"] for p in presses if p["status"] in FINISHED_STATUSES}
-    return bool(planned) and set(planned) <= done
+        planned = list(read_session_info(path).attrs.get("planned_presses", []))
+    except Exception as exc:
+        log.info("%s cannot be read yet: %s", path, exc)
+        return None
+    return {p["press_id"] for p in presses if p["status"] in FINISHED_STATUSES}, planned
+
+
+def session_complete(data_dir: Path, object_id: str, sensor: str) -> bool:
+    """True when the session file holds a finished press for every press it planned."""
+    found = session_presses(data_dir, object_id, sensor)
+    return found is not None and bool(found[1]) and set(found[1]) <= found[0]
 
 
 def choose_sensor(rig: Rig, object_id: str, sensor: str | None, data_dir: Path) -> SensorChoice:

@@ -35,10 +35,10 @@ import numpy as np
 
 from drivers.arm import Arm
 from drivers.errors import ArmError, ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop
-from drivers.motion import settle
 from drivers.sensor import TactileSensor
+from unitac_rig.collection.guarded_motion import settle
 from unitac_rig.collection.press import run_press, zero_wrist
-from unitac_rig.collection.streams import TickInfo
+from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.transit import (
     PressPlan,
     check_session_plan,
@@ -246,7 +246,7 @@ def _press_all(
         if plan.rotation_deg != current_rotation:
             confirmed = False  # the placement is unknown again after the object is turned
             if previous is not None:  # out to the clearance radius before anyone turns the object by hand
-                _retract(rig, previous, best_effort=False)
+                retract_from_object(rig.arm, previous, rig.config)
             rig.mount(obj, plan.rotation_deg, sensor_name)
             if ask_operator is not None and not rig.simulated and n_rotations > 1:
                 with rig.arm.keep_alive():
@@ -271,8 +271,8 @@ def _press_all(
             break
         if stop:
             break
-    if previous is not None and not stop:  # the stops above retracted already
-        _retract(rig, previous)  # out to the clearance radius: the operator swaps the sensor or object next
+    if previous is not None and not stop:  # the stops above retracted already; the operator swaps things next
+        retract_from_object(rig.arm, previous, rig.config, best_effort=True)  # out to the clearance radius
 
 
 def _say_load_left(rig: Rig, exc: BaseException, outcome: SessionOutcome) -> None:
@@ -350,10 +350,10 @@ def _first_move_and_tare(rig: Rig, sensor: TactileSensor, first: PressPlan, outc
         return session_tare(rig, sensor, first, free=free)
     except KeyboardInterrupt:
         with acknowledged_interrupts():
-            _retract(rig, first, to_clearance=False)
+            retract_from_object(rig.arm, first, rig.config, to_clearance=False, best_effort=True)
         raise
     except (SafetyLimit, DeviceError) as exc:
-        _retract(rig, first)
+        retract_from_object(rig.arm, first, rig.config, best_effort=True)
         raise _controller_stop_explained(rig, exc, f"before the first press ({first.press_id})") from exc
 
 
@@ -471,10 +471,10 @@ def _one_press(
             if isinstance(exc, KeyboardInterrupt):
                 outcome.stopped = f"interrupted at press {plan.press_id}"
                 with acknowledged_interrupts():  # a second Ctrl-C still ends the retract, arm stopped
-                    _retract(rig, plan, to_clearance=False)
+                    retract_from_object(rig.arm, plan, rig.config, to_clearance=False, best_effort=True)
                 raise
             if isinstance(exc, SafetyLimit):
-                _retract(rig, plan)
+                retract_from_object(rig.arm, plan, rig.config, best_effort=True)
             outcome.stopped = f"{type(exc).__name__} at press {plan.press_id}: {exc}"
             explained = _controller_stop_explained(rig, exc, f"at press {plan.press_id}")
             if explained is not exc:
@@ -487,7 +487,7 @@ def _one_press(
                 with _kept_alive(rig.arm):  # the arm is stopped; writing may take longer than the watchdog allows
                     _save(writer, sensor, partial, extraction, outcome)
             what = "stalled" if isinstance(exc, DeviceTimeout) else "failed"
-            _retract(rig, plan)
+            retract_from_object(rig.arm, plan, rig.config, best_effort=True)
             if attempt == 1:
                 log.warning("%s; reconnecting the sensor and retrying the press once", exc)
                 try:
@@ -557,22 +557,6 @@ def _reconnect(rig: Rig, sensor: TactileSensor) -> None:
             rig.clock.sleep(RECONNECT_POLL_S)
 
 
-def _retract(rig: Rig, plan: PressPlan, *, to_clearance: bool = True, best_effort: bool = True) -> None:
-    """:func:`retract_from_object` with the rig file's stand-off, clearance and transit speed; best effort (logged,
-    not raised) unless ``best_effort=False``."""
-    config = rig.config
-    retract_from_object(
-        rig.arm,
-        plan,
-        config.limits,
-        standoff_m=config.object.standoff_mm / 1000.0,
-        clearance_m=config.object.clearance_mm / 1000.0,
-        transit_speed_m_s=config.press.transit_speed_mm_s / 1000.0,
-        to_clearance=to_clearance,
-        best_effort=best_effort,
-    )
-
-
 def _save(
     writer: SessionWriter,
     sensor: TactileSensor,
@@ -584,7 +568,7 @@ def _save(
         record.attrs.setdefault("sensor_health", sensor.health().as_dict())
     except DeviceError as exc:
         log.info("no sensor health for press %s: %s", record.press_id, exc)
-    if record.reason != "off_axis":  # a press off the object's face never feeds extraction (collection/streams.py)
+    if record.reason != "off_axis":  # a press off the object's face never feeds extraction (collection/safety_check.py)
         record.extraction = extract_press(
             record.robot_t_s, record.press_force_n, record.tactile_t_s, record.tactile_valid, settings
         )

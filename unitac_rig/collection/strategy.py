@@ -5,7 +5,7 @@ A strategy is an object with one method, ``press(ctx) -> stop reason``, in its o
 is checked against that table). It never gets the arm: it moves the pad only through the :class:`PressContext` it is
 handed, whose two motions carry the safety of every press whatever the strategy asks:
 
-* :meth:`PressContext.move` is ``drivers.motion.guarded_move`` in the controller's force mode, compliant along the
+* :meth:`PressContext.move` is ``guarded_motion.guarded_move`` in the controller's force mode, compliant along the
   press direction. The force set-point is the press threshold + ``press.setpoint_margin_n`` (in the controller's
   zero), raised on a plateau only up to :func:`setpoint_ceiling_n`, never within ``HARD_LIMIT_CLEARANCE_N`` of the
   hard limit, whatever force the strategy asks to stop at: a host that freezes cannot push past it. A stop force at
@@ -13,7 +13,7 @@ handed, whose two motions carry the safety of every press whatever the strategy 
 * :meth:`PressContext.force_control` is one control period of force control with a set-point the strategy chooses,
   capped at threshold + ``press.setpoint_margin_n`` (the force a stalled host leaves the controller regulating).
 
-Every control period of both goes through the press's :meth:`~unitac_rig.collection.streams.PressStreams.tick` (hard
+Every control period of both goes through the press's :meth:`~.safety_check.PressStreams.tick` (hard
 force and torque limits, travel past first contact, the tactile stream, protective stops, a stopped program, Ctrl-C),
 and every motion feeds the RTDE watchdog. The arm is stopped after the strategy returns whatever it left running. The
 moves before (the near zone) and after (dwell, retract) are the press's (collection/press.py), not the strategy's.
@@ -31,8 +31,8 @@ import numpy as np
 
 from drivers.arm import Arm
 from drivers.errors import ProtectiveStop
-from drivers.motion import DEFAULT_SETTLE_S, force_limits, guarded_move, press_frame, stop_arm
-from unitac_rig.collection.streams import PressStreams
+from unitac_rig.collection.guarded_motion import DEFAULT_SETTLE_S, force_limits, guarded_move, press_frame, stop_arm
+from unitac_rig.collection.safety_check import PressStreams
 from unitac_rig.collection.transit import PressPlan, backstop_m
 from unitac_rig.errors import ConfigError, SafetyLimit
 from unitac_rig.rig.config import LimitsConfig, PressConfig

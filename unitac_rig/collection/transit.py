@@ -18,10 +18,10 @@ import numpy as np
 
 from drivers.arm import Arm, ArmState
 from drivers.errors import ControlScriptStopped, ProtectiveStop
-from drivers.motion import check_controller, move_to
+from unitac_rig.collection.guarded_motion import check_controller, force_magnitude, move_to
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.interrupts import raise_if_interrupted
-from unitac_rig.rig.config import LimitsConfig
+from unitac_rig.rig.config import LimitsConfig, RigConfig
 from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation, tool_z
 from unitac_rig.storage.press_record import press_id
 
@@ -144,13 +144,11 @@ def transit_guard(arm: Arm, limits: LimitsConfig) -> Callable[[ArmState], None]:
     Growth, not any change: a move that starts with the pad still loaded (a session resumed after Ctrl-C stopped it
     mid-press) unloads on its way out, and that must not read as a collision.
     """
-    start = np.asarray(arm.read_state().tcp_force, dtype=np.float64)
-    start_force, start_torque = float(np.linalg.norm(start[:3])), float(np.linalg.norm(start[3:]))
+    start_force, start_torque = force_magnitude(arm.read_state())
 
     def guard(state: ArmState) -> None:
         raise_if_interrupted()
-        wrench = np.asarray(state.tcp_force, dtype=np.float64)
-        force, torque = float(np.linalg.norm(wrench[:3])), float(np.linalg.norm(wrench[3:]))
+        force, torque = force_magnitude(state)
         if force - start_force > limits.move_force_n or torque - start_torque > 0.1 * limits.move_force_n:
             raise SafetyLimit(
                 f"the wrist felt {force:.1f} N / {torque:.2f} N*m during a transit move at "
@@ -275,22 +273,15 @@ def check_session_plan(
 
 
 def retract_from_object(
-    arm: Arm,
-    plan: PressPlan,
-    limits: LimitsConfig,
-    *,
-    standoff_m: float,
-    clearance_m: float,
-    transit_speed_m_s: float,
-    to_clearance: bool = True,
-    best_effort: bool = False,
+    arm: Arm, plan: PressPlan, config: RigConfig, *, to_clearance: bool = True, best_effort: bool = False
 ) -> list[np.ndarray]:
     """After an abort: pull the pad off whatever it touches, from wherever the arm IS, never toward a pose that was
     not reached; -> the poses moved to.
 
     1. Back along the pad's own axis (away from what it presses) to the plan's stand-off radius, and at least
-       ``standoff_m`` when the wrist reads loaded (an object closer than the rig file says), at the near speed;
-    2. (``to_clearance``) out horizontally, radially from the object's axis, to ``clearance_m`` at the transit speed.
+       ``object.standoff_mm`` when the wrist reads loaded (an object closer than the rig file says), at the near speed;
+    2. (``to_clearance``) out horizontally, radially from the object's axis, to ``object.clearance_mm`` at the
+       transit speed.
 
     Both legs are force-guarded (:func:`transit_guard`: the force may fall, not grow) and clipped to the workspace
     box and reach (a leg that would leave them ends at their edge). The next press then starts with a fresh,
@@ -305,15 +296,7 @@ def retract_from_object(
     if best_effort:
         try:
             check_controller(arm.read_state(), "the retract")
-            return retract_from_object(
-                arm,
-                plan,
-                limits,
-                standoff_m=standoff_m,
-                clearance_m=clearance_m,
-                transit_speed_m_s=transit_speed_m_s,
-                to_clearance=to_clearance,
-            )
+            return retract_from_object(arm, plan, config, to_clearance=to_clearance)
         except (ProtectiveStop, ControlScriptStopped) as exc:
             log.info("not retracting after press %s: %s", plan.press_id, exc)
         except KeyboardInterrupt:
@@ -321,11 +304,13 @@ def retract_from_object(
         except Exception:
             log.exception("retracting from the object after press %s failed; the arm is stopped", plan.press_id)
         return []
+    limits, transit_speed_m_s = config.limits, config.press.transit_speed_mm_s / 1000.0
+    standoff_m, clearance_m = config.object.standoff_mm / 1000.0, config.object.clearance_mm / 1000.0
     state = arm.read_state()
     here = np.asarray(state.tcp_pose, dtype=np.float64)
     center = np.asarray(plan.center_xy_m, dtype=np.float64)
     radius = float(np.linalg.norm(here[:2] - center))
-    loaded = float(np.linalg.norm(np.asarray(state.tcp_force, dtype=np.float64)[:3])) > UNLOADED_FORCE_N
+    loaded = force_magnitude(state)[0] > UNLOADED_FORCE_N
     back_m = max(standoff_radius_m(plan) - radius, 0.0)
     if loaded:
         back_m = max(back_m, standoff_m)

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from drivers.arm import Arm
-from drivers.motion import wait_until_at_rest
+from unitac_rig.collection.guarded_motion import wait_until_at_rest
 from unitac_rig.collection.transit import UNLOADED_FORCE_N, move_within_limits
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.rig.config import LimitsConfig
@@ -96,12 +96,11 @@ def force_n(wrench: np.ndarray, reference: np.ndarray | None = None) -> float:
 @dataclass(frozen=True)
 class Unloaded:
     """What the back-off found: the load the pad was under (N, how much |F| fell), how far it backed (mm), the
-    reading at the free pose (6,), and whether the remembered zero disagreed (N off it at the start, NaN: none)."""
+    reading at the free pose (6,)."""
 
     load_n: float
     backed_mm: float
     free_reading: np.ndarray
-    off_zero_n: float
 
     @property
     def was_loaded(self) -> bool:
@@ -152,7 +151,7 @@ def unload_wrist(arm: Arm, limits: LimitsConfig, *, zero: np.ndarray | None = No
                 f"{force_n(first, now):.1f} N and still falls ({change:.1f} N in the last step); refusing to zero it",
                 hint="move the pad clear of the object (freedrive on the pendant), then run the same command",
             )
-    result = Unloaded(force_n(first, previous), backed_mm, previous, off_zero)
+    result = Unloaded(force_n(first, previous), backed_mm, previous)
     if result.was_loaded:
         log.warning("%s", result.describe())
     elif not math.isnan(off_zero) and off_zero > UNLOADED_FORCE_N:

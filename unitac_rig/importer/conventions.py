@@ -17,14 +17,14 @@ session's root attributes.
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from unitac_rig.errors import ConfigError
-from unitac_rig.rig.config import describe_validation_error, read_toml
+from unitac_rig.rig.config import describe_validation_error, read_toml, toml_text
+from unitac_rig.rig.sensors.base import StrictTable
 from unitac_rig.storage.extraction import ExtractionSettings, default_targets_n
 
 # What the authors' script (0_data_preprocessing.py) already applied to every processed .npz file.
@@ -37,11 +37,7 @@ AUTHORS_PROCESSED_STEPS: dict[str, Any] = {
 }
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class TactileMapping(_Strict):
+class TactileMapping(StrictTable):
     """How one of their matrices (rows x cols x 3, after their own sign harmonisation) lands in our frame.
 
     Identity by default: their matrix row r, column c becomes our taxel ``r * cols + c`` and their x, y, z our x, y, z.
@@ -61,7 +57,7 @@ class TactileMapping(_Strict):
         return value
 
 
-class ExtractionConventions(_Strict):
+class ExtractionConventions(StrictTable):
     """Settings of the force-matched extraction for 100 Hz imported data (the project defaults assume 500 Hz)."""
 
     targets_n: tuple[float, ...] = tuple(float(x) for x in default_targets_n())
@@ -99,7 +95,7 @@ def _default_object_shapes() -> dict[str, str]:
     }
 
 
-class ImportConventions(_Strict):
+class ImportConventions(StrictTable):
     """Every assumption the import makes about the UniTac-NV files (see the module docstring)."""
 
     # --- names -------------------------------------------------------------------------------------------------
@@ -193,7 +189,7 @@ class ImportConventions(_Strict):
 
     def to_toml(self) -> str:
         """The effective conventions as a TOML document that ``load_conventions`` reads back unchanged."""
-        return _to_toml(self.as_json_dict())
+        return toml_text(self.as_json_dict())
 
 
 def _merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
@@ -222,41 +218,3 @@ def load_conventions(path: Path | None) -> ImportConventions:
         return ImportConventions()
     path = Path(path)
     return conventions_from_dict(read_toml(path, "conventions file"), source=str(path))
-
-
-# ---------------------------------------------------------------------------------------------------------------------
-# a small TOML writer for the types the conventions use (str, bool, int, float, lists of numbers, nested tables)
-
-
-def _toml_key(key: str) -> str:
-    return key if key.replace("_", "").replace("-", "").isalnum() else json.dumps(key)
-
-
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if math.isnan(value) or math.isinf(value):
-            raise ConfigError(f"cannot write {value} to TOML")
-        return repr(value)
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, list | tuple):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    raise ConfigError(f"cannot write a {type(value).__name__} to TOML")
-
-
-def _to_toml(data: dict[str, Any], prefix: str = "") -> str:
-    scalars = [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in data.items() if not isinstance(v, dict)]
-    lines = []
-    if prefix:
-        lines.append(f"[{prefix}]")
-    lines.extend(scalars)
-    text = "\n".join(lines)
-    for key, value in data.items():
-        if isinstance(value, dict):
-            sub = _to_toml(value, f"{prefix}.{_toml_key(key)}" if prefix else _toml_key(key))
-            text = f"{text}\n\n{sub}" if text else sub
-    return text + ("\n" if not prefix else "")

@@ -36,7 +36,6 @@ from unitac_rig.storage.recorder import SessionWriter, journal_dir, session_path
 log = logging.getLogger(__name__)
 
 SOURCE_TAG = "unitac-nv-import"
-MAX_LISTED_BAD_ROWS = 5
 
 
 @dataclass

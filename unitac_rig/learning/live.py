@@ -103,7 +103,7 @@ class LiveModel:
 
 
 class LiveSensor(Protocol):
-    """What the loop needs of a driver (``drivers._reader.PumpedSensor``)."""
+    """What the loop needs of a driver (``drivers.sensor_base.PumpedSensor``)."""
 
     def poll_wait(self, timeout_s: float) -> list[TactileFrame]: ...
 
@@ -328,7 +328,7 @@ def _stream(
 
 
 class _PolledSensor:
-    """A driver without ``poll_wait`` (not a :class:`drivers._reader.PumpedSensor`): polled every 0.2 ms."""
+    """A driver without ``poll_wait`` (not a :class:`drivers.sensor_base.PumpedSensor`): polled every 0.2 ms."""
 
     def __init__(self, sensor: Any) -> None:
         self._sensor = sensor

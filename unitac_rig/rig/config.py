@@ -6,6 +6,7 @@ become one :class:`ConfigError` line naming the field. See docs/rig-file.md for 
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
 from pathlib import Path
@@ -13,10 +14,8 @@ from typing import Annotated, Any
 
 from pydantic import (
     AfterValidator,
-    AliasChoices,
     BaseModel,
     BeforeValidator,
-    ConfigDict,
     Field,
     SerializeAsAny,
     ValidationError,
@@ -26,6 +25,7 @@ from pydantic import (
 from drivers.arm import DEFAULT_WATCHDOG_HZ
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.sensors import SENSORS, SensorConfigBase, parse_sensor_config
+from unitac_rig.rig.sensors.base import StrictTable
 from unitac_rig.rig.strategies import known_strategy
 
 # Physical ceilings of the limits (docs/real-rig.md, "Limits with physical ceilings"): a limit above what the hardware
@@ -39,13 +39,7 @@ DOUBLE_FAULT_BOUND_N = 25.0  # what a host frozen at an unexpected contact may r
 MIN_STANDOFF_FLOOR_MM = 2.0  # no position move may end closer to the object than this, mm
 
 
-class _Strict(BaseModel):
-    # allow_inf_nan=False: every number in the rig file is finite. A NaN or inf limit would switch its check off
-    # silently (every comparison with NaN is False; nothing passes inf), so it is refused naming the field.
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-
-
-class ArmConfig(_Strict):
+class ArmConfig(StrictTable):
     host: str = Field(description="IP address or host name of the UR controller")
     frequency_hz: float = Field(500.0, gt=0, le=500, description="RTDE control/receive frequency")
     watchdog_hz: float = Field(
@@ -72,7 +66,7 @@ class ArmConfig(_Strict):
 SensorConfig = Annotated[SerializeAsAny[SensorConfigBase], BeforeValidator(parse_sensor_config)]
 
 
-class ObjectPlacement(_Strict):
+class ObjectPlacement(StrictTable):
     center_m: tuple[float, float] = Field((-0.15, 0.625), description="object axis in the base frame (x, y), m")
     press_height_m: float = Field(0.20, description="height of the press plane (TCP z) in the base frame, m")
     standoff_mm: float = Field(
@@ -88,7 +82,7 @@ class ObjectPlacement(_Strict):
     objects_files: tuple[Path, ...] = Field((), description="extra object files (TOML/JSON) to add to the catalogue")
 
 
-class PressConfig(_Strict):
+class PressConfig(StrictTable):
     threshold_n: float = Field(10.0, gt=0, description="stop force along the press, N")
     # two-phase 15/2 mm/s: chosen from the press chart (docs/benchmarks.md, "Press strategy")
     strategy: Annotated[str, AfterValidator(known_strategy)] = Field(
@@ -167,7 +161,7 @@ def _arc(press: PressConfig) -> list[float]:
     return [float(a) for a in np.round(values, 6)]
 
 
-class LimitsConfig(_Strict):
+class LimitsConfig(StrictTable):
     hard_force_n: float = Field(25.0, gt=0, description="abort a press when |F| (all force axes) passes this, N")
     hard_torque_nm: float = Field(2.0, gt=0, description="abort a press when |T| at the TCP passes this, N*m")
     move_force_n: float = Field(
@@ -179,10 +173,8 @@ class LimitsConfig(_Strict):
     max_failed_in_a_row: int = Field(
         3,
         ge=1,
-        validation_alias=AliasChoices("max_failed_in_a_row", "max_presses_without_contact"),
         description="stop the session after this many presses in a row that did not complete (no contact, "
-        "timeout, travel limit, ...): the object is missing, misplaced or not what the rig file says "
-        "(the old name max_presses_without_contact is still read)",
+        "timeout, travel limit, ...): the object is missing, misplaced or not what the rig file says",
     )
     max_reach_m: float = Field(
         0.85, gt=0, description="no waypoint farther than this from the shoulder (0, 0, 0.1625 m): UR5e reach"
@@ -215,12 +207,16 @@ class LimitsConfig(_Strict):
     def _physical_ceilings(self) -> LimitsConfig:
         """Refuse limits past what the hardware can read or survive (the module's ceilings)."""
         ceilings = (
-            ("hard_force_n", self.hard_force_n, WRIST_FORCE_RANGE_N, "N, the UR5e wrist F/T's force range: a limit "
-             "the wrist cannot read never trips"),
+            (
+                "hard_force_n",
+                self.hard_force_n,
+                WRIST_FORCE_RANGE_N,
+                "N, the UR5e wrist F/T's force range: a limit the wrist cannot read never trips",
+            ),
             ("hard_torque_nm", self.hard_torque_nm, WRIST_TORQUE_RANGE_NM, "N*m, the UR5e wrist F/T's torque range"),
             ("max_speed_mm_s", self.max_speed_mm_s, REDUCED_SPEED_MM_S, "mm/s, the ISO 10218-1 reduced speed"),
             ("move_force_n", self.move_force_n, self.hard_force_n, "N, limits.hard_force_n"),
-        )  # fmt: skip
+        )
         for name, value, ceiling, what in ceilings:
             if value > ceiling:
                 raise ValueError(f"{name} = {value:g} is above {ceiling:g} {what}")
@@ -238,7 +234,7 @@ class LimitsConfig(_Strict):
         return max(DOUBLE_FAULT_BOUND_N - self.move_force_n, 0.0) * watchdog_hz / NEAR_STIFFNESS_N_PER_MM
 
 
-class RigConfig(_Strict):
+class RigConfig(StrictTable):
     """A whole rig. ``arm`` absent and no sensors means the simulated rig."""
 
     name: str = "rig"
@@ -259,6 +255,7 @@ class RigConfig(_Strict):
             "press.fast_speed_mm_s": self.press.fast_speed_mm_s,
             "press.transit_speed_mm_s": self.press.transit_speed_mm_s,
             "press.retract_speed_mm_s": self.press.retract_speed_mm_s,
+            "limits.near_speed_mm_s": self.limits.near_speed_mm_s,
         }
         for name, value in speeds.items():
             if value > self.limits.max_speed_mm_s:
@@ -284,9 +281,7 @@ class RigConfig(_Strict):
             raise ValueError("limits.workspace_min_m must be below limits.workspace_max_m on every axis")
         for name, sensor in self.sensors.items():
             if name not in SENSORS:
-                known = [repr(n) for n in SENSORS]
-                listed = f"{', '.join(known[:-1])} or {known[-1]}" if len(known) > 1 else known[0]
-                raise ValueError(f"sensors.{name}: unknown sensor id (use {listed})")
+                raise ValueError(f"sensors.{name}: unknown sensor id (use {spoken([repr(n) for n in SENSORS])})")
             if not isinstance(sensor, SENSORS[name].config_types):
                 raise ValueError(f"sensors.{name}: type {sensor.type!r} does not fit sensor {name!r}")
         if self.arm is not None and not self.sensors:
@@ -306,15 +301,15 @@ class RigConfig(_Strict):
                 f"frozen at an unexpected contact runs on for 1/{watchdog_hz:g} s, past {DOUBLE_FAULT_BOUND_N:g} N "
                 f"on a {NEAR_STIFFNESS_N_PER_MM:g} N/mm object (docs/real-rig.md)"
             )
-        if self.limits.near_speed_mm_s > self.limits.max_speed_mm_s:
-            raise ValueError(
-                f"limits.near_speed_mm_s = {self.limits.near_speed_mm_s} exceeds limits.max_speed_mm_s = "
-                f"{self.limits.max_speed_mm_s}"
-            )
         return self
 
     def angles_deg(self) -> list[float]:
         return _arc(self.press)
+
+
+def spoken(names: list[str]) -> str:
+    """``a, b or c``: registered names in a message or a help line (the registries name them, not the text)."""
+    return f"{', '.join(names[:-1])} or {names[-1]}" if len(names) > 1 else names[0]
 
 
 def describe_validation_error(err: ValidationError, source: str, model: type[BaseModel] | None = None) -> str:
@@ -374,6 +369,39 @@ def read_toml(path: Path, what: str) -> dict[str, Any]:
         raise ConfigError(f"{path}: not valid TOML ({exc})") from exc
     except OSError as exc:
         raise ConfigError(f"{what} {path} cannot be read ({exc.strerror or exc})") from exc
+
+
+def _toml_key(key: str) -> str:
+    return key if key.replace("_", "").replace("-", "").isalnum() else json.dumps(key)
+
+
+def toml_value(value: Any) -> str:
+    """One TOML value: a string, bool, int, finite float or a list of them (what the project's files hold)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            raise ConfigError(f"cannot write {value} to TOML")
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)  # JSON's string escapes are TOML's
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    raise ConfigError(f"cannot write a {type(value).__name__} to TOML")
+
+
+def toml_text(data: dict[str, Any], prefix: str = "") -> str:
+    """A TOML document of ``data`` (nested dicts are tables) that :func:`read_toml` reads back unchanged."""
+    lines = [f"[{prefix}]"] if prefix else []
+    lines.extend(f"{_toml_key(k)} = {toml_value(v)}" for k, v in data.items() if not isinstance(v, dict))
+    text = "\n".join(lines)
+    for key, value in data.items():
+        if isinstance(value, dict):
+            sub = toml_text(value, f"{prefix}.{_toml_key(key)}" if prefix else _toml_key(key))
+            text = f"{text}\n\n{sub}" if text else sub
+    return text + ("\n" if not prefix else "")
 
 
 def load_rig_config(path: Path | None) -> RigConfig:

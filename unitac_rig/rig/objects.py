@@ -36,6 +36,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from unitac_rig.errors import ConfigError, UsageError
+from unitac_rig.rig.config import describe_validation_error
 
 log = logging.getLogger(__name__)
 
@@ -134,10 +135,6 @@ class ObjectSpec:
 
     def __repr__(self) -> str:
         return f"ObjectSpec(id={self.id!r}, shape={self.shape!r}, material={self.material!r})"
-
-    @property
-    def is_circle(self) -> bool:
-        return self.radius_mm is not None
 
     def outline_hit(self, direction_xy: np.ndarray) -> np.ndarray:
         """Where the ray from the centre along ``direction_xy`` (CAD frame) meets the outer outline (mm, (2,))."""
@@ -373,10 +370,8 @@ def load_object_file(path: Path) -> ObjectSpec:
     try:
         spec = ObjectFile.model_validate(raw)
     except ValidationError as exc:
-        first = exc.errors()[0]
-        where = ".".join(str(p) for p in first["loc"]) or "(file)"
         raise ConfigError(
-            f"object file {path}: field {where}: {first['msg']}",
+            describe_validation_error(exc, f"object file {path}", ObjectFile),
             hint="see docs/simulator.md (object files) for the fields",
         ) from exc
     return _spec_from_file(spec)

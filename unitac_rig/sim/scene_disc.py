@@ -6,7 +6,7 @@ instead: the contact normal is then the cylinder's surface normal at the rim, ti
 mode (compliant along the press axis only; the arm holds position across it) lets the lateral part grow with the
 stiffness. This world gives that contact (frictionless: the worst case for the lateral force, which friction only
 lowers), for the misplacement faults of the fault matrix and the tests of the off-axis bound
-(collection/streams.py):
+(collection/safety_check.py):
 
 * the pad is a disc of radius ``pad_radius_mm`` centred on the TCP, its face normal to tool +z (the press
   direction); the cylinder is vertical, radius ``radius_mm``, axis at ``center_m`` (base x, y);

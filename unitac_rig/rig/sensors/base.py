@@ -15,13 +15,17 @@ from unitac_rig.errors import UsageError
 from unitac_rig.rig.lazy import load
 
 
-class SensorConfigBase(BaseModel):
-    """One ``[sensors.<name>]`` table of the rig file; subclasses fix ``type`` to a literal that tells them apart.
+class StrictTable(BaseModel):
+    """The base of every table a user writes (rig file, sensor tables, import conventions): an unknown key fails (a
+    typo in a safety limit or a port must not pass silently), and every number is finite (a NaN or inf limit would
+    switch its check off silently: every comparison with NaN is False; nothing passes inf). Defined here, the lowest
+    module the rig file's tables share."""
 
-    Unknown keys fail, as everywhere in the rig file: a typo in a port must not pass silently.
-    """
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+
+class SensorConfigBase(StrictTable):
+    """One ``[sensors.<name>]`` table of the rig file; subclasses fix ``type`` to a literal that tells them apart."""
 
     type: str
 

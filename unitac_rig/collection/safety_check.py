@@ -1,5 +1,5 @@
-"""One press's record in the making: the robot and tactile streams, one control period at a time, and the checks
-every control period of every press goes through, whatever its strategy.
+"""The safety check every control period of every press goes through, whatever its strategy, and the press's
+record it keeps while checking: the robot and tactile streams, one control period at a time.
 
 :meth:`PressStreams.tick` is handed to every motion of a press as its ``on_period``. It raises on a stopped controller
 (protective stop, the RTDE watchdog), a tactile stream that stalls, a wrist force that points the wrong way, travel
@@ -30,8 +30,8 @@ import numpy as np
 from drivers.arm import Arm, ArmState
 from drivers.errors import DeviceTimeout
 from drivers.frames import TactileFrame
-from drivers.motion import check_controller, force_magnitude
 from drivers.sensor import TactileSensor
+from unitac_rig.collection.guarded_motion import check_controller, force_magnitude
 from unitac_rig.collection.transit import PressPlan
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.interrupts import raise_if_interrupted

@@ -1,4 +1,5 @@
-"""Motion primitives on top of :class:`drivers.arm.Arm`: watched moves, the guarded (force-terminated) move, settling.
+"""The press's force policy and every other motion of a session, on top of :class:`drivers.arm.Arm`: watched moves,
+the guarded (force-terminated) move, settling, stopping. Policy, not I/O: the driver only carries the commands.
 
 Every motion here is started and then watched one control period at a time (``wait_period`` also feeds the
 controller's watchdog), and every way out (a reached condition, an exception from a callback or the arm, Ctrl-C, a
@@ -32,6 +33,7 @@ import numpy as np
 from drivers.arm import Arm, ArmState
 from drivers.errors import ArmError, ControlScriptStopped, ProtectiveStop
 from drivers.rotations import angle_between, matrix_to_rotvec
+from unitac_rig.rig.poses import press_force_n
 
 logger = logging.getLogger(__name__)
 
@@ -78,7 +80,7 @@ class GuardedMoveResult:
 
 def press_force(state: ArmState, direction: np.ndarray) -> float:
     """Press force (N) along the unit ``direction``: positive while the tool pushes into something."""
-    return -float(np.dot(np.asarray(state.tcp_force, dtype=np.float64)[:3], direction))
+    return press_force_n(state.tcp_force, direction)
 
 
 def force_magnitude(state: ArmState) -> tuple[float, float]:
@@ -230,9 +232,20 @@ def guarded_move(
             reason: StopReason = "protective_stop"
             trigger = start_state
         else:
-            reason, trigger, peak = _approach(arm, command, unit, start_position, max_travel_m, force_threshold_n,
-                                             hard_limit_n, hard_torque_nm, stop_samples, max_duration_s, on_period,
-                                             peak)  # fmt: skip
+            reason, trigger, peak = _approach(
+                arm,
+                command,
+                unit,
+                start_position,
+                max_travel_m,
+                force_threshold_n,
+                hard_limit_n,
+                hard_torque_nm,
+                stop_samples,
+                max_duration_s,
+                on_period,
+                peak,
+            )
         if keep_moving and reason == "force":
             stop_sent = True  # nothing to stop: the next guarded move takes over within one control period
             travel = float(np.dot(np.asarray(trigger.tcp_pose[:3]) - start_position, unit))

@@ -1,4 +1,5 @@
-"""The pump every tactile driver shares: one decode path, polled on the caller's thread or run on a reader thread.
+"""The base class of every tactile-sensor driver (:class:`PumpedSensor`): one decode path, polled on the caller's
+thread or run on a reader thread. The interface it implements is :class:`drivers.sensor.TactileSensor`.
 
 A driver subclasses :class:`PumpedSensor` and fills three hooks: ``_open()`` (open the transport and start the
 device streaming), ``_close()`` (stop streaming, close) and ``_pump(wait_s)`` (decode whatever the transport holds,

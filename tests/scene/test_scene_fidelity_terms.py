@@ -9,7 +9,9 @@
 * a sensor pad mounted off the tool axis: a cylinder met off its crest, and the torque moved to the TCP;
 * two terms the default scene leaves off (measured, docs/simulator.md): the prism bending as a cantilever (the
   contact deeper toward its base) and a seeded rotation of the object on its adapter;
-* a third it leaves off (issue 38): the uSkin's magnets reading a load through the skin a contact leaves under it.
+* a third it leaves off (issue 38): the uSkin's magnets reading a load through the skin a contact leaves under it;
+* the skin sheared along each flank's own normal, turned back by friction (issue 38; the realistic twin's
+  ``flank_friction``): a corner's angle reaches the uSkin's shear.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from unitac_rig.rig.objects import ObjectSpec, get_object
 from unitac_rig.rig.poses import rotvec_to_matrix
 from unitac_rig.sim.fast_rig import SimRig
 from unitac_rig.sim.scene import PressScene, SceneParams, bending_tilt_rad_per_n
-from unitac_rig.sim.scene_pads import PillarPad, SkinPad, tilted_profile
+from unitac_rig.sim.scene_pads import PillarPad, SkinPad, flank_shear_ratio, tilted_profile
 
 EXACT = SceneParams().exact()  # object placed and pad mounted exactly: only the term under test differs
 
@@ -365,6 +367,7 @@ def test_a_rotation_error_turns_the_object_and_leaves_the_centring_draw_alone() 
         {"pillar_friction": -0.2},
         {"skin_bulge_mm": 0.5, "skin_spread_sigma_mm": 0.0},
         {"skin_thickness_mm": -1.0},
+        {"skin_flank_friction": -0.1},
         {"skin_thickness_mm": 2.5, "skin_spread_sigma_mm": 0.0, "skin_bulge_mm": 0.0},
     ],
 )
@@ -398,3 +401,25 @@ def test_the_read_through_sharpens_a_corner_and_leaves_a_face_alone() -> None:
     peak = np.unravel_index(np.argmax(corner_off[..., 2]), corner_off.shape[:2])
     assert corner_on[..., 2][peak] > 1.03 * corner_off[..., 2][peak]
     assert corner_on[..., 2].sum() == pytest.approx(corner_off[..., 2].sum(), rel=1e-9)
+
+
+def test_a_flank_shears_the_skin_along_its_normal_turned_back_by_friction() -> None:
+    """Coulomb's cone about the flank's normal: shear/normal tan(phi - atan mu) = (tan phi - mu) / (1 + mu tan phi),
+    0 inside the cone. By hand at mu 0.25: a 90 deg corner's flank (tan phi 1) 0.6, an 80 deg one's (phi 50 deg)
+    0.7256, a 120 deg one's (tan 30 deg) 0.2861, a flank tilted less than atan 0.25 (14 deg) none."""
+    slopes = np.array([1.0, -1.0, math.tan(math.radians(50)), -math.tan(math.radians(30)), 0.2, 0.0])
+    expected = [0.6, -0.6, 0.7256, -0.2861, 0.0, 0.0]
+    np.testing.assert_allclose(flank_shear_ratio(slopes, 0.25), expected, atol=1e-4)
+
+
+def test_the_corners_angle_reaches_the_skins_shear_through_its_flanks() -> None:
+    """The square at 45 deg (a 90 deg corner) and the hexagon at 30 deg (120 deg): with almost no spreading and no
+    bulge each column next to the corner holds one flank, and reads its shear/normal: +-0.6 and +-0.2861 at mu 0.25,
+    where the clean twin's cap reads +-0.18 on both."""
+    params = replace(EXACT, skin_spread_sigma_mm=0.01, skin_bulge_mm=0.0, skin_flank_friction=0.25)
+    for object_id, angle, ratio in (("square_pla", 45.0, 0.6), ("hex_pla", 30.0, 0.2861)):
+        g = grid(object_id, USKIN, angle, params)
+        np.testing.assert_allclose(g[:, 2, 0], -ratio * g[:, 2, 2], rtol=2e-3)
+        np.testing.assert_allclose(g[:, 3, 0], ratio * g[:, 3, 2], rtol=2e-3)
+        clean = grid(object_id, USKIN, angle, replace(params, skin_flank_friction=0.0))
+        np.testing.assert_allclose(clean[:, 3, 0], EXACT.skin_friction * clean[:, 3, 2], rtol=2e-3)

@@ -150,6 +150,9 @@ class SkinPad:
         ratio, ratio_y = _friction_capped(
             p.shear_projection * slope, p.shear_projection * self.pitch_tan, p.skin_friction
         )
+        if p.skin_flank_friction > 0:
+            ratio = flank_shear_ratio(slope, p.skin_flank_friction)
+            ratio_y = _friction_capped(np.zeros_like(ratio), p.shear_projection * self.pitch_tan, p.skin_friction)[1]
         scale = k_eff * self.height * length  # N per mm of mean overlap over the segment
 
         def force(e: float) -> float:
@@ -354,6 +357,22 @@ class PillarPad:
         contact = gap < p.corner_contact_depth_mm
         proximity = float(np.max(np.exp(-col_xi[self.cols][contact] / p.corner_decay_mm))) if np.any(contact) else 0.0
         return PadTable(depth, loads, disp, wrench, touch, proximity)
+
+
+def flank_shear_ratio(slope: np.ndarray, mu: float) -> np.ndarray:
+    """Shear/normal ratio (across the pad) of a skin pressed by a rigid flank of slope ``slope`` (tan of its tilt
+    phi from the pad), with Coulomb friction ``mu`` between them: tan(phi - atan mu), with the slope's sign, where
+    phi > atan mu, else 0.
+
+    A frictionless flank pushes the skin along the flank's own normal, phi off the pad's (shear/normal tan phi,
+    outward from the apex); the incompressible skin is squeezed outward under it and slides along the flank, so
+    friction turns the traction back toward the apex by atan mu, the edge of Coulomb's cone about the flank normal
+    (Popov, Contact Mechanics and Friction, 2010, ch. 10). Where phi <= atan mu the cone holds the skin: it sticks
+    and the flank pushes it straight in. The corner's angle thus reaches the readings: a 90 deg corner (phi 45 deg)
+    gives tan(45 - atan mu), an 80 deg one tan(50 - atan mu), a 120 deg one (phi 30 deg) none for mu >= 0.58.
+    """
+    phi = np.arctan(np.abs(slope))
+    return np.sign(slope) * np.tan(np.maximum(0.0, phi - math.atan(mu)))
 
 
 def _friction_capped(ratio_x: np.ndarray, ratio_y: np.ndarray | float, mu: float) -> tuple[np.ndarray, np.ndarray]:

@@ -28,6 +28,10 @@ class SceneParams:
     # hexagon and the square (-2.7k..-3.1k counts) although the square's faces tilt further, so the skin slides
     # (capped) on both; one value serves both materials, the TPU sessions' larger lateral readings come from the
     # wall's drag (MaterialSpec.skin_drag_mm)
+    skin_flank_friction: float = 0.0  # [S/I] mu of the skin on a printed flank when the flank sets the shear's
+    # direction (scene_pads.flank_shear_ratio): shear/normal tan(phi - atan mu) past Coulomb's cone, 0 inside it;
+    # 0 = off (the fitted c * tan(tilt) capped at skin_friction). Rubber on printed PLA 0.62-0.76 [S], silicone on
+    # PLA 0.6-1.0 [I] (scene facts section 4)
     # ---- PapillArray pad -----------------------------------------------------------------------------------
     pillar_axial_n_per_mm: float = 6.0  # [D] 15 N / 2.5 mm range ratio; data: 4.9 N at 0.86 mm
     pillar_lateral_n_per_mm: float = 1.2  # [I] fitted: data pillar shear ~1.9 N with displacement ~1.5 mm
@@ -101,13 +105,14 @@ class SceneParams:
                 self.skin_bulge_mm,
                 self.skin_friction,
                 self.pillar_friction,
+                self.skin_flank_friction,
             )
             < 0
         ):
             raise ConfigError(
                 "scene error spreads, the skin bulge and friction cannot be negative",
                 hint="centring_error_mm, rotation_error_deg, pad_pitch_sd_deg, skin_bulge_mm, skin_friction,"
-                " pillar_friction >= 0",
+                " pillar_friction, skin_flank_friction >= 0",
             )
         if self.bending_lever_mm < 0:
             raise ConfigError("the bending lever cannot be negative", hint="bending_lever_mm >= 0 (0: no bending)")

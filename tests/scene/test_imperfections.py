@@ -19,6 +19,7 @@ from unitac_rig.sim.fast_rig import SimRig, seeded_scene
 from unitac_rig.sim.imperfections import (
     CLEAN,
     REALISTIC,
+    SKIN_FLANK_FRICTION,
     ElastomerMemory,
     Imperfections,
     mount_offset_mm,
@@ -165,6 +166,21 @@ def test_mount_offset_moves_the_pad_by_the_cited_spread_per_session() -> None:
         assert on.pad_offset_mm - off.pad_offset_mm == pytest.approx(draw) and draw != 0.0
     draws = [mount_offset_mm(np.random.default_rng(mount_seed(s, hexagon.id, "uskin", 0.0))) for s in range(400)]
     assert np.std(draws) == pytest.approx(0.2, rel=0.15)
+
+
+def test_flank_friction_turns_the_skins_shear_to_each_flank_of_the_seeded_scene() -> None:
+    """The switch gives the scene the fitted flank friction (its physics: tests/scene/test_scene_fidelity_terms.py):
+    the square's 90 deg corner (45 deg) then shears the skin by (1 - mu) / (1 + mu) = 0.6 of the normal load on each
+    flank, where the clean scene caps it at the skin friction 0.18; the two columns astride the corner read each
+    flank's shear through the 2 mm spread, which mixes in the other flank's (and the bulge's), so they read ~20 %
+    more, not 3.3x. A face pressed square-on (no tilt) is left alone."""
+    square = get_object("square_pla")
+    on = seeded_scene(square, 0.0, "uskin", seed=1, imperfections=Imperfections.parse("flank_friction"))
+    off = seeded_scene(square, 0.0, "uskin", seed=1)
+    assert on.params.skin_flank_friction == SKIN_FLANK_FRICTION and off.params.skin_flank_friction == 0.0
+    corner_on, corner_off = on.loads_at_force(45.0, 10.0).forces_n, off.loads_at_force(45.0, 10.0).forces_n
+    assert np.abs(corner_on[:, 0]).sum() > 1.15 * np.abs(corner_off[:, 0]).sum()
+    np.testing.assert_allclose(on.loads_at_force(0.0, 10.0).forces_n, off.loads_at_force(0.0, 10.0).forces_n)
 
 
 def _session_hashes(

@@ -34,6 +34,7 @@ from unitac_rig.sim.fast_sensors import configured_sensors
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
 from unitac_rig.sim.imperfections import (
     CLEAN,
+    SKIN_FLANK_FRICTION,
     Imperfections,
     as_imperfections,
     mount_offset_mm,
@@ -124,6 +125,8 @@ def seeded_scene(
     placement = np.random.default_rng(placement_seed(seed, obj.id, rotation_deg)) if shared_placement else None
     if imperfections.print_tolerance:
         obj = printed_object(obj, np.random.default_rng(print_seed(seed, obj.id)))
+    if imperfections.flank_friction:
+        params = replace(params or SceneParams(), skin_flank_friction=SKIN_FLANK_FRICTION)
     if imperfections.mount_offset:
         params = params or SceneParams()
         extra_mm = mount_offset_mm(np.random.default_rng(mount_seed(seed, obj.id, sensor, rotation_deg)))

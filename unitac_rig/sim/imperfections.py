@@ -3,7 +3,7 @@
 A twin without them is far easier than the hardware: its readings are one smooth function of the contact, so a
 model that interpolates between seen contacts scores as well as one that generalises. Each imperfection here is a
 field of :class:`Imperfections` (True = on; the default, :data:`REALISTIC`, has all of them); :data:`CLEAN` turns
-every one off and gives, bit for bit, the twin as it was before them (``unitac-rig campaign --clean-twin``).
+every one off and gives, bit for bit, the twin as it was before them (``unitac-rig campaign --imperfections none``).
 
 * ``hysteresis`` and ``creep`` of the elastomer (the uSkin's skin, the PapillArray's silicone pillars):
   :class:`ElastomerMemory` changes each taxel's load before its transducer reads it;
@@ -13,7 +13,10 @@ every one off and gives, bit for bit, the twin as it was before them (``unitac-r
 * ``print_tolerance``: each printed object a little larger or smaller than its CAD, and not quite round/square
   (:func:`printed_object`, seeded per object, the same for every sensor and rotation);
 * ``mount_offset``: each time a sensor is mounted its pad sits a little off the tool axis (:func:`mounted_params`,
-  seeded per session).
+  seeded per session);
+* ``flank_friction``: the uSkin's skin sheared by each flank it meets along that flank's own normal, turned back by
+  friction (:data:`SKIN_FLANK_FRICTION`, ``unitac_rig.sim.scene_pads.flank_shear_ratio``), instead of the clean
+  twin's shear in proportion to the tilt with one cap: a corner's angle reaches the readings.
 
 The figures and their sources are with each parameter (sensor ones in ``sim/sensor_models.py``) and in
 docs/simulator.md ("Imperfections").
@@ -38,6 +41,11 @@ PRINT_TOLERANCE_MM = 0.2  # [S] "typical accuracy: +-0.2 mm on calibrated FDM ma
 MOUNT_OFFSET_SD_MM = 0.2  # [S/D] an M3 bolt in its ISO 273 "medium" clearance hole (3.4 mm) has 0.2 mm of radial
 # play, and the printed adapter itself +-0.2 mm (the FDM figure above): each remount puts the pad's centre off the
 # tool axis along the pad by sd 0.2 mm, on top of the fitted offsets of SceneParams
+SKIN_FLANK_FRICTION = 0.25  # [I] fitted on the seen objects' recorded uSkin extremes: Coulomb mu of the uSkin's
+# skin on a printed flank, the shear's direction set by the flank (SceneParams.skin_flank_friction). Over 5 placement
+# draws (benchmarks/fidelity_draws.py --set skin_flank_friction=MU) it meets 28.6 of the 32 seen targets per draw at
+# 0.25, 27.8 at 0.36, 28.4 at 0.47, 26.8 / 26.4 at the handbook's rubber on PLA 0.62 / 0.76, 28.2 with it off: the
+# same below-handbook value the fitted cap skin_friction (0.18) says of printed layer lines
 
 
 @dataclass(frozen=True)
@@ -51,6 +59,7 @@ class Imperfections:
     crosstalk: bool = True
     print_tolerance: bool = True
     mount_offset: bool = True
+    flank_friction: bool = True
 
     @property
     def any(self) -> bool:

@@ -61,6 +61,7 @@ class SkinPad:
 
     WEIGHT_LOOKUP_STEP_MM = 0.01
     HEIGHT_BINS = 200  # bins up the pad for the bending tilt's load profile (0.15 mm)
+    SIGMA_LEVELS = np.linspace(0.1, 1.0, 19)  # spreads tabulated for the read-through, as fractions of sigma
 
     def __init__(
         self, layout: SensorLayout, params: SceneParams, pitch_tan: float = 0.0, tilt_rad_per_n: float = 0.0
@@ -78,6 +79,12 @@ class SkinPad:
         sigma = params.skin_spread_sigma_mm
         self.lookup_s = np.linspace(-half_w, half_w, round(2 * half_w / self.WEIGHT_LOOKUP_STEP_MM) + 1)
         self.lookup_w = _cell_weights(self.lookup_s, layout.cols, pitch, sigma)  # (cols, n)
+        # the same at narrower spreads, for a contact read through the thinner skin left under it
+        self.level_w = (
+            [_cell_weights(self.lookup_s, layout.cols, pitch, sigma * f) for f in self.SIGMA_LEVELS]
+            if params.skin_thickness_mm > 0
+            else []
+        )
         # the pad's height in bins (y up, mm): what share of a line load at each height each row reads, and how the
         # skin spreads it onto the inner row edges (both exact for a load constant within a bin)
         y_edges = np.linspace(-half_h, half_h, self.HEIGHT_BINS + 1)
@@ -143,6 +150,9 @@ class SkinPad:
         ratio, ratio_y = _friction_capped(
             p.shear_projection * slope, p.shear_projection * self.pitch_tan, p.skin_friction
         )
+        if p.skin_flank_friction > 0:
+            ratio = flank_shear_ratio(slope, p.skin_flank_friction)
+            ratio_y = _friction_capped(np.zeros_like(ratio), p.shear_projection * self.pitch_tan, p.skin_friction)[1]
         scale = k_eff * self.height * length  # N per mm of mean overlap over the segment
 
         def force(e: float) -> float:
@@ -156,10 +166,16 @@ class SkinPad:
         normal_seg = scale[near] * _mean_positive(d - gap_a[near], d - gap_b[near])  # (m, n_near) N
         shear_seg = normal_seg * ratio[near]
         shear_y_seg = normal_seg * ratio_y[near]
-        weights = np.stack([np.interp(mid[near], self.lookup_s, w) for w in self.lookup_w])  # (cols, n_near)
-        col_n = normal_seg @ weights.T  # (m, cols)
-        col_x = shear_seg @ weights.T
-        col_y = shear_y_seg @ weights.T
+        if p.skin_thickness_mm > 0:
+            # each segment read through the skin left under it: the Winkler skin takes k_eff / k_skin of the overlap
+            squeeze = d - np.stack([gap_a[near], gap_b[near]]).min(axis=0)  # deepest overlap in the segment (mm)
+            skin_mm = np.clip(squeeze, 0.0, None) * (k_eff[near] / k_skin)
+            col_n, col_x, col_y = self._read_through(mid[near], skin_mm, (normal_seg, shear_seg, shear_y_seg))
+        else:
+            weights = np.stack([np.interp(mid[near], self.lookup_s, w) for w in self.lookup_w])  # (cols, n_near)
+            col_n = normal_seg @ weights.T  # (m, cols)
+            col_x = shear_seg @ weights.T
+            col_y = shear_y_seg @ weights.T
         kappa_x = p.skin_bulge_mm + material.skin_drag_mm  # the skin's bulge plus a soft wall's surface drag
         if kappa_x > 0:
             # the spread line load (N/mm) at each inner column edge; a column's lateral reading is -kappa times the
@@ -193,6 +209,26 @@ class SkinPad:
             touch_cn=-fmin,
             corner_proximity=proximity,
         )
+
+    def _read_through(
+        self, mid: np.ndarray, squeeze_mm: np.ndarray, loads: tuple[np.ndarray, ...]
+    ) -> tuple[np.ndarray, ...]:
+        """Column loads (m, cols) of segment loads (m, n) at ``mid`` (mm across the pad) when each is read through the
+        skin left under it. A magnet h below the surface sees a surface load spread over a width proportional to its
+        depth (FWHM 1.29 x depth under a line load: Flamant, Johnson, Contact Mechanics, 1985, section 2.2); a contact
+        ``squeeze_mm`` deep leaves h - squeeze of skin between the surface and the magnet, so the spread shrinks to
+        sigma * (h - squeeze) / h (the load is kept, so its peak rises by h / (h - squeeze)). Linear in sigma between
+        the :attr:`SIGMA_LEVELS` tables."""
+        h = self.params.skin_thickness_mm
+        fraction = np.clip(1.0 - squeeze_mm / h, self.SIGMA_LEVELS[0], 1.0)  # (m, n): sigma / sigma_0
+        level = np.interp(fraction, self.SIGMA_LEVELS, np.arange(self.SIGMA_LEVELS.size))
+        lo = np.minimum(np.floor(level).astype(int), self.SIGMA_LEVELS.size - 2)
+        frac = level - lo
+        # (levels, n, cols): the share each column reads of a load at each segment, at each tabulated sigma
+        w = np.stack([np.stack([np.interp(mid, self.lookup_s, c) for c in lw], axis=-1) for lw in self.level_w])
+        seg = np.arange(mid.size)[None, :]
+        weights = w[lo, seg] * (1.0 - frac)[..., None] + w[lo + 1, seg] * frac[..., None]  # (m, n, cols)
+        return tuple(np.einsum("mn,mnc->mc", load, weights) for load in loads)
 
     def _loads_up_the_pad(self, depth: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per-mm-of-height column loads and sums ``line`` (m, 3 * cols + 5) at each table depth -> taxel loads
@@ -321,6 +357,22 @@ class PillarPad:
         contact = gap < p.corner_contact_depth_mm
         proximity = float(np.max(np.exp(-col_xi[self.cols][contact] / p.corner_decay_mm))) if np.any(contact) else 0.0
         return PadTable(depth, loads, disp, wrench, touch, proximity)
+
+
+def flank_shear_ratio(slope: np.ndarray, mu: float) -> np.ndarray:
+    """Shear/normal ratio (across the pad) of a skin pressed by a rigid flank of slope ``slope`` (tan of its tilt
+    phi from the pad), with Coulomb friction ``mu`` between them: tan(phi - atan mu), with the slope's sign, where
+    phi > atan mu, else 0.
+
+    A frictionless flank pushes the skin along the flank's own normal, phi off the pad's (shear/normal tan phi,
+    outward from the apex); the incompressible skin is squeezed outward under it and slides along the flank, so
+    friction turns the traction back toward the apex by atan mu, the edge of Coulomb's cone about the flank normal
+    (Popov, Contact Mechanics and Friction, 2010, ch. 10). Where phi <= atan mu the cone holds the skin: it sticks
+    and the flank pushes it straight in. The corner's angle thus reaches the readings: a 90 deg corner (phi 45 deg)
+    gives tan(45 - atan mu), an 80 deg one tan(50 - atan mu), a 120 deg one (phi 30 deg) none for mu >= 0.58.
+    """
+    phi = np.arctan(np.abs(slope))
+    return np.sign(slope) * np.tan(np.maximum(0.0, phi - math.atan(mu)))
 
 
 def _friction_capped(ratio_x: np.ndarray, ratio_y: np.ndarray | float, mu: float) -> tuple[np.ndarray, np.ndarray]:

@@ -18,6 +18,9 @@ class SceneParams:
     # h ~2.5 mm, so 0.24-4; refitted (benchmarks/fidelity_fit.py) toward the soft end: a softer skin widens a circle's
     # contact more than a corner's, lowering the circles' uSkin maxima against the prisms'; ~0.9 mm under a corner
     skin_spread_sigma_mm: float = 2.0  # [I] Gaussian load spreading of the continuous skin, 2-4 mm (0.3-0.55 pitch)
+    skin_thickness_mm: float = 0.0  # [I] elastomer between the skin's surface and the magnets, 1.5-3 mm
+    # (scene facts section 1; the 2.5 mm the foundation's K = E_eff / h assumes). > 0: each load is read through the
+    # skin left under it (SkinPad._read_through), so a contact that squeezes the skin reads sharper; 0: off
     skin_margin_x_mm: float = 4.55  # [S] first taxel 4.55 mm from the pad edge across the press (LeapXELA layout)
     skin_margin_y_mm: float = 4.43  # [S] same along the prism axis
     skin_friction: float = 0.18  # [I] fitted: Coulomb coefficient of the skin on either printed material (caps skin
@@ -25,6 +28,10 @@ class SceneParams:
     # hexagon and the square (-2.7k..-3.1k counts) although the square's faces tilt further, so the skin slides
     # (capped) on both; one value serves both materials, the TPU sessions' larger lateral readings come from the
     # wall's drag (MaterialSpec.skin_drag_mm)
+    skin_flank_friction: float = 0.0  # [S/I] mu of the skin on a printed flank when the flank sets the shear's
+    # direction (scene_pads.flank_shear_ratio): shear/normal tan(phi - atan mu) past Coulomb's cone, 0 inside it;
+    # 0 = off (the fitted c * tan(tilt) capped at skin_friction). Rubber on printed PLA 0.62-0.76 [S], silicone on
+    # PLA 0.6-1.0 [I] (scene facts section 4)
     # ---- PapillArray pad -----------------------------------------------------------------------------------
     pillar_axial_n_per_mm: float = 6.0  # [D] 15 N / 2.5 mm range ratio; data: 4.9 N at 0.86 mm
     pillar_lateral_n_per_mm: float = 1.2  # [I] fitted: data pillar shear ~1.9 N with displacement ~1.5 mm
@@ -98,16 +105,22 @@ class SceneParams:
                 self.skin_bulge_mm,
                 self.skin_friction,
                 self.pillar_friction,
+                self.skin_flank_friction,
             )
             < 0
         ):
             raise ConfigError(
                 "scene error spreads, the skin bulge and friction cannot be negative",
                 hint="centring_error_mm, rotation_error_deg, pad_pitch_sd_deg, skin_bulge_mm, skin_friction,"
-                " pillar_friction >= 0",
+                " pillar_friction, skin_flank_friction >= 0",
             )
         if self.bending_lever_mm < 0:
             raise ConfigError("the bending lever cannot be negative", hint="bending_lever_mm >= 0 (0: no bending)")
+        if self.skin_thickness_mm < 0 or (self.skin_thickness_mm > 0 and self.skin_spread_sigma_mm <= 0):
+            raise ConfigError(
+                "the skin's read-through needs a thickness >= 0 and a spread to narrow",
+                hint="skin_thickness_mm >= 0 (0: off); > 0 needs skin_spread_sigma_mm > 0",
+            )
         if self.skin_bulge_mm > 0 and self.skin_spread_sigma_mm <= 0:
             raise ConfigError(
                 "the skin bulge reads the spread pressure's gradient",

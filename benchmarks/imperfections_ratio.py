@@ -79,7 +79,7 @@ def scene_distance(
 ) -> dict[str, Any]:
     """:func:`nearest_seen_distance` on the scene's own loads (the ``--scene`` screen), ``changes`` applied to
     :class:`SceneParams`: every contact counts (no sampling), the press ids as in a campaign."""
-    params = replace(SceneParams(), **changes)
+    params = replace(SceneParams(), **changes)  # type: ignore[arg-type]  # field names checked by SceneParams
     out: dict[str, Any] = {"changes": changes, "angles": angles}
     for sensor in sensors:
         rows, press, unseen = [], [], []
@@ -134,11 +134,11 @@ def main() -> None:
         label, _, spec = item.partition("=")
         changes = {k: float(v) for k, _, v in (c.partition("=") for c in spec.split(",") if c)}
         doc["scene"][label] = screened = scene_distance(changes, args.scene_angles)
-        ratios = "  ".join(f"{sensor} x{screened[sensor]['ratio']:.2f}" for sensor in ("uskin", "papillarray"))
-        print(f"scene {label} {changes}: nearest seen contact, unseen / seen {ratios}")
+        screen = "  ".join(f"{sensor} x{screened[sensor]['ratio']:.2f}" for sensor in ("uskin", "papillarray"))
+        print(f"scene {label} {changes}: nearest seen contact, unseen / seen {screen}")
     for item in args.data:
-        label, _, data = item.partition("=")
-        doc["data"][label] = distances = nearest_seen_distance(Path(data))
+        label, _, data_dir = item.partition("=")
+        doc["data"][label] = distances = nearest_seen_distance(Path(data_dir))
         for sensor, d in distances.items():
             print(
                 f"{label} {sensor}: nearest seen contact, seen {d['seen']:.4f} unseen {d['unseen']:.4f}"

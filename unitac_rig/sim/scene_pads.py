@@ -61,7 +61,6 @@ class SkinPad:
 
     WEIGHT_LOOKUP_STEP_MM = 0.01
     HEIGHT_BINS = 200  # bins up the pad for the bending tilt's load profile (0.15 mm)
-    SIGMA_LEVELS = np.linspace(0.1, 1.0, 19)  # spreads tabulated for the read-through, as fractions of sigma
 
     def __init__(
         self, layout: SensorLayout, params: SceneParams, pitch_tan: float = 0.0, tilt_rad_per_n: float = 0.0
@@ -79,12 +78,6 @@ class SkinPad:
         sigma = params.skin_spread_sigma_mm
         self.lookup_s = np.linspace(-half_w, half_w, round(2 * half_w / self.WEIGHT_LOOKUP_STEP_MM) + 1)
         self.lookup_w = _cell_weights(self.lookup_s, layout.cols, pitch, sigma)  # (cols, n)
-        # the same at narrower spreads, for a contact read through the thinner skin left under it
-        self.level_w = (
-            [_cell_weights(self.lookup_s, layout.cols, pitch, sigma * f) for f in self.SIGMA_LEVELS]
-            if params.skin_thickness_mm > 0
-            else []
-        )
         # the pad's height in bins (y up, mm): what share of a line load at each height each row reads, and how the
         # skin spreads it onto the inner row edges (both exact for a load constant within a bin)
         y_edges = np.linspace(-half_h, half_h, self.HEIGHT_BINS + 1)
@@ -166,16 +159,10 @@ class SkinPad:
         normal_seg = scale[near] * _mean_positive(d - gap_a[near], d - gap_b[near])  # (m, n_near) N
         shear_seg = normal_seg * ratio[near]
         shear_y_seg = normal_seg * ratio_y[near]
-        if p.skin_thickness_mm > 0:
-            # each segment read through the skin left under it: the Winkler skin takes k_eff / k_skin of the overlap
-            squeeze = d - np.stack([gap_a[near], gap_b[near]]).min(axis=0)  # deepest overlap in the segment (mm)
-            skin_mm = np.clip(squeeze, 0.0, None) * (k_eff[near] / k_skin)
-            col_n, col_x, col_y = self._read_through(mid[near], skin_mm, (normal_seg, shear_seg, shear_y_seg))
-        else:
-            weights = np.stack([np.interp(mid[near], self.lookup_s, w) for w in self.lookup_w])  # (cols, n_near)
-            col_n = normal_seg @ weights.T  # (m, cols)
-            col_x = shear_seg @ weights.T
-            col_y = shear_y_seg @ weights.T
+        weights = np.stack([np.interp(mid[near], self.lookup_s, w) for w in self.lookup_w])  # (cols, n_near)
+        col_n = normal_seg @ weights.T  # (m, cols)
+        col_x = shear_seg @ weights.T
+        col_y = shear_y_seg @ weights.T
         kappa_x = p.skin_bulge_mm + material.skin_drag_mm  # the skin's bulge plus a soft wall's surface drag
         if kappa_x > 0:
             # the spread line load (N/mm) at each inner column edge; a column's lateral reading is -kappa times the
@@ -209,26 +196,6 @@ class SkinPad:
             touch_cn=-fmin,
             corner_proximity=proximity,
         )
-
-    def _read_through(
-        self, mid: np.ndarray, squeeze_mm: np.ndarray, loads: tuple[np.ndarray, ...]
-    ) -> tuple[np.ndarray, ...]:
-        """Column loads (m, cols) of segment loads (m, n) at ``mid`` (mm across the pad) when each is read through the
-        skin left under it. A magnet h below the surface sees a surface load spread over a width proportional to its
-        depth (FWHM 1.29 x depth under a line load: Flamant, Johnson, Contact Mechanics, 1985, section 2.2); a contact
-        ``squeeze_mm`` deep leaves h - squeeze of skin between the surface and the magnet, so the spread shrinks to
-        sigma * (h - squeeze) / h (the load is kept, so its peak rises by h / (h - squeeze)). Linear in sigma between
-        the :attr:`SIGMA_LEVELS` tables."""
-        h = self.params.skin_thickness_mm
-        fraction = np.clip(1.0 - squeeze_mm / h, self.SIGMA_LEVELS[0], 1.0)  # (m, n): sigma / sigma_0
-        level = np.interp(fraction, self.SIGMA_LEVELS, np.arange(self.SIGMA_LEVELS.size))
-        lo = np.minimum(np.floor(level).astype(int), self.SIGMA_LEVELS.size - 2)
-        frac = level - lo
-        # (levels, n, cols): the share each column reads of a load at each segment, at each tabulated sigma
-        w = np.stack([np.stack([np.interp(mid, self.lookup_s, c) for c in lw], axis=-1) for lw in self.level_w])
-        seg = np.arange(mid.size)[None, :]
-        weights = w[lo, seg] * (1.0 - frac)[..., None] + w[lo + 1, seg] * frac[..., None]  # (m, n, cols)
-        return tuple(np.einsum("mn,mnc->mc", load, weights) for load in loads)
 
     def _loads_up_the_pad(self, depth: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per-mm-of-height column loads and sums ``line`` (m, 3 * cols + 5) at each table depth -> taxel loads

@@ -18,9 +18,6 @@ class SceneParams:
     # h ~2.5 mm, so 0.24-4; refitted (benchmarks/fidelity_fit.py) toward the soft end: a softer skin widens a circle's
     # contact more than a corner's, lowering the circles' uSkin maxima against the prisms'; ~0.9 mm under a corner
     skin_spread_sigma_mm: float = 2.0  # [I] Gaussian load spreading of the continuous skin, 2-4 mm (0.3-0.55 pitch)
-    skin_thickness_mm: float = 0.0  # [I] elastomer between the skin's surface and the magnets, 1.5-3 mm
-    # (scene facts section 1; the 2.5 mm the foundation's K = E_eff / h assumes). > 0: each load is read through the
-    # skin left under it (SkinPad._read_through), so a contact that squeezes the skin reads sharper; 0: off
     skin_margin_x_mm: float = 4.55  # [S] first taxel 4.55 mm from the pad edge across the press (LeapXELA layout)
     skin_margin_y_mm: float = 4.43  # [S] same along the prism axis
     skin_friction: float = 0.18  # [I] fitted: Coulomb coefficient of the skin on either printed material (caps skin
@@ -116,11 +113,6 @@ class SceneParams:
             )
         if self.bending_lever_mm < 0:
             raise ConfigError("the bending lever cannot be negative", hint="bending_lever_mm >= 0 (0: no bending)")
-        if self.skin_thickness_mm < 0 or (self.skin_thickness_mm > 0 and self.skin_spread_sigma_mm <= 0):
-            raise ConfigError(
-                "the skin's read-through needs a thickness >= 0 and a spread to narrow",
-                hint="skin_thickness_mm >= 0 (0: off); > 0 needs skin_spread_sigma_mm > 0",
-            )
         if self.skin_bulge_mm > 0 and self.skin_spread_sigma_mm <= 0:
             raise ConfigError(
                 "the skin bulge reads the spread pressure's gradient",

@@ -43,7 +43,7 @@ MOUNT_OFFSET_SD_MM = 0.2  # [S/D] an M3 bolt in its ISO 273 "medium" clearance h
 # tool axis along the pad by sd 0.2 mm, on top of the fitted offsets of SceneParams
 SKIN_FLANK_FRICTION = 0.25  # [I] fitted on the seen objects' recorded uSkin extremes: Coulomb mu of the uSkin's
 # skin on a printed flank, the shear's direction set by the flank (SceneParams.skin_flank_friction). Over 5 placement
-# draws (benchmarks/fidelity_draws.py --set skin_flank_friction=MU) it meets 28.6 of the 32 seen targets per draw at
+# draws (benchmarks/fidelity.py draws --set skin_flank_friction=MU) it meets 28.6 of the 32 seen targets per draw at
 # 0.25, 27.8 at 0.36, 28.4 at 0.47, 26.8 / 26.4 at the handbook's rubber on PLA 0.62 / 0.76, 28.2 with it off: the
 # same below-handbook value the fitted cap skin_friction (0.18) says of printed layer lines
 

@@ -31,7 +31,6 @@ that is not the field's own name; ``shape.<field>`` for the model's), ``cli`` (i
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from dataclasses import fields as dataclass_fields
@@ -42,7 +41,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationEr
 from pydantic.fields import FieldInfo
 
 from unitac_rig.errors import ConfigError, ModelError, UsageError
-from unitac_rig.rig.config import describe_validation_error, read_toml
+from unitac_rig.rig.config import describe_validation_error, read_toml, toml_value
 
 if TYPE_CHECKING:  # the model's module imports torch; the CLI reads these fields before it may
     from unitac_rig.learning.network import ModelShape
@@ -221,28 +220,12 @@ def sectioned(flat: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
     return out
 
 
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            raise ConfigError(f"cannot write {value} to a TOML config")
-        return repr(value)
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, list | tuple):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    raise ConfigError(f"cannot write a {type(value).__name__} to a TOML config")
-
-
 def to_toml(flat: Mapping[str, Any]) -> str:
     """The TOML text of a complete flat config; :func:`parse_config` of it gives the same values back."""
     lines = ["# unitac-rig training configuration (written with the run; `unitac-rig train --config` reads it)"]
     for section, keys in sectioned(flat).items():
         lines += ["", f"[{section}]"]
-        lines += [f"{key} = {_toml_value(value)}" for key, value in keys.items()]
+        lines += [f"{key} = {toml_value(value)}" for key, value in keys.items()]
     return "\n".join(lines) + "\n"
 
 

@@ -33,7 +33,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from unitac_rig.errors import UsageError
-from unitac_rig.rig.config import ObjectPlacement
+from unitac_rig.rig.config import ObjectPlacement, toml_value
 from unitac_rig.rig.objects import get_object
 from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation
 from unitac_rig.rig.sensors import sensor_layout, sensor_names
@@ -239,18 +239,6 @@ def rig_file_text(
     )
 
 
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int | float):
-        return repr(value)
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, list | tuple):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    raise ValueError(f"cannot write {value!r} into a rig file")
-
-
 def _toml_values(values: dict[str, Any]) -> str:
     """``key = value`` lines of one flat table (numbers, strings, booleans and lists of them)."""
-    return "".join(f"{key} = {_toml_value(value)}\n" for key, value in values.items())
+    return "".join(f"{key} = {toml_value(value)}\n" for key, value in values.items())

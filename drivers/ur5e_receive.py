@@ -38,6 +38,9 @@ RECEIVE_VARIABLES = (
 SPEED_VARIABLE = "actual_TCP_speed"  # m/s, rad/s; without it the moves tell rest from the pose's change
 PAYLOAD_VARIABLE = "payload"  # kg; subscribed only when the rig file gives a payload to check
 STALL_TIMEOUT_S = 0.5  # no new controller timestamp for this long = the RTDE stream stalled
+# A gap this long between two reads means the host was not reading (frozen, descheduled, SIGSTOP): the stall count
+# starts again at the first read after it, so the receive thread that was frozen with the host can catch up.
+HOST_GAP_S = 0.1
 
 RECEIVE_HINT = (
     "check the cable/network (can you ping it?), that the robot is powered on, and that nothing blocks TCP port 30004"
@@ -112,6 +115,7 @@ class UR5eReceiver:
         self._closed = False
         self._last_controller_t_s: float | None = None
         self._stale_since_ns: int | None = None  # host time of the first read that saw the timestamp unchanged
+        self._last_read_ns: int | None = None
 
     def read_state(self) -> ArmState:
         """The latest state the RTDE client holds, stamped with the host clock (ns).
@@ -136,13 +140,16 @@ class UR5eReceiver:
         except (RuntimeError, ValueError) as exc:
             raise DeviceError(f"reading the UR state from {self.host} failed: {exc}", hint=RECEIVE_HINT) from exc
         now_ns = self.clock.now_ns()
-        # Stale = unchanged over STALL_TIMEOUT_S of *reads*, counted from the first read that saw it unchanged: a
-        # host that was itself frozen (SIGSTOP, a long GC) sees an old timestamp on its first read after waking, and
-        # that says nothing about the controller (it would call a live controller lost and send it no stop).
+        # Stale = unchanged over STALL_TIMEOUT_S of *reads*, counted from the first read that saw it unchanged
+        # after the host last read without a gap: a host that was itself frozen (SIGSTOP, a long GC) sees an old
+        # timestamp after waking, and that says nothing about the controller (it would call a live controller lost,
+        # send it no stop, and blame the cable for what the watchdog did).
+        host_gap = self._last_read_ns is not None and now_ns - self._last_read_ns > HOST_GAP_S * 1e9
+        self._last_read_ns = now_ns
         if controller_t_s != self._last_controller_t_s:
             self._last_controller_t_s = controller_t_s
             self._stale_since_ns = None
-        elif self._stale_since_ns is None:
+        elif self._stale_since_ns is None or host_gap:
             self._stale_since_ns = now_ns
         elif now_ns - self._stale_since_ns > STALL_TIMEOUT_S * 1e9:
             raise RobotStateLost(

@@ -379,11 +379,10 @@ def test_a_stalled_stream_and_a_lost_connection_are_robot_state_lost() -> None:
     receiver.read_state()
     receive.getTimestamp = lambda: 5.0  # type: ignore[method-assign]  # the controller clock stops
     receiver.read_state()
-    clock.sleep(STALL_TIMEOUT_S + 0.01)
-    receiver.read_state()  # the first read that sees it unchanged: the host may have been frozen, not the stream
-    clock.sleep(STALL_TIMEOUT_S + 0.01)
     with pytest.raises(RobotStateLost) as excinfo:
-        receiver.read_state()
+        for _ in range(round(STALL_TIMEOUT_S / 0.002) + 2):  # the control loop reads every 2 ms
+            clock.sleep(0.002)
+            receiver.read_state()
     assert isinstance(excinfo.value, DeviceTimeout) and isinstance(excinfo.value, ArmError)
     receive.connected = False
     with pytest.raises(RobotStateLost):
@@ -408,6 +407,27 @@ def test_a_host_that_was_frozen_does_not_call_a_live_controller_lost() -> None:
     receiver.close()
 
 
+def test_a_freeze_right_after_a_read_that_saw_no_new_state_does_not_call_the_controller_lost() -> None:
+    """The fault matrix's stall-0.5s-approach: the loop reads twice within one RTDE period (the second read sees the
+    same timestamp and starts the stall count), then the host is frozen 0.5 s with ur_rtde's receive thread. The
+    first reads after waking must not count the freeze as the controller's silence (that line blamed the cable for
+    what the watchdog did); reads without a gap for STALL_TIMEOUT_S still do."""
+    receive = FakeReceive()
+    clock = VirtualClock()
+    receiver = UR5eReceiver("ur", receive=receive, clock=clock)
+    receive.getTimestamp = lambda: 5.0  # type: ignore[method-assign]
+    receiver.read_state()
+    clock.sleep(0.001)
+    receiver.read_state()  # the same timestamp: the stall count starts here
+    clock.sleep(STALL_TIMEOUT_S + 0.01)  # the host is frozen
+    for _ in range(10):  # awake: 20 ms of reads while the receive thread catches up
+        clock.sleep(0.002)
+        receiver.read_state()
+    receive.getTimestamp = lambda: 7.0  # type: ignore[method-assign]
+    assert receiver.read_state().controller_t_s == 7.0
+    receiver.close()
+
+
 def test_a_stale_stream_with_the_program_stopped_is_a_stopped_program_not_a_lost_controller() -> None:
     """After a host freeze past the watchdog the receive stream may lag; the control side already says the program
     stopped. That is ControlScriptStopped (its hint: the same command resumes), and stop() has nothing to send."""
@@ -415,17 +435,20 @@ def test_a_stale_stream_with_the_program_stopped_is_a_stopped_program_not_a_lost
     arm = UR5eArm("ur", control=control, receive=receive, clock=clock)
     receive.getTimestamp = lambda: 5.0  # type: ignore[method-assign]
     arm.read_state()
-    clock.sleep(STALL_TIMEOUT_S + 0.01)
-    arm.read_state()
-    clock.sleep(STALL_TIMEOUT_S + 0.01)
+    for _ in range(round(STALL_TIMEOUT_S / 0.002) - 5):  # the loop reads every 2 ms: not yet stale
+        clock.sleep(0.002)
+        arm.read_state()
     control.program_running = False  # the watchdog stopped the program
     with pytest.raises(ControlScriptStopped) as excinfo:
-        arm.read_state()
+        for _ in range(20):
+            clock.sleep(0.002)
+            arm.read_state()
     assert not isinstance(excinfo.value, RobotStateLost)
     assert "run the same command again" in excinfo.value.one_line()
     arm.stop()  # no RobotStateLost: the controller already stopped the arm
     control.program_running = True  # running, yet no new state: the controller is lost
     with pytest.raises(RobotStateLost):
+        clock.sleep(0.002)
         arm.read_state()
     arm.close()
 

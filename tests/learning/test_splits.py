@@ -3,6 +3,7 @@ geometry splits seeded apart from the model seeds. Hand-worked cases on small sy
 
 from __future__ import annotations
 
+import json
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -13,7 +14,9 @@ import pytest
 from unitac_rig.learning.contact_geometry import GeometryConfig, OutlineGeometry, geometry_split
 from unitac_rig.learning.data import (
     PairedDataset,
+    folded_distance_deg,
     hold_out_rays,
+    object_symmetry,
     ray_deg,
     ray_distance_deg,
     split_by_direction,
@@ -219,3 +222,40 @@ def test_training_stops_when_validation_stops_improving_and_records_the_epoch(tm
     assert resumed.epochs_done == 4
     without = train(pairs, tmp_path / "runs_on", replace(frozen, patience=0, epochs=6), device="cpu")
     assert without.epochs_done == 6
+
+
+COMMITTED_BLOCKED = sorted((Path(__file__).resolve().parents[2] / "docs" / "results" / "blocked").glob("split-*.json"))
+
+
+@pytest.mark.parametrize("split_file", COMMITTED_BLOCKED, ids=lambda p: p.stem)
+def test_the_committed_blocked_results_hold_out_contact_geometry(split_file: Path) -> None:
+    """Issue 38's done-criterion on the committed JSON itself: it records its mode and gap, its test directions are
+    the ones the recorded seed, fractions and gap give, and once folded by each object's symmetry no test ray lies
+    within the gap of a training ray (the circles, alike at every angle, are not held out)."""
+    doc = json.loads(split_file.read_text(encoding="utf-8"))
+    recorded, config = doc["split"], doc["config"]
+    assert recorded["mode"] == "blocked" and recorded["gap_deg"] >= 1.0
+    assert sorted(recorded["not_held_out"]) == ["circle_pla", "circle_tpu"]
+    seen = ("circle_pla", "circle_tpu", "hex_pla", "hex_tpu", "square_pla", "square_tpu")
+    objects = {o: [(0, a) for a in SEEN_ANGLES] for o in seen}
+    objects["irregular_pla"] = [(r, a) for r in (0, 90, 180, 270) for a in SEEN_ANGLES]
+    dataset = directions_dataset(objects, forces=1)
+    split = split_by_direction(
+        dataset,
+        doc["split_seed"],
+        config["test_fraction"],
+        None,
+        val_fraction=config["val_fraction"],
+        mode="blocked",
+        gap_deg=recorded["gap_deg"],
+    )
+    for object_id in seen:
+        in_object = dataset.object_id == object_id
+        test = {(0, a) for a in _angles(dataset, split.test_mask & in_object, object_id)}
+        assert test == {tuple(d) for d in recorded["test_directions"][object_id]}
+        if not test:
+            continue
+        symmetry = object_symmetry(object_id)
+        train = [ray_deg(0, a) for a in _angles(dataset, split.train_mask & in_object, object_id)]
+        nearest = min(folded_distance_deg(ray_deg(r, a), t, symmetry) for r, a in test for t in train)
+        assert nearest > recorded["gap_deg"], f"{object_id}: a training ray {nearest} deg from a test ray, folded"

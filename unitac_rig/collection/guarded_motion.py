@@ -159,6 +159,38 @@ def _end_arrived_move(arm: Arm) -> None:
     arm.stop()
 
 
+def _check_motion(
+    speed_m_s: float, max_travel_m: float, accel_m_s2: float, stop_decel_m_s2: float, stop_samples: int
+) -> None:
+    """:func:`guarded_move`'s motion arguments checked before the arm moves (ArmError for nonsense)."""
+    if not speed_m_s > 0:
+        raise ArmError(f"guarded move speed must be > 0 m/s, got {speed_m_s}")
+    if not max_travel_m > 0:
+        raise ArmError(f"guarded move travel limit must be > 0 m, got {max_travel_m}")
+    if not (accel_m_s2 > 0 and stop_decel_m_s2 > 0):
+        raise ArmError("guarded move accelerations must be > 0 m/s^2")
+    if stop_samples < 1:
+        raise ArmError(f"guarded move stop_samples must be >= 1, got {stop_samples}")
+
+
+def _checked_ceiling(
+    force_threshold_n: float, hard_limit_n: float, force_setpoint_n: float | None, setpoint_ceiling_n: float | None
+) -> float | None:
+    """:func:`guarded_move`'s forces checked before the arm moves (ArmError for nonsense); returns the force-mode
+    set-point ceiling (N) the move may raise its set-point to (the set-point itself when no ceiling is given)."""
+    if not 0 < force_threshold_n < hard_limit_n:
+        raise ArmError(
+            f"guarded move needs 0 < threshold ({force_threshold_n} N) < hard limit ({hard_limit_n} N)",
+            hint="check the press threshold and the hard force limit in the rig file",
+        )
+    if force_setpoint_n is not None and not 0 < force_setpoint_n < hard_limit_n:
+        raise ArmError(f"guarded move force set-point {force_setpoint_n} N must be within (0, {hard_limit_n}) N")
+    ceiling_n = force_setpoint_n if setpoint_ceiling_n is None else setpoint_ceiling_n
+    if force_setpoint_n is not None and ceiling_n is not None and not force_setpoint_n <= ceiling_n < hard_limit_n:
+        raise ArmError(f"guarded move set-point ceiling {ceiling_n} N must be within [set-point, {hard_limit_n}) N")
+    return ceiling_n
+
+
 def guarded_move(
     arm: Arm,
     direction: np.ndarray,
@@ -201,24 +233,8 @@ def guarded_move(
     force mode that is still bounded by the set-point. Every other way out stops the arm as usual.
     """
     unit = _unit_direction(direction)
-    if not speed_m_s > 0:
-        raise ArmError(f"guarded move speed must be > 0 m/s, got {speed_m_s}")
-    if not 0 < force_threshold_n < hard_limit_n:
-        raise ArmError(
-            f"guarded move needs 0 < threshold ({force_threshold_n} N) < hard limit ({hard_limit_n} N)",
-            hint="check the press threshold and the hard force limit in the rig file",
-        )
-    if force_setpoint_n is not None and not 0 < force_setpoint_n < hard_limit_n:
-        raise ArmError(f"guarded move force set-point {force_setpoint_n} N must be within (0, {hard_limit_n}) N")
-    ceiling_n = force_setpoint_n if setpoint_ceiling_n is None else setpoint_ceiling_n
-    if force_setpoint_n is not None and ceiling_n is not None and not force_setpoint_n <= ceiling_n < hard_limit_n:
-        raise ArmError(f"guarded move set-point ceiling {ceiling_n} N must be within [set-point, {hard_limit_n}) N")
-    if not max_travel_m > 0:
-        raise ArmError(f"guarded move travel limit must be > 0 m, got {max_travel_m}")
-    if not (accel_m_s2 > 0 and stop_decel_m_s2 > 0):
-        raise ArmError("guarded move accelerations must be > 0 m/s^2")
-    if stop_samples < 1:
-        raise ArmError(f"guarded move stop_samples must be >= 1, got {stop_samples}")
+    _check_motion(speed_m_s, max_travel_m, accel_m_s2, stop_decel_m_s2, stop_samples)
+    ceiling_n = _checked_ceiling(force_threshold_n, hard_limit_n, force_setpoint_n, setpoint_ceiling_n)
 
     start_state = arm.read_state()
     start_position = np.asarray(start_state.tcp_pose[:3], dtype=np.float64)

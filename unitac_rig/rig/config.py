@@ -376,15 +376,16 @@ def _toml_key(key: str) -> str:
 
 
 def toml_value(value: Any) -> str:
-    """One TOML value: a string, bool, int, finite float or a list of them (what the project's files hold)."""
+    """One TOML value: a string, bool, int, float or a list of them (what the project's files hold). TOML has
+    ``inf`` and ``nan``, so a non-finite number is written as such and refused by whoever reads it as a limit."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
         return str(value)
     if isinstance(value, float):
-        if not math.isfinite(value):
-            raise ConfigError(f"cannot write {value} to TOML")
-        return repr(value)
+        return (
+            repr(value) if math.isfinite(value) else ("nan" if math.isnan(value) else ("inf" if value > 0 else "-inf"))
+        )
     if isinstance(value, str):
         return json.dumps(value)  # JSON's string escapes are TOML's
     if isinstance(value, list | tuple):

@@ -216,6 +216,37 @@ def _prepare_out(out: Path) -> Path:
     return staging
 
 
+def _session_columns(provenance: list[dict[str, Any]]) -> dict[tuple[str, str], dict[str, Any]]:
+    """Per (object, sensor): the Parquet's per-session columns (raw file, shape, material, simulated)."""
+    by_key = {}
+    for entry in provenance:
+        raw_spec = entry.get("object_spec")
+        spec: dict[str, Any] = raw_spec if isinstance(raw_spec, dict) else {}
+        material = spec.get("material")
+        by_key[(entry["object"], entry["sensor"])] = {
+            "file": entry["file"],
+            "shape": spec.get("shape"),
+            "material": str(material).upper() if material is not None else None,
+            "simulated": entry["simulated"],
+        }
+    return by_key
+
+
+def _incomplete_sessions(provenance: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Sessions collected only in part (finished presses fewer than planned): the card and the summary name them."""
+    return [
+        {
+            "file": e["file"],
+            "object": e["object"],
+            "sensor": e["sensor"],
+            "finished": e["presses"]["complete"] + e["presses"]["failed"],
+            "planned": e["presses"]["planned"],
+        }
+        for e in provenance
+        if e["presses"]["complete"] + e["presses"]["failed"] < e["presses"]["planned"]
+    ]
+
+
 def export_dataset(data_dirs: Sequence[Path], out: Path) -> ExportSummary:
     """Pool ``data_dirs``, copy the raw sessions, write the Parquet, the card and the manifest into ``out``.
 
@@ -244,17 +275,7 @@ def export_dataset(data_dirs: Sequence[Path], out: Path) -> ExportSummary:
             sets.append(load_matched_set(copy))
         paired = build_paired_dataset(sets)
         sensors = tuple(paired.sensors)
-        by_key = {}
-        for entry in provenance:
-            raw_spec = entry.get("object_spec")
-            spec: dict[str, Any] = raw_spec if isinstance(raw_spec, dict) else {}
-            material = spec.get("material")
-            by_key[(entry["object"], entry["sensor"])] = {
-                "file": entry["file"],
-                "shape": spec.get("shape"),
-                "material": str(material).upper() if material is not None else None,
-                "simulated": entry["simulated"],
-            }
+        by_key = _session_columns(provenance)
         simulated = all(bool(e["simulated"]) for e in provenance if e["sensor"] in sensors)
         objects = tuple(sorted(set(np.asarray(paired.object_id).astype(str).tolist())))
         counts = {
@@ -265,17 +286,7 @@ def export_dataset(data_dirs: Sequence[Path], out: Path) -> ExportSummary:
             "matched_frames_without_partner": {s: int(n) for s, n in paired.dropped_per_sensor.items()},
             "sessions": len(provenance),
         }
-        incomplete = [
-            {
-                "file": e["file"],
-                "object": e["object"],
-                "sensor": e["sensor"],
-                "finished": e["presses"]["complete"] + e["presses"]["failed"],
-                "planned": e["presses"]["planned"],
-            }
-            for e in provenance
-            if e["presses"]["complete"] + e["presses"]["failed"] < e["presses"]["planned"]
-        ]
+        incomplete = _incomplete_sessions(provenance)
         schema = _arrow_schema(sensors, {"join": ["object", "rotation_deg", "angle_deg", "target_n"]})
         table = paired_table(paired, by_key, simulated).cast(schema)
         pq.write_table(table, staging / PARQUET_NAME, compression="zstd")

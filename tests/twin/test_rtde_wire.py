@@ -13,18 +13,10 @@ import rtde_receive
 
 from drivers.errors import DeviceError
 from protocols import rtde
-from tests.twin.twin_helpers import wait_until
+from tests.twin.twin_helpers import RECEIVE_VARIABLES, wait_until
 from unitac_rig.sim.twin import ControllerParams, ControllerTwin, start_twin_on_free_loopback
 
-VARIABLES = [
-    "timestamp",
-    "actual_TCP_pose",
-    "actual_TCP_force",
-    "actual_TCP_speed",
-    "robot_mode",
-    "safety_mode",
-    "safety_status_bits",
-]
+VARIABLES = RECEIVE_VARIABLES[:7]  # the state a receive client reads: time, pose, force, speed, modes, safety bits
 POSE = (-0.15, 0.625, 0.21, 0.1, -2.2, 2.3)  # m, rad: a still pad, no object in front of it
 
 

@@ -185,7 +185,6 @@ class SimArm:
         if watchdog_hz is not None and not watchdog_hz > 0:
             raise ArmError(f"watchdog frequency must be > 0 Hz, got {watchdog_hz}")
         self._watchdog_hz = watchdog_hz  # what every start of the control program arms at its first motion
-        self._pending_watchdog_hz = watchdog_hz
         self._watchdog_ns: int | None = None  # armed: longest allowed gap between host writes
         self._last_write_ns = self._integrated_ns
         self._kept_alive = False
@@ -430,7 +429,7 @@ class SimArm:
             raise ProtectiveStop("cannot start the control program during a protective stop", hint=_UNLOCK_HINT)
         self.latest_state()  # the state of the last period keeps the stopped program until the next period
         self._program_running, self._program_stop_reason = True, None
-        self._watchdog_ns, self._pending_watchdog_hz = None, self._watchdog_hz
+        self._watchdog_ns = None
         self._note_write()
 
     def stop_program(self, reason: str = "stopped by the host") -> None:
@@ -473,8 +472,8 @@ class SimArm:
                 hint="re-upload the control program (a new connection does it)",
             )
         self._note_write()
-        if self._watchdog_ns is None and self._pending_watchdog_hz is not None:
-            self._watchdog_ns = round(1e9 / self._pending_watchdog_hz)
+        if self._watchdog_ns is None and self._watchdog_hz is not None:
+            self._watchdog_ns = round(1e9 / self._watchdog_hz)
 
     def _note_write(self) -> None:
         self._last_write_ns = max(self._last_write_ns, self.virtual_clock.now_ns())

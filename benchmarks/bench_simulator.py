@@ -8,7 +8,7 @@ Run: ``python benchmarks/bench_simulator.py`` (add ``--quick`` for a smoke run).
    holds 0.1 s and retracts 2 mm; the wrench is asked at 500 Hz and the taxel loads at 100 Hz, as the simulated arm
    and sensors do. Reports presses per wall second and simulated seconds per wall second.
 2. Same, with the sensor output models (noise, counts) through :class:`SceneSensorSource`.
-3. With the simulated arm and ``guarded_move`` (other modules; skipped if missing) for one object, both sensors.
+3. With the simulated arm and ``guarded_move`` for one object, both sensors.
 4. Fidelity: the uSkin section step (mm) and the per-ray table size against the cost of building a ray and the
    change in taxel loads and travel at 10 N relative to the finest setting.
 """
@@ -25,10 +25,13 @@ from typing import Any
 
 import numpy as np
 
+from drivers.clock import VirtualClock
 from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
 from unitac_rig.bench import default_out_dir, machine_info, write_json
+from unitac_rig.collection.guarded_motion import guarded_move
 from unitac_rig.plotting import new_figure, save_figure
-from unitac_rig.rig.objects import list_objects
+from unitac_rig.rig.objects import get_object, list_objects
+from unitac_rig.sim.arm import SimArm
 from unitac_rig.sim.scene import PressScene, SceneParams
 from unitac_rig.sim.sensor_models import model_for
 from unitac_rig.sim.source import SceneSensorSource
@@ -114,16 +117,8 @@ def _first(box: list[np.ndarray]) -> np.ndarray:
     return box[0]
 
 
-def with_sim_arm(angles: list[int]) -> dict[str, Any] | None:
-    """Presses through SimArm + guarded_move (the real press path's motion code), if those modules exist."""
-    try:
-        from drivers.clock import VirtualClock
-        from unitac_rig.collection.guarded_motion import guarded_move
-        from unitac_rig.sim.arm import SimArm
-    except ImportError:
-        return None
-    from unitac_rig.rig.objects import get_object
-
+def with_sim_arm(angles: list[int]) -> dict[str, Any]:
+    """Presses through SimArm + guarded_move (the real press path's motion code)."""
     presses, sim_s, peaks = 0, 0.0, []
     wall0 = time.perf_counter()
     for layout in (USKIN, PAPILLARRAY):
@@ -273,9 +268,6 @@ def main() -> None:
     plot(report, args.out / "sim_bench.png")
     for key in ("campaign_scene", "campaign_scene_and_sensor_models", "sim_arm_guarded_move"):
         r = report[key]
-        if r is None:
-            print(f"{key}: skipped (module missing)")
-            continue
         print(
             f"{key}: {r['presses']} presses, {r['simulated_s']:.0f} simulated s in {r['wall_s']:.1f} s wall "
             f"({r['presses_per_wall_s']:.0f} presses/s, {r['simulated_s_per_wall_s']:.0f}x real time)"

@@ -31,32 +31,23 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from lab.twin_runs import collect_command, host_load
 from unitac_rig.bench import machine_info, write_json
 from unitac_rig.sim.twin import ControllerParams, TwinTruth, first_free_loopback
 from unitac_rig.sim.twin.rig import RigTwin
 
 OUT = Path(__file__).resolve().parent.parent / "docs" / "figures" / "control_loop_load.json"
+OBJECT = "circle_pla"
 WATCHDOG_S = 1.0 / 6.0  # the default watchdog's window
 PRESSING_N = 5.0
 REST_BOUND_S = 0.25
 KICK_S = 0.02
-_BUSY = "while True: pass"
-_FSYNC_WRITER = """
-import os, sys
-block = os.urandom(1 << 20)
-with open(sys.argv[1], "wb") as fh:
-    while True:
-        for _ in range(64):
-            fh.write(block); fh.flush(); os.fsync(fh.fileno())
-        fh.seek(0); fh.truncate()
-"""
 _KICKER = """
 import sys, time
 gaps, last, end = [], time.monotonic(), time.monotonic() + float(sys.argv[1])
@@ -65,21 +56,6 @@ while time.monotonic() < end:
     now = time.monotonic(); gaps.append(now - last); last = now
 print(max(gaps))
 """
-
-
-@contextmanager
-def loaded_box(scratch: Path) -> Iterator[int]:
-    """Two busy processes per core and an fsync writer, for the duration; yields how many processes."""
-    procs = [subprocess.Popen([sys.executable, "-c", _BUSY]) for _ in range(2 * (os.cpu_count() or 1))]
-    procs.append(subprocess.Popen([sys.executable, "-c", _FSYNC_WRITER, str(scratch / "fsync.bin")]))
-    try:
-        time.sleep(2.0)  # let the load average see them
-        yield len(procs)
-    finally:
-        for proc in procs:
-            proc.kill()
-        for proc in procs:
-            proc.wait()
 
 
 def _hdf5_press(scratch: Path) -> Callable[[], None]:
@@ -147,25 +123,6 @@ def gil_starvation(seconds: float, scratch: Path) -> dict[str, dict[str, float]]
 HOST_PREFIX: list[str] = []  # e.g. chrt -f 5: the collecting process under real-time scheduling (--host-fifo)
 
 
-def collect_cmd(rig_file: Path, data: Path, angles: int) -> list[str]:
-    return [
-        *HOST_PREFIX,
-        sys.executable,
-        "-m",
-        "unitac_rig",
-        "collect",
-        "--rig",
-        str(rig_file),
-        "--object",
-        "circle_pla",
-        "--angles",
-        str(angles),
-        "--data",
-        str(data),
-        "--no-live",
-    ]
-
-
 def _run(rig: RigTwin, cmd: list[str], stdin: str | None = None) -> dict[str, Any]:
     rig.controller.reset_timing()
     before = rig.controller.truth()
@@ -185,28 +142,18 @@ def _run(rig: RigTwin, cmd: list[str], stdin: str | None = None) -> dict[str, An
     }
 
 
-def sessions(count: int, angles: int, scratch: Path, host: str) -> list[dict[str, Any]]:
+def repeated_runs(label: str, count: int, angles: int, scratch: Path, host: str, seed: int, *extra: str) -> list[Any]:
+    """``collect --rig`` ``count`` times on one twin, each into a fresh data directory (``extra``: ``--dry-run`` for
+    every stand-off and clearance waypoint with nothing pressed or recorded)."""
     runs = []
-    with RigTwin("circle_pla", sensor="papillarray", host=host, seed=3) as rig:
-        rig_file = scratch / "twin.toml"
+    with RigTwin(OBJECT, sensor="papillarray", host=host, seed=seed) as rig:
+        rig_file = scratch / f"{label}.toml"
         rig_file.write_text(rig.rig_file())
         print(f"twin scheduling: {rig.controller.status().get('scheduling')}", flush=True)
         for index in range(count):
-            run = _run(rig, collect_cmd(rig_file, scratch / f"session{index}", angles))
-            print(f"session {index + 1}/{count}: {run}", flush=True)
-            runs.append(run)
-    return runs
-
-
-def dry_runs(count: int, angles: int, scratch: Path, host: str) -> list[dict[str, Any]]:
-    """``collect --rig --dry-run``: every stand-off and clearance waypoint, nothing pressed or recorded."""
-    runs = []
-    with RigTwin("circle_pla", sensor="papillarray", host=host, seed=5) as rig:
-        rig_file = scratch / "dry.toml"
-        rig_file.write_text(rig.rig_file())
-        for index in range(count):
-            run = _run(rig, [*collect_cmd(rig_file, scratch / f"dry{index}", angles), "--dry-run"])
-            print(f"dry run {index + 1}/{count}: {run}", flush=True)
+            cmd = collect_command(rig_file, scratch / f"{label}{index}", OBJECT, angles, *extra, prefix=HOST_PREFIX)
+            run = _run(rig, cmd)
+            print(f"{label} {index + 1}/{count}: {run}", flush=True)
             runs.append(run)
     return runs
 
@@ -263,7 +210,9 @@ def host_death(how: str, angles: int, scratch: Path, host: str) -> dict[str, Any
         rig_file = scratch / f"{how}.toml"
         rig_file.write_text(rig.rig_file())
         proc = subprocess.Popen(
-            collect_cmd(rig_file, scratch / how, angles), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+            collect_command(rig_file, scratch / how, OBJECT, angles, prefix=HOST_PREFIX),
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
         )
         try:
             deadline = time.monotonic() + 300
@@ -303,14 +252,15 @@ def main() -> None:
     if args.host_fifo:
         HOST_PREFIX[:] = ["chrt", "-f", str(args.host_fifo)]
     result: dict[str, Any] = {"args": {k: str(v) for k, v in vars(args).items()}}
-    with tempfile.TemporaryDirectory() as tmp, loaded_box(Path(tmp)) as load_processes:
+    with tempfile.TemporaryDirectory() as tmp, host_load(Path(tmp)) as load_processes:
         scratch = Path(tmp)
+        time.sleep(2.0)  # let the load average see them
         result["load_processes"] = load_processes
         result["gil"] = gil_starvation(args.gil_seconds, scratch)
         print(f"GIL: {result['gil']}", flush=True)
         host = first_free_loopback(220, 239)
-        result["sessions"] = sessions(args.sessions, args.angles, scratch, host)
-        result["dry_runs"] = dry_runs(args.dry_runs, args.angles, scratch, host)
+        result["sessions"] = repeated_runs("session", args.sessions, args.angles, scratch, host, 3)
+        result["dry_runs"] = repeated_runs("dry-run", args.dry_runs, args.angles, scratch, host, 5, "--dry-run")
         if not args.no_campaign:
             result["campaign"] = campaign(args.angles, scratch, host)
         result["host_death"] = [

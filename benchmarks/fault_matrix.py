@@ -45,10 +45,8 @@ import os
 import re
 import signal
 import subprocess
-import sys
 import tempfile
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -56,6 +54,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from lab.twin_runs import collect_command, host_load
 from unitac_rig.bench import machine_info, replace_doc_section, write_json
 from unitac_rig.rig.config import PressConfig, load_rig_config
 from unitac_rig.sim.twin import ControllerParams, first_free_loopback
@@ -209,7 +208,6 @@ def scenarios() -> list[Scenario]:
     return rows
 
 
-NEW_ROWS_37 = ("side-20mm-disc", "resume-double-fault", "host-load")
 QUICK_ROWS = ("misplaced-y-minus", "stall-0.5s-press", "kill-retract", "pstop-transit", "ft-sign", "double-fault")
 
 
@@ -300,12 +298,6 @@ class RunResult:
 def last_line(err: str) -> str:
     lines = [line for line in err.strip().splitlines() if line.strip()]
     return lines[-1].strip() if lines else ""
-
-
-def collect_command(rig_path: Path, data: Path, angles: int, max_presses: int | None = None) -> list[str]:
-    cmd = [sys.executable, "-m", "unitac_rig", "collect", "--rig", str(rig_path), "--object", OBJECT, "--no-live"]
-    cmd += ["--angles", str(angles), "--data", str(data)]
-    return cmd + (["--max-presses", str(max_presses)] if max_presses else [])
 
 
 def _inject(rig: RigTwin, proc: subprocess.Popen[str], scenario: Scenario) -> None:
@@ -443,10 +435,10 @@ def run_scenario(scenario: Scenario, workdir: Path) -> dict[str, Any]:
         faulted = workdir / "rig-faulted.toml"
         text = rig.rig_file(tables={"limits": scenario.limits} if scenario.limits else None)
         faulted.write_text(with_tcp(text, scenario.rig_tcp) if scenario.rig_tcp else text)
-        full = collect_command(faulted, data, scenario.angles)
+        full = collect_command(faulted, data, OBJECT, scenario.angles)
         base: RunResult | None = None
         if scenario.base == "resumed":
-            first_press = collect_command(good, data, scenario.angles, max_presses=1)
+            first_press = collect_command(good, data, OBJECT, scenario.angles, "--max-presses", "1")
             base = run_collect(rig, first_press, good, workdir / "base.stderr")
         if scenario.placement_m != (0.0, 0.0):
             rig.set_placement_error(*scenario.placement_m)
@@ -461,7 +453,7 @@ def run_scenario(scenario: Scenario, workdir: Path) -> dict[str, Any]:
         before = recorded_presses(data)
         detector = MomentDetector(scenario.motion, rig.placement.center_m) if scenario.inject else None
         early: list[RunResult] = []  # faulted runs a host-starved watchdog stopped before the moment came
-        with host_load(scenario.load, workdir):
+        with host_load(workdir, LOAD_BUSY_PER_CPU) if scenario.load else contextlib.nullcontext():
             for attempt in range(1, RESUME_ATTEMPTS + 1):
                 stderr = workdir / f"fault-{attempt}.stderr"
                 fault = run_collect(rig, full, faulted, stderr, scenario=scenario, detector=detector)
@@ -479,8 +471,8 @@ def run_scenario(scenario: Scenario, workdir: Path) -> dict[str, Any]:
         if scenario.clearable:
             put_back = {"pending": _clear(rig, scenario)}
             for attempt in range(1, RESUME_ATTEMPTS + 1):
-                again_cmd, stderr = collect_command(good, data, scenario.angles), workdir / f"resume-{attempt}.stderr"
-                again = run_collect(rig, again_cmd, good, stderr, put_back=put_back)
+                again_cmd = collect_command(good, data, OBJECT, scenario.angles)
+                again = run_collect(rig, again_cmd, good, workdir / f"resume-{attempt}.stderr", put_back=put_back)
                 resumes.append(again)
                 if not _stopped_by_watchdog(again):
                     break  # done, or failed for another reason than a program the watchdog stopped
@@ -509,31 +501,6 @@ def run_scenario(scenario: Scenario, workdir: Path) -> dict[str, Any]:
     record["criteria"] = criteria(record)
     record["pass"] = all(v for v in record["criteria"].values() if v is not None)
     return record
-
-
-@contextlib.contextmanager
-def host_load(on: bool, workdir: Path) -> Iterator[None]:
-    """While on: ``LOAD_BUSY_PER_CPU`` busy processes per CPU and one writing 1 MB blocks with fsync (the issue's
-    "two busy processes per core plus a writer doing fsync"); all ended after."""
-    procs: list[subprocess.Popen[bytes]] = []
-    if on:
-        busy = [sys.executable, "-c", "while True: pass"]
-        target = workdir / "load.bin"
-        writer = [
-            sys.executable,
-            "-c",
-            "import os\nwhile True:\n"
-            f"    f = os.open({str(target)!r}, os.O_WRONLY | os.O_CREAT | os.O_TRUNC)\n"
-            "    os.write(f, os.urandom(1 << 20)); os.fsync(f); os.close(f)",
-        ]
-        procs = [subprocess.Popen(busy) for _ in range(LOAD_BUSY_PER_CPU * (os.cpu_count() or 1))]
-        procs.append(subprocess.Popen(writer))
-    try:
-        yield
-    finally:
-        for proc in procs:
-            proc.kill()
-            proc.wait()
 
 
 def _stopped_by_watchdog(run: RunResult) -> bool:
@@ -795,7 +762,6 @@ def _summarise(doc: dict[str, Any]) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help=f"only the rows {', '.join(QUICK_ROWS)}")
-    parser.add_argument("--issue-37", action="store_true", help=f"only the rows {', '.join(NEW_ROWS_37)}")
     parser.add_argument("--only", nargs="*", default=None, help="only these rows (by id)")
     parser.add_argument("--out", type=Path, default=Path("docs/figures/fault_matrix.json"), help="the JSON")
     parser.add_argument("--write-docs", action="store_true", help="render the table into docs/reliability.md")
@@ -816,15 +782,13 @@ def main() -> None:
         chosen = [s for s in chosen if s.row in QUICK_ROWS]
     if args.only:
         chosen = [s for s in chosen if s.row in args.only]
-    if args.issue_37:
-        chosen = [s for s in chosen if s.row in NEW_ROWS_37]
     rows: list[dict[str, Any]] = []
     doc: dict[str, Any] = {
         "benchmark": "fault_matrix",
         "object": OBJECT,
         "sensor": SENSOR,
         "hard_limit_n": HARD_LIMIT_N,
-        "quick": bool(args.quick or args.only or args.issue_37),
+        "quick": bool(args.quick or args.only),
         "planned": len(chosen),
         "rows": rows,
     }

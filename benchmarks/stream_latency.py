@@ -27,10 +27,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+import rtde_control
 
 from unitac_rig.bench import default_out_dir, machine_info, write_json
 from unitac_rig.plotting import new_figure, save_figure
 from unitac_rig.sim.twin.rig import RigTwin
+from unitac_rig.sim.twin.world import build_scene
 
 FIGURES = default_out_dir()
 BUDGET_MS = 1.0  # one frame period of a PapillArray at 1 kHz
@@ -69,14 +71,8 @@ def wait_for(condition, timeout_s: float) -> bool:  # type: ignore[no-untyped-de
     return bool(condition())
 
 
-def press_until(twin: object, stop: threading.Event, counts: dict[str, int]) -> None:
+def press_until(twin: RigTwin, stop: threading.Event, counts: dict[str, int]) -> None:
     """Press circle_pla 1.5 mm past first touch and back, over and over, until ``stop``."""
-    import rtde_control
-
-    from unitac_rig.sim.twin.rig import RigTwin
-    from unitac_rig.sim.twin.world import build_scene
-
-    assert isinstance(twin, RigTwin)
     pressed, home = build_scene(twin.spec).pose_at_travel(0.0, 1.5), twin.controller.settings.start_pose
     control = rtde_control.RTDEControlInterface(twin.host, 500.0)
     try:

@@ -4,26 +4,16 @@ JSON alone. Running the rows themselves is ``pytest -m fault_matrix`` (about an 
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import sys
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import pytest
 
+import fault_matrix as matrix
+
 ROOT = Path(__file__).resolve().parents[2]
-
-
-@pytest.fixture(scope="module")
-def matrix() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("fault_matrix", ROOT / "benchmarks" / "fault_matrix.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up by name
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture(scope="module")
@@ -32,22 +22,20 @@ def committed() -> dict[str, Any]:
     return doc
 
 
-def test_every_recorded_row_is_judged_as_when_it_ran(matrix: ModuleType, committed: dict[str, Any]) -> None:
+def test_every_recorded_row_is_judged_as_when_it_ran(committed: dict[str, Any]) -> None:
     """The criteria the run recorded (a row recorded before a criterion existed is judged on the ones it has)."""
     for row in committed["rows"]:
         judged = matrix.criteria(row)
         assert {k: v for k, v in judged.items() if k in row["criteria"]} == row["criteria"], row["row"]
 
 
-def test_the_planned_rows_are_the_recorded_ones(matrix: ModuleType, committed: dict[str, Any]) -> None:
+def test_the_planned_rows_are_the_recorded_ones(committed: dict[str, Any]) -> None:
     assert [s.row for s in matrix.scenarios()] == [r["row"] for r in committed["rows"]]
     for scenario, row in zip(matrix.scenarios(), committed["rows"], strict=True):
         assert scenario.host_can_act == row["host_can_act"], row["row"]
 
 
-def test_render_regenerates_the_reliability_section(
-    matrix: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+def test_render_regenerates_the_reliability_section(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     page = tmp_path / "reliability.md"
     page.write_text((ROOT / "docs" / "reliability.md").read_text(encoding="utf-8"), encoding="utf-8")
     out = ROOT / "docs" / "figures" / "fault_matrix.json"

@@ -77,6 +77,7 @@ def test_angles_with_the_same_whole_degree_are_refused_before_any_array_is_built
         (["--max-presses", "0"], "--max-presses must be 1 or more, got 0"),
         (["--angles", "1000000000"], "--angles must be 1 to 91, got 1000000000"),
         (["--angles", "0"], "--angles must be 1 to 91, got 0"),
+        (["--angles", "1e30"], "Invalid value for '--angles'"),  # not a whole number: the parser's one line
     ],
 )
 def test_collect_counts_and_seeds_are_usage_errors_naming_the_option(

@@ -8,28 +8,14 @@ addresses 127.0.0.220-239 belong to the matrix; each row starts and closes its o
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import pytest
 
+import fault_matrix as matrix
+
 pytestmark = [pytest.mark.fault_matrix, pytest.mark.slow]
-
-
-def _load_matrix() -> ModuleType:
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / "fault_matrix.py"
-    spec = importlib.util.spec_from_file_location("fault_matrix", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up by name
-    spec.loader.exec_module(module)
-    return module
-
-
-matrix = _load_matrix()
 
 
 @pytest.mark.parametrize("scenario", matrix.scenarios(), ids=lambda s: s.row)

@@ -1,20 +1,23 @@
-"""The fuzz campaign's targets (see benchmarks/fuzz.py): one per wire codec, each also driving its driver's
-decode path where there is one, and what they share: one input (:class:`Case`), the :class:`Target` interface and the
-input generators.
+"""The fuzz oracles the default suite's slice runs (tests/protocols/test_fuzz_slice.py): one target per wire codec,
+each also driving its driver's decode path where there is one, and :func:`run_target`, which feeds a target seeded
+inputs and counts crashes, wrong decodes and a long-lived decoder's memory growth.
 
-Why one module: five targets of about 130 lines each (input kinds, the check, the long-lived stream),
-alike in shape, read side by side, after the interface and generators they all use.
+These are the targets of the retired 100,000-input campaign (``git show b714727:benchmarks/fuzz.py``, whose table is
+in docs/reliability.md); the draws are unchanged, so a slice with seed 28 is the first inputs of that campaign.
 """
 
 from __future__ import annotations
 
 import contextlib
+import gc
 import itertools
 import json
 import math
 import struct
+import tracemalloc
+from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import can
@@ -845,3 +848,86 @@ def _same_values(a: list[Any], b: list[Any]) -> bool:
     flat_a = np.array([x for v in a for x in (v if isinstance(v, tuple) else (v,))], dtype=np.float64)
     flat_b = np.array([x for v in b for x in (v if isinstance(v, tuple) else (v,))], dtype=np.float64)
     return bool(np.array_equal(flat_a, flat_b, equal_nan=True))
+
+
+# ---- the runner -------------------------------------------------------------------------------------------------
+
+TARGETS: dict[str, Callable[[], Target]] = {
+    "xela_can": XelaCanTarget,
+    "xela_ws": XelaWsTarget,
+    "papillarray": PapillArrayTarget,
+    "papillarray_commands": PapillArrayCommandTarget,
+    "rtde": RtdeTarget,
+}
+MAX_MEMORY_GROWTH_BYTES = 256 * 1024  # a decoder that keeps more than this after hundreds of inputs is leaking
+
+
+@dataclass
+class Report:
+    """What one target did with its inputs; ``examples`` names the first findings by input number."""
+
+    inputs: int = 0
+    kinds: Counter[str] = field(default_factory=Counter)
+    crashes: int = 0
+    wrong_decodes: int = 0
+    valid_embedded: int = 0  # valid packets/messages placed among garbage and damage
+    valid_recovered: int = 0
+    memory_growth_bytes: int = 0
+    examples: list[str] = field(default_factory=list)
+
+
+def _rng(seed: int, target_name: str, index: int) -> Rng:
+    """The input numbered ``index`` is drawn from ``(seed, target number, index)``, so any one can be rebuilt."""
+    return np.random.default_rng((seed, list(TARGETS).index(target_name), index))
+
+
+def run_target(name: str, n_inputs: int, seed: int, memory_inputs: int = 0) -> Report:
+    """Feed ``n_inputs`` inputs to one target. A crash is any exception outside the target's ``allowed`` errors (the
+    project's error tree); a valid input refused counts as wrong. Then ``memory_inputs`` more go back to back to one
+    long-lived decoder under tracemalloc."""
+    target = TARGETS[name]()
+    report = Report()
+    for index in range(n_inputs):
+        rng = _rng(seed, name, index)
+        case = target.draw(rng)
+        report.inputs += 1
+        report.kinds[case.kind] += 1
+        try:
+            wrong, placed, recovered = target.check(case, rng)
+        except target.allowed:
+            recovered = 0
+            wrong = placed = (len(case.expected) if isinstance(case.expected, list) else 1) if case.expected else 0
+        except Exception as exc:  # everything else is what the fuzzing looks for
+            report.crashes += 1
+            report.examples.append(f"input {index} ({case.kind}): {type(exc).__name__}: {exc}"[:300])
+            continue
+        report.valid_embedded += placed
+        report.valid_recovered += recovered
+        if wrong:
+            report.wrong_decodes += wrong
+            report.examples.append(f"input {index} ({case.kind}): {wrong} wrong of {placed} placed")
+    if memory_inputs:
+        report.memory_growth_bytes = memory_growth(target, seed + 1, memory_inputs)
+    return report
+
+
+def memory_growth(target: Target, seed: int, n: int) -> int:
+    """Bytes one long-lived decoder gains between a fifth of ``n`` inputs and all of them."""
+    feed = target.stream()
+    cases = [target.draw(_rng(seed, target.name, index)) for index in range(n)]
+    fifth = max(1, n // 5)
+    gc.collect()
+    tracemalloc.start()
+    try:
+        for case in cases[:fifth]:
+            with contextlib.suppress(*target.allowed):
+                feed(case)
+        gc.collect()
+        early = tracemalloc.get_traced_memory()[0]
+        for case in cases[fifth:]:
+            with contextlib.suppress(*target.allowed):
+                feed(case)
+        gc.collect()
+        return tracemalloc.get_traced_memory()[0] - early
+    finally:
+        tracemalloc.stop()

@@ -274,9 +274,8 @@ class PressScene:
             xh /= np.linalg.norm(xh)
             zh /= np.linalg.norm(zh)
             reach = self._outline.reach_toward(zh)
-            self._frame = (
-                rot, float(xh[0]), float(xh[1]), float(zh[0]), float(zh[1]), math.atan2(zh[1], zh[0]), reach
-            )  # fmt: skip
+            (xx, xy), (zx, zy) = xh.tolist(), zh.tolist()
+            self._frame = (rot, xx, xy, zx, zy, math.atan2(zy, zx), reach)
             self._last_rotvec = rotvec
         rot, xx, xy, zx, zy, psi, reach = self._frame
         center_x, center_y = self._center_xy

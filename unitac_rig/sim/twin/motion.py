@@ -2,12 +2,13 @@
 
 The fast twin's :class:`SimArm` is driven by a host that advances a virtual clock. A controller runs the other way
 round: every 2 ms cycle it executes whatever motion the program set up, whether or not anyone is listening.
-:class:`TwinArm` gives the controller those motion primitives through SimArm's public interface and advances SimArm's
-own virtual clock by one period per controller cycle, so the kinematics (trapezoidal lines, acceleration-limited
-velocity ramps, force-mode admittance), the wrist F/T (latency, bias, noise, filter, zero) and the protective stop on
-the true contact force are exactly the fast twin's. SimArm's own program model (its watchdog and its refusal of
-commands after a protective stop) stays idle here: the controller twin runs the real program semantics itself, so
-SimArm is built without a watchdog and its program is restarted whenever the controller's protective stop is unlocked.
+:class:`TwinArm` is a SimArm on its own virtual clock that the controller advances by one period per cycle
+(:meth:`TwinArm.step`); the emulated script commands it through SimArm's own motion methods, so the kinematics
+(trapezoidal lines, acceleration-limited velocity ramps, force-mode admittance), the wrist F/T (latency, bias, noise,
+filter, zero) and the protective stop on the true contact force are exactly the fast twin's. SimArm's own program
+model (its watchdog and its refusal of commands after a protective stop) stays idle here: the controller twin runs
+the real program semantics itself, so SimArm is built without a watchdog and its program is restarted whenever the
+controller's protective stop is unlocked.
 
 Tool centre point: SimArm simulates the pad (the physical tool) with the pose the scene feels. The controller
 reports and commands the *active* TCP set on the pendant or with ``set_tcp``; when that differs from the physical

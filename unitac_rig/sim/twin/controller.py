@@ -289,7 +289,7 @@ class Controller:
 
     def power_off(self) -> None:
         self.stop_program("power off")
-        self.arm.stop(self.params.emergency_stop_decel_m_s2)
+        self.arm.stop(self.arm.params.protective_stop_decel_m_s2)
         self.robot_mode = ROBOT_MODE_POWER_OFF
 
     def brake_release(self) -> bool:
@@ -312,7 +312,7 @@ class Controller:
         if self.runtime_state != RUNTIME_PLAYING:
             return False
         self.runtime_state = RUNTIME_PAUSED
-        self.arm.stop(self.params.program_stop_decel_m_s2)
+        self.arm.stop(self.arm.params.program_stop_decel_m_s2)
         return True
 
     def play_program(self) -> bool:
@@ -420,7 +420,7 @@ class Controller:
         self.runtime_state = RUNTIME_STOPPED
         self.watchdog = None
         if not self.arm.protective_stopped:
-            self.arm.stop(self.params.program_stop_decel_m_s2)
+            self.arm.stop(self.arm.params.program_stop_decel_m_s2)
         return True
 
     def emergency_stop(self) -> None:
@@ -432,7 +432,7 @@ class Controller:
         logger.warning("emergency stop")
         self.stop_program("emergency stop")
         if not self.arm.protective_stopped:
-            self.arm.stop(self.params.emergency_stop_decel_m_s2)
+            self.arm.stop(self.arm.params.protective_stop_decel_m_s2)
 
     def release_emergency_stop(self) -> None:
         self.emergency = False

@@ -33,10 +33,6 @@ class ControllerParams:
     protective_stop_n: float = 150.0
     # "Cannot unlock protective stop until 5s after occurrence" (PolyScope dashboard) [I]; tests may shorten it.
     unlock_delay_s: float = 5.0
-    # Deceleration when a program stops (stopScript, dashboard stop, watchdog) or an emergency stop brakes [I]:
-    # the stopl default, 10 m/s^2.
-    program_stop_decel_m_s2: float = 10.0
-    emergency_stop_decel_m_s2: float = 10.0
     # UR5e reach: 850 mm from the shoulder axis to the flange [I, UR5e datasheet as commonly quoted]; the shoulder is
     # 162.5 mm above the base (UR5e d1). A target out of reach is a runtime error; leaving reach in motion a
     # protective stop.

@@ -96,9 +96,10 @@ class SimArmParams:
     # Protective stop on the true contact force. A UR e-Series ships with a 150 N "Force" safety limit in normal mode
     # [I, UR safety settings default]; the press routine's own hard limit (tens of N) must act long before this.
     protective_stop_n: float = 150.0
-    # Deceleration during a protective stop (a category-2 stop along the path) [I]: the stopL default, 10 m/s^2.
+    # Deceleration during a protective stop (a category-2 stop along the path; the real-time twin's emergency stop
+    # and power off brake the same) [I]: the stopL default, 10 m/s^2.
     protective_stop_decel_m_s2: float = 10.0
-    # Deceleration when the program stops (watchdog, stopScript) [I]: the same 10 m/s^2.
+    # Deceleration when the program stops (watchdog, stopScript, the dashboard's stop) [I]: 10 m/s^2.
     program_stop_decel_m_s2: float = 10.0
     # Argument checks ur_rtde applies (tool speed <= 3 m/s, tool accel <= 150 m/s^2) [S, hardware-facts 3.4].
     max_tool_speed_m_s: float = 3.0

@@ -26,7 +26,7 @@ from drivers.layouts import SensorLayout
 from drivers.sensor import TactileSensor
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.base import Rig
-from unitac_rig.rig.config import RigConfig
+from unitac_rig.rig.config import ObjectPlacement, RigConfig
 from unitac_rig.rig.objects import DEFAULT_OBJECT_CENTER_M, ObjectSpec
 from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation
 from unitac_rig.rig.sensors import SENSORS, SensorSpec, sensor_layout
@@ -90,6 +90,16 @@ def _simulated_sensor(spec: SensorSpec, device: object) -> SimulatedSensor:
             hint="name an object with rng_stream, model() and open() (see unitac_rig/sim/fast_sensors.py)",
         )
     return device
+
+
+HOME_DISTANCE_M = 0.08  # both twins' arms start this far from the object's axis, facing it from approach angle 0
+
+
+def home_pose(placement: ObjectPlacement) -> np.ndarray:
+    """Where a twin's arm starts: the pad at the press height, facing the object from approach angle 0."""
+    u = approach_direction(0.0)
+    position = np.array([*placement.center_m, placement.press_height_m]) + u * HOME_DISTANCE_M
+    return pose_from(position, press_rotation(-u))
 
 
 def scene_seed(seed: int, object_id: str, sensor: str, rotation_deg: float) -> list[int]:
@@ -206,7 +216,7 @@ class SimRig(Rig):
         self.world = _SceneSwitch()
         self.mounted_sensor: str | None = None
         self._instance = next(_instance_ids)
-        home = self._home_pose()
+        home = home_pose(config.object)
         self.sim_arm = SimArm(self.world, clock=self.clock, rng=np.random.default_rng([seed, 1]), start_pose=home)
         self.imperfections = as_imperfections(imperfections)
         self._simulated: dict[str, SimulatedSensor] = {
@@ -221,12 +231,6 @@ class SimRig(Rig):
         self._devices: list[Any] = []
         self._object: ObjectSpec | None = None
         self._rotation = 0.0
-
-    def _home_pose(self) -> np.ndarray:
-        placement = self.config.object
-        u = approach_direction(0.0)
-        position = np.array([*placement.center_m, placement.press_height_m]) + u * 0.08
-        return pose_from(position, press_rotation(-u))
 
     @property
     def arm(self) -> Arm:

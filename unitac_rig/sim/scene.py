@@ -49,7 +49,7 @@ import numpy as np
 from drivers.layouts import SensorLayout
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.objects import DEFAULT_OBJECT_CENTER_M, MaterialSpec, ObjectSpec
-from unitac_rig.rig.poses import matrix_to_rotvec, rotvec_to_matrix
+from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation, rotvec_to_matrix
 from unitac_rig.rig.sensors import SENSORS
 from unitac_rig.sim.scene_geometry import Outline, bending_tilt_rad_per_n
 from unitac_rig.sim.scene_pads import PadTable, PillarPad, SkinPad
@@ -90,13 +90,8 @@ def press_pose(
     height_m: float = 0.30,
 ) -> np.ndarray:
     """TCP pose (6,) for approach angle ``angle_deg`` with the pad centre ``distance_mm`` from the object's axis."""
-    a = math.radians(angle_deg)
-    u = (math.sin(a), -math.cos(a))
-    x = object_center_m[0] + u[0] * distance_mm * 1e-3
-    y = object_center_m[1] + u[1] * distance_mm * 1e-3
-    d = (-u[0], -u[1], 0.0)
-    rot = np.array([[-d[1], 0.0, d[0]], [d[0], 0.0, d[1]], [0.0, 1.0, 0.0]])
-    return np.concatenate([[x, y, height_m], matrix_to_rotvec(rot)])
+    u = approach_direction(angle_deg)
+    return pose_from(np.array([*object_center_m, height_m]) + u * distance_mm * 1e-3, press_rotation(-u))
 
 
 class PressScene:
@@ -279,9 +274,8 @@ class PressScene:
             xh /= np.linalg.norm(xh)
             zh /= np.linalg.norm(zh)
             reach = self._outline.reach_toward(zh)
-            self._frame = (
-                rot, float(xh[0]), float(xh[1]), float(zh[0]), float(zh[1]), math.atan2(zh[1], zh[0]), reach
-            )  # fmt: skip
+            (xx, xy), (zx, zy) = xh.tolist(), zh.tolist()
+            self._frame = (rot, xx, xy, zx, zy, math.atan2(zy, zx), reach)
             self._last_rotvec = rotvec
         rot, xx, xy, zx, zy, psi, reach = self._frame
         center_x, center_y = self._center_xy

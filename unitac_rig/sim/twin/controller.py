@@ -289,7 +289,7 @@ class Controller:
 
     def power_off(self) -> None:
         self.stop_program("power off")
-        self.arm.stopl(self.params.emergency_stop_decel_m_s2)
+        self.arm.stop(self.arm.params.protective_stop_decel_m_s2)
         self.robot_mode = ROBOT_MODE_POWER_OFF
 
     def brake_release(self) -> bool:
@@ -312,7 +312,7 @@ class Controller:
         if self.runtime_state != RUNTIME_PLAYING:
             return False
         self.runtime_state = RUNTIME_PAUSED
-        self.arm.stopl(self.params.program_stop_decel_m_s2)
+        self.arm.stop(self.arm.params.program_stop_decel_m_s2)
         return True
 
     def play_program(self) -> bool:
@@ -386,7 +386,7 @@ class Controller:
         self.counts["protective"] += 1
         self.last_error = f"protective stop: {why}"
         logger.warning(self.last_error)
-        self.arm.protective_stop()
+        self.arm.trigger_protective_stop()
         if self.runtime_state == RUNTIME_PLAYING:
             self.runtime_state = RUNTIME_PAUSED
 
@@ -419,8 +419,8 @@ class Controller:
         self.program = None
         self.runtime_state = RUNTIME_STOPPED
         self.watchdog = None
-        if not self.arm.sim.protective_stopped:
-            self.arm.stopl(self.params.program_stop_decel_m_s2)
+        if not self.arm.protective_stopped:
+            self.arm.stop(self.arm.params.program_stop_decel_m_s2)
         return True
 
     def emergency_stop(self) -> None:
@@ -431,15 +431,15 @@ class Controller:
         self.last_error = "emergency stop"
         logger.warning("emergency stop")
         self.stop_program("emergency stop")
-        if not self.arm.sim.protective_stopped:
-            self.arm.stopl(self.params.emergency_stop_decel_m_s2)
+        if not self.arm.protective_stopped:
+            self.arm.stop(self.arm.params.protective_stop_decel_m_s2)
 
     def release_emergency_stop(self) -> None:
         self.emergency = False
 
     def _cycle(self, check_watchdog: bool = True) -> None:
         arm = self.arm
-        if arm.sim.protective_stopped and not self.protective:
+        if arm.protective_stopped and not self.protective:
             force = float(np.linalg.norm(arm.true_wrench()[:3]))
             self.trigger_protective_stop(f"force {force:.1f} N over the {self.params.protective_stop_n:g} N limit")
         elif not self.protective and not arm.at_rest() and not self._inside_reach():
@@ -484,7 +484,7 @@ class Controller:
                 self.stop_program("internal error")
 
     def _inside_reach(self) -> bool:
-        pad = self.arm.sim.true_tcp_pose()
+        pad = self.arm.true_tcp_pose()
         distance = self._flange_distance_m(pad)
         if distance <= self.params.reach_m:
             return True
@@ -554,7 +554,7 @@ class Controller:
         return TwinTruth(
             controller_t_s=self.now_s,
             cycles=self.cycles,
-            pad_pose=arm.sim.true_tcp_pose(),
+            pad_pose=arm.true_tcp_pose(),
             tcp_pose=arm.reported_pose(),
             true_wrench=wrench,
             reported_wrench=arm.measured_wrench(),
@@ -648,7 +648,7 @@ class Controller:
         elif op == "contact_scale":
             self.world.force_scale = float(request["scale"])
         elif op == "ft_sign":
-            self.arm.sim.set_ft_sign(float(request["sign"]))
+            self.arm.set_ft_sign(float(request["sign"]))
         elif op == "remote_control":
             self.remote_control = bool(request["on"])
         elif op == "pendant_tcp":

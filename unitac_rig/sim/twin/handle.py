@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from drivers.errors import DeviceError
+from unitac_rig.sim.arm import DEFAULT_START_POSE
 from unitac_rig.sim.twin.params import CONTROLLER_PORTS, ControllerParams, SceneSpec, TwinSettings
 from unitac_rig.sim.twin.truth import TruthBlock, TwinTruth
 
@@ -31,9 +32,6 @@ _START_TIMEOUT_S = 20.0  # a fresh interpreter importing numpy and the scene on 
 _HOOK_TIMEOUT_S = 10.0
 _STOP_TIMEOUT_S = 5.0
 _PACKAGE_ROOT = str(Path(__file__).resolve().parents[3])  # the directory that holds unitac_rig/
-
-# A still pad in front of where the default object stands (m, rad): used when no start pose is given.
-DEFAULT_START_POSE = (-0.15, 0.52, 0.25, 0.0, 2.2214, -2.2214)
 
 
 class AddressTaken(DeviceError):
@@ -70,7 +68,7 @@ class ControllerTwin:
         self.host = host
         self.params = params or ControllerParams()
         self.scene = scene
-        pose = DEFAULT_START_POSE if start_pose is None else tuple(float(v) for v in start_pose)
+        pose = tuple(float(v) for v in (DEFAULT_START_POSE if start_pose is None else start_pose))
         self.settings = TwinSettings(host=host, start_pose=pose, params=self.params, scene=scene, seed=seed)
         self._closed = False
         self._lock = threading.Lock()

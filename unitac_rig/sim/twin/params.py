@@ -33,10 +33,6 @@ class ControllerParams:
     protective_stop_n: float = 150.0
     # "Cannot unlock protective stop until 5s after occurrence" (PolyScope dashboard) [I]; tests may shorten it.
     unlock_delay_s: float = 5.0
-    # Deceleration when a program stops (stopScript, dashboard stop, watchdog) or an emergency stop brakes [I]:
-    # the stopl default, 10 m/s^2.
-    program_stop_decel_m_s2: float = 10.0
-    emergency_stop_decel_m_s2: float = 10.0
     # UR5e reach: 850 mm from the shoulder axis to the flange [I, UR5e datasheet as commonly quoted]; the shoulder is
     # 162.5 mm above the base (UR5e d1). A target out of reach is a runtime error; leaving reach in motion a
     # protective stop.
@@ -118,28 +114,10 @@ class TwinSettings:
     @classmethod
     def from_json(cls, text: str) -> TwinSettings:
         data: dict[str, Any] = json.loads(text)
-        params = data["params"]
-        for key in ("tool_offset", "payload_cog_m", "serve", "rtde_registers_in_use", "rtde_outputs_not_found"):
-            params[key] = tuple(params[key])
-        if params.get("pendant_tcp") is not None:
-            params["pendant_tcp"] = tuple(params["pendant_tcp"])
-        scene = data.get("scene")
-        return cls(
-            host=data["host"],
-            start_pose=tuple(data["start_pose"]),
-            params=ControllerParams(**params),
-            scene=None
-            if scene is None
-            else SceneSpec(
-                object_id=scene["object_id"],
-                rotation_deg=scene["rotation_deg"],
-                sensor=scene["sensor"],
-                center_m=tuple(scene["center_m"]),
-                seed=scene["seed"],
-                objects_files=tuple(scene["objects_files"]),
-                placement_error_m=tuple(scene["placement_error_m"]),
-                layout=SensorLayout(**scene["layout"]),
-                pad=scene["pad"],
-            ),
-            seed=data["seed"],
-        )
+        params: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data["params"].items()}
+        scene: dict[str, Any] | None = data.get("scene")
+        if scene is not None:
+            scene = {k: tuple(v) if isinstance(v, list) else v for k, v in scene.items()}
+            scene["layout"] = SensorLayout(**scene["layout"])
+        spec = None if scene is None else SceneSpec(**scene)
+        return cls(data["host"], tuple(data["start_pose"]), ControllerParams(**params), spec, data["seed"])

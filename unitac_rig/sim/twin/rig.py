@@ -35,8 +35,8 @@ import numpy as np
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.config import ObjectPlacement, toml_value
 from unitac_rig.rig.objects import get_object
-from unitac_rig.rig.poses import approach_direction, pose_from, press_rotation
 from unitac_rig.rig.sensors import sensor_layout, sensor_names
+from unitac_rig.sim.fast_rig import home_pose
 from unitac_rig.sim.fast_sensors import configured_sensors
 from unitac_rig.sim.sensor_signals import SignalSource
 from unitac_rig.sim.twin.handle import ControllerTwin
@@ -46,7 +46,6 @@ from unitac_rig.sim.twin.world import build_scene
 logger = logging.getLogger(__name__)
 
 DEFAULT_HOST = "127.0.0.210"  # examples/twin.toml points here
-HOME_DISTANCE_M = 0.08  # the arm starts this far from the object's axis, facing it from approach angle 0
 SensorOptions = Mapping[str, Mapping[str, Any]]  # sensor name -> its simulation options (sim/fast_sensors.py)
 
 
@@ -73,13 +72,6 @@ class TwinSensor(Protocol):
 def twin_sensors(options: SensorOptions | None = None) -> dict[str, TwinSensor]:
     """Every registered sensor the real-time twin can serve (registry order), with ``options`` set."""
     return {name: s for name, s in configured_sensors(options).items() if isinstance(s, TwinSensor)}
-
-
-def home_pose(placement: ObjectPlacement) -> np.ndarray:
-    """Where the twin's arm starts: the pad at the press height, facing the object from approach angle 0."""
-    u = approach_direction(0.0)
-    position = np.array([*placement.center_m, placement.press_height_m]) + u * HOME_DISTANCE_M
-    return pose_from(position, press_rotation(-u))
 
 
 class RigTwin:

@@ -204,11 +204,11 @@ class ControlScript:
 
     def _blocking_done(self) -> bool:
         arm = self.host.arm
-        return not arm.path_active and arm.at_rest(AT_REST_M_S)
+        return not arm.move_running() and arm.at_rest(AT_REST_M_S)
 
     def _run_threads(self) -> None:
         arm = self.host.arm
-        if self._move_thread and not arm.path_active:
+        if self._move_thread and not arm.move_running():
             self._move_thread = False  # move_thread finished
             self._write_async_progress(-1)
         if self._stop_thread and arm.at_rest(AT_REST_M_S):
@@ -216,7 +216,7 @@ class ControlScript:
             self._write_async_progress(-1)
         if self._speed_thread and self._speed_args is not None:
             target, accel = self._speed_args
-            arm.speedl(np.array(target), accel)  # the thread's speedl(...) runs again every cycle
+            arm.speed_linear(np.array(target), accel)  # the thread's speedl(...) runs again every cycle
         if self._force_thread and self._force_args is not None:
             frame, selection, wrench, _kind, limits = self._force_args
             arm.force_mode(frame, selection, wrench, limits)
@@ -269,7 +269,7 @@ class ControlScript:
             # URScript would have two threads fighting over the arm; the twin lets the running thread keep it
             logger.warning("stopl/stopj while a speed or force thread runs: the thread keeps moving the arm")
             return
-        self.host.arm.stopl(max(decel, 1e-3))
+        self.host.arm.stop(max(decel, 1e-3))
         if asynchronous:
             self._stop_thread = True
             self._write_async_progress(0)
@@ -293,8 +293,8 @@ class ControlScript:
     def _force_mode_stop(self) -> None:
         self._force_thread = False
         self._force_args = None
-        self.host.arm.end_force_mode()
-        self.host.arm.stopl(FORCE_STOP_DECEL_M_S2)
+        self.host.arm.force_mode_stop()
+        self.host.arm.stop(FORCE_STOP_DECEL_M_S2)
         self._blocking = "stop"
 
     def _speedl(self) -> None:
@@ -306,13 +306,13 @@ class ControlScript:
         if not self._speed_thread:
             self._speed_thread = True
             self._force_thread = False
-        self.host.arm.speedl(np.array(xd), accel)
+        self.host.arm.speed_linear(np.array(xd), accel)
 
     def _speed_stop(self) -> None:
         decel = self._in_double(0)
         self._speed_thread = False
         self._speed_args = None
-        self.host.arm.stopl(max(decel, 1e-3))
+        self.host.arm.stop(max(decel, 1e-3))
         self._blocking = "stop"
 
     def _zero_ft(self) -> None:
@@ -356,17 +356,17 @@ class ControlScript:
         self.host.set_watchdog(f"input_int_register_{0 if self.offset not in (0, 24) else self.offset}", frequency)
 
     def _get_steptime(self) -> None:
-        self.out.doubles[self.offset] = self.host.arm.period_s
+        self.out.doubles[self.offset] = self.host.arm.control_period_s
 
     def _force_mode_set_damping(self) -> None:
         """``force_mode_set_damping(d0)``: clamped to [0, 1] as URScript does."""
-        sim = self.host.arm.sim
-        sim.set_force_mode_parameters(min(max(self._in_double(0), 0.0), 1.0), sim.force_mode_gain_scaling)
+        arm = self.host.arm
+        arm.set_force_mode_parameters(min(max(self._in_double(0), 0.0), 1.0), arm.force_mode_gain_scaling)
 
     def _force_mode_set_gain_scaling(self) -> None:
         """``force_mode_set_gain_scaling(d0)``: clamped to [0, 2] as URScript does."""
-        sim = self.host.arm.sim
-        sim.set_force_mode_parameters(sim.force_mode_damping, min(max(self._in_double(0), 0.0), 2.0))
+        arm = self.host.arm
+        arm.set_force_mode_parameters(arm.force_mode_damping, min(max(self._in_double(0), 0.0), 2.0))
 
     def _accepted(self) -> None:
         """Commands whose effect the twin does not model but which a real controller accepts (logged)."""

@@ -447,7 +447,7 @@ def render(
     collection: dict[str, Any] | None = None,
 ) -> str:
     """The generated block (without its markers): a header, then per protocol the claims, Table I, the readings,
-    alignment and geometry, then the beyond-the-paper section and the figures."""
+    alignment, geometry and the figures."""
     splits0 = next(iter(results.values()))
     first, config = splits0[0]["metrics"], splits0[0]["config"]
     sensors = tuple(first["sensors"])
@@ -479,11 +479,6 @@ def render(
     ]
     for protocol, splits in results.items():
         lines += protocol_section(protocol, splits, figures.get(protocol, {}))
-    beyond = ROOT / "docs" / "figures" / "beyond_paper.json"
-    if beyond.exists():
-        from beyond_paper import render_section  # the sibling script, on sys.path when this one runs
-
-        lines += ["", *render_section(json.loads(beyond.read_text(encoding="utf-8")))]
     return "\n".join(lines)
 
 

@@ -3,7 +3,7 @@ hand-written rest is kept), rendered from the per-split JSON that ``results_full
 alone: no data, no checkpoints. Figures drawn from the JSON (curves, alignment, the cross-sensor chart) are redrawn;
 the per-run figures (t-SNE, reconstructions, geometry outline) are copied from ``--runs`` when the runs are there.
 
-    python benchmarks/run_results.py --report-only [--json docs/results] [--docs docs] [--runs RUNS]
+    python benchmarks/run_results.py [--json docs/results] [--docs docs] [--runs RUNS]
 """
 
 from __future__ import annotations
@@ -36,7 +36,6 @@ PROTOCOL_TITLE = {
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--report-only", action="store_true", help="accepted: rendering is all this script does")
     parser.add_argument("--json", type=Path, default=ROOT / "docs" / "results", help="the per-split JSON folder")
     parser.add_argument("--docs", type=Path, default=ROOT / "docs")
     parser.add_argument("--runs", type=Path, default=None, help="results_full's runs folder (per-run figures)")
@@ -423,7 +422,7 @@ def render(
         "other reading is in its own table below.",
         "",
         "Every number on this page is computed from the per-split JSON files in `docs/results/` "
-        "(`python benchmarks/run_results.py --report-only` redraws it from them alone). Made by "
+        "(`python benchmarks/run_results.py` redraws it from them alone). Made by "
         "`python benchmarks/results_full.py` (collection, both protocols, geometry; see docs/learning.md).",
         *collection_line(collection),
     ]

@@ -144,7 +144,7 @@ def test_the_halving_verdict_does_not_call_a_ceiling_a_bound_when_a_strict_metho
 
 
 def test_the_committed_page_is_what_the_committed_json_renders(tmp_path: Path) -> None:
-    """``run_results.py --report-only`` regenerates docs/results.md byte for byte from docs/results/*.json (the JSON
+    """``run_results.py`` regenerates docs/results.md byte for byte from docs/results/*.json (the JSON
     keeps the training config of the code that wrote it: the page reads it as stored, not through TrainConfig)."""
     import run_results
 

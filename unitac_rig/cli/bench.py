@@ -46,8 +46,13 @@ def press_command(
     """Press strategies and speeds on the simulated rig: campaign time against force-matching error."""
     from rich.progress import Progress
 
-    from unitac_rig.bench.press_benchmark import full_plan, quick_plan, run_press_benchmark
-    from unitac_rig.bench.press_report import plot_press_benchmark, summary_lines
+    from unitac_rig.bench.press_benchmark import (
+        full_plan,
+        plot_press_benchmark,
+        quick_plan,
+        run_press_benchmark,
+        summary_lines,
+    )
 
     with Progress(transient=True) as progress:
         task = progress.add_task("rig sessions", total=None)

@@ -1,24 +1,9 @@
-"""Reproduce the paper's results over several splits and seeds, under the paper's random split and a blocked one,
-and write docs/results.md from committed JSON.
+"""docs/results.md's generated block (between ``<!-- generated:start -->`` and ``<!-- generated:end -->``; the
+hand-written rest is kept), rendered from the per-split JSON that ``results_full.py`` writes (``docs/results/``)
+alone: no data, no checkpoints. Figures drawn from the JSON (curves, alignment, the cross-sensor chart) are redrawn;
+the per-run figures (t-SNE, reconstructions, geometry outline) are copied from ``--runs`` when the runs are there.
 
-Training and geometry (``--data``): for each protocol (``--protocol random`` = the paper's split, Table I
-comparable; ``--protocol blocked`` = contiguous blocks of approach rays with a guard band, docs/learning.md) and each
-split seed (``--splits 5``: 0..4), one batched run trains UniTac-NV and both per-sensor baselines for that split's
-model seeds (``results_stages.model_seeds``: no seed repeats across splits), then every member's geometry heads run
-(the paper's, the pooled same-sensor head, the strict cross-sensor methods; the tuned ceiling on ``--ceiling-members``
-members per split), then one compact JSON per split is written under ``--json`` (default ``docs/results/``):
-``<protocol>/split-<K>.json``. Finished runs under ``--out`` are reused and unfinished ones resumed.
-
-The page (``--report-only``): docs/results.md's generated block (between ``<!-- generated:start -->`` and
-``<!-- generated:end -->``; the hand-written rest is kept) is rendered from those JSON files alone: no data, no
-checkpoints. Figures drawn from the JSON (curves, alignment, the cross-sensor chart) are redrawn; the per-run figures
-(t-SNE, reconstructions, geometry outline) are copied from ``--out`` when the runs are there.
-
-    python benchmarks/run_results.py --data DATA [--protocol random --protocol blocked] [--out runs/results]
-        [--seeds 5] [--splits 5] [--epochs 1000] [--eval-every 10] [--config FILE.toml] [--only-split K]
-    python benchmarks/run_results.py --report-only [--json docs/results] [--docs docs]
-
-The one-shot full protocol on a 16-core machine (collection, both protocols, geometry, JSON, page): results_full.py.
+    python benchmarks/run_results.py [--json docs/results] [--docs docs] [--runs RUNS]
 """
 
 from __future__ import annotations
@@ -32,14 +17,11 @@ from typing import Any
 import numpy as np
 
 from unitac_rig.bench import replace_doc_section
-from unitac_rig.learning.config import load_config
 from unitac_rig.learning.contact_geometry import GeometryConfig
-from unitac_rig.learning.data import build_paired_dataset, load_sets
 from unitac_rig.learning.evaluate import PREPROCESSING_TEXT, metric_description
 from unitac_rig.learning.metrics import NMAE_NORMALISERS, SSIM_RANGES
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM, PAPER_TABLE1
 from unitac_rig.learning.report import table_columns
-from unitac_rig.learning.train import TrainConfig
 from unitac_rig.plotting import new_figure, save_figure
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -54,44 +36,11 @@ PROTOCOL_TITLE = {
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--data", type=Path, default=None)
-    parser.add_argument("--out", type=Path, default=ROOT / "runs" / "results")
-    parser.add_argument("--protocol", action="append", choices=("random", "blocked"), default=None)
-    parser.add_argument("--seeds", type=int, default=5, help="model seeds per split, trained together")
-    parser.add_argument("--splits", type=int, default=5, help="split seeds 0..N-1, one run each")
-    parser.add_argument("--epochs", type=int, default=1000)
-    parser.add_argument("--eval-every", type=int, default=10, help="epochs between validation evaluations")
-    parser.add_argument("--patience", type=int, default=100, help="stop after this many epochs without progress")
-    parser.add_argument("--config", type=Path, default=None, help="TOML training config (docs/learning.md)")
-    parser.add_argument("--ceiling-members", type=int, default=1, help="members per split that run the ceiling")
-    parser.add_argument("--report-only", action="store_true", help="only render the page from the JSON")
-    parser.add_argument("--only-split", type=int, action="append", default=None, help="train only this split seed")
     parser.add_argument("--json", type=Path, default=ROOT / "docs" / "results", help="the per-split JSON folder")
     parser.add_argument("--docs", type=Path, default=ROOT / "docs")
+    parser.add_argument("--runs", type=Path, default=None, help="results_full's runs folder (per-run figures)")
     args = parser.parse_args()
-    protocols = args.protocol or ["random"]
-    if not args.report_only:
-        if args.data is None:
-            parser.error("--data is needed unless --report-only")
-        from results_stages import export_split, geometry_member, split_config, train_split
-
-        flat = load_config(args.config) if args.config else {}
-        base = TrainConfig().updated(
-            {"eval_every": args.eval_every, "patience": args.patience, **flat, "epochs": args.epochs}
-        )
-        dataset = build_paired_dataset(load_sets(args.data))
-        print(f"{len(dataset)} pairs, sensors {dataset.sensors}, objects {dataset.objects}", flush=True)
-        for protocol in protocols:
-            for k in range(args.splits):
-                if args.only_split is not None and k not in args.only_split:
-                    continue
-                run_dir = args.out / protocol / f"split-{k}"
-                train_split(dataset, run_dir, split_config(base, protocol, k, args.seeds))
-                for member in range(args.seeds):
-                    geometry_member(run_dir, protocol, member, ceiling=member < args.ceiling_members)
-                export_split(run_dir, protocol, args.json / protocol / f"split-{k}.json")
-                print(f"{protocol} split {k}: done", flush=True)
-    if write_page(args.json, args.docs / "results.md", args.out):
+    if write_page(args.json, args.docs / "results.md", args.runs):
         print(f"wrote {args.docs / 'results.md'}")
     else:
         print(f"no split JSON under {args.json}: results.md not written")
@@ -447,7 +396,7 @@ def render(
     collection: dict[str, Any] | None = None,
 ) -> str:
     """The generated block (without its markers): a header, then per protocol the claims, Table I, the readings,
-    alignment and geometry, then the beyond-the-paper section and the figures."""
+    alignment, geometry and the figures."""
     splits0 = next(iter(results.values()))
     first, config = splits0[0]["metrics"], splits0[0]["config"]
     sensors = tuple(first["sensors"])
@@ -473,17 +422,12 @@ def render(
         "other reading is in its own table below.",
         "",
         "Every number on this page is computed from the per-split JSON files in `docs/results/` "
-        "(`python benchmarks/run_results.py --report-only` redraws it from them alone). Made by "
+        "(`python benchmarks/run_results.py` redraws it from them alone). Made by "
         "`python benchmarks/results_full.py` (collection, both protocols, geometry; see docs/learning.md).",
         *collection_line(collection),
     ]
     for protocol, splits in results.items():
         lines += protocol_section(protocol, splits, figures.get(protocol, {}))
-    beyond = ROOT / "docs" / "figures" / "beyond_paper.json"
-    if beyond.exists():
-        from beyond_paper import render_section  # the sibling script, on sys.path when this one runs
-
-        lines += ["", *render_section(json.loads(beyond.read_text(encoding="utf-8")))]
     return "\n".join(lines)
 
 
@@ -685,13 +629,13 @@ def simple_baselines_lines(protocol: str, splits: list[dict[str, Any]]) -> list[
                     continue
                 d_nmae = simple_members(splits, row, baseline, "nmae") - members(splits, row, ours, "nmae")
                 d_ssim = members(splits, row, ours, "ssim") - simple_members(splits, row, baseline, "ssim")
-                n = len(d_nmae)
+                count = len(d_nmae)
                 wins_n, wins_s = int((d_nmae > 0).sum()), int((d_ssim > 0).sum())
                 lines.append(
                     f"| {row} | {_arrow(ours)} | {baseline.replace('_to_', ' → ').replace('_', ' ', 1)} | "
-                    f"{d_nmae.mean():+.4f} | {wins_n} of {n} | {d_ssim.mean():+.4f} | {wins_s} of {n} |"
+                    f"{d_nmae.mean():+.4f} | {wins_n} of {count} | {d_ssim.mean():+.4f} | {wins_s} of {count} |"
                 )
-                if 2 * wins_n <= n or 2 * wins_s <= n:
+                if 2 * wins_n <= count or 2 * wins_s <= count:
                     not_beaten.append(f"{row}: {_arrow(ours)} vs {baseline.replace('_to_', ' → ')}")
     lines += [
         "",

@@ -21,7 +21,7 @@ from unitac_rig.learning.train import TrainConfig  # noqa: E402
 
 @pytest.fixture(scope="module")
 def json_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from results_stages import export_split, geometry_member, split_config, train_split
+    from results_full import export_split, geometry_member, split_config, train_split
 
     root = tmp_path_factory.mktemp("results")
     dataset = build_paired_dataset(small_sets())
@@ -57,7 +57,7 @@ def test_each_split_keeps_its_own_model_seeds_and_every_members_geometry(json_di
     assert [m["model_seed"] for m in members] == [2, 3]
     assert len({m["geometry_split_seed"] for m in members}) == 2
     assert "ceiling" in members[0]["cross_sensor"] and "ceiling" not in members[1]["cross_sensor"]
-    assert set(doc["readings"]) == {f"{n}|{s}" for n, s in __import__("results_stages").READINGS}
+    assert set(doc["readings"]) == {f"{n}|{s}" for n, s in __import__("results_full").READINGS}
 
 
 def test_the_pages_no_latent_number_is_the_mean_over_the_json_members(json_dir: Path, tmp_path: Path) -> None:
@@ -144,7 +144,7 @@ def test_the_halving_verdict_does_not_call_a_ceiling_a_bound_when_a_strict_metho
 
 
 def test_the_committed_page_is_what_the_committed_json_renders(tmp_path: Path) -> None:
-    """``run_results.py --report-only`` regenerates docs/results.md byte for byte from docs/results/*.json (the JSON
+    """``run_results.py`` regenerates docs/results.md byte for byte from docs/results/*.json (the JSON
     keeps the training config of the code that wrote it: the page reads it as stored, not through TrainConfig)."""
     import run_results
 

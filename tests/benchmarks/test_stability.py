@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from stability_learning import (
+from stability import (
     CORNERS_PNG,
     MATERIALS_PNG,
     SEEDS_PNG,

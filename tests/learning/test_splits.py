@@ -149,7 +149,7 @@ def test_the_corner_split_centres_its_block_on_a_corner_of_the_prism() -> None:
 
 
 def test_the_geometry_split_follows_its_own_seed_not_the_model_seed() -> None:
-    from results_stages import geometry_split_seed, model_seeds
+    from results_full import geometry_split_seed, model_seeds
 
     subset = irregular_subset()
     outline = OutlineGeometry.from_catalogue("irregular_pla")

@@ -46,8 +46,7 @@ def press_command(
     """Press strategies and speeds on the simulated rig: campaign time against force-matching error."""
     from rich.progress import Progress
 
-    from unitac_rig.bench.press_benchmark import full_plan, quick_plan, run_press_benchmark
-    from unitac_rig.bench.press_report import plot_press_benchmark, summary_lines
+    from unitac_rig.bench import press_benchmark as press
 
     with Progress(transient=True) as progress:
         task = progress.add_task("rig sessions", total=None)
@@ -55,8 +54,8 @@ def press_command(
         def on_cell(done: int, total: int) -> None:
             progress.update(task, completed=done, total=total)
 
-        doc = run_press_benchmark(quick_plan() if quick else full_plan(), jobs=max(1, jobs), on_cell=on_cell)
-    _finish(doc, plot_press_benchmark, summary_lines, out)
+        doc = press.run_press_benchmark(press.quick_plan() if quick else press.full_plan(), max(1, jobs), on_cell)
+    _finish(doc, press.plot_press_benchmark, press.summary_lines, out)
 
 
 @bench_app.command("recorder")

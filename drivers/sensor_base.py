@@ -80,7 +80,6 @@ class PumpedSensor:
         self.clock: Clock = clock if clock is not None else MonotonicClock()
         self.stall_timeout_s = stall_timeout_s
         self._thread_name = thread_name
-        self._is_saturated = is_saturated
         self._health = SensorHealth()
         self._watch = TaxelWatch(layout.n_taxels, is_saturated)
         self._lock = threading.Lock()
@@ -194,18 +193,7 @@ class PumpedSensor:
 
     def poll(self) -> list[TactileFrame]:
         """Every frame completed since the last call (never blocks). Raises the reader thread's error once."""
-        self._require_connected()
-        frames = self._take_queued()
-        if self._reader is not None or self._reader_error is not None:
-            if not frames and self._reader_error is not None:
-                error, self._reader_error = self._reader_error, None
-                raise error
-        else:
-            pumped = self._pump(0.0)
-            self._account(pumped)
-            frames += pumped
-        self._check_stall()
-        return frames
+        return self.poll_wait(0.0)
 
     def poll_wait(self, timeout_s: float) -> list[TactileFrame]:
         """Like :meth:`poll`, but waits up to ``timeout_s`` for the first frame, without a sleep loop: a live
@@ -213,16 +201,20 @@ class PumpedSensor:
         runs on the caller's thread, blocked in the transport until bytes arrive."""
         self._require_connected()
         if self._reader is None and self._reader_error is None:
+            frames = self._take_queued()  # left over after stop_reader
+            pumped = self._pump(0.0 if frames else timeout_s)
+            self._account(pumped)
+            frames += pumped
+        else:
+            with self._queued:
+                if not self._queue and self._reader_error is None and timeout_s > 0:
+                    self._queued.wait(timeout_s)
             frames = self._take_queued()
-            if not frames:
-                frames = self._pump(timeout_s)
-                self._account(frames)
-            self._check_stall()
-            return frames
-        with self._queued:
-            if not self._queue and self._reader_error is None:
-                self._queued.wait(timeout_s)
-        return self.poll()
+            if not frames and self._reader_error is not None:
+                error, self._reader_error = self._reader_error, None
+                raise error
+        self._check_stall()
+        return frames
 
     def _take_queued(self) -> list[TactileFrame]:
         """Frames the reader thread queued (also those left over after ``stop_reader``)."""
@@ -245,19 +237,8 @@ class PumpedSensor:
                     f"{self.layout.name}: got {len(frames)} of {n_frames} frames within {timeout_s:g} s",
                     hint="check the device is powered and streaming (cable, CAN bitrate, controller id, port)",
                 )
-            if self._reader is None and self._reader_error is None:
-                self._require_connected()
-                new = self._take_queued()
-                pumped = self._pump(min(remaining, 0.05))
-                self._account(pumped)
-                new += pumped
-                self._check_stall()
-            else:
-                new = self.poll()
-                if not new:
-                    time.sleep(min(remaining, 0.005))
-            frames.extend(new)
-        return frames[:n_frames] if len(frames) > n_frames else frames
+            frames += self.poll_wait(min(remaining, 0.05))
+        return frames[:n_frames]
 
     # ---- reader thread ----------------------------------------------------------------------------------------
     def start_reader(self) -> None:

@@ -179,10 +179,7 @@ class UR5eArm:
         )
         self.clock: Clock = self._receiver.clock
         try:
-            state = self._receiver.read_state()
-            if state.protective_stop or state.emergency_stop:
-                kind = "an emergency" if state.emergency_stop else "a protective"
-                raise ProtectiveStop(f"the UR at {host} is in {kind} stop", hint=STOPPED_HINT)
+            self._refuse_safety_stop(self._receiver.read_state(), "connect")
             self._control = control if control is not None else _connect_control(host, frequency_hz)
         except BaseException:
             self._receiver.close()
@@ -275,8 +272,7 @@ class UR5eArm:
             raise ArmError(f"deceleration must be > 0 m/s^2, got {decel_m_s2}")
         self._end_keep_alive()  # stopping always wins; the kicker must not share the client with us
         if self._controller_lost():
-            self._in_force_mode = self._speeding = False
-            self._move = None
+            self._forget_motion()
             if self._program_stopped():
                 return  # the controller stopped the program (and the arm) itself: nothing to stop, nothing to wait for
             raise RobotStateLost(
@@ -284,18 +280,11 @@ class UR5eArm:
                 "ur_rtde's 300 s for an answer)",
                 hint=self._lost_hint(),
             )
-        decel = float(min(decel_m_s2, MAX_TOOL_ACCEL_M_S2))
-        steps: list[tuple[str, Callable[[], object]]] = []
-        if self._in_force_mode:
-            steps.append(("forceModeStop", self._control.forceModeStop))
-        if self._move is not None:
-            steps.append(("stopL", lambda: self._control.stopL(decel, False)))
-        steps.append(("speedStop", lambda: self._control.speedStop(decel)))
+        steps = self._stop_steps(self._control, float(min(decel_m_s2, MAX_TOOL_ACCEL_M_S2)))
         try:
             refused = _run_all(steps, on_error=lambda name, exc: logger.warning("UR stop: %s failed: %s", name, exc))
         finally:
-            self._in_force_mode = self._speeding = False
-            self._move = None
+            self._forget_motion()
         if refused:
             if not self._stopped_anyway():
                 raise ArmError(f"the UR at {self.host} refused {', '.join(refused)}", hint=STOPPED_HINT)
@@ -412,21 +401,13 @@ class UR5eArm:
             )
             steps.append(("disconnect", control.disconnect))
         elif control is not None:
-            if self._in_force_mode:
-                steps.append(("forceModeStop", control.forceModeStop))
-            if self._move is not None:
-                steps.append(("stopL", lambda: control.stopL(10.0, False)))
-            steps += [
-                ("speedStop", lambda: control.speedStop(10.0)),
-                ("stopScript", control.stopScript),
-                ("disconnect", control.disconnect),
-            ]
+            steps += [*self._stop_steps(control, 10.0), ("stopScript", control.stopScript)]
+            steps.append(("disconnect", control.disconnect))
         steps.append(("receive disconnect", self._receiver.close))
         try:
             _run_all(steps, on_error=lambda name, exc: logger.warning("UR close: %s failed: %s", name, exc))
         finally:
-            self._in_force_mode = self._speeding = False
-            self._move = None
+            self._forget_motion()
             # Let ur_rtde's objects go now: their destructors block (a 0.5 s sleep each) holding the GIL, and run
             # later, when garbage collection gets to them, they freeze whatever this process does then (a second
             # connection's watchdog tripped that way on the twin).
@@ -499,23 +480,42 @@ class UR5eArm:
         if self._kicker is not None:
             raise ArmError(f"{what} inside keep_alive: the arm must stay at rest there")
 
+    def _stop_steps(self, control: Any, decel_m_s2: float) -> list[tuple[str, Callable[[], object]]]:
+        """What ends whatever runs: forceModeStop (in force mode), stopL (an asynchronous move), speedStop."""
+        steps: list[tuple[str, Callable[[], object]]] = []
+        if self._in_force_mode:
+            steps.append(("forceModeStop", control.forceModeStop))
+        if self._move is not None:
+            steps.append(("stopL", lambda: control.stopL(decel_m_s2, False)))
+        return [*steps, ("speedStop", lambda: control.speedStop(decel_m_s2))]
+
+    def _forget_motion(self) -> None:
+        self._in_force_mode = self._speeding = False
+        self._move = None
+
+    def _state_or_none(self) -> ArmState | None:
+        try:
+            return self._receiver.read_state()
+        except DeviceError:
+            return None
+
+    def _refuse_safety_stop(self, state: ArmState | None, what: str) -> None:
+        """ProtectiveStop (what to do on the pendant in its hint) when ``state`` shows a protective or emergency
+        stop."""
+        if state is not None and (state.protective_stop or state.emergency_stop):
+            kind = "an emergency" if state.emergency_stop else "a protective"
+            raise ProtectiveStop(f"{what}: the UR at {self.host} is in {kind} stop", hint=STOPPED_HINT)
+
     def _stopped_anyway(self) -> bool:
         """A refused stop is fine when the controller stopped on its own (safety stop, program not running)."""
-        try:
-            state = self._receiver.read_state()
-            running = bool(self._control.isProgramRunning())
-        except (DeviceError, RuntimeError, ValueError):
-            return False
-        return state.protective_stop or state.emergency_stop or not running
+        state = self._state_or_none()
+        return state is not None and (state.protective_stop or state.emergency_stop or self._program_stopped())
 
     def _require_ready(self, what: str) -> None:
         """Refuse a motion command up front while the controller is stopped (safety stop, program not running)."""
         self._check_open()
         self._refuse_while_kept_alive(what)
-        state = self._receiver.read_state()
-        if state.protective_stop or state.emergency_stop:
-            kind = "an emergency" if state.emergency_stop else "a protective"
-            raise ProtectiveStop(f"{what}: the UR at {self.host} is in {kind} stop", hint=STOPPED_HINT)
+        self._refuse_safety_stop(self._receiver.read_state(), what)
         if not self._call("isProgramRunning", self._control.isProgramRunning):
             self._raise_stopped(what, "is not running")
 
@@ -531,9 +531,7 @@ class UR5eArm:
                 state = self._receiver.wait_for_new_state(timeout_s=0.05)
         except DeviceError:
             state = None
-        if state is not None and (state.protective_stop or state.emergency_stop):
-            kind = "an emergency" if state.emergency_stop else "a protective"
-            raise ProtectiveStop(f"{what}: the UR at {self.host} is in {kind} stop", hint=STOPPED_HINT)
+        self._refuse_safety_stop(state, what)
         raise ControlScriptStopped(
             f"{what}: the control program on the UR at {self.host} {how}",
             hint=_program_stopped_hint(self._watchdog_hz),
@@ -614,20 +612,8 @@ class UR5eArm:
     def _expect_ok(self, what: str, ok: object) -> None:
         if ok is not False:
             return
-        try:
-            state = self._receiver.read_state()
-            stopped = state.protective_stop or state.emergency_stop
-        except DeviceError:
-            stopped = False
-        if stopped:
-            raise ProtectiveStop(
-                f"{what}: the UR at {self.host} stopped (protective/emergency stop)", hint=STOPPED_HINT
-            )
-        try:
-            running = bool(self._control.isProgramRunning())
-        except (RuntimeError, ValueError):
-            running = True
-        if not running:
+        self._refuse_safety_stop(self._state_or_none(), what)
+        if self._program_stopped():
             self._raise_stopped(what, "stopped")
         raise ArmError(
             f"{what} was not completed by the UR at {self.host}",

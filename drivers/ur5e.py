@@ -6,49 +6,30 @@ State comes from ``rtde_receive.RTDEReceiveInterface`` (RTDE port 30004, 500 Hz 
 Both objects can be injected (tests use the real clients against the controller twin, and a recording fake where
 the twin cannot reach).
 
-Safety (what a real controller does when the host misbehaves, ``hardware-facts`` 3.8, and what this class adds):
+Safety (``hardware-facts`` 3.8; the reasons and measurements are in docs/real-rig.md, "Safety"): the controller
+executes the last command until told otherwise, even after the host dies, so
 
-* the controller executes the last command until told otherwise: ur_rtde's speed and force threads run forever,
-  even after the host dies. The one thing that stops them is the **RTDE watchdog** (``setWatchdog``): the program
-  stops when the host writes nothing for 1 / ``watchdog_hz``. It is held at ``watchdog_hz`` **only while a motion is
-  commanded** (a speedL, force mode or asynchronous moveL not yet seen to end or stopped), and fed then only by the
-  loop that decides the motion (``wait_period``, or the motion command itself): a host that freezes or dies
-  mid-motion stops the arm 1 / ``watchdog_hz`` after its last decision. As the arm comes to rest (``stop``, the
-  move's end, ``force_mode_stop``) and at connect it is set to ``REST_WATCHDOG_HZ`` instead (URScript has no way to
-  remove a watchdog but stopping the program; setting it again on the same register replaces its frequency): with
-  nothing commanded nothing moves, so set-up work, writing a press or a session's end (git, HDF5, fsync, a loaded
-  box) can take seconds without the controller stopping the program under it. No thread has to win the GIL in
-  time for that; :meth:`UR5eArm.keep_alive` still kicks from a thread for the operator's waits, which can outlast
-  even the rest window;
-* a period that sent speedL or forceMode is **not** also kicked: ur_rtde sends those without waiting, and
-  ``kickWatchdog`` writes 0 to the same command register, which the script reads once per 2 ms cycle. Sent right
-  after, the kick can land in the same cycle and the script never sees the command (the last write wins). The
-  command's own write of that register feeds the watchdog just the same;
-* ``speedL`` is always sent with a time limit of a few control periods. ur_rtde's script repeats ``speedl`` in its
-  speed thread, so on a real controller this does *not* stop the arm (the watchdog does); it bounds each ``speedl``
-  call and costs nothing;
-* straight-line moves are asynchronous (``moveL(..., asynchronous=True)``) and polled, so ``stop`` (``stopL``) can
-  end them and the watchdog stays fed: a blocking ``moveL`` longer than 1 / ``watchdog_hz`` would trip it and
-  cannot be stopped from the host;
-* ``stop`` and ``close`` run every step (forceModeStop, stopL, speedStop; then stopScript and disconnect) on its own,
-  and a second Ctrl-C during them is held until they are done. When the receive side has lost the controller (no
-  new state for ``STALL_TIMEOUT_S``) they send none of them: ur_rtde's blocking commands to a vanished controller
-  return only after ~301 s each, and the watchdog stops the program anyway;
-* the watchdog is armed (at ``watchdog_hz``) again as each motion starts: ur_rtde reconnects by itself after a
-  network error and uploads its script again, and a fresh script has no watchdog;
-* after a protective or emergency stop the controller refuses everything: commands are refused up front with
-  :class:`~drivers.errors.ProtectiveStop` (what to do on the pendant in the hint), and a program that stopped (the
-  watchdog, the pendant) gives :class:`~drivers.errors.ControlScriptStopped`;
-* at connect, the TCP offset (``getTCPOffset``) and payload (RTDE ``payload``) are read back and compared with what
-  the rig file expects, when it names them; ur_rtde's ``RuntimeError`` and ``ValueError`` are wrapped at this
-  boundary.
+* the **RTDE watchdog** (``setWatchdog``) is held at ``watchdog_hz`` only while a motion is commanded (a speedL,
+  force mode or asynchronous moveL not yet seen to end or stopped), armed again as each motion starts (ur_rtde's
+  reconnect uploads a script without one), and fed only by the loop that decides the motion (``wait_period``, or
+  the motion command itself): a host that freezes or dies mid-motion stops the arm 1 / ``watchdog_hz`` after its
+  last decision. At connect and as the arm comes to rest it is set to ``REST_WATCHDOG_HZ`` (a watchdog can only be
+  replaced, not removed), so set-up and saving can take seconds; :meth:`UR5eArm.keep_alive` kicks from a thread
+  for the operator's waits;
+* a period that sent speedL or forceMode is **not** also kicked: ``kickWatchdog`` writes 0 to the same command
+  register, and landing in the same 2 ms script cycle it would erase the command unread;
+* ``speedL`` carries a time limit of a few control periods (it bounds each call; the watchdog stops the arm);
+  moveL is asynchronous and polled, so ``stop`` (``stopL``) can end it and the watchdog stays fed;
+* ``stop`` and ``close`` run every step (forceModeStop, stopL, speedStop; then stopScript and disconnect) however
+  the others fare, holding a second Ctrl-C until done; with the receive stream lost (no new state for
+  ``STALL_TIMEOUT_S``) they send none (each would block ~301 s; the watchdog stops the program);
+* in a protective or emergency stop commands are refused up front with :class:`~drivers.errors.ProtectiveStop`
+  (what to do on the pendant in the hint); a stopped program gives :class:`~drivers.errors.ControlScriptStopped`;
+* at connect the TCP offset and payload are read back and compared with the rig file's, when it names them.
 
-Gotchas: ur_rtde's Python constructors hold the GIL until the handshake finishes (a Python RTDE server in the same
-process would deadlock, hence the twins' server processes); the C++ library prints to file descriptor 2 itself
-(e.g. ``connect: Connection refused``), so the constructors run with fd 2 routed to the log.
-
-Why one module: every ur_rtde control call the project makes goes through the same error mapping and
-safety checks here (watchdog, stops, TCP/payload read-back).
+ur_rtde's ``RuntimeError`` and ``ValueError`` are wrapped at this boundary. Its Python constructors hold the GIL
+until the handshake finishes (hence the twins' server processes), and its C++ code prints to file descriptor 2,
+so the constructors run with fd 2 routed to the log.
 """
 
 from __future__ import annotations
@@ -261,11 +242,8 @@ class UR5eArm:
         self._expect_ok("speedL", ok)
 
     def stop(self, decel_m_s2: float = 10.0) -> None:
-        """Stop whatever runs: forceModeStop (in force mode), stopL (an asynchronous move), speedStop (always).
-
-        Every step runs even when an earlier one fails or a second Ctrl-C arrives (held until the end). A stopped
-        controller (protective stop, program not running) counts as stopped. A no-op after ``close``.
-        """
+        """Stop whatever runs (:meth:`_stop_steps`, every step run); a controller that stopped on its own (protective
+        stop, program not running) counts as stopped. A no-op after ``close``."""
         if self._closed:
             return
         if not decel_m_s2 > 0:
@@ -340,11 +318,8 @@ class UR5eArm:
         self._rest_watchdog()
 
     def wait_period(self) -> None:
-        """Feed the watchdog, then pace the loop at the RTDE frequency with ur_rtde's initPeriod/waitPeriod.
-
-        The kick is skipped when speedL or forceMode was sent this period: it would overwrite that command in the
-        script's register before the script read it (see the module docstring), and the command fed the watchdog.
-        """
+        """Feed the watchdog, then pace the loop at the RTDE frequency with ur_rtde's initPeriod/waitPeriod. No kick
+        after a speedL or forceMode this period: the command fed the watchdog, and a kick would erase it unread."""
         self._check_open()
         self._refuse_while_kept_alive("wait_period")
         if self._watchdog_hz is not None and not self._command_this_period:
@@ -382,11 +357,8 @@ class UR5eArm:
             self._end_keep_alive()
 
     def close(self) -> None:
-        """Stop force mode and motion, stop the control script, disconnect both interfaces. Idempotent.
-
-        Every step runs even if an earlier one fails or a second Ctrl-C arrives; such an interrupt is re-raised
-        once everything ran.
-        """
+        """Stop force mode and motion, stop the control script, disconnect both interfaces (every step run).
+        Idempotent."""
         if self._closed:
             return
         self._closed = True
@@ -545,9 +517,8 @@ class UR5eArm:
             return False
 
     def _rearm_watchdog(self) -> None:
-        """Arm the watchdog at ``watchdog_hz`` as a motion starts (one ~5 ms round trip), every time: ur_rtde
-        reconnects by itself after a network error and uploads its script again, and a fresh script has no
-        watchdog, so no motion starts unguarded after such a reconnect."""
+        """Arm the watchdog at ``watchdog_hz`` as every motion starts (one ~5 ms round trip): the script ur_rtde
+        uploads again after reconnecting by itself has none."""
         if self._watchdog_hz is not None:
             self._set_watchdog(self._watchdog_hz)
 

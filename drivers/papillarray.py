@@ -45,9 +45,6 @@ RATED_NORMAL_MM = 2.5  # per-pillar Dz range
 #   1 - exp(-2 pi 235 Hz dt): the hub's anti-alias filter (-3 dB at about 235 Hz) passes nothing faster. At 1 kHz
 #   that is 77 % of the span per sample, so the range check catches most; both are counted.
 IMPOSSIBLE_RANGE_FACTOR = 4.0
-# Packets in a row whose slot holds another pillar count before the driver stops with an error: one is damage that
-# passed the checksum (counted, skipped); a tenth of a second of them at 500 Hz is another array in the slot.
-WRONG_SHAPE_LIMIT = 50
 PHYSICAL_LIMITS = IMPOSSIBLE_RANGE_FACTOR * np.array(
     [RATED_SHEAR_N, RATED_SHEAR_N, RATED_NORMAL_N, RATED_SHEAR_MM, RATED_SHEAR_MM, RATED_NORMAL_MM]
 )  # |Fx| |Fy| |Fz| (N), |Dx| |Dy| |Dz| (mm)
@@ -128,7 +125,6 @@ class PapillArrayDriver(PumpedSensor):
         self._last_counter: int | None = None
         self._last_plausible: np.ndarray | None = None  # (9, 6) last reading that passed the physics check
         self._last_plausible_counter: int | None = None
-        self._wrong_shape_in_a_row = 0
         self._health.link_check = LINK_CHECK
 
     # ---- transport --------------------------------------------------------------------------------------------
@@ -208,17 +204,12 @@ class PapillArrayDriver(PumpedSensor):
                 logger.warning("papillarray: packet %d has no slot %d", packet.counter, self.slot)
                 continue
             sensor = packet.sensors[self.slot]
-            if len(sensor.forces_n) != PAPILLARRAY.n_taxels:
-                self._count(checksum_errors=1)
-                self._wrong_shape_in_a_row += 1
-                if self._wrong_shape_in_a_row < WRONG_SHAPE_LIMIT:
-                    continue  # one damaged packet; the reader goes on
-                raise DeviceError(
-                    f"PapillArray slot {self.slot} reports {len(sensor.forces_n)} pillars in {WRONG_SHAPE_LIMIT} "
-                    f"packets in a row; this project reads the {PAPILLARRAY.n_taxels}-pillar (3x3) array",
-                    hint="plug the 3x3 PapillArray into this slot, or choose its slot in the rig file",
-                )
-            self._wrong_shape_in_a_row = 0
+            if not self._right_shape(
+                n := len(sensor.forces_n),
+                f"PapillArray slot {self.slot} reports {n} pillars",
+                hint="plug the 3x3 PapillArray into this slot, or choose its slot in the rig file",
+            ):
+                continue  # one damaged packet; the reader goes on
             forces = np.asarray(sensor.forces_n, dtype=np.float64)
             displacements = np.asarray(sensor.displacements_mm, dtype=np.float64)
             implausible = self._implausible(np.hstack((forces, displacements)), packet.counter)

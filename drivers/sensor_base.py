@@ -31,6 +31,9 @@ logger = logging.getLogger(__name__)
 READER_WAIT_S = 0.02  # how long one reader-thread pump waits for bytes before checking the stop flag
 MAX_QUEUED_FRAMES = 100_000  # ~100 s at 1 kHz; older frames are dropped (and logged) if nobody polls
 DEAD_AFTER_FRAMES = 100  # a taxel whose three axes never changed over this many valid frames is reported dead
+# Messages in a row whose sensor has the wrong number of taxels before a driver stops with an error: one is damage
+# that passed the link's own check (counted, skipped); 0.1 to 0.5 s of them is another sensor in that slot.
+WRONG_SHAPE_LIMIT = 50
 
 
 class TaxelWatch:
@@ -91,6 +94,7 @@ class PumpedSensor:
         self._connected = False
         self._watch_since_ns = 0
         self._stalled = False
+        self._wrong_shape_in_a_row = 0
 
     # ---- hooks ------------------------------------------------------------------------------------------------
     def _open(self) -> None:
@@ -168,6 +172,21 @@ class PumpedSensor:
                     self._watch.update(frame.values)
             self._health.last_frame_ns = frames[-1].host_t_ns
             self._stalled = False
+
+    def _right_shape(self, n_taxels: int, what: str, hint: str) -> bool:
+        """False for a message whose sensor has ``n_taxels`` taxels, not the layout's (counted as damage, to skip);
+        DeviceError saying ``what``, with ``hint``, once :data:`WRONG_SHAPE_LIMIT` came in a row."""
+        if n_taxels == self.layout.n_taxels:
+            self._wrong_shape_in_a_row = 0
+            return True
+        self._count(checksum_errors=1)
+        self._wrong_shape_in_a_row += 1
+        if self._wrong_shape_in_a_row < WRONG_SHAPE_LIMIT:
+            return False
+        raise DeviceError(
+            f"{what} in {WRONG_SHAPE_LIMIT} messages in a row; the {self.layout.model} has {self.layout.n_taxels}",
+            hint=hint,
+        )
 
     def _check_stall(self) -> None:
         if not self._connected:

@@ -312,9 +312,6 @@ XELA_SERVER_HINT = (
     "versions ignore --ip and listen on the primary network address, not 127.0.0.1"
 )
 RETRY_INTERVAL_S = 0.1  # between connection attempts while the server starts
-# Messages in a row whose sensor has the wrong number of taxels before the driver stops with an error: one such
-# message is damage (counted, skipped); half a second of them at 100 Hz is the wrong sensor number or model.
-WRONG_SHAPE_LIMIT = 50
 CLIENT_MAX_QUEUE = 4096  # messages the WebSocket client buffers between polls (~40 s at 100 Hz)
 
 
@@ -345,7 +342,6 @@ class UskinXelaServerDriver(_UskinDriver):
         self._ws_stack: contextlib.ExitStack | None = None
         self._last_seq: int | None = None
         self._missing_sensor_logged = False
-        self._wrong_shape_in_a_row = 0
 
     def _open(self) -> None:
         deadline = time.monotonic() + self.connect_timeout_s
@@ -427,17 +423,12 @@ class UskinXelaServerDriver(_UskinDriver):
                 )
                 self._missing_sensor_logged = True
             return None
-        if sensor.values.shape != USKIN.frame_shape:
-            self._count(checksum_errors=1)
-            self._wrong_shape_in_a_row += 1
-            if self._wrong_shape_in_a_row < WRONG_SHAPE_LIMIT:
-                return None  # one damaged message; the reader goes on
-            raise DeviceError(
-                f"xela_server sensor {self.sensor_number} ({sensor.model[:40]}) has {sensor.taxels} taxels in "
-                f"{WRONG_SHAPE_LIMIT} messages in a row, the uSPa46 has {USKIN.n_taxels}",
-                hint="pick the uSPa46's sensor number (--sensor-number) or fix the model in xServ.ini",
-            )
-        self._wrong_shape_in_a_row = 0
+        if not self._right_shape(  # the codec made values (taxels, 3)
+            sensor.taxels,
+            f"xela_server sensor {self.sensor_number} ({sensor.model[:40]}) has {sensor.taxels} taxels",
+            hint="pick the uSPa46's sensor number (--sensor-number) or fix the model in xServ.ini",
+        ):
+            return None  # one damaged message; the reader goes on
         self.model = sensor.model
         invalid = invalid_taxels(sensor.values)  # e.g. FA00 placeholders while the server has no data yet
         return TactileFrame(

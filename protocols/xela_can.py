@@ -32,7 +32,6 @@ from __future__ import annotations
 import math
 import struct
 from collections import deque
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -112,8 +111,8 @@ def decode_stream_command(arbitration_id: int, data: bytes) -> tuple[int, bool] 
 class TaxelIdMap:
     """Which CAN arbitration id carries which taxel, in layout order (``index = row * cols + col``).
 
-    ``ids[i]`` is the arbitration id of taxel ``i``. Firmware differs in its ids, so maps are data: build one with
-    :meth:`from_ids` (ids in layout order; XELA's map file lists s1, s2, ... in that order) or
+    ``ids[i]`` is the arbitration id of taxel ``i``. Firmware differs in its ids, so maps are data: give the ids in
+    layout order (XELA's map file lists s1, s2, ... in that order, see the module docstring) or use
     :meth:`from_row_col_ids`.
     """
 
@@ -148,17 +147,6 @@ class TaxelIdMap:
         return self._index.get(arbitration_id)
 
     @classmethod
-    def from_ids(cls, ids: Iterable[int], name: str = "") -> TaxelIdMap:
-        """Map from CAN ids listed in layout order (taxel 0 first).
-
-        XELA's map file is in that order: its 4x6 map numbers the taxels s1 = 0x135 ... s6 = 0x130, s7 = 0x125 ...
-        s24 = 0x100, and xela_server lists a sensor's taxels "from top left, line by line" in that numbering
-        [inferred]; so s1 (0x135) is taxel 0 (row 0, col 0) here too, and a frame reads the same through CAN and
-        through xela_server.
-        """
-        return cls(tuple(ids), name=name)
-
-    @classmethod
     def from_row_col_ids(cls, rows: int, cols: int, base: int = 0x100, name: str = "") -> TaxelIdMap:
         """The ``base + 0x10 * row + col`` scheme (0x1RC) of the uSPa44/uSPa46 boards."""
         if not (1 <= rows <= 16 and 1 <= cols <= 16):
@@ -167,9 +155,7 @@ class TaxelIdMap:
 
 
 # uSPa46: XELA's 4x6 map, s1 = 0x135 first (0x1RC ids numbered in reverse); layout taxel 0 = s1 = 0x135.
-USPA46_ID_MAP = TaxelIdMap.from_ids(
-    reversed(TaxelIdMap.from_row_col_ids(4, 6).ids), name="uSPa46 XELA map (s1 = 0x135 first)"
-)
+USPA46_ID_MAP = TaxelIdMap(tuple(reversed(TaxelIdMap.from_row_col_ids(4, 6).ids)), "uSPa46 XELA map (s1 = 0x135 first)")
 USPA44_ID_MAP = TaxelIdMap.from_row_col_ids(4, 4, name="uSPa44 0x1RC (4x4)")
 
 

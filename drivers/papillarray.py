@@ -121,7 +121,7 @@ class PapillArrayDriver(PumpedSensor):
         self.max_tare_std_n = max_tare_std_n
         self._port: Any = None
         self._parser = PacketParser()
-        self._parser_seen = {"checksum_errors": 0, "framing_errors": 0, "bytes_dropped": 0}
+        self._parser_seen = self._parser.counters()
         self._last_counter: int | None = None
         self._last_plausible: np.ndarray | None = None  # (9, 6) last reading that passed the physics check
         self._last_plausible_counter: int | None = None
@@ -243,14 +243,11 @@ class PapillArrayDriver(PumpedSensor):
         return bad
 
     def _account_parser(self) -> None:
-        counters = self._parser.counters()
-        errors = counters["checksum_errors"] + counters["framing_errors"]
-        seen_errors = self._parser_seen["checksum_errors"] + self._parser_seen["framing_errors"]
-        self._count(
-            checksum_errors=errors - seen_errors,
-            bytes_dropped=counters["bytes_dropped"] - self._parser_seen["bytes_dropped"],
-        )
-        self._parser_seen = {k: counters[k] for k in self._parser_seen}
+        """Add what the parser counted since the last call (a framing error counts as a checksum error)."""
+        now, seen = self._parser.counters(), self._parser_seen
+        self._parser_seen = now
+        errors = now["checksum_errors"] + now["framing_errors"] - seen["checksum_errors"] - seen["framing_errors"]
+        self._count(checksum_errors=errors, bytes_dropped=now["bytes_dropped"] - seen["bytes_dropped"])
 
     # ---- the rest of TactileSensor ----------------------------------------------------------------------------
     def tare(self, frames: list[TactileFrame]) -> TareRecord:

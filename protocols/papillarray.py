@@ -522,12 +522,7 @@ class PacketParser:
         return len(self._buf)
 
     def counters(self) -> dict[str, int]:
-        return {
-            "packets": self.packets,
-            "bytes_dropped": self.bytes_dropped,
-            "checksum_errors": self.checksum_errors,
-            "framing_errors": self.framing_errors,
-        }
+        return {name: getattr(self, name) for name in ("packets", "bytes_dropped", "checksum_errors", "framing_errors")}
 
     def _decode(self, body: bytes, u8: np.ndarray) -> PapillArrayPacket:
         layout = self._layout

@@ -511,11 +511,5 @@ class FrameAssembler:
     def counters(self) -> dict[str, int]:
         """All counters as a dict (for health reports); ``unproven_frames`` are complete frames flagged because
         nothing proved they held one cycle."""
-        return {
-            "messages": self.messages,
-            "unknown_ids": self.unknown_ids,
-            "invalid_messages": self.invalid_messages,
-            "frames": self.frames,
-            "incomplete_frames": self.incomplete_frames,
-            "unproven_frames": self.unproven_frames,
-        }
+        names = ("messages", "unknown_ids", "invalid_messages", "frames", "incomplete_frames", "unproven_frames")
+        return {name: getattr(self, name) for name in names}

@@ -8,6 +8,7 @@ faster than real time.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Protocol
 
 
@@ -41,7 +42,7 @@ class VirtualClock:
 
     def __init__(self, start_ns: int = 0) -> None:
         self._now_ns = start_ns
-        self._listeners: list[_AdvanceListener] = []
+        self._listeners: list[Callable[[int], None]] = []  # called with the new time (ns)
 
     def now_ns(self) -> int:
         return self._now_ns
@@ -56,13 +57,9 @@ class VirtualClock:
         for listener in list(self._listeners):
             listener(self._now_ns)
 
-    def on_advance(self, listener: _AdvanceListener) -> None:
+    def on_advance(self, listener: Callable[[int], None]) -> None:
         self._listeners.append(listener)
 
-    def remove_listener(self, listener: _AdvanceListener) -> None:
+    def remove_listener(self, listener: Callable[[int], None]) -> None:
         if listener in self._listeners:
             self._listeners.remove(listener)
-
-
-class _AdvanceListener(Protocol):
-    def __call__(self, now_ns: int) -> None: ...

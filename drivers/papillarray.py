@@ -34,20 +34,11 @@ RATED_SHEAR_N = 4.0  # per-pillar Fx, Fy range
 RATED_NORMAL_N = 15.0  # per-pillar Fz range
 RATED_SHEAR_MM = 1.0  # per-pillar Dx, Dy range
 RATED_NORMAL_MM = 2.5  # per-pillar Dz range
-# Integrity (issue 28). The stream's checksum is the 16-bit sum of the body bytes, so two flips of the same bit, one
-# 0->1 and one 1->0, cancel (about 6 % of random double bit flips; about three quarters of those still decode), as do
-# swapped bytes: such a packet cannot be told from a good one on the wire. What can be caught is a value no pillar
-# produces (documented in docs/reliability.md):
-# - range: beyond IMPOSSIBLE_RANGE_FACTOR times the rated range (Fx, Fy +-4 N, Fz 15 N, Dx, Dy +-1 mm, Dz 2.5 mm;
-#   PTS 2.1 spec) on any axis, or not finite. A tip 4 mm sideways would have passed its neighbour (6 mm pillars on a
-#   7 mm pitch), and the forces are a calibration of that displacement.
-# - rate: between packets dt apart no value moves more than the whole span of that range times
-#   1 - exp(-2 pi 235 Hz dt): the hub's anti-alias filter (-3 dB at about 235 Hz) passes nothing faster. At 1 kHz
-#   that is 77 % of the span per sample, so the range check catches most; both are counted.
+# Integrity (issue 28; why and how often, docs/reliability.md): the 16-bit byte-sum checksum misses two flips of one
+# bit in opposite directions, so the driver also flags values no pillar produces: beyond IMPOSSIBLE_RANGE_FACTOR
+# times the rated range (PTS 2.1 spec; a tip 4 mm sideways would have passed its neighbour on the 7 mm pitch) or not
+# finite, or a move between packets dt apart faster than the hub's anti-alias filter (-3 dB at about 235 Hz) passes.
 IMPOSSIBLE_RANGE_FACTOR = 4.0
-# Packets in a row whose slot holds another pillar count before the driver stops with an error: one is damage that
-# passed the checksum (counted, skipped); a tenth of a second of them at 500 Hz is another array in the slot.
-WRONG_SHAPE_LIMIT = 50
 PHYSICAL_LIMITS = IMPOSSIBLE_RANGE_FACTOR * np.array(
     [RATED_SHEAR_N, RATED_SHEAR_N, RATED_NORMAL_N, RATED_SHEAR_MM, RATED_SHEAR_MM, RATED_NORMAL_MM]
 )  # |Fx| |Fy| |Fz| (N), |Dx| |Dy| |Dz| (mm)
@@ -60,6 +51,9 @@ READ_CHUNK_BYTES = 65_536
 MAX_READS_PER_PUMP = 64
 IDLE_SLEEP_S = 0.002  # reader thread nap when the port had nothing (the port is read with timeout 0)
 
+_URL_HINT = (
+    "give a device path like /dev/ttyACM0 (simulated hubs register simpapill:// when unitac_rig.sim is imported)"
+)
 _PORT_HINT = (
     "check the hub is plugged in (ls /dev/ttyACM*) and that you may open it: sudo usermod -aG dialout $USER, "
     "then log in again"
@@ -124,25 +118,19 @@ class PapillArrayDriver(PumpedSensor):
         self.max_tare_std_n = max_tare_std_n
         self._port: Any = None
         self._parser = PacketParser()
-        self._parser_seen = {"checksum_errors": 0, "framing_errors": 0, "bytes_dropped": 0}
+        self._parser_seen = self._parser.counters()
         self._last_counter: int | None = None
         self._last_plausible: np.ndarray | None = None  # (9, 6) last reading that passed the physics check
         self._last_plausible_counter: int | None = None
-        self._wrong_shape_in_a_row = 0
         self._health.link_check = LINK_CHECK
 
     # ---- transport --------------------------------------------------------------------------------------------
     def _open(self) -> None:
         try:
             port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0)
-        except ValueError as exc:  # pyserial: unknown URL scheme or bad settings
-            raise DeviceNotFound(
-                f"cannot open PapillArray port {self.url!r}: {exc}",
-                hint="give a device path like /dev/ttyACM0 (simulated hubs register simpapill:// when "
-                "unitac_rig.sim is imported)",
-            ) from exc
-        except (serial.SerialException, OSError) as exc:
-            raise DeviceNotFound(f"cannot open PapillArray port {self.url!r}: {exc}", hint=_PORT_HINT) from exc
+        except (ValueError, OSError) as exc:  # ValueError: unknown URL scheme or bad settings; SerialException: OSError
+            hint = _URL_HINT if isinstance(exc, ValueError) else _PORT_HINT
+            raise DeviceNotFound(f"cannot open PapillArray port {self.url!r}: {exc}", hint=hint) from exc
         self._port = port
         self._parser.reset()
         self._last_counter = None
@@ -208,17 +196,12 @@ class PapillArrayDriver(PumpedSensor):
                 logger.warning("papillarray: packet %d has no slot %d", packet.counter, self.slot)
                 continue
             sensor = packet.sensors[self.slot]
-            if len(sensor.forces_n) != PAPILLARRAY.n_taxels:
-                self._count(checksum_errors=1)
-                self._wrong_shape_in_a_row += 1
-                if self._wrong_shape_in_a_row < WRONG_SHAPE_LIMIT:
-                    continue  # one damaged packet; the reader goes on
-                raise DeviceError(
-                    f"PapillArray slot {self.slot} reports {len(sensor.forces_n)} pillars in {WRONG_SHAPE_LIMIT} "
-                    f"packets in a row; this project reads the {PAPILLARRAY.n_taxels}-pillar (3x3) array",
-                    hint="plug the 3x3 PapillArray into this slot, or choose its slot in the rig file",
-                )
-            self._wrong_shape_in_a_row = 0
+            if not self._right_shape(
+                n := len(sensor.forces_n),
+                f"PapillArray slot {self.slot} reports {n} pillars",
+                hint="plug the 3x3 PapillArray into this slot, or choose its slot in the rig file",
+            ):
+                continue  # one damaged packet; the reader goes on
             forces = np.asarray(sensor.forces_n, dtype=np.float64)
             displacements = np.asarray(sensor.displacements_mm, dtype=np.float64)
             implausible = self._implausible(np.hstack((forces, displacements)), packet.counter)
@@ -252,14 +235,11 @@ class PapillArrayDriver(PumpedSensor):
         return bad
 
     def _account_parser(self) -> None:
-        counters = self._parser.counters()
-        errors = counters["checksum_errors"] + counters["framing_errors"]
-        seen_errors = self._parser_seen["checksum_errors"] + self._parser_seen["framing_errors"]
-        self._count(
-            checksum_errors=errors - seen_errors,
-            bytes_dropped=counters["bytes_dropped"] - self._parser_seen["bytes_dropped"],
-        )
-        self._parser_seen = {k: counters[k] for k in self._parser_seen}
+        """Add what the parser counted since the last call (a framing error counts as a checksum error)."""
+        now, seen = self._parser.counters(), self._parser_seen
+        self._parser_seen = now
+        errors = now["checksum_errors"] + now["framing_errors"] - seen["checksum_errors"] - seen["framing_errors"]
+        self._count(checksum_errors=errors, bytes_dropped=now["bytes_dropped"] - seen["bytes_dropped"])
 
     # ---- the rest of TactileSensor ----------------------------------------------------------------------------
     def tare(self, frames: list[TactileFrame]) -> TareRecord:

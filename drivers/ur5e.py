@@ -6,49 +6,30 @@ State comes from ``rtde_receive.RTDEReceiveInterface`` (RTDE port 30004, 500 Hz 
 Both objects can be injected (tests use the real clients against the controller twin, and a recording fake where
 the twin cannot reach).
 
-Safety (what a real controller does when the host misbehaves, ``hardware-facts`` 3.8, and what this class adds):
+Safety (``hardware-facts`` 3.8; the reasons and measurements are in docs/real-rig.md, "Safety"): the controller
+executes the last command until told otherwise, even after the host dies, so
 
-* the controller executes the last command until told otherwise: ur_rtde's speed and force threads run forever,
-  even after the host dies. The one thing that stops them is the **RTDE watchdog** (``setWatchdog``): the program
-  stops when the host writes nothing for 1 / ``watchdog_hz``. It is held at ``watchdog_hz`` **only while a motion is
-  commanded** (a speedL, force mode or asynchronous moveL not yet seen to end or stopped), and fed then only by the
-  loop that decides the motion (``wait_period``, or the motion command itself): a host that freezes or dies
-  mid-motion stops the arm 1 / ``watchdog_hz`` after its last decision. As the arm comes to rest (``stop``, the
-  move's end, ``force_mode_stop``) and at connect it is set to ``REST_WATCHDOG_HZ`` instead (URScript has no way to
-  remove a watchdog but stopping the program; setting it again on the same register replaces its frequency): with
-  nothing commanded nothing moves, so set-up work, writing a press or a session's end (git, HDF5, fsync, a loaded
-  box) can take seconds without the controller stopping the program under it. No thread has to win the GIL in
-  time for that; :meth:`UR5eArm.keep_alive` still kicks from a thread for the operator's waits, which can outlast
-  even the rest window;
-* a period that sent speedL or forceMode is **not** also kicked: ur_rtde sends those without waiting, and
-  ``kickWatchdog`` writes 0 to the same command register, which the script reads once per 2 ms cycle. Sent right
-  after, the kick can land in the same cycle and the script never sees the command (the last write wins). The
-  command's own write of that register feeds the watchdog just the same;
-* ``speedL`` is always sent with a time limit of a few control periods. ur_rtde's script repeats ``speedl`` in its
-  speed thread, so on a real controller this does *not* stop the arm (the watchdog does); it bounds each ``speedl``
-  call and costs nothing;
-* straight-line moves are asynchronous (``moveL(..., asynchronous=True)``) and polled, so ``stop`` (``stopL``) can
-  end them and the watchdog stays fed: a blocking ``moveL`` longer than 1 / ``watchdog_hz`` would trip it and
-  cannot be stopped from the host;
-* ``stop`` and ``close`` run every step (forceModeStop, stopL, speedStop; then stopScript and disconnect) on its own,
-  and a second Ctrl-C during them is held until they are done. When the receive side has lost the controller (no
-  new state for ``STALL_TIMEOUT_S``) they send none of them: ur_rtde's blocking commands to a vanished controller
-  return only after ~301 s each, and the watchdog stops the program anyway;
-* the watchdog is armed (at ``watchdog_hz``) again as each motion starts: ur_rtde reconnects by itself after a
-  network error and uploads its script again, and a fresh script has no watchdog;
-* after a protective or emergency stop the controller refuses everything: commands are refused up front with
-  :class:`~drivers.errors.ProtectiveStop` (what to do on the pendant in the hint), and a program that stopped (the
-  watchdog, the pendant) gives :class:`~drivers.errors.ControlScriptStopped`;
-* at connect, the TCP offset (``getTCPOffset``) and payload (RTDE ``payload``) are read back and compared with what
-  the rig file expects, when it names them; ur_rtde's ``RuntimeError`` and ``ValueError`` are wrapped at this
-  boundary.
+* the **RTDE watchdog** (``setWatchdog``) is held at ``watchdog_hz`` only while a motion is commanded (a speedL,
+  force mode or asynchronous moveL not yet seen to end or stopped), armed again as each motion starts (ur_rtde's
+  reconnect uploads a script without one), and fed only by the loop that decides the motion (``wait_period``, or
+  the motion command itself): a host that freezes or dies mid-motion stops the arm 1 / ``watchdog_hz`` after its
+  last decision. At connect and as the arm comes to rest it is set to ``REST_WATCHDOG_HZ`` (a watchdog can only be
+  replaced, not removed), so set-up and saving can take seconds; :meth:`UR5eArm.keep_alive` kicks from a thread
+  for the operator's waits;
+* a period that sent speedL or forceMode is **not** also kicked: ``kickWatchdog`` writes 0 to the same command
+  register, and landing in the same 2 ms script cycle it would erase the command unread;
+* ``speedL`` carries a time limit of a few control periods (it bounds each call; the watchdog stops the arm);
+  moveL is asynchronous and polled, so ``stop`` (``stopL``) can end it and the watchdog stays fed;
+* ``stop`` and ``close`` run every step (forceModeStop, stopL, speedStop; then stopScript and disconnect) however
+  the others fare, holding a second Ctrl-C until done; with the receive stream lost (no new state for
+  ``STALL_TIMEOUT_S``) they send none (each would block ~301 s; the watchdog stops the program);
+* in a protective or emergency stop commands are refused up front with :class:`~drivers.errors.ProtectiveStop`
+  (what to do on the pendant in the hint); a stopped program gives :class:`~drivers.errors.ControlScriptStopped`;
+* at connect the TCP offset and payload are read back and compared with the rig file's, when it names them.
 
-Gotchas: ur_rtde's Python constructors hold the GIL until the handshake finishes (a Python RTDE server in the same
-process would deadlock, hence the twins' server processes); the C++ library prints to file descriptor 2 itself
-(e.g. ``connect: Connection refused``), so the constructors run with fd 2 routed to the log.
-
-Why one module: every ur_rtde control call the project makes goes through the same error mapping and
-safety checks here (watchdog, stops, TCP/payload read-back).
+ur_rtde's ``RuntimeError`` and ``ValueError`` are wrapped at this boundary. Its Python constructors hold the GIL
+until the handshake finishes (hence the twins' server processes), and its C++ code prints to file descriptor 2,
+so the constructors run with fd 2 routed to the log.
 """
 
 from __future__ import annotations
@@ -179,10 +160,7 @@ class UR5eArm:
         )
         self.clock: Clock = self._receiver.clock
         try:
-            state = self._receiver.read_state()
-            if state.protective_stop or state.emergency_stop:
-                kind = "an emergency" if state.emergency_stop else "a protective"
-                raise ProtectiveStop(f"the UR at {host} is in {kind} stop", hint=STOPPED_HINT)
+            self._refuse_safety_stop(self._receiver.read_state(), "connect")
             self._control = control if control is not None else _connect_control(host, frequency_hz)
         except BaseException:
             self._receiver.close()
@@ -264,19 +242,15 @@ class UR5eArm:
         self._expect_ok("speedL", ok)
 
     def stop(self, decel_m_s2: float = 10.0) -> None:
-        """Stop whatever runs: forceModeStop (in force mode), stopL (an asynchronous move), speedStop (always).
-
-        Every step runs even when an earlier one fails or a second Ctrl-C arrives (held until the end). A stopped
-        controller (protective stop, program not running) counts as stopped. A no-op after ``close``.
-        """
+        """Stop whatever runs (:meth:`_stop_steps`, every step run); a controller that stopped on its own (protective
+        stop, program not running) counts as stopped. A no-op after ``close``."""
         if self._closed:
             return
         if not decel_m_s2 > 0:
             raise ArmError(f"deceleration must be > 0 m/s^2, got {decel_m_s2}")
         self._end_keep_alive()  # stopping always wins; the kicker must not share the client with us
         if self._controller_lost():
-            self._in_force_mode = self._speeding = False
-            self._move = None
+            self._forget_motion()
             if self._program_stopped():
                 return  # the controller stopped the program (and the arm) itself: nothing to stop, nothing to wait for
             raise RobotStateLost(
@@ -284,18 +258,11 @@ class UR5eArm:
                 "ur_rtde's 300 s for an answer)",
                 hint=self._lost_hint(),
             )
-        decel = float(min(decel_m_s2, MAX_TOOL_ACCEL_M_S2))
-        steps: list[tuple[str, Callable[[], object]]] = []
-        if self._in_force_mode:
-            steps.append(("forceModeStop", self._control.forceModeStop))
-        if self._move is not None:
-            steps.append(("stopL", lambda: self._control.stopL(decel, False)))
-        steps.append(("speedStop", lambda: self._control.speedStop(decel)))
+        steps = self._stop_steps(self._control, float(min(decel_m_s2, MAX_TOOL_ACCEL_M_S2)))
         try:
             refused = _run_all(steps, on_error=lambda name, exc: logger.warning("UR stop: %s failed: %s", name, exc))
         finally:
-            self._in_force_mode = self._speeding = False
-            self._move = None
+            self._forget_motion()
         if refused:
             if not self._stopped_anyway():
                 raise ArmError(f"the UR at {self.host} refused {', '.join(refused)}", hint=STOPPED_HINT)
@@ -351,11 +318,8 @@ class UR5eArm:
         self._rest_watchdog()
 
     def wait_period(self) -> None:
-        """Feed the watchdog, then pace the loop at the RTDE frequency with ur_rtde's initPeriod/waitPeriod.
-
-        The kick is skipped when speedL or forceMode was sent this period: it would overwrite that command in the
-        script's register before the script read it (see the module docstring), and the command fed the watchdog.
-        """
+        """Feed the watchdog, then pace the loop at the RTDE frequency with ur_rtde's initPeriod/waitPeriod. No kick
+        after a speedL or forceMode this period: the command fed the watchdog, and a kick would erase it unread."""
         self._check_open()
         self._refuse_while_kept_alive("wait_period")
         if self._watchdog_hz is not None and not self._command_this_period:
@@ -393,11 +357,8 @@ class UR5eArm:
             self._end_keep_alive()
 
     def close(self) -> None:
-        """Stop force mode and motion, stop the control script, disconnect both interfaces. Idempotent.
-
-        Every step runs even if an earlier one fails or a second Ctrl-C arrives; such an interrupt is re-raised
-        once everything ran.
-        """
+        """Stop force mode and motion, stop the control script, disconnect both interfaces (every step run).
+        Idempotent."""
         if self._closed:
             return
         self._closed = True
@@ -412,21 +373,13 @@ class UR5eArm:
             )
             steps.append(("disconnect", control.disconnect))
         elif control is not None:
-            if self._in_force_mode:
-                steps.append(("forceModeStop", control.forceModeStop))
-            if self._move is not None:
-                steps.append(("stopL", lambda: control.stopL(10.0, False)))
-            steps += [
-                ("speedStop", lambda: control.speedStop(10.0)),
-                ("stopScript", control.stopScript),
-                ("disconnect", control.disconnect),
-            ]
+            steps += [*self._stop_steps(control, 10.0), ("stopScript", control.stopScript)]
+            steps.append(("disconnect", control.disconnect))
         steps.append(("receive disconnect", self._receiver.close))
         try:
             _run_all(steps, on_error=lambda name, exc: logger.warning("UR close: %s failed: %s", name, exc))
         finally:
-            self._in_force_mode = self._speeding = False
-            self._move = None
+            self._forget_motion()
             # Let ur_rtde's objects go now: their destructors block (a 0.5 s sleep each) holding the GIL, and run
             # later, when garbage collection gets to them, they freeze whatever this process does then (a second
             # connection's watchdog tripped that way on the twin).
@@ -499,23 +452,42 @@ class UR5eArm:
         if self._kicker is not None:
             raise ArmError(f"{what} inside keep_alive: the arm must stay at rest there")
 
+    def _stop_steps(self, control: Any, decel_m_s2: float) -> list[tuple[str, Callable[[], object]]]:
+        """What ends whatever runs: forceModeStop (in force mode), stopL (an asynchronous move), speedStop."""
+        steps: list[tuple[str, Callable[[], object]]] = []
+        if self._in_force_mode:
+            steps.append(("forceModeStop", control.forceModeStop))
+        if self._move is not None:
+            steps.append(("stopL", lambda: control.stopL(decel_m_s2, False)))
+        return [*steps, ("speedStop", lambda: control.speedStop(decel_m_s2))]
+
+    def _forget_motion(self) -> None:
+        self._in_force_mode = self._speeding = False
+        self._move = None
+
+    def _state_or_none(self) -> ArmState | None:
+        try:
+            return self._receiver.read_state()
+        except DeviceError:
+            return None
+
+    def _refuse_safety_stop(self, state: ArmState | None, what: str) -> None:
+        """ProtectiveStop (what to do on the pendant in its hint) when ``state`` shows a protective or emergency
+        stop."""
+        if state is not None and (state.protective_stop or state.emergency_stop):
+            kind = "an emergency" if state.emergency_stop else "a protective"
+            raise ProtectiveStop(f"{what}: the UR at {self.host} is in {kind} stop", hint=STOPPED_HINT)
+
     def _stopped_anyway(self) -> bool:
         """A refused stop is fine when the controller stopped on its own (safety stop, program not running)."""
-        try:
-            state = self._receiver.read_state()
-            running = bool(self._control.isProgramRunning())
-        except (DeviceError, RuntimeError, ValueError):
-            return False
-        return state.protective_stop or state.emergency_stop or not running
+        state = self._state_or_none()
+        return state is not None and (state.protective_stop or state.emergency_stop or self._program_stopped())
 
     def _require_ready(self, what: str) -> None:
         """Refuse a motion command up front while the controller is stopped (safety stop, program not running)."""
         self._check_open()
         self._refuse_while_kept_alive(what)
-        state = self._receiver.read_state()
-        if state.protective_stop or state.emergency_stop:
-            kind = "an emergency" if state.emergency_stop else "a protective"
-            raise ProtectiveStop(f"{what}: the UR at {self.host} is in {kind} stop", hint=STOPPED_HINT)
+        self._refuse_safety_stop(self._receiver.read_state(), what)
         if not self._call("isProgramRunning", self._control.isProgramRunning):
             self._raise_stopped(what, "is not running")
 
@@ -531,9 +503,7 @@ class UR5eArm:
                 state = self._receiver.wait_for_new_state(timeout_s=0.05)
         except DeviceError:
             state = None
-        if state is not None and (state.protective_stop or state.emergency_stop):
-            kind = "an emergency" if state.emergency_stop else "a protective"
-            raise ProtectiveStop(f"{what}: the UR at {self.host} is in {kind} stop", hint=STOPPED_HINT)
+        self._refuse_safety_stop(state, what)
         raise ControlScriptStopped(
             f"{what}: the control program on the UR at {self.host} {how}",
             hint=_program_stopped_hint(self._watchdog_hz),
@@ -547,9 +517,8 @@ class UR5eArm:
             return False
 
     def _rearm_watchdog(self) -> None:
-        """Arm the watchdog at ``watchdog_hz`` as a motion starts (one ~5 ms round trip), every time: ur_rtde
-        reconnects by itself after a network error and uploads its script again, and a fresh script has no
-        watchdog, so no motion starts unguarded after such a reconnect."""
+        """Arm the watchdog at ``watchdog_hz`` as every motion starts (one ~5 ms round trip): the script ur_rtde
+        uploads again after reconnecting by itself has none."""
         if self._watchdog_hz is not None:
             self._set_watchdog(self._watchdog_hz)
 
@@ -614,20 +583,8 @@ class UR5eArm:
     def _expect_ok(self, what: str, ok: object) -> None:
         if ok is not False:
             return
-        try:
-            state = self._receiver.read_state()
-            stopped = state.protective_stop or state.emergency_stop
-        except DeviceError:
-            stopped = False
-        if stopped:
-            raise ProtectiveStop(
-                f"{what}: the UR at {self.host} stopped (protective/emergency stop)", hint=STOPPED_HINT
-            )
-        try:
-            running = bool(self._control.isProgramRunning())
-        except (RuntimeError, ValueError):
-            running = True
-        if not running:
+        self._refuse_safety_stop(self._state_or_none(), what)
+        if self._program_stopped():
             self._raise_stopped(what, "stopped")
         raise ArmError(
             f"{what} was not completed by the UR at {self.host}",

@@ -117,12 +117,29 @@ def open_can_bus(interface: str, channel: str, bitrate: int = 1_000_000, **optio
         raise DeviceNotFound(f"cannot open CAN {interface} channel {channel!r}: {exc}", hint=hint) from exc
 
 
+class _UskinDriver(PumpedSensor):
+    """What both uSkin transports share: the layout, the saturation rule and the host-side tare (counts)."""
+
+    def __init__(
+        self, thread_name: str, clock: Clock | None, stall_timeout_s: float, max_tare_spread_counts: float
+    ) -> None:
+        super().__init__(
+            USKIN, clock=clock, stall_timeout_s=stall_timeout_s, thread_name=thread_name, is_saturated=uskin_saturated
+        )
+        self.max_tare_spread_counts = max_tare_spread_counts
+
+    def tare(self, frames: list[TactileFrame]) -> TareRecord:
+        """Host-side baseline from unloaded frames (the uSkin has no tare command); refuses when they spread more
+        than a resting pad."""
+        return uskin_host_tare(frames, self.clock.now_ns(), self.max_tare_spread_counts)
+
+
 def _is_slcan(bus: Any) -> bool:
     """True for python-can's serial slcan bus (ASCII lines over a serial port, without a checksum)."""
     return type(bus).__name__.lower().startswith("slcan")
 
 
-class UskinCanDriver(PumpedSensor):
+class UskinCanDriver(_UskinDriver):
     """uSPa46 over raw CAN: sends the start command on connect, assembles per-taxel messages into frames.
 
     ``bus`` is any python-can bus (socketcan, slcan, pcan, virtual); with ``owns_bus`` the driver shuts it down on
@@ -149,19 +166,12 @@ class UskinCanDriver(PumpedSensor):
                 f"id map {id_map.name!r} has {id_map.n_taxels} taxels, the uSPa46 has {USKIN.n_taxels}",
                 hint="use USPA46_ID_MAP or a 24-id map",
             )
-        super().__init__(
-            USKIN,
-            clock=clock,
-            stall_timeout_s=stall_timeout_s,
-            thread_name=f"uskin-can-{controller_id}",
-            is_saturated=uskin_saturated,
-        )
+        super().__init__(f"uskin-can-{controller_id}", clock, stall_timeout_s, max_tare_spread_counts)
         self.bus = bus
         self.controller_id = controller_id
         self.id_map = id_map
         self.owns_bus = owns_bus
         self._bus_shut_down = False
-        self.max_tare_spread_counts = max_tare_spread_counts
         self._start_command = encode_stream_command(controller_id, True)
         self._stop_command = encode_stream_command(controller_id, False)
         self.cycle_start_id = cycle_start_id
@@ -280,11 +290,6 @@ class UskinCanDriver(PumpedSensor):
                 frames.append(self._frame(assembled))
         return frames
 
-    # ---- the rest of TactileSensor ----------------------------------------------------------------------------
-    def tare(self, frames: list[TactileFrame]) -> TareRecord:
-        """Host-side baseline (counts) from unloaded frames; refuses when they spread more than a resting pad."""
-        return uskin_host_tare(frames, self.clock.now_ns(), self.max_tare_spread_counts)
-
     def link_counters(self) -> dict[str, int]:
         """The frame assembler's counters (messages, unknown_ids, invalid_messages, frames, incomplete_frames,
         unproven_frames)."""
@@ -307,13 +312,10 @@ XELA_SERVER_HINT = (
     "versions ignore --ip and listen on the primary network address, not 127.0.0.1"
 )
 RETRY_INTERVAL_S = 0.1  # between connection attempts while the server starts
-# Messages in a row whose sensor has the wrong number of taxels before the driver stops with an error: one such
-# message is damage (counted, skipped); half a second of them at 100 Hz is the wrong sensor number or model.
-WRONG_SHAPE_LIMIT = 50
 CLIENT_MAX_QUEUE = 4096  # messages the WebSocket client buffers between polls (~40 s at 100 Hz)
 
 
-class UskinXelaServerDriver(PumpedSensor):
+class UskinXelaServerDriver(_UskinDriver):
     """uSPa46 through XELA's xela_server WebSocket (``ws://HOST:5000``), one sensor number of its broadcast.
 
     ``seq`` is the server's message number (gaps counted), ``device_t_us`` the server time in microseconds, and
@@ -330,24 +332,16 @@ class UskinXelaServerDriver(PumpedSensor):
         stall_timeout_s: float = 0.5,
         max_tare_spread_counts: float = MAX_TARE_SPREAD_COUNTS,
     ) -> None:
-        super().__init__(
-            USKIN,
-            clock=clock,
-            stall_timeout_s=stall_timeout_s,
-            thread_name=f"uskin-xela-server-{sensor_number}",
-            is_saturated=uskin_saturated,
-        )
+        super().__init__(f"uskin-xela-server-{sensor_number}", clock, stall_timeout_s, max_tare_spread_counts)
         self.url = url
         self.sensor_number = sensor_number
         self.connect_timeout_s = connect_timeout_s
-        self.max_tare_spread_counts = max_tare_spread_counts
         self.welcome: dict[str, Any] | None = None
         self.model: str | None = None
         self._ws: ClientConnection | None = None
         self._ws_stack: contextlib.ExitStack | None = None
         self._last_seq: int | None = None
         self._missing_sensor_logged = False
-        self._wrong_shape_in_a_row = 0
 
     def _open(self) -> None:
         deadline = time.monotonic() + self.connect_timeout_s
@@ -429,17 +423,12 @@ class UskinXelaServerDriver(PumpedSensor):
                 )
                 self._missing_sensor_logged = True
             return None
-        if sensor.values.shape != USKIN.frame_shape:
-            self._count(checksum_errors=1)
-            self._wrong_shape_in_a_row += 1
-            if self._wrong_shape_in_a_row < WRONG_SHAPE_LIMIT:
-                return None  # one damaged message; the reader goes on
-            raise DeviceError(
-                f"xela_server sensor {self.sensor_number} ({sensor.model[:40]}) has {sensor.taxels} taxels in "
-                f"{WRONG_SHAPE_LIMIT} messages in a row, the uSPa46 has {USKIN.n_taxels}",
-                hint="pick the uSPa46's sensor number (--sensor-number) or fix the model in xServ.ini",
-            )
-        self._wrong_shape_in_a_row = 0
+        if not self._right_shape(  # the codec made values (taxels, 3)
+            sensor.taxels,
+            f"xela_server sensor {self.sensor_number} ({sensor.model[:40]}) has {sensor.taxels} taxels",
+            hint="pick the uSPa46's sensor number (--sensor-number) or fix the model in xServ.ini",
+        ):
+            return None  # one damaged message; the reader goes on
         self.model = sensor.model
         invalid = invalid_taxels(sensor.values)  # e.g. FA00 placeholders while the server has no data yet
         return TactileFrame(
@@ -452,10 +441,6 @@ class UskinXelaServerDriver(PumpedSensor):
             valid=not invalid.any(),
             stale_mask=invalid if invalid.any() else None,
         )
-
-    def tare(self, frames: list[TactileFrame]) -> TareRecord:
-        """Host-side baseline (counts) from unloaded frames; xela_server has no tare command."""
-        return uskin_host_tare(frames, self.clock.now_ns(), self.max_tare_spread_counts)
 
     def identity(self) -> dict[str, Any]:
         return {

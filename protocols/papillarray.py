@@ -39,17 +39,18 @@ PTS 2.1 spec and PTS Python/ROS manuals, and the body layout of langxin11/contac
 Pure codec: no I/O, threads or clocks.
 
 Why one module: it is one binary format. The encoder (for the simulated hub) and the decoder (for the
-driver) mirror each other block by block and are tested against each other (round trips, fuzzing), and the stream
-parser reuses the decoder's cached body layout (``_Layout``) to skip re-walking same-shaped packets; split apart,
-each half would have to expose the other's internals.
+driver) read each data block's layout from one table (``_BLOCKS``) and are tested against each other (round trips,
+fuzzing); the stream parser reuses the decoder's cached body layout (``_Layout``) to skip re-walking same-shaped
+packets.
 """
 
 from __future__ import annotations
 
 import struct
 from bisect import bisect_left, bisect_right, insort
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -66,25 +67,42 @@ BLOCK_PILLAR = 3
 BLOCK_GLOBAL = 4
 BLOCK_PILLAR_SLIP = 5
 BLOCK_SENSOR_SLIP = 6
-_KNOWN_BLOCKS = (BLOCK_HUB, BLOCK_PILLAR, BLOCK_GLOBAL, BLOCK_PILLAR_SLIP, BLOCK_SENSOR_SLIP)
-_PILLAR_ENTRY_TYPE = 2
-_GLOBAL_ENTRY_TYPE = 2
-_SLIP_ENTRY_TYPE = 1
 
 NO_FRICTION_ESTIMATE = -1.0  # the device's "no estimate" value for friction and target grip force
 
 _FRAMING_OVERHEAD = len(START_MARKER) + 2 + len(END_MARKER)
 _U16 = struct.Struct("<H")
 _HUB = struct.Struct("<IQ")
-_GLOBAL_ENTRY = struct.Struct("<H6f")
-_SENSOR_SLIP_ENTRY = struct.Struct("<HBff")
-_PILLAR_DTYPE = np.dtype([("type", "<u2"), ("values", "<f4", (6,))])  # 26 bytes, packed
-_PILLAR_SLIP_DTYPE = np.dtype([("type", "<u2"), ("state", "i1"), ("friction", "<f4")])  # 7 bytes, packed
 _HINT = "check the cable and the port; the decoder resynchronises on the next packet"
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
-def _zeros3x(n: int) -> np.ndarray:
-    return np.zeros((n, 3), dtype=np.float64)
+@dataclass(frozen=True)
+class _Block:
+    """One data block's layout, shared by the encoder and the decoder: a u16 sensor count and sensor offset table,
+    then per sensor either one entry (``nested`` False) or a u16 pillar count, pillar offset table and one entry per
+    pillar. An entry is a u16 ``entry_type``, an optional one-byte field (``byte``: numpy code) and ``n_floats``
+    float32."""
+
+    name: str
+    nested: bool
+    entry_type: int
+    byte: str | None
+    n_floats: int
+
+    @cached_property
+    def dtype(self) -> np.dtype:  # packed, as on the wire
+        fields = [("type", "<u2"), ("byte", self.byte)] if self.byte else [("type", "<u2")]
+        return np.dtype([*fields, ("floats", "<f4", (self.n_floats,))])
+
+
+_BLOCKS = {
+    BLOCK_PILLAR: _Block("pillar", nested=True, entry_type=2, byte=None, n_floats=6),  # Fx Fy Fz Dx Dy Dz
+    BLOCK_GLOBAL: _Block("global", nested=False, entry_type=2, byte=None, n_floats=6),  # Fx Fy Fz Tx Ty Tz
+    BLOCK_PILLAR_SLIP: _Block("pillar slip", nested=True, entry_type=1, byte="i1", n_floats=1),  # state, friction
+    # slip detection state, friction estimate, target grip force
+    BLOCK_SENSOR_SLIP: _Block("sensor slip", nested=False, entry_type=1, byte="u1", n_floats=2),
+}
 
 
 @dataclass(eq=False)
@@ -116,14 +134,9 @@ class PillarSensorData:
     @classmethod
     def unloaded(cls, n_pillars: int = N_PILLARS) -> PillarSensorData:
         """An all-zero reading (e.g. an empty sensor slot)."""
-        return cls(
-            forces_n=_zeros3x(n_pillars),
-            displacements_mm=_zeros3x(n_pillars),
-            global_force_n=np.zeros(3),
-            global_torque_nmm=np.zeros(3),
-            slip_states=np.zeros(n_pillars, dtype=np.int64),
-            pillar_friction=np.full(n_pillars, NO_FRICTION_ESTIMATE),
-        )
+        zeros = np.zeros((n_pillars, 3))
+        slip_states = np.zeros(n_pillars, dtype=np.int64)
+        return cls(zeros, zeros.copy(), np.zeros(3), np.zeros(3), slip_states, np.full(n_pillars, NO_FRICTION_ESTIMATE))
 
 
 @dataclass(eq=False)
@@ -148,123 +161,80 @@ def checksum(body: bytes | bytearray | memoryview) -> int:
 # ----------------------------------------------------------------------------------------------------- encoding
 
 
-def _offset_bytes(offset: int, index_size: int) -> bytes:
-    if offset >= 1 << (8 * index_size):
+def _offsets(first: int, sizes: list[int], index_size: int) -> bytes:
+    """Offset table (``index_size`` bytes each) of consecutive items of ``sizes`` bytes starting at ``first``."""
+    positions = first + np.cumsum([0, *sizes], dtype=np.int64)[:-1]
+    if len(positions) and positions[-1] >= 1 << (8 * index_size):
         raise ProtocolError(
-            f"offset {offset} does not fit in index_size={index_size} bytes",
+            f"offset {positions[-1]} does not fit in index_size={index_size} bytes",
             hint="use index_size=2 for packets longer than 255 bytes",
         )
-    return offset.to_bytes(index_size, "little")
+    return positions.astype("<u8").view(np.uint8).reshape(-1, 8)[:, :index_size].tobytes()
 
 
-_FLOAT32_MAX = float(np.finfo(np.float32).max)
-
-
-def _check_f32(values: np.ndarray, what: str) -> None:
-    """Reject finite values that float32 cannot hold (NaN and inf pass through as the wire can carry them)."""
-    finite = values[np.isfinite(values)]
+def _f32(values: object, shape: tuple[int, ...], what: str) -> np.ndarray:
+    """``values`` as float64 of ``shape``; finite values float32 cannot hold are refused (NaN and inf pass)."""
+    array = np.asarray(values, dtype=np.float64)
+    if array.shape != shape:
+        raise ProtocolError(f"{what} has shape {array.shape}, expected {shape}", hint="one row per pillar")
+    finite = array[np.isfinite(array)]
     if finite.size and np.abs(finite).max() > _FLOAT32_MAX:
         raise ProtocolError(f"{what} exceeds the float32 range of the wire", hint="check the units (N, mm)")
+    return array
 
 
-def _as_float_rows(array: np.ndarray, shape: tuple[int, ...], what: str) -> np.ndarray:
-    values = np.asarray(array, dtype=np.float64)
-    if values.shape != shape:
-        raise ProtocolError(f"{what} has shape {values.shape}, expected {shape}", hint="one row per pillar")
-    _check_f32(values, what)
-    return values
-
-
-class _BodyWriter:
-    """Appends blocks to a body while tracking absolute offsets (from body byte 0)."""
-
-    def __init__(self, start: int, index_size: int) -> None:
-        self.parts: list[bytes] = []
-        self.offset = start
-        self.index_size = index_size
-
-    def put(self, data: bytes) -> None:
-        self.parts.append(data)
-        self.offset += len(data)
-
-    def offset_table(self, sizes: list[int], first: int) -> bytes:
-        """Offsets of consecutive sub-blocks of the given sizes starting at absolute offset ``first``."""
-        table = []
-        position = first
-        for size in sizes:
-            table.append(_offset_bytes(position, self.index_size))
-            position += size
-        return b"".join(table)
-
-
-def _encode_pillar_block(writer: _BodyWriter, sensors: list[PillarSensorData]) -> None:
-    isz = writer.index_size
-    entry = 2 + 24
-    sensor_sizes = [2 + s.n_pillars * (isz + entry) for s in sensors]
-    writer.put(_U16.pack(len(sensors)))
-    writer.put(writer.offset_table(sensor_sizes, writer.offset + len(sensors) * isz))
-    for sensor in sensors:
-        n = sensor.n_pillars
-        forces = _as_float_rows(sensor.forces_n, (n, 3), "forces_n")
-        displacements = _as_float_rows(sensor.displacements_mm, (n, 3), "displacements_mm")
-        writer.put(_U16.pack(n))
-        writer.put(writer.offset_table([entry] * n, writer.offset + n * isz))
-        entries = np.empty(n, dtype=_PILLAR_DTYPE)
-        entries["type"] = _PILLAR_ENTRY_TYPE
-        entries["values"] = np.concatenate([forces, displacements], axis=1)
-        writer.put(entries.tobytes())
-
-
-def _encode_global_block(writer: _BodyWriter, sensors: list[PillarSensorData]) -> None:
-    isz = writer.index_size
-    writer.put(_U16.pack(len(sensors)))
-    writer.put(writer.offset_table([_GLOBAL_ENTRY.size] * len(sensors), writer.offset + len(sensors) * isz))
-    for sensor in sensors:
-        force = _as_float_rows(sensor.global_force_n, (3,), "global_force_n")
-        torque = _as_float_rows(sensor.global_torque_nmm, (3,), "global_torque_nmm")
-        writer.put(_GLOBAL_ENTRY.pack(_GLOBAL_ENTRY_TYPE, *force.tolist(), *torque.tolist()))
-
-
-def _encode_pillar_slip_block(writer: _BodyWriter, sensors: list[PillarSensorData]) -> None:
-    isz = writer.index_size
-    entry = _PILLAR_SLIP_DTYPE.itemsize
-    sensor_sizes = [2 + s.n_pillars * (isz + entry) for s in sensors]
-    writer.put(_U16.pack(len(sensors)))
-    writer.put(writer.offset_table(sensor_sizes, writer.offset + len(sensors) * isz))
-    for sensor in sensors:
-        n = sensor.n_pillars
-        states = np.asarray(sensor.slip_states).reshape(-1)
+def _entries(block_type: int, sensor: PillarSensorData) -> np.ndarray:
+    """One sensor's entries of one block, checked against the wire's types."""
+    n = sensor.n_pillars
+    byte: object = None
+    if block_type == BLOCK_PILLAR:
+        floats = np.hstack(
+            [_f32(sensor.forces_n, (n, 3), "forces_n"), _f32(sensor.displacements_mm, (n, 3), "displacements_mm")]
+        )
+    elif block_type == BLOCK_GLOBAL:
+        force = _f32(sensor.global_force_n, (3,), "global_force_n")
+        floats = np.concatenate([force, _f32(sensor.global_torque_nmm, (3,), "global_torque_nmm")])[None]
+    elif block_type == BLOCK_PILLAR_SLIP:
+        byte = np.asarray(sensor.slip_states).reshape(-1)
         friction = np.asarray(sensor.pillar_friction, dtype=np.float64).reshape(-1)
-        _check_f32(friction, "pillar_friction")
-        if states.shape != (n,) or friction.shape != (n,):
+        if byte.shape != (n,) or friction.shape != (n,):
             raise ProtocolError(
-                f"slip_states {states.shape} / pillar_friction {friction.shape} do not match {n} pillars",
+                f"slip_states {byte.shape} / pillar_friction {friction.shape} do not match {n} pillars",
                 hint="one slip state and one friction value per pillar",
             )
-        if states.size and (states.min() < -128 or states.max() > 127):
+        if n and (byte.min() < -128 or byte.max() > 127):
             raise ProtocolError("slip state outside int8 range", hint="use the device's states -2..3")
-        writer.put(_U16.pack(n))
-        writer.put(writer.offset_table([entry] * n, writer.offset + n * isz))
-        entries = np.empty(n, dtype=_PILLAR_SLIP_DTYPE)
-        entries["type"] = _SLIP_ENTRY_TYPE
-        entries["state"] = states
-        entries["friction"] = friction
-        writer.put(entries.tobytes())
-
-
-def _encode_sensor_slip_block(writer: _BodyWriter, sensors: list[PillarSensorData]) -> None:
-    isz = writer.index_size
-    writer.put(_U16.pack(len(sensors)))
-    writer.put(writer.offset_table([_SENSOR_SLIP_ENTRY.size] * len(sensors), writer.offset + len(sensors) * isz))
-    for sensor in sensors:
+        floats = _f32(friction, (n,), "pillar_friction")[:, None]
+    else:
         if not 0 <= sensor.slip_active <= 0xFF:
             raise ProtocolError(f"slip_active {sensor.slip_active} is not a u8", hint="use 0, 1 or 2")
-        _check_f32(np.array([sensor.friction_estimate, sensor.target_grip_force_n]), "friction/target grip")
-        writer.put(
-            _SENSOR_SLIP_ENTRY.pack(
-                _SLIP_ENTRY_TYPE, sensor.slip_active, sensor.friction_estimate, sensor.target_grip_force_n
-            )
-        )
+        byte = sensor.slip_active
+        scalars = [sensor.friction_estimate, sensor.target_grip_force_n]
+        floats = _f32(scalars, (2,), "friction/target grip")[None]
+    spec = _BLOCKS[block_type]
+    entries = np.empty(len(floats), dtype=spec.dtype)
+    entries["type"] = spec.entry_type
+    entries["floats"] = floats
+    if spec.byte:
+        entries["byte"] = byte
+    return entries
+
+
+def _encode_block(block_type: int, sensors: list[PillarSensorData], start: int, isz: int) -> bytes:
+    """A data block beginning at body offset ``start``; every offset counts from body byte 0."""
+    spec = _BLOCKS[block_type]
+    rows = [_entries(block_type, sensor) for sensor in sensors]
+    size = spec.dtype.itemsize
+    parts = [_U16.pack(len(sensors))]
+    position = start + 2 + len(sensors) * isz
+    if not spec.nested:
+        return b"".join([*parts, _offsets(position, [size] * len(rows), isz), *(r.tobytes() for r in rows)])
+    parts.append(_offsets(position, [2 + len(r) * (isz + size) for r in rows], isz))
+    for entries in rows:
+        n = len(entries)
+        parts += [_U16.pack(n), _offsets(position + 2 + n * isz, [size] * n, isz), entries.tobytes()]
+        position += 2 + n * (isz + size)
+    return b"".join(parts)
 
 
 def encode_body(
@@ -283,28 +253,25 @@ def encode_body(
         raise ProtocolError(f"timestamp_us {timestamp_us} is not a u64", hint="use a non-negative int")
     if not packet.sensors or len(packet.sensors) > 0xFFFF:
         raise ProtocolError("a packet needs at least one sensor slot", hint="the controller reports 2 slots")
-    blocks: list[tuple[int, Callable[[_BodyWriter], None]]] = []
-    if counter is not None:
-        blocks.append((BLOCK_HUB, lambda w: w.put(_HUB.pack(counter, timestamp_us))))
-    blocks.append((BLOCK_PILLAR, lambda w: _encode_pillar_block(w, packet.sensors)))
-    if include_global:
-        blocks.append((BLOCK_GLOBAL, lambda w: _encode_global_block(w, packet.sensors)))
-    if include_slip:
-        blocks.append((BLOCK_PILLAR_SLIP, lambda w: _encode_pillar_slip_block(w, packet.sensors)))
-        blocks.append((BLOCK_SENSOR_SLIP, lambda w: _encode_sensor_slip_block(w, packet.sensors)))
+    types = [BLOCK_PILLAR] if counter is None else [BLOCK_HUB, BLOCK_PILLAR]
+    types += [BLOCK_GLOBAL] * include_global + [BLOCK_PILLAR_SLIP, BLOCK_SENSOR_SLIP] * include_slip
     extra = sorted(packet.unknown_blocks.items())
-    n_entries = len(blocks) + len(extra)
-    writer = _BodyWriter(start=1 + n_entries * (2 + index_size), index_size=index_size)
-    index = [bytes((index_size,))]
-    for block_type, write in blocks:
-        index.append(_U16.pack(block_type) + _offset_bytes(writer.offset, index_size))
-        write(writer)
-    for block_type, raw in extra:
-        if block_type in _KNOWN_BLOCKS or not 0 < block_type <= 0xFFFF or not raw:
+    for block_type, data in extra:
+        if block_type in (BLOCK_HUB, *_BLOCKS) or not 0 < block_type <= 0xFFFF or not data:
             raise ProtocolError(f"cannot encode raw block type {block_type}", hint="use an undefined type, e.g. 7")
-        index.append(_U16.pack(block_type) + _offset_bytes(writer.offset, index_size))
-        writer.put(bytes(raw))
-    return b"".join(index + writer.parts)
+    index = [bytes((index_size,))]
+    blocks: list[bytes] = []
+    position = 1 + (len(types) + len(extra)) * (2 + index_size)
+    pending: list[tuple[int, bytes | None]] = [(t, None) for t in types] + [(t, bytes(data)) for t, data in extra]
+    for block_type, raw in pending:
+        if block_type == BLOCK_HUB:
+            raw = _HUB.pack(counter, timestamp_us)
+        elif raw is None:
+            raw = _encode_block(block_type, packet.sensors, position, index_size)
+        index.append(_U16.pack(block_type) + _offsets(position, [0], index_size))
+        blocks.append(raw)
+        position += len(raw)
+    return b"".join(index + blocks)
 
 
 def frame_body(body: bytes) -> bytes:
@@ -316,9 +283,7 @@ def encode_packet(
     packet: PapillArrayPacket, index_size: int = 2, include_slip: bool = True, include_global: bool = True
 ) -> bytes:
     """One whole framed packet, as the controller sends it (blocks 1, 3, 4, 5, 6 and any unknown raw blocks)."""
-    return frame_body(
-        encode_body(packet, index_size=index_size, include_slip=include_slip, include_global=include_global)
-    )
+    return frame_body(encode_body(packet, index_size, include_slip, include_global))
 
 
 # ----------------------------------------------------------------------------------------------------- decoding
@@ -359,140 +324,91 @@ def _read_index(body: bytes) -> tuple[int, list[tuple[int, int]], int]:
     return isz, entries, pos
 
 
-@dataclass
-class _SensorLayout:
-    """Where one sensor slot's values sit in the gathered float array (-1 = block absent)."""
-
-    n_pillars: int
-    pillar_at: int = -1  # n_pillars x (Fx Fy Fz Dx Dy Dz)
-    global_at: int = -1  # Fx Fy Fz Tx Ty Tz
-    friction_at: int = -1  # n_pillars friction estimates
-    state_at: int = -1  # index into the gathered int8 slip states
-    scalars_at: int = -1  # friction estimate, target grip force
-    active_pos: int = -1  # body byte of the u8 slip detection state
-
-
 class _Layout:
     """Positions of every field of one body shape, found once by walking a body; reused while the shape holds.
 
     ``struct_pos``/``struct_val`` are the body bytes that fix the shape (index size, index table, counts, offset
-    tables, entry types): a later body with the same length and the same bytes there has the same layout.
+    tables, entry types): a later body with the same length and the same bytes there has the same layout. The
+    floats of every entry are gathered into one array, the one-byte fields into another; ``sensors[i][block type]``
+    is ``(n entries, first float, first byte)`` of sensor slot i in that block.
     """
 
     def __init__(self, body: bytes) -> None:
         self.length = len(body)
         self._body = body
-        self._struct_ranges: list[tuple[int, int]] = []
-        self._float_ranges: list[tuple[int, int]] = []  # (body byte, n floats)
-        self._n_floats = 0
-        self._state_pos: list[int] = []
+        struct_ranges: list[tuple[int, int]] = []
+        float_ranges: list[tuple[int, int]] = []  # (body byte, n floats)
+        n_floats = 0
+        byte_pos: list[int] = []
         self.hub_pos = -1
         self.unknown: list[tuple[int, int, int]] = []  # (block type, start, end)
-        isz, entries, index_end = _read_index(body)
-        self._isz = isz
-        self._struct_ranges.append((0, index_end))
-        types = [block_type for block_type, _ in entries]
-        if BLOCK_PILLAR not in types:
+        self._isz, entries, index_end = _read_index(body)
+        struct_ranges.append((0, index_end))
+        if BLOCK_PILLAR not in (block_type for block_type, _ in entries):
             raise _bad(f"no block of type {BLOCK_PILLAR} (pillar data)")
-        pillar_counts: list[int] = []
-        globals_at: list[int] = []
-        pillar_slip: list[tuple[int, int, int]] | None = None  # (n_pillars, state_at, friction_at)
-        sensor_slip: list[tuple[int, int]] | None = None  # (active_pos, scalars_at)
-        pillar_at: list[int] = []
+        blocks: dict[int, list[tuple[int, int, int]]] = {}
         for position, (block_type, offset) in enumerate(entries):
             block_end = entries[position + 1][1] if position + 1 < len(entries) else len(body)
             self._pos = offset
+            spec = _BLOCKS.get(block_type)
             if block_type == BLOCK_HUB:
                 self.hub_pos = self._need(_HUB.size, "hub block")
-            elif block_type == BLOCK_PILLAR:
-                for sensor in range(self._count("pillar block sensor count")):
-                    n_pillars = self._count(f"sensor {sensor} pillar count")
-                    pillar_counts.append(n_pillars)
-                    pillar_at.append(self._n_floats)
-                    for _ in range(n_pillars):
-                        self._entry_type(_PILLAR_ENTRY_TYPE, f"sensor {sensor} pillar entry")
-                        self._floats(6, f"sensor {sensor} pillar values")
-            elif block_type == BLOCK_GLOBAL:
-                for sensor in range(self._count("global block sensor count")):
-                    self._entry_type(_GLOBAL_ENTRY_TYPE, f"sensor {sensor} global entry")
-                    globals_at.append(self._floats(6, f"sensor {sensor} global values"))
-            elif block_type == BLOCK_PILLAR_SLIP:
-                pillar_slip = []
-                for sensor in range(self._count("slip block sensor count")):
-                    n_pillars = self._count(f"sensor {sensor} slip pillar count")
-                    state_at, friction_at = len(self._state_pos), self._n_floats
-                    for _ in range(n_pillars):
-                        self._entry_type(_SLIP_ENTRY_TYPE, f"sensor {sensor} slip entry")
-                        self._state_pos.append(self._need(1, "slip state"))
-                        self._floats(1, f"sensor {sensor} pillar friction")
-                    pillar_slip.append((n_pillars, state_at, friction_at))
-            elif block_type == BLOCK_SENSOR_SLIP:
-                sensor_slip = []
-                for sensor in range(self._count("sensor slip block sensor count")):
-                    self._entry_type(_SLIP_ENTRY_TYPE, f"sensor {sensor} sensor slip entry")
-                    active_pos = self._need(1, "slip detection state")
-                    sensor_slip.append((active_pos, self._floats(2, "friction estimate, target grip force")))
-            else:
+            elif spec is None:
                 self.unknown.append((block_type, offset, block_end))
                 self._pos = block_end
+            else:
+                slots = blocks[block_type] = []
+                for sensor in range(self._count(f"{spec.name} block sensor count", struct_ranges)):
+                    n = self._count(f"sensor {sensor} {spec.name} pillar count", struct_ranges) if spec.nested else 1
+                    slots.append((n, n_floats, len(byte_pos)))
+                    for _ in range(n):
+                        start = self._need(2, f"sensor {sensor} {spec.name} entry")
+                        found = _U16.unpack_from(body, start)[0]
+                        if found != spec.entry_type:
+                            raise _bad(f"sensor {sensor} {spec.name} entry type {found}, expected {spec.entry_type}")
+                        struct_ranges.append((start, 2))
+                        if spec.byte:
+                            byte_pos.append(self._need(1, f"sensor {sensor} {spec.name} state"))
+                        float_ranges.append(
+                            (self._need(4 * spec.n_floats, f"sensor {sensor} {spec.name} values"), spec.n_floats)
+                        )
+                        n_floats += spec.n_floats
             if self._pos > block_end:
                 raise _bad(f"block type {block_type} overlaps the next block")
             if block_end == len(body) and self._pos != block_end:
                 raise _bad(f"{block_end - self._pos} stray bytes after the last block")
-        n_sensors = len(pillar_counts)
-        if BLOCK_GLOBAL in types and len(globals_at) != n_sensors:
-            raise _bad(f"pillar block has {n_sensors} sensors but global block has {len(globals_at)}")
-        if pillar_slip is not None and len(pillar_slip) != n_sensors:
-            raise _bad(f"pillar block has {n_sensors} sensors but pillar slip block has {len(pillar_slip)}")
-        if sensor_slip is not None and len(sensor_slip) != n_sensors:
-            raise _bad(f"pillar block has {n_sensors} sensors but sensor slip block has {len(sensor_slip)}")
-        self.sensors: list[_SensorLayout] = []
-        for index, n_pillars in enumerate(pillar_counts):
-            global_at = globals_at[index] if globals_at else -1
-            slot = _SensorLayout(n_pillars, pillar_at=pillar_at[index], global_at=global_at)
-            if pillar_slip is not None:
-                slip_pillars, slot.state_at, slot.friction_at = pillar_slip[index]
-                if slip_pillars != n_pillars:
-                    raise _bad(f"sensor {index}: {n_pillars} pillars but {slip_pillars} slip entries")
-            if sensor_slip is not None:
-                slot.active_pos, slot.scalars_at = sensor_slip[index]
-            self.sensors.append(slot)
-        self.struct_pos = _ranges_to_positions((start, length) for start, length in self._struct_ranges)
+        n_sensors = len(blocks[BLOCK_PILLAR])
+        for block_type, slots in blocks.items():
+            if len(slots) != n_sensors:
+                raise _bad(
+                    f"pillar block has {n_sensors} sensors but {_BLOCKS[block_type].name} block has {len(slots)}"
+                )
+        self.sensors = [{block_type: slots[i] for block_type, slots in blocks.items()} for i in range(n_sensors)]
+        for index, sensor_blocks in enumerate(self.sensors):
+            n_pillars, n_slip = sensor_blocks[BLOCK_PILLAR][0], sensor_blocks.get(BLOCK_PILLAR_SLIP, (None,))[0]
+            if n_slip is not None and n_slip != n_pillars:
+                raise _bad(f"sensor {index}: {n_pillars} pillars but {n_slip} slip entries")
+        self.struct_pos = _ranges_to_positions(struct_ranges)
         self.struct_val = np.frombuffer(body, dtype=np.uint8)[self.struct_pos]
-        self.float_bytes = _ranges_to_positions((start, 4 * n) for start, n in self._float_ranges)
-        self.state_pos = np.array(self._state_pos, dtype=np.intp)
+        self.float_bytes = _ranges_to_positions((start, 4 * n) for start, n in float_ranges)
+        self.byte_pos = np.array(byte_pos, dtype=np.intp)
         del self._body
 
-    # walking helpers (only used while building the layout)
     def _need(self, n: int, what: str) -> int:
+        """Claim ``n`` bytes at the walk's position; -> where they start."""
         start = self._pos
         if start + n > len(self._body):
             raise _bad(f"{what} at body byte {start} runs past the end ({len(self._body)} bytes)")
         self._pos = start + n
         return start
 
-    def _count(self, what: str) -> int:
+    def _count(self, what: str, struct_ranges: list[tuple[int, int]]) -> int:
         """A u16 count followed by its offset table (both fix the shape)."""
         start = self._need(2, what)
         n: int = _U16.unpack_from(self._body, start)[0]
         self._need(n * self._isz, f"{what} offset table")
-        self._struct_ranges.append((start, self._pos - start))
+        struct_ranges.append((start, self._pos - start))
         return n
-
-    def _entry_type(self, expected: int, what: str) -> None:
-        start = self._need(2, what)
-        found = _U16.unpack_from(self._body, start)[0]
-        if found != expected:
-            raise _bad(f"{what} type {found}, expected {expected}")
-        self._struct_ranges.append((start, 2))
-
-    def _floats(self, n: int, what: str) -> int:
-        """Record n float32 at the current position; returns their index in the gathered float array."""
-        start = self._need(4 * n, what)
-        self._float_ranges.append((start, n))
-        first = self._n_floats
-        self._n_floats += n
-        return first
 
     def matches(self, u8: np.ndarray) -> bool:
         """True when a body (as uint8 array) has exactly this shape."""
@@ -501,22 +417,23 @@ class _Layout:
     def extract(self, body: bytes, u8: np.ndarray) -> PapillArrayPacket:
         with np.errstate(invalid="ignore"):  # a signalling NaN on the wire stays NaN, without a warning
             floats = u8[self.float_bytes].view("<f4").astype(np.float64)
-        states = u8[self.state_pos].view(np.int8).astype(np.int64)
+        one_byte = u8[self.byte_pos]
+        states = one_byte.view(np.int8).astype(np.int64)
         counter, timestamp_us = _HUB.unpack_from(body, self.hub_pos) if self.hub_pos >= 0 else (None, None)
         sensors = []
-        for layout in self.sensors:
-            n = layout.n_pillars
-            pillar_values = floats[layout.pillar_at : layout.pillar_at + 6 * n].reshape(n, 6)
-            if layout.friction_at >= 0:
-                slip_states = states[layout.state_at : layout.state_at + n]
-                pillar_friction = floats[layout.friction_at : layout.friction_at + n]
-            else:
-                slip_states = np.zeros(n, dtype=np.int64)
-                pillar_friction = np.full(n, NO_FRICTION_ESTIMATE)
-            if layout.global_at >= 0:
-                global_values = floats[layout.global_at : layout.global_at + 6]
+        for blocks in self.sensors:
+            n, at, _ = blocks[BLOCK_PILLAR]
+            pillar_values = floats[at : at + 6 * n].reshape(n, 6)
+            if BLOCK_GLOBAL in blocks:
+                at = blocks[BLOCK_GLOBAL][1]
+                global_values = floats[at : at + 6]
             else:
                 global_values = np.full(6, np.nan)  # no global block in this packet
+            if BLOCK_PILLAR_SLIP in blocks:
+                _, at, state_at = blocks[BLOCK_PILLAR_SLIP]
+                slip_states, pillar_friction = states[state_at : state_at + n], floats[at : at + n]
+            else:
+                slip_states, pillar_friction = np.zeros(n, dtype=np.int64), np.full(n, NO_FRICTION_ESTIMATE)
             sensor = PillarSensorData(
                 forces_n=pillar_values[:, :3],
                 displacements_mm=pillar_values[:, 3:],
@@ -525,10 +442,10 @@ class _Layout:
                 slip_states=slip_states,
                 pillar_friction=pillar_friction,
             )
-            if layout.active_pos >= 0:
-                sensor.slip_active = body[layout.active_pos]
-                sensor.friction_estimate = float(floats[layout.scalars_at])
-                sensor.target_grip_force_n = float(floats[layout.scalars_at + 1])
+            if BLOCK_SENSOR_SLIP in blocks:
+                _, at, active_at = blocks[BLOCK_SENSOR_SLIP]
+                sensor.slip_active = int(one_byte[active_at])
+                sensor.friction_estimate, sensor.target_grip_force_n = float(floats[at]), float(floats[at + 1])
             sensors.append(sensor)
         unknown = {block_type: body[start:end] for block_type, start, end in self.unknown}
         return PapillArrayPacket(counter, timestamp_us, sensors, unknown)
@@ -539,13 +456,8 @@ def _ranges_to_positions(ranges: Iterable[tuple[int, int]]) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros(0, dtype=np.intp)
 
 
-def decode_body(body: bytes) -> PapillArrayPacket:
-    """Decode a body (between start marker and checksum) whose checksum was already verified."""
-    body = bytes(body)
-    return _Layout(body).extract(body, np.frombuffer(body, dtype=np.uint8))
-
-
-def _verified_body(frame: bytes | bytearray | memoryview) -> bytes:
+def decode_packet(frame: bytes | bytearray | memoryview) -> PapillArrayPacket:
+    """Decode one whole framed packet (start marker to end marker); ProtocolError says what is wrong."""
     if len(frame) < _FRAMING_OVERHEAD + 1:
         raise _bad(f"{len(frame)} bytes is too short for a framed packet")
     if frame[:4] != START_MARKER:
@@ -553,20 +465,10 @@ def _verified_body(frame: bytes | bytearray | memoryview) -> bytes:
     if frame[-4:] != END_MARKER:
         raise _bad(f"ends with {bytes(frame[-4:]).hex(' ')}, not the end marker aa bb cc dd")
     body = bytes(frame[4:-6])
-    sent = _U16.unpack_from(frame, len(frame) - 6)[0]
-    computed = checksum(body)
+    sent, computed = _U16.unpack_from(frame, len(frame) - 6)[0], checksum(body)
     if sent != computed:
         raise _bad(f"checksum 0x{sent:04x} on the wire, 0x{computed:04x} computed")
-    return body
-
-
-def decode_packet(frame: bytes | bytearray | memoryview) -> PapillArrayPacket:
-    """Decode one whole framed packet (start marker to end marker); ProtocolError says what is wrong."""
-    return decode_body(_verified_body(frame))
-
-
-_CHECKSUM_FAIL = "checksum"
-_FRAMING_FAIL = "framing"
+    return _Layout(body).extract(body, np.frombuffer(body, dtype=np.uint8))
 
 
 class PacketParser:
@@ -598,9 +500,10 @@ class PacketParser:
         # work done, for benchmarks and tests: (start, end) marker pairs whose checksum was compared, bodies decoded
         self.pairs_checked = 0
         self.bodies_decoded = 0
-        self._clear()
+        self.reset()
 
-    def _clear(self) -> None:
+    def reset(self) -> None:
+        """Forget buffered bytes (e.g. after reopening the port); counters are kept."""
         # Positions are absolute stream offsets; self._buf holds the stream from self._base on.
         self._buf = bytearray()
         self._base = 0
@@ -618,17 +521,8 @@ class PacketParser:
         """Bytes held back waiting for the rest of a packet."""
         return len(self._buf)
 
-    def reset(self) -> None:
-        """Forget buffered bytes (e.g. after reopening the port); counters are kept."""
-        self._clear()
-
     def counters(self) -> dict[str, int]:
-        return {
-            "packets": self.packets,
-            "bytes_dropped": self.bytes_dropped,
-            "checksum_errors": self.checksum_errors,
-            "framing_errors": self.framing_errors,
-        }
+        return {name: getattr(self, name) for name in ("packets", "bytes_dropped", "checksum_errors", "framing_errors")}
 
     def _decode(self, body: bytes, u8: np.ndarray) -> PapillArrayPacket:
         layout = self._layout
@@ -696,10 +590,6 @@ class PacketParser:
                 self._decoded[key] = None
         return self._decoded[key]
 
-    def _intact(self, start: int) -> tuple[PapillArrayPacket, int] | None:
-        """(packet, end) for the first end that closes an intact packet from ``start``, if one has arrived."""
-        return self._closed.get(start)
-
     def _give_up(self, start: int, stop: int) -> None:
         """Count a start marker with no intact packet ending by ``stop``: a framing error when a body with the right
         checksum did not decode or no end marker came; a checksum error when only checksums failed."""
@@ -752,7 +642,7 @@ class PacketParser:
             start = self._starts[0]
             self.bytes_dropped += start - pos
             pos = start
-            intact = self._intact(start)
+            intact = self._closed.get(start)  # (packet, end) of its first intact end, if one has arrived
             if intact is not None:
                 out.append(intact[0])
                 self.packets += 1

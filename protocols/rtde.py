@@ -70,6 +70,7 @@ FIELD_FORMATS: dict[str, str] = {
     "VECTOR6INT32": "6i",
     "VECTOR6UINT32": "6I",
 }
+_FIELD_COUNTS = {name: struct.calcsize(code) // struct.calcsize(code[-1]) for name, code in FIELD_FORMATS.items()}
 
 # Output variables (controller -> client) with their RTDE types; the subset ur_rtde's receive interface reads.
 VARIABLE_TYPES: dict[str, str] = {
@@ -362,21 +363,13 @@ def recipe_struct(types: Sequence[str]) -> struct.Struct:
         raise ProtocolError(f"RTDE type {exc.args[0]!r} has no wire layout") from exc
 
 
-def _field_count(field_type: str) -> int:
-    """Numbers in one field: 3 or 6 for vectors, 1 for scalars."""
-    try:
-        code = FIELD_FORMATS[field_type]
-    except KeyError as exc:
-        raise ProtocolError(f"RTDE type {field_type!r} has no wire layout") from exc
-    return int(code[:-1]) if len(code) > 1 else 1
-
-
 def _flatten(types: Sequence[str], values: Sequence[FieldValue]) -> list[float | int | bool]:
+    """One number per struct slot (vectors spread out); ``types`` already checked by :func:`recipe_struct`."""
     if len(types) != len(values):
         raise ProtocolError(f"RTDE data package: {len(values)} values for a recipe of {len(types)} fields")
     flat: list[float | int | bool] = []
     for field_type, value in zip(types, values, strict=True):
-        count = _field_count(field_type)
+        count = _FIELD_COUNTS[field_type]
         if isinstance(value, tuple | list):
             if count > 1 and len(value) == count:
                 flat.extend(value)
@@ -407,7 +400,7 @@ def decode_data_package(payload: bytes, types: Sequence[str]) -> tuple[int, list
     values: list[FieldValue] = []
     index = 0
     for field_type in types:
-        count = _field_count(field_type)
+        count = _FIELD_COUNTS[field_type]
         values.append(tuple(flat[index : index + count]) if count > 1 else flat[index])
         index += count
     return payload[0], values

@@ -18,12 +18,8 @@ Wire format (1 Mbit/s CAN, standard 11-bit arbitration ids, classic frames of up
   source states the order in which a controller sends a cycle's messages, so the assembler does not assume one.
   Other firmware uses other ids (one used 0x710 + taxel index), so id maps are plain data (:class:`TaxelIdMap`).
   This project's taxel index is row-major, ``index = row * cols + col`` (drivers/layouts.py).
-* There is **no frame counter** on the wire: a frame is the latest message of every taxel id. The
-  :class:`FrameAssembler` closes a frame as soon as every taxel has reported once since the previous frame, or early
-  (missing taxels flagged) when a taxel repeats or a cycle start is seen. A frame is flagged valid only when every
-  taxel provably came from one cycle: it must begin and end at a cycle start that the wire shows, either a learned
-  pause between bursts, a learned fixed send order wrapping round, or a configured first id. Frames nothing proves
-  are flagged and counted (``unproven_frames``).
+* There is **no frame counter** on the wire: :class:`FrameAssembler` decides which messages make a frame, and
+  flags every frame that nothing proves to hold one controller cycle.
 
 Sources: XELA-Robotics/CAN-USB README and sensor-server/server.py, ROS/4x6.ini (reverse numbering), the XELA ROS
 manual v0.0.9b and manual v1.4.0 (sentinel example), the AIST o2as_xela_sensor driver and demo (0xFA rule, 1-byte
@@ -36,7 +32,6 @@ from __future__ import annotations
 import math
 import struct
 from collections import deque
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -116,8 +111,8 @@ def decode_stream_command(arbitration_id: int, data: bytes) -> tuple[int, bool] 
 class TaxelIdMap:
     """Which CAN arbitration id carries which taxel, in layout order (``index = row * cols + col``).
 
-    ``ids[i]`` is the arbitration id of taxel ``i``. Firmware differs in its ids, so maps are data: build one with
-    :meth:`from_ids` (ids in layout order; XELA's map file lists s1, s2, ... in that order) or
+    ``ids[i]`` is the arbitration id of taxel ``i``. Firmware differs in its ids, so maps are data: give the ids in
+    layout order (XELA's map file lists s1, s2, ... in that order, see the module docstring) or use
     :meth:`from_row_col_ids`.
     """
 
@@ -152,17 +147,6 @@ class TaxelIdMap:
         return self._index.get(arbitration_id)
 
     @classmethod
-    def from_ids(cls, ids: Iterable[int], name: str = "") -> TaxelIdMap:
-        """Map from CAN ids listed in layout order (taxel 0 first).
-
-        XELA's map file is in that order: its 4x6 map numbers the taxels s1 = 0x135 ... s6 = 0x130, s7 = 0x125 ...
-        s24 = 0x100, and xela_server lists a sensor's taxels "from top left, line by line" in that numbering
-        [inferred]; so s1 (0x135) is taxel 0 (row 0, col 0) here too, and a frame reads the same through CAN and
-        through xela_server.
-        """
-        return cls(tuple(ids), name=name)
-
-    @classmethod
     def from_row_col_ids(cls, rows: int, cols: int, base: int = 0x100, name: str = "") -> TaxelIdMap:
         """The ``base + 0x10 * row + col`` scheme (0x1RC) of the uSPa44/uSPa46 boards."""
         if not (1 <= rows <= 16 and 1 <= cols <= 16):
@@ -171,9 +155,7 @@ class TaxelIdMap:
 
 
 # uSPa46: XELA's 4x6 map, s1 = 0x135 first (0x1RC ids numbered in reverse); layout taxel 0 = s1 = 0x135.
-USPA46_ID_MAP = TaxelIdMap.from_ids(
-    reversed(TaxelIdMap.from_row_col_ids(4, 6).ids), name="uSPa46 XELA map (s1 = 0x135 first)"
-)
+USPA46_ID_MAP = TaxelIdMap(tuple(reversed(TaxelIdMap.from_row_col_ids(4, 6).ids)), "uSPa46 XELA map (s1 = 0x135 first)")
 USPA44_ID_MAP = TaxelIdMap.from_row_col_ids(4, 4, name="uSPa44 0x1RC (4x4)")
 
 
@@ -206,8 +188,15 @@ def decode_taxel_message(arbitration_id: int, data: bytes) -> TaxelMessage:
             hint="check the CAN bit rate (1 Mbit/s) and the sensor firmware version",
         )
     x, y, z = _AXES.unpack_from(data, 1)
-    valid = data[1] < INVALID_X_MSB and not x == y == z == 0
-    return TaxelMessage(arbitration_id, x, y, z, valid)
+    return TaxelMessage(arbitration_id, x, y, z, valid=_reading(data) is not None)
+
+
+def _reading(data: bytes) -> tuple[int, int, int] | None:
+    """X, Y, Z counts of a taxel payload; None when it is too short, the 0xFA sentinel or all zero (no reading)."""
+    if len(data) < MIN_TAXEL_PAYLOAD_LEN or data[1] >= INVALID_X_MSB:
+        return None
+    counts: tuple[int, int, int] = _AXES.unpack_from(data, 1)
+    return counts if any(counts) else None
 
 
 def _clip_count(value: int, axis: str) -> int:
@@ -339,7 +328,7 @@ class FrameAssembler:
         self._position: list[int] | None = None  # taxel index -> its place in send_order
         self._proven_orders: deque[tuple[int, ...]] = deque(maxlen=ORDER_LEARN_FRAMES)
         self._frames_since_valid = 0
-        self._values: list[list[int]] = [[0, 0, 0] for _ in range(n)]  # last good counts per taxel
+        self._values: list[tuple[int, int, int]] = [(0, 0, 0)] * n  # last good counts per taxel
         self._good_t_ns: list[int | None] = [None] * n  # time of each taxel's last good value
         self._bad_this_cycle: list[bool] = [False] * n  # reported, but invalid
         self._seen: list[bool] = [False] * n  # reported since the last closed frame
@@ -411,18 +400,13 @@ class FrameAssembler:
         self._n_seen += 1
         self._arrival.append(index)
         self._last_t_ns = t_ns
-        if len(data) >= MIN_TAXEL_PAYLOAD_LEN and data[1] < INVALID_X_MSB:
-            x, y, z = _AXES.unpack_from(data, 1)
-            if x or y or z:
-                self._values[index] = [x, y, z]
-                self._good_t_ns[index] = t_ns
-                self._bad_this_cycle[index] = False
-            else:
-                self._bad_this_cycle[index] = True
-                self.invalid_messages += 1
-        else:
-            self._bad_this_cycle[index] = True
+        reading = _reading(data)
+        self._bad_this_cycle[index] = reading is None
+        if reading is None:
             self.invalid_messages += 1
+        else:
+            self._values[index] = reading
+            self._good_t_ns[index] = t_ns
         if self._n_seen < self._n:
             return emitted
         # Complete. Cannot coincide with an early close or a pending frame (either leaves one taxel seen) unless the
@@ -527,11 +511,5 @@ class FrameAssembler:
     def counters(self) -> dict[str, int]:
         """All counters as a dict (for health reports); ``unproven_frames`` are complete frames flagged because
         nothing proved they held one cycle."""
-        return {
-            "messages": self.messages,
-            "unknown_ids": self.unknown_ids,
-            "invalid_messages": self.invalid_messages,
-            "frames": self.frames,
-            "incomplete_frames": self.incomplete_frames,
-            "unproven_frames": self.unproven_frames,
-        }
+        names = ("messages", "unknown_ids", "invalid_messages", "frames", "incomplete_frames", "unproven_frames")
+        return {name: getattr(self, name) for name in names}

@@ -30,9 +30,8 @@ import numpy as np
 from protocols.errors import ProtocolError
 from protocols.xela_can import MAX_COUNT  # the uSkin's counts, unsigned 16-bit on either wire
 
-HEX_DIGITS = frozenset(
-    "0123456789ABCDEFabcdef"
-)  # ASCII only: int(..., 16) would also take "-FFF", "0x1F", "F_FF", "١٢"
+# ASCII only: int(..., 16) would also take "-FFF", "0x1F", "F_FF", "١٢"
+HEX_DIGITS = frozenset("0123456789ABCDEFabcdef")
 MAX_SEQ = 2**63 - 1  # the sequence number is stored as int64
 # Server Unix time (s): non-negative, and small enough that microseconds stay exact in a float64 (2**53 us, the year
 # 2255); beyond that, device_t_us (int64 us) could not be formed from it.
@@ -212,21 +211,6 @@ def encode_welcome(msg_type: str | None = "welcome", **fields: Any) -> str:
     return json.dumps(obj)
 
 
-def _counts_list(sensor: XelaSensorData) -> list[int]:
-    values = np.asarray(sensor.values)
-    if values.shape != (sensor.taxels, 3):
-        raise ProtocolError(
-            f"sensor {sensor.sensor_number}: values shape {values.shape} != ({sensor.taxels}, 3)",
-            hint="pass one (X, Y, Z) count row per taxel",
-        )
-    if values.size and (values.min() < 0 or values.max() > MAX_COUNT):
-        raise ProtocolError(
-            f"sensor {sensor.sensor_number}: counts must be within 0..65535",
-            hint="clip raw counts to the 16-bit range before encoding",
-        )
-    return [int(v) for v in values.reshape(-1)]
-
-
 def encode_data_message(
     seq: int,
     server_time_s: float,
@@ -239,28 +223,29 @@ def encode_data_message(
     if msg_type is not None:
         obj["type"] = msg_type
     for sensor in sensors:
-        counts = _counts_list(sensor)
-        calibrated: list[float] | None = None
-        if sensor.calibrated is not None:
-            cal = np.asarray(sensor.calibrated, dtype=np.float64)
-            if cal.shape != (sensor.taxels, 3):
-                raise ProtocolError(
-                    f"sensor {sensor.sensor_number}: calibrated shape {cal.shape} != ({sensor.taxels}, 3)",
-                    hint="pass one (Fx, Fy, Fz) row in N per taxel, or None",
-                )
-            calibrated = [float(v) for v in cal.reshape(-1)]
         key = str(sensor.sensor_number)
+        values = np.asarray(sensor.values)
+        cal = None if sensor.calibrated is None else np.asarray(sensor.calibrated, dtype=np.float64)
+        for what, array in (("values", values), ("calibrated", cal)):
+            if array is not None and array.shape != (sensor.taxels, 3):
+                raise ProtocolError(
+                    f"sensor {key}: {what} shape {array.shape} != ({sensor.taxels}, 3)",
+                    hint="pass one (X, Y, Z) row per taxel: raw counts, and forces in N (or None) for calibrated",
+                )
+        if values.size and (values.min() < 0 or values.max() > MAX_COUNT):
+            raise ProtocolError(
+                f"sensor {key}: counts must be within 0..65535",
+                hint="clip raw counts to the 16-bit range before encoding",
+            )
         if key in obj:
             raise ProtocolError(f"sensor number {key} appears twice", hint="give each sensor its own number")
-        entry: dict[str, Any] = dict(sensor.extra)
-        entry.update(
-            {
-                "sensor": key,
-                "model": sensor.model,
-                "taxels": sensor.taxels,
-                "data": ",".join(f"{v:04X}" for v in counts) if as_hex else counts,
-                "calibrated": calibrated,
-            }
-        )
-        obj[key] = entry
+        counts = [int(v) for v in values.reshape(-1)]
+        obj[key] = {
+            **sensor.extra,
+            "sensor": key,
+            "model": sensor.model,
+            "taxels": sensor.taxels,
+            "data": ",".join(f"{v:04X}" for v in counts) if as_hex else counts,
+            "calibrated": None if cal is None else [float(v) for v in cal.reshape(-1)],
+        }
     return json.dumps(obj)

@@ -15,7 +15,8 @@ from drivers.clock import VirtualClock
 from drivers.errors import DeviceError, DeviceNotFound
 from drivers.frames import TactileFrame
 from drivers.layouts import PAPILLARRAY
-from drivers.papillarray import WRONG_SHAPE_LIMIT, PapillArrayDriver, implausible_pillars
+from drivers.papillarray import PapillArrayDriver, implausible_pillars
+from drivers.sensor_base import WRONG_SHAPE_LIMIT
 from protocols.papillarray import PapillArrayPacket, PillarSensorData, encode_packet
 from tests.drivers.driver_helpers import PERIOD_NS, run_mode, step
 from unitac_rig.sim.devices import SimPapillArrayHub

@@ -14,7 +14,8 @@ from websockets.sync.server import ServerConnection, serve
 
 from drivers.errors import DeviceError, DeviceNotFound
 from drivers.layouts import USKIN
-from drivers.uskin import WRONG_SHAPE_LIMIT, UskinXelaServerDriver
+from drivers.sensor_base import WRONG_SHAPE_LIMIT
+from drivers.uskin import UskinXelaServerDriver
 from protocols.xela_ws import XelaSensorData, encode_data_message, encode_welcome
 from tests.drivers.driver_helpers import collect
 from unitac_rig.sim.devices import counts_from_sample

@@ -134,21 +134,21 @@ def test_xela_map_file_order_is_the_layout_order() -> None:
     # XELA's 4x6 map file lists s1 = 0x135, s2 = 0x134 ... s6 = 0x130, s7 = 0x125 ... s24 = 0x100.
     ini = [0x135, 0x134, 0x133, 0x132, 0x131, 0x130, 0x125, 0x124, 0x123, 0x122, 0x121, 0x120]
     ini += [0x115, 0x114, 0x113, 0x112, 0x111, 0x110, 0x105, 0x104, 0x103, 0x102, 0x101, 0x100]
-    assert TaxelIdMap.from_ids(ini) == USPA46_ID_MAP
+    assert TaxelIdMap(tuple(ini)) == USPA46_ID_MAP
 
 
 def test_uspa44_map_and_other_firmware_maps_are_data() -> None:
     assert USPA44_ID_MAP.n_taxels == 16
     assert USPA44_ID_MAP.index_of(0x133) == 15
     assert USPA44_ID_MAP.index_of(0x134) is None
-    aist = TaxelIdMap.from_ids(range(0x710, 0x720))  # one firmware used 0x710 + taxel index
+    aist = TaxelIdMap(tuple(range(0x710, 0x720)))  # one firmware used 0x710 + taxel index
     assert aist.index_of(0x71F) == 15
 
 
 @pytest.mark.parametrize("ids", [[0x100, 0x100], [0x800], [], [-1]])
 def test_bad_id_maps_are_refused(ids: list[int]) -> None:
     with pytest.raises(ProtocolError):
-        TaxelIdMap.from_ids(ids)
+        TaxelIdMap(tuple(ids))
 
 
 # ----------------------------------------------------------------------------------------------- frame assembly

@@ -367,8 +367,7 @@ def geometry_split(
 
 def member_latents(run: LoadedRun, member: int, frames: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """One member's UniTac-NV latents (M, latent) of each sensor's frames (M, n_taxels, 3), sensor units."""
-    if not 0 <= member < run.engine.members:
-        raise ModelError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
+    run.check_member(member)
     translator = Translator(run.engine.member(member, groups=[UNITAC_GROUP]), run.normaliser)
     return {s: translator.encode(frames[s], s) for s in frames}
 
@@ -397,8 +396,7 @@ def run_geometry(
     ``seed``, as before the split had its own seed; a study over members should give each its own)."""
     config = config or GeometryConfig()
     object_id, rows = geometry_object(run, test_set, object_id)
-    if not 0 <= member < run.engine.members:
-        raise ModelError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
+    run.check_member(member)
     seed = run.engine.seeds[member] if seed is None else seed
     outline = outline or OutlineGeometry.from_catalogue(object_id)
     subset, truth, valid, _ = contact_profiles(test_set, rows, object_id, config, outline)

@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import logging
 import zlib
-from collections.abc import Collection, Iterable, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
-from unitac_rig.errors import DataError, UnitacError
+from unitac_rig.errors import DataError, ModelError, UnitacError
 from unitac_rig.learning.config import PREPROCESSING
 from unitac_rig.learning.paper import PAPER_UNSEEN_OBJECTS
 from unitac_rig.storage.paired import (
@@ -118,6 +118,27 @@ class Split:
             "gap_deg": self.gap_deg,
             "not_held_out": list(self.not_held_out),
         }
+
+    @classmethod
+    def from_dict(cls, info: Mapping[str, Any], test_mask: np.ndarray, val_mask: np.ndarray | None) -> Split:
+        """The split :meth:`to_dict` described, with its row masks (a checkpoint keeps them apart, as tensors)."""
+
+        def directions(key: str) -> dict[str, list[tuple[int, int]]]:
+            return {k: [(int(d[0]), int(d[1])) for d in v] for k, v in info[key].items()}
+
+        return cls(
+            np.asarray(test_mask, dtype=bool),
+            int(info["seed"]),
+            float(info["test_fraction"]),
+            tuple(info["unseen_objects"]),
+            directions("test_directions"),
+            np.asarray(val_mask, dtype=bool),
+            float(info["val_fraction"]),
+            directions("val_directions"),
+            str(info["mode"]),
+            float(info["gap_deg"]),
+            tuple(info["not_held_out"]),
+        )
 
 
 def held_out_directions(directions: Sequence[tuple[int, int]], object_id: str, seed: int, fraction: float) -> list:
@@ -489,11 +510,14 @@ class Normaliser:
     sensor_range: dict[str, float]
 
     @classmethod
-    def fit(cls, dataset: PairedDataset, rows: np.ndarray, mode: str = "channel_z") -> Normaliser:
+    def fit(
+        cls, dataset: PairedDataset, rows: np.ndarray, mode: str = "channel_z", sensors: Sequence[str] | None = None
+    ) -> Normaliser:
+        """The statistics of ``sensors`` (default: all of the dataset's) over the training ``rows``."""
         if mode not in PREPROCESSING:
             raise DataError(f"unknown preprocessing {mode!r}", hint=f"use one of {', '.join(PREPROCESSING)}")
         mean, std, data_range, channel_std, sensor_range = {}, {}, {}, {}, {}
-        for sensor in dataset.sensors:
+        for sensor in dataset.sensors if sensors is None else sensors:
             channels = dataset.values[sensor][rows].reshape(-1, 3).astype(np.float64)
             channels = channels[~np.isnan(channels).any(axis=1)]  # a partial join's missing frames are NaN
             if channels.shape[0] == 0:
@@ -538,10 +562,22 @@ class Normaliser:
         frames = flat.reshape(*flat.shape[:-1], -1, 3)
         return (frames * self.std[sensor] + self.mean[sensor]).astype(np.float32)
 
+    def inputs(self, rows: PairedDataset, feature_dims: Mapping[str, int]) -> tuple[np.ndarray, np.ndarray]:
+        """What the model trains on: (M, sum of ``feature_dims``) float32, the normalised frames of those sensors side
+        by side in that order, a frame a contact lacks as zeros (the masked loss never sees it), and the (M, sensors)
+        float32 presence."""
+        blocks, present = [], []
+        for sensor, width in feature_dims.items():
+            has = rows.has(sensor) if sensor in rows.values else np.zeros(len(rows), dtype=bool)
+            block = np.zeros((len(rows), width), dtype=np.float32)
+            if has.any():
+                block[has] = self.normalise(sensor, rows.values[sensor][has])
+            blocks.append(block)
+            present.append(has)
+        return np.concatenate(blocks, axis=1), np.stack(present, axis=1).astype(np.float32)
+
     def _check(self, sensor: str) -> None:
         if sensor not in self.mean:
-            from unitac_rig.errors import ModelError
-
             raise ModelError(f"no normalisation for sensor {sensor!r}", hint=f"known: {', '.join(self.mean)}")
 
     def to_dict(self) -> dict[str, dict[str, Any]]:

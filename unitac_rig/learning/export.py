@@ -49,7 +49,7 @@ import torch
 from torch import nn
 
 from unitac_rig.errors import UsageError
-from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
+from unitac_rig.learning.engine import UNITAC_GROUP
 from unitac_rig.learning.network import linear_layers
 from unitac_rig.learning.run import provenance, read_metrics
 from unitac_rig.learning.train import LoadedRun, load_run
@@ -159,21 +159,14 @@ def _sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-def _units(sensor: str) -> str:
-    from unitac_rig.rig.sensors import SENSORS
-
-    spec = SENSORS.get(sensor)
-    return spec.layout.units if spec is not None else "as recorded (not a registered sensor)"
-
-
-def _layout(sensor: str) -> dict[str, Any] | None:
+def _units_and_layout(sensor: str) -> tuple[str, dict[str, Any] | None]:
     from unitac_rig.rig.sensors import SENSORS
 
     spec = SENSORS.get(sensor)
     if spec is None:
-        return None
+        return "as recorded (not a registered sensor)", None
     layout = spec.layout
-    return {"rows": layout.rows, "cols": layout.cols, "pitch_mm": layout.pitch_mm, "units": layout.units}
+    return layout.units, {"rows": layout.rows, "cols": layout.cols, "pitch_mm": layout.pitch_mm, "units": layout.units}
 
 
 def export_model(run_dir: Path, out: Path, fmt: str, member: int = 0) -> dict[str, Any]:
@@ -185,8 +178,7 @@ def export_model(run_dir: Path, out: Path, fmt: str, member: int = 0) -> dict[st
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise UsageError(f"{out} exists and is not empty", hint="export into a new directory")
     run = load_run(Path(run_dir))
-    if not 0 <= member < run.engine.members:
-        raise UsageError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
+    run.check_member(member)
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = out.parent / f".{out.name}.export-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     staging.mkdir()  # not tempfile.mkdtemp: that is private (0700), and the export is meant to be shared
@@ -203,11 +195,12 @@ def _sensor_entry(run: LoadedRun, sensor: str, files: dict[str, str]) -> dict[st
     their layer widths and the normaliser folded into them."""
     engine, latent = run.engine, run.engine.shape.latent_dim
     n_taxels = engine.feature_dims[sensor] // 3
+    units, layout = _units_and_layout(sensor)
     return {
         "n_taxels": n_taxels,
         "frame_shape": [n_taxels, 3],
-        "units": _units(sensor),
-        "layout": _layout(sensor),
+        "units": units,
+        "layout": layout,
         **files,
         "encoder_widths": [n_taxels * 3, *engine.shape.encoder_hidden, latent],
         "decoder_widths": [latent, *engine.shape.decoder_hidden, n_taxels * 3],
@@ -235,22 +228,38 @@ def _export_into(run: LoadedRun, staging: Path, fmt: str, member: int) -> dict[s
         for name in names.values():
             files[name] = _sha256(staging / name)
         entries[sensor] = _sensor_entry(run, sensor, names)
-    metrics = read_metrics(run.run_dir)
-    document: dict[str, Any] = {
+    document = _document(run, member, fmt, entries, model.latent_dim)
+    document["frame"] = "(B, n_taxels, 3) float32; taxel i at (row, col) = divmod(i, cols); channels x, y, z"
+    document["translate"] = "decoder_<target>(encoder_<source>(frames))"
+    document["files"] = files
+    (staging / MODEL_JSON).write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+    (staging / CARD_NAME).write_text(render_card(document, read_metrics(run.run_dir)), encoding="utf-8")
+    return document
+
+
+def _document(run: LoadedRun, member: int, fmt: str, entries: dict[str, Any], latent_dim: int) -> dict[str, Any]:
+    """What every export's model.json / config.json says: the format, the sensors' entries, and where the model
+    came from (member, seed, epochs, the dataset's hash and summary, a new-sensor extension, provenance)."""
+    payload = run.payload
+    extension = payload.get("extension")
+    return {
         "format": EXPORT_FORMAT,
         "version": EXPORT_VERSION,
         "export_format": fmt,
         "model": "UniTac-NV (Hou et al., IROS 2025): one encoder per sensor, one shared decoder",
-        "latent_dim": model.latent_dim,
+        "latent_dim": latent_dim,
         "sensors": entries,
-        "frame": "(B, n_taxels, 3) float32; taxel i at (row, col) = divmod(i, cols); channels x, y, z",
-        "translate": "decoder_<target>(encoder_<source>(frames))",
-        **run_fields(run.payload, run.engine, member),
-        "files": files,
+        "member": member,
+        "seed": run.engine.seeds[member],
+        "epochs": int(payload["epoch"]),
+        "dataset_hash": payload["dataset_hash"],
+        "dataset_summary": payload.get("dataset_summary", {}),
+        "extension": (
+            {k: extension[k] for k in ("new_sensor", "trained_sensors", "from_dataset_hash")} if extension else None
+        ),
+        "run_provenance": payload.get("provenance", {}),
+        "exported_by": provenance(),
     }
-    (staging / MODEL_JSON).write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    (staging / CARD_NAME).write_text(render_card(document, metrics), encoding="utf-8")
-    return document
 
 
 def _metrics_lines(metrics: dict[str, Any] | None) -> list[str]:
@@ -283,25 +292,6 @@ def _metrics_lines(metrics: dict[str, Any] | None) -> list[str]:
         mean = sum(latent) / len(latent)
         lines.append(f"Mean L1 distance between two sensors' latents of the same contact: {mean:.3f}.")
     return lines
-
-
-def run_fields(payload: dict[str, Any], engine: StackedAutoencoders, member: int) -> dict[str, Any]:
-    """What every exported model says about the run it came from: member, seed, epochs, the dataset's hash and
-    summary, a new-sensor extension, the run's and the exporter's provenance."""
-    return {
-        "member": member,
-        "seed": engine.seeds[member],
-        "epochs": int(payload["epoch"]),
-        "dataset_hash": payload["dataset_hash"],
-        "dataset_summary": payload.get("dataset_summary", {}),
-        "extension": (
-            {k: payload["extension"][k] for k in ("new_sensor", "trained_sensors", "from_dataset_hash")}
-            if payload.get("extension")
-            else None
-        ),
-        "run_provenance": payload.get("provenance", {}),
-        "exported_by": provenance(),
-    }
 
 
 def render_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str:
@@ -476,20 +466,14 @@ def _export_safetensors(run: LoadedRun, staging: Path, member: int) -> dict[str,
         s: _sensor_entry(run, s, {"encoder": f"encoders.{s}.*", "decoder": f"decoders.{s}.*"}) for s in model.sensors
     }
     metrics = read_metrics(run.run_dir)
-    document: dict[str, Any] = {
-        "format": EXPORT_FORMAT,
-        "version": EXPORT_VERSION,
-        "export_format": "safetensors",
-        "model": "UniTac-NV (Hou et al., IROS 2025): one encoder per sensor, one shared decoder",
+    document = _document(run, member, "safetensors", entries, model.latent_dim)
+    document |= {
         "class": "unitac_rig.learning.network.UniTacNV",
         "weights": WEIGHTS_NAME,
-        "latent_dim": model.latent_dim,
-        "sensors": entries,
         "tensors": {name: list(t.shape) for name, t in model.state_dict().items()},
         "frame": "(B, n_taxels, 3) float32, tare-subtracted, sensor units; taxel i at (row, col) = divmod(i, cols); "
         "channels x, y, z",
         "translate": "model(frames, source, target) = model.decode(model.encode(frames, source), target)",
-        **run_fields(run.payload, run.engine, member),
     }
     (staging / CARD_NAME).write_text(_hub_card(document, metrics), encoding="utf-8")  # before: the mixin keeps it
     model.save_pretrained(staging, config=document)  # its config.json sorts keys: rewritten below in sensor order

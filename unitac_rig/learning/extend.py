@@ -27,7 +27,7 @@ import logging
 import time
 import zlib
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -52,7 +52,9 @@ from unitac_rig.learning.run import (
     save_checkpoint,
     save_test_set,
     tsne_rows,
+    write_config_json,
 )
+from unitac_rig.learning.train import train_epoch
 from unitac_rig.storage.reader import MatchedSet
 
 log = logging.getLogger(__name__)
@@ -138,40 +140,6 @@ def _test_mask(dataset: PairedDataset, split: dict[str, Any]) -> np.ndarray:
     return mask
 
 
-def _fit_new_sensor(run: LoadedRun, dataset: PairedDataset, sensor: str, rows: np.ndarray) -> Normaliser:
-    """The run's normaliser plus the new sensor's statistics, fitted on its training frames with the run's
-    preprocessing."""
-    only = PairedDataset(
-        sensors=(sensor,),
-        object_id=dataset.object_id[rows],
-        rotation_deg=dataset.rotation_deg[rows],
-        angle_deg=dataset.angle_deg[rows],
-        target_n=dataset.target_n[rows],
-        values={sensor: dataset.values[sensor][rows]},
-        force_n={sensor: dataset.force_n[sensor][rows]},
-        simulated=dataset.simulated,
-    )
-    fitted = Normaliser.fit(only, np.ones(len(only), dtype=bool), mode=run.normaliser.mode)
-    return Normaliser.from_dict({**run.normaliser.to_dict(), **fitted.to_dict()})
-
-
-def _inputs(
-    dataset: PairedDataset, feature_dims: dict[str, int], normaliser: Normaliser
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """(M, sum of features) normalised rows in the engine's sensor order, missing frames as 0 (the masked loss
-    ignores them), and (M, sensors) presence."""
-    blocks, present = [], []
-    for sensor, width in feature_dims.items():
-        block = np.zeros((len(dataset), width), dtype=np.float32)
-        has = dataset.has(sensor) if sensor in dataset.values else np.zeros(len(dataset), dtype=bool)
-        if has.any():
-            block[has] = normaliser.normalise(sensor, dataset.values[sensor][has])
-        blocks.append(block)
-        present.append(has)
-    presence = np.stack(present, axis=1).astype(np.float32)
-    return torch.from_numpy(np.concatenate(blocks, axis=1)), torch.from_numpy(presence)
-
-
 def evaluate_new_sensor(
     engine: StackedAutoencoders,
     normaliser: Normaliser,
@@ -251,15 +219,17 @@ def _add_sensor(
     if len(test_rows) == 0:
         log.warning("no shared contact falls in the run's test directions: the new sensor is not evaluated")
 
-    normaliser = _fit_new_sensor(run, dataset, new_sensor, ~test_mask & dataset.has(new_sensor))
+    # the run's normaliser plus the new sensor's statistics, fitted on its training frames with the run's preprocessing
+    fitted = Normaliser.fit(dataset, ~test_mask & dataset.has(new_sensor), run.normaliser.mode, sensors=[new_sensor])
+    normaliser = Normaliser.from_dict({**run.normaliser.to_dict(), **fitted.to_dict()})
     engine = run.engine.with_new_sensor(new_sensor, dataset.n_taxels(new_sensor) * 3)
     before = evaluate_new_sensor(
         engine, normaliser, test_rows, new_sensor, run.config.nmae_normaliser, run.config.ssim_range
     )
 
-    x, present = _inputs(train_rows, engine.feature_dims, normaliser)
+    x, present = (torch.from_numpy(a).to(device) for a in normaliser.inputs(train_rows, engine.feature_dims))
     optimizer = engine.make_optimizer(settings["learning_rate"])
-    history = _train_new_sensor(engine, optimizer, x.to(device), present.to(device), new_sensor, settings, progress)
+    history = _train_new_sensor(engine, optimizer, x, present, new_sensor, settings, progress)
     seconds = history[-1]["seconds"] if history else 0.0
     after = evaluate_new_sensor(
         engine, normaliser, test_rows, new_sensor, run.config.nmae_normaliser, run.config.ssim_range
@@ -319,22 +289,15 @@ def _train_new_sensor(
     history: list[dict[str, Any]] = []
     seconds = 0.0
     unitac = [g.name for g in engine.groups].index(UNITAC_GROUP)
-    n = x.shape[0]
     for epoch in range(1, settings["epochs"] + 1):
         began = time.perf_counter()
-        order = torch.from_numpy(np.stack([rng.permutation(n) for rng in shuffles])).to(x.device)
-        xs, ps = x[order], present[order]
-        loss_sum = torch.zeros(engine.members, device=x.device)
-        for start in range(0, n, settings["batch_size"]):
-            chunk = slice(start, start + settings["batch_size"])
-            losses = engine.train_step(xs[:, chunk], optimizer, present=ps[:, chunk])
-            loss_sum += losses[unitac] * xs[:, chunk].shape[1]
+        loss = train_epoch(engine, optimizer, x, present, shuffles, settings["batch_size"])
         seconds += time.perf_counter() - began
         record = {
             "epoch": epoch,
             "epochs": settings["epochs"],
             "seconds": seconds,
-            "train_loss": (loss_sum / n).cpu().tolist(),
+            "train_loss": loss[unitac].tolist(),
         }
         history.append(record)
         if progress is not None:
@@ -358,15 +321,12 @@ def _write_run(
 
     sensors = engine.sensors
     complete = dataset.subset(test_mask & dataset.complete_rows())
-    ordered = PairedDataset(
+    ordered = replace(  # in the engine's sensor order
+        complete,
         sensors=sensors,
-        object_id=complete.object_id,
-        rotation_deg=complete.rotation_deg,
-        angle_deg=complete.angle_deg,
-        target_n=complete.target_n,
         values={s: complete.values[s] for s in sensors if s in complete.values},
         force_n={s: complete.force_n[s] for s in sensors if s in complete.force_n},
-        simulated=complete.simulated,
+        present=None,
     )
     out.mkdir(parents=True, exist_ok=True)
     base = run.payload
@@ -402,13 +362,6 @@ def _write_run(
     }
     save_checkpoint(out, payload)
     (out / EXTENSION_JSON).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    readable = {
-        "config": base["config"],
-        "split": base["split"],
-        "sensors": list(sensors),
-        "dataset_hash": summary["dataset_hash"],
-        "extension": {k: v for k, v in summary.items() if k not in ("untrained", "trained")},
-        "provenance": summary["provenance"],
-    }
-    (out / "config.json").write_text(json.dumps(readable, indent=2) + "\n", encoding="utf-8")
+    extension = {k: v for k, v in summary.items() if k not in ("untrained", "trained", "provenance")}
+    write_config_json(out, base["config"], base["split"], sensors, summary["dataset_hash"], extension=extension)
     return len(ordered)

@@ -32,7 +32,7 @@ import torch
 from torch import nn
 
 from drivers.frames import TactileFrame
-from unitac_rig.errors import ModelError, UsageError
+from unitac_rig.errors import ModelError
 
 
 @dataclass
@@ -52,8 +52,7 @@ class LiveModel:
 
         run = load_run(Path(run_dir))
         engine = run.engine
-        if not 0 <= member < engine.members:
-            raise UsageError(f"member {member} does not exist", hint=f"the run has {engine.members} member(s)")
+        run.check_member(member)
         sensors = engine.group(UNITAC_GROUP).sensors
         if sensor not in sensors:
             raise ModelError(

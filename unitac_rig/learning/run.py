@@ -20,7 +20,7 @@ import os
 import pickle
 import re
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -259,6 +259,20 @@ def save_run_files(run_dir: Path, contents: Mapping[str, str | Mapping[str, Any]
             tmp.unlink(missing_ok=True)  # only when a write failed or was interrupted
 
 
+def write_config_json(
+    run_dir: Path,
+    config: Mapping[str, Any],
+    split: Mapping[str, Any],
+    sensors: Sequence[str],
+    dataset_hash: str,
+    **extra: Any,
+) -> None:
+    """``RUN/config.json``, for people: what the run trained with, on which data, and by which unitac-rig."""
+    readable = {"config": config, "split": split, "sensors": list(sensors), "dataset_hash": dataset_hash, **extra}
+    text = json.dumps(readable | {"provenance": provenance()}, indent=2) + "\n"
+    (Path(run_dir) / "config.json").write_text(text, encoding="utf-8")
+
+
 def read_metrics(run_dir: Path) -> dict[str, Any] | None:
     """The run's ``metrics.json``; None before a run was scored."""
     path = Path(run_dir) / METRICS_JSON
@@ -342,6 +356,11 @@ class LoadedRun:
     @property
     def unseen_objects(self) -> tuple[str, ...]:
         return tuple(self.payload["split"]["unseen_objects"])
+
+    def check_member(self, member: int) -> None:
+        """UsageError unless the run has a member (seed) ``member``."""
+        if not 0 <= member < self.engine.members:
+            raise UsageError(f"member {member} does not exist", hint=f"the run has {self.engine.members} member(s)")
 
     def scored_under(self, nmae_normaliser: str | None = None, ssim_range: str | None = None) -> LoadedRun:
         """This run with other metric options (they change no weight, only how reports score it); ``None`` keeps

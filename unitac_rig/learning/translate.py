@@ -34,8 +34,7 @@ class Translator:
     @classmethod
     def load(cls, run_dir: Path | str, member: int = 0, device: str = "cpu") -> Translator:
         run = load_run(Path(run_dir), device)
-        if not 0 <= member < run.engine.members:
-            raise ModelError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
+        run.check_member(member)
         return cls(run.engine.member(member, groups=[UNITAC_GROUP]), run.normaliser, Path(run_dir))
 
     @property

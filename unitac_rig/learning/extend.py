@@ -39,7 +39,8 @@ from unitac_rig.learning.data import (
     Normaliser,
     PairedDataset,
     build_paired_dataset,
-    held_out_directions,
+    hold_out_rays,
+    ray_deg,
 )
 from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
 from unitac_rig.learning.evaluate import Evaluator, direction_name
@@ -120,23 +121,23 @@ def extension_dataset(sets: Sequence[MatchedSet], trained: Sequence[str], new_se
 
 def _test_mask(dataset: PairedDataset, split: dict[str, Any]) -> np.ndarray:
     """Test rows: the trained run's held-out directions for the objects it knew, all rows of its unseen objects,
-    and a seeded share of a new object's directions."""
+    and a seeded share of a new object's approach rays (the run's random split)."""
     unseen = set(split["unseen_objects"])
-    held = {obj: {tuple(int(v) for v in d) for d in dirs} for obj, dirs in split["test_directions"].items()}
-    seed, fraction = int(split["seed"]), float(split["test_fraction"])
+    held = {obj: {(int(d[0]), int(d[1])) for d in dirs} for obj, dirs in split["test_directions"].items()}
     rotation = np.round(dataset.rotation_deg).astype(int)
     angle = np.round(dataset.angle_deg).astype(int)
     mask = np.zeros(len(dataset), dtype=bool)
     for object_id in dataset.objects:
         rows = np.flatnonzero(dataset.object_id == object_id)
+        directions = list(zip(rotation[rows].tolist(), angle[rows].tolist(), strict=True))
         if object_id in unseen:
             mask[rows] = True
-            continue
-        directions = list(zip(rotation[rows].tolist(), angle[rows].tolist(), strict=True))
-        chosen = held.get(object_id)
-        if chosen is None:
-            chosen = set(held_out_directions(directions, object_id, seed, fraction))
-        mask[rows] = [d in chosen for d in directions]
+        elif object_id in held:
+            mask[rows] = [d in held[object_id] for d in directions]
+        else:
+            rays = [ray_deg(r, a) for r, a in directions]
+            test = hold_out_rays(rays, object_id, int(split["seed"]), float(split["test_fraction"])).test
+            mask[rows] = [ray in test for ray in rays]
     return mask
 
 

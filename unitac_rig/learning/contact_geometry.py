@@ -637,6 +637,21 @@ class GeometryEstimator:
     def train_sensors(self) -> tuple[str, ...]:
         return tuple(self.meta["train_sensors"])
 
+    def check_fits(self, run: LoadedRun, member: int) -> None:
+        """ModelError unless it was fitted to the latents of ``run``'s member ``member`` as its encoders are now (a
+        run trained on (resumed) or replaced since is caught here)."""
+        if int(self.meta["member"]) != member or encoder_fingerprint(run, member) != self.meta.get("encoder_sha256"):
+            raise ModelError(
+                f"the geometry estimator in {run.run_dir} was fitted to other encoder weights than member {member} "
+                f"has now (run epoch {self.meta.get('run_epoch')} then, {run.payload['epoch']} now)",
+                hint=f"refit it (unitac-rig geometry {run.run_dir}), or use --member {self.meta['member']}",
+            )
+
+    def trained_on(self, sensor: str) -> str:
+        """The training sensor whose MLP reads ``sensor``'s latents by default: ``sensor`` itself when an MLP was
+        trained on it (the paper's within-sensor case), else the first training sensor."""
+        return sensor if sensor in self.train_sensors else self.train_sensors[0]
+
     def head(self, trained_on: str) -> nn.Sequential:
         """The MLP trained on ``trained_on``'s latents as the plain :func:`~unitac_rig.learning.network.mlp`
         (eval mode): latents (M, latent) -> profile depths (M, points), mm."""
@@ -674,17 +689,11 @@ def predict_geometry(
     when an MLP was trained on it, the paper's within-sensor case; else the first training sensor)."""
     estimator = GeometryEstimator.load(run_dir)
     member = int(estimator.meta["member"])
-    translator = Translator.load(run_dir, member=member)
     run = load_run(run_dir)
-    if encoder_fingerprint(run, member) != estimator.meta["encoder_sha256"]:
-        raise ModelError(
-            f"the geometry estimator in {run_dir} was fitted to other encoder weights (the run was trained on or "
-            f"replaced since, epoch {estimator.meta['run_epoch']} then, {run.payload['epoch']} now)",
-            hint=f"refit it: unitac-rig geometry {run_dir}",
-        )
-    chosen = trained_on or (sensor if sensor in estimator.train_sensors else estimator.train_sensors[0])
-    latents = translator.encode(np.asarray(frames, dtype=np.float32).reshape(-1, *np.shape(frames)[-2:]), sensor)
-    profiles = estimator.predict(latents, chosen)
+    estimator.check_fits(run, member)
+    chosen = trained_on or estimator.trained_on(sensor)
+    frames = np.asarray(frames, dtype=np.float32).reshape(-1, *np.shape(frames)[-2:])
+    profiles = estimator.predict(member_latents(run, member, {sensor: frames})[sensor], chosen)
     return GeometryPrediction(
         profiles, np.asarray(estimator.meta["offsets_mm"], dtype=np.float64), sensor, chosen, estimator.meta
     )

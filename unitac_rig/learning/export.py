@@ -50,9 +50,8 @@ from torch import nn
 
 from unitac_rig.errors import UsageError
 from unitac_rig.learning.engine import UNITAC_GROUP
-from unitac_rig.learning.network import linear_layers
-from unitac_rig.learning.run import provenance, read_metrics
-from unitac_rig.learning.train import LoadedRun, load_run
+from unitac_rig.learning.network import head_part, linear_layers
+from unitac_rig.learning.run import LoadedRun, load_run, provenance, read_metrics
 from unitac_rig.storage.manifest import publish_when_done
 
 if TYPE_CHECKING:
@@ -69,28 +68,6 @@ EXPORT_VERSION = 1
 WEIGHTS_NAME = "model.safetensors"
 CONFIG_NAME = "config.json"
 LICENSE = "mit"  # the package's licence (pyproject.toml), which the exported weights are shared under
-
-
-def _fold_into(
-    target: nn.Linear,
-    source: nn.Linear,
-    scale_in: np.ndarray | None = None,
-    shift_in: np.ndarray | None = None,
-    scale_out: np.ndarray | None = None,
-    shift_out: np.ndarray | None = None,
-) -> None:
-    """``source`` written into ``target`` with the normaliser folded in, computed in float64:
-    ``W ((x - shift_in) * scale_in) + b`` for an input layer, ``(W z + b) * scale_out + shift_out`` for an output
-    layer, ``source`` itself for any other."""
-    weight = source.weight.detach().cpu().double().numpy().T  # (in, out)
-    bias = source.bias.detach().cpu().double().numpy()
-    if scale_in is not None and shift_in is not None:
-        weight, bias = weight * scale_in[:, None], bias - (shift_in * scale_in) @ weight
-    if scale_out is not None and shift_out is not None:
-        weight, bias = weight * scale_out[None, :], bias * scale_out + shift_out
-    with torch.no_grad():
-        target.weight.copy_(torch.from_numpy(weight.T.copy()))
-        target.bias.copy_(torch.from_numpy(bias.copy()))
 
 
 @contextlib.contextmanager
@@ -432,30 +409,35 @@ def _loading_snippet(fmt: str, source: str, target: str, src: dict[str, Any], ds
 
 def hub_model(run: LoadedRun, member: int = 0) -> UniTacNV:
     """Member ``member`` of ``run`` as the exported module (normaliser folded in, no dropout, eval mode, CPU): per
-    sensor, the member's plain encoder (:meth:`StackedAutoencoders.network`) with ``(x - mean) / std`` folded into
-    its first layer, and the shared hidden layers plus that sensor's columns of the output layer with ``y * std +
-    mean`` folded into the last."""
+    sensor, the member's encoder with ``(x - mean) / std`` folded into its first layer, and the shared hidden layers
+    plus that sensor's columns of its output layer with ``y * std + mean`` folded into the last (in float64)."""
     from unitac_rig.learning.network import UniTacNV  # imports huggingface_hub: only when asked
 
     engine = run.engine
-    sensors = engine.group(UNITAC_GROUP).sensors
-    net = engine.network(UNITAC_GROUP, member, dropout=0.0).cpu()
-    model = UniTacNV({s: _sensor_entry(run, s, {}) for s in sensors}, engine.shape.latent_dim)
-    for sensor in sensors:
-        taxels = engine.feature_dims[sensor] // 3
-        mean = np.tile(np.asarray(run.normaliser.mean[sensor], dtype=np.float64), taxels)  # per frame column
-        std = np.tile(np.asarray(run.normaliser.std[sensor], dtype=np.float64), taxels)
-        pairs = [
-            *zip(linear_layers(model.encoders[sensor]), linear_layers(net.encoder(sensor)), strict=True),
-            *zip(linear_layers(model.decoders[sensor]), linear_layers(net.decoder_for(sensor)), strict=True),
-        ]
-        for i, (target, source) in enumerate(pairs):
-            if i == 0:
-                _fold_into(target, source, scale_in=1.0 / std, shift_in=mean)
-            elif i == len(pairs) - 1:
-                _fold_into(target, source, scale_out=std, shift_out=mean)
-            else:
-                _fold_into(target, source)
+    group = engine.group(UNITAC_GROUP)
+    model = UniTacNV({s: _sensor_entry(run, s, {}) for s in group.sensors}, engine.shape.latent_dim)
+    params = engine.layer_parameters(UNITAC_GROUP, member)  # key -> (weight (in, out), bias (out,))
+    n_hidden = len(engine.shape.decoder_hidden)
+    for sensor in group.sensors:
+        dims = engine.feature_dims
+        mean = np.tile(np.asarray(run.normaliser.mean[sensor], dtype=np.float64), dims[sensor] // 3)  # per column
+        scale = np.tile(np.asarray(run.normaliser.std[sensor], dtype=np.float64), dims[sensor] // 3)
+        h, head = next((h, head) for h, head in enumerate(group.output_heads) if sensor in head)
+        start = sum(dims[s] for s in head[: head.index(sensor)])
+        out_weight, out_bias = params[f"{head_part(head, h)}/{n_hidden}"]
+        layers = [params[f"enc_{sensor}/{i}"] for i in range(len(engine.shape.encoder_hidden) + 1)]
+        layers += [params[f"dec/{i}"] for i in range(n_hidden)]
+        layers.append((out_weight[:, start : start + dims[sensor]], out_bias[start : start + dims[sensor]]))
+        layers = [(w.astype(np.float64), b.astype(np.float64)) for w, b in layers]
+        (w, b), inverse = layers[0], 1.0 / scale
+        layers[0] = (w * inverse[:, None], b - (mean * inverse) @ w)
+        w, b = layers[-1]
+        layers[-1] = (w * scale[None, :], b * scale + mean)
+        linears = linear_layers(model.encoders[sensor]) + linear_layers(model.decoders[sensor])
+        with torch.no_grad():
+            for linear, (w, b) in zip(linears, layers, strict=True):
+                linear.weight.copy_(torch.from_numpy(w.T.copy()))
+                linear.bias.copy_(torch.from_numpy(b.copy()))
     return model.eval()
 
 

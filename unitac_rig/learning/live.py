@@ -71,19 +71,13 @@ class LiveModel:
             self._load_geometry(run, member)
 
     def _load_geometry(self, run: Any, member: int) -> None:
-        from unitac_rig.learning.contact_geometry import ESTIMATOR_PT, GeometryEstimator, encoder_fingerprint
+        from unitac_rig.learning.contact_geometry import ESTIMATOR_PT, GeometryEstimator
 
         if not (self.run_dir / ESTIMATOR_PT).is_file():
             return
         estimator = GeometryEstimator.load(self.run_dir)
-        if int(estimator.meta["member"]) != member or encoder_fingerprint(run, member) != estimator.meta.get(
-            "encoder_sha256"
-        ):
-            raise ModelError(
-                f"the geometry estimator in {self.run_dir} was fitted to other encoder weights than member {member}",
-                hint=f"use --member {estimator.meta['member']}, --no-geometry, or refit: unitac-rig geometry RUN",
-            )
-        chosen = self.sensor if self.sensor in estimator.train_sensors else estimator.train_sensors[0]
+        estimator.check_fits(run, member)
+        chosen = estimator.trained_on(self.sensor)
         self.geometry = estimator.head(chosen)
         self.geometry_meta = {
             "trained_on": chosen,

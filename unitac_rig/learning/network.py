@@ -10,7 +10,6 @@ one group; :class:`UniTacNV` is what ``export-model`` writes and ``stream`` runs
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -221,27 +220,6 @@ class Autoencoder(nn.Module):
             for target, estimate in zip(inputs, recon.split(list(self.feature_dims.values()), dim=-1), strict=True):
                 total = total + nn.functional.l1_loss(estimate, target)
         return total
-
-    def encoder(self, sensor: str) -> nn.Sequential:
-        """``sensor``'s encoder without dropout: frames (B, F) -> latent (a copy)."""
-        mlp = self.encoders[sensor]
-        assert isinstance(mlp, nn.Sequential)
-        return nn.Sequential(*(copy.deepcopy(m) for m in mlp if not isinstance(m, nn.Dropout)))
-
-    def decoder_for(self, sensor: str) -> nn.Sequential:
-        """Latent -> ``sensor``'s frames (B, F) alone, without dropout: the hidden layers and that sensor's columns of
-        its output layer (a copy)."""
-        hidden = [copy.deepcopy(m) for m in self.decoder if not isinstance(m, nn.Dropout)]
-        h, head = next((h, head) for h, head in enumerate(self.output_heads) if sensor in head)
-        start = sum(self.feature_dims[s] for s in head[: head.index(sensor)])
-        columns = slice(start, start + self.feature_dims[sensor])
-        source = self.heads[h]
-        assert isinstance(source, nn.Linear)
-        out = nn.Linear(source.in_features, self.feature_dims[sensor], device=source.weight.device)
-        with torch.no_grad():
-            out.weight.copy_(source.weight[columns])
-            out.bias.copy_(source.bias[columns])
-        return nn.Sequential(*hidden, out)
 
 
 def linear_layers(module: nn.Module) -> list[nn.Linear]:

@@ -69,16 +69,11 @@ class Evaluator:
         self.dataset = test
         self.sensors = test.sensors
         self.device = device
-        self.nmae_normaliser = nmae_normaliser
-        self.ssim_range = ssim_range
         self.options = {"nmae_normaliser": nmae_normaliser, "ssim_range": ssim_range}  # TrainConfig field -> value
         self.inputs = {s: torch.from_numpy(normaliser.normalise(s, test.values[s])).to(device) for s in self.sensors}
         self.targets = {s: torch.from_numpy(test.values[s]).to(device, torch.float32) for s in self.sensors}
         self.mean = {s: torch.tensor(normaliser.mean[s], dtype=torch.float32, device=device) for s in self.sensors}
         self.std = {s: torch.tensor(normaliser.std[s], dtype=torch.float32, device=device) for s in self.sensors}
-        self.range = {
-            s: torch.tensor(normaliser.data_range[s], dtype=torch.float32, device=device) for s in self.sensors
-        }
         self._normaliser = normaliser
         unseen = np.isin(test.object_id, list(unseen_objects))
         self.subsets = {
@@ -102,11 +97,14 @@ class Evaluator:
         return {s: engine.encode(UNITAC_GROUP, s, self.inputs[s]) for s in self.sensors}
 
     @torch.no_grad()
-    def reconstructions(self, engine: StackedAutoencoders) -> dict[str, tuple[str, torch.Tensor]]:
+    def reconstructions(
+        self, engine: StackedAutoencoders, latents: dict[str, torch.Tensor] | None = None
+    ) -> dict[str, tuple[str, torch.Tensor]]:
         """{column: (target sensor, frames (members, M, n_taxels, 3) in sensor units)} for every UniTac-NV direction
-        ``<src>_to_<dst>`` and every baseline ``ae_<sensor>`` the run trained."""
+        ``<src>_to_<dst>`` and every baseline ``ae_<sensor>`` the run trained (from ``latents`` when they are at
+        hand)."""
         out: dict[str, tuple[str, torch.Tensor]] = {}
-        latents = self.latents(engine)
+        latents = latents or self.latents(engine)
         for source in self.sensors:
             decoded = engine.decode(UNITAC_GROUP, latents[source])
             for target in self.sensors:
@@ -120,12 +118,14 @@ class Evaluator:
         return out
 
     @torch.no_grad()
-    def per_frame(self, engine: StackedAutoencoders) -> dict[str, dict[str, torch.Tensor]]:
+    def per_frame(
+        self, engine: StackedAutoencoders, latents: dict[str, torch.Tensor] | None = None
+    ) -> dict[str, dict[str, torch.Tensor]]:
         """{column: {frame metric name: (members, M)}} for every frame metric of the table. Columns:
         ``<src>_to_<dst>`` for UniTac-NV, ``ae_<sensor>`` for baselines the run trained."""
         return {
             column: self.score_frames(target, frames)
-            for column, (target, frames) in self.reconstructions(engine).items()
+            for column, (target, frames) in self.reconstructions(engine, latents).items()
         }
 
     @torch.no_grad()
@@ -151,15 +151,13 @@ class Evaluator:
         scoring, estimate = self.scoring(sensor), estimate.to(self.device, torch.float32)
         return {metric.name: metric.score(estimate, scoring, None) for metric in frame_metrics()}
 
-    @torch.no_grad()
-    def alignment(self, engine: StackedAutoencoders, mask: torch.Tensor | None = None) -> dict[str, Any]:
+    def alignment(self, latents: dict[str, torch.Tensor], mask: torch.Tensor | None = None) -> dict[str, Any]:
         """Per member, over the rows ``mask`` selects (all by default), every alignment metric of the table (the
-        paper's raw ``latent_l1``, the scale-free ``latent_ratio``, sensor ``mixing`` and ``mixing_expected``), each
-        averaged over sensor pairs. Empty for one sensor."""
+        paper's raw ``latent_l1``, the scale-free ``latent_ratio``, sensor ``mixing`` and ``mixing_expected``) of
+        :meth:`latents`, each averaged over sensor pairs. Empty for one sensor."""
         pairs = self.sensor_pairs()
         if not pairs:
             return {}
-        latents = self.latents(engine)
         if mask is not None:
             latents = {s: z[:, mask] for s, z in latents.items()}
         scored = LatentPairs([(latents[a], latents[b]) for a, b in pairs])
@@ -168,7 +166,8 @@ class Evaluator:
     def summary(self, engine: StackedAutoencoders) -> dict[str, Any]:
         """Means over the subsets ("all", "seen" objects' held-out angles, "unseen" objects), per member, with the
         latent alignment of each subset."""
-        scores = self.per_frame(engine)
+        latents = self.latents(engine)
+        scores = self.per_frame(engine, latents)
         summary: dict[str, Any] = {}
         for subset, mask in self.subsets.items():
             if not bool(mask.any()):
@@ -177,7 +176,7 @@ class Evaluator:
                 column: {metric: values[:, mask].mean(dim=1).tolist() for metric, values in metrics.items()}
                 for column, metrics in scores.items()
             }
-            entry.update(self.alignment(engine, mask))
+            entry.update(self.alignment(latents, mask))
             summary[subset] = entry
         return summary
 
@@ -267,7 +266,8 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
     baselines' Table I (``simple_baselines``)."""
     config = run.config
     evaluator = Evaluator.for_run(run, test)
-    scores = evaluator.per_frame(run.engine)
+    latents = evaluator.latents(run.engine)
+    scores = evaluator.per_frame(run.engine, latents)
     members = run.engine.members
     table: dict[str, dict[str, dict[str, float]]] = {}
     table_std: dict[str, dict[str, dict[str, float]]] = {}
@@ -289,7 +289,7 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
     for subset, subset_mask in evaluator.subsets.items():
         if not bool(subset_mask.any()) or not evaluator.sensor_pairs():
             continue
-        now = evaluator.alignment(run.engine, subset_mask)
+        now = evaluator.alignment(latents, subset_mask)
         then = first_test.get(subset, {})
         alignment[subset] = {
             metric.name: {"first_epoch": then.get(metric.name), "final": now[metric.name]}

@@ -195,7 +195,7 @@ def test_training_stops_when_validation_stops_improving_and_records_the_epoch(tm
     so a patience of 3 stops at epoch 4, and the checkpoint and metrics.json say so."""
     from tests.learning.learning_helpers import small_sets
     from unitac_rig.learning.data import build_paired_dataset
-    from unitac_rig.learning.evaluate import write_metrics
+    from unitac_rig.learning.evaluate import run_metrics
     from unitac_rig.learning.train import TrainConfig, load_run, train
 
     pairs = build_paired_dataset(small_sets())
@@ -205,7 +205,7 @@ def test_training_stops_when_validation_stops_improving_and_records_the_epoch(tm
     assert "test" in outcome.history[-1]  # the stopping epoch is scored as the last one
     payload = load_run(tmp_path / "stops").payload
     assert payload["epoch"] == 4 and payload["early_stop"]["stopped_epoch"] == 4
-    metrics = write_metrics(tmp_path / "stops")
+    metrics = run_metrics(tmp_path / "stops")
     assert metrics["epochs"] == 4
     assert metrics["early_stopping"] == {
         "patience": 3,

@@ -24,12 +24,10 @@ from unitac_rig.learning.metric_table import METRICS, alignment_metrics, frame_m
 from unitac_rig.learning.metrics import FrameScoring, LatentPairs, latent_l1_per_pair
 from unitac_rig.learning.paper import TABLE1_ROWS
 from unitac_rig.learning.run import (
-    METRICS_JSON,
     LoadedRun,
     load_run,
     load_test_set,
     load_training_pairs,
-    save_run_files,
 )
 from unitac_rig.learning.simple_baselines import SimplePredictions, baseline_columns, predict_simple_baselines
 
@@ -352,10 +350,3 @@ def run_metrics(run_dir: Path, run: LoadedRun | None = None, test: PairedDataset
     run = run or load_run(run_dir)
     test = test or load_test_set(run_dir)
     return evaluate_run(run, test, simple_predictions(run_dir, run, test))
-
-
-def write_metrics(run_dir: Path, run: LoadedRun | None = None, test: PairedDataset | None = None) -> dict[str, Any]:
-    """Evaluate the run in ``run_dir`` (:func:`run_metrics`) and write ``RUN/metrics.json`` (atomically)."""
-    metrics = run_metrics(run_dir, run, test)
-    save_run_files(run_dir, {METRICS_JSON: metrics})
-    return metrics

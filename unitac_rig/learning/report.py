@@ -18,7 +18,6 @@ from unitac_rig.learning.contact_geometry import GEOMETRY_JSON
 from unitac_rig.learning.data import PairedDataset, object_shape_material
 from unitac_rig.learning.engine import UNITAC_GROUP, baseline_name
 from unitac_rig.learning.evaluate import (
-    METRICS_JSON,
     PREPROCESSING_TEXT,
     Evaluator,
     direction_name,
@@ -28,7 +27,7 @@ from unitac_rig.learning.evaluate import (
 from unitac_rig.learning.metric_table import alignment_metrics, frame_metrics
 from unitac_rig.learning.metrics import latent_mixing
 from unitac_rig.learning.paper import PAPER_TABLE1
-from unitac_rig.learning.run import LoadedRun, load_run, load_test_set, read_metrics, save_run_files
+from unitac_rig.learning.run import METRICS_JSON, LoadedRun, load_run, load_test_set, read_metrics, save_run_files
 from unitac_rig.plotting import draw_taxel_map, new_figure, save_figure
 
 log = logging.getLogger(__name__)
@@ -491,4 +490,4 @@ def _rel(path: Path, root: Path) -> str:
     return str(Path(path).relative_to(root))
 
 
-__all__ = ["METRICS_JSON", "REPORT_MD", "write_report"]
+__all__ = ["REPORT_MD", "write_report"]

@@ -243,7 +243,8 @@ def load_test_set(run_dir: Path) -> PairedDataset:
 def save_run_files(run_dir: Path, contents: Mapping[str, str | Mapping[str, Any]]) -> None:
     """Write the run's text files (name -> text, or a mapping written as JSON) together: each beside its file first,
     then each renamed over the old one (microseconds apart), so an interruption (a Ctrl-C during a report's minutes,
-    a crash) leaves every one as it was and the run's files in agreement. The one writer of ``metrics.json``."""
+    a crash) leaves every one as it was and the run's files in agreement. ``metrics.json`` is written only through it,
+    by :func:`unitac_rig.learning.report.write_report`."""
     staged: list[tuple[Path, Path]] = []
     try:
         for name, content in contents.items():

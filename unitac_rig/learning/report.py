@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from unitac_rig.errors import UnitacError
-from unitac_rig.learning.contact_geometry import GEOMETRY_JSON
+from unitac_rig.learning.contact_geometry import GEOMETRY_JSON, GEOMETRY_PNG
 from unitac_rig.learning.data import PairedDataset, object_shape_material
 from unitac_rig.learning.engine import UNITAC_GROUP, baseline_name
 from unitac_rig.learning.evaluate import (
@@ -34,6 +34,13 @@ log = logging.getLogger(__name__)
 
 REPORT_MD = "report.md"
 FIGURES = "figures"
+FIGURE_LABELS = {  # file in RUN/figures -> its label in report.md, in the report's order
+    "curves.png": "training curves",
+    "tsne.png": "t-SNE of the latents",
+    "reconstructions_seen.png": "reconstructions (seen)",
+    "reconstructions_unseen.png": "reconstructions (unseen)",
+    GEOMETRY_PNG: "contact geometry",
+}
 
 
 def table_columns(sensors: tuple[str, ...], trained: set[str]) -> list[str]:
@@ -426,11 +433,12 @@ def write_report(
     metrics = run_metrics(run_dir, run, test)  # written with report.md at the end: an interrupted report keeps both
     if kept and not figures:  # the t-SNE is only recomputed with the figures
         metrics["tsne_mixing"] = kept
-    drawn: dict[str, str] = {}
+    drawn: set[str] = set()  # figures drawn now, by file name
     if figures:
         fig_dir = run_dir / FIGURES
         stage("drawing the training curves")
-        drawn["training curves"] = _rel(plot_curves(run.history, run.sensors, fig_dir / "curves.png"), run_dir)
+        plot_curves(run.history, run.sensors, fig_dir / "curves.png")
+        drawn.add("curves.png")
         evaluator = Evaluator.for_run(run, test)
         first = run.payload.get("latents_first_epoch")
         rows = np.asarray(run.payload.get("tsne_rows", []), dtype=int)
@@ -440,10 +448,8 @@ def write_report(
             last = {s: z[0, rows].numpy() for s, z in latents.items()}
             sensors = [s for s in test.sensors if s in first and s in last]
             embeddings = tsne_embeddings(first, last, sensors, seed=run.config.split_seed)
-            path = plot_tsne(
-                first, last, test, rows, fig_dir / "tsne.png", seed=run.config.split_seed, embeddings=embeddings
-            )
-            drawn["t-SNE of the latents"] = _rel(path, run_dir)
+            plot_tsne(first, last, test, rows, fig_dir / "tsne.png", seed=run.config.split_seed, embeddings=embeddings)
+            drawn.add("tsne.png")
             metrics["tsne_mixing"] = {
                 "contacts": int(rows.size),
                 "member": 0,
@@ -464,30 +470,18 @@ def write_report(
                 log.warning("reconstruction figures need unitac_rig.plotting, which is not installed")
                 break
             if path_or_none is not None:
-                drawn[f"reconstructions ({subset})"] = _rel(path_or_none, run_dir)
-    else:  # keep the figures an earlier report drew
-        known = {
-            "curves.png": "training curves",
-            "tsne.png": "t-SNE of the latents",
-            "reconstructions_seen.png": "reconstructions (seen)",
-            "reconstructions_unseen.png": "reconstructions (unseen)",
-        }
-        for name, label in known.items():
-            if (run_dir / FIGURES / name).exists():
-                drawn[label] = f"{FIGURES}/{name}"
-    geometry_png = run_dir / FIGURES / "geometry.png"
-    if geometry_png.exists():
-        drawn["contact geometry"] = f"{FIGURES}/geometry.png"
+                drawn.add(path_or_none.name)
+    shown = {  # without figures, those an earlier report drew; the geometry figure is `unitac-rig geometry`'s
+        label: f"{FIGURES}/{name}"
+        for name, label in FIGURE_LABELS.items()
+        if name in drawn or ((not figures or name == GEOMETRY_PNG) and (run_dir / FIGURES / name).exists())
+    }
     geometry_path = run_dir / GEOMETRY_JSON
     geometry = json.loads(geometry_path.read_text(encoding="utf-8")) if geometry_path.exists() else None
     stage("writing metrics.json and report.md")
-    text = render_markdown(metrics, run, drawn, geometry)
+    text = render_markdown(metrics, run, shown, geometry)
     save_run_files(run_dir, {METRICS_JSON: metrics, REPORT_MD: text})
     return run_dir / REPORT_MD
-
-
-def _rel(path: Path, root: Path) -> str:
-    return str(Path(path).relative_to(root))
 
 
 __all__ = ["REPORT_MD", "write_report"]

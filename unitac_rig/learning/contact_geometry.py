@@ -80,19 +80,13 @@ def local_depth_profile(
     x_hat, u = surface_frame(direction)
     points = np.asarray(outline_mm, dtype=np.float64) - np.asarray(origin_mm, dtype=np.float64)
     local = np.stack([points @ x_hat, points @ u], axis=1)  # (N, 2): across, toward the pad
-    a = local
-    b = np.roll(local, -1, axis=0)
-    depths = np.full(len(offsets_mm), np.nan)
-    for i, x in enumerate(np.asarray(offsets_mm, dtype=np.float64)):
-        lo = np.minimum(a[:, 0], b[:, 0])
-        hi = np.maximum(a[:, 0], b[:, 0])
-        crossing = (lo <= x + 1e-9) & (hi >= x - 1e-9) & (hi - lo > 1e-12)
-        if not crossing.any():
-            continue
-        t = (x - a[crossing, 0]) / (b[crossing, 0] - a[crossing, 0])
-        y = a[crossing, 1] + t * (b[crossing, 1] - a[crossing, 1])
-        depths[i] = -float(np.max(y))
-    return depths
+    a, b = local, np.roll(local, -1, axis=0)  # each edge of the outline, (N, 2) x2
+    x = np.asarray(offsets_mm, dtype=np.float64)[:, None]  # (K, 1) against every edge
+    lo, hi = np.minimum(a[:, 0], b[:, 0]), np.maximum(a[:, 0], b[:, 0])
+    crossing = (lo <= x + 1e-9) & (hi >= x - 1e-9) & (hi - lo > 1e-12)  # (K, N)
+    with np.errstate(divide="ignore", invalid="ignore"):  # a vertical edge crosses no line across
+        y = np.where(crossing, a[:, 1] + (x - a[:, 0]) / (b[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]), -np.inf)
+    return np.where(crossing.any(axis=1), -y.max(axis=1), np.nan)
 
 
 DirectionFn = Callable[[float, float], np.ndarray]

@@ -527,9 +527,6 @@ class StackedAutoencoders(nn.Module):
         """Each member's dropout stream (so ``state_dict`` resumes the same masks), tagged with its device kind."""
         return {"device": self.device.type, "states": [g.get_state() for g in self._dropout_generators]}
 
-    def set_extra_state(self, state: Any) -> None:
-        self._restore_dropout_streams(state)
-
     @classmethod
     def from_state(cls, state: Mapping[str, Any], device: torch.device | str = "cpu") -> StackedAutoencoders:
         """The model a :meth:`state` describes."""
@@ -551,7 +548,7 @@ class StackedAutoencoders(nn.Module):
             ) from exc
         return engine
 
-    def _restore_dropout_streams(self, saved: Any) -> None:
+    def set_extra_state(self, saved: Any) -> None:
         """Continue each member's dropout stream where the checkpoint left it, when it was drawn on this kind of
         device (a CPU stream cannot continue on a GPU); otherwise the streams restart from the seeds."""
         if isinstance(saved, Mapping) and saved.get("device") == self.device.type:

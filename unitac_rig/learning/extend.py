@@ -27,7 +27,7 @@ import logging
 import time
 import zlib
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -73,15 +73,9 @@ class ExtendConfig:
     learning_rate: float | None = None
 
     def resolved(self, run: LoadedRun) -> dict[str, Any]:
-        config = run.payload["config"]
-        out = {
-            "epochs": int(self.epochs if self.epochs is not None else config["epochs"]),
-            "batch_size": int(self.batch_size if self.batch_size is not None else config["batch_size"]),
-            "learning_rate": float(self.learning_rate if self.learning_rate is not None else config["learning_rate"]),
-        }
-        if out["epochs"] < 1 or out["batch_size"] < 1 or out["learning_rate"] <= 0:
-            raise UsageError(f"epochs and batch size must be at least 1 and the learning rate positive, got {out}")
-        return out
+        """The settings, checked as the run's :class:`~unitac_rig.learning.config.TrainConfig` checks them."""
+        config = run.config.updated({k: v for k, v in asdict(self).items() if v is not None})
+        return {"epochs": config.epochs, "batch_size": config.batch_size, "learning_rate": config.learning_rate}
 
 
 @dataclass

@@ -279,7 +279,6 @@ def render_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str
     fmt = document["export_format"]
     summary = document.get("dataset_summary") or {}
     source, target = (names[0], names[1]) if len(names) > 1 else (names[0], names[0])
-    src, dst = sensors[source], sensors[target]
     rows = [
         f"| {s} | {e['n_taxels']} | ({e['n_taxels']}, 3) | {e['units']} | `{e['encoder']}` | `{e['decoder']}` |"
         for s, e in sensors.items()
@@ -344,18 +343,36 @@ def render_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str
         "## How to load",
         "",
     ]
-    lines += _loading_snippet(fmt, source, target, src, dst)
-    lines += [
-        "",
-        f"`{MODEL_JSON}` lists every sensor's shape, units, layer widths, file names and their SHA-256 "
-        "(check a copy with `sha256sum`).",
-        "",
-    ]
+    lines += _loading_snippet(document, source, target)
     return "\n".join(lines)
 
 
-def _loading_snippet(fmt: str, source: str, target: str, src: dict[str, Any], dst: dict[str, Any]) -> list[str]:
+def _loading_snippet(document: dict[str, Any], source: str, target: str) -> list[str]:
+    """The card's "How to load" section: code that translates ``source`` frames into ``target`` frames."""
+    fmt, src, dst = document["export_format"], document["sensors"][source], document["sensors"][target]
     n_src = src["n_taxels"]
+    if fmt == "safetensors":
+        return [
+            "With unitac-rig installed (`pip install unitac-rig`; the class rebuilds itself from `config.json` "
+            "through huggingface_hub's `PyTorchModelHubMixin`), from this folder or from its Hub repository:",
+            "",
+            "```python",
+            "import torch",
+            "from unitac_rig.learning.network import UniTacNV",
+            "",
+            'model = UniTacNV.from_pretrained(".")  # or the Hub repository id',
+            f"frames = torch.zeros(1, {n_src}, 3)  # {source} frames, {src['units']}",
+            "with torch.no_grad():",
+            f'    latent = model.encode(frames, "{source}")  # (1, {document["latent_dim"]})',
+            f'    translated = model.decode(latent, "{target}")  # (1, {dst["n_taxels"]}, 3) {target} frames, '
+            f"{dst['units']}",
+            "```",
+            "",
+            "Without unitac-rig, export the run with `--format torchscript` or `--format onnx` (plain torch or "
+            f"onnxruntime load those). `{CONFIG_NAME}` lists every sensor's shape, units, layer widths and the "
+            f"folded normaliser, every tensor's shape, and the SHA-256 of `{WEIGHTS_NAME}`.",
+            "",
+        ]
     if fmt == "torchscript":
         code = [
             "import torch",
@@ -404,7 +421,15 @@ def _loading_snippet(fmt: str, source: str, target: str, src: dict[str, Any], ds
             "with torch.no_grad():",
             f"    translated = decoder(encoder(torch.zeros(1, {n_src}, 3)))  # {target} frames, {dst['units']}",
         ]
-    return ["```python", *code, "```"]
+    return [
+        "```python",
+        *code,
+        "```",
+        "",
+        f"`{MODEL_JSON}` lists every sensor's shape, units, layer widths, file names and their SHA-256 "
+        "(check a copy with `sha256sum`).",
+        "",
+    ]
 
 
 def hub_model(run: LoadedRun, member: int = 0) -> UniTacNV:
@@ -523,10 +548,6 @@ def _model_index(document: dict[str, Any], metrics: dict[str, Any] | None) -> li
 def _hub_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str:
     """The Hub model card: YAML front matter (license, library, pipeline tag, tags, datasets, model-index), then the
     shared card (:func:`render_card`) with the ``from_pretrained`` loading code."""
-
-    names = list(document["sensors"])
-    source, target = (names[0], names[1]) if len(names) > 1 else (names[0], names[0])
-    src, dst = document["sensors"][source], document["sensors"][target]
     front = [
         "---",
         f"license: {LICENSE}",
@@ -539,29 +560,4 @@ def _hub_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str:
         "---",
         "",
     ]
-    body = render_card(document, metrics)
-    head, _, _ = body.partition("## How to load")
-    loading = [
-        "## How to load",
-        "",
-        "With unitac-rig installed (`pip install unitac-rig`; the class rebuilds itself from `config.json` through "
-        "huggingface_hub's `PyTorchModelHubMixin`), from this folder or from its Hub repository:",
-        "",
-        "```python",
-        "import torch",
-        "from unitac_rig.learning.network import UniTacNV",
-        "",
-        'model = UniTacNV.from_pretrained(".")  # or the Hub repository id',
-        f"frames = torch.zeros(1, {src['n_taxels']}, 3)  # {source} frames, {src['units']}",
-        "with torch.no_grad():",
-        f'    latent = model.encode(frames, "{source}")  # (1, {document["latent_dim"]})',
-        f'    translated = model.decode(latent, "{target}")  # (1, {dst["n_taxels"]}, 3) {target} frames, '
-        f"{dst['units']}",
-        "```",
-        "",
-        "Without unitac-rig, export the run with `--format torchscript` or `--format onnx` (plain torch or "
-        f"onnxruntime load those). `{CONFIG_NAME}` lists every sensor's shape, units, layer widths and the folded "
-        f"normaliser, every tensor's shape, and the SHA-256 of `{WEIGHTS_NAME}`.",
-        "",
-    ]
-    return "\n".join(front) + "\n" + head + "\n".join(loading)
+    return "\n".join(front) + "\n" + render_card(document, metrics)

@@ -39,13 +39,7 @@ class ModelShape:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> ModelShape:
-        return cls(
-            encoder_hidden=tuple(int(x) for x in d["encoder_hidden"]),
-            latent_dim=int(d["latent_dim"]),
-            decoder_hidden=tuple(int(x) for x in d["decoder_hidden"]),
-            dropout=float(d["dropout"]),
-            align_weight=float(d.get("align_weight", 0.0)),
-        )
+        return cls(**{**d, "encoder_hidden": tuple(d["encoder_hidden"]), "decoder_hidden": tuple(d["decoder_hidden"])})
 
 
 @dataclass(frozen=True)

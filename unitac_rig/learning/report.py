@@ -60,10 +60,6 @@ def _evaluated(history: list[dict[str, Any]]) -> tuple[str, list[dict[str, Any]]
     return "test", [h for h in history if "test" in h]
 
 
-def _member_mean(values: Any) -> float:
-    return float(np.mean(values))
-
-
 def plot_curves(history: list[dict[str, Any]], sensors: tuple[str, ...], path: Path) -> Path:
     """Per-epoch validation curves: NMAE per direction and baseline (seen objects' validation angles), the raw
     matched-latent L1 (the paper's), the scale-free matched/unmatched ratio and the sensor mixing."""
@@ -85,7 +81,7 @@ def plot_curves(history: list[dict[str, Any]], sensors: tuple[str, ...], path: P
         for column, value in points[-1][key][subset].items():
             if not isinstance(value, dict):
                 continue
-            values = [_member_mean(h[key][subset][column][primary.name]) for h in points]
+            values = [float(np.mean(h[key][subset][column][primary.name])) for h in points]
             style = "--" if column.startswith("ae_") else "-"
             ax.plot(epochs, values, style, label=column.replace("_to_", " → "), lw=1.2)
         ax.set_yscale("log")
@@ -109,7 +105,7 @@ def plot_curves(history: list[dict[str, Any]], sensors: tuple[str, ...], path: P
                 ax.plot(epochs, per_member[:, m], color="black", alpha=0.25, lw=0.8)
             ax.plot(epochs, per_member.mean(axis=1), color="black", lw=1.6, label="mean over seeds")
             if name == "mixing":
-                expected = [_member_mean(h[key][subset]["mixing_expected"]) for h in points]
+                expected = [float(np.mean(h[key][subset]["mixing_expected"])) for h in points]
                 ax.plot(epochs, expected, "--", color="tab:green", label="perfect mixing")
             if name == "latent_ratio":
                 ax.axhline(1.0, ls="--", color="tab:red", lw=1.0, label="chance")

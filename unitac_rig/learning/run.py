@@ -186,26 +186,20 @@ def provenance() -> dict[str, str]:
     return {"package_version": package_version(), "git_commit": git_commit(), "torch_version": str(torch.__version__)}
 
 
-def _test_subset_path(run_dir: Path) -> Path:
-    return Path(run_dir) / TEST_SET_NAME
+_CONTACT_KEYS = ("object_id", "rotation_deg", "angle_deg", "target_n")  # a contact's join key, one array each
 
 
 def save_test_set(run_dir: Path, test: PairedDataset) -> None:
     """The test rows (every sensor's frames and the keys), so evaluation, reports and geometry need no --data."""
-    arrays: dict[str, np.ndarray] = {
-        "sensors": np.array(test.sensors, dtype=str),
-        "object_id": test.object_id.astype(str),
-        "rotation_deg": test.rotation_deg,
-        "angle_deg": test.angle_deg,
-        "target_n": test.target_n,
-        "simulated": np.array(test.simulated),
-    }
+    arrays = {"sensors": np.array(test.sensors, dtype=str), "simulated": np.array(test.simulated)}
+    arrays |= {key: getattr(test, key) for key in _CONTACT_KEYS}
+    arrays["object_id"] = test.object_id.astype(str)
     for sensor in test.sensors:
         arrays[f"values__{sensor}"] = test.values[sensor]
         arrays[f"force_n__{sensor}"] = test.force_n[sensor]
     tmp = Path(run_dir) / (TEST_SET_NAME + ".tmp.npz")
     np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
-    os.replace(tmp, _test_subset_path(run_dir))
+    os.replace(tmp, Path(run_dir) / TEST_SET_NAME)
 
 
 def save_training_pairs(run_dir: Path, train: PairedDataset) -> None:
@@ -219,21 +213,18 @@ def save_training_pairs(run_dir: Path, train: PairedDataset) -> None:
 def load_training_pairs(run_dir: Path) -> PairedDataset | None:
     """The pairs :func:`save_training_pairs` kept; None for a run from before they were kept."""
     folder = Path(run_dir) / TRAINING_PAIRS
-    return load_test_set(folder) if _test_subset_path(folder).is_file() else None
+    return load_test_set(folder) if (folder / TEST_SET_NAME).is_file() else None
 
 
 def load_test_set(run_dir: Path) -> PairedDataset:
-    path = _test_subset_path(run_dir)
+    path = Path(run_dir) / TEST_SET_NAME
     if not path.is_file():
         raise UsageError(f"{run_dir} has no {TEST_SET_NAME}", hint="it is written by `unitac-rig train`; retrain")
     with np.load(path, allow_pickle=False) as data:
         sensors = tuple(str(s) for s in data["sensors"])
         return PairedDataset(
             sensors=sensors,
-            object_id=data["object_id"].astype(str),
-            rotation_deg=data["rotation_deg"],
-            angle_deg=data["angle_deg"],
-            target_n=data["target_n"],
+            **{key: data[key] for key in _CONTACT_KEYS},
             values={s: data[f"values__{s}"] for s in sensors},
             force_n={s: data[f"force_n__{s}"] for s in sensors},
             simulated=bool(data["simulated"]),

@@ -187,74 +187,64 @@ def add_sensor(
     if checkpoint_path(out).exists():
         raise UsageError(f"{out} already holds a run", hint="choose another --out")
     with computing_on(device, threads) as torch_device:
-        return _add_sensor(base_run, sets, new_sensor, out, config or ExtendConfig(), torch_device, progress)
+        run = load_run(base_run, torch_device.type)
+        if new_sensor in run.sensors:
+            raise ModelError(
+                f"the run in {base_run} already has sensor {new_sensor!r}", hint=f"it has {', '.join(run.sensors)}"
+            )
+        settings = (config or ExtendConfig()).resolved(run)
+        dataset = extension_dataset(sets, run.sensors, new_sensor)
+        _check_layouts(run, dataset)
+        test_mask = _test_mask(dataset, run.payload["split"])
+        train_rows, test_rows = dataset.subset(~test_mask), dataset.subset(test_mask)
+        if len(train_rows) == 0:
+            raise DataError("every shared contact is test data: nothing left to train the new sensor on")
+        if len(test_rows) == 0:
+            log.warning("no shared contact falls in the run's test directions: the new sensor is not evaluated")
 
-
-def _add_sensor(
-    base_run: Path,
-    sets: Sequence[MatchedSet],
-    new_sensor: str,
-    out: Path,
-    config: ExtendConfig,
-    device: torch.device,
-    progress: ProgressCallback | None,
-) -> ExtendOutcome:
-    run = load_run(base_run, device.type)
-    if new_sensor in run.sensors:
-        raise ModelError(
-            f"the run in {base_run} already has sensor {new_sensor!r}", hint=f"it has {', '.join(run.sensors)}"
+        # the run's normaliser plus the new sensor's statistics from its training frames, with the run's preprocessing
+        fitted = Normaliser.fit(
+            dataset, ~test_mask & dataset.has(new_sensor), run.normaliser.mode, sensors=[new_sensor]
         )
-    settings = config.resolved(run)
-    dataset = extension_dataset(sets, run.sensors, new_sensor)
-    _check_layouts(run, dataset)
-    test_mask = _test_mask(dataset, run.payload["split"])
-    train_rows, test_rows = dataset.subset(~test_mask), dataset.subset(test_mask)
-    if len(train_rows) == 0:
-        raise DataError("every shared contact is test data: nothing left to train the new sensor on")
-    if len(test_rows) == 0:
-        log.warning("no shared contact falls in the run's test directions: the new sensor is not evaluated")
+        normaliser = Normaliser.from_dict({**run.normaliser.to_dict(), **fitted.to_dict()})
+        engine = run.engine.with_new_sensor(new_sensor, dataset.n_taxels(new_sensor) * 3)
+        before = evaluate_new_sensor(
+            engine, normaliser, test_rows, new_sensor, run.config.nmae_normaliser, run.config.ssim_range
+        )
 
-    # the run's normaliser plus the new sensor's statistics, fitted on its training frames with the run's preprocessing
-    fitted = Normaliser.fit(dataset, ~test_mask & dataset.has(new_sensor), run.normaliser.mode, sensors=[new_sensor])
-    normaliser = Normaliser.from_dict({**run.normaliser.to_dict(), **fitted.to_dict()})
-    engine = run.engine.with_new_sensor(new_sensor, dataset.n_taxels(new_sensor) * 3)
-    before = evaluate_new_sensor(
-        engine, normaliser, test_rows, new_sensor, run.config.nmae_normaliser, run.config.ssim_range
-    )
+        x, present = (torch.from_numpy(a).to(torch_device) for a in normaliser.inputs(train_rows, engine.feature_dims))
+        optimizer = engine.make_optimizer(settings["learning_rate"])
+        history = _train_new_sensor(engine, optimizer, x, present, new_sensor, settings, progress)
+        seconds = history[-1]["seconds"] if history else 0.0
+        after = evaluate_new_sensor(
+            engine, normaliser, test_rows, new_sensor, run.config.nmae_normaliser, run.config.ssim_range
+        )
 
-    x, present = (torch.from_numpy(a).to(device) for a in normaliser.inputs(train_rows, engine.feature_dims))
-    optimizer = engine.make_optimizer(settings["learning_rate"])
-    history = _train_new_sensor(engine, optimizer, x, present, new_sensor, settings, progress)
-    seconds = history[-1]["seconds"] if history else 0.0
-    after = evaluate_new_sensor(
-        engine, normaliser, test_rows, new_sensor, run.config.nmae_normaliser, run.config.ssim_range
-    )
-
-    summary = {
-        "new_sensor": new_sensor,
-        "trained_sensors": list(run.sensors),
-        "from_run": str(base_run),
-        "from_dataset_hash": run.payload["dataset_hash"],
-        "from_epoch": int(run.payload["epoch"]),
-        "frozen_layers": sorted(engine.frozen),
-        "trained_layers": sorted(k for k in engine.weights if k not in engine.frozen),
-        "settings": settings,
-        "contacts": {
-            "train": len(train_rows),
-            "test": len(test_rows),
-            "train_shared_with": {s: int(train_rows.has(s).sum()) for s in run.sensors if s in train_rows.values},
-            "test_shared_with": {s: int(test_rows.has(s).sum()) for s in run.sensors if s in test_rows.values},
-        },
-        "metric": f"NMAE ({run.config.nmae_normaliser}) and SSIM ({run.config.ssim_range}), the run's own readings, "
-        "on test contacts that have both sensors",
-        "untrained": before,
-        "trained": after,
-        "train_seconds": seconds,
-        "dataset_hash": dataset.content_hash(),
-        "provenance": provenance(),
-    }
-    complete = _write_run(run, out, engine, normaliser, dataset, test_mask, summary, history, optimizer)
-    return ExtendOutcome(out, engine, normaliser, summary, complete, history)
+        summary = {
+            "new_sensor": new_sensor,
+            "trained_sensors": list(run.sensors),
+            "from_run": str(base_run),
+            "from_dataset_hash": run.payload["dataset_hash"],
+            "from_epoch": int(run.payload["epoch"]),
+            "frozen_layers": sorted(engine.frozen),
+            "trained_layers": sorted(k for k in engine.weights if k not in engine.frozen),
+            "settings": settings,
+            "contacts": {
+                "train": len(train_rows),
+                "test": len(test_rows),
+                "train_shared_with": {s: int(train_rows.has(s).sum()) for s in run.sensors if s in train_rows.values},
+                "test_shared_with": {s: int(test_rows.has(s).sum()) for s in run.sensors if s in test_rows.values},
+            },
+            "metric": f"NMAE ({run.config.nmae_normaliser}) and SSIM ({run.config.ssim_range}), the run's own "
+            "readings, on test contacts that have both sensors",
+            "untrained": before,
+            "trained": after,
+            "train_seconds": seconds,
+            "dataset_hash": dataset.content_hash(),
+            "provenance": provenance(),
+        }
+        complete = _write_run(run, out, engine, normaliser, dataset, test_mask, summary, history, optimizer)
+        return ExtendOutcome(out, engine, normaliser, summary, complete, history)
 
 
 def _check_layouts(run: LoadedRun, dataset: PairedDataset) -> None:

@@ -108,67 +108,60 @@ def train(
     progress: ProgressCallback | None = None,
 ) -> TrainingRun:
     """Train (or resume) a run in ``run_dir``. ``epochs`` on resume extends or keeps the stored budget."""
+    run_dir = Path(run_dir)
     with computing_on(device, threads) as torch_device:
-        return _train(dataset, Path(run_dir), config, torch_device, resume, epochs, progress)
-
-
-def _train(
-    dataset: PairedDataset,
-    run_dir: Path,
-    config: TrainConfig | None,
-    device: torch.device,
-    resume: bool,
-    epochs: int | None,
-    progress: ProgressCallback | None,
-) -> TrainingRun:
-    run = (
-        _resume_run(dataset, run_dir, epochs, device)
-        if resume
-        else _start_run(dataset, run_dir, config, epochs, device)
-    )
-    train_rows, test_rows = _split_rows(dataset, run.split)
-    val_rows = dataset.subset(run.split.validation_mask & dataset.complete_rows())
-    x, present = run.normaliser.inputs(train_rows, run.engine.feature_dims)
-    train_x = torch.from_numpy(x).to(device)
-    train_present = None if train_rows.present is None else torch.from_numpy(present).to(device)
-    options = {"nmae_normaliser": run.config.nmae_normaliser, "ssim_range": run.config.ssim_range}
-    evaluator = Evaluator(test_rows, run.normaliser, run.split.unseen_objects, device, **options)
-    validator = Evaluator(val_rows, run.normaliser, (), device, **options) if len(val_rows) else None
-    while run.epochs_done < run.config.epochs and run.early_stop.get("stopped_epoch") is None:
-        began = time.perf_counter()
-        loss = train_epoch(run.engine, run.optimizer, train_x, train_present, run.shuffle_rngs, run.config.batch_size)
-        run.train_seconds += time.perf_counter() - began
-        run.epochs_done += 1
-        record: dict[str, Any] = {
-            "epoch": run.epochs_done,
-            "seconds": run.train_seconds,
-            "train_loss": {g.name: loss[i].tolist() for i, g in enumerate(run.engine.groups)},
-        }
-        done, last = run.epochs_done, run.epochs_done == run.config.epochs
-        # per-epoch curves (and any choice made from them) use validation rows; the test rows are scored only
-        # after epoch 1 and after the last epoch, for the report's "from epoch 1 to the end" comparisons
-        if validator is not None and (done % run.config.eval_every == 0 or last or done == 1):
-            record["val"] = validator.summary(run.engine)
-            last = _early_stop(run, record["val"]) or last
-            if last:
-                record["val_metric_variants"] = validator.metric_variants(run.engine)
-        if last or done == 1:
-            record["test"] = evaluator.summary(run.engine)
-        if done == 1 and run.first_latents is None:
-            run.first_latents = {s: z[0, run.tsne_rows].cpu().numpy() for s, z in evaluator.latents(run.engine).items()}
-        run.history.append(record)
-        if progress is not None:
-            progress(record)
-        saved = done % run.config.checkpoint_every == 0 or last
-        if saved:
-            save_checkpoint(run.run_dir, run.checkpoint())
-        try:
-            raise_if_interrupted()  # a Ctrl-C the CLI deferred to here, between two epochs
-        except KeyboardInterrupt:
-            if not saved:  # keep this finished epoch: --resume goes on from it, nothing is lost
+        run = (
+            _resume_run(dataset, run_dir, epochs, torch_device)
+            if resume
+            else _start_run(dataset, run_dir, config, epochs, torch_device)
+        )
+        train_rows, test_rows = _split_rows(dataset, run.split)
+        val_rows = dataset.subset(run.split.validation_mask & dataset.complete_rows())
+        x, present = run.normaliser.inputs(train_rows, run.engine.feature_dims)
+        train_x = torch.from_numpy(x).to(torch_device)
+        train_present = None if train_rows.present is None else torch.from_numpy(present).to(torch_device)
+        options = {"nmae_normaliser": run.config.nmae_normaliser, "ssim_range": run.config.ssim_range}
+        evaluator = Evaluator(test_rows, run.normaliser, run.split.unseen_objects, torch_device, **options)
+        validator = Evaluator(val_rows, run.normaliser, (), torch_device, **options) if len(val_rows) else None
+        while run.epochs_done < run.config.epochs and run.early_stop.get("stopped_epoch") is None:
+            began = time.perf_counter()
+            loss = train_epoch(
+                run.engine, run.optimizer, train_x, train_present, run.shuffle_rngs, run.config.batch_size
+            )
+            run.train_seconds += time.perf_counter() - began
+            run.epochs_done += 1
+            record: dict[str, Any] = {
+                "epoch": run.epochs_done,
+                "seconds": run.train_seconds,
+                "train_loss": {g.name: loss[i].tolist() for i, g in enumerate(run.engine.groups)},
+            }
+            done, last = run.epochs_done, run.epochs_done == run.config.epochs
+            # per-epoch curves (and any choice made from them) use validation rows; the test rows are scored only
+            # after epoch 1 and after the last epoch, for the report's "from epoch 1 to the end" comparisons
+            if validator is not None and (done % run.config.eval_every == 0 or last or done == 1):
+                record["val"] = validator.summary(run.engine)
+                last = _early_stop(run, record["val"]) or last
+                if last:
+                    record["val_metric_variants"] = validator.metric_variants(run.engine)
+            if last or done == 1:
+                record["test"] = evaluator.summary(run.engine)
+            if done == 1 and run.first_latents is None:
+                run.first_latents = {
+                    s: z[0, run.tsne_rows].cpu().numpy() for s, z in evaluator.latents(run.engine).items()
+                }
+            run.history.append(record)
+            if progress is not None:
+                progress(record)
+            saved = done % run.config.checkpoint_every == 0 or last
+            if saved:
                 save_checkpoint(run.run_dir, run.checkpoint())
-            raise
-    return run
+            try:
+                raise_if_interrupted()  # a Ctrl-C the CLI deferred to here, between two epochs
+            except KeyboardInterrupt:
+                if not saved:  # keep this finished epoch: --resume goes on from it, nothing is lost
+                    save_checkpoint(run.run_dir, run.checkpoint())
+                raise
+        return run
 
 
 def _early_stop(run: TrainingRun, val: Mapping[str, Any]) -> bool:

@@ -412,11 +412,11 @@ def run_geometry(
     )
     scenarios: dict[str, dict[str, Any]] = {}
     predictions: dict[str, np.ndarray] = {}
+    with torch.no_grad():  # every training sensor's MLP on each sensor's test latents, (train sensors, T, K)
+        by_test = {t: model(torch.from_numpy(np.stack([latents[t][split.test]] * len(sensors)))) for t in sensors}
     for k, train_sensor in enumerate(sensors):
         for test_sensor in sensors:
-            with torch.no_grad():
-                stacked = torch.from_numpy(np.stack([latents[test_sensor][split.test]] * len(sensors)))
-                predicted = model(stacked)[k].numpy()
+            predicted = by_test[test_sensor][k].numpy()
             name = f"{train_sensor}_to_{test_sensor}"
             errors = np.abs(predicted - truth[split.test])
             scenarios[name] = {

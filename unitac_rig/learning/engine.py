@@ -2,8 +2,9 @@
 
 :class:`StackedAutoencoders` holds all models of a run (UniTac-NV and the per-sensor baselines) for all seeds
 ("members"); :meth:`StackedAutoencoders.network` slices one member's model out of it as an ordinary PyTorch network
-(:class:`Autoencoder`: ``nn.Linear``, ``nn.ReLU``, ``nn.Dropout``), the network that ``export-model`` writes and the
-benchmark's plain loop trains. The trainer, evaluation, translation, geometry and export all use this one model.
+(:class:`Autoencoder`: ``nn.Linear``, ``nn.ReLU``, ``nn.Dropout``), the network the benchmark's plain loop trains;
+``export-model`` writes the same member's layers (:func:`unitac_rig.learning.export.hub_model`). The trainer,
+evaluation, translation, geometry and export all use this one model.
 
 At the paper's batch size (64) the networks are so small that PyTorch's per-operation overhead, not arithmetic, sets
 the speed of an ordinary loop (one ``nn.Module`` per model, a ``DataLoader``, an optimizer kernel per tensor, one
@@ -578,8 +579,7 @@ class StackedAutoencoders(nn.Module):
 
     def network(self, group: str, member: int, dropout: float | None = None) -> Autoencoder:
         """Member ``member``'s model ``group`` as an ordinary PyTorch network (:class:`Autoencoder`), a copy of its
-        weights: ``dropout`` None keeps the run's (``nn.Dropout`` where this model drops out), 0 leaves it out (the
-        network ``export-model`` writes)."""
+        weights: ``dropout`` None keeps the run's (``nn.Dropout`` where this model drops out), 0 leaves it out."""
         spec = self.group(group)
         net = Autoencoder(self.feature_dims, spec, self.shape, dropout).to(self.device)
         for key, linear in net.linears().items():

@@ -7,8 +7,8 @@ written by huggingface_hub's ``PyTorchModelHubMixin`` from :class:`unitac_rig.le
 units, taxel layout, the folded normaliser, the training data's content hash, provenance and the SHA-256 of the
 weights; :func:`push_to_hub` uploads such a folder. The other formats write one file per network.
 
-For every sensor of the run's UniTac-NV model, one member (seed), cut from that member's plain network
-(:meth:`unitac_rig.learning.engine.StackedAutoencoders.network`, the one model's own slice):
+For every sensor of the run's UniTac-NV model, one member (seed), from that member's layers of the one trained model
+(:meth:`unitac_rig.learning.engine.StackedAutoencoders.layer_parameters`):
 
 * ``encoder_<sensor>``: frames ``(B, n_taxels, 3)`` in the sensor's own units -> latent ``(B, latent_dim)``;
 * ``decoder_<sensor>``: latent ``(B, latent_dim)`` -> frames ``(B, n_taxels, 3)`` in that sensor's units: the shared

@@ -160,8 +160,7 @@ def member_mlp(layers: Sequence[StackedLinear], member: int) -> nn.Sequential:
 
 class Autoencoder(nn.Module):
     """One member of one group (UniTac-NV, or a per-sensor baseline) as ordinary PyTorch: what
-    :meth:`StackedAutoencoders.network` slices out, what ``export-model`` writes (:meth:`encoder`, :meth:`decoder`)
-    and what the training benchmark's plain loop trains.
+    :meth:`StackedAutoencoders.network` slices out and what the training benchmark's plain loop trains.
 
     ``encoders[sensor]``: frames (B, F) -> latent, ``nn.Linear`` with ReLU between and ``nn.Dropout`` after every
     layer (the latent's too); ``decoder``: the hidden layers, each followed by ReLU and dropout; ``heads``: the output

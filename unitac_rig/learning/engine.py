@@ -217,12 +217,12 @@ class StackedAutoencoders(nn.Module):
             shapes.update({key: (widths[i], widths[i + 1]) for i, key in enumerate(keys)})
             return keys
 
-        plan, trunk_widths = [], [self.shape.latent_dim, *self.shape.decoder_hidden]
+        plan, trunk_widths = [], self.shape.trunk_widths
         for g in self.groups:
             encoders = tuple(
                 _Encoder(
                     s,
-                    chain(g.name, f"enc_{s}", [self.feature_dims[s], *self.shape.encoder_hidden, trunk_widths[0]]),
+                    chain(g.name, f"enc_{s}", self.shape.encoder_widths(self.feature_dims[s])),
                     columns[s],
                 )
                 for s in g.sensors

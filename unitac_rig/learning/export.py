@@ -170,7 +170,7 @@ def export_model(run_dir: Path, out: Path, fmt: str, member: int = 0) -> dict[st
 def _sensor_entry(run: LoadedRun, sensor: str, files: dict[str, str]) -> dict[str, Any]:
     """What model.json / config.json say of one sensor: shape, units, layout, where its networks are (``files``),
     their layer widths and the normaliser folded into them."""
-    engine, latent = run.engine, run.engine.shape.latent_dim
+    engine = run.engine
     n_taxels = engine.feature_dims[sensor] // 3
     units, layout = _units_and_layout(sensor)
     return {
@@ -179,8 +179,8 @@ def _sensor_entry(run: LoadedRun, sensor: str, files: dict[str, str]) -> dict[st
         "units": units,
         "layout": layout,
         **files,
-        "encoder_widths": [n_taxels * 3, *engine.shape.encoder_hidden, latent],
-        "decoder_widths": [latent, *engine.shape.decoder_hidden, n_taxels * 3],
+        "encoder_widths": engine.shape.encoder_widths(n_taxels * 3),
+        "decoder_widths": engine.shape.decoder_widths(n_taxels * 3),
         "normaliser_folded_in": {
             "mean": np.asarray(run.normaliser.mean[sensor], dtype=float).tolist(),
             "std": np.asarray(run.normaliser.std[sensor], dtype=float).tolist(),

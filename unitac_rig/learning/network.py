@@ -37,6 +37,19 @@ class ModelShape:
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
+    def encoder_widths(self, features: int) -> list[int]:
+        """A sensor's encoder, frame (``features`` = n_taxels * 3) to latent."""
+        return [features, *self.encoder_hidden, self.latent_dim]
+
+    @property
+    def trunk_widths(self) -> list[int]:
+        """The decoder's hidden layers (shared by every sensor), latent onwards."""
+        return [self.latent_dim, *self.decoder_hidden]
+
+    def decoder_widths(self, features: int) -> list[int]:
+        """The decoder for one sensor's frame, latent to ``features``."""
+        return [*self.trunk_widths, features]
+
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> ModelShape:
         return cls(**{**d, "encoder_hidden": tuple(d["encoder_hidden"]), "decoder_hidden": tuple(d["decoder_hidden"])})
@@ -175,10 +188,8 @@ class Autoencoder(nn.Module):
         self.sensors = tuple(spec.sensors)
         self.output_heads = spec.output_heads
         self.feature_dims = {s: int(feature_dims[s]) for s in spec.sensors}
-        latent, trunk = shape.latent_dim, [shape.latent_dim, *shape.decoder_hidden]
-        self.encoders = nn.ModuleDict(
-            {s: mlp([d, *shape.encoder_hidden, latent], p, hidden=False) for s, d in self.feature_dims.items()}
-        )
+        trunk = shape.trunk_widths
+        self.encoders = nn.ModuleDict({s: mlp(shape.encoder_widths(d), p) for s, d in self.feature_dims.items()})
         self.decoder = mlp(trunk, p, hidden=True)
         self.heads = nn.ModuleList(
             nn.Linear(trunk[-1], sum(self.feature_dims[s] for s in head)) for head in self.output_heads

@@ -49,7 +49,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:  # the catalogue is imported lazily (it pulls in the rig's geometry)
-    from unitac_rig.rig.objects import Symmetry
+    from unitac_rig.rig.objects import ObjectSpec, Symmetry
 
 log = logging.getLogger(__name__)
 
@@ -57,20 +57,21 @@ log = logging.getLogger(__name__)
 def default_unseen_objects(object_ids: Iterable[str]) -> tuple[str, ...]:
     """Objects that stay out of autoencoder training: the catalogue's ``in_autoencoder_training`` flag where the
     catalogue knows the object, else the paper's list (the irregular prism)."""
-    unseen: list[str] = []
-    for object_id in sorted(set(object_ids)):
-        flag = _catalogue_training_flag(object_id)
-        if flag is False or (flag is None and object_id in PAPER_UNSEEN_OBJECTS):
-            unseen.append(object_id)
-    return tuple(unseen)
+    specs = {object_id: _catalogued(object_id) for object_id in sorted(set(object_ids))}
+    return tuple(
+        object_id
+        for object_id, spec in specs.items()
+        if (object_id in PAPER_UNSEEN_OBJECTS if spec is None else not spec.in_autoencoder_training)
+    )
 
 
-def _catalogue_training_flag(object_id: str) -> bool | None:
+def _catalogued(object_id: str) -> ObjectSpec | None:
+    """The catalogue's entry for an object; None for an id it does not know (imported or synthetic data)."""
     from unitac_rig.rig.objects import get_object
 
     try:
-        return bool(get_object(object_id).in_autoencoder_training)
-    except UnitacError:  # an id the catalogue does not know (imported or synthetic data)
+        return get_object(object_id)
+    except UnitacError:
         return None
 
 
@@ -206,12 +207,10 @@ def within_gap(
 def object_symmetry(object_id: str) -> Symmetry:
     """The catalogue's symmetry of an object's cross-section (:attr:`unitac_rig.rig.objects.ObjectSpec.symmetry`);
     an object the catalogue does not know (imported or synthetic data) is taken as having none."""
-    from unitac_rig.rig.objects import Symmetry, get_object
+    from unitac_rig.rig.objects import Symmetry
 
-    try:
-        return get_object(object_id).symmetry
-    except UnitacError:
-        return Symmetry(order=1)
+    spec = _catalogued(object_id)
+    return Symmetry(order=1) if spec is None else spec.symmetry
 
 
 def fold_ray(ray: float, symmetry: Symmetry) -> float:
@@ -536,11 +535,8 @@ class Normaliser:
 
 def object_shape_material(object_id: str) -> tuple[str, str]:
     """(shape, material) of an object: from the catalogue where it knows the id, else from ``<shape>_<material>``."""
-    from unitac_rig.rig.objects import get_object
-
-    try:
-        spec = get_object(object_id)
+    spec = _catalogued(object_id)
+    if spec is not None:
         return str(spec.shape), str(spec.material).upper()
-    except UnitacError:
-        shape, _, material = object_id.rpartition("_")
-        return (shape or object_id), (material.upper() or "unknown")
+    shape, _, material = object_id.rpartition("_")
+    return (shape or object_id), (material.upper() or "unknown")

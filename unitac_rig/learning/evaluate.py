@@ -11,7 +11,7 @@ With several members (seeds) the table holds the mean over members, ``table1_std
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -249,14 +249,28 @@ def simple_baseline_table(
         column: evaluator.score_frames(target, torch.from_numpy(frames)[None])
         for column, (target, frames) in predictions.frames.items()
     }
-    table = {
+    table = _cells(_row_means(scores, rows), lambda values: float(values[0]))
+    return {"table1": table, "compared_with": baseline_columns(evaluator.sensors), **predictions.info()}
+
+
+def _row_means(
+    scores: dict[str, dict[str, torch.Tensor]], rows: list[tuple[str, np.ndarray]]
+) -> dict[str, dict[str, dict[str, np.ndarray]]]:
+    """{row: {column: {frame metric: (members,) its mean over the row's contacts}}} of per-frame ``scores``."""
+    return {
         row: {
-            column: {name: float(values[0, torch.from_numpy(mask)].mean()) for name, values in metrics.items()}
+            column: {name: values[:, torch.from_numpy(mask)].mean(dim=1).numpy() for name, values in metrics.items()}
             for column, metrics in scores.items()
         }
         for row, mask in rows
     }
-    return {"table1": table, "compared_with": baseline_columns(evaluator.sensors), **predictions.info()}
+
+
+def _cells(means: dict[str, dict[str, dict[str, np.ndarray]]], read: Callable[[np.ndarray], Any]) -> dict[str, Any]:
+    """:func:`_row_means` with each cell's per-member values read by ``read`` (their mean, spread, list...)."""
+    return {
+        row: {c: {n: read(v) for n, v in cell.items()} for c, cell in columns.items()} for row, columns in means.items()
+    }
 
 
 def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions | None = None) -> dict[str, Any]:
@@ -266,20 +280,8 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
     evaluator = Evaluator.for_run(run, test)
     latents = evaluator.latents(run.engine)
     scores = evaluator.per_frame(run.engine, latents)
-    members = run.engine.members
-    table: dict[str, dict[str, dict[str, float]]] = {}
-    table_std: dict[str, dict[str, dict[str, float]]] = {}
-    table_members: dict[str, dict[str, dict[str, list[float]]]] = {}
-    counts: dict[str, int] = {}
-    for row, mask in table_rows(test, run.unseen_objects):
-        index = torch.from_numpy(mask)
-        counts[row] = int(mask.sum())
-        table[row], table_std[row], table_members[row] = {}, {}, {}
-        for column, metrics in scores.items():
-            per_member = {name: values[:, index].mean(dim=1).numpy() for name, values in metrics.items()}
-            table[row][column] = {name: float(v.mean()) for name, v in per_member.items()}
-            table_std[row][column] = {name: float(v.std()) for name, v in per_member.items()}
-            table_members[row][column] = {name: v.tolist() for name, v in per_member.items()}
+    rows = table_rows(test, run.unseen_objects)
+    means = _row_means(scores, rows)
 
     history = run.history
     first_test = history[0].get("test", {}) if history else {}
@@ -294,7 +296,7 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
             for metric in alignment_metrics()
         }
     result: dict[str, Any] = {
-        "table1": table,
+        "table1": _cells(means, lambda values: float(values.mean())),
         "alignment": {
             "per_subset": alignment,
             "definition": {metric.name: metric.description for metric in alignment_metrics()},
@@ -312,7 +314,7 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
         "seeds": list(run.engine.seeds),
         "split_seed": int(config.split_seed),
         "sensors": list(run.sensors),
-        "test_rows": counts,
+        "test_rows": {row: int(mask.sum()) for row, mask in rows},
         "simulated": bool(test.simulated),
         "dataset_hash": run.payload["dataset_hash"],
         "provenance": run.payload.get("provenance", {}),
@@ -328,10 +330,10 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
     if variants:
         result["validation_metric_variants"] = variants
     if simple is not None:
-        result["simple_baselines"] = simple_baseline_table(evaluator, table_rows(test, run.unseen_objects), simple)
-    if members > 1:
-        result["table1_std"] = table_std
-        result["table1_members"] = table_members
+        result["simple_baselines"] = simple_baseline_table(evaluator, rows, simple)
+    if run.engine.members > 1:
+        result["table1_std"] = _cells(means, lambda values: float(values.std()))
+        result["table1_members"] = _cells(means, lambda values: values.tolist())
     return result
 
 

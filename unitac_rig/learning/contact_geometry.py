@@ -45,7 +45,7 @@ from torch import nn
 
 from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.data import DEFAULT_GAP_DEG, PairedDataset, hold_out_rays, object_symmetry
-from unitac_rig.learning.network import UNITAC_GROUP, StackedLinear, member_mlp, stacked_mlp
+from unitac_rig.learning.network import UNITAC_GROUP, StackedLinear, linear_layers, mlp, stacked_mlp
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM
 from unitac_rig.learning.run import LoadedRun, computing_on, load_run, load_test_set, safe_torch_load
 from unitac_rig.learning.translate import Translator, read_frames
@@ -653,12 +653,13 @@ class GeometryEstimator:
             raise UsageError(
                 f"no geometry MLP was trained on {trained_on!r}", hint=f"choose one of {', '.join(self.train_sensors)}"
             )
-        layers = []
-        for weight, bias in zip(self.weights, self.biases, strict=True):
-            layer = StackedLinear(*weight.shape)
-            layer.load_state_dict({"weight": weight.to(torch.float32), "bias": bias.to(torch.float32)})
-            layers.append(layer)
-        return member_mlp(layers, self.train_sensors.index(trained_on)).eval()
+        k = self.train_sensors.index(trained_on)
+        net = mlp([self.weights[0].shape[1], *(weight.shape[2] for weight in self.weights)])
+        with torch.no_grad():
+            for linear, weight, bias in zip(linear_layers(net), self.weights, self.biases, strict=True):
+                linear.weight.copy_(weight[k].T)
+                linear.bias.copy_(bias[k, 0])
+        return net.eval()
 
     def predict(self, latents: np.ndarray, trained_on: str) -> np.ndarray:
         """(M, latent) -> (M, points) profile depths in mm, with the MLP trained on ``trained_on``'s latents."""

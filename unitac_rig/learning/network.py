@@ -4,9 +4,9 @@
 every model of a run. :func:`mlp` is the MLP of this package for one member (``nn.Linear``, ``nn.ReLU``,
 ``nn.Dropout``); :class:`StackedLinear` and :func:`stacked_mlp` are the same layers and forward with a members
 dimension, so the trainer (:class:`unitac_rig.learning.engine.StackedAutoencoders`) and the geometry head
-(:mod:`unitac_rig.learning.contact_geometry`) train every seed or sensor at once, and :func:`member_mlp` /
-``StackedAutoencoders.network`` hand one member back as the plain :func:`mlp`. :class:`Autoencoder` is one member of
-one group; :class:`UniTacNV` is what ``export-model`` writes and ``stream`` runs."""
+(:mod:`unitac_rig.learning.contact_geometry`) train every seed or sensor at once; ``StackedAutoencoders.network`` and
+the saved geometry head hand one member back as the plain :func:`mlp`. :class:`Autoencoder` is one member of one
+group; :class:`UniTacNV` is what ``export-model`` writes and ``stream`` runs."""
 
 from __future__ import annotations
 
@@ -134,11 +134,11 @@ class StackedLinear(nn.Module):
         """(members, rows, in) -> (members, rows, out)."""
         return torch.baddbmm(self.bias, h, self.weight)
 
-    def copy_into(self, linear: nn.Linear, member: int, columns: slice = slice(None)) -> nn.Linear:
-        """Member ``member``'s layer (optionally only some output ``columns``) written into ``linear``."""
+    def copy_into(self, linear: nn.Linear, member: int) -> nn.Linear:
+        """Member ``member``'s layer written into ``linear``."""
         with torch.no_grad():
-            linear.weight.copy_(self.weight[member, :, columns].T)
-            linear.bias.copy_(self.bias[member, 0, columns])
+            linear.weight.copy_(self.weight[member].T)
+            linear.bias.copy_(self.bias[member, 0])
         return linear
 
 
@@ -160,15 +160,6 @@ def stacked_mlp(
         if dropout is not None:
             h = dropout(i, h)
     return h
-
-
-def member_mlp(layers: Sequence[StackedLinear], member: int) -> nn.Sequential:
-    """Member ``member`` of ``layers`` as the plain :func:`mlp` (a copy, no dropout)."""
-    widths = [layers[0].weight.shape[1], *(layer.weight.shape[2] for layer in layers)]
-    net = mlp(widths).to(layers[0].weight.device)
-    for layer, linear in zip(layers, linear_layers(net), strict=True):
-        layer.copy_into(linear, member)
-    return net
 
 
 class Autoencoder(nn.Module):

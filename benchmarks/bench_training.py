@@ -105,7 +105,7 @@ def stack(size: int) -> tuple[list[int], bool]:
 
 class _Batches:
     """Each member's rows in its own order, gathered on the device once per epoch; batches are slices of it (what
-    :func:`unitac_rig.learning.train._train_epoch` does)."""
+    :func:`unitac_rig.learning.train.train_epoch` does)."""
 
     def __init__(self, x: torch.Tensor, seeds: Sequence[int]) -> None:
         self.x = x

@@ -25,7 +25,7 @@ from tests.learning.learning_helpers import small_sets
 from unitac_rig.errors import DataError, UsageError
 from unitac_rig.learning.contact_geometry import GeometryConfig
 from unitac_rig.learning.data import build_paired_dataset
-from unitac_rig.learning.evaluate import evaluate_run, write_metrics
+from unitac_rig.learning.evaluate import evaluate_run, run_metrics
 from unitac_rig.learning.paper import PAPER_TABLE1
 from unitac_rig.learning.train import TrainConfig, load_run, load_test_set, train
 from unitac_rig.rig.objects import get_object
@@ -115,7 +115,7 @@ def report(run_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str,
 
 @pytest.fixture(scope="module")
 def metrics(run_dir: Path) -> dict[str, Any]:
-    return write_metrics(run_dir)
+    return run_metrics(run_dir)
 
 
 def test_report_is_json_and_names_the_object_seeds_and_paper_remark(report: dict[str, Any]) -> None:

@@ -10,7 +10,8 @@ from unitac_rig.errors import DataError
 from unitac_rig.learning.data import (
     Normaliser,
     build_paired_dataset,
-    held_out_directions,
+    hold_out_rays,
+    ray_deg,
     split_by_direction,
 )
 from unitac_rig.storage.reader import MatchedSet
@@ -104,11 +105,11 @@ def test_irregular_object_is_all_test_data(pairs) -> None:  # type: ignore[no-un
 
 def test_split_is_seeded_and_per_object_stable(pairs) -> None:  # type: ignore[no-untyped-def]
     assert np.array_equal(split_by_direction(pairs, seed=5).test_mask, split_by_direction(pairs, seed=5).test_mask)
-    angles = [(0, a) for a in range(-45, 46)]
-    held = held_out_directions(angles, "hex_tpu", seed=5, fraction=0.1)
+    rays = [ray_deg(0, a) for a in range(-45, 46)]
+    held = hold_out_rays(rays, "hex_tpu", 5, 0.1).test
     assert len(held) == 9  # the paper: 10% of 91 angles
-    assert held == held_out_directions(list(reversed(angles)), "hex_tpu", seed=5, fraction=0.1)
-    others = {tuple(held_out_directions(angles, "hex_tpu", seed=s, fraction=0.1)) for s in range(6)}
+    assert held == hold_out_rays(list(reversed(rays)), "hex_tpu", 5, 0.1).test
+    others = {hold_out_rays(rays, "hex_tpu", s, 0.1).test for s in range(6)}
     assert len(others) > 1  # the seed matters
     # one object's held-out angles do not depend on which other objects are in the dataset
     only_hex = pairs.subset(pairs.object_id != "circle_pla")

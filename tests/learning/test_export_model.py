@@ -19,8 +19,8 @@ from drivers.layouts import PAPILLARRAY, USKIN, SensorLayout
 from tests.helpers import cli
 from tests.learning.learning_helpers import REFUSE_PROJECT_IMPORTS, small_sets
 from unitac_rig.learning.data import PairedDataset, build_paired_dataset
-from unitac_rig.learning.evaluate import write_metrics
 from unitac_rig.learning.extend import ExtendConfig, add_sensor
+from unitac_rig.learning.report import write_report
 from unitac_rig.learning.train import TrainConfig, train
 from unitac_rig.learning.translate import Translator
 
@@ -56,7 +56,7 @@ def pairs() -> PairedDataset:
 def run_dir(pairs: PairedDataset, tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("export") / "run"
     train(pairs, out, TrainConfig(epochs=30, seeds=(0, 1), tsne_contacts=30, eval_every=30), device="cpu")
-    write_metrics(out)
+    write_report(out, figures=False)  # metrics.json, which the model card quotes
     return out
 
 

@@ -24,8 +24,8 @@ from safetensors import safe_open
 from tests.helpers import cli
 from tests.learning.learning_helpers import small_sets
 from unitac_rig.learning.data import PairedDataset, build_paired_dataset
-from unitac_rig.learning.evaluate import write_metrics
 from unitac_rig.learning.network import UniTacNV
+from unitac_rig.learning.report import write_report
 from unitac_rig.learning.train import TrainConfig, train
 from unitac_rig.learning.translate import Translator
 
@@ -54,7 +54,7 @@ def pairs() -> PairedDataset:
 def run_dir(pairs: PairedDataset, tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("safetensors") / "run"
     train(pairs, out, TrainConfig(epochs=30, seeds=(0,), tsne_contacts=30, eval_every=30), device="cpu")
-    write_metrics(out)
+    write_report(out, figures=False)  # metrics.json, which the model card quotes
     return out
 
 

@@ -8,16 +8,31 @@ import torch
 
 from unitac_rig.learning.metrics import (
     alignment_ratio,
-    latent_alignment_ratio,
-    latent_l1,
+    latent_l1_per_pair,
     latent_mixing,
     nmae,
     nmae_per_frame,
     nmae_scale,
-    ssim,
     ssim_per_frame,
     ssim_scale,
 )
+
+
+def tensor(array: np.ndarray) -> torch.Tensor:
+    return torch.as_tensor(np.asarray(array, dtype=np.float64))
+
+
+def ssim(target: np.ndarray, estimate: np.ndarray, data_range: np.ndarray) -> float:
+    """Mean SSIM over frames."""
+    return float(ssim_per_frame(tensor(target), tensor(estimate), tensor(data_range)).mean())
+
+
+def latent_l1(z_a: np.ndarray, z_b: np.ndarray) -> float:
+    return float(latent_l1_per_pair(tensor(z_a), tensor(z_b)).mean())
+
+
+def latent_alignment_ratio(z_a: np.ndarray, z_b: np.ndarray) -> float:
+    return float(alignment_ratio(tensor(z_a), tensor(z_b)))
 
 
 def frame(x: list[float], y: list[float], z: list[float]) -> np.ndarray:

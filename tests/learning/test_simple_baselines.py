@@ -78,14 +78,14 @@ def test_the_lookup_returns_the_paired_frame_and_full_rank_pca_the_frame_itself(
 def test_a_runs_metrics_carry_the_simple_baselines_fitted_on_its_training_rows(
     pairs: PairedDataset, tmp_path: Path
 ) -> None:
-    from unitac_rig.learning.evaluate import write_metrics
+    from unitac_rig.learning.evaluate import run_metrics
     from unitac_rig.learning.run import load_training_pairs
     from unitac_rig.learning.train import TrainConfig, train
 
     outcome = train(pairs, tmp_path / "run", TrainConfig(epochs=1, seeds=(0,), tsne_contacts=30), device="cpu")
     kept = load_training_pairs(tmp_path / "run")
     assert kept is not None and len(kept) == int((outcome.split.train_mask & pairs.complete_rows()).sum())
-    metrics = write_metrics(tmp_path / "run")
+    metrics = run_metrics(tmp_path / "run")
     simple = metrics["simple_baselines"]
     assert simple["train_rows"] == len(kept) and simple["pca_components"] == 16
     assert set(simple["table1"]) == set(metrics["table1"])  # the same rows as UniTac-NV's

@@ -45,7 +45,7 @@ from torch import nn
 
 from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.data import DEFAULT_GAP_DEG, PairedDataset, hold_out_rays, object_symmetry
-from unitac_rig.learning.network import UNITAC_GROUP, StackedLinear, member_mlp, stacked_mlp
+from unitac_rig.learning.network import UNITAC_GROUP, StackedLinear, linear_layers, mlp, stacked_mlp
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM
 from unitac_rig.learning.run import LoadedRun, computing_on, load_run, load_test_set, safe_torch_load
 from unitac_rig.learning.translate import Translator, read_frames
@@ -80,19 +80,13 @@ def local_depth_profile(
     x_hat, u = surface_frame(direction)
     points = np.asarray(outline_mm, dtype=np.float64) - np.asarray(origin_mm, dtype=np.float64)
     local = np.stack([points @ x_hat, points @ u], axis=1)  # (N, 2): across, toward the pad
-    a = local
-    b = np.roll(local, -1, axis=0)
-    depths = np.full(len(offsets_mm), np.nan)
-    for i, x in enumerate(np.asarray(offsets_mm, dtype=np.float64)):
-        lo = np.minimum(a[:, 0], b[:, 0])
-        hi = np.maximum(a[:, 0], b[:, 0])
-        crossing = (lo <= x + 1e-9) & (hi >= x - 1e-9) & (hi - lo > 1e-12)
-        if not crossing.any():
-            continue
-        t = (x - a[crossing, 0]) / (b[crossing, 0] - a[crossing, 0])
-        y = a[crossing, 1] + t * (b[crossing, 1] - a[crossing, 1])
-        depths[i] = -float(np.max(y))
-    return depths
+    a, b = local, np.roll(local, -1, axis=0)  # each edge of the outline, (N, 2) x2
+    x = np.asarray(offsets_mm, dtype=np.float64)[:, None]  # (K, 1) against every edge
+    lo, hi = np.minimum(a[:, 0], b[:, 0]), np.maximum(a[:, 0], b[:, 0])
+    crossing = (lo <= x + 1e-9) & (hi >= x - 1e-9) & (hi - lo > 1e-12)  # (K, N)
+    with np.errstate(divide="ignore", invalid="ignore"):  # a vertical edge crosses no line across
+        y = np.where(crossing, a[:, 1] + (x - a[:, 0]) / (b[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]), -np.inf)
+    return np.where(crossing.any(axis=1), -y.max(axis=1), np.nan)
 
 
 DirectionFn = Callable[[float, float], np.ndarray]
@@ -367,8 +361,7 @@ def geometry_split(
 
 def member_latents(run: LoadedRun, member: int, frames: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """One member's UniTac-NV latents (M, latent) of each sensor's frames (M, n_taxels, 3), sensor units."""
-    if not 0 <= member < run.engine.members:
-        raise ModelError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
+    run.check_member(member)
     translator = Translator(run.engine.member(member, groups=[UNITAC_GROUP]), run.normaliser)
     return {s: translator.encode(frames[s], s) for s in frames}
 
@@ -397,8 +390,7 @@ def run_geometry(
     ``seed``, as before the split had its own seed; a study over members should give each its own)."""
     config = config or GeometryConfig()
     object_id, rows = geometry_object(run, test_set, object_id)
-    if not 0 <= member < run.engine.members:
-        raise ModelError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
+    run.check_member(member)
     seed = run.engine.seeds[member] if seed is None else seed
     outline = outline or OutlineGeometry.from_catalogue(object_id)
     subset, truth, valid, _ = contact_profiles(test_set, rows, object_id, config, outline)
@@ -420,11 +412,11 @@ def run_geometry(
     )
     scenarios: dict[str, dict[str, Any]] = {}
     predictions: dict[str, np.ndarray] = {}
+    with torch.no_grad():  # every training sensor's MLP on each sensor's test latents, (train sensors, T, K)
+        by_test = {t: model(torch.from_numpy(np.stack([latents[t][split.test]] * len(sensors)))) for t in sensors}
     for k, train_sensor in enumerate(sensors):
         for test_sensor in sensors:
-            with torch.no_grad():
-                stacked = torch.from_numpy(np.stack([latents[test_sensor][split.test]] * len(sensors)))
-                predicted = model(stacked)[k].numpy()
+            predicted = by_test[test_sensor][k].numpy()
             name = f"{train_sensor}_to_{test_sensor}"
             errors = np.abs(predicted - truth[split.test])
             scenarios[name] = {
@@ -639,6 +631,21 @@ class GeometryEstimator:
     def train_sensors(self) -> tuple[str, ...]:
         return tuple(self.meta["train_sensors"])
 
+    def check_fits(self, run: LoadedRun, member: int) -> None:
+        """ModelError unless it was fitted to the latents of ``run``'s member ``member`` as its encoders are now (a
+        run trained on (resumed) or replaced since is caught here)."""
+        if int(self.meta["member"]) != member or encoder_fingerprint(run, member) != self.meta.get("encoder_sha256"):
+            raise ModelError(
+                f"the geometry estimator in {run.run_dir} was fitted to other encoder weights than member {member} "
+                f"has now (run epoch {self.meta.get('run_epoch')} then, {run.payload['epoch']} now)",
+                hint=f"refit it (unitac-rig geometry {run.run_dir}), or use --member {self.meta['member']}",
+            )
+
+    def trained_on(self, sensor: str) -> str:
+        """The training sensor whose MLP reads ``sensor``'s latents by default: ``sensor`` itself when an MLP was
+        trained on it (the paper's within-sensor case), else the first training sensor."""
+        return sensor if sensor in self.train_sensors else self.train_sensors[0]
+
     def head(self, trained_on: str) -> nn.Sequential:
         """The MLP trained on ``trained_on``'s latents as the plain :func:`~unitac_rig.learning.network.mlp`
         (eval mode): latents (M, latent) -> profile depths (M, points), mm."""
@@ -646,12 +653,13 @@ class GeometryEstimator:
             raise UsageError(
                 f"no geometry MLP was trained on {trained_on!r}", hint=f"choose one of {', '.join(self.train_sensors)}"
             )
-        layers = []
-        for weight, bias in zip(self.weights, self.biases, strict=True):
-            layer = StackedLinear(*weight.shape)
-            layer.load_state_dict({"weight": weight.to(torch.float32), "bias": bias.to(torch.float32)})
-            layers.append(layer)
-        return member_mlp(layers, self.train_sensors.index(trained_on)).eval()
+        k = self.train_sensors.index(trained_on)
+        net = mlp([self.weights[0].shape[1], *(weight.shape[2] for weight in self.weights)])
+        with torch.no_grad():
+            for linear, weight, bias in zip(linear_layers(net), self.weights, self.biases, strict=True):
+                linear.weight.copy_(weight[k].T)
+                linear.bias.copy_(bias[k, 0])
+        return net.eval()
 
     def predict(self, latents: np.ndarray, trained_on: str) -> np.ndarray:
         """(M, latent) -> (M, points) profile depths in mm, with the MLP trained on ``trained_on``'s latents."""
@@ -676,17 +684,11 @@ def predict_geometry(
     when an MLP was trained on it, the paper's within-sensor case; else the first training sensor)."""
     estimator = GeometryEstimator.load(run_dir)
     member = int(estimator.meta["member"])
-    translator = Translator.load(run_dir, member=member)
     run = load_run(run_dir)
-    if encoder_fingerprint(run, member) != estimator.meta["encoder_sha256"]:
-        raise ModelError(
-            f"the geometry estimator in {run_dir} was fitted to other encoder weights (the run was trained on or "
-            f"replaced since, epoch {estimator.meta['run_epoch']} then, {run.payload['epoch']} now)",
-            hint=f"refit it: unitac-rig geometry {run_dir}",
-        )
-    chosen = trained_on or (sensor if sensor in estimator.train_sensors else estimator.train_sensors[0])
-    latents = translator.encode(np.asarray(frames, dtype=np.float32).reshape(-1, *np.shape(frames)[-2:]), sensor)
-    profiles = estimator.predict(latents, chosen)
+    estimator.check_fits(run, member)
+    chosen = trained_on or estimator.trained_on(sensor)
+    frames = np.asarray(frames, dtype=np.float32).reshape(-1, *np.shape(frames)[-2:])
+    profiles = estimator.predict(member_latents(run, member, {sensor: frames})[sensor], chosen)
     return GeometryPrediction(
         profiles, np.asarray(estimator.meta["offsets_mm"], dtype=np.float64), sensor, chosen, estimator.meta
     )

@@ -9,15 +9,16 @@ code reads the dataset from one module.
 
 from __future__ import annotations
 
+import functools
 import logging
 import zlib
-from collections.abc import Collection, Iterable, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from unitac_rig.errors import DataError, UnitacError
+from unitac_rig.errors import DataError, ModelError, UnitacError
 from unitac_rig.learning.config import PREPROCESSING
 from unitac_rig.learning.paper import PAPER_UNSEEN_OBJECTS
 from unitac_rig.storage.paired import (
@@ -39,18 +40,16 @@ __all__ = [
     "default_unseen_objects",
     "fold_ray",
     "folded_distance_deg",
-    "held_out_directions",
     "join_key",
     "load_sets",
     "object_shape_material",
     "object_symmetry",
     "sensor_order",
     "split_by_direction",
-    "validation_directions",
 ]
 
 if TYPE_CHECKING:  # the catalogue is imported lazily (it pulls in the rig's geometry)
-    from unitac_rig.rig.objects import Symmetry
+    from unitac_rig.rig.objects import ObjectSpec, Symmetry
 
 log = logging.getLogger(__name__)
 
@@ -58,20 +57,21 @@ log = logging.getLogger(__name__)
 def default_unseen_objects(object_ids: Iterable[str]) -> tuple[str, ...]:
     """Objects that stay out of autoencoder training: the catalogue's ``in_autoencoder_training`` flag where the
     catalogue knows the object, else the paper's list (the irregular prism)."""
-    unseen: list[str] = []
-    for object_id in sorted(set(object_ids)):
-        flag = _catalogue_training_flag(object_id)
-        if flag is False or (flag is None and object_id in PAPER_UNSEEN_OBJECTS):
-            unseen.append(object_id)
-    return tuple(unseen)
+    specs = {object_id: _catalogued(object_id) for object_id in sorted(set(object_ids))}
+    return tuple(
+        object_id
+        for object_id, spec in specs.items()
+        if (object_id in PAPER_UNSEEN_OBJECTS if spec is None else not spec.in_autoencoder_training)
+    )
 
 
-def _catalogue_training_flag(object_id: str) -> bool | None:
+def _catalogued(object_id: str) -> ObjectSpec | None:
+    """The catalogue's entry for an object; None for an id it does not know (imported or synthetic data)."""
     from unitac_rig.rig.objects import get_object
 
     try:
-        return bool(get_object(object_id).in_autoencoder_training)
-    except UnitacError:  # an id the catalogue does not know (imported or synthetic data)
+        return get_object(object_id)
+    except UnitacError:
         return None
 
 
@@ -119,32 +119,26 @@ class Split:
             "not_held_out": list(self.not_held_out),
         }
 
+    @classmethod
+    def from_dict(cls, info: Mapping[str, Any], test_mask: np.ndarray, val_mask: np.ndarray | None) -> Split:
+        """The split :meth:`to_dict` described, with its row masks (a checkpoint keeps them apart, as tensors)."""
 
-def held_out_directions(directions: Sequence[tuple[int, int]], object_id: str, seed: int, fraction: float) -> list:
-    """A seeded ``fraction`` (at least one, never all) of an object's directions; depends only on the seed, the
-    object id and the directions, so adding objects to a dataset does not reshuffle the others."""
-    units = sorted(set(directions))
-    if len(units) < 2:
-        return []
-    n_test = min(len(units) - 1, max(1, round(fraction * len(units))))
-    rng = np.random.default_rng([seed, zlib.crc32(object_id.encode())])
-    picked = rng.choice(len(units), size=n_test, replace=False)
-    return sorted(units[int(i)] for i in picked)
+        def directions(key: str) -> dict[str, list[tuple[int, int]]]:
+            return {k: [(int(d[0]), int(d[1])) for d in v] for k, v in info[key].items()}
 
-
-def validation_directions(
-    directions: Sequence[tuple[int, int]], held: Collection[tuple[int, int]], object_id: str, seed: int, fraction: float
-) -> list:
-    """A seeded ``fraction`` of an object's directions (counted over all of them, at least one when ``fraction`` > 0)
-    from those not ``held`` out for test, always leaving one to train on; its own random stream, so the test
-    directions of a seed are the same with or without validation."""
-    units = sorted(set(directions) - set(held))
-    if fraction <= 0.0 or len(units) < 2:
-        return []
-    n_val = min(len(units) - 1, max(1, round(fraction * len(set(directions)))))
-    rng = np.random.default_rng([seed, zlib.crc32(object_id.encode()), 1])
-    picked = rng.choice(len(units), size=n_val, replace=False)
-    return sorted(units[int(i)] for i in picked)
+        return cls(
+            np.asarray(test_mask, dtype=bool),
+            int(info["seed"]),
+            float(info["test_fraction"]),
+            tuple(info["unseen_objects"]),
+            directions("test_directions"),
+            np.asarray(val_mask, dtype=bool),
+            float(info["val_fraction"]),
+            directions("val_directions"),
+            str(info["mode"]),
+            float(info["gap_deg"]),
+            tuple(info["not_held_out"]),
+        )
 
 
 SPLIT_MODES: tuple[str, ...] = ("random", "blocked")
@@ -165,31 +159,28 @@ def ray_distance_deg(a: float, b: float) -> float:
     return min(d, 360.0 - d)
 
 
-def arc_order(rays: Collection[int]) -> tuple[list[int], bool]:
-    """(the rays in order along their arc, whether they close a ring). A partial arc (a seen object's -45..45 deg)
-    starts after its widest gap, so a block never joins its two ends; a ring (the irregular prism's four rotations
-    cover all 360 deg) may wrap."""
-    units = sorted(set(int(r) % 360 for r in rays))
+def arc_order(values: Collection[float], period: float = 360) -> tuple[list[float], bool]:
+    """(``values`` (rays, or folded rays on a ring of ``period`` deg) in order along their arc, whether they close a
+    ring). A partial arc (a seen object's -45..45 deg) starts after its widest gap, so a block never joins its two
+    ends; a ring (the irregular prism's four rotations cover all 360 deg) may wrap."""
+    units = sorted(set(values))
     n = len(units)
     if n < 2:
         return units, False
-    gaps = [(units[(i + 1) % n] - units[i]) % 360 for i in range(n)]
+    gaps = [(units[(i + 1) % n] - units[i]) % period for i in range(n)]
     widest = int(np.argmax(gaps))
     order = units[widest + 1 :] + units[: widest + 1]
     return order, max(gaps) <= 2 * min(gaps)
 
 
-_Ray = TypeVar("_Ray", int, float)  # a ray (whole degrees) or a folded ray
-
-
 def pick_block(
-    order: Sequence[_Ray],
+    order: Sequence[float],
     ring: bool,
     size: int,
     rng: np.random.Generator,
-    avoid: Collection[_Ray] = (),
+    avoid: Collection[float] = (),
     centre_deg: float | None = None,
-) -> list[_Ray]:
+) -> list[float]:
     """One contiguous block of ``size`` rays along ``order`` that holds none of ``avoid``: a seeded one, or the one
     whose middle ray is nearest ``centre_deg``. Raises DataError when no such block exists."""
     n = len(order)
@@ -204,21 +195,22 @@ def pick_block(
     return blocks[int(rng.integers(len(blocks)))]
 
 
-def within_gap(rays: Collection[int], held: Collection[int], gap_deg: float) -> set[int]:
-    """The rays (not held) within ``gap_deg`` of a held one: the guard band that neither trains nor tests."""
+def within_gap(
+    values: Collection[float], held: Collection[float], gap_deg: float, distance: Callable[[float, float], float]
+) -> set[float]:
+    """The values (not held) within ``gap_deg`` of a held one by ``distance``: the guard band that neither trains
+    nor tests."""
     held_set = set(held)
-    return {r for r in rays if r not in held_set and any(ray_distance_deg(r, h) <= gap_deg for h in held_set)}
+    return {v for v in values if v not in held_set and any(distance(v, h) <= gap_deg + 1e-9 for h in held_set)}
 
 
 def object_symmetry(object_id: str) -> Symmetry:
     """The catalogue's symmetry of an object's cross-section (:attr:`unitac_rig.rig.objects.ObjectSpec.symmetry`);
     an object the catalogue does not know (imported or synthetic data) is taken as having none."""
-    from unitac_rig.rig.objects import Symmetry, get_object
+    from unitac_rig.rig.objects import Symmetry
 
-    try:
-        return get_object(object_id).symmetry
-    except UnitacError:
-        return Symmetry(order=1)
+    spec = _catalogued(object_id)
+    return Symmetry(order=1) if spec is None else spec.symmetry
 
 
 def fold_ray(ray: float, symmetry: Symmetry) -> float:
@@ -274,10 +266,10 @@ def hold_out_rays(
     """Test, validation and guard rays of one object, seeded by (``seed``, the object id, ``stream``).
 
     ``random`` (the paper's): ``test_fraction`` of the rays drawn at random, then ``val_fraction`` (of all) of the
-    rest; no guard. On an object pressed at one rotation this is exactly :func:`held_out_directions` and
-    :func:`validation_directions` (stream 0). ``blocked``: one contiguous block of rays for test and one for
-    validation, with every other ray within ``gap_deg`` of either a guard ray (held out of training, scored on
-    neither side), so no training ray lies within ``gap_deg`` of a test or validation ray. ``corner``: as blocked,
+    rest; no guard (on an object pressed at one rotation: the paper's split of its approach angles). ``blocked``: one
+    contiguous block of rays for test and one for validation, with every other ray within ``gap_deg`` of either a
+    guard ray (held out of training, scored on neither side), so no training ray lies within ``gap_deg`` of a test or
+    validation ray. ``corner``: as blocked,
     the test block centred on one of ``centres_deg`` (a corner's ray), chosen by the seed.
 
     ``symmetry`` (blocked only): the cross-section's symmetry. The blocks are then drawn in the folded angle
@@ -294,32 +286,41 @@ def hold_out_rays(
     if mode == "random":
         n_test, n_val = _block_sizes(len(units), test_fraction, val_fraction)
         rng = np.random.default_rng(key)
-        test = {units[int(i)] for i in rng.choice(len(units), size=n_test, replace=False)}
-        rest = [u for u in units if u not in test]
-        val: set[int] = set()
+        tested = {units[int(i)] for i in rng.choice(len(units), size=n_test, replace=False)}
+        rest = [u for u in units if u not in tested]
+        picked: set[int] = set()
         if n_val > 0 and len(rest) >= 2:
             val_rng = np.random.default_rng([*key[:2], 1, *key[2:]])
-            val = {rest[int(i)] for i in val_rng.choice(len(rest), size=min(n_val, len(rest) - 1), replace=False)}
-        return RayHoldOut(frozenset(test), frozenset(val), frozenset())
+            picked = {rest[int(i)] for i in val_rng.choice(len(rest), size=min(n_val, len(rest) - 1), replace=False)}
+        return RayHoldOut(frozenset(tested), frozenset(picked), frozenset())
     rng = np.random.default_rng([*key, 2])
+    value_of = {u: float(u) for u in units}  # the value a block is drawn in: the ray, or the folded ray
+    order, ring = arc_order(list(value_of.values()))
+    distance: Callable[[float, float], float] = ray_distance_deg
     if mode == "blocked" and symmetry is not None and (symmetry.order != 1 or symmetry.mirror_axis_deg is not None):
-        return _folded_blocks(units, object_id, symmetry, rng, test_fraction, val_fraction, gap_deg)
-    n_test, n_val = _block_sizes(len(units), test_fraction, val_fraction)
-    order, ring = arc_order(units)
+        sym = symmetry
+        value_of = {u: fold_ray(u, sym) for u in units}
+        if sym.continuous or len(set(value_of.values())) < 2:
+            return empty
+        values = sorted(set(value_of.values()))
+        # with mirrors the folded values lie on an interval [0, 180 / n], without on a ring of 360 / n
+        order, ring = (values, False) if sym.mirror_axis_deg is not None else arc_order(values, 360.0 / sym.order)
+        distance = functools.partial(_folded_value_distance, symmetry=sym)
+    n_test, n_val = _block_sizes(len(order), test_fraction, val_fraction)
     centre = None
     if mode == "corner":
         if not centres_deg:
             raise DataError(f"{object_id} has no corner to hold out", hint="use the blocked split for it")
         centre = float(centres_deg[int(rng.integers(len(centres_deg)))])
     test = set(pick_block(order, ring, n_test, rng, centre_deg=centre))
-    guard = within_gap(units, test, gap_deg)
-    val = set()
+    guard = within_gap(order, test, gap_deg, distance)
+    val: set[float] = set()
     if n_val > 0:
         val = set(pick_block(order, ring, n_val, rng, avoid=test | guard))
-        guard |= within_gap(units, val, gap_deg) - test
-    if not set(units) - test - val - guard:
+        guard |= within_gap(order, val, gap_deg, distance) - test
+    if not set(order) - test - val - guard:
         raise DataError(f"{object_id}: the blocked split leaves no approach direction to train on")
-    return RayHoldOut(frozenset(test), frozenset(val), frozenset(guard))
+    return RayHoldOut(*(frozenset(u for u in units if value_of[u] in side) for side in (test, val, guard)))
 
 
 def _block_sizes(n_units: int, test_fraction: float, val_fraction: float) -> tuple[int, int]:
@@ -328,61 +329,6 @@ def _block_sizes(n_units: int, test_fraction: float, val_fraction: float) -> tup
     n_test = min(n_units - 1, max(1, round(test_fraction * n_units)))
     n_val = min(n_units - 1 - n_test, max(1, round(val_fraction * n_units))) if val_fraction > 0 else 0
     return n_test, n_val
-
-
-def _folded_blocks(
-    units: Sequence[int],
-    object_id: str,
-    symmetry: Symmetry,
-    rng: np.random.Generator,
-    test_fraction: float,
-    val_fraction: float,
-    gap_deg: float,
-) -> RayHoldOut:
-    """The blocked split in the folded angle: contiguous blocks of folded values (the fractions count distinct
-    folded values), every ray of a held folded value held, the guard band every other ray within ``gap_deg`` of a
-    held one in folded distance."""
-    if symmetry.continuous:
-        return RayHoldOut(frozenset(), frozenset(), frozenset())
-    folded = {u: fold_ray(u, symmetry) for u in units}
-    values = sorted(set(folded.values()))
-    if len(values) < 2:
-        return RayHoldOut(frozenset(), frozenset(), frozenset())
-    n_test, n_val = _block_sizes(len(values), test_fraction, val_fraction)
-    if symmetry.mirror_axis_deg is not None:  # folded values lie on an interval [0, 180 / n]
-        order, ring = values, False
-    else:  # on a ring of 360 / n: start after the widest gap, wrap when the values cover it evenly
-        period = 360.0 / symmetry.order
-        gaps = [((values[(i + 1) % len(values)] - values[i]) % period) or period for i in range(len(values))]
-        widest = int(np.argmax(gaps))
-        order, ring = values[widest + 1 :] + values[: widest + 1], max(gaps) <= 2 * min(gaps)
-
-    test_values = set(pick_block(order, ring, n_test, rng))
-    guard_values = _within_folded_gap(values, test_values, symmetry, gap_deg)
-    val_values: set[float] = set()
-    if n_val > 0:
-        val_values = set(pick_block(order, ring, n_val, rng, avoid=test_values | guard_values))
-        guard_values |= _within_folded_gap(values, val_values, symmetry, gap_deg) - test_values
-    held = test_values | val_values | guard_values
-    if not set(values) - held:
-        raise DataError(f"{object_id}: the folded blocked split leaves no approach direction to train on")
-    return RayHoldOut(
-        frozenset(u for u in units if folded[u] in test_values),
-        frozenset(u for u in units if folded[u] in val_values),
-        frozenset(u for u in units if folded[u] in guard_values),
-    )
-
-
-def _within_folded_gap(
-    values: Collection[float], held: Collection[float], symmetry: Symmetry, gap_deg: float
-) -> set[float]:
-    """The folded values (not held) within ``gap_deg`` of a held one, distances in folded space."""
-    held_set = set(held)
-    return {
-        v
-        for v in values
-        if v not in held_set and any(_folded_value_distance(v, h, symmetry) <= gap_deg + 1e-9 for h in held_set)
-    }
 
 
 def split_by_direction(
@@ -489,11 +435,14 @@ class Normaliser:
     sensor_range: dict[str, float]
 
     @classmethod
-    def fit(cls, dataset: PairedDataset, rows: np.ndarray, mode: str = "channel_z") -> Normaliser:
+    def fit(
+        cls, dataset: PairedDataset, rows: np.ndarray, mode: str = "channel_z", sensors: Sequence[str] | None = None
+    ) -> Normaliser:
+        """The statistics of ``sensors`` (default: all of the dataset's) over the training ``rows``."""
         if mode not in PREPROCESSING:
             raise DataError(f"unknown preprocessing {mode!r}", hint=f"use one of {', '.join(PREPROCESSING)}")
         mean, std, data_range, channel_std, sensor_range = {}, {}, {}, {}, {}
-        for sensor in dataset.sensors:
+        for sensor in dataset.sensors if sensors is None else sensors:
             channels = dataset.values[sensor][rows].reshape(-1, 3).astype(np.float64)
             channels = channels[~np.isnan(channels).any(axis=1)]  # a partial join's missing frames are NaN
             if channels.shape[0] == 0:
@@ -538,10 +487,22 @@ class Normaliser:
         frames = flat.reshape(*flat.shape[:-1], -1, 3)
         return (frames * self.std[sensor] + self.mean[sensor]).astype(np.float32)
 
+    def inputs(self, rows: PairedDataset, feature_dims: Mapping[str, int]) -> tuple[np.ndarray, np.ndarray]:
+        """What the model trains on: (M, sum of ``feature_dims``) float32, the normalised frames of those sensors side
+        by side in that order, a frame a contact lacks as zeros (the masked loss never sees it), and the (M, sensors)
+        float32 presence."""
+        blocks, present = [], []
+        for sensor, width in feature_dims.items():
+            has = rows.has(sensor) if sensor in rows.values else np.zeros(len(rows), dtype=bool)
+            block = np.zeros((len(rows), width), dtype=np.float32)
+            if has.any():
+                block[has] = self.normalise(sensor, rows.values[sensor][has])
+            blocks.append(block)
+            present.append(has)
+        return np.concatenate(blocks, axis=1), np.stack(present, axis=1).astype(np.float32)
+
     def _check(self, sensor: str) -> None:
         if sensor not in self.mean:
-            from unitac_rig.errors import ModelError
-
             raise ModelError(f"no normalisation for sensor {sensor!r}", hint=f"known: {', '.join(self.mean)}")
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
@@ -574,11 +535,8 @@ class Normaliser:
 
 def object_shape_material(object_id: str) -> tuple[str, str]:
     """(shape, material) of an object: from the catalogue where it knows the id, else from ``<shape>_<material>``."""
-    from unitac_rig.rig.objects import get_object
-
-    try:
-        spec = get_object(object_id)
+    spec = _catalogued(object_id)
+    if spec is not None:
         return str(spec.shape), str(spec.material).upper()
-    except UnitacError:
-        shape, _, material = object_id.rpartition("_")
-        return (shape or object_id), (material.upper() or "unknown")
+    shape, _, material = object_id.rpartition("_")
+    return (shape or object_id), (material.upper() or "unknown")

@@ -2,8 +2,9 @@
 
 :class:`StackedAutoencoders` holds all models of a run (UniTac-NV and the per-sensor baselines) for all seeds
 ("members"); :meth:`StackedAutoencoders.network` slices one member's model out of it as an ordinary PyTorch network
-(:class:`Autoencoder`: ``nn.Linear``, ``nn.ReLU``, ``nn.Dropout``), the network that ``export-model`` writes and the
-benchmark's plain loop trains. The trainer, evaluation, translation, geometry and export all use this one model.
+(:class:`Autoencoder`: ``nn.Linear``, ``nn.ReLU``, ``nn.Dropout``), the network the benchmark's plain loop trains;
+``export-model`` writes the same member's layers (:func:`unitac_rig.learning.export.hub_model`). The trainer,
+evaluation, translation, geometry and export all use this one model.
 
 At the paper's batch size (64) the networks are so small that PyTorch's per-operation overhead, not arithmetic, sets
 the speed of an ordinary loop (one ``nn.Module`` per model, a ``DataLoader``, an optimizer kernel per tensor, one
@@ -87,13 +88,6 @@ def _stream_seed(seed: int, stream: int) -> int:
 
 
 @dataclass(frozen=True)
-class _Layer:
-    key: str  # "<group>/<part>/<index>", part = "enc_<sensor>", "dec" or "head_<sensor>" (an added output layer)
-    fan_in: int
-    fan_out: int
-
-
-@dataclass(frozen=True)
 class _Encoder:
     sensor: str
     layers: tuple[str, ...]  # layer keys, input to latent
@@ -170,12 +164,15 @@ class StackedAutoencoders(nn.Module):
             if unknown:
                 raise ModelError(f"group {group.name} names unknown sensor(s) {unknown}")
 
-        self._layers = {layer.key: layer for layer in self._layer_plan()}
+        self._plan, self._layers = self._forward_plan()
         dotted = sorted({name for g in self.groups for name in (g.name, *g.sensors) if "." in name})
         if dotted:  # a state_dict key is "layers.<group>/<part>/<index>.weight": a dot would make it ambiguous
             raise ModelError(f"model and sensor names cannot contain a dot: {', '.join(dotted)}")
         self.layers = nn.ModuleDict(
-            {k: StackedLinear(self.members, n.fan_in, n.fan_out, self.device) for k, n in self._layers.items()}
+            {
+                k: StackedLinear(self.members, fan_in, fan_out, self.device)
+                for k, (fan_in, fan_out) in self._layers.items()
+            }
         )
         # plain dicts of the same layers and Parameters: the hot loop looks them up without nn.Module's __getattr__
         self._linear = {k: layer for k, layer in self.layers.items() if isinstance(layer, StackedLinear)}
@@ -187,7 +184,6 @@ class StackedAutoencoders(nn.Module):
         self.frozen = frozenset(frozen)
         for key in self.frozen:
             self.layers[key].requires_grad_(False)
-        self._plan = self._forward_plan()
         self._trained_plan = [g for g in self._plan if self._trains(g)]
         self._pair_masks = {g.spec.name: self._pair_mask(g) for g in self._plan}
         self._mask_plans: dict[int, tuple[int, int, dict[str, tuple[int, int, int]]]] = {}
@@ -206,46 +202,40 @@ class StackedAutoencoders(nn.Module):
                 return group
         raise ModelError(f"no model {name!r} in this run", hint=f"models: {', '.join(g.name for g in self.groups)}")
 
-    @staticmethod
-    def _key(group: str, part: str, index: int) -> str:
-        return f"{group}/{part}/{index}"
-
-    def _layer_plan(self) -> list[_Layer]:
-        """Every layer in a fixed order (per group: each sensor's encoder, then the decoder), input to output."""
-        plan = []
-        for group in self.groups:
-            for sensor in group.sensors:
-                widths = [self.feature_dims[sensor], *self.shape.encoder_hidden, self.shape.latent_dim]
-                plan += [
-                    _Layer(self._key(group.name, f"enc_{sensor}", i), widths[i], widths[i + 1])
-                    for i in range(len(widths) - 1)
-                ]
-            widths = [self.shape.latent_dim, *self.shape.decoder_hidden]
-            plan += [_Layer(self._key(group.name, "dec", i), widths[i], widths[i + 1]) for i in range(len(widths) - 1)]
-            out = len(widths) - 1
-            for h, head in enumerate(group.output_heads):
-                fan_out = sum(self.feature_dims[s] for s in head)
-                plan.append(_Layer(self._key(group.name, head_part(head, h), out), widths[-1], fan_out))
-        return plan
-
-    def _forward_plan(self) -> list[_Group]:
+    def _forward_plan(self) -> tuple[list[_Group], dict[str, tuple[int, int]]]:
+        """Every group's layer keys (``<group>/<part>/<index>``, part ``enc_<sensor>``, ``dec`` or ``head_<sensors>``
+        for an added output layer) and every layer's (fan_in, fan_out), in a fixed order (per group: each sensor's
+        encoder, the decoder's hidden layers, its output layers), input to output."""
         columns, start = {}, 0
         for sensor in self.sensors:
             columns[sensor] = (start, start + self.feature_dims[sensor])
             start += self.feature_dims[sensor]
-        n_enc, n_hidden = len(self.shape.encoder_hidden) + 1, len(self.shape.decoder_hidden)
-        return [
-            _Group(
-                group,
-                tuple(
-                    _Encoder(s, tuple(self._key(group.name, f"enc_{s}", i) for i in range(n_enc)), columns[s])
-                    for s in group.sensors
-                ),
-                tuple(self._key(group.name, "dec", i) for i in range(n_hidden)),
-                tuple(self._key(group.name, head_part(head, h), n_hidden) for h, head in enumerate(group.output_heads)),
+        shapes: dict[str, tuple[int, int]] = {}
+
+        def chain(group: str, part: str, widths: Sequence[int], first: int = 0) -> tuple[str, ...]:
+            keys = tuple(f"{group}/{part}/{first + i}" for i in range(len(widths) - 1))
+            shapes.update({key: (widths[i], widths[i + 1]) for i, key in enumerate(keys)})
+            return keys
+
+        plan, trunk_widths = [], self.shape.trunk_widths
+        for g in self.groups:
+            encoders = tuple(
+                _Encoder(
+                    s,
+                    chain(g.name, f"enc_{s}", self.shape.encoder_widths(self.feature_dims[s])),
+                    columns[s],
+                )
+                for s in g.sensors
             )
-            for group in self.groups
-        ]
+            trunk = chain(g.name, "dec", trunk_widths)
+            heads = tuple(
+                chain(
+                    g.name, head_part(head, h), [trunk_widths[-1], sum(self.feature_dims[s] for s in head)], len(trunk)
+                )[0]
+                for h, head in enumerate(g.output_heads)
+            )
+            plan.append(_Group(g, encoders, trunk, heads))
+        return plan, shapes
 
     def _trains(self, group: _Group) -> bool:
         """Whether any layer of ``group`` is trained (a wholly frozen group is left out of the loss)."""
@@ -290,19 +280,19 @@ class StackedAutoencoders(nn.Module):
         with torch.no_grad():
             for member, seed in enumerate(self.seeds):
                 generator = torch.Generator().manual_seed(seed if stream is None else _stream_seed(seed, stream))
-                for key, layer in self._layers.items():
+                for key, (fan_in, fan_out) in self._layers.items():
                     if keys is not None and key not in keys:
                         continue
-                    bound = 1.0 / math.sqrt(layer.fan_in)
-                    w = torch.empty(layer.fan_in, layer.fan_out).uniform_(-bound, bound, generator=generator)
-                    b = torch.empty(1, layer.fan_out).uniform_(-bound, bound, generator=generator)
+                    bound = 1.0 / math.sqrt(fan_in)
+                    w = torch.empty(fan_in, fan_out).uniform_(-bound, bound, generator=generator)
+                    b = torch.empty(1, fan_out).uniform_(-bound, bound, generator=generator)
                     self.weights[key][member].copy_(w)
                     self.biases[key][member].copy_(b)
 
     def parameter_count(self, group: str) -> int:
         """Parameters of one member of ``group``."""
         return sum(
-            lay.fan_in * lay.fan_out + lay.fan_out for k, lay in self._layers.items() if k.startswith(group + "/")
+            fan_in * fan_out + fan_out for k, (fan_in, fan_out) in self._layers.items() if k.startswith(group + "/")
         )
 
     # ---- dropout masks ---------------------------------------------------------------------------------------
@@ -319,12 +309,12 @@ class StackedAutoencoders(nn.Module):
         for group in self._trained_plan:
             for encoder in group.encoders:
                 for key in encoder.layers:
-                    width = self._layers[key].fan_out
+                    width = self._layers[key][1]
                     plan[key] = (offset, rows, width)
                     offset += rows * width
             dec_rows = rows * len(group.encoders)
             for key in group.trunk:
-                width = self._layers[key].fan_out
+                width = self._layers[key][1]
                 plan[key] = (offset, dec_rows, width)
                 offset += dec_rows * width
         mean = offset * self.shape.dropout
@@ -538,9 +528,6 @@ class StackedAutoencoders(nn.Module):
         """Each member's dropout stream (so ``state_dict`` resumes the same masks), tagged with its device kind."""
         return {"device": self.device.type, "states": [g.get_state() for g in self._dropout_generators]}
 
-    def set_extra_state(self, state: Any) -> None:
-        self._restore_dropout_streams(state)
-
     @classmethod
     def from_state(cls, state: Mapping[str, Any], device: torch.device | str = "cpu") -> StackedAutoencoders:
         """The model a :meth:`state` describes."""
@@ -562,7 +549,7 @@ class StackedAutoencoders(nn.Module):
             ) from exc
         return engine
 
-    def _restore_dropout_streams(self, saved: Any) -> None:
+    def set_extra_state(self, saved: Any) -> None:
         """Continue each member's dropout stream where the checkpoint left it, when it was drawn on this kind of
         device (a CPU stream cannot continue on a GPU); otherwise the streams restart from the seeds."""
         if isinstance(saved, Mapping) and saved.get("device") == self.device.type:
@@ -592,8 +579,7 @@ class StackedAutoencoders(nn.Module):
 
     def network(self, group: str, member: int, dropout: float | None = None) -> Autoencoder:
         """Member ``member``'s model ``group`` as an ordinary PyTorch network (:class:`Autoencoder`), a copy of its
-        weights: ``dropout`` None keeps the run's (``nn.Dropout`` where this model drops out), 0 leaves it out (the
-        network ``export-model`` writes)."""
+        weights: ``dropout`` None keeps the run's (``nn.Dropout`` where this model drops out), 0 leaves it out."""
         spec = self.group(group)
         net = Autoencoder(self.feature_dims, spec, self.shape, dropout).to(self.device)
         for key, linear in net.linears().items():

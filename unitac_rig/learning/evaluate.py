@@ -11,7 +11,7 @@ With several members (seeds) the table holds the mean over members, ``table1_std
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -24,12 +24,10 @@ from unitac_rig.learning.metric_table import METRICS, alignment_metrics, frame_m
 from unitac_rig.learning.metrics import FrameScoring, LatentPairs, latent_l1_per_pair
 from unitac_rig.learning.paper import TABLE1_ROWS
 from unitac_rig.learning.run import (
-    METRICS_JSON,
     LoadedRun,
     load_run,
     load_test_set,
     load_training_pairs,
-    save_run_files,
 )
 from unitac_rig.learning.simple_baselines import SimplePredictions, baseline_columns, predict_simple_baselines
 
@@ -69,16 +67,11 @@ class Evaluator:
         self.dataset = test
         self.sensors = test.sensors
         self.device = device
-        self.nmae_normaliser = nmae_normaliser
-        self.ssim_range = ssim_range
         self.options = {"nmae_normaliser": nmae_normaliser, "ssim_range": ssim_range}  # TrainConfig field -> value
         self.inputs = {s: torch.from_numpy(normaliser.normalise(s, test.values[s])).to(device) for s in self.sensors}
         self.targets = {s: torch.from_numpy(test.values[s]).to(device, torch.float32) for s in self.sensors}
         self.mean = {s: torch.tensor(normaliser.mean[s], dtype=torch.float32, device=device) for s in self.sensors}
         self.std = {s: torch.tensor(normaliser.std[s], dtype=torch.float32, device=device) for s in self.sensors}
-        self.range = {
-            s: torch.tensor(normaliser.data_range[s], dtype=torch.float32, device=device) for s in self.sensors
-        }
         self._normaliser = normaliser
         unseen = np.isin(test.object_id, list(unseen_objects))
         self.subsets = {
@@ -102,11 +95,14 @@ class Evaluator:
         return {s: engine.encode(UNITAC_GROUP, s, self.inputs[s]) for s in self.sensors}
 
     @torch.no_grad()
-    def reconstructions(self, engine: StackedAutoencoders) -> dict[str, tuple[str, torch.Tensor]]:
+    def reconstructions(
+        self, engine: StackedAutoencoders, latents: dict[str, torch.Tensor] | None = None
+    ) -> dict[str, tuple[str, torch.Tensor]]:
         """{column: (target sensor, frames (members, M, n_taxels, 3) in sensor units)} for every UniTac-NV direction
-        ``<src>_to_<dst>`` and every baseline ``ae_<sensor>`` the run trained."""
+        ``<src>_to_<dst>`` and every baseline ``ae_<sensor>`` the run trained (from ``latents`` when they are at
+        hand)."""
         out: dict[str, tuple[str, torch.Tensor]] = {}
-        latents = self.latents(engine)
+        latents = latents or self.latents(engine)
         for source in self.sensors:
             decoded = engine.decode(UNITAC_GROUP, latents[source])
             for target in self.sensors:
@@ -120,12 +116,14 @@ class Evaluator:
         return out
 
     @torch.no_grad()
-    def per_frame(self, engine: StackedAutoencoders) -> dict[str, dict[str, torch.Tensor]]:
+    def per_frame(
+        self, engine: StackedAutoencoders, latents: dict[str, torch.Tensor] | None = None
+    ) -> dict[str, dict[str, torch.Tensor]]:
         """{column: {frame metric name: (members, M)}} for every frame metric of the table. Columns:
         ``<src>_to_<dst>`` for UniTac-NV, ``ae_<sensor>`` for baselines the run trained."""
         return {
             column: self.score_frames(target, frames)
-            for column, (target, frames) in self.reconstructions(engine).items()
+            for column, (target, frames) in self.reconstructions(engine, latents).items()
         }
 
     @torch.no_grad()
@@ -151,15 +149,13 @@ class Evaluator:
         scoring, estimate = self.scoring(sensor), estimate.to(self.device, torch.float32)
         return {metric.name: metric.score(estimate, scoring, None) for metric in frame_metrics()}
 
-    @torch.no_grad()
-    def alignment(self, engine: StackedAutoencoders, mask: torch.Tensor | None = None) -> dict[str, Any]:
+    def alignment(self, latents: dict[str, torch.Tensor], mask: torch.Tensor | None = None) -> dict[str, Any]:
         """Per member, over the rows ``mask`` selects (all by default), every alignment metric of the table (the
-        paper's raw ``latent_l1``, the scale-free ``latent_ratio``, sensor ``mixing`` and ``mixing_expected``), each
-        averaged over sensor pairs. Empty for one sensor."""
+        paper's raw ``latent_l1``, the scale-free ``latent_ratio``, sensor ``mixing`` and ``mixing_expected``) of
+        :meth:`latents`, each averaged over sensor pairs. Empty for one sensor."""
         pairs = self.sensor_pairs()
         if not pairs:
             return {}
-        latents = self.latents(engine)
         if mask is not None:
             latents = {s: z[:, mask] for s, z in latents.items()}
         scored = LatentPairs([(latents[a], latents[b]) for a, b in pairs])
@@ -168,7 +164,8 @@ class Evaluator:
     def summary(self, engine: StackedAutoencoders) -> dict[str, Any]:
         """Means over the subsets ("all", "seen" objects' held-out angles, "unseen" objects), per member, with the
         latent alignment of each subset."""
-        scores = self.per_frame(engine)
+        latents = self.latents(engine)
+        scores = self.per_frame(engine, latents)
         summary: dict[str, Any] = {}
         for subset, mask in self.subsets.items():
             if not bool(mask.any()):
@@ -177,7 +174,7 @@ class Evaluator:
                 column: {metric: values[:, mask].mean(dim=1).tolist() for metric, values in metrics.items()}
                 for column, metrics in scores.items()
             }
-            entry.update(self.alignment(engine, mask))
+            entry.update(self.alignment(latents, mask))
             summary[subset] = entry
         return summary
 
@@ -252,14 +249,28 @@ def simple_baseline_table(
         column: evaluator.score_frames(target, torch.from_numpy(frames)[None])
         for column, (target, frames) in predictions.frames.items()
     }
-    table = {
+    table = _cells(_row_means(scores, rows), lambda values: float(values[0]))
+    return {"table1": table, "compared_with": baseline_columns(evaluator.sensors), **predictions.info()}
+
+
+def _row_means(
+    scores: dict[str, dict[str, torch.Tensor]], rows: list[tuple[str, np.ndarray]]
+) -> dict[str, dict[str, dict[str, np.ndarray]]]:
+    """{row: {column: {frame metric: (members,) its mean over the row's contacts}}} of per-frame ``scores``."""
+    return {
         row: {
-            column: {name: float(values[0, torch.from_numpy(mask)].mean()) for name, values in metrics.items()}
+            column: {name: values[:, torch.from_numpy(mask)].mean(dim=1).numpy() for name, values in metrics.items()}
             for column, metrics in scores.items()
         }
         for row, mask in rows
     }
-    return {"table1": table, "compared_with": baseline_columns(evaluator.sensors), **predictions.info()}
+
+
+def _cells(means: dict[str, dict[str, dict[str, np.ndarray]]], read: Callable[[np.ndarray], Any]) -> dict[str, Any]:
+    """:func:`_row_means` with each cell's per-member values read by ``read`` (their mean, spread, list...)."""
+    return {
+        row: {c: {n: read(v) for n, v in cell.items()} for c, cell in columns.items()} for row, columns in means.items()
+    }
 
 
 def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions | None = None) -> dict[str, Any]:
@@ -267,21 +278,10 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
     baselines' Table I (``simple_baselines``)."""
     config = run.config
     evaluator = Evaluator.for_run(run, test)
-    scores = evaluator.per_frame(run.engine)
-    members = run.engine.members
-    table: dict[str, dict[str, dict[str, float]]] = {}
-    table_std: dict[str, dict[str, dict[str, float]]] = {}
-    table_members: dict[str, dict[str, dict[str, list[float]]]] = {}
-    counts: dict[str, int] = {}
-    for row, mask in table_rows(test, run.unseen_objects):
-        index = torch.from_numpy(mask)
-        counts[row] = int(mask.sum())
-        table[row], table_std[row], table_members[row] = {}, {}, {}
-        for column, metrics in scores.items():
-            per_member = {name: values[:, index].mean(dim=1).numpy() for name, values in metrics.items()}
-            table[row][column] = {name: float(v.mean()) for name, v in per_member.items()}
-            table_std[row][column] = {name: float(v.std()) for name, v in per_member.items()}
-            table_members[row][column] = {name: v.tolist() for name, v in per_member.items()}
+    latents = evaluator.latents(run.engine)
+    scores = evaluator.per_frame(run.engine, latents)
+    rows = table_rows(test, run.unseen_objects)
+    means = _row_means(scores, rows)
 
     history = run.history
     first_test = history[0].get("test", {}) if history else {}
@@ -289,14 +289,14 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
     for subset, subset_mask in evaluator.subsets.items():
         if not bool(subset_mask.any()) or not evaluator.sensor_pairs():
             continue
-        now = evaluator.alignment(run.engine, subset_mask)
+        now = evaluator.alignment(latents, subset_mask)
         then = first_test.get(subset, {})
         alignment[subset] = {
             metric.name: {"first_epoch": then.get(metric.name), "final": now[metric.name]}
             for metric in alignment_metrics()
         }
     result: dict[str, Any] = {
-        "table1": table,
+        "table1": _cells(means, lambda values: float(values.mean())),
         "alignment": {
             "per_subset": alignment,
             "definition": {metric.name: metric.description for metric in alignment_metrics()},
@@ -314,7 +314,7 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
         "seeds": list(run.engine.seeds),
         "split_seed": int(config.split_seed),
         "sensors": list(run.sensors),
-        "test_rows": counts,
+        "test_rows": {row: int(mask.sum()) for row, mask in rows},
         "simulated": bool(test.simulated),
         "dataset_hash": run.payload["dataset_hash"],
         "provenance": run.payload.get("provenance", {}),
@@ -330,10 +330,10 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
     if variants:
         result["validation_metric_variants"] = variants
     if simple is not None:
-        result["simple_baselines"] = simple_baseline_table(evaluator, table_rows(test, run.unseen_objects), simple)
-    if members > 1:
-        result["table1_std"] = table_std
-        result["table1_members"] = table_members
+        result["simple_baselines"] = simple_baseline_table(evaluator, rows, simple)
+    if run.engine.members > 1:
+        result["table1_std"] = _cells(means, lambda values: float(values.std()))
+        result["table1_members"] = _cells(means, lambda values: values.tolist())
     return result
 
 
@@ -352,10 +352,3 @@ def run_metrics(run_dir: Path, run: LoadedRun | None = None, test: PairedDataset
     run = run or load_run(run_dir)
     test = test or load_test_set(run_dir)
     return evaluate_run(run, test, simple_predictions(run_dir, run, test))
-
-
-def write_metrics(run_dir: Path, run: LoadedRun | None = None, test: PairedDataset | None = None) -> dict[str, Any]:
-    """Evaluate the run in ``run_dir`` (:func:`run_metrics`) and write ``RUN/metrics.json`` (atomically)."""
-    metrics = run_metrics(run_dir, run, test)
-    save_run_files(run_dir, {METRICS_JSON: metrics})
-    return metrics

@@ -7,8 +7,8 @@ written by huggingface_hub's ``PyTorchModelHubMixin`` from :class:`unitac_rig.le
 units, taxel layout, the folded normaliser, the training data's content hash, provenance and the SHA-256 of the
 weights; :func:`push_to_hub` uploads such a folder. The other formats write one file per network.
 
-For every sensor of the run's UniTac-NV model, one member (seed), cut from that member's plain network
-(:meth:`unitac_rig.learning.engine.StackedAutoencoders.network`, the one model's own slice):
+For every sensor of the run's UniTac-NV model, one member (seed), from that member's layers of the one trained model
+(:meth:`unitac_rig.learning.engine.StackedAutoencoders.layer_parameters`):
 
 * ``encoder_<sensor>``: frames ``(B, n_taxels, 3)`` in the sensor's own units -> latent ``(B, latent_dim)``;
 * ``decoder_<sensor>``: latent ``(B, latent_dim)`` -> frames ``(B, n_taxels, 3)`` in that sensor's units: the shared
@@ -49,10 +49,9 @@ import torch
 from torch import nn
 
 from unitac_rig.errors import UsageError
-from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
-from unitac_rig.learning.network import linear_layers
-from unitac_rig.learning.run import provenance, read_metrics
-from unitac_rig.learning.train import LoadedRun, load_run
+from unitac_rig.learning.engine import UNITAC_GROUP
+from unitac_rig.learning.network import head_part, linear_layers
+from unitac_rig.learning.run import LoadedRun, load_run, provenance, read_metrics
 from unitac_rig.storage.manifest import publish_when_done
 
 if TYPE_CHECKING:
@@ -69,28 +68,6 @@ EXPORT_VERSION = 1
 WEIGHTS_NAME = "model.safetensors"
 CONFIG_NAME = "config.json"
 LICENSE = "mit"  # the package's licence (pyproject.toml), which the exported weights are shared under
-
-
-def _fold_into(
-    target: nn.Linear,
-    source: nn.Linear,
-    scale_in: np.ndarray | None = None,
-    shift_in: np.ndarray | None = None,
-    scale_out: np.ndarray | None = None,
-    shift_out: np.ndarray | None = None,
-) -> None:
-    """``source`` written into ``target`` with the normaliser folded in, computed in float64:
-    ``W ((x - shift_in) * scale_in) + b`` for an input layer, ``(W z + b) * scale_out + shift_out`` for an output
-    layer, ``source`` itself for any other."""
-    weight = source.weight.detach().cpu().double().numpy().T  # (in, out)
-    bias = source.bias.detach().cpu().double().numpy()
-    if scale_in is not None and shift_in is not None:
-        weight, bias = weight * scale_in[:, None], bias - (shift_in * scale_in) @ weight
-    if scale_out is not None and shift_out is not None:
-        weight, bias = weight * scale_out[None, :], bias * scale_out + shift_out
-    with torch.no_grad():
-        target.weight.copy_(torch.from_numpy(weight.T.copy()))
-        target.bias.copy_(torch.from_numpy(bias.copy()))
 
 
 @contextlib.contextmanager
@@ -159,21 +136,14 @@ def _sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-def _units(sensor: str) -> str:
-    from unitac_rig.rig.sensors import SENSORS
-
-    spec = SENSORS.get(sensor)
-    return spec.layout.units if spec is not None else "as recorded (not a registered sensor)"
-
-
-def _layout(sensor: str) -> dict[str, Any] | None:
+def _units_and_layout(sensor: str) -> tuple[str, dict[str, Any] | None]:
     from unitac_rig.rig.sensors import SENSORS
 
     spec = SENSORS.get(sensor)
     if spec is None:
-        return None
+        return "as recorded (not a registered sensor)", None
     layout = spec.layout
-    return {"rows": layout.rows, "cols": layout.cols, "pitch_mm": layout.pitch_mm, "units": layout.units}
+    return layout.units, {"rows": layout.rows, "cols": layout.cols, "pitch_mm": layout.pitch_mm, "units": layout.units}
 
 
 def export_model(run_dir: Path, out: Path, fmt: str, member: int = 0) -> dict[str, Any]:
@@ -185,8 +155,7 @@ def export_model(run_dir: Path, out: Path, fmt: str, member: int = 0) -> dict[st
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise UsageError(f"{out} exists and is not empty", hint="export into a new directory")
     run = load_run(Path(run_dir))
-    if not 0 <= member < run.engine.members:
-        raise UsageError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
+    run.check_member(member)
     out.parent.mkdir(parents=True, exist_ok=True)
     staging = out.parent / f".{out.name}.export-{os.getpid()}-{uuid.uuid4().hex[:8]}"
     staging.mkdir()  # not tempfile.mkdtemp: that is private (0700), and the export is meant to be shared
@@ -201,16 +170,17 @@ def export_model(run_dir: Path, out: Path, fmt: str, member: int = 0) -> dict[st
 def _sensor_entry(run: LoadedRun, sensor: str, files: dict[str, str]) -> dict[str, Any]:
     """What model.json / config.json say of one sensor: shape, units, layout, where its networks are (``files``),
     their layer widths and the normaliser folded into them."""
-    engine, latent = run.engine, run.engine.shape.latent_dim
+    engine = run.engine
     n_taxels = engine.feature_dims[sensor] // 3
+    units, layout = _units_and_layout(sensor)
     return {
         "n_taxels": n_taxels,
         "frame_shape": [n_taxels, 3],
-        "units": _units(sensor),
-        "layout": _layout(sensor),
+        "units": units,
+        "layout": layout,
         **files,
-        "encoder_widths": [n_taxels * 3, *engine.shape.encoder_hidden, latent],
-        "decoder_widths": [latent, *engine.shape.decoder_hidden, n_taxels * 3],
+        "encoder_widths": engine.shape.encoder_widths(n_taxels * 3),
+        "decoder_widths": engine.shape.decoder_widths(n_taxels * 3),
         "normaliser_folded_in": {
             "mean": np.asarray(run.normaliser.mean[sensor], dtype=float).tolist(),
             "std": np.asarray(run.normaliser.std[sensor], dtype=float).tolist(),
@@ -235,22 +205,38 @@ def _export_into(run: LoadedRun, staging: Path, fmt: str, member: int) -> dict[s
         for name in names.values():
             files[name] = _sha256(staging / name)
         entries[sensor] = _sensor_entry(run, sensor, names)
-    metrics = read_metrics(run.run_dir)
-    document: dict[str, Any] = {
+    document = _document(run, member, fmt, entries, model.latent_dim)
+    document["frame"] = "(B, n_taxels, 3) float32; taxel i at (row, col) = divmod(i, cols); channels x, y, z"
+    document["translate"] = "decoder_<target>(encoder_<source>(frames))"
+    document["files"] = files
+    (staging / MODEL_JSON).write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+    (staging / CARD_NAME).write_text(render_card(document, read_metrics(run.run_dir)), encoding="utf-8")
+    return document
+
+
+def _document(run: LoadedRun, member: int, fmt: str, entries: dict[str, Any], latent_dim: int) -> dict[str, Any]:
+    """What every export's model.json / config.json says: the format, the sensors' entries, and where the model
+    came from (member, seed, epochs, the dataset's hash and summary, a new-sensor extension, provenance)."""
+    payload = run.payload
+    extension = payload.get("extension")
+    return {
         "format": EXPORT_FORMAT,
         "version": EXPORT_VERSION,
         "export_format": fmt,
         "model": "UniTac-NV (Hou et al., IROS 2025): one encoder per sensor, one shared decoder",
-        "latent_dim": model.latent_dim,
+        "latent_dim": latent_dim,
         "sensors": entries,
-        "frame": "(B, n_taxels, 3) float32; taxel i at (row, col) = divmod(i, cols); channels x, y, z",
-        "translate": "decoder_<target>(encoder_<source>(frames))",
-        **run_fields(run.payload, run.engine, member),
-        "files": files,
+        "member": member,
+        "seed": run.engine.seeds[member],
+        "epochs": int(payload["epoch"]),
+        "dataset_hash": payload["dataset_hash"],
+        "dataset_summary": payload.get("dataset_summary", {}),
+        "extension": (
+            {k: extension[k] for k in ("new_sensor", "trained_sensors", "from_dataset_hash")} if extension else None
+        ),
+        "run_provenance": payload.get("provenance", {}),
+        "exported_by": provenance(),
     }
-    (staging / MODEL_JSON).write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    (staging / CARD_NAME).write_text(render_card(document, metrics), encoding="utf-8")
-    return document
 
 
 def _metrics_lines(metrics: dict[str, Any] | None) -> list[str]:
@@ -285,25 +271,6 @@ def _metrics_lines(metrics: dict[str, Any] | None) -> list[str]:
     return lines
 
 
-def run_fields(payload: dict[str, Any], engine: StackedAutoencoders, member: int) -> dict[str, Any]:
-    """What every exported model says about the run it came from: member, seed, epochs, the dataset's hash and
-    summary, a new-sensor extension, the run's and the exporter's provenance."""
-    return {
-        "member": member,
-        "seed": engine.seeds[member],
-        "epochs": int(payload["epoch"]),
-        "dataset_hash": payload["dataset_hash"],
-        "dataset_summary": payload.get("dataset_summary", {}),
-        "extension": (
-            {k: payload["extension"][k] for k in ("new_sensor", "trained_sensors", "from_dataset_hash")}
-            if payload.get("extension")
-            else None
-        ),
-        "run_provenance": payload.get("provenance", {}),
-        "exported_by": provenance(),
-    }
-
-
 def render_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str:
     """The model card: what the files are, the data it learned from, its test metrics, intended use, limits, and
     how to load it with plain torch (or onnxruntime)."""
@@ -312,7 +279,6 @@ def render_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str
     fmt = document["export_format"]
     summary = document.get("dataset_summary") or {}
     source, target = (names[0], names[1]) if len(names) > 1 else (names[0], names[0])
-    src, dst = sensors[source], sensors[target]
     rows = [
         f"| {s} | {e['n_taxels']} | ({e['n_taxels']}, 3) | {e['units']} | `{e['encoder']}` | `{e['decoder']}` |"
         for s, e in sensors.items()
@@ -377,18 +343,36 @@ def render_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str
         "## How to load",
         "",
     ]
-    lines += _loading_snippet(fmt, source, target, src, dst)
-    lines += [
-        "",
-        f"`{MODEL_JSON}` lists every sensor's shape, units, layer widths, file names and their SHA-256 "
-        "(check a copy with `sha256sum`).",
-        "",
-    ]
+    lines += _loading_snippet(document, source, target)
     return "\n".join(lines)
 
 
-def _loading_snippet(fmt: str, source: str, target: str, src: dict[str, Any], dst: dict[str, Any]) -> list[str]:
+def _loading_snippet(document: dict[str, Any], source: str, target: str) -> list[str]:
+    """The card's "How to load" section: code that translates ``source`` frames into ``target`` frames."""
+    fmt, src, dst = document["export_format"], document["sensors"][source], document["sensors"][target]
     n_src = src["n_taxels"]
+    if fmt == "safetensors":
+        return [
+            "With unitac-rig installed (`pip install unitac-rig`; the class rebuilds itself from `config.json` "
+            "through huggingface_hub's `PyTorchModelHubMixin`), from this folder or from its Hub repository:",
+            "",
+            "```python",
+            "import torch",
+            "from unitac_rig.learning.network import UniTacNV",
+            "",
+            'model = UniTacNV.from_pretrained(".")  # or the Hub repository id',
+            f"frames = torch.zeros(1, {n_src}, 3)  # {source} frames, {src['units']}",
+            "with torch.no_grad():",
+            f'    latent = model.encode(frames, "{source}")  # (1, {document["latent_dim"]})',
+            f'    translated = model.decode(latent, "{target}")  # (1, {dst["n_taxels"]}, 3) {target} frames, '
+            f"{dst['units']}",
+            "```",
+            "",
+            "Without unitac-rig, export the run with `--format torchscript` or `--format onnx` (plain torch or "
+            f"onnxruntime load those). `{CONFIG_NAME}` lists every sensor's shape, units, layer widths and the "
+            f"folded normaliser, every tensor's shape, and the SHA-256 of `{WEIGHTS_NAME}`.",
+            "",
+        ]
     if fmt == "torchscript":
         code = [
             "import torch",
@@ -437,35 +421,48 @@ def _loading_snippet(fmt: str, source: str, target: str, src: dict[str, Any], ds
             "with torch.no_grad():",
             f"    translated = decoder(encoder(torch.zeros(1, {n_src}, 3)))  # {target} frames, {dst['units']}",
         ]
-    return ["```python", *code, "```"]
+    return [
+        "```python",
+        *code,
+        "```",
+        "",
+        f"`{MODEL_JSON}` lists every sensor's shape, units, layer widths, file names and their SHA-256 "
+        "(check a copy with `sha256sum`).",
+        "",
+    ]
 
 
 def hub_model(run: LoadedRun, member: int = 0) -> UniTacNV:
     """Member ``member`` of ``run`` as the exported module (normaliser folded in, no dropout, eval mode, CPU): per
-    sensor, the member's plain encoder (:meth:`StackedAutoencoders.network`) with ``(x - mean) / std`` folded into
-    its first layer, and the shared hidden layers plus that sensor's columns of the output layer with ``y * std +
-    mean`` folded into the last."""
+    sensor, the member's encoder with ``(x - mean) / std`` folded into its first layer, and the shared hidden layers
+    plus that sensor's columns of its output layer with ``y * std + mean`` folded into the last (in float64)."""
     from unitac_rig.learning.network import UniTacNV  # imports huggingface_hub: only when asked
 
     engine = run.engine
-    sensors = engine.group(UNITAC_GROUP).sensors
-    net = engine.network(UNITAC_GROUP, member, dropout=0.0).cpu()
-    model = UniTacNV({s: _sensor_entry(run, s, {}) for s in sensors}, engine.shape.latent_dim)
-    for sensor in sensors:
-        taxels = engine.feature_dims[sensor] // 3
-        mean = np.tile(np.asarray(run.normaliser.mean[sensor], dtype=np.float64), taxels)  # per frame column
-        std = np.tile(np.asarray(run.normaliser.std[sensor], dtype=np.float64), taxels)
-        pairs = [
-            *zip(linear_layers(model.encoders[sensor]), linear_layers(net.encoder(sensor)), strict=True),
-            *zip(linear_layers(model.decoders[sensor]), linear_layers(net.decoder_for(sensor)), strict=True),
-        ]
-        for i, (target, source) in enumerate(pairs):
-            if i == 0:
-                _fold_into(target, source, scale_in=1.0 / std, shift_in=mean)
-            elif i == len(pairs) - 1:
-                _fold_into(target, source, scale_out=std, shift_out=mean)
-            else:
-                _fold_into(target, source)
+    group = engine.group(UNITAC_GROUP)
+    model = UniTacNV({s: _sensor_entry(run, s, {}) for s in group.sensors}, engine.shape.latent_dim)
+    params = engine.layer_parameters(UNITAC_GROUP, member)  # key -> (weight (in, out), bias (out,))
+    n_hidden = len(engine.shape.decoder_hidden)
+    for sensor in group.sensors:
+        dims = engine.feature_dims
+        mean = np.tile(np.asarray(run.normaliser.mean[sensor], dtype=np.float64), dims[sensor] // 3)  # per column
+        scale = np.tile(np.asarray(run.normaliser.std[sensor], dtype=np.float64), dims[sensor] // 3)
+        h, head = next((h, head) for h, head in enumerate(group.output_heads) if sensor in head)
+        start = sum(dims[s] for s in head[: head.index(sensor)])
+        out_weight, out_bias = params[f"{head_part(head, h)}/{n_hidden}"]
+        layers = [params[f"enc_{sensor}/{i}"] for i in range(len(engine.shape.encoder_hidden) + 1)]
+        layers += [params[f"dec/{i}"] for i in range(n_hidden)]
+        layers.append((out_weight[:, start : start + dims[sensor]], out_bias[start : start + dims[sensor]]))
+        layers = [(w.astype(np.float64), b.astype(np.float64)) for w, b in layers]
+        (w, b), inverse = layers[0], 1.0 / scale
+        layers[0] = (w * inverse[:, None], b - (mean * inverse) @ w)
+        w, b = layers[-1]
+        layers[-1] = (w * scale[None, :], b * scale + mean)
+        linears = linear_layers(model.encoders[sensor]) + linear_layers(model.decoders[sensor])
+        with torch.no_grad():
+            for linear, (w, b) in zip(linears, layers, strict=True):
+                linear.weight.copy_(torch.from_numpy(w.T.copy()))
+                linear.bias.copy_(torch.from_numpy(b.copy()))
     return model.eval()
 
 
@@ -476,20 +473,14 @@ def _export_safetensors(run: LoadedRun, staging: Path, member: int) -> dict[str,
         s: _sensor_entry(run, s, {"encoder": f"encoders.{s}.*", "decoder": f"decoders.{s}.*"}) for s in model.sensors
     }
     metrics = read_metrics(run.run_dir)
-    document: dict[str, Any] = {
-        "format": EXPORT_FORMAT,
-        "version": EXPORT_VERSION,
-        "export_format": "safetensors",
-        "model": "UniTac-NV (Hou et al., IROS 2025): one encoder per sensor, one shared decoder",
+    document = _document(run, member, "safetensors", entries, model.latent_dim)
+    document |= {
         "class": "unitac_rig.learning.network.UniTacNV",
         "weights": WEIGHTS_NAME,
-        "latent_dim": model.latent_dim,
-        "sensors": entries,
         "tensors": {name: list(t.shape) for name, t in model.state_dict().items()},
         "frame": "(B, n_taxels, 3) float32, tare-subtracted, sensor units; taxel i at (row, col) = divmod(i, cols); "
         "channels x, y, z",
         "translate": "model(frames, source, target) = model.decode(model.encode(frames, source), target)",
-        **run_fields(run.payload, run.engine, member),
     }
     (staging / CARD_NAME).write_text(_hub_card(document, metrics), encoding="utf-8")  # before: the mixin keeps it
     model.save_pretrained(staging, config=document)  # its config.json sorts keys: rewritten below in sensor order
@@ -557,10 +548,6 @@ def _model_index(document: dict[str, Any], metrics: dict[str, Any] | None) -> li
 def _hub_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str:
     """The Hub model card: YAML front matter (license, library, pipeline tag, tags, datasets, model-index), then the
     shared card (:func:`render_card`) with the ``from_pretrained`` loading code."""
-
-    names = list(document["sensors"])
-    source, target = (names[0], names[1]) if len(names) > 1 else (names[0], names[0])
-    src, dst = document["sensors"][source], document["sensors"][target]
     front = [
         "---",
         f"license: {LICENSE}",
@@ -573,29 +560,4 @@ def _hub_card(document: dict[str, Any], metrics: dict[str, Any] | None) -> str:
         "---",
         "",
     ]
-    body = render_card(document, metrics)
-    head, _, _ = body.partition("## How to load")
-    loading = [
-        "## How to load",
-        "",
-        "With unitac-rig installed (`pip install unitac-rig`; the class rebuilds itself from `config.json` through "
-        "huggingface_hub's `PyTorchModelHubMixin`), from this folder or from its Hub repository:",
-        "",
-        "```python",
-        "import torch",
-        "from unitac_rig.learning.network import UniTacNV",
-        "",
-        'model = UniTacNV.from_pretrained(".")  # or the Hub repository id',
-        f"frames = torch.zeros(1, {src['n_taxels']}, 3)  # {source} frames, {src['units']}",
-        "with torch.no_grad():",
-        f'    latent = model.encode(frames, "{source}")  # (1, {document["latent_dim"]})',
-        f'    translated = model.decode(latent, "{target}")  # (1, {dst["n_taxels"]}, 3) {target} frames, '
-        f"{dst['units']}",
-        "```",
-        "",
-        "Without unitac-rig, export the run with `--format torchscript` or `--format onnx` (plain torch or "
-        f"onnxruntime load those). `{CONFIG_NAME}` lists every sensor's shape, units, layer widths and the folded "
-        f"normaliser, every tensor's shape, and the SHA-256 of `{WEIGHTS_NAME}`.",
-        "",
-    ]
-    return "\n".join(front) + "\n" + head + "\n".join(loading)
+    return "\n".join(front) + "\n" + render_card(document, metrics)

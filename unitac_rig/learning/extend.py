@@ -27,7 +27,7 @@ import logging
 import time
 import zlib
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +39,8 @@ from unitac_rig.learning.data import (
     Normaliser,
     PairedDataset,
     build_paired_dataset,
-    held_out_directions,
+    hold_out_rays,
+    ray_deg,
 )
 from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
 from unitac_rig.learning.evaluate import Evaluator, direction_name
@@ -52,7 +53,9 @@ from unitac_rig.learning.run import (
     save_checkpoint,
     save_test_set,
     tsne_rows,
+    write_config_json,
 )
+from unitac_rig.learning.train import train_epoch
 from unitac_rig.storage.reader import MatchedSet
 
 log = logging.getLogger(__name__)
@@ -70,15 +73,9 @@ class ExtendConfig:
     learning_rate: float | None = None
 
     def resolved(self, run: LoadedRun) -> dict[str, Any]:
-        config = run.payload["config"]
-        out = {
-            "epochs": int(self.epochs if self.epochs is not None else config["epochs"]),
-            "batch_size": int(self.batch_size if self.batch_size is not None else config["batch_size"]),
-            "learning_rate": float(self.learning_rate if self.learning_rate is not None else config["learning_rate"]),
-        }
-        if out["epochs"] < 1 or out["batch_size"] < 1 or out["learning_rate"] <= 0:
-            raise UsageError(f"epochs and batch size must be at least 1 and the learning rate positive, got {out}")
-        return out
+        """The settings, checked as the run's :class:`~unitac_rig.learning.config.TrainConfig` checks them."""
+        config = run.config.updated({k: v for k, v in asdict(self).items() if v is not None})
+        return {"epochs": config.epochs, "batch_size": config.batch_size, "learning_rate": config.learning_rate}
 
 
 @dataclass
@@ -118,58 +115,24 @@ def extension_dataset(sets: Sequence[MatchedSet], trained: Sequence[str], new_se
 
 def _test_mask(dataset: PairedDataset, split: dict[str, Any]) -> np.ndarray:
     """Test rows: the trained run's held-out directions for the objects it knew, all rows of its unseen objects,
-    and a seeded share of a new object's directions."""
+    and a seeded share of a new object's approach rays (the run's random split)."""
     unseen = set(split["unseen_objects"])
-    held = {obj: {tuple(int(v) for v in d) for d in dirs} for obj, dirs in split["test_directions"].items()}
-    seed, fraction = int(split["seed"]), float(split["test_fraction"])
+    held = {obj: {(int(d[0]), int(d[1])) for d in dirs} for obj, dirs in split["test_directions"].items()}
     rotation = np.round(dataset.rotation_deg).astype(int)
     angle = np.round(dataset.angle_deg).astype(int)
     mask = np.zeros(len(dataset), dtype=bool)
     for object_id in dataset.objects:
         rows = np.flatnonzero(dataset.object_id == object_id)
+        directions = list(zip(rotation[rows].tolist(), angle[rows].tolist(), strict=True))
         if object_id in unseen:
             mask[rows] = True
-            continue
-        directions = list(zip(rotation[rows].tolist(), angle[rows].tolist(), strict=True))
-        chosen = held.get(object_id)
-        if chosen is None:
-            chosen = set(held_out_directions(directions, object_id, seed, fraction))
-        mask[rows] = [d in chosen for d in directions]
+        elif object_id in held:
+            mask[rows] = [d in held[object_id] for d in directions]
+        else:
+            rays = [ray_deg(r, a) for r, a in directions]
+            test = hold_out_rays(rays, object_id, int(split["seed"]), float(split["test_fraction"])).test
+            mask[rows] = [ray in test for ray in rays]
     return mask
-
-
-def _fit_new_sensor(run: LoadedRun, dataset: PairedDataset, sensor: str, rows: np.ndarray) -> Normaliser:
-    """The run's normaliser plus the new sensor's statistics, fitted on its training frames with the run's
-    preprocessing."""
-    only = PairedDataset(
-        sensors=(sensor,),
-        object_id=dataset.object_id[rows],
-        rotation_deg=dataset.rotation_deg[rows],
-        angle_deg=dataset.angle_deg[rows],
-        target_n=dataset.target_n[rows],
-        values={sensor: dataset.values[sensor][rows]},
-        force_n={sensor: dataset.force_n[sensor][rows]},
-        simulated=dataset.simulated,
-    )
-    fitted = Normaliser.fit(only, np.ones(len(only), dtype=bool), mode=run.normaliser.mode)
-    return Normaliser.from_dict({**run.normaliser.to_dict(), **fitted.to_dict()})
-
-
-def _inputs(
-    dataset: PairedDataset, feature_dims: dict[str, int], normaliser: Normaliser
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """(M, sum of features) normalised rows in the engine's sensor order, missing frames as 0 (the masked loss
-    ignores them), and (M, sensors) presence."""
-    blocks, present = [], []
-    for sensor, width in feature_dims.items():
-        block = np.zeros((len(dataset), width), dtype=np.float32)
-        has = dataset.has(sensor) if sensor in dataset.values else np.zeros(len(dataset), dtype=bool)
-        if has.any():
-            block[has] = normaliser.normalise(sensor, dataset.values[sensor][has])
-        blocks.append(block)
-        present.append(has)
-    presence = np.stack(present, axis=1).astype(np.float32)
-    return torch.from_numpy(np.concatenate(blocks, axis=1)), torch.from_numpy(presence)
 
 
 def evaluate_new_sensor(
@@ -224,72 +187,64 @@ def add_sensor(
     if checkpoint_path(out).exists():
         raise UsageError(f"{out} already holds a run", hint="choose another --out")
     with computing_on(device, threads) as torch_device:
-        return _add_sensor(base_run, sets, new_sensor, out, config or ExtendConfig(), torch_device, progress)
+        run = load_run(base_run, torch_device.type)
+        if new_sensor in run.sensors:
+            raise ModelError(
+                f"the run in {base_run} already has sensor {new_sensor!r}", hint=f"it has {', '.join(run.sensors)}"
+            )
+        settings = (config or ExtendConfig()).resolved(run)
+        dataset = extension_dataset(sets, run.sensors, new_sensor)
+        _check_layouts(run, dataset)
+        test_mask = _test_mask(dataset, run.payload["split"])
+        train_rows, test_rows = dataset.subset(~test_mask), dataset.subset(test_mask)
+        if len(train_rows) == 0:
+            raise DataError("every shared contact is test data: nothing left to train the new sensor on")
+        if len(test_rows) == 0:
+            log.warning("no shared contact falls in the run's test directions: the new sensor is not evaluated")
 
-
-def _add_sensor(
-    base_run: Path,
-    sets: Sequence[MatchedSet],
-    new_sensor: str,
-    out: Path,
-    config: ExtendConfig,
-    device: torch.device,
-    progress: ProgressCallback | None,
-) -> ExtendOutcome:
-    run = load_run(base_run, device.type)
-    if new_sensor in run.sensors:
-        raise ModelError(
-            f"the run in {base_run} already has sensor {new_sensor!r}", hint=f"it has {', '.join(run.sensors)}"
+        # the run's normaliser plus the new sensor's statistics from its training frames, with the run's preprocessing
+        fitted = Normaliser.fit(
+            dataset, ~test_mask & dataset.has(new_sensor), run.normaliser.mode, sensors=[new_sensor]
         )
-    settings = config.resolved(run)
-    dataset = extension_dataset(sets, run.sensors, new_sensor)
-    _check_layouts(run, dataset)
-    test_mask = _test_mask(dataset, run.payload["split"])
-    train_rows, test_rows = dataset.subset(~test_mask), dataset.subset(test_mask)
-    if len(train_rows) == 0:
-        raise DataError("every shared contact is test data: nothing left to train the new sensor on")
-    if len(test_rows) == 0:
-        log.warning("no shared contact falls in the run's test directions: the new sensor is not evaluated")
+        normaliser = Normaliser.from_dict({**run.normaliser.to_dict(), **fitted.to_dict()})
+        engine = run.engine.with_new_sensor(new_sensor, dataset.n_taxels(new_sensor) * 3)
+        before = evaluate_new_sensor(
+            engine, normaliser, test_rows, new_sensor, run.config.nmae_normaliser, run.config.ssim_range
+        )
 
-    normaliser = _fit_new_sensor(run, dataset, new_sensor, ~test_mask & dataset.has(new_sensor))
-    engine = run.engine.with_new_sensor(new_sensor, dataset.n_taxels(new_sensor) * 3)
-    before = evaluate_new_sensor(
-        engine, normaliser, test_rows, new_sensor, run.config.nmae_normaliser, run.config.ssim_range
-    )
+        x, present = (torch.from_numpy(a).to(torch_device) for a in normaliser.inputs(train_rows, engine.feature_dims))
+        optimizer = engine.make_optimizer(settings["learning_rate"])
+        history = _train_new_sensor(engine, optimizer, x, present, new_sensor, settings, progress)
+        seconds = history[-1]["seconds"] if history else 0.0
+        after = evaluate_new_sensor(
+            engine, normaliser, test_rows, new_sensor, run.config.nmae_normaliser, run.config.ssim_range
+        )
 
-    x, present = _inputs(train_rows, engine.feature_dims, normaliser)
-    optimizer = engine.make_optimizer(settings["learning_rate"])
-    history = _train_new_sensor(engine, optimizer, x.to(device), present.to(device), new_sensor, settings, progress)
-    seconds = history[-1]["seconds"] if history else 0.0
-    after = evaluate_new_sensor(
-        engine, normaliser, test_rows, new_sensor, run.config.nmae_normaliser, run.config.ssim_range
-    )
-
-    summary = {
-        "new_sensor": new_sensor,
-        "trained_sensors": list(run.sensors),
-        "from_run": str(base_run),
-        "from_dataset_hash": run.payload["dataset_hash"],
-        "from_epoch": int(run.payload["epoch"]),
-        "frozen_layers": sorted(engine.frozen),
-        "trained_layers": sorted(k for k in engine.weights if k not in engine.frozen),
-        "settings": settings,
-        "contacts": {
-            "train": len(train_rows),
-            "test": len(test_rows),
-            "train_shared_with": {s: int(train_rows.has(s).sum()) for s in run.sensors if s in train_rows.values},
-            "test_shared_with": {s: int(test_rows.has(s).sum()) for s in run.sensors if s in test_rows.values},
-        },
-        "metric": f"NMAE ({run.config.nmae_normaliser}) and SSIM ({run.config.ssim_range}), the run's own readings, "
-        "on test contacts that have both sensors",
-        "untrained": before,
-        "trained": after,
-        "train_seconds": seconds,
-        "dataset_hash": dataset.content_hash(),
-        "provenance": provenance(),
-    }
-    complete = _write_run(run, out, engine, normaliser, dataset, test_mask, summary, history, optimizer)
-    return ExtendOutcome(out, engine, normaliser, summary, complete, history)
+        summary = {
+            "new_sensor": new_sensor,
+            "trained_sensors": list(run.sensors),
+            "from_run": str(base_run),
+            "from_dataset_hash": run.payload["dataset_hash"],
+            "from_epoch": int(run.payload["epoch"]),
+            "frozen_layers": sorted(engine.frozen),
+            "trained_layers": sorted(k for k in engine.weights if k not in engine.frozen),
+            "settings": settings,
+            "contacts": {
+                "train": len(train_rows),
+                "test": len(test_rows),
+                "train_shared_with": {s: int(train_rows.has(s).sum()) for s in run.sensors if s in train_rows.values},
+                "test_shared_with": {s: int(test_rows.has(s).sum()) for s in run.sensors if s in test_rows.values},
+            },
+            "metric": f"NMAE ({run.config.nmae_normaliser}) and SSIM ({run.config.ssim_range}), the run's own "
+            "readings, on test contacts that have both sensors",
+            "untrained": before,
+            "trained": after,
+            "train_seconds": seconds,
+            "dataset_hash": dataset.content_hash(),
+            "provenance": provenance(),
+        }
+        complete = _write_run(run, out, engine, normaliser, dataset, test_mask, summary, history, optimizer)
+        return ExtendOutcome(out, engine, normaliser, summary, complete, history)
 
 
 def _check_layouts(run: LoadedRun, dataset: PairedDataset) -> None:
@@ -319,22 +274,15 @@ def _train_new_sensor(
     history: list[dict[str, Any]] = []
     seconds = 0.0
     unitac = [g.name for g in engine.groups].index(UNITAC_GROUP)
-    n = x.shape[0]
     for epoch in range(1, settings["epochs"] + 1):
         began = time.perf_counter()
-        order = torch.from_numpy(np.stack([rng.permutation(n) for rng in shuffles])).to(x.device)
-        xs, ps = x[order], present[order]
-        loss_sum = torch.zeros(engine.members, device=x.device)
-        for start in range(0, n, settings["batch_size"]):
-            chunk = slice(start, start + settings["batch_size"])
-            losses = engine.train_step(xs[:, chunk], optimizer, present=ps[:, chunk])
-            loss_sum += losses[unitac] * xs[:, chunk].shape[1]
+        loss = train_epoch(engine, optimizer, x, present, shuffles, settings["batch_size"])
         seconds += time.perf_counter() - began
         record = {
             "epoch": epoch,
             "epochs": settings["epochs"],
             "seconds": seconds,
-            "train_loss": (loss_sum / n).cpu().tolist(),
+            "train_loss": loss[unitac].tolist(),
         }
         history.append(record)
         if progress is not None:
@@ -358,15 +306,12 @@ def _write_run(
 
     sensors = engine.sensors
     complete = dataset.subset(test_mask & dataset.complete_rows())
-    ordered = PairedDataset(
+    ordered = replace(  # in the engine's sensor order
+        complete,
         sensors=sensors,
-        object_id=complete.object_id,
-        rotation_deg=complete.rotation_deg,
-        angle_deg=complete.angle_deg,
-        target_n=complete.target_n,
         values={s: complete.values[s] for s in sensors if s in complete.values},
         force_n={s: complete.force_n[s] for s in sensors if s in complete.force_n},
-        simulated=complete.simulated,
+        present=None,
     )
     out.mkdir(parents=True, exist_ok=True)
     base = run.payload
@@ -402,13 +347,6 @@ def _write_run(
     }
     save_checkpoint(out, payload)
     (out / EXTENSION_JSON).write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    readable = {
-        "config": base["config"],
-        "split": base["split"],
-        "sensors": list(sensors),
-        "dataset_hash": summary["dataset_hash"],
-        "extension": {k: v for k, v in summary.items() if k not in ("untrained", "trained")},
-        "provenance": summary["provenance"],
-    }
-    (out / "config.json").write_text(json.dumps(readable, indent=2) + "\n", encoding="utf-8")
+    extension = {k: v for k, v in summary.items() if k not in ("untrained", "trained", "provenance")}
+    write_config_json(out, base["config"], base["split"], sensors, summary["dataset_hash"], extension=extension)
     return len(ordered)

@@ -32,7 +32,7 @@ import torch
 from torch import nn
 
 from drivers.frames import TactileFrame
-from unitac_rig.errors import ModelError, UsageError
+from unitac_rig.errors import ModelError
 
 
 @dataclass
@@ -52,8 +52,7 @@ class LiveModel:
 
         run = load_run(Path(run_dir))
         engine = run.engine
-        if not 0 <= member < engine.members:
-            raise UsageError(f"member {member} does not exist", hint=f"the run has {engine.members} member(s)")
+        run.check_member(member)
         sensors = engine.group(UNITAC_GROUP).sensors
         if sensor not in sensors:
             raise ModelError(
@@ -72,19 +71,13 @@ class LiveModel:
             self._load_geometry(run, member)
 
     def _load_geometry(self, run: Any, member: int) -> None:
-        from unitac_rig.learning.contact_geometry import ESTIMATOR_PT, GeometryEstimator, encoder_fingerprint
+        from unitac_rig.learning.contact_geometry import ESTIMATOR_PT, GeometryEstimator
 
         if not (self.run_dir / ESTIMATOR_PT).is_file():
             return
         estimator = GeometryEstimator.load(self.run_dir)
-        if int(estimator.meta["member"]) != member or encoder_fingerprint(run, member) != estimator.meta.get(
-            "encoder_sha256"
-        ):
-            raise ModelError(
-                f"the geometry estimator in {self.run_dir} was fitted to other encoder weights than member {member}",
-                hint=f"use --member {estimator.meta['member']}, --no-geometry, or refit: unitac-rig geometry RUN",
-            )
-        chosen = self.sensor if self.sensor in estimator.train_sensors else estimator.train_sensors[0]
+        estimator.check_fits(run, member)
+        chosen = estimator.trained_on(self.sensor)
         self.geometry = estimator.head(chosen)
         self.geometry_meta = {
             "trained_on": chosen,
@@ -244,86 +237,75 @@ def stream_frames(
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        return _stream(sensor, model, write, tare_frames, max_frames, duration_s, should_stop, clock_ns)
+        epoch_offset_ns = time.time_ns() - clock_ns()
+        stats = StreamStats()
+        warm = True  # in the warm-up backlog until the loop catches up (see the module's docstring)
+        tare: list[np.ndarray] = []
+        baseline: np.ndarray | None = None
+        last_seq: int | None = None
+        deadline_ns: int | None = None
+        while not should_stop():
+            frames = sensor.poll_wait(0.1)
+            if not frames:
+                continue
+            if max_frames is not None and baseline is not None:
+                frames = frames[: max_frames - stats.frames_out]  # the rest arrived after the stop: not dropped
+            stats.frames_in += len(frames)
+            for frame in frames:
+                if frame.seq is not None and last_seq is not None and frame.seq > last_seq + 1:
+                    stats.seq_gaps += frame.seq - last_seq - 1
+                last_seq = frame.seq if frame.seq is not None else last_seq
+            if baseline is None:
+                take = frames[: max(0, tare_frames - len(tare))]
+                tare += [f.values for f in take if f.valid]
+                stats.tare_frames += len(take)
+                frames = frames[len(take) :]
+                if len(tare) >= tare_frames or (stats.tare_frames >= tare_frames and tare):
+                    baseline = np.median(np.stack(tare), axis=0).astype(np.float32)
+                if not frames or baseline is None:
+                    continue
+                if max_frames is not None and len(frames) > max_frames:
+                    stats.frames_in -= len(frames) - max_frames
+                    frames = frames[:max_frames]
+            values = np.stack([f.values for f in frames]).astype(np.float32) - baseline
+            if (
+                warm
+                and stats.frames_out
+                and (
+                    frames[0].host_t_ns > stats.ended_ns or frames[0].host_t_ns - stats.started_ns > WARMUP_MAX_S * 1e9
+                )
+            ):
+                warm = False  # the next frame was stamped after the last line was written: no backlog left
+                stats.steady_ns = frames[0].host_t_ns
+            output = model(values)
+            for row, frame in enumerate(frames):
+                line = frame_line(
+                    stats.frames_out,
+                    frame,
+                    output,
+                    row,
+                    model,
+                    clock_ns(),
+                    tared=values[row],
+                    epoch_offset_ns=epoch_offset_ns,
+                    warmup=warm,
+                )
+                write(line)
+                done_ns = clock_ns()
+                (stats.warmup_latencies_ns if warm else stats.latencies_ns).append(done_ns - frame.host_t_ns)
+                if stats.frames_out == 0:
+                    stats.started_ns = frame.host_t_ns
+                    if duration_s is not None:
+                        deadline_ns = frame.host_t_ns + round(duration_s * 1e9)
+                stats.frames_out += 1
+                stats.last_frame_ns = frame.host_t_ns
+                stats.ended_ns = done_ns
+            if max_frames is not None and stats.frames_out >= max_frames:
+                break
+            if deadline_ns is not None and stats.ended_ns >= deadline_ns:
+                break
     finally:
         torch.set_num_threads(threads)
-
-
-def _stream(
-    sensor: LiveSensor,
-    model: LiveModel,
-    write: Callable[[bytes], None],
-    tare_frames: int,
-    max_frames: int | None,
-    duration_s: float | None,
-    should_stop: Callable[[], bool],
-    clock_ns: Callable[[], int],
-) -> StreamStats:
-    epoch_offset_ns = time.time_ns() - clock_ns()
-    stats = StreamStats()
-    warm = True  # in the warm-up backlog until the loop catches up (see the module's docstring)
-    tare: list[np.ndarray] = []
-    baseline: np.ndarray | None = None
-    last_seq: int | None = None
-    deadline_ns: int | None = None
-    while not should_stop():
-        frames = sensor.poll_wait(0.1)
-        if not frames:
-            continue
-        if max_frames is not None and baseline is not None:
-            frames = frames[: max_frames - stats.frames_out]  # the rest arrived after the stop: not dropped
-        stats.frames_in += len(frames)
-        for frame in frames:
-            if frame.seq is not None and last_seq is not None and frame.seq > last_seq + 1:
-                stats.seq_gaps += frame.seq - last_seq - 1
-            last_seq = frame.seq if frame.seq is not None else last_seq
-        if baseline is None:
-            take = frames[: max(0, tare_frames - len(tare))]
-            tare += [f.values for f in take if f.valid]
-            stats.tare_frames += len(take)
-            frames = frames[len(take) :]
-            if len(tare) >= tare_frames or (stats.tare_frames >= tare_frames and tare):
-                baseline = np.median(np.stack(tare), axis=0).astype(np.float32)
-            if not frames or baseline is None:
-                continue
-            if max_frames is not None and len(frames) > max_frames:
-                stats.frames_in -= len(frames) - max_frames
-                frames = frames[:max_frames]
-        values = np.stack([f.values for f in frames]).astype(np.float32) - baseline
-        if (
-            warm
-            and stats.frames_out
-            and (frames[0].host_t_ns > stats.ended_ns or frames[0].host_t_ns - stats.started_ns > WARMUP_MAX_S * 1e9)
-        ):
-            warm = False  # the next frame was stamped after the last line was written: no backlog left
-            stats.steady_ns = frames[0].host_t_ns
-        output = model(values)
-        for row, frame in enumerate(frames):
-            line = frame_line(
-                stats.frames_out,
-                frame,
-                output,
-                row,
-                model,
-                clock_ns(),
-                tared=values[row],
-                epoch_offset_ns=epoch_offset_ns,
-                warmup=warm,
-            )
-            write(line)
-            done_ns = clock_ns()
-            (stats.warmup_latencies_ns if warm else stats.latencies_ns).append(done_ns - frame.host_t_ns)
-            if stats.frames_out == 0:
-                stats.started_ns = frame.host_t_ns
-                if duration_s is not None:
-                    deadline_ns = frame.host_t_ns + round(duration_s * 1e9)
-            stats.frames_out += 1
-            stats.last_frame_ns = frame.host_t_ns
-            stats.ended_ns = done_ns
-        if max_frames is not None and stats.frames_out >= max_frames:
-            break
-        if deadline_ns is not None and stats.ended_ns >= deadline_ns:
-            break
     return stats
 
 

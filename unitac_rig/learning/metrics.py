@@ -184,24 +184,6 @@ def nmae(target: np.ndarray, estimate: np.ndarray, data_range: np.ndarray) -> fl
     return float(nmae_per_frame(t, e, r).mean())
 
 
-def ssim(target: np.ndarray, estimate: np.ndarray, data_range: np.ndarray) -> float:
-    """Mean SSIM over frames; shapes as :func:`nmae`."""
-    t, e, r = _as_tensors(target, estimate, data_range)
-    return float(ssim_per_frame(t, e, r).mean())
-
-
-def latent_l1(z_a: np.ndarray, z_b: np.ndarray) -> float:
-    """Mean Manhattan distance between matched latents (M, d) x2."""
-    a, b = _as_tensors(z_a, z_b)
-    return float(latent_l1_per_pair(a, b).mean())
-
-
-def latent_alignment_ratio(z_a: np.ndarray, z_b: np.ndarray) -> float:
-    """:func:`alignment_ratio` of matched latents (M, d) x2."""
-    a, b = _as_tensors(z_a, z_b)
-    return float(alignment_ratio(a, b))
-
-
 def latent_mixing(latents: Sequence[np.ndarray], k: int = MIXING_K) -> tuple[float, float]:
     """:func:`sensor_mixing` of one (M_s, d) array per sensor."""
     return sensor_mixing(_as_tensors(*latents), k=k)

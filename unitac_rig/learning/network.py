@@ -4,13 +4,12 @@
 every model of a run. :func:`mlp` is the MLP of this package for one member (``nn.Linear``, ``nn.ReLU``,
 ``nn.Dropout``); :class:`StackedLinear` and :func:`stacked_mlp` are the same layers and forward with a members
 dimension, so the trainer (:class:`unitac_rig.learning.engine.StackedAutoencoders`) and the geometry head
-(:mod:`unitac_rig.learning.contact_geometry`) train every seed or sensor at once, and :func:`member_mlp` /
-``StackedAutoencoders.network`` hand one member back as the plain :func:`mlp`. :class:`Autoencoder` is one member of
-one group; :class:`UniTacNV` is what ``export-model`` writes and ``stream`` runs."""
+(:mod:`unitac_rig.learning.contact_geometry`) train every seed or sensor at once; ``StackedAutoencoders.network`` and
+the saved geometry head hand one member back as the plain :func:`mlp`. :class:`Autoencoder` is one member of one
+group; :class:`UniTacNV` is what ``export-model`` writes and ``stream`` runs."""
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
@@ -38,15 +37,22 @@ class ModelShape:
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
+    def encoder_widths(self, features: int) -> list[int]:
+        """A sensor's encoder, frame (``features`` = n_taxels * 3) to latent."""
+        return [features, *self.encoder_hidden, self.latent_dim]
+
+    @property
+    def trunk_widths(self) -> list[int]:
+        """The decoder's hidden layers (shared by every sensor), latent onwards."""
+        return [self.latent_dim, *self.decoder_hidden]
+
+    def decoder_widths(self, features: int) -> list[int]:
+        """The decoder for one sensor's frame, latent to ``features``."""
+        return [*self.trunk_widths, features]
+
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> ModelShape:
-        return cls(
-            encoder_hidden=tuple(int(x) for x in d["encoder_hidden"]),
-            latent_dim=int(d["latent_dim"]),
-            decoder_hidden=tuple(int(x) for x in d["decoder_hidden"]),
-            dropout=float(d["dropout"]),
-            align_weight=float(d.get("align_weight", 0.0)),
-        )
+        return cls(**{**d, "encoder_hidden": tuple(d["encoder_hidden"]), "decoder_hidden": tuple(d["decoder_hidden"])})
 
 
 @dataclass(frozen=True)
@@ -128,11 +134,11 @@ class StackedLinear(nn.Module):
         """(members, rows, in) -> (members, rows, out)."""
         return torch.baddbmm(self.bias, h, self.weight)
 
-    def copy_into(self, linear: nn.Linear, member: int, columns: slice = slice(None)) -> nn.Linear:
-        """Member ``member``'s layer (optionally only some output ``columns``) written into ``linear``."""
+    def copy_into(self, linear: nn.Linear, member: int) -> nn.Linear:
+        """Member ``member``'s layer written into ``linear``."""
         with torch.no_grad():
-            linear.weight.copy_(self.weight[member, :, columns].T)
-            linear.bias.copy_(self.bias[member, 0, columns])
+            linear.weight.copy_(self.weight[member].T)
+            linear.bias.copy_(self.bias[member, 0])
         return linear
 
 
@@ -156,19 +162,9 @@ def stacked_mlp(
     return h
 
 
-def member_mlp(layers: Sequence[StackedLinear], member: int) -> nn.Sequential:
-    """Member ``member`` of ``layers`` as the plain :func:`mlp` (a copy, no dropout)."""
-    widths = [layers[0].weight.shape[1], *(layer.weight.shape[2] for layer in layers)]
-    net = mlp(widths).to(layers[0].weight.device)
-    for layer, linear in zip(layers, linear_layers(net), strict=True):
-        layer.copy_into(linear, member)
-    return net
-
-
 class Autoencoder(nn.Module):
     """One member of one group (UniTac-NV, or a per-sensor baseline) as ordinary PyTorch: what
-    :meth:`StackedAutoencoders.network` slices out, what ``export-model`` writes (:meth:`encoder`, :meth:`decoder`)
-    and what the training benchmark's plain loop trains.
+    :meth:`StackedAutoencoders.network` slices out and what the training benchmark's plain loop trains.
 
     ``encoders[sensor]``: frames (B, F) -> latent, ``nn.Linear`` with ReLU between and ``nn.Dropout`` after every
     layer (the latent's too); ``decoder``: the hidden layers, each followed by ReLU and dropout; ``heads``: the output
@@ -183,10 +179,8 @@ class Autoencoder(nn.Module):
         self.sensors = tuple(spec.sensors)
         self.output_heads = spec.output_heads
         self.feature_dims = {s: int(feature_dims[s]) for s in spec.sensors}
-        latent, trunk = shape.latent_dim, [shape.latent_dim, *shape.decoder_hidden]
-        self.encoders = nn.ModuleDict(
-            {s: mlp([d, *shape.encoder_hidden, latent], p, hidden=False) for s, d in self.feature_dims.items()}
-        )
+        trunk = shape.trunk_widths
+        self.encoders = nn.ModuleDict({s: mlp(shape.encoder_widths(d), p) for s, d in self.feature_dims.items()})
         self.decoder = mlp(trunk, p, hidden=True)
         self.heads = nn.ModuleList(
             nn.Linear(trunk[-1], sum(self.feature_dims[s] for s in head)) for head in self.output_heads
@@ -221,27 +215,6 @@ class Autoencoder(nn.Module):
             for target, estimate in zip(inputs, recon.split(list(self.feature_dims.values()), dim=-1), strict=True):
                 total = total + nn.functional.l1_loss(estimate, target)
         return total
-
-    def encoder(self, sensor: str) -> nn.Sequential:
-        """``sensor``'s encoder without dropout: frames (B, F) -> latent (a copy)."""
-        mlp = self.encoders[sensor]
-        assert isinstance(mlp, nn.Sequential)
-        return nn.Sequential(*(copy.deepcopy(m) for m in mlp if not isinstance(m, nn.Dropout)))
-
-    def decoder_for(self, sensor: str) -> nn.Sequential:
-        """Latent -> ``sensor``'s frames (B, F) alone, without dropout: the hidden layers and that sensor's columns of
-        its output layer (a copy)."""
-        hidden = [copy.deepcopy(m) for m in self.decoder if not isinstance(m, nn.Dropout)]
-        h, head = next((h, head) for h, head in enumerate(self.output_heads) if sensor in head)
-        start = sum(self.feature_dims[s] for s in head[: head.index(sensor)])
-        columns = slice(start, start + self.feature_dims[sensor])
-        source = self.heads[h]
-        assert isinstance(source, nn.Linear)
-        out = nn.Linear(source.in_features, self.feature_dims[sensor], device=source.weight.device)
-        with torch.no_grad():
-            out.weight.copy_(source.weight[columns])
-            out.bias.copy_(source.bias[columns])
-        return nn.Sequential(*hidden, out)
 
 
 def linear_layers(module: nn.Module) -> list[nn.Linear]:

@@ -14,11 +14,10 @@ import numpy as np
 import torch
 
 from unitac_rig.errors import UnitacError
-from unitac_rig.learning.contact_geometry import GEOMETRY_JSON
+from unitac_rig.learning.contact_geometry import GEOMETRY_JSON, GEOMETRY_PNG
 from unitac_rig.learning.data import PairedDataset, object_shape_material
 from unitac_rig.learning.engine import UNITAC_GROUP, baseline_name
 from unitac_rig.learning.evaluate import (
-    METRICS_JSON,
     PREPROCESSING_TEXT,
     Evaluator,
     direction_name,
@@ -28,13 +27,20 @@ from unitac_rig.learning.evaluate import (
 from unitac_rig.learning.metric_table import alignment_metrics, frame_metrics
 from unitac_rig.learning.metrics import latent_mixing
 from unitac_rig.learning.paper import PAPER_TABLE1
-from unitac_rig.learning.run import LoadedRun, load_run, load_test_set, read_metrics, save_run_files
+from unitac_rig.learning.run import METRICS_JSON, LoadedRun, load_run, load_test_set, read_metrics, save_run_files
 from unitac_rig.plotting import draw_taxel_map, new_figure, save_figure
 
 log = logging.getLogger(__name__)
 
 REPORT_MD = "report.md"
 FIGURES = "figures"
+FIGURE_LABELS = {  # file in RUN/figures -> its label in report.md, in the report's order
+    "curves.png": "training curves",
+    "tsne.png": "t-SNE of the latents",
+    "reconstructions_seen.png": "reconstructions (seen)",
+    "reconstructions_unseen.png": "reconstructions (unseen)",
+    GEOMETRY_PNG: "contact geometry",
+}
 
 
 def table_columns(sensors: tuple[str, ...], trained: set[str]) -> list[str]:
@@ -52,10 +58,6 @@ def _evaluated(history: list[dict[str, Any]]) -> tuple[str, list[dict[str, Any]]
     if validated:
         return "val", validated
     return "test", [h for h in history if "test" in h]
-
-
-def _member_mean(values: Any) -> float:
-    return float(np.mean(values))
 
 
 def plot_curves(history: list[dict[str, Any]], sensors: tuple[str, ...], path: Path) -> Path:
@@ -79,7 +81,7 @@ def plot_curves(history: list[dict[str, Any]], sensors: tuple[str, ...], path: P
         for column, value in points[-1][key][subset].items():
             if not isinstance(value, dict):
                 continue
-            values = [_member_mean(h[key][subset][column][primary.name]) for h in points]
+            values = [float(np.mean(h[key][subset][column][primary.name])) for h in points]
             style = "--" if column.startswith("ae_") else "-"
             ax.plot(epochs, values, style, label=column.replace("_to_", " → "), lw=1.2)
         ax.set_yscale("log")
@@ -103,7 +105,7 @@ def plot_curves(history: list[dict[str, Any]], sensors: tuple[str, ...], path: P
                 ax.plot(epochs, per_member[:, m], color="black", alpha=0.25, lw=0.8)
             ax.plot(epochs, per_member.mean(axis=1), color="black", lw=1.6, label="mean over seeds")
             if name == "mixing":
-                expected = [_member_mean(h[key][subset]["mixing_expected"]) for h in points]
+                expected = [float(np.mean(h[key][subset]["mixing_expected"])) for h in points]
                 ax.plot(epochs, expected, "--", color="tab:green", label="perfect mixing")
             if name == "latent_ratio":
                 ax.axhline(1.0, ls="--", color="tab:red", lw=1.0, label="chance")
@@ -427,11 +429,12 @@ def write_report(
     metrics = run_metrics(run_dir, run, test)  # written with report.md at the end: an interrupted report keeps both
     if kept and not figures:  # the t-SNE is only recomputed with the figures
         metrics["tsne_mixing"] = kept
-    drawn: dict[str, str] = {}
+    drawn: set[str] = set()  # figures drawn now, by file name
     if figures:
         fig_dir = run_dir / FIGURES
         stage("drawing the training curves")
-        drawn["training curves"] = _rel(plot_curves(run.history, run.sensors, fig_dir / "curves.png"), run_dir)
+        plot_curves(run.history, run.sensors, fig_dir / "curves.png")
+        drawn.add("curves.png")
         evaluator = Evaluator.for_run(run, test)
         first = run.payload.get("latents_first_epoch")
         rows = np.asarray(run.payload.get("tsne_rows", []), dtype=int)
@@ -441,10 +444,8 @@ def write_report(
             last = {s: z[0, rows].numpy() for s, z in latents.items()}
             sensors = [s for s in test.sensors if s in first and s in last]
             embeddings = tsne_embeddings(first, last, sensors, seed=run.config.split_seed)
-            path = plot_tsne(
-                first, last, test, rows, fig_dir / "tsne.png", seed=run.config.split_seed, embeddings=embeddings
-            )
-            drawn["t-SNE of the latents"] = _rel(path, run_dir)
+            plot_tsne(first, last, test, rows, fig_dir / "tsne.png", seed=run.config.split_seed, embeddings=embeddings)
+            drawn.add("tsne.png")
             metrics["tsne_mixing"] = {
                 "contacts": int(rows.size),
                 "member": 0,
@@ -465,30 +466,18 @@ def write_report(
                 log.warning("reconstruction figures need unitac_rig.plotting, which is not installed")
                 break
             if path_or_none is not None:
-                drawn[f"reconstructions ({subset})"] = _rel(path_or_none, run_dir)
-    else:  # keep the figures an earlier report drew
-        known = {
-            "curves.png": "training curves",
-            "tsne.png": "t-SNE of the latents",
-            "reconstructions_seen.png": "reconstructions (seen)",
-            "reconstructions_unseen.png": "reconstructions (unseen)",
-        }
-        for name, label in known.items():
-            if (run_dir / FIGURES / name).exists():
-                drawn[label] = f"{FIGURES}/{name}"
-    geometry_png = run_dir / FIGURES / "geometry.png"
-    if geometry_png.exists():
-        drawn["contact geometry"] = f"{FIGURES}/geometry.png"
+                drawn.add(path_or_none.name)
+    shown = {  # without figures, those an earlier report drew; the geometry figure is `unitac-rig geometry`'s
+        label: f"{FIGURES}/{name}"
+        for name, label in FIGURE_LABELS.items()
+        if name in drawn or ((not figures or name == GEOMETRY_PNG) and (run_dir / FIGURES / name).exists())
+    }
     geometry_path = run_dir / GEOMETRY_JSON
     geometry = json.loads(geometry_path.read_text(encoding="utf-8")) if geometry_path.exists() else None
     stage("writing metrics.json and report.md")
-    text = render_markdown(metrics, run, drawn, geometry)
+    text = render_markdown(metrics, run, shown, geometry)
     save_run_files(run_dir, {METRICS_JSON: metrics, REPORT_MD: text})
     return run_dir / REPORT_MD
 
 
-def _rel(path: Path, root: Path) -> str:
-    return str(Path(path).relative_to(root))
-
-
-__all__ = ["METRICS_JSON", "REPORT_MD", "write_report"]
+__all__ = ["REPORT_MD", "write_report"]

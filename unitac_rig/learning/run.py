@@ -20,7 +20,7 @@ import os
 import pickle
 import re
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -186,26 +186,20 @@ def provenance() -> dict[str, str]:
     return {"package_version": package_version(), "git_commit": git_commit(), "torch_version": str(torch.__version__)}
 
 
-def _test_subset_path(run_dir: Path) -> Path:
-    return Path(run_dir) / TEST_SET_NAME
+_CONTACT_KEYS = ("object_id", "rotation_deg", "angle_deg", "target_n")  # a contact's join key, one array each
 
 
 def save_test_set(run_dir: Path, test: PairedDataset) -> None:
     """The test rows (every sensor's frames and the keys), so evaluation, reports and geometry need no --data."""
-    arrays: dict[str, np.ndarray] = {
-        "sensors": np.array(test.sensors, dtype=str),
-        "object_id": test.object_id.astype(str),
-        "rotation_deg": test.rotation_deg,
-        "angle_deg": test.angle_deg,
-        "target_n": test.target_n,
-        "simulated": np.array(test.simulated),
-    }
+    arrays = {"sensors": np.array(test.sensors, dtype=str), "simulated": np.array(test.simulated)}
+    arrays |= {key: getattr(test, key) for key in _CONTACT_KEYS}
+    arrays["object_id"] = test.object_id.astype(str)
     for sensor in test.sensors:
         arrays[f"values__{sensor}"] = test.values[sensor]
         arrays[f"force_n__{sensor}"] = test.force_n[sensor]
     tmp = Path(run_dir) / (TEST_SET_NAME + ".tmp.npz")
     np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
-    os.replace(tmp, _test_subset_path(run_dir))
+    os.replace(tmp, Path(run_dir) / TEST_SET_NAME)
 
 
 def save_training_pairs(run_dir: Path, train: PairedDataset) -> None:
@@ -219,21 +213,18 @@ def save_training_pairs(run_dir: Path, train: PairedDataset) -> None:
 def load_training_pairs(run_dir: Path) -> PairedDataset | None:
     """The pairs :func:`save_training_pairs` kept; None for a run from before they were kept."""
     folder = Path(run_dir) / TRAINING_PAIRS
-    return load_test_set(folder) if _test_subset_path(folder).is_file() else None
+    return load_test_set(folder) if (folder / TEST_SET_NAME).is_file() else None
 
 
 def load_test_set(run_dir: Path) -> PairedDataset:
-    path = _test_subset_path(run_dir)
+    path = Path(run_dir) / TEST_SET_NAME
     if not path.is_file():
         raise UsageError(f"{run_dir} has no {TEST_SET_NAME}", hint="it is written by `unitac-rig train`; retrain")
     with np.load(path, allow_pickle=False) as data:
         sensors = tuple(str(s) for s in data["sensors"])
         return PairedDataset(
             sensors=sensors,
-            object_id=data["object_id"].astype(str),
-            rotation_deg=data["rotation_deg"],
-            angle_deg=data["angle_deg"],
-            target_n=data["target_n"],
+            **{key: data[key] for key in _CONTACT_KEYS},
             values={s: data[f"values__{s}"] for s in sensors},
             force_n={s: data[f"force_n__{s}"] for s in sensors},
             simulated=bool(data["simulated"]),
@@ -243,7 +234,8 @@ def load_test_set(run_dir: Path) -> PairedDataset:
 def save_run_files(run_dir: Path, contents: Mapping[str, str | Mapping[str, Any]]) -> None:
     """Write the run's text files (name -> text, or a mapping written as JSON) together: each beside its file first,
     then each renamed over the old one (microseconds apart), so an interruption (a Ctrl-C during a report's minutes,
-    a crash) leaves every one as it was and the run's files in agreement. The one writer of ``metrics.json``."""
+    a crash) leaves every one as it was and the run's files in agreement. ``metrics.json`` is written only through it,
+    by :func:`unitac_rig.learning.report.write_report`."""
     staged: list[tuple[Path, Path]] = []
     try:
         for name, content in contents.items():
@@ -257,6 +249,20 @@ def save_run_files(run_dir: Path, contents: Mapping[str, str | Mapping[str, Any]
     finally:
         for tmp, _ in staged:
             tmp.unlink(missing_ok=True)  # only when a write failed or was interrupted
+
+
+def write_config_json(
+    run_dir: Path,
+    config: Mapping[str, Any],
+    split: Mapping[str, Any],
+    sensors: Sequence[str],
+    dataset_hash: str,
+    **extra: Any,
+) -> None:
+    """``RUN/config.json``, for people: what the run trained with, on which data, and by which unitac-rig."""
+    readable = {"config": config, "split": split, "sensors": list(sensors), "dataset_hash": dataset_hash, **extra}
+    text = json.dumps(readable | {"provenance": provenance()}, indent=2) + "\n"
+    (Path(run_dir) / "config.json").write_text(text, encoding="utf-8")
 
 
 def read_metrics(run_dir: Path) -> dict[str, Any] | None:
@@ -342,6 +348,11 @@ class LoadedRun:
     @property
     def unseen_objects(self) -> tuple[str, ...]:
         return tuple(self.payload["split"]["unseen_objects"])
+
+    def check_member(self, member: int) -> None:
+        """UsageError unless the run has a member (seed) ``member``."""
+        if not 0 <= member < self.engine.members:
+            raise UsageError(f"member {member} does not exist", hint=f"the run has {self.engine.members} member(s)")
 
     def scored_under(self, nmae_normaliser: str | None = None, ssim_range: str | None = None) -> LoadedRun:
         """This run with other metric options (they change no weight, only how reports score it); ``None`` keeps

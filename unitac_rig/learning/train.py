@@ -5,17 +5,16 @@ The loop has no per-sample Python: the training rows sit on the device as one te
 shuffled index per epoch (one gather), and batches are slices of it; see :mod:`unitac_rig.learning.engine` for the
 step itself.
 
-One run's life (start, resume, epoch, evaluation, checkpoint) shares the ``_Run`` record. What a run trains is
-:class:`unitac_rig.learning.config.TrainConfig`, its folder and checkpoint :mod:`unitac_rig.learning.run`, the scoring
-of a model on a set of rows :class:`unitac_rig.learning.evaluate.Evaluator`.
+One run's life (start, resume, epoch, evaluation, checkpoint) shares the :class:`TrainingRun` record. What a run
+trains is :class:`unitac_rig.learning.config.TrainConfig`, its folder and checkpoint :mod:`unitac_rig.learning.run`,
+the scoring of a model on a set of rows :class:`unitac_rig.learning.evaluate.Evaluator`.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -42,45 +41,19 @@ from unitac_rig.learning.run import (
     save_test_set,
     save_training_pairs,
     tsne_rows,
+    write_config_json,
 )
 
 log = logging.getLogger(__name__)
 
 
-@dataclass
-class TrainOutcome:
-    run_dir: Path
-    engine: StackedAutoencoders
-    normaliser: Normaliser
-    split: Split
-    config: TrainConfig
-    history: list[dict[str, Any]]
-    train_seconds: float
-    epochs_done: int
-
-
 ProgressCallback = Callable[[dict[str, Any]], None]
 
 
-def train(
-    dataset: PairedDataset,
-    run_dir: Path,
-    config: TrainConfig | None = None,
-    *,
-    device: str = "auto",
-    threads: int | None = None,
-    resume: bool = False,
-    epochs: int | None = None,
-    progress: ProgressCallback | None = None,
-) -> TrainOutcome:
-    """Train (or resume) a run in ``run_dir``. ``epochs`` on resume extends or keeps the stored budget."""
-    with computing_on(device, threads) as torch_device:
-        return _train(dataset, Path(run_dir), config, torch_device, resume, epochs, progress)
-
-
 @dataclass
-class _Run:
-    """Everything a run carries from epoch to epoch: exactly what its checkpoint stores."""
+class TrainingRun:
+    """Everything a run carries from epoch to epoch: exactly what its checkpoint stores (and what :func:`train`
+    returns)."""
 
     run_dir: Path
     config: TrainConfig
@@ -93,8 +66,8 @@ class _Run:
     shuffle_rngs: list[np.random.Generator]  # one per member: the order of its training rows each epoch
     tsne_rows: np.ndarray
     history: list[dict[str, Any]] = field(default_factory=list)
-    epoch: int = 0  # epochs done
-    seconds: float = 0.0  # training wall time so far (evaluation excluded)
+    epochs_done: int = 0
+    train_seconds: float = 0.0  # training wall time so far (evaluation excluded)
     first_latents: dict[str, np.ndarray] | None = None  # UniTac-NV latents of the t-SNE rows after epoch 1
     early_stop: dict[str, Any] = field(default_factory=dict)  # best_val_nmae, best_epoch, stopped_epoch (or None)
 
@@ -111,9 +84,9 @@ class _Run:
             "val_mask": torch.from_numpy(self.split.validation_mask.copy()),
             "dataset_hash": self.dataset_hash,
             "dataset_summary": self.dataset_summary,
-            "epoch": self.epoch,
+            "epoch": self.epochs_done,
             "history": self.history,
-            "train_seconds": self.seconds,
+            "train_seconds": self.train_seconds,
             "tsne_rows": torch.from_numpy(self.tsne_rows.astype(np.int64)),
             "latents_first_epoch": (
                 None if self.first_latents is None else {s: torch.from_numpy(z) for s, z in self.first_latents.items()}
@@ -123,58 +96,75 @@ class _Run:
         }
 
 
-def _train(
+def train(
     dataset: PairedDataset,
     run_dir: Path,
-    config: TrainConfig | None,
-    device: torch.device,
-    resume: bool,
-    epochs: int | None,
-    progress: ProgressCallback | None,
-) -> TrainOutcome:
-    run = (
-        _resume_run(dataset, run_dir, epochs, device)
-        if resume
-        else _start_run(dataset, run_dir, config, epochs, device)
-    )
-    train_rows, test_rows = _split_rows(dataset, run.split)
-    val_rows = dataset.subset(run.split.validation_mask & dataset.complete_rows())
-    train_x, train_present = _training_inputs(train_rows, run.normaliser, device)
-    options = {"nmae_normaliser": run.config.nmae_normaliser, "ssim_range": run.config.ssim_range}
-    evaluator = Evaluator(test_rows, run.normaliser, run.split.unseen_objects, device, **options)
-    validator = Evaluator(val_rows, run.normaliser, (), device, **options) if len(val_rows) else None
-    while run.epoch < run.config.epochs and run.early_stop.get("stopped_epoch") is None:
-        record = _train_epoch(run, train_x, train_present)
-        done, last = run.epoch, run.epoch == run.config.epochs
-        # per-epoch curves (and any choice made from them) use validation rows; the test rows are scored only
-        # after epoch 1 and after the last epoch, for the report's "from epoch 1 to the end" comparisons
-        if validator is not None and (done % run.config.eval_every == 0 or last or done == 1):
-            record["val"] = validator.summary(run.engine)
-            last = _early_stop(run, record["val"]) or last
-            if last:
-                record["val_metric_variants"] = validator.metric_variants(run.engine)
-        if last or done == 1:
-            record["test"] = evaluator.summary(run.engine)
-        if done == 1 and run.first_latents is None:
-            run.first_latents = {s: z[0, run.tsne_rows].cpu().numpy() for s, z in evaluator.latents(run.engine).items()}
-        run.history.append(record)
-        if progress is not None:
-            progress(record)
-        saved = done % run.config.checkpoint_every == 0 or last
-        if saved:
-            save_checkpoint(run.run_dir, run.checkpoint())
-        try:
-            raise_if_interrupted()  # a Ctrl-C the CLI deferred to here, between two epochs
-        except KeyboardInterrupt:
-            if not saved:  # keep this finished epoch: --resume goes on from it, nothing is lost
+    config: TrainConfig | None = None,
+    *,
+    device: str = "auto",
+    threads: int | None = None,
+    resume: bool = False,
+    epochs: int | None = None,
+    progress: ProgressCallback | None = None,
+) -> TrainingRun:
+    """Train (or resume) a run in ``run_dir``. ``epochs`` on resume extends or keeps the stored budget."""
+    run_dir = Path(run_dir)
+    with computing_on(device, threads) as torch_device:
+        run = (
+            _resume_run(dataset, run_dir, epochs, torch_device)
+            if resume
+            else _start_run(dataset, run_dir, config, epochs, torch_device)
+        )
+        train_rows, test_rows = _split_rows(dataset, run.split)
+        val_rows = dataset.subset(run.split.validation_mask & dataset.complete_rows())
+        x, present = run.normaliser.inputs(train_rows, run.engine.feature_dims)
+        train_x = torch.from_numpy(x).to(torch_device)
+        train_present = None if train_rows.present is None else torch.from_numpy(present).to(torch_device)
+        options = {"nmae_normaliser": run.config.nmae_normaliser, "ssim_range": run.config.ssim_range}
+        evaluator = Evaluator(test_rows, run.normaliser, run.split.unseen_objects, torch_device, **options)
+        validator = Evaluator(val_rows, run.normaliser, (), torch_device, **options) if len(val_rows) else None
+        while run.epochs_done < run.config.epochs and run.early_stop.get("stopped_epoch") is None:
+            began = time.perf_counter()
+            loss = train_epoch(
+                run.engine, run.optimizer, train_x, train_present, run.shuffle_rngs, run.config.batch_size
+            )
+            run.train_seconds += time.perf_counter() - began
+            run.epochs_done += 1
+            record: dict[str, Any] = {
+                "epoch": run.epochs_done,
+                "seconds": run.train_seconds,
+                "train_loss": {g.name: loss[i].tolist() for i, g in enumerate(run.engine.groups)},
+            }
+            done, last = run.epochs_done, run.epochs_done == run.config.epochs
+            # per-epoch curves (and any choice made from them) use validation rows; the test rows are scored only
+            # after epoch 1 and after the last epoch, for the report's "from epoch 1 to the end" comparisons
+            if validator is not None and (done % run.config.eval_every == 0 or last or done == 1):
+                record["val"] = validator.summary(run.engine)
+                last = _early_stop(run, record["val"]) or last
+                if last:
+                    record["val_metric_variants"] = validator.metric_variants(run.engine)
+            if last or done == 1:
+                record["test"] = evaluator.summary(run.engine)
+            if done == 1 and run.first_latents is None:
+                run.first_latents = {
+                    s: z[0, run.tsne_rows].cpu().numpy() for s, z in evaluator.latents(run.engine).items()
+                }
+            run.history.append(record)
+            if progress is not None:
+                progress(record)
+            saved = done % run.config.checkpoint_every == 0 or last
+            if saved:
                 save_checkpoint(run.run_dir, run.checkpoint())
-            raise
-    return TrainOutcome(
-        run.run_dir, run.engine, run.normaliser, run.split, run.config, run.history, run.seconds, run.epoch
-    )
+            try:
+                raise_if_interrupted()  # a Ctrl-C the CLI deferred to here, between two epochs
+            except KeyboardInterrupt:
+                if not saved:  # keep this finished epoch: --resume goes on from it, nothing is lost
+                    save_checkpoint(run.run_dir, run.checkpoint())
+                raise
+        return run
 
 
-def _early_stop(run: _Run, val: Mapping[str, Any]) -> bool:
+def _early_stop(run: TrainingRun, val: Mapping[str, Any]) -> bool:
     """Track the best validation NMAE (mean over UniTac-NV's directions and members, seen contacts); True when
     ``config.patience`` epochs have passed without a better one (recorded as ``stopped_epoch``)."""
     subset = val.get("seen") or val.get("all") or {}
@@ -183,57 +173,40 @@ def _early_stop(run: _Run, val: Mapping[str, Any]) -> bool:
         return False
     nmae = float(np.mean(values))
     if nmae < run.early_stop.get("best_val_nmae", np.inf):
-        run.early_stop.update(best_val_nmae=nmae, best_epoch=run.epoch)
+        run.early_stop.update(best_val_nmae=nmae, best_epoch=run.epochs_done)
     run.early_stop.setdefault("stopped_epoch", None)
     patience = run.config.patience
-    if patience and run.epoch - int(run.early_stop["best_epoch"]) >= patience and run.epoch < run.config.epochs:
-        run.early_stop["stopped_epoch"] = run.epoch
+    epoch = run.epochs_done
+    if patience and epoch - int(run.early_stop["best_epoch"]) >= patience and epoch < run.config.epochs:
+        run.early_stop["stopped_epoch"] = epoch
         log.info(
-            "early stop at epoch %d: no better validation NMAE since epoch %d", run.epoch, run.early_stop["best_epoch"]
+            "early stop at epoch %d: no better validation NMAE since epoch %d", epoch, run.early_stop["best_epoch"]
         )
         return True
     return False
 
 
-def _training_inputs(
-    rows: PairedDataset, normaliser: Normaliser, device: torch.device
-) -> tuple[torch.Tensor, torch.Tensor | None]:
-    """The normalised training rows (M, sum of features) in sensor order on the device, and for a partial join the
-    (M, sensors) presence the masked loss needs (missing frames are zeros there, never seen by the loss)."""
-    if rows.present is None:
-        x = np.concatenate([normaliser.normalise(s, rows.values[s]) for s in rows.sensors], axis=1)
-        return torch.from_numpy(x).to(device), None
-    blocks = []
-    for sensor in rows.sensors:
-        block = np.zeros((len(rows), rows.n_taxels(sensor) * 3), dtype=np.float32)
-        has = rows.has(sensor)
-        block[has] = normaliser.normalise(sensor, rows.values[sensor][has])
-        blocks.append(block)
-    present = np.stack([rows.has(s) for s in rows.sensors], axis=1).astype(np.float32)
-    return torch.from_numpy(np.concatenate(blocks, axis=1)).to(device), torch.from_numpy(present).to(device)
-
-
-def _train_epoch(run: _Run, train_x: torch.Tensor, present: torch.Tensor | None = None) -> dict[str, Any]:
-    """One pass over the training rows for every member (its own order: one gather), batches are slices;
-    ``present`` (rows, sensors) masks the loss of contacts some sensors did not record."""
-    began = time.perf_counter()
-    engine, n_train, batch = run.engine, train_x.shape[0], run.config.batch_size
-    order = torch.from_numpy(np.stack([rng.permutation(n_train) for rng in run.shuffle_rngs])).to(train_x.device)
-    shuffled = train_x[order]  # (members, n_train, features)
+def train_epoch(
+    engine: StackedAutoencoders,
+    optimizer: torch.optim.Optimizer,
+    x: torch.Tensor,
+    present: torch.Tensor | None,
+    shuffle_rngs: Sequence[np.random.Generator],
+    batch: int,
+) -> torch.Tensor:
+    """One pass over the training rows ``x`` (rows, features) for every member, each in its own order (one gather),
+    batches are slices; ``present`` (rows, sensors) masks the loss of contacts some sensors did not record. Returns
+    the (groups, members) mean training loss."""
+    n_train = x.shape[0]
+    order = torch.from_numpy(np.stack([rng.permutation(n_train) for rng in shuffle_rngs])).to(x.device)
+    shuffled = x[order]  # (members, n_train, features)
     shuffled_present = None if present is None else present[order]
-    loss_sum = torch.zeros(len(engine.groups), engine.members, device=train_x.device)
+    loss_sum = torch.zeros(len(engine.groups), engine.members, device=x.device)
     for start in range(0, n_train, batch):
         chunk = shuffled[:, start : start + batch]
         mask = None if shuffled_present is None else shuffled_present[:, start : start + batch]
-        loss_sum += engine.train_step(chunk, run.optimizer, present=mask) * chunk.shape[1]
-    train_loss = (loss_sum / n_train).cpu()
-    run.seconds += time.perf_counter() - began
-    run.epoch += 1
-    return {
-        "epoch": run.epoch,
-        "seconds": run.seconds,
-        "train_loss": {g.name: train_loss[i].tolist() for i, g in enumerate(engine.groups)},
-    }
+        loss_sum += engine.train_step(chunk, optimizer, present=mask) * chunk.shape[1]
+    return (loss_sum / n_train).cpu()
 
 
 def _split_rows(dataset: PairedDataset, split: Split) -> tuple[PairedDataset, PairedDataset]:
@@ -247,7 +220,7 @@ def _split_rows(dataset: PairedDataset, split: Split) -> tuple[PairedDataset, Pa
 
 def _start_run(
     dataset: PairedDataset, run_dir: Path, config: TrainConfig | None, epochs: int | None, device: torch.device
-) -> _Run:
+) -> TrainingRun:
     """A new run: split, normalisation, freshly initialised models; writes the test set and config.json."""
     if checkpoint_path(run_dir).exists():
         raise UsageError(f"{run_dir} already holds a run", hint="pass --resume to continue it, or choose another --out")
@@ -266,7 +239,7 @@ def _start_run(
     feature_dims = {s: dataset.n_taxels(s) * 3 for s in dataset.sensors}
     groups = default_groups(dataset.sensors, config.baselines)
     engine = StackedAutoencoders(feature_dims, groups, config.seeds, config.shape, device)
-    run = _Run(
+    run = TrainingRun(
         run_dir=run_dir,
         config=config,
         dataset_hash=dataset.content_hash(),
@@ -290,19 +263,12 @@ def _start_run(
     run_dir.mkdir(parents=True, exist_ok=True)
     save_test_set(run_dir, test_rows)
     save_training_pairs(run_dir, train_rows)
-    readable = {
-        "config": config.to_dict(),
-        "split": split.to_dict(),
-        "sensors": list(dataset.sensors),
-        "dataset_hash": run.dataset_hash,
-        "provenance": provenance(),
-    }
-    (run_dir / "config.json").write_text(json.dumps(readable, indent=2) + "\n", encoding="utf-8")
+    write_config_json(run_dir, config.to_dict(), split.to_dict(), dataset.sensors, run.dataset_hash)
     (run_dir / CONFIG_TOML).write_text(to_toml(config.to_dict()), encoding="utf-8")
     return run
 
 
-def _resume_run(dataset: PairedDataset, run_dir: Path, epochs: int | None, device: torch.device) -> _Run:
+def _resume_run(dataset: PairedDataset, run_dir: Path, epochs: int | None, device: torch.device) -> TrainingRun:
     """The run in ``run_dir`` as its last checkpoint left it; ``epochs`` extends (never shortens) its budget."""
     loaded = load_run(run_dir, device.type)
     payload = loaded.payload
@@ -321,20 +287,20 @@ def _resume_run(dataset: PairedDataset, run_dir: Path, epochs: int | None, devic
     if epochs is not None:
         config = replace(config, epochs=max(epochs, int(payload["epoch"])))
     engine = loaded.engine
-    run = _Run(
+    run = TrainingRun(
         run_dir=run_dir,
         config=config,
         dataset_hash=dataset_hash,
         dataset_summary=dict(payload["dataset_summary"]),
-        split=_stored_split(payload),
+        split=Split.from_dict(payload["split"], payload["test_mask"], payload["val_mask"]),
         normaliser=loaded.normaliser,
         engine=engine,
         optimizer=engine.make_optimizer(config.learning_rate),
         shuffle_rngs=[_restored_rng(state) for state in payload["shuffle_rng"]],
         tsne_rows=payload["tsne_rows"],
         history=list(payload["history"]),
-        epoch=int(payload["epoch"]),
-        seconds=float(payload["train_seconds"]),
+        epochs_done=int(payload["epoch"]),
+        train_seconds=float(payload["train_seconds"]),
         first_latents=payload.get("latents_first_epoch"),
         early_stop=dict(payload.get("early_stop") or {}),
     )
@@ -363,33 +329,12 @@ def _restored_rng(state: Mapping[str, Any]) -> np.random.Generator:
     return rng
 
 
-def _stored_split(payload: Mapping[str, Any]) -> Split:
-    info = payload["split"]
-
-    def directions(key: str) -> dict[str, Any]:
-        return {k: [tuple(d) for d in v] for k, v in info[key].items()}
-
-    return Split(
-        np.asarray(payload["test_mask"], dtype=bool),
-        int(info["seed"]),
-        float(info["test_fraction"]),
-        tuple(info["unseen_objects"]),
-        directions("test_directions"),
-        np.asarray(payload["val_mask"], dtype=bool),
-        float(info["val_fraction"]),
-        directions("val_directions"),
-        str(info["mode"]),
-        float(info["gap_deg"]),
-        tuple(info["not_held_out"]),
-    )
-
-
 # what callers outside the learning room (the CLI, export, live, benchmarks) import from here; each is defined once,
 # in config.py (TrainConfig) or run.py (the rest)
 __all__ = [
     "LoadedRun",
     "TrainConfig",
-    "TrainOutcome",
+    "TrainingRun",
     "load_run",
     "load_test_set",
     "resolve_device",

@@ -34,19 +34,22 @@ class Translator:
     @classmethod
     def load(cls, run_dir: Path | str, member: int = 0, device: str = "cpu") -> Translator:
         run = load_run(Path(run_dir), device)
-        if not 0 <= member < run.engine.members:
-            raise ModelError(f"member {member} does not exist", hint=f"the run has {run.engine.members} member(s)")
+        run.check_member(member)
         return cls(run.engine.member(member, groups=[UNITAC_GROUP]), run.normaliser, Path(run_dir))
 
     @property
     def sensors(self) -> tuple[str, ...]:
         return self.engine.sensors
 
-    def _check(self, sensor: str, frames: np.ndarray) -> np.ndarray:
+    def _known(self, sensor: str) -> None:
         if sensor not in self.sensors:
             raise ModelError(
                 f"this model knows no sensor {sensor!r}", hint=f"it was trained on {', '.join(self.sensors)}"
             )
+
+    def _check(self, sensor: str, frames: np.ndarray) -> np.ndarray:
+        """``frames`` as float32; ModelError unless the model knows ``sensor`` and they are its (..., n_taxels, 3)."""
+        self._known(sensor)
         frames = np.asarray(frames, dtype=np.float32)
         n_taxels = self.engine.feature_dims[sensor] // 3
         if frames.shape[-2:] != (n_taxels, 3):
@@ -65,17 +68,11 @@ class Translator:
 
     def translate(self, frames: np.ndarray, source: str, target: str) -> np.ndarray:
         """``frames`` (..., n_src, 3) in the source's units -> (..., n_dst, 3) in the target's units."""
-        frames = self._check(source, frames)
-        if target not in self.sensors:
-            raise ModelError(
-                f"this model knows no sensor {target!r}", hint=f"it was trained on {', '.join(self.sensors)}"
-            )
-        flat = self.normaliser.normalise(source, frames.reshape(-1, *frames.shape[-2:]))
-        with torch.no_grad():
-            z = self.engine.encode(UNITAC_GROUP, source, torch.from_numpy(flat))
-            decoded = self.engine.decode(UNITAC_GROUP, z)[target][0].cpu().numpy()
-        out = self.normaliser.denormalise(target, decoded)
-        return out.reshape(*frames.shape[:-2], *out.shape[-2:])
+        self._known(target)
+        z = self.encode(frames, source)
+        decoded = self.engine.decode(UNITAC_GROUP, torch.from_numpy(z.reshape(-1, z.shape[-1])))[target]
+        out = self.normaliser.denormalise(target, decoded[0].cpu().numpy())
+        return out.reshape(*z.shape[:-1], *out.shape[-2:])
 
     def single_frame_latency_ms(self, source: str, target: str, repeats: int = 200) -> dict[str, float]:
         """Wall time of translating one frame (median and 90th percentile over ``repeats`` calls, ms)."""

@@ -83,3 +83,12 @@ def replace_doc_section(doc_path: Path, name: str, body: str, markers: tuple[str
     else:
         text = text.rstrip("\n") + "\n\n" + block + "\n"
     doc_path.write_text(text, encoding="utf-8")
+
+
+def markdown_table(header: list[str], align: list[str], rows: list[list[str]]) -> list[str]:
+    """A Markdown table's lines: ``header`` cells, one ``align`` marker per column (``---``, ``---:``), ``rows``."""
+    return [
+        "| " + " | ".join(header) + " |",
+        "|" + "|".join(align) + "|",
+        *("| " + " | ".join(row) + " |" for row in rows),
+    ]

@@ -271,29 +271,27 @@ def run_fidelity(
     }
 
 
-# Each addition of issue 12 set back to what the scene had before it: (scene parameters, uSkin output parameters,
-# material fields by material name).
-ABLATIONS: dict[str, tuple[dict[str, Any], dict[str, Any], dict[str, dict[str, Any]]]] = {
-    "without the skin bulge (kappa 0)": ({"skin_bulge_mm": 0.0}, {}, {}),
-    "without the TPU wall's drag on the skin (0)": ({}, {}, {"TPU": {"skin_drag_mm": 0.0}}),
-    "old uSkin gains and spreading (2500/3000 counts/N, sigma 3 mm)": (
-        {"skin_spread_sigma_mm": 3.0},
-        {"gain_normal_counts_per_n": 2500.0, "gain_shear_counts_per_n": 3000.0},
-        {},
-    ),
-    "old skin friction (0.8)": ({"skin_friction": 0.8}, {}, {}),
-    "without the pad pitch (beta 0)": ({"pad_pitch_deg": 0.0, "pad_pitch_sd_deg": 0.0}, {}, {}),
-    "full-slip shear as before (c 1, pillar friction 0.32, pitch 3.5 deg)": (
-        {"shear_projection": 1.0, "pillar_friction": 0.32, "pad_pitch_deg": 3.5},
-        {},
-        {},
-    ),
-    "without the centring error": ({"centring_error_mm": 0.0}, {}, {}),
-    "centring error as before, no PapillArray pad offset (sigma 0.75, 0)": (
-        {"centring_error_mm": 0.75, "pillar_pad_offset_mm": 0.0},
-        {},
-        {},
-    ),
+# Each addition of issue 12 set back to what the scene had before it, as :func:`model_settings` names.
+ABLATIONS: dict[str, dict[str, float]] = {
+    "without the skin bulge (kappa 0)": {"skin_bulge_mm": 0.0},
+    "without the TPU wall's drag on the skin (0)": {"TPU.skin_drag_mm": 0.0},
+    "old uSkin gains and spreading (2500/3000 counts/N, sigma 3 mm)": {
+        "skin_spread_sigma_mm": 3.0,
+        "gain_normal_counts_per_n": 2500.0,
+        "gain_shear_counts_per_n": 3000.0,
+    },
+    "old skin friction (0.8)": {"skin_friction": 0.8},
+    "without the pad pitch (beta 0)": {"pad_pitch_deg": 0.0, "pad_pitch_sd_deg": 0.0},
+    "full-slip shear as before (c 1, pillar friction 0.32, pitch 3.5 deg)": {
+        "shear_projection": 1.0,
+        "pillar_friction": 0.32,
+        "pad_pitch_deg": 3.5,
+    },
+    "without the centring error": {"centring_error_mm": 0.0},
+    "centring error as before, no PapillArray pad offset (sigma 0.75, 0)": {
+        "centring_error_mm": 0.75,
+        "pillar_pad_offset_mm": 0.0,
+    },
 }
 # Pooled extremes of the noise-free scene: press forces at which the loads are taken (N), per material; about the
 # simulated rig's largest true press force per session.
@@ -356,16 +354,10 @@ def run_ablation(*, seed: int = 0, angles: int = 91) -> dict[str, Any]:
     """Which recorded number each addition moves and by how much: the scene-alone statistics of the final model
     and of the model with each addition set back (:data:`ABLATIONS`)."""
     final = scene_extremes(SceneParams(), UskinParams(), seed=seed, angles=angles)
-    variants = {
-        name: scene_extremes(
-            replace(SceneParams(), **scene),
-            replace(UskinParams(), **uskin),
-            seed=seed,
-            angles=angles,
-            materials={material: replace(MATERIALS[material], **fields) for material, fields in materials.items()},
-        )
-        for name, (scene, uskin, materials) in ABLATIONS.items()
-    }
+    variants = {}
+    for name, settings in ABLATIONS.items():
+        scene_params, uskin_params, materials = model_settings(settings)
+        variants[name] = scene_extremes(scene_params, uskin_params, seed=seed, angles=angles, materials=materials)
     return {"forces_n": ABLATION_FORCE_N, "angles": angles, "seed": seed, "final": final, "variants": variants}
 
 

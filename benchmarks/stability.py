@@ -72,16 +72,23 @@ THRESHOLD_N = 10.0
 # ---- per-press measurements ----
 
 
-def travel_after_contact_mm(press: PressRecord) -> float:
-    """Pad travel along the press from the recorded first contact to the peak force (mm); NaN without a contact."""
+def travel_curve(press: PressRecord) -> tuple[np.ndarray, np.ndarray]:
+    """Pad travel along the press from the recorded first contact (mm) and the press force (N), up to the peak
+    force; empty without a contact."""
     contact_t = [t for t, kind, _ in press.events if kind == "contact"]
     if not contact_t or press.robot_t_s.size == 0:
-        return float("nan")
+        return np.zeros(0), np.zeros(0)
+    peak = int(np.argmax(press.press_force_n))
+    i0 = min(int(np.searchsorted(press.robot_t_s, contact_t[0])), peak)
     direction = np.asarray(press.attrs["direction"], dtype=np.float64)
-    i_contact = int(np.searchsorted(press.robot_t_s, contact_t[0]))
-    i_peak = int(np.argmax(press.press_force_n))
-    delta = press.robot_pose[i_peak, :3] - press.robot_pose[min(i_contact, i_peak), :3]
-    return 1000.0 * float(np.dot(delta, direction))
+    travel = 1000.0 * (press.robot_pose[i0 : peak + 1, :3] - press.robot_pose[i0, :3]) @ direction
+    return travel, press.press_force_n[i0 : peak + 1]
+
+
+def travel_after_contact_mm(press: PressRecord) -> float:
+    """Pad travel along the press from the recorded first contact to the peak force (mm); NaN without a contact."""
+    travel, _ = travel_curve(press)
+    return float(travel[-1]) if travel.size else float("nan")
 
 
 def ramp_rate_n_s(press: PressRecord) -> float:
@@ -158,13 +165,8 @@ def soft_objects(workdir: Path, angles: int) -> dict[str, Any]:
                 }
             )
             if limit == max(limits_mm):
-                p = presses[len(presses) // 2]
-                contact_t = next(t for t, kind, _ in p.events if kind == "contact")
-                i0 = int(np.searchsorted(p.robot_t_s, contact_t))
-                peak = int(np.argmax(p.press_force_n))
-                direction = np.asarray(p.attrs["direction"])
-                travel = 1000.0 * (p.robot_pose[i0 : peak + 1, :3] - p.robot_pose[i0, :3]) @ direction
-                curves[obj_id] = {"travel_mm": travel.tolist(), "force_n": p.press_force_n[i0 : peak + 1].tolist()}
+                travel, force = travel_curve(presses[len(presses) // 2])
+                curves[obj_id] = {"travel_mm": travel.tolist(), "force_n": force.tolist()}
     return {"limits_mm": list(limits_mm), "rows": rows, "curves": curves}
 
 

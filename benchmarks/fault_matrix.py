@@ -55,7 +55,7 @@ import h5py
 import numpy as np
 
 from lab.twin_runs import collect_command, host_load
-from unitac_rig.bench import machine_info, replace_doc_section, write_json
+from unitac_rig.bench import machine_info, markdown_table, replace_doc_section, write_json
 from unitac_rig.rig.config import PressConfig, load_rig_config
 from unitac_rig.sim.twin import ControllerParams, first_free_loopback
 from unitac_rig.sim.twin.rig import RigTwin
@@ -668,11 +668,7 @@ def render_section(doc: dict[str, Any]) -> tuple[str, str]:
         "",
         *summary_lines(doc)[:-1],
     ]
-    table = [
-        "| fault | motion | moment (v mm/s, F N) | peak N fault / resume | end N | exit | last line of the faulted run "
-        "| runs the watchdog ended, fault / resume | recorded / expected | resume | verdict |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
+    table_rows: list[list[str]] = []
     for r in rows:
         f, res, c = r["fault_run"], r["resume_run"], r["criteria"]
         moment = f["moment"]
@@ -703,10 +699,12 @@ def render_section(doc: dict[str, Any]) -> tuple[str, str]:
             )
         failed = [k.replace("_", " ") for k, v in c.items() if v is False]
         verdict = "pass" if not failed else "**FAIL**: " + ", ".join(failed)
-        table.append(
-            f"| {r['fault']} | {motion} | {when} | {peak} | {f['end_force_n']:.1f} | {f['exit_code']} | "
-            f"{_cell(f['last_line']) or '—'} | {trips} | {rec} | {resume} | {verdict} |"
-        )
+        last = _cell(f["last_line"]) or "—"
+        table_rows.append([r["fault"], motion, when, peak, f"{f['end_force_n']:.1f}", str(f["exit_code"]), last, trips])
+        table_rows[-1] += [rec, resume, verdict]
+    header = ["fault", "motion", "moment (v mm/s, F N)", "peak N fault / resume", "end N", "exit"]
+    header += ["last line of the faulted run", "runs the watchdog ended, fault / resume", "recorded / expected"]
+    table = markdown_table([*header, "resume", "verdict"], ["---"] * 11, table_rows)
     table += [
         "",
         "*recorded*: presses finished (complete or failed) when the faulted run ended → presses complete after the "

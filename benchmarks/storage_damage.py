@@ -41,7 +41,7 @@ from lab.damage import (
     swap_journal_entries,
     swap_press_files,
 )
-from unitac_rig.bench import default_out_dir, machine_info, replace_doc_section, write_json
+from unitac_rig.bench import default_out_dir, machine_info, markdown_table, replace_doc_section, write_json
 from unitac_rig.cli import main as cli_main
 from unitac_rig.storage.integrity import check_session
 from unitac_rig.storage.recorder import journal_dir, session_path
@@ -394,10 +394,7 @@ def random_bits(pristine: Path, root: Path, seeds: int) -> dict[str, Any]:
 
 
 def table(doc: dict[str, Any]) -> str:
-    lines = [
-        "| Damage | " + " | ".join(f"`{c}`" for c in COMMANDS) + " | data lost |",
-        "|---|" + "---|" * len(COMMANDS) + "---|",
-    ]
+    rows = []
     for case in doc["cases"].values():
         cells, lost = [], []
         for command in COMMANDS:
@@ -412,8 +409,10 @@ def table(doc: dict[str, Any]) -> str:
         if len(counts) == 1 and counts != {0}:
             r = next(iter(case["commands"].values()))
             lost = [f"{r['lost']} of {r['presses']} presses, whatever the command"]
-        lines.append(f"| {case['label']} | " + " | ".join(cells) + f" | {'; '.join(lost) or 'none'} |")
+        rows.append([case["label"], *cells, "; ".join(lost) or "none"])
     rb = doc["random_bits"]
+    header = ["Damage", *(f"`{c}`" for c in COMMANDS), "data lost"]
+    lines = markdown_table(header, ["---"] * (len(COMMANDS) + 2), rows)
     lines += [
         "",
         "Data lost: recorded presses (raw streams, tare, events, status) that cannot be read back as recorded "

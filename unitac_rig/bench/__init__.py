@@ -1,5 +1,5 @@
 """The benchmarks ``unitac-rig bench`` runs (press, recorder, inference), and what every measuring script shares:
-the machine's description, the JSON writer and the regenerated doc section.
+the machine's description, the JSON writer, the Markdown table and the regenerated doc section.
 
 Each benchmark module measures and returns a JSON-ready dict and draws its figure; printing belongs to the callers.
 Simulated time (virtual clock) is reported as-is; wall-clock figures are reported next to the hardware rate they

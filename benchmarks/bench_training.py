@@ -56,6 +56,7 @@ from drivers.layouts import PAPILLARRAY, USKIN
 from unitac_rig.bench import default_out_dir, write_json
 from unitac_rig.learning.data import PairedDataset, build_paired_dataset, load_sets
 from unitac_rig.learning.engine import Autoencoder, ModelShape, StackedAutoencoders, default_groups
+from unitac_rig.learning.run import computing_on
 from unitac_rig.learning.synthetic_data import synthetic_matched_sets
 
 TRAINERS = ("autograd", "vmap", "plain")
@@ -363,18 +364,14 @@ def run_training_benchmark(dataset: PairedDataset, source: str, plan: TrainingBe
     """Every measurement of this module on ``dataset``, at one torch thread; a JSON-ready dict."""
     from unitac_rig.bench import machine_info
 
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
     load_before = machine_info()["load_average_1min"]
-    try:
+    with computing_on("cpu", 1):
         x, dims, n_train = training_matrix(dataset)
         began = time.perf_counter()
         rates = measure_rates(x, dims, plan)
         rates_seconds = time.perf_counter() - began
         paper = measure_paper_run(dataset, plan.paper_run_epochs)
         budget = measure_budget(dataset, plan.budget_epochs, plan.eval_every) if plan.budget_epochs else None
-    finally:
-        torch.set_num_threads(previous)
     steps_per_epoch = -(-n_train // BATCH)
     largest = str(max(plan.stack_sizes))
     return {

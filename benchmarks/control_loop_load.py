@@ -173,22 +173,9 @@ def campaign(angles: int, scratch: Path, host: str) -> dict[str, Any]:
     with RigTwin("circle_pla", sensor="papillarray", host=host, seed=4) as rig:
         rig_file = scratch / "campaign.toml"
         rig_file.write_text(_only_sensor(rig.rig_file(), "papillarray"))  # the twin serves the mounted one only
-        cmd = [
-            *HOST_PREFIX,
-            sys.executable,
-            "-m",
-            "unitac_rig",
-            "campaign",
-            "--rig",
-            str(rig_file),
-            "--objects",
-            "circle_pla,circle_tpu",
-            "--angles",
-            str(angles),
-            "--data",
-            str(scratch / "campaign"),
-            "--no-live",
-        ]
+        cmd = [*HOST_PREFIX, sys.executable, "-m", "unitac_rig", "campaign", "--rig", str(rig_file)]
+        cmd += ["--objects", "circle_pla,circle_tpu", "--angles", str(angles), "--data", str(scratch / "campaign")]
+        cmd.append("--no-live")
         run = _run(rig, cmd, stdin="\n" * 8)  # mount the sensor, then each object
     print(f"campaign: {run}", flush=True)
     return run

@@ -55,7 +55,7 @@ import h5py
 import numpy as np
 
 from lab.twin_runs import collect_command, host_load
-from unitac_rig.bench import machine_info, replace_doc_section, write_json
+from unitac_rig.bench import machine_info, markdown_table, replace_doc_section, write_json
 from unitac_rig.rig.config import PressConfig, load_rig_config
 from unitac_rig.sim.twin import ControllerParams, first_free_loopback
 from unitac_rig.sim.twin.rig import RigTwin
@@ -641,8 +641,9 @@ def summary_lines(doc: dict[str, Any]) -> list[str]:
     ]
 
 
-def render_section(doc: dict[str, Any]) -> str:
-    """The "## Motion faults" section of docs/reliability.md."""
+def render_section(doc: dict[str, Any]) -> tuple[str, str]:
+    """The "## Motion faults" section of docs/reliability.md: its head (the run, the verdict, the worst peak) and its
+    table; which pairs run and the criteria are the doc's own text between the two."""
     rows = doc["rows"]
     passed = sum(r["pass"] for r in rows)
     lines = [
@@ -665,35 +666,9 @@ def render_section(doc: dict[str, Any]) -> str:
             else f" (a partial run: {len(rows)} of the {doc['planned']} rows ran)"
         ),
         "",
-        *summary_lines(doc),
-        "Which pairs are run, and why. A stall (SIGSTOP/SIGCONT of 0.1, 0.5, 2 s), a host death (SIGKILL) and a "
-        "protective stop happen at a moment, so each meets every motion: first move, transit (the inward leg to "
-        "press 2's stand-off), the free-air approach of press 2, press 2 in contact (> 5 N), its retract (force "
-        "falling after the stop), the back-off after an abort (object 50 mm closer: the first move's guard trips) "
-        "and the resume of a session stopped after one press. A misplaced or missing object, a stiffer or softer "
-        "object, a flipped wrist-force sign and a wrong TCP are conditions of the whole session: they meet every "
-        "motion of it in one run (rows marked *session*). The object removed between presses is injected in the "
-        "transit. A workspace that excludes a later press is a property of the rig file: it is refused before any "
-        "motion, tried on a new session and on the resume of one. Moments are detected from the twin's ground "
-        "truth (rules in the docstring of benchmarks/fault_matrix.py).",
-        "",
-        "Criteria: true peak < 25 N over every run of the row; the arm at rest and inside the rig file's workspace "
-        "at the end of each run; the pad unloaded (< 1 N) where the host could still act (not after SIGKILL, a "
-        "stall past the 167 ms watchdog period, or a protective stop: the controller stopped the program); one "
-        "clear line (`error: ...`, no traceback) when the run fails (SIGKILL: nothing can print), and after a "
-        "stall past "
-        "the watchdog period or a protective stop (not in the back-off, whose line is the abort's) that line names "
-        "it (`program stopped`, `protective stop`) and says the same command resumes; every press "
-        "recorded before the fault still there with its status; the same command, run again after the fault is "
-        "cleared (object back, stiffness and sign restored, protective stop unlocked, TCP corrected), finishes "
-        "the session (all presses complete or failed). Issue 37's rows add: no true peak above 15 N where no fault is "
-        "injected during contact; a resume run before the fault is cleared adds no force to what the fault left; no "
-        "exit 0 with nothing pressed. *end N*: the true force when the faulted run ended.",
-        "",
-        "| fault | motion | moment (v mm/s, F N) | peak N fault / resume | end N | exit | last line of the faulted run "
-        "| runs the watchdog ended, fault / resume | recorded / expected | resume | verdict |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        *summary_lines(doc)[:-1],
     ]
+    table_rows: list[list[str]] = []
     for r in rows:
         f, res, c = r["fault_run"], r["resume_run"], r["criteria"]
         moment = f["moment"]
@@ -724,17 +699,26 @@ def render_section(doc: dict[str, Any]) -> str:
             )
         failed = [k.replace("_", " ") for k, v in c.items() if v is False]
         verdict = "pass" if not failed else "**FAIL**: " + ", ".join(failed)
-        lines.append(
-            f"| {r['fault']} | {motion} | {when} | {peak} | {f['end_force_n']:.1f} | {f['exit_code']} | "
-            f"{_cell(f['last_line']) or '—'} | {trips} | {rec} | {resume} | {verdict} |"
-        )
-    lines += [
+        last = _cell(f["last_line"]) or "—"
+        table_rows.append([r["fault"], motion, when, peak, f"{f['end_force_n']:.1f}", str(f["exit_code"]), last, trips])
+        table_rows[-1] += [rec, resume, verdict]
+    header = ["fault", "motion", "moment (v mm/s, F N)", "peak N fault / resume", "end N", "exit"]
+    header += ["last line of the faulted run", "runs the watchdog ended, fault / resume", "recorded / expected"]
+    table = markdown_table([*header, "resume", "verdict"], ["---"] * 11, table_rows)
+    table += [
         "",
         "*recorded*: presses finished (complete or failed) when the faulted run ended → presses complete after the "
         "resume. Exit 1/2 is a failed run with its one line, -9 the SIGKILL, 0 a session that finished (presses "
         "that touched nothing or could not reach the threshold are recorded as failed).",
     ]
-    return "\n".join(lines)
+    return "\n".join(lines), "\n".join(table)
+
+
+def write_docs(page: Path, doc: dict[str, Any]) -> None:
+    head, table = render_section(doc)
+    replace_doc_section(page, "fault_matrix", head)
+    replace_doc_section(page, "fault_matrix_table", table)
+    print(f"table written into {page} ({DOC_SECTION})")
 
 
 def merge_rows(doc: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -771,8 +755,7 @@ def main() -> None:
     parser.add_argument("--merge", type=Path, default=None, help="put these rows into that JSON (replacing by id)")
     args = parser.parse_args()
     if args.render:
-        replace_doc_section(args.docs, "fault_matrix", render_section(json.loads(args.out.read_text())))
-        print(f"table written into {args.docs} ({DOC_SECTION})")
+        write_docs(args.docs, json.loads(args.out.read_text()))
         return
     if args.merge is not None and args.out.resolve() == args.merge.resolve():
         # the rows are written after every one; into the merge target itself, they would replace the rows kept there
@@ -815,8 +798,7 @@ def main() -> None:
         write_json(doc, args.merge)
         print(f"merged into {args.merge}: {doc['passed']}/{doc['total']} rows pass")
     if args.write_docs:
-        replace_doc_section(args.docs, "fault_matrix", render_section(doc))
-        print(f"table written into {args.docs} ({DOC_SECTION})")
+        write_docs(args.docs, doc)
 
 
 if __name__ == "__main__":

@@ -10,14 +10,13 @@ reading per tactile sample).
 
 The recorded numbers are carried here (:data:`RECORDED`), not read from anywhere at run time.
 
-Why one module: the recorded numbers, the measurement, the verdicts, the refit and the figure share
+Why one module: the recorded numbers, the measurement, the verdicts and the figure share
 the same targets and tolerances.
 
 Commands (each writes its JSON to ``--out``, default docs/figures):
 
     python benchmarks/fidelity.py report [--quick] [--angles N] [--seed S] [--imperfections all|none|...] [--keep DIR]
     python benchmarks/fidelity.py draws [--draws 10] [--angles 91] [--set NAME=VALUE ...]
-    python benchmarks/fidelity.py fit [--params a,b,...] [--rounds N] [--angles N] [--draws N]
 
 ``report`` collects every object with a recorded session (circle, hexagon, square; PLA and TPU) with both sensors
 through the normal collection code, prints the table (simulated, recorded in brackets, * = outside +-25 %) and the
@@ -33,10 +32,11 @@ target missed in any draw, the median and range of its error; writes fidelity_dr
 ``--set bending_lever_mm=90``) and writes fidelity_draws_<settings>.json: how docs/simulator.md's "What is left
 out" rows were measured.
 
-``fit`` refits the existing terms by coordinate descent (``refit``) on the scene alone over the named parameters
-(default: all of ``FIT_PARAMETERS`` but the terms the scene leaves off), prints the cost each round and every target
-still more than 25 % off at 91 angles; writes fidelity_fit.json (a few minutes on one core). ``--draws N`` fits each
-target's median over N placement draws (N times slower) and writes fidelity_fit_draws.json.
+The ``fit`` subcommand (coordinate descent of the scene's existing terms toward :data:`RECORDED`) was a one-time
+calibration: its result is the defaults in unitac_rig/sim/scene_params.py. Its code is kept as a record:
+``git show dfa451f:benchmarks/fidelity.py`` (``refit``, ``fit_evaluation``, ``FIT_PARAMETERS``); to refit, check that
+commit out beside this one (``git worktree add ../refit dfa451f``) and run ``python benchmarks/fidelity.py fit``
+there (docs/simulator.md, "Refitting the existing terms").
 """
 
 from __future__ import annotations
@@ -271,29 +271,27 @@ def run_fidelity(
     }
 
 
-# Each addition of issue 12 set back to what the scene had before it: (scene parameters, uSkin output parameters,
-# material fields by material name).
-ABLATIONS: dict[str, tuple[dict[str, Any], dict[str, Any], dict[str, dict[str, Any]]]] = {
-    "without the skin bulge (kappa 0)": ({"skin_bulge_mm": 0.0}, {}, {}),
-    "without the TPU wall's drag on the skin (0)": ({}, {}, {"TPU": {"skin_drag_mm": 0.0}}),
-    "old uSkin gains and spreading (2500/3000 counts/N, sigma 3 mm)": (
-        {"skin_spread_sigma_mm": 3.0},
-        {"gain_normal_counts_per_n": 2500.0, "gain_shear_counts_per_n": 3000.0},
-        {},
-    ),
-    "old skin friction (0.8)": ({"skin_friction": 0.8}, {}, {}),
-    "without the pad pitch (beta 0)": ({"pad_pitch_deg": 0.0, "pad_pitch_sd_deg": 0.0}, {}, {}),
-    "full-slip shear as before (c 1, pillar friction 0.32, pitch 3.5 deg)": (
-        {"shear_projection": 1.0, "pillar_friction": 0.32, "pad_pitch_deg": 3.5},
-        {},
-        {},
-    ),
-    "without the centring error": ({"centring_error_mm": 0.0}, {}, {}),
-    "centring error as before, no PapillArray pad offset (sigma 0.75, 0)": (
-        {"centring_error_mm": 0.75, "pillar_pad_offset_mm": 0.0},
-        {},
-        {},
-    ),
+# Each addition of issue 12 set back to what the scene had before it, as :func:`model_settings` names.
+ABLATIONS: dict[str, dict[str, float]] = {
+    "without the skin bulge (kappa 0)": {"skin_bulge_mm": 0.0},
+    "without the TPU wall's drag on the skin (0)": {"TPU.skin_drag_mm": 0.0},
+    "old uSkin gains and spreading (2500/3000 counts/N, sigma 3 mm)": {
+        "skin_spread_sigma_mm": 3.0,
+        "gain_normal_counts_per_n": 2500.0,
+        "gain_shear_counts_per_n": 3000.0,
+    },
+    "old skin friction (0.8)": {"skin_friction": 0.8},
+    "without the pad pitch (beta 0)": {"pad_pitch_deg": 0.0, "pad_pitch_sd_deg": 0.0},
+    "full-slip shear as before (c 1, pillar friction 0.32, pitch 3.5 deg)": {
+        "shear_projection": 1.0,
+        "pillar_friction": 0.32,
+        "pad_pitch_deg": 3.5,
+    },
+    "without the centring error": {"centring_error_mm": 0.0},
+    "centring error as before, no PapillArray pad offset (sigma 0.75, 0)": {
+        "centring_error_mm": 0.75,
+        "pillar_pad_offset_mm": 0.0,
+    },
 }
 # Pooled extremes of the noise-free scene: press forces at which the loads are taken (N), per material; about the
 # simulated rig's largest true press force per session.
@@ -322,7 +320,7 @@ def scene_extremes(
     """The pooled statistics of the scene alone (no arm, no noise): loads at the press force and at half of it over
     the angle sweep, through the uSkin's seeded gains and cross-talk; placement and mount errors seeded as the
     simulated rig seeds them. Cheap enough to switch each addition off in turn (:data:`ABLATIONS`). ``materials``
-    replaces the catalogue's material parameters by name (a refit moves them)."""
+    replaces the catalogue's material parameters by name (a what-if run moves them)."""
     out: dict[str, dict[str, float]] = {}
     uskin = UskinModel(uskin_params, np.random.default_rng([seed, 2]))
     for object_id in RECORDED:
@@ -356,16 +354,10 @@ def run_ablation(*, seed: int = 0, angles: int = 91) -> dict[str, Any]:
     """Which recorded number each addition moves and by how much: the scene-alone statistics of the final model
     and of the model with each addition set back (:data:`ABLATIONS`)."""
     final = scene_extremes(SceneParams(), UskinParams(), seed=seed, angles=angles)
-    variants = {
-        name: scene_extremes(
-            replace(SceneParams(), **scene),
-            replace(UskinParams(), **uskin),
-            seed=seed,
-            angles=angles,
-            materials={material: replace(MATERIALS[material], **fields) for material, fields in materials.items()},
-        )
-        for name, (scene, uskin, materials) in ABLATIONS.items()
-    }
+    variants = {}
+    for name, settings in ABLATIONS.items():
+        scene_params, uskin_params, materials = model_settings(settings)
+        variants[name] = scene_extremes(scene_params, uskin_params, seed=seed, angles=angles, materials=materials)
     return {"forces_n": ABLATION_FORCE_N, "angles": angles, "seed": seed, "final": final, "variants": variants}
 
 
@@ -518,29 +510,6 @@ def plot_fidelity(doc: dict[str, Any], path: Path) -> Path:
     return save_figure(fig, path)
 
 
-# ---- refitting the existing terms ---------------------------------------------------------------------------------
-
-# The parameters a refit may move: name -> (which dataclass, lower bound, upper bound). Bounds are what each
-# parameter's source allows (docs/simulator.md, "Parameters and their sources"), widened to see where a fit runs.
-FIT_PARAMETERS: dict[str, tuple[str, float, float]] = {
-    "skin_foundation_n_per_mm3": ("scene", 0.1, 3.0),
-    "skin_spread_sigma_mm": ("scene", 0.5, 4.0),
-    "skin_bulge_mm": ("scene", 0.1, 1.5),
-    "skin_friction": ("scene", 0.15, 1.0),
-    "shear_projection": ("scene", 0.3, 1.0),
-    "pillar_friction": ("scene", 0.2, 1.0),
-    "pad_pitch_deg": ("scene", 0.5, 10.0),
-    "gain_normal_counts_per_n": ("uskin", 600.0, 2500.0),
-    "gain_shear_counts_per_n": ("uskin", 1500.0, 10_000.0),
-    "TPU.skin_drag_mm": ("material", 0.0, 3.0),
-    "TPU.wall_point_stiffness_n_per_mm": ("material", 3.0, 100.0),
-    "TPU.wall_foundation_n_per_mm3": ("material", 0.01, 1.0),
-    "bending_lever_mm": ("scene", 40.0, 110.0),  # off (0) by default: its first move puts it at the lower bound
-}
-TERMS_OFF_BY_DEFAULT = ("bending_lever_mm",)  # fitted only when named (``fit --params``)
-FIT_SLACK = 0.12  # errors under this cost nothing beyond the worst one: the full rig's noise moves extremes ~5 %
-
-
 def target_errors(
     extremes: dict[str, dict[str, float]], recorded: dict[str, dict[str, tuple[float, float]]] = RECORDED
 ) -> dict[str, float]:
@@ -560,106 +529,6 @@ def target_errors(
         if not np.isnan(row["face_y_std_n"]):
             errors[f"{object_id} face_y_std_n"] = min(0.0, row["face_y_std_n"] / FACE_Y_STD_N - 1.0)
     return errors
-
-
-def fit_cost(errors: dict[str, float]) -> float:
-    """The largest |error|, plus the squares of every error beyond :data:`FIT_SLACK` (so the rest also improve)."""
-    values = np.abs(np.array(list(errors.values())))
-    return float(values.max() + np.sum(np.maximum(0.0, values - FIT_SLACK) ** 2))
-
-
-def _check_fit_names(names: Sequence[str]) -> None:
-    unknown = [name for name in names if name not in FIT_PARAMETERS]
-    if unknown:
-        raise ConfigError(f"cannot fit {', '.join(unknown)}", hint=f"choose from {', '.join(FIT_PARAMETERS)}")
-
-
-def fit_evaluation(
-    values: dict[str, float],
-    *,
-    angles: int = 91,
-    seed: int = 0,
-    draws: int = 1,
-    recorded: dict[str, dict[str, tuple[float, float]]] = RECORDED,
-) -> tuple[float, dict[str, float]]:
-    """(:func:`fit_cost`, :func:`target_errors`) of the scene alone with ``values`` (:data:`FIT_PARAMETERS` names)
-    in place of the defaults. ``draws`` > 1 scores the median error of each target over the placement and mount
-    draws of seeds ``seed .. seed + draws - 1``, so that a fit cannot win by suiting one draw."""
-    _check_fit_names(list(values))
-    scene_params, uskin_params, materials = model_settings(values)
-    per_draw = [
-        target_errors(
-            scene_extremes(scene_params, uskin_params, seed=seed + i, angles=angles, materials=materials), recorded
-        )
-        for i in range(max(1, draws))
-    ]
-    errors = {key: float(np.median([d[key] for d in per_draw])) for key in per_draw[0]}
-    return fit_cost(errors), errors
-
-
-def _default_value(name: str) -> float:
-    """The value a :data:`FIT_PARAMETERS` entry has in the code as it stands."""
-    kind = FIT_PARAMETERS[name][0]
-    if kind == "material":
-        material, field_name = name.split(".", 1)
-        return float(getattr(MATERIALS[material], field_name))
-    return float(getattr(SceneParams() if kind == "scene" else UskinParams(), name))
-
-
-def refit(
-    names: Sequence[str],
-    *,
-    rounds: int = 25,
-    angles: int = 31,
-    seed: int = 0,
-    draws: int = 1,
-    recorded: dict[str, dict[str, tuple[float, float]]] = RECORDED,
-    on_round: Callable[[int, float, dict[str, float]], None] | None = None,
-) -> dict[str, Any]:
-    """Fit the named :data:`FIT_PARAMETERS` to ``recorded`` on the scene alone, by coordinate descent.
-
-    Each round tries every parameter times and divided by exp(step) (within its bounds) and keeps the first move
-    that lowers :func:`fit_cost`; a round that moves nothing halves the step (from 0.25). Starts from the
-    defaults (a term that is off, at 0, goes to its lower bound on its first move). ``draws`` > 1 fits the median
-    over that many placement draws (:func:`fit_evaluation`). Returns the start and end values, their cost and
-    errors. Deterministic for a seed.
-    """
-    _check_fit_names(names)
-
-    def cost_of(values: dict[str, float]) -> tuple[float, dict[str, float]]:
-        return fit_evaluation(values, angles=angles, seed=seed, draws=draws, recorded=recorded)
-
-    start = {name: _default_value(name) for name in names}
-    values = dict(start)
-    cost, errors = cost_of(values)
-    start_cost, start_errors = cost, errors
-    step = 0.25
-    for round_index in range(rounds):
-        moved = False
-        for name in names:
-            _, low, high = FIT_PARAMETERS[name]
-            for sign in (1.0, -1.0):
-                trial = dict(values)
-                trial[name] = min(high, max(low, values[name] * float(np.exp(sign * step))))
-                if trial[name] == values[name]:
-                    continue
-                trial_cost, trial_errors = cost_of(trial)
-                if trial_cost < cost - 1e-6:
-                    values, cost, errors, moved = trial, trial_cost, trial_errors, True
-                    break
-        if not moved:
-            step /= 2.0
-        if on_round is not None:
-            on_round(round_index, cost, values)
-    return {
-        "fitted": list(names),
-        "angles": angles,
-        "seed": seed,
-        "draws": draws,
-        "rounds": rounds,
-        "start": {"values": start, "cost": start_cost, "errors": start_errors},
-        "end": {"values": values, "cost": cost, "errors": errors},
-    }
 
 
 def model_settings(values: dict[str, float]) -> tuple[SceneParams, UskinParams, dict[str, MaterialSpec]]:
@@ -766,33 +635,6 @@ def _draws(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
     print(f"wrote {write_json(doc, args.out / f'fidelity_draws{suffix}.json')}")
 
 
-def _fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
-    names = [n.strip() for n in args.params.split(",") if n.strip()]
-    unknown = [n for n in names if n not in FIT_PARAMETERS]
-    if unknown:
-        parser.error(f"cannot fit {', '.join(unknown)}; choose from {', '.join(FIT_PARAMETERS)}")
-    doc = refit(
-        names,
-        rounds=args.rounds,
-        angles=args.angles,
-        seed=args.seed,
-        draws=args.draws,
-        on_round=lambda i, cost, values: print(
-            f"round {i}: cost {cost:.3f} " + " ".join(f"{k}={v:.3g}" for k, v in values.items()), flush=True
-        ),
-    )
-    doc["at_91_angles"] = {}
-    for label, values in (("defaults", doc["start"]["values"]), ("fitted", doc["end"]["values"])):
-        cost, errors = fit_evaluation(values, angles=91, seed=args.seed, draws=args.draws)
-        doc["at_91_angles"][label] = {"values": values, "cost": cost, "errors": errors}
-        off = {k: v for k, v in errors.items() if abs(v) > REL_TOLERANCE}
-        print(f"{label} (91 angles): cost {cost:.3f}, {len(off)} targets off by more than 25 %")
-        for key, err in off.items():
-            print(f"  {key} {100 * err:+.0f}%")
-    name = "fidelity_fit.json" if args.draws <= 1 else "fidelity_fit_draws.json"
-    print(f"wrote {write_json(doc, args.out / name)}")
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=default_out_dir(), help="folder for the JSON and PNG")
@@ -811,20 +653,11 @@ def main() -> None:
     draws.add_argument(
         "--set", dest="settings", action="append", default=[], metavar="NAME=VALUE", help="change one model parameter"
     )
-    fit = commands.add_parser("fit", help="refit the scene's existing terms to the recorded statistics")
-    default_names = [name for name in FIT_PARAMETERS if name not in TERMS_OFF_BY_DEFAULT]
-    fit.add_argument("--params", default=",".join(default_names), help="comma-separated parameters to fit")
-    fit.add_argument("--rounds", type=int, default=25, help="descent rounds (default 25)")
-    fit.add_argument("--angles", type=int, default=31, help="approach angles while fitting (default 31)")
-    fit.add_argument("--seed", type=int, default=0, help="scene seed (the first of --draws)")
-    fit.add_argument("--draws", type=int, default=1, help="fit the median over this many placement draws")
     args = parser.parse_args()
     if args.command == "report":
         _report(args)
-    elif args.command == "draws":
-        _draws(args, parser)
     else:
-        _fit(args, parser)
+        _draws(args, parser)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from unitac_rig.bench import replace_doc_section
+from unitac_rig.bench import markdown_table, replace_doc_section
 from unitac_rig.learning.contact_geometry import GeometryConfig
 from unitac_rig.learning.evaluate import PREPROCESSING_TEXT, metric_description
 from unitac_rig.learning.metrics import NMAE_NORMALISERS, SSIM_RANGES
@@ -479,71 +479,69 @@ def protocol_section(protocol: str, splits: list[dict[str, Any]], figures: dict[
         "",
         f"### Headline claims ({protocol} split, default reading)",
         "",
-        "| claim | reproduced | measurement |",
-        "|---|---|---|",
+        *markdown_table(
+            ["claim", "reproduced", "measurement"],
+            ["---"] * 3,
+            [[claim, "yes" if ok else "**no**", text] for claim, ok, text in claims(splits)],
+        ),
     ]
-    for claim, ok, text in claims(splits):
-        lines.append(f"| {claim} | {'yes' if ok else '**no**'} | {text} |")
     lines += readings_lines(splits)
     lines += [
         "",
         f"### Table I ({protocol} split): NMAE / SSIM on the test set, mean ± std over {n_members} members "
         f"({len(splits)} splits x {len(config['seeds'])} seeds), paper below",
         "",
-        "| row | " + " | ".join(_arrow(c) for c in columns) + " |",
-        "|---|" + "---|" * len(columns),
     ]
+    table_rows = []
     for row in table:
-        cells = []
+        cells = [row]
         for c in columns:
             n, s = members(splits, row, c, "nmae"), members(splits, row, c, "ssim")
             cells.append(f"{n.mean():.3f}±{n.std():.3f} / {s.mean():.3f}±{s.std():.3f}")
-        lines.append(f"| {row} | " + " | ".join(cells) + " |")
+        table_rows.append(cells)
         if row in PAPER_TABLE1:
             paper = PAPER_TABLE1[row]
-            lines.append(
-                "| *paper* | "
-                + " | ".join(f"{paper[c][0]:.3f} / {paper[c][1]:.3f}" if c in paper else "–" for c in columns)
-                + " |"
+            table_rows.append(
+                ["*paper*", *(f"{paper[c][0]:.3f} / {paper[c][1]:.3f}" if c in paper else "–" for c in columns)]
             )
+    lines += markdown_table(["row", *(_arrow(c) for c in columns)], ["---"] * (len(columns) + 1), table_rows)
     lines += simple_baselines_lines(protocol, splits)
     lines += [
         "",
         "Spread of the all-seen row: standard deviation of the per-split means (split to split) against the mean "
         "standard deviation over seeds within a split (seed to seed):",
         "",
-        "| column | NMAE split-to-split | NMAE seed-to-seed | SSIM split-to-split | SSIM seed-to-seed |",
-        "|---|---:|---:|---:|---:|",
     ]
+    spread = []
     for c in columns:
-        within = {
-            metric: np.mean(
-                [s["metrics"].get("table1_std", {}).get("all_seen", {}).get(c, {}).get(metric, 0.0) for s in splits]
-            )
-            for metric in ("nmae", "ssim")
-        }
-        lines.append(
-            f"| {_arrow(c)} | {split_means(splits, 'all_seen', c, 'nmae').std():.4f} | {within['nmae']:.4f} | "
-            f"{split_means(splits, 'all_seen', c, 'ssim').std():.4f} | {within['ssim']:.4f} |"
-        )
+        cells = [_arrow(c)]
+        for metric in ("nmae", "ssim"):
+            within = [
+                s["metrics"].get("table1_std", {}).get("all_seen", {}).get(c, {}).get(metric, 0.0) for s in splits
+            ]
+            cells += [f"{split_means(splits, 'all_seen', c, metric).std():.4f}", f"{np.mean(within):.4f}"]
+        spread.append(cells)
+    header = ["column", "NMAE split-to-split", "NMAE seed-to-seed", "SSIM split-to-split", "SSIM seed-to-seed"]
+    lines += markdown_table(header, ["---"] + ["---:"] * 4, spread)
     lines += _variants_lines(splits, columns)
     lines += _consistency_lines(splits, columns)
     lines += [
         "",
         f"### Latent alignment ({protocol} split; test contacts, after epoch 1 → at the end, mean over all members)",
         "",
-        "| contacts | matched L1 (paper's; moves with the latents' scale) | matched / unmatched L1 (scale-free: the "
-        "claim) | sensor mixing (10 NN) | perfect mixing |",
-        "|---|---|---|---|---|",
     ]
+    alignment = []
     for subset in ("all", "seen", "unseen"):
-        cells = []
+        cells = [subset]
         for key in ("latent_l1", "latent_ratio", "mixing"):
             before = alignment_values(splits, subset, key, "first_epoch")
             after = alignment_values(splits, subset, key, "final")
             cells.append(f"{before.mean():.3f} → {after.mean():.3f}" if before.size and after.size else "–")
         expected = alignment_values(splits, subset, "mixing_expected", "final")
-        lines.append(f"| {subset} | " + " | ".join(cells) + f" | {expected.mean() if expected.size else 0:.3f} |")
+        alignment.append([*cells, f"{expected.mean() if expected.size else 0:.3f}"])
+    header = ["contacts", "matched L1 (paper's; moves with the latents' scale)"]
+    header += ["matched / unmatched L1 (scale-free: the claim)", "sensor mixing (10 NN)", "perfect mixing"]
+    lines += markdown_table(header, ["---"] * 5, alignment)
     lines += geometry_lines(protocol, splits, n_members)
     lines += cross_sensor_lines(protocol, splits)
     lines += ["", f"### Figures ({protocol} split)", ""]
@@ -599,25 +597,25 @@ def simple_baselines_lines(protocol: str, splits: list[dict[str, Any]]) -> list[
         f"scored like UniTac-NV: PCA: {info['definition']['pca']} (k = {info['pca_components']}); ridge: "
         f"{info['definition']['ridge']}; nn: {info['definition']['nn']}.",
         "",
-        "| row | " + " | ".join(c.replace("_to_", " → ").replace("_", " ", 1) for c in columns) + " |",
-        "|---|" + "---|" * len(columns),
     ]
+    table_rows = []
     for row in rows:
-        cells = []
+        cells = [row]
         for c in columns:
             n = np.asarray([s["metrics"]["simple_baselines"]["table1"][row][c]["nmae"] for s in splits])
             q = np.asarray([s["metrics"]["simple_baselines"]["table1"][row][c]["ssim"] for s in splits])
             cells.append(f"{n.mean():.3f}±{n.std():.3f} / {q.mean():.3f}±{q.std():.3f}")
-        lines.append(f"| {row} | " + " | ".join(cells) + " |")
+        table_rows.append(cells)
+    header = ["row", *(c.replace("_to_", " → ").replace("_", " ", 1) for c in columns)]
+    lines += markdown_table(header, ["---"] * (len(columns) + 1), table_rows)
     lines += [
         "",
         "UniTac-NV against each simple baseline, paired over members (each member with its split's baseline): mean "
         "difference (baseline − UniTac-NV for NMAE, UniTac-NV − baseline for SSIM: positive = UniTac-NV better) and "
         "in how many members UniTac-NV is better.",
         "",
-        "| row | UniTac-NV | baseline | NMAE difference | better NMAE | SSIM difference | better SSIM |",
-        "|---|---|---|---:|---:|---:|---:|",
     ]
+    paired: list[list[str]] = []
     not_beaten: list[str] = []
     for row in rows[rows.index("all_seen") :] if "all_seen" in rows else rows:  # pooled seen, then unseen
         for baseline in columns:
@@ -631,12 +629,13 @@ def simple_baselines_lines(protocol: str, splits: list[dict[str, Any]]) -> list[
                 d_ssim = members(splits, row, ours, "ssim") - simple_members(splits, row, baseline, "ssim")
                 count = len(d_nmae)
                 wins_n, wins_s = int((d_nmae > 0).sum()), int((d_ssim > 0).sum())
-                lines.append(
-                    f"| {row} | {_arrow(ours)} | {baseline.replace('_to_', ' → ').replace('_', ' ', 1)} | "
-                    f"{d_nmae.mean():+.4f} | {wins_n} of {count} | {d_ssim.mean():+.4f} | {wins_s} of {count} |"
-                )
+                named = baseline.replace("_to_", " → ").replace("_", " ", 1)
+                paired.append([row, _arrow(ours), named, f"{d_nmae.mean():+.4f}", f"{wins_n} of {count}"])
+                paired[-1] += [f"{d_ssim.mean():+.4f}", f"{wins_s} of {count}"]
                 if 2 * wins_n <= count or 2 * wins_s <= count:
                     not_beaten.append(f"{row}: {_arrow(ours)} vs {baseline.replace('_to_', ' → ')}")
+    header = ["row", "UniTac-NV", "baseline", "NMAE difference", "better NMAE", "SSIM difference", "better SSIM"]
+    lines += markdown_table(header, ["---"] * 3 + ["---:"] * 4, paired)
     lines += [
         "",
         (
@@ -762,24 +761,20 @@ def geometry_lines(protocol: str, splits: list[dict[str, Any]], n_members: int) 
         )
         + " The no-latent baseline predicts the training rays' mean profile for every contact.",
         "",
-        "| train → test | ours | paper |",
-        "|---|---:|---:|",
     ]
+    rows = []
     for name in scenarios:
         paper_mm = PAPER_GEOMETRY_MAE_MM.get(name)
-        lines.append(
-            f"| {_arrow(name)} | {_pm(geometry_values(splits, name))} | "
-            f"{'–' if paper_mm is None else f'{paper_mm:.3f}'} |"
-        )
-    lines.append(f"| no latent (the training rays' mean profile) | {_pm(no_latent)} | – |")
+        rows.append([_arrow(name), _pm(geometry_values(splits, name)), "–" if paper_mm is None else f"{paper_mm:.3f}"])
+    rows.append(["no latent (the training rays' mean profile)", _pm(no_latent), "–"])
     pooled = [head for split in splits for head in split["geometry"]["pooled_head"]]
     for name in pooled[0]["scenarios"] if pooled else []:
-        lines.append(
-            f"| {_arrow(name)} (same-sensor option: one head trained on both sensors' latents, the test "
-            f"sensor's included; {len(pooled)} member{'s' if len(pooled) != 1 else ''}) | "
-            f"{_pm(geometry_values(splits, name))} | – |"
+        label = (
+            f"{_arrow(name)} (same-sensor option: one head trained on both sensors' latents, the test sensor's "
+            f"included; {len(pooled)} member{'s' if len(pooled) != 1 else ''})"
         )
-    return lines
+        rows.append([label, _pm(geometry_values(splits, name)), "–"])
+    return lines + markdown_table(["train → test", "ours", "paper"], ["---", "---:", "---:"], rows)
 
 
 def cross_summary(splits: list[dict[str, Any]]) -> dict[str, Any]:
@@ -831,8 +826,6 @@ def cross_sensor_lines(protocol: str, splits: list[dict[str, Any]]) -> list[str]
         f"Mean over {summary['members']} members; cost = CPU seconds per head (heads fitted together share the fit "
         "equally) plus the method's own fit.",
         "",
-        "| method | u → p (mm) | p → u (mm) | mean | cost (CPU s) |",
-        "|---|---:|---:|---:|---:|",
     ]
     described = {
         "paper": "paper: A's latents",
@@ -840,17 +833,15 @@ def cross_sensor_lines(protocol: str, splits: list[dict[str, Any]]) -> list[str]
         "linear_map": "linear map z_A → z_B (ridge, seen pairs)",
         "cca": "CCA on seen pairs (both projected)",
     }
+    rows = []
     for method, entry in summary["methods"].items():
         u_p, p_u = entry.get("uskin_to_papillarray", np.nan), entry.get("papillarray_to_uskin", np.nan)
-        lines.append(
-            f"| {described.get(method, method)} | {u_p:.3f} | {p_u:.3f} | {(u_p + p_u) / 2:.3f} | "
-            f"{entry['seconds']:.1f} |"
-        )
-    lines.append(
-        f"| *paper (Hou et al.)* | {PAPER_GEOMETRY_MAE_MM['uskin_to_papillarray']:.3f} | "
-        f"{PAPER_GEOMETRY_MAE_MM['papillarray_to_uskin']:.3f} | "
-        f"{np.mean([PAPER_GEOMETRY_MAE_MM[c] for c in CROSS]):.3f} | – |"
-    )
+        rows.append([described.get(method, method), f"{u_p:.3f}", f"{p_u:.3f}", f"{(u_p + p_u) / 2:.3f}"])
+        rows[-1].append(f"{entry['seconds']:.1f}")
+    paper = [f"{PAPER_GEOMETRY_MAE_MM[c]:.3f}" for c in CROSS]
+    rows.append(["*paper (Hou et al.)*", *paper, f"{np.mean([PAPER_GEOMETRY_MAE_MM[c] for c in CROSS]):.3f}", "–"])
+    header = ["method", "u → p (mm)", "p → u (mm)", "mean", "cost (CPU s)"]
+    lines += markdown_table(header, ["---"] + ["---:"] * 4, rows)
     lines += [
         "",
         "Beside it, on the same rays: the same-sensor paper heads "
@@ -865,15 +856,13 @@ def cross_sensor_lines(protocol: str, splits: list[dict[str, Any]]) -> list[str]
             f"(normalised) frames; {ceiling_recipe_text(crosses)}; {n} member{'s' if n != 1 else ''} (the first of "
             "each split):",
             "",
-            "| ceiling head | test (mm) | recipe (lr, dropout, epochs) | cost (CPU s) |",
-            "|---|---:|---|---:|",
         ]
-        for key, entry in summary["ceiling"].items():
-            choices = "; ".join(f"{lr:g}, {d:g}, {e}" for lr, d, e in entry["choices"][:5])
-            lines.append(
-                f"| {key} | {entry['test_mm']:.3f} ± {entry['std']:.3f} | {choices} | {entry['seconds']:.0f} |"
-            )
-        lines += ["", halving_verdict(summary)]
+        rows = []
+        for key, e in summary["ceiling"].items():
+            choices = "; ".join(f"{lr:g}, {d:g}, {n}" for lr, d, n in e["choices"][:5])
+            rows.append([key, f"{e['test_mm']:.3f} ± {e['std']:.3f}", choices, f"{e['seconds']:.0f}"])
+        header = ["ceiling head", "test (mm)", "recipe (lr, dropout, epochs)", "cost (CPU s)"]
+        lines += [*markdown_table(header, ["---", "---:", "---", "---:"], rows), "", halving_verdict(summary)]
     return lines
 
 
@@ -998,9 +987,8 @@ def _variants_lines(splits: list[dict[str, Any]], columns: list[str]) -> list[st
         "",
         "### The same models under every metric reading (validation contacts, seen objects, mean over members)",
         "",
-        "| metric | option | " + " | ".join(_arrow(c) for c in columns) + " | geometric-mean ratio to the paper's |",
-        "|---|---|" + "---|" * len(columns) + "---:|",
     ]
+    rows = []
     for metric, index in (("nmae", 0), ("ssim", 1)):
         for option in variants[0][metric]:
             values = [_variant_mean(variants, metric, option, c) for c in columns]
@@ -1010,17 +998,12 @@ def _variants_lines(splits: list[dict[str, Any]], columns: list[str]) -> list[st
                 for v, c in zip(values, columns, strict=True)
                 if c in paper
             ]
-            lines.append(
-                f"| {metric.upper()} | `{option}` | "
-                + " | ".join(f"{v:.3f}" for v in values)
-                + f" | {float(np.exp(np.mean(np.log(ratios)))):.2f} |"
-            )
-        lines.append(
-            f"| {metric.upper()} | *paper, all seen (test)* | "
-            + " | ".join(f"{paper[c][index]:.3f}" if c in paper else "–" for c in columns)
-            + " | 1 |"
-        )
-    return lines
+            rows.append([metric.upper(), f"`{option}`", *(f"{v:.3f}" for v in values)])
+            rows[-1].append(f"{float(np.exp(np.mean(np.log(ratios)))):.2f}")
+        paper_row = [f"{paper[c][index]:.3f}" if c in paper else "–" for c in columns]
+        rows.append([metric.upper(), "*paper, all seen (test)*", *paper_row, "1"])
+    header = ["metric", "option", *(_arrow(c) for c in columns), "geometric-mean ratio to the paper's"]
+    return lines + markdown_table(header, ["---"] * (len(columns) + 2) + ["---:"], rows)
 
 
 def _variant_mean(variants: list[Any], metric: str, option: str, column: str) -> float:
@@ -1046,11 +1029,10 @@ def _consistency_lines(splits: list[dict[str, Any]], columns: list[str]) -> list
         f"({paper_slope:.2f} on its all-seen row): 1 where our two metrics relate as the paper's do, whatever the "
         "size of the errors.",
         "",
-        "| NMAE normaliser \\ SSIM range | " + " | ".join(f"`{o}`" for o in ssim_options) + " |",
-        "|---|" + "---:|" * len(ssim_options),
     ]
+    rows = []
     for nmae_option in variants[0]["nmae"]:
-        cells = []
+        cells = [f"`{nmae_option}`"]
         for ssim_option in ssim_options:
             slopes = [
                 np.log(
@@ -1060,8 +1042,9 @@ def _consistency_lines(splits: list[dict[str, Any]], columns: list[str]) -> list
                 for c in shared
             ]
             cells.append(f"{float(np.exp(np.mean(slopes))) / paper_slope:.2f}")
-        lines.append(f"| `{nmae_option}` | " + " | ".join(cells) + " |")
-    return lines
+        rows.append(cells)
+    header = ["NMAE normaliser \\ SSIM range", *(f"`{o}`" for o in ssim_options)]
+    return lines + markdown_table(header, ["---"] + ["---:"] * len(ssim_options), rows)
 
 
 if __name__ == "__main__":

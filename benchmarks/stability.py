@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
 import math
 import tempfile
 import time
@@ -45,7 +44,7 @@ import torch
 from unitac_rig.bench import default_out_dir, write_json
 from unitac_rig.collection.session import collect_session
 from unitac_rig.errors import DataError, UsageError
-from unitac_rig.learning.contact_geometry import GeometryConfig, contact_profiles, fit_profile_mlps
+from unitac_rig.learning.contact_geometry import GeometryConfig, contact_profiles, fit_single_thread
 from unitac_rig.learning.data import PairedDataset, object_shape_material
 from unitac_rig.learning.engine import UNITAC_GROUP
 from unitac_rig.learning.evaluate import Evaluator, table_rows
@@ -64,28 +63,32 @@ from unitac_rig.storage.recorder import session_path
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-# =====================================================================================================================
-# collection: where the collection method stops working
-# =====================================================================================================================
+# ==== collection: where the collection method stops working ====
 
 
 THRESHOLD_N = 10.0
 
 
-# ---------------------------------------------------------------------------------------------------------------------
-# per-press measurements
+# ---- per-press measurements ----
+
+
+def travel_curve(press: PressRecord) -> tuple[np.ndarray, np.ndarray]:
+    """Pad travel along the press from the recorded first contact (mm) and the press force (N), up to the peak
+    force; empty without a contact."""
+    contact_t = [t for t, kind, _ in press.events if kind == "contact"]
+    if not contact_t or press.robot_t_s.size == 0:
+        return np.zeros(0), np.zeros(0)
+    peak = int(np.argmax(press.press_force_n))
+    i0 = min(int(np.searchsorted(press.robot_t_s, contact_t[0])), peak)
+    direction = np.asarray(press.attrs["direction"], dtype=np.float64)
+    travel = 1000.0 * (press.robot_pose[i0 : peak + 1, :3] - press.robot_pose[i0, :3]) @ direction
+    return travel, press.press_force_n[i0 : peak + 1]
 
 
 def travel_after_contact_mm(press: PressRecord) -> float:
     """Pad travel along the press from the recorded first contact to the peak force (mm); NaN without a contact."""
-    contact_t = [t for t, kind, _ in press.events if kind == "contact"]
-    if not contact_t or press.robot_t_s.size == 0:
-        return float("nan")
-    direction = np.asarray(press.attrs["direction"], dtype=np.float64)
-    i_contact = int(np.searchsorted(press.robot_t_s, contact_t[0]))
-    i_peak = int(np.argmax(press.press_force_n))
-    delta = press.robot_pose[i_peak, :3] - press.robot_pose[min(i_contact, i_peak), :3]
-    return 1000.0 * float(np.dot(delta, direction))
+    travel, _ = travel_curve(press)
+    return float(travel[-1]) if travel.size else float("nan")
 
 
 def ramp_rate_n_s(press: PressRecord) -> float:
@@ -135,8 +138,7 @@ def run_session(
     return read_presses(session_path(out, obj_id, sensor))
 
 
-# ---------------------------------------------------------------------------------------------------------------------
-# A. soft objects that cannot reach the threshold
+# ---- A. soft objects that cannot reach the threshold ----
 
 
 def soft_objects(workdir: Path, angles: int) -> dict[str, Any]:
@@ -163,18 +165,12 @@ def soft_objects(workdir: Path, angles: int) -> dict[str, Any]:
                 }
             )
             if limit == max(limits_mm):
-                p = presses[len(presses) // 2]
-                contact_t = next(t for t, kind, _ in p.events if kind == "contact")
-                i0 = int(np.searchsorted(p.robot_t_s, contact_t))
-                peak = int(np.argmax(p.press_force_n))
-                direction = np.asarray(p.attrs["direction"])
-                travel = 1000.0 * (p.robot_pose[i0 : peak + 1, :3] - p.robot_pose[i0, :3]) @ direction
-                curves[obj_id] = {"travel_mm": travel.tolist(), "force_n": p.press_force_n[i0 : peak + 1].tolist()}
+                travel, force = travel_curve(presses[len(presses) // 2])
+                curves[obj_id] = {"travel_mm": travel.tolist(), "force_n": force.tolist()}
     return {"limits_mm": list(limits_mm), "rows": rows, "curves": curves}
 
 
-# ---------------------------------------------------------------------------------------------------------------------
-# B. steep ramps against the frame period
+# ---- B. steep ramps against the frame period ----
 
 
 def ramp_sweep(trials: int, seed: int = 0) -> dict[str, Any]:
@@ -227,8 +223,7 @@ def ramp_sweep(trials: int, seed: int = 0) -> dict[str, Any]:
     return {"tolerance_n": tol, "smoothing_samples": settings.smoothing_samples, "rows": rows}
 
 
-# ---------------------------------------------------------------------------------------------------------------------
-# C. PLA against TPU
+# ---- C. PLA against TPU ----
 
 
 def materials(workdir: Path, angles: int) -> dict[str, Any]:
@@ -267,8 +262,7 @@ def material_stats(sessions: dict[str, Any]) -> dict[str, Any]:
     return stats
 
 
-# ---------------------------------------------------------------------------------------------------------------------
-# figures
+# ---- figures ----
 
 
 def draw(result: dict[str, Any], out_dir: Path) -> list[Path]:
@@ -405,12 +399,8 @@ def run_collection(args: argparse.Namespace) -> None:
     print(f"wall {result['wall_s']} s")
 
 
-# =====================================================================================================================
-# learning: where the learned representation fails
-# =====================================================================================================================
+# ==== learning: where the learned representation fails ====
 
-
-log = logging.getLogger(__name__)
 
 FACE_DISTANCE_MM = 3.0  # a contact origin farther than this from every corner vertex is on a face
 DEFAULT_GEOMETRY_FOLDS = 10  # each fold holds out 10% of the directions, like the paper's single split
@@ -424,12 +414,8 @@ PAPER_REMARKS = {
 METRICS = ("nmae", "ssim")
 MATERIALS = ("PLA", "TPU")
 
-STABILITY_JSON = "stability_learning.json"
 
-
-# ---------------------------------------------------------------------------------------------------------------
-# Outline features
-# ---------------------------------------------------------------------------------------------------------------
+# ---- Outline features ----
 
 
 @dataclass(frozen=True)
@@ -518,9 +504,7 @@ def assign_features(
     return features, index, distance
 
 
-# ---------------------------------------------------------------------------------------------------------------
-# Statistics over members
-# ---------------------------------------------------------------------------------------------------------------
+# ---- Statistics over members ----
 
 
 def spread(per_member: Iterable[float]) -> dict[str, Any]:
@@ -542,9 +526,7 @@ def _member_means(values: torch.Tensor, mask: np.ndarray) -> np.ndarray:
     return values[:, torch.from_numpy(mask)].double().mean(dim=1).numpy()
 
 
-# ---------------------------------------------------------------------------------------------------------------
-# The report
-# ---------------------------------------------------------------------------------------------------------------
+# ---- The report ----
 
 
 def stability_report(
@@ -731,32 +713,27 @@ def _geometry_by_feature(
     }
     # reference without the latent: predict the training folds' mean profile for every contact
     mean_profile_error = np.full(len(subset), np.nan)
-    previous_threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # tiny layers: one thread is fastest (see train.default_threads)
-    try:
-        for fold in range(folds):
-            train_rows = valid & (fold_of != fold)
-            test_rows = np.flatnonzero(valid & (fold_of == fold))
-            if test_rows.size == 0 or not train_rows.any():
-                continue
-            mean_profile = truth[train_rows].mean(axis=0)
-            mean_profile_error[test_rows] = np.abs(truth[test_rows] - mean_profile).mean(axis=1)
-            model = fit_profile_mlps(
-                [latents[s][m][train_rows] for m, s in slots],
-                truth[train_rows],
-                config,
-                [config.dropout_for(s) for _, s in slots],
-                seed=run.engine.seeds[0] * 1000 + fold,
-            )
-            for test_sensor in sensors:
-                stacked = torch.from_numpy(np.stack([latents[test_sensor][m][test_rows] for m, _ in slots]))
-                with torch.no_grad():
-                    predicted = model(stacked).numpy()  # (slots, T, points)
-                for k, (m, train_sensor) in enumerate(slots):
-                    per_contact = np.abs(predicted[k] - truth[test_rows]).mean(axis=1)
-                    error[f"{train_sensor}_to_{test_sensor}"][m, test_rows] = per_contact
-    finally:
-        torch.set_num_threads(previous_threads)
+    for fold in range(folds):
+        train_rows = valid & (fold_of != fold)
+        test_rows = np.flatnonzero(valid & (fold_of == fold))
+        if test_rows.size == 0 or not train_rows.any():
+            continue
+        mean_profile = truth[train_rows].mean(axis=0)
+        mean_profile_error[test_rows] = np.abs(truth[test_rows] - mean_profile).mean(axis=1)
+        model = fit_single_thread(
+            [latents[s][m][train_rows] for m, s in slots],
+            truth[train_rows],
+            config,
+            [config.dropout_for(s) for _, s in slots],
+            seed=run.engine.seeds[0] * 1000 + fold,
+        )
+        for test_sensor in sensors:
+            stacked = torch.from_numpy(np.stack([latents[test_sensor][m][test_rows] for m, _ in slots]))
+            with torch.no_grad():
+                predicted = model(stacked).numpy()  # (slots, T, points)
+            for k, (m, train_sensor) in enumerate(slots):
+                per_contact = np.abs(predicted[k] - truth[test_rows]).mean(axis=1)
+                error[f"{train_sensor}_to_{test_sensor}"][m, test_rows] = per_contact
 
     def summarise(mask: np.ndarray) -> dict[str, Any] | None:
         tested = mask & valid
@@ -1121,7 +1098,6 @@ def print_summary(report: dict[str, Any]) -> None:
 
 
 def run_learning(args: argparse.Namespace) -> None:
-
     began = time.perf_counter()
     report = stability_report(
         args.run,
@@ -1134,7 +1110,7 @@ def run_learning(args: argparse.Namespace) -> None:
         ssim_range=args.ssim_range,
     )
     report["wall_seconds"] = time.perf_counter() - began
-    json_path = write_json(report, args.out / STABILITY_JSON)
+    json_path = write_json(report, args.out / "stability_learning.json")
     print_summary(report)
     print(f"\n{report['wall_seconds']:.0f} s; wrote {json_path} and {', '.join(report['figures'].values())}")
 

@@ -41,7 +41,7 @@ from lab.damage import (
     swap_journal_entries,
     swap_press_files,
 )
-from unitac_rig.bench import default_out_dir, machine_info, replace_doc_section, write_json
+from unitac_rig.bench import default_out_dir, machine_info, markdown_table, replace_doc_section, write_json
 from unitac_rig.cli import main as cli_main
 from unitac_rig.storage.integrity import check_session
 from unitac_rig.storage.recorder import journal_dir, session_path
@@ -84,57 +84,49 @@ def run_cli(args: list[str]) -> tuple[int, str, list[str]]:
     return code, err.getvalue().strip(), notes
 
 
+def collect_args(obj: str, sensor: str, data: Path) -> list[str]:
+    return ["collect", "--object", obj, "--sensor", sensor, "--data", str(data), "--angles", ANGLES, "--no-live"]
+
+
 def record_dataset(root: Path) -> Path:
     data = root / "pristine"
     for obj in OBJECTS:
         for sensor in ("uskin", "papillarray"):
-            code, err, _ = run_cli(
-                ["collect", "--object", obj, "--sensor", sensor, "--data", str(data), "--angles", ANGLES, "--no-live"]
-            )
+            code, err, _ = run_cli(collect_args(obj, sensor, data))
             if code != 0:
                 raise RuntimeError(f"recording the dataset failed: {err}")
     return data
 
 
 def command_args(command: str, data: Path, work: Path) -> list[str]:
-    obj, sensor = TARGET
+    train = ["train", "--data", str(data), "--out", str(work / "run"), "--epochs", "1"]
     return {
         "inspect": ["inspect", str(data)],
         "extract": ["extract", str(data)],
-        "train": [
-            "train",
-            "--data",
-            str(data),
-            "--out",
-            str(work / "run"),
-            "--epochs",
-            "1",
-            "--no-report",
-            "--no-baselines",
-        ],
+        "train": [*train, "--no-report", "--no-baselines"],
         "export": ["export", str(data), "--out", str(work / "export")],
-        "collect": [
-            "collect",
-            "--object",
-            obj,
-            "--sensor",
-            sensor,
-            "--data",
-            str(data),
-            "--angles",
-            ANGLES,
-            "--no-live",
-        ],
+        "collect": collect_args(*TARGET, data),
     }[command]
 
 
-# -- the damage cases: each changes a fresh copy of the dataset ------------------------------------------------------
+# -- the damage cases: each changes a fresh copy of the dataset; CASES: name -> (the table's label, the damage) ----
+
+CASES: dict[str, tuple[str, Callable[[Path], None]]] = {}
+
+
+def case(label: str) -> Callable[[Callable[[Path], None]], Callable[[Path], None]]:
+    def register(damage: Callable[[Path], None]) -> Callable[[Path], None]:
+        CASES[damage.__name__] = (label, damage)
+        return damage
+
+    return register
 
 
 def _target(data: Path) -> Path:
     return session_path(data, *TARGET)
 
 
+@case("20 flipped bits: raw arrays of 3 presses changed, tactile/values of 2 unreadable; journal intact")
 def review_bits(data: Path) -> None:
     """The review's case: 20 bits changing raw arrays of 3 presses and the compressed tactile/values of 2."""
     path = _target(data)
@@ -150,38 +142,45 @@ def review_bits(data: Path) -> None:
         flip_bits_in_dataset(path, f"presses/{pid}/{dataset}", 4, seed)
 
 
+@case("a press damaged in the session file and in its journal entry")
 def both_copies(data: Path) -> None:
     pid = press_ids(_target(data))[2]
     flip_bits_in_dataset(_target(data), f"presses/{pid}/robot/press_force_n", 4, 0)
     flip_bits_in_dataset(journal_dir(data, *TARGET) / f"{pid}.h5", "press/robot/press_force_n", 4, 1)
 
 
+@case("a damaged press, no journal (files copied without .journal/)")
 def no_journal(data: Path) -> None:
     shutil.rmtree(data / ".journal")
     pid = press_ids(_target(data))[1]
     flip_bits_in_dataset(_target(data), f"presses/{pid}/tactile/values", 4, 0)
 
 
+@case("session file truncated to a third; journal intact")
 def truncated(data: Path) -> None:
     path = _target(data)
     path.write_bytes(path.read_bytes()[: path.stat().st_size // 3])
 
 
-def torn_journal_entry(data: Path) -> None:
+@case("journal entry torn (1.5 kB left); session file intact")
+def torn_journal(data: Path) -> None:
     entry = journal_dir(data, *TARGET) / f"{press_ids(_target(data))[0]}.h5"
     entry.write_bytes(entry.read_bytes()[:1500])
 
 
-def foreign_file(data: Path) -> None:
+@case("a foreign HDF5 file under the session's name; journal intact")
+def foreign(data: Path) -> None:
     _target(data).unlink()
     with h5py.File(_target(data), "w") as f:
         f["something_else"] = [1.0, 2.0, 3.0]
 
 
+@case("journal header (_session.json) cut short")
 def broken_header(data: Path) -> None:
     (journal_dir(data, *TARGET) / "_session.json").write_text('{"object": "circle_pla", "sens')
 
 
+@case("every checksum and the root seal stripped, schema_version 1 (one format is read: damage)")
 def checksums_stripped(data: Path) -> None:
     """Every checksum and the root seal removed (what schema 1 wrote): only schema 3 is read, so this is damage."""
     for path in data.glob("*__*.h5"):
@@ -195,45 +194,55 @@ def checksums_stripped(data: Path) -> None:
 # -- issue 41: a press intact but in the wrong place, the journal's own damage, a vanished session, a killed extract
 
 
+@case("irregular_pla's press file copied over circle_pla's file of that press")
 def other_object_press(data: Path) -> None:
     copy_press_over(data, ("irregular_pla", TARGET[1]), TARGET)
 
 
+@case("a uSkin press file copied over the PapillArray session's file of that press")
 def other_sensor_press(data: Path) -> None:
     copy_press_over(data, (TARGET[0], "uskin"), (TARGET[0], "papillarray"))
 
 
+@case("two press files of the session swapped")
 def swapped_press_files(data: Path) -> None:
     swap_press_files(data, *TARGET)
 
 
+@case("two journal entries swapped, then a press file deleted")
 def journal_swapped_then_deleted(data: Path) -> None:
     swap_journal_entries(data, *TARGET)
     delete_press_file(data, *TARGET, 0)
 
 
+@case("the session file deleted (its press files and journal stay)")
 def session_deleted(data: Path) -> None:
     _target(data).unlink()
 
 
+@case("3 bits flipped in a journal entry")
 def journal_entry_flipped(data: Path) -> None:
     entry = journal_dir(data, *TARGET) / f"{press_ids(_target(data))[1]}.h5"
     flip_bits_in_dataset(entry, "press/robot/press_force_n", 3, 0)
 
 
+@case("a journal entry deleted")
 def journal_entry_deleted(data: Path) -> None:
     (journal_dir(data, *TARGET) / f"{press_ids(_target(data))[1]}.h5").unlink()
 
 
+@case("the journal's _session.json deleted")
 def header_deleted(data: Path) -> None:
     (journal_dir(data, *TARGET) / "_session.json").unlink()
 
 
+@case("one bit flipped in the root seal's attribute name (attrs_sha256 reads as absent)")
 def seal_name_flipped(data: Path) -> None:
     flip_seal_name(_target(data))
 
 
-def extract_killed_then_press_deleted(data: Path) -> None:
+@case("extract killed right after its session file's rename, then a press file deleted")
+def extract_killed(data: Path) -> None:
     """extract killed right after its session file's rename (press files and session NEW, journal OLD), then a
     press file deleted: the repair must give the press the NEW extraction."""
     import os
@@ -258,49 +267,6 @@ def extract_killed_then_press_deleted(data: Path) -> None:
     finally:
         reextract.os.replace = real
     delete_press_file(data, *TARGET, 0)
-
-
-CASES: dict[str, tuple[str, Callable[[Path], None]]] = {
-    "review_bits": (
-        "20 flipped bits: raw arrays of 3 presses changed, tactile/values of 2 unreadable; journal intact",
-        review_bits,
-    ),
-    "both_copies": ("a press damaged in the session file and in its journal entry", both_copies),
-    "no_journal": ("a damaged press, no journal (files copied without .journal/)", no_journal),
-    "truncated": ("session file truncated to a third; journal intact", truncated),
-    "torn_journal": ("journal entry torn (1.5 kB left); session file intact", torn_journal_entry),
-    "foreign": ("a foreign HDF5 file under the session's name; journal intact", foreign_file),
-    "broken_header": ("journal header (_session.json) cut short", broken_header),
-    "checksums_stripped": (
-        "every checksum and the root seal stripped, schema_version 1 (one format is read: damage)",
-        checksums_stripped,
-    ),
-    "other_object_press": (
-        "irregular_pla's press file copied over circle_pla's file of that press",
-        other_object_press,
-    ),
-    "other_sensor_press": (
-        "a uSkin press file copied over the PapillArray session's file of that press",
-        other_sensor_press,
-    ),
-    "swapped_press_files": ("two press files of the session swapped", swapped_press_files),
-    "journal_swapped_then_deleted": (
-        "two journal entries swapped, then a press file deleted",
-        journal_swapped_then_deleted,
-    ),
-    "session_deleted": ("the session file deleted (its press files and journal stay)", session_deleted),
-    "journal_entry_flipped": ("3 bits flipped in a journal entry", journal_entry_flipped),
-    "journal_entry_deleted": ("a journal entry deleted", journal_entry_deleted),
-    "header_deleted": ("the journal's _session.json deleted", header_deleted),
-    "seal_name_flipped": (
-        "one bit flipped in the root seal's attribute name (attrs_sha256 reads as absent)",
-        seal_name_flipped,
-    ),
-    "extract_killed": (
-        "extract killed right after its session file's rename, then a press file deleted",
-        extract_killed_then_press_deleted,
-    ),
-}
 
 
 def _lost(pristine: Path, data: Path) -> tuple[int, int]:
@@ -428,10 +394,7 @@ def random_bits(pristine: Path, root: Path, seeds: int) -> dict[str, Any]:
 
 
 def table(doc: dict[str, Any]) -> str:
-    lines = [
-        "| Damage | " + " | ".join(f"`{c}`" for c in COMMANDS) + " | data lost |",
-        "|---|" + "---|" * len(COMMANDS) + "---|",
-    ]
+    rows = []
     for case in doc["cases"].values():
         cells, lost = [], []
         for command in COMMANDS:
@@ -446,8 +409,10 @@ def table(doc: dict[str, Any]) -> str:
         if len(counts) == 1 and counts != {0}:
             r = next(iter(case["commands"].values()))
             lost = [f"{r['lost']} of {r['presses']} presses, whatever the command"]
-        lines.append(f"| {case['label']} | " + " | ".join(cells) + f" | {'; '.join(lost) or 'none'} |")
+        rows.append([case["label"], *cells, "; ".join(lost) or "none"])
     rb = doc["random_bits"]
+    header = ["Damage", *(f"`{c}`" for c in COMMANDS), "data lost"]
+    lines = markdown_table(header, ["---"] * (len(COMMANDS) + 2), rows)
     lines += [
         "",
         "Data lost: recorded presses (raw streams, tare, events, status) that cannot be read back as recorded "

@@ -39,26 +39,11 @@ BUDGET_MS = 1.0  # one frame period of a PapillArray at 1 kHz
 
 
 def train_small_run(out: Path) -> Path:
-    from drivers.layouts import PAPILLARRAY, USKIN
+    """The benchmarks' tiny UniTac-NV run (30 epochs) with a fitted geometry estimator: what ``stream`` loads."""
+    from unitac_rig.bench.inference import train_tiny_run
     from unitac_rig.learning.contact_geometry import GeometryConfig, geometry_for_run
-    from unitac_rig.learning.data import build_paired_dataset
-    from unitac_rig.learning.synthetic_data import synthetic_matched_sets
-    from unitac_rig.learning.train import TrainConfig, train
 
-    sets = synthetic_matched_sets(
-        ("circle_pla", "hex_tpu", "irregular_pla"),
-        (USKIN, PAPILLARRAY),
-        angles_deg=tuple(float(a) for a in range(-45, 46, 9)),
-        targets_n=(4.0, 5.5, 7.0, 8.5, 10.0),
-        seed=0,
-    )
-    train(
-        build_paired_dataset(sets),
-        out,
-        TrainConfig(epochs=30, seeds=(0,), tsne_contacts=30, eval_every=30),
-        device="cpu",
-    )
-    geometry_for_run(out, config=GeometryConfig(epochs=5))
+    geometry_for_run(train_tiny_run(out, epochs=30), config=GeometryConfig(epochs=5))
     return out
 
 
@@ -100,22 +85,10 @@ def main() -> None:
         try:
             rig_file.write_text(twin.rig_file().replace("rate_hz = 100", "rate_hz = 1000"))
             summary_path = tmp / "summary.json"
+            command = [sys.executable, "-m", "unitac_rig", "stream", str(run), "--rig", str(rig_file)]
+            command += ["--sensor", "papillarray", "--duration", str(args.seconds), "--summary", str(summary_path)]
             stream = subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "unitac_rig",
-                    "stream",
-                    str(run),
-                    "--rig",
-                    str(rig_file),
-                    "--sensor",
-                    "papillarray",
-                    "--duration",
-                    str(args.seconds),
-                    "--summary",
-                    str(summary_path),
-                ],
+                command,
                 stdout=subprocess.PIPE,
                 stderr=subprocess.PIPE,
                 env=env,

@@ -31,6 +31,7 @@ the paper's heads.
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -184,30 +185,22 @@ def _method_inputs(
 ) -> tuple[dict[tuple[str, str, str], tuple[np.ndarray, np.ndarray]], dict[str, float]]:
     """(method, train sensor, test sensor) -> (training inputs from the train sensor's frames, test inputs from the
     test sensor's frames), both over all of the object's contacts; and each method's preparation CPU seconds."""
-    out: dict[tuple[str, str, str], tuple[np.ndarray, np.ndarray]] = {}
-    prep: dict[str, float] = {}
-    for a in sensors:
-        out[("paper", a, a)] = (latents[a], latents[a])
-    clock = time.process_time()
-    for a in sensors:
-        for b in sensors:
-            if a != b:
-                out[("paper", a, b)] = (latents[a], latents[b])
-                out[("translated", a, b)] = (translated_latents(run, member, subset.values[a], a, b), latents[b])
-    prep["translated"] = time.process_time() - clock
-    clock = time.process_time()
-    for a in sensors:
-        for b in sensors:
-            if a != b:
-                out[("linear_map", a, b)] = (ridge_map(pairs[a], pairs[b])(latents[a]), latents[b])
-    prep["linear_map"] = time.process_time() - clock
-    clock = time.process_time()
-    for a in sensors:
-        for b in sensors:
-            if a != b:
-                project_a, project_b = cca_projections(pairs[a], pairs[b])
-                out[("cca", a, b)] = (project_a(latents[a]), project_b(latents[b]))
-    prep["cca"] = time.process_time() - clock
+    out: dict[tuple[str, str, str], tuple[np.ndarray, np.ndarray]] = {
+        ("paper", a, a): (latents[a], latents[a]) for a in sensors
+    }
+    prep = dict.fromkeys(("translated", "linear_map", "cca"), 0.0)
+    for a, b in itertools.permutations(sensors, 2):
+        out[("paper", a, b)] = (latents[a], latents[b])
+        clock = time.process_time()
+        out[("translated", a, b)] = (translated_latents(run, member, subset.values[a], a, b), latents[b])
+        prep["translated"] += time.process_time() - clock
+        clock = time.process_time()
+        out[("linear_map", a, b)] = (ridge_map(pairs[a], pairs[b])(latents[a]), latents[b])
+        prep["linear_map"] += time.process_time() - clock
+        clock = time.process_time()
+        project_a, project_b = cca_projections(pairs[a], pairs[b])
+        out[("cca", a, b)] = (project_a(latents[a]), project_b(latents[b]))
+        prep["cca"] += time.process_time() - clock
     return out, prep
 
 

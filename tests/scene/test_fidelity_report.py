@@ -13,10 +13,7 @@ from fidelity import (
     collect_object,
     compare,
     draw_spread,
-    fit_cost,
-    fit_evaluation,
     model_settings,
-    refit,
     scene_extremes,
     summarise,
     target_errors,
@@ -24,7 +21,6 @@ from fidelity import (
 from unitac_rig.errors import ConfigError
 from unitac_rig.rig.config import parse_rig_config
 from unitac_rig.sim.scene import SceneParams
-from unitac_rig.sim.sensor_models import UskinParams
 
 
 def _uskin(lo: float, hi: float, peak: float = 10.8) -> dict[str, float]:
@@ -97,41 +93,21 @@ def test_target_errors_and_cost_on_a_hand_worked_row() -> None:
     assert errors["hex_pla uskin_max"] == pytest.approx(-0.3)
     assert errors["hex_pla uskin_abs_min_over_max"] == 0.0
     assert errors["hex_pla face_y_std_n"] == pytest.approx(0.045 / 0.06 - 1)  # -0.25: a shortfall counts
-    # cost: the worst |error| 0.3, plus (0.3 - 0.12)^2 and (0.25 - 0.12)^2; the 0.1 is within the slack
-    assert fit_cost(errors) == pytest.approx(0.3 + 0.18**2 + 0.13**2)
     # the circles' PapillArray minima are noise on the rig, not the scene's: left out
     circle = dict(row, papillarray_n_min=-0.01, papillarray_mm_min=-0.001, face_y_std_n=float("nan"))
     assert not any("papillarray_n_min" in k or "face" in k for k in target_errors({"circle_pla": circle}))
 
 
-def test_refit_recovers_a_gain_from_statistics_it_made() -> None:
-    # "recorded" statistics made by the scene itself with a normal gain of 950 counts/N: fitting that gain from
-    # the default 1100 must land near 950, and the fit must lower the cost. (A lower gain than the default keeps
-    # every object's uSkin |min|/max above the 0.5 target, so the truth costs nothing; with a higher one the
-    # circle's ratio at 9 angles falls under it and the fit rightly trades the gain against that target.)
-    truth = scene_extremes(SceneParams(), UskinParams(gain_normal_counts_per_n=950.0), angles=9)
-    assert all(row["uskin_abs_min_over_max"] >= 0.5 for row in truth.values())
-    recorded = {
-        obj: {
-            "uskin": (row["uskin_min"], row["uskin_max"]),
-            "papillarray_n": (row["papillarray_n_min"], row["papillarray_n_max"]),
-            "papillarray_mm": (row["papillarray_mm_min"], row["papillarray_mm_max"]),
-        }
-        for obj, row in truth.items()
-    }
-    doc = refit(["gain_normal_counts_per_n"], rounds=10, angles=9, recorded=recorded)
-    assert doc["start"]["values"]["gain_normal_counts_per_n"] == 1100.0
-    assert doc["end"]["values"]["gain_normal_counts_per_n"] == pytest.approx(950.0, rel=0.03)
-    assert doc["end"]["cost"] < 0.5 * doc["start"]["cost"]
-    with pytest.raises(ConfigError):
-        refit(["not_a_parameter"], rounds=1)
+def _errors(settings: dict[str, float], seed: int = 0) -> dict[str, float]:
+    scene, uskin, materials = model_settings(settings)
+    return target_errors(scene_extremes(scene, uskin, seed=seed, angles=5, materials=materials))
 
 
-def test_a_refit_material_parameter_moves_only_that_materials_objects() -> None:
+def test_a_material_setting_moves_only_that_materials_objects() -> None:
     # "TPU.skin_drag_mm" reaches the TPU prisms through the catalogue material, not the scene parameters: switched
     # off, the TPU uSkin minima shrink (the drag pushes the skin apart) and no PLA number moves
-    _, with_drag = fit_evaluation({}, angles=5)
-    _, without = fit_evaluation({"TPU.skin_drag_mm": 0.0}, angles=5)
+    with_drag = _errors({})
+    without = _errors({"TPU.skin_drag_mm": 0.0})
     for key, error in with_drag.items():
         if key.startswith(("circle_pla", "hex_pla", "square_pla")) or "papillarray" in key:
             assert without[key] == error, key
@@ -142,7 +118,7 @@ def test_a_refit_material_parameter_moves_only_that_materials_objects() -> None:
 def test_draw_spread_summarises_each_target_over_the_draws() -> None:
     # three draws at 5 angles: each target's median / range / misses are those of the three draws' own errors
     doc = draw_spread([0, 1, 2], angles=5)
-    draws = [fit_evaluation({}, angles=5, seed=s)[1] for s in (0, 1, 2)]
+    draws = [_errors({}, seed=s) for s in (0, 1, 2)]
     assert doc["targets_per_draw"] == len(doc["targets"]) > 20
     assert "circle_pla uskin_abs_min_over_max" not in doc["targets"]
     for key, row in doc["targets"].items():
@@ -174,12 +150,3 @@ def test_a_what_if_draw_changes_only_what_its_setting_reaches() -> None:
         if key.startswith(("circle_pla", "hex_pla", "square_pla")):
             assert bent["targets"][key]["median"] == pytest.approx(row["median"], abs=0.02), key
     assert bent["targets"]["square_tpu uskin_max"]["median"] > base["targets"]["square_tpu uskin_max"]["median"] + 0.02
-
-
-def test_a_fit_over_draws_scores_each_targets_median() -> None:
-    # three draws: every target's error is the median of the three draws' own errors (fails with mean or one draw)
-    _, over = fit_evaluation({}, angles=5, draws=3)
-    draws = [fit_evaluation({}, angles=5, seed=s)[1] for s in (0, 1, 2)]
-    for key, error in over.items():
-        assert error == pytest.approx(sorted(d[key] for d in draws)[1], abs=1e-12), key
-    assert fit_cost(over) == fit_evaluation({}, angles=5, draws=3)[0]

@@ -1,5 +1,5 @@
 """The benchmarks ``unitac-rig bench`` runs (press, recorder, inference), and what every measuring script shares:
-the machine's description, the JSON writer and the regenerated doc section.
+the machine's description, the JSON writer, the Markdown table and the regenerated doc section.
 
 Each benchmark module measures and returns a JSON-ready dict and draws its figure; printing belongs to the callers.
 Simulated time (virtual clock) is reported as-is; wall-clock figures are reported next to the hardware rate they
@@ -83,3 +83,12 @@ def replace_doc_section(doc_path: Path, name: str, body: str, markers: tuple[str
     else:
         text = text.rstrip("\n") + "\n\n" + block + "\n"
     doc_path.write_text(text, encoding="utf-8")
+
+
+def markdown_table(header: list[str], align: list[str], rows: list[list[str]]) -> list[str]:
+    """A Markdown table's lines: ``header`` cells, one ``align`` marker per column (``---``, ``---:``), ``rows``."""
+    return [
+        "| " + " | ".join(header) + " |",
+        "|" + "|".join(align) + "|",
+        *("| " + " | ".join(row) + " |" for row in rows),
+    ]

@@ -136,6 +136,7 @@ def run_inference_benchmark(plan: InferencePlan, run_dir: Path | None = None) ->
     import torch
 
     from unitac_rig.bench import machine_info
+    from unitac_rig.learning.run import computing_on
     from unitac_rig.learning.translate import Translator
 
     host = machine_info()
@@ -148,12 +149,9 @@ def run_inference_benchmark(plan: InferencePlan, run_dir: Path | None = None) ->
         translator = Translator.load(source_dir)
         default_threads = torch.get_num_threads()
         by_threads = {}
-        try:
-            for threads in sorted({1, default_threads}):
-                torch.set_num_threads(threads)
+        for threads in sorted({1, default_threads}):
+            with computing_on("cpu", threads):
                 by_threads[str(threads)] = measure_latency(translator, plan, rng)
-        finally:
-            torch.set_num_threads(default_threads)
     single = {name: rows[0]["median_ms"] for name, rows in by_threads["1"].items() if rows and rows[0]["batch"] == 1}
     worst_single = max(single.values())
     return {

@@ -31,7 +31,7 @@ import textwrap
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -56,12 +56,7 @@ class PressSetting:
         return f"force-ramp {self.ramp_rate_n_s:g} N/s"
 
     def press_config(self) -> dict[str, Any]:
-        return {
-            "strategy": self.strategy,
-            "speed_mm_s": self.speed_mm_s,
-            "fast_speed_mm_s": self.fast_speed_mm_s,
-            "ramp_rate_n_s": self.ramp_rate_n_s,
-        }
+        return asdict(self)
 
 
 # variant name -> the extraction's force estimate: the fitted, lag-compensated true force (with the simulated wrist's

@@ -15,7 +15,7 @@ class SceneParams:
 
     # ---- uSkin uSPa46 pad ----------------------------------------------------------------------------------
     skin_foundation_n_per_mm3: float = 0.53  # [I] Winkler K = E_eff/h: E 0.3-1 MPa x2-10 (bonded, incompressible),
-    # h ~2.5 mm, so 0.24-4; refitted (benchmarks/fidelity.py fit) toward the soft end: a softer skin widens a circle's
+    # h ~2.5 mm, so 0.24-4; refitted (fidelity.py fit @dfa451f) toward the soft end: a softer skin widens a circle's
     # contact more than a corner's, lowering the circles' uSkin maxima against the prisms'; ~0.9 mm under a corner
     skin_spread_sigma_mm: float = 2.0  # [I] Gaussian load spreading of the continuous skin, 2-4 mm (0.3-0.55 pitch)
     skin_margin_x_mm: float = 4.55  # [S] first taxel 4.55 mm from the pad edge across the press (LeapXELA layout)

@@ -68,7 +68,7 @@ def acknowledged_interrupts() -> Iterator[None]:
 
     For the clean-up an interrupt asks for (the arm pulling the pad off the object before the process exits): its
     moves poll :func:`raise_if_interrupted` like any other, and a *new* interrupt (the operator's second Ctrl-C)
-    still raises, at once (:func:`raise_at_once`), and ends the clean-up with the arm stopped."""
+    still raises, at once, and ends the clean-up with the arm stopped."""
     saved = _acknowledged[0]
     _acknowledged[0] = len(_noted)
     try:
@@ -81,12 +81,6 @@ def forget_interrupts() -> None:
     """Clear the noted interrupts (tests, and a handler scope that ends without one)."""
     _noted.clear()
     _acknowledged[0] = 0
-
-
-def raise_at_once() -> bool:
-    """Whether a handler should raise the interrupt it just noted rather than defer it: inside
-    :func:`immediate_interrupts`, or when an earlier interrupt is still noted (a repeated Ctrl-C)."""
-    return _immediate_depth[0] > 0 or len(_noted) > 1
 
 
 @contextlib.contextmanager
@@ -108,11 +102,12 @@ _deferring = [False]  # whether the open termination_as_interrupt scope defers (
 
 
 def _on_signal(signal_number: int, frame: FrameType | None) -> None:
-    """Note the interrupt; raise it here only when not deferring, inside a prompt, or on a repeated signal."""
+    """Note the interrupt; raise it here only when not deferring, inside :func:`immediate_interrupts` (a prompt), or
+    when an earlier interrupt is still noted (a repeated Ctrl-C: something between two polls is stuck)."""
     if signal_number != signal.SIGINT:
         _received.append(signal_number)
     note_interrupt(signal_number)  # also when raised: in case the exception gets swallowed
-    if not _deferring[0] or raise_at_once():
+    if not _deferring[0] or _immediate_depth[0] > 0 or len(_noted) > 1:
         raise interrupt_for(signal_number)
 
 

@@ -6,10 +6,10 @@ ellipsis (long values fold onto a second line). The full numbers are in ``inspec
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +19,7 @@ from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from unitac_rig.cli.paths import path_text, require_directory, require_writable_output
+from unitac_rig.cli.paths import path_text, require_directory, require_empty_output
 from unitac_rig.errors import DataError, UsageError
 from unitac_rig.interrupts import raise_if_interrupted, termination_as_interrupt
 
@@ -37,16 +37,8 @@ def inspect_tables(report: dict[str, Any], data: Path) -> RenderableType:
     if not sessions:
         return Text(f"no sessions in {data} yet")
     table = Table(box=None, pad_edge=False)
-    for name, justify in (
-        ("object", "left"),
-        ("sensor", "left"),
-        ("presses", "right"),
-        ("targets", "right"),
-        ("|err| mN", "right"),
-        ("peak N", "right"),
-        ("time s", "right"),
-    ):
-        table.add_column(name, justify=justify, overflow="fold")  # type: ignore[arg-type]
+    for name in ("object", "sensor", "presses", "targets", "|err| mN", "peak N", "time s"):
+        table.add_column(name, justify="left" if name in ("object", "sensor") else "right", overflow="fold")
     for s in sessions:
         e, p = s["match_error_n"], s["peak_force_n"]
         sensor = s["sensor"] + ("*" if s["simulated"] else "") + (" ●" if s.get("writer") else "")
@@ -158,29 +150,22 @@ def _watch(data: Path, interval: float, as_json: bool) -> None:
         head = Text(f"{stamp}  refreshing every {interval:g} s, Ctrl-C to stop", style="bold")
         return Group(head, inspect_tables(report, data))
 
-    try:
-        with termination_as_interrupt(defer=False):  # read-only: raising at once harms nothing
-            _refresh_until_interrupted(frame, interval, as_json)
-    except KeyboardInterrupt:
-        return
-
-
-def _refresh_until_interrupted(frame: Callable[[], RenderableType], interval: float, as_json: bool) -> None:
-    if as_json or not console.is_terminal:  # a pipe or a log: one refresh after the other (JSON: one per line)
-        while True:
-            raise_if_interrupted()  # a Ctrl-C swallowed inside an HDF5 read ends the watch all the same
-            rendered = frame()
-            if as_json:
-                typer.echo(rendered.plain if isinstance(rendered, Text) else "")
-            else:
-                console.print(rendered)
-                console.print()
-            time.sleep(interval)
-    with Live(frame(), console=console, auto_refresh=False) as live:
-        while True:
-            time.sleep(interval)
-            raise_if_interrupted()
-            live.update(frame(), refresh=True)
+    with contextlib.suppress(KeyboardInterrupt), termination_as_interrupt(defer=False):  # read-only: raising at once
+        if as_json or not console.is_terminal:  # a pipe or a log: one refresh after the other (JSON: one per line)
+            while True:
+                raise_if_interrupted()  # a Ctrl-C swallowed inside an HDF5 read ends the watch all the same
+                rendered = frame()
+                if as_json:
+                    typer.echo(rendered.plain if isinstance(rendered, Text) else "")
+                else:
+                    console.print(rendered)
+                    console.print()
+                time.sleep(interval)
+        with Live(frame(), console=console, auto_refresh=False) as live:
+            while True:
+                time.sleep(interval)
+                raise_if_interrupted()
+                live.update(frame(), refresh=True)
 
 
 def inspect(
@@ -228,14 +213,9 @@ def export(
     see docs/share-your-data.md)."""
     if fmt not in ("parquet", "lerobot", "rosbag2"):
         raise UsageError(f"--format {fmt}: unknown export format", hint="use parquet, lerobot or rosbag2")
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):  # a usage error like export-model's: exit 2
-        raise UsageError(f"--out {out} already exists and is not an empty directory", hint="choose a new --out")
     for folder in data:
         require_directory(folder, "DATA", hint=_DATA_HINT)
-    require_writable_output(out, "--out")
-    if fmt == "lerobot":
-        _export_lerobot(data, out)
-        return
+    require_empty_output(out, "--out", "already exists and is not an empty directory", hint="choose a new --out")
     if fmt == "rosbag2":
         from unitac_rig.storage.rosbag import export_rosbag2
 
@@ -244,34 +224,32 @@ def export(
             console.print(f"{out / name}: " + ", ".join(f"{t} {n}" for t, n in topics.items()), soft_wrap=True)
         console.print(f"{len(bags.bags)} bags (MCAP), {bags.bytes / 1e6:.1f} MB; open with ros2 bag info or Foxglove")
         return
-    from unitac_rig.storage.export import export_dataset
+    if fmt == "lerobot":
+        from unitac_rig.storage.lerobot import export_lerobot
 
-    console.print(f"copying and pairing the sessions of {', '.join(map(str, data))} into {out}...", soft_wrap=True)
-    summary = export_dataset(data, out)
-    console.print(
-        f"exported {summary.contacts} contacts x {len(summary.sensors)} sensors ({', '.join(summary.sensors)}) = "
-        f"{summary.rows} rows from {summary.sessions} sessions, objects {', '.join(summary.objects)}"
-    )
-    if summary.incomplete:
+        robot = export_lerobot(data, out)
+        for sensor, counts in robot.sensors.items():
+            console.print(
+                f"{sensor}: {counts['episodes']} presses, {counts['frames']} frames at {counts['fps']} fps -> "
+                f"{robot.out / sensor}"
+            )
+        console.print(f"{robot.files} files, {robot.bytes / 1e6:.1f} MB from {robot.sessions} sessions")
+    else:
+        from unitac_rig.storage.export import export_dataset
+
+        console.print(f"copying and pairing the sessions of {', '.join(map(str, data))} into {out}...", soft_wrap=True)
+        summary = export_dataset(data, out)
         console.print(
-            f"[yellow]incomplete sessions (presses finished/planned):[/] {', '.join(summary.incomplete)} "
-            "(listed under incomplete_sessions in manifest.json)"
+            f"exported {summary.contacts} contacts x {len(summary.sensors)} sensors ({', '.join(summary.sensors)}) = "
+            f"{summary.rows} rows from {summary.sessions} sessions, objects {', '.join(summary.objects)}"
         )
-    console.print(f"{summary.files} files, {summary.bytes / 1e6:.1f} MB -> {summary.out}")
-    console.print(f"check a copy with: unitac-rig verify {summary.out}")
-
-
-def _export_lerobot(data: list[Path], out: Path) -> None:
-    from unitac_rig.storage.lerobot import export_lerobot
-
-    summary = export_lerobot(data, out)
-    for sensor, counts in summary.sensors.items():
-        console.print(
-            f"{sensor}: {counts['episodes']} presses, {counts['frames']} frames at {counts['fps']} fps -> "
-            f"{summary.out / sensor}"
-        )
-    console.print(f"{summary.files} files, {summary.bytes / 1e6:.1f} MB from {summary.sessions} sessions")
-    console.print(f"check a copy with: unitac-rig verify {summary.out}")
+        if summary.incomplete:
+            console.print(
+                f"[yellow]incomplete sessions (presses finished/planned):[/] {', '.join(summary.incomplete)} "
+                "(listed under incomplete_sessions in manifest.json)"
+            )
+        console.print(f"{summary.files} files, {summary.bytes / 1e6:.1f} MB -> {summary.out}")
+    console.print(f"check a copy with: unitac-rig verify {out}")
 
 
 def verify(

@@ -16,15 +16,6 @@ RUN_MARKER = "checkpoint.pt"  # learning.run.CHECKPOINT_NAME: a folder holding i
 DEVICES = ("auto", "cpu", "cuda")
 
 
-def stage_printer(console: Any) -> Any:
-    """A report's ``on_stage`` callback: one line per stage (the t-SNE alone can take a minute or two)."""
-
-    def on_stage(message: str) -> None:
-        console.print(f"report: {message}...", highlight=False, soft_wrap=True)
-
-    return on_stage
-
-
 def kept_run_line(run: Path, data: list[Path]) -> str:
     """What an interrupted ``train`` kept (its checkpoint's epoch, read back from disk) and the command that goes
     on from there."""
@@ -47,15 +38,28 @@ def kept_run_line(run: Path, data: list[Path]) -> str:
     return f"train: interrupted; kept epoch {payload.get('epoch', '?')}/{planned} in {run}; go on with: {command}"
 
 
-def report_interrupted_line(run: Path) -> str:
-    """What an interrupted report kept: the run as it was (its metrics.json and report.md are written together at
-    the end), and the command that writes them."""
+def report_with_table(console: Any, run_dir: Path, **options: Any) -> None:
+    """Write the report of the run in ``run_dir`` (a line per stage: the t-SNE alone can take a minute or two), then
+    print its Table I and where the report is. Interrupted, it says what it kept: the run as it was (metrics.json and
+    report.md are written together at the end), and the command that writes them."""
     import shlex
 
-    return (
-        f"report: interrupted; {run}/metrics.json and report.md are as they were; "
-        f"write them with: unitac-rig report {shlex.quote(str(run))}"
-    )
+    from unitac_rig.learning.report import write_report
+
+    def on_stage(message: str) -> None:
+        console.print(f"report: {message}...", highlight=False, soft_wrap=True)
+
+    try:
+        path = write_report(run_dir, on_stage=on_stage, **options)
+    except KeyboardInterrupt:
+        typer.echo(
+            f"report: interrupted; {run_dir}/metrics.json and report.md are as they were; "
+            f"write them with: unitac-rig report {shlex.quote(str(run_dir))}",
+            err=True,
+        )
+        raise
+    _print_table(console, run_dir)
+    console.print(f"report: {path}")
 
 
 def report_command(
@@ -71,20 +75,8 @@ def report_command(
     """Recompute RUN/metrics.json and rewrite RUN/report.md (and its figures)."""
     from rich.console import Console
 
-    from unitac_rig.learning.report import write_report
-
-    _require_run(run)
-    console = Console()
-    try:
-        on_stage = stage_printer(console)
-        path = write_report(
-            run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range, on_stage=on_stage
-        )
-    except KeyboardInterrupt:
-        typer.echo(report_interrupted_line(run), err=True)
-        raise
-    _print_table(console, run)
-    console.print(f"report: {path}")
+    require_run(run)
+    report_with_table(Console(), run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range)
 
 
 def _short_sensor_names(sensors: list[str]) -> dict[str, str]:
@@ -201,7 +193,7 @@ def _output_beside_run(run: Path, folder: str, name: str, out: Path | None) -> P
     return path
 
 
-def _require_run(run: Path) -> None:
+def require_run(run: Path) -> None:
     """A cheap check before torch is imported (the same words as :func:`unitac_rig.learning.run.load_checkpoint`)."""
     if not (run / RUN_MARKER).is_file():
         raise UsageError(f"{run} is not a training run (no {RUN_MARKER})", hint="run `unitac-rig train` first")
@@ -219,7 +211,7 @@ def translate_command(
     ),
 ) -> None:
     """Translate one sensor's frames into another sensor's format."""
-    _require_run(run)
+    require_run(run)
     source = _sensor_of(input_path, source, "--from")
     out = _output_beside_run(run, "translations", f"{input_path.stem}_to_{target}.npz", out)
     from rich.console import Console
@@ -279,7 +271,7 @@ def geometry_command(
 ) -> None:
     """Downstream contact geometry on the unseen object: N x N train/test-sensor scenarios, RUN/geometry.json and
     the saved estimator; with --predict, the estimator's profiles for new frames."""
-    _require_run(run)
+    require_run(run)
     if predict is not None:
         sensor = _sensor_of(predict, sensor, "--sensor")
         out = _output_beside_run(run, "geometry", f"{predict.stem}_geometry.npz", out)

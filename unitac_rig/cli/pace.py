@@ -1,14 +1,15 @@
-"""Time left at this run's pace, said as a person would (``about 12 min left``): the progress lines of ``collect``,
-``campaign`` and ``train`` all say a duration with :func:`spoken_duration`, so an estimate reads the same everywhere;
-``train`` measures its pace per epoch with :class:`Pace` (``collect`` and ``campaign`` count presses themselves).
+"""Progress in words, the same in ``collect``, ``campaign`` and ``train``: the time left at this run's pace
+(``about 12 min left``), and how often a log (no terminal to redraw a bar) gets a progress line.
 
-The pace is measured on this run only (work done before a resume does not count: it took no time here), so the
-estimate follows the load of the machine it runs on rather than a figure measured elsewhere.
+The pace is measured on this run only (work done before a resume took no time here), so the estimate follows the
+load of the machine it runs on rather than a figure measured elsewhere.
 """
 
 from __future__ import annotations
 
 import time
+
+LOG_LINE_EVERY_S = 10.0  # without a terminal (a log, nohup, CI): a progress line at most this often, s
 
 
 def spoken_duration(seconds: float) -> str:
@@ -20,31 +21,39 @@ def spoken_duration(seconds: float) -> str:
 
 
 class Pace:
-    """Seconds per unit of work (press, epoch) since the first :meth:`update` of this run, and the time left."""
+    """Seconds per unit of work (press, epoch) since this run started, and the time left at that pace.
 
-    def __init__(self) -> None:
-        self._start: tuple[float, int] | None = None  # (monotonic time, units done) when first seen
-        self._last: tuple[float, int] | None = None
+    ``done_before``: units finished before this run; by default one less than the first :meth:`update` says."""
+
+    def __init__(self, done_before: int | None = None) -> None:
+        self.started = time.monotonic()
+        self._first = done_before
+        self._last = (self.started, done_before or 0)
 
     def update(self, done: int) -> None:
-        """``done`` units are finished now (counted from the run's start, including any before a resume)."""
+        """``done`` units are finished now (counted from the very start, including any before a resume)."""
+        if self._first is None:
+            self._first = done - 1
+        self._last = (time.monotonic(), done)
+
+    def left_text(self, units_left: int) -> str:
+        """``about 12 min left``, or "" while no unit of this run finished or nothing is left."""
+        when, done = self._last
+        if self._first is None or done <= self._first or units_left <= 0:
+            return ""
+        return f"about {spoken_duration((when - self.started) / (done - self._first) * units_left)} left"
+
+
+class EveryFewSeconds:
+    """Throttle for progress lines written to a log: the first call, then one every ``seconds``, and the last."""
+
+    def __init__(self, seconds: float = LOG_LINE_EVERY_S) -> None:
+        self.seconds = seconds
+        self._last: float | None = None
+
+    def due(self, *, last: bool = False) -> bool:
         now = time.monotonic()
-        if self._start is None:
-            self._start = (now, done)
-        self._last = (now, done)
-
-    def seconds_left(self, total: int) -> float | None:
-        """Seconds until ``total`` units at this run's pace; None until a unit finished after the first update."""
-        if self._start is None or self._last is None or self._last[1] <= self._start[1]:
-            return None
-        per_unit = (self._last[0] - self._start[0]) / (self._last[1] - self._start[1])
-        return per_unit * max(total - self._last[1], 0)
-
-    def left_text(self, total: int) -> str:
-        """``about 12 min left``, or "" while the pace is not known yet or nothing is left."""
-        left = self.seconds_left(total)
-        return (
-            ""
-            if left is None or (self._last is not None and self._last[1] >= total)
-            else (f"about {spoken_duration(left)} left")
-        )
+        if last or self._last is None or now - self._last >= self.seconds:
+            self._last = now
+            return True
+        return False

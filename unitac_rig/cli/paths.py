@@ -5,9 +5,9 @@ an "unexpected OSError" after minutes of work, or a run written into the wrong p
   mean the current directory.
 * :func:`require_directory`: an input folder that must exist (``inspect``, ``extract``, ``export``, ``verify``).
 * :func:`require_data_folder`: ``collect``'s ``--data``, which may not exist yet but must not be a file.
-* :func:`require_writable_output`: an output folder this command will create or fill (``export --out``,
-  ``train --out``): every existing part of the path is a folder and the deepest one accepts a new entry (tried with
-  a probe folder that is removed at once, because permission bits do not tell root, read-only mounts or /proc).
+* :func:`require_empty_output`: an output folder this command will create or fill (``export --out``, ``train --out``):
+  new or empty, every existing part of the path a folder and the deepest one accepting a new entry (tried with a
+  probe folder that is removed at once, because permission bits do not tell root, read-only mounts or /proc).
 """
 
 from __future__ import annotations
@@ -46,6 +46,13 @@ def require_data_folder(path: Path, option: str = "--data") -> None:
         raise UsageError(f"{option} {path} is a file, not a folder", hint="name a folder to collect into")
     if not path.exists():
         require_writable_output(path, option)
+
+
+def require_empty_output(path: Path, option: str, taken: str, hint: str) -> None:
+    """``path`` is new or an empty folder (else a usage error saying it is ``taken``) that this process can fill."""
+    if path.exists() and (not path.is_dir() or any(path.iterdir())):
+        raise UsageError(f"{option} {path} {taken}", hint=hint)
+    require_writable_output(path, option)
 
 
 def require_writable_output(path: Path, option: str) -> None:

@@ -17,7 +17,7 @@ import inspect
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Literal, Protocol, cast, get_args, get_origin
+from typing import Any, Literal, get_args, get_origin
 
 import numpy as np
 import typer
@@ -29,8 +29,9 @@ from typer.models import CommandInfo
 
 from drivers.frames import TactileFrame
 from drivers.layouts import SensorLayout
-from drivers.sensor import SensorHealth, TactileSensor
+from drivers.sensor import SensorHealth
 from unitac_rig.cli.help import PlainCommand
+from unitac_rig.cli.probe_ur5e import register_ur5e
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.sensors import SENSORS, SensorConfigBase, SensorSpec
 
@@ -131,15 +132,6 @@ def _run_probe(driver: Any, layout: SensorLayout, n_frames: int, as_json: bool, 
 # ---- one command per registered sensor -------------------------------------------------------------------------
 
 
-class SimulatedProbe(Protocol):
-    """A sensor's simulated side as ``probe --simulated`` uses it (see sim/fast_sensors.py)."""
-
-    def probe(self, options: Mapping[str, Any], stack: contextlib.ExitStack) -> TactileSensor:
-        """The real driver on a simulated device streaming a synthetic press, set up as ``options`` (the probe
-        options given, by config field name) say; ``stack`` closes the device."""
-        ...
-
-
 @dataclass(frozen=True)
 class ProbeOption:
     """One field of a sensor's rig-file table as a probe option: ``--can-channel``, or the field's ``cli`` name."""
@@ -233,22 +225,16 @@ def probe_sensor(
 
     table = _choose_table(spec, given, simulated)
     with contextlib.ExitStack() as stack:
-        if simulated:
-            device = spec.simulated_device()
-            if not callable(getattr(device, "probe", None)):
+        if simulated:  # the real driver on the simulated device, streaming a synthetic press (sim/fast_sensors.py)
+            probe = getattr(spec.simulated_device(), "probe", None)
+            if not callable(probe):
                 raise UsageError(f"sensor {spec.name!r} has no simulated device to probe", hint="probe the hardware")
-            driver = cast(SimulatedProbe, device).probe(given, stack)
+            driver = probe(given, stack)  # set up as the options given say; the stack closes the device
         else:
             assert table is not None
             driver = spec.open_driver(_config(spec, table, given), MonotonicClock())
             stack.callback(driver.disconnect)  # closes the transport even if connect() fails
         _run_probe(driver, spec.layout, frames, as_json, timeout)
-
-
-def _units_text(layout: SensorLayout) -> str:
-    if layout.units == "counts":
-        return "raw counts"
-    return f"forces in {layout.units}" + (", displacements in mm" if layout.has_displacement else "")
 
 
 class _SensorProbeInfo(CommandInfo):
@@ -279,8 +265,10 @@ def sensor_probe_command(spec: SensorSpec) -> CommandInfo:
     command.__annotations__ = {p.name: p.annotation for p in parameters}
     layout = spec.layout
     tables = " or ".join(f"[{t.model_fields['type'].default}]" for t in spec.config_types)
+    units = "raw counts" if layout.units == "counts" else f"forces in {layout.units}"
+    units += ", displacements in mm" if layout.has_displacement else ""
     text = (
-        f"Read frames from a {layout.model} ({_units_text(layout)}). The options are those of its rig-file table "
+        f"Read frames from a {layout.model} ({units}). The options are those of its rig-file table "
         f"[sensors.{spec.name}], one connection: {tables}."
     )
     return _SensorProbeInfo(name=spec.name, callback=command, cls=PlainCommand, help=text)
@@ -308,12 +296,9 @@ probe_app = _ProbeApp(
     no_args_is_help=True,
 )
 
+register_ur5e(probe_app)
+
 
 def register(app: typer.Typer) -> None:
     """Add ``probe`` and its device subcommands to the root app."""
     app.add_typer(probe_app, name="probe")
-
-
-from unitac_rig.cli.probe_ur5e import register_ur5e  # noqa: E402
-
-register_ur5e(probe_app)

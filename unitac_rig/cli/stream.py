@@ -64,14 +64,9 @@ def _socket_writer(address: tuple[str, int], stop: threading.Event) -> Iterator[
         server.close()
 
 
-def _stdout_writer() -> Callable[[bytes], None]:
-    out = sys.stdout.buffer
-
-    def write(line: bytes) -> None:
-        out.write(line)
-        out.flush()
-
-    return write
+def _write_stdout(line: bytes) -> None:
+    sys.stdout.buffer.write(line)
+    sys.stdout.buffer.flush()
 
 
 @contextlib.contextmanager
@@ -130,7 +125,7 @@ def stream_command(
     object_id: str = typer.Option("circle_pla", "--object", help="With --simulated: the object in front of the pad."),
     rate_hz: int = typer.Option(None, "--rate", help="PapillArray sample rate, Hz (100, 250, 500 or 1000)."),
     member: int = typer.Option(0, "--member", help="Which seed of a multi-seed run (index)."),
-    tare_frames: int = typer.Option(50, "--tare-frames", help="Frames to tare on (median) before streaming."),
+    tare_frames: int = typer.Option(50, "--tare-frames", min=1, help="Frames to tare on (median) before streaming."),
     frames: int = typer.Option(None, "--frames", help="Stop after this many frames."),
     duration: float = typer.Option(None, "--duration", help="Stop after this many seconds of streaming."),
     listen: str = typer.Option(None, "--listen", help="Serve the lines to one client on 127.0.0.1:PORT."),
@@ -148,8 +143,6 @@ def stream_command(
 
     if (rig_file is None) == (not simulated):
         raise UsageError("stream needs --rig RIG.toml or --simulated (one of them)")
-    if tare_frames < 1:
-        raise UsageError("--tare-frames must be at least 1")
     address = _listen_address(listen) if listen is not None else None
     from unitac_rig.learning.engine import UNITAC_GROUP
     from unitac_rig.learning.train import load_run
@@ -171,7 +164,7 @@ def stream_command(
                 err=True,
             )
             with contextlib.ExitStack() as stack:
-                write = stack.enter_context(_socket_writer(address, stop)) if address else _stdout_writer()
+                write = stack.enter_context(_socket_writer(address, stop)) if address else _write_stdout
                 try:
                     stats = stream_frames(
                         live_sensor(driver),

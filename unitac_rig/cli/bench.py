@@ -88,8 +88,3 @@ def inference_command(
         require_run(run)
     doc = inference.run_inference_benchmark(inference.quick_plan() if quick else inference.full_plan(), run)
     _finish(doc, inference.plot_inference_benchmark, inference.summary_lines, out)
-
-
-def register(app: typer.Typer) -> None:
-    """Add ``bench`` and its subcommands to the root app."""
-    app.add_typer(bench_app, name="bench")

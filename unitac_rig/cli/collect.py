@@ -11,14 +11,14 @@ from pathlib import Path
 import numpy as np
 import typer
 from pydantic import ValidationError
-from rich.console import Console, Group
+from rich.console import Group
 from rich.live import Live
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table
 from rich.text import Text
 
-from unitac_rig.cli.pace import EveryFewSeconds, Pace, spoken_duration
+from unitac_rig.cli.output import EveryFewSeconds, Pace, console, spoken_duration
 from unitac_rig.cli.paths import path_text, require_data_folder, require_directory
 from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.sensor_choice import choose_sensor, collection_order, session_complete, session_presses
@@ -37,8 +37,6 @@ from unitac_rig.storage.extraction import ExtractionSettings
 from unitac_rig.storage.reader import list_sessions
 from unitac_rig.storage.recorder import session_path
 from unitac_rig.storage.reextract import reextract_sessions
-
-console = Console(stderr=False)
 
 DATA_OPTION = typer.Option(
     Path("data"),
@@ -501,11 +499,3 @@ def objects_cmd(
             "yes" if o.in_autoencoder_training else "no (test only)",
         )
     console.print(table)
-
-
-def register(app: typer.Typer) -> None:
-    """Add collection commands to the root app."""
-    app.command("collect")(collect)
-    app.command("campaign")(campaign)
-    app.command("extract")(extract)
-    app.command("objects")(objects_cmd)

@@ -14,16 +14,16 @@ from pathlib import Path
 from typing import Any
 
 import typer
-from rich.console import Console, Group, RenderableType
+from rich.console import Group, RenderableType
 from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
+from unitac_rig.cli.output import console
 from unitac_rig.cli.paths import path_text, require_directory, require_empty_output
 from unitac_rig.errors import DataError, UsageError
 from unitac_rig.interrupts import raise_if_interrupted, termination_as_interrupt
 
-console = Console()
 _DATA_HINT = "pass the --data folder you collected into"
 
 
@@ -264,10 +264,3 @@ def verify(
     require_directory(directory, "DIR", hint="pass a directory written by `unitac-rig export`")
     report = verify_manifest(directory)
     console.print(f"ok: {report.files} files, {report.bytes / 1e6:.1f} MB match {directory / 'manifest.json'}")
-
-
-def register(app: typer.Typer) -> None:
-    """Add the dataset commands to the root app."""
-    app.command("inspect")(inspect)
-    app.command("export")(export)
-    app.command("verify")(verify)

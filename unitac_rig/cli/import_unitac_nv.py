@@ -15,11 +15,6 @@ if TYPE_CHECKING:  # the importer and rich load when the command runs, not when 
     from unitac_rig.importer import FileReport, ImportReport
 
 
-def register(app: typer.Typer) -> None:
-    """Add this area's commands to the root app."""
-    app.command("import-unitac-nv")(import_unitac_nv_command)
-
-
 def import_unitac_nv_command(
     source: Path = typer.Argument(
         ...,

@@ -9,6 +9,7 @@ from typing import Any
 
 import typer
 
+from unitac_rig.cli.output import console
 from unitac_rig.errors import UsageError
 
 # What the checks before the heavy imports compare with (tests keep them equal to the library's own tables).
@@ -38,7 +39,7 @@ def kept_run_line(run: Path, data: list[Path]) -> str:
     return f"train: interrupted; kept epoch {payload.get('epoch', '?')}/{planned} in {run}; go on with: {command}"
 
 
-def report_with_table(console: Any, run_dir: Path, **options: Any) -> None:
+def report_with_table(run_dir: Path, **options: Any) -> None:
     """Write the report of the run in ``run_dir`` (a line per stage: the t-SNE alone can take a minute or two), then
     print its Table I and where the report is. Interrupted, it says what it kept: the run as it was (metrics.json and
     report.md are written together at the end), and the command that writes them."""
@@ -73,10 +74,8 @@ def report_command(
     ),
 ) -> None:
     """Recompute RUN/metrics.json and rewrite RUN/report.md (and its figures)."""
-    from rich.console import Console
-
     require_run(run)
-    report_with_table(Console(), run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range)
+    report_with_table(run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range)
 
 
 def _short_sensor_names(sensors: list[str]) -> dict[str, str]:
@@ -214,12 +213,9 @@ def translate_command(
     require_run(run)
     source = _sensor_of(input_path, source, "--from")
     out = _output_beside_run(run, "translations", f"{input_path.stem}_to_{target}.npz", out)
-    from rich.console import Console
-
     from unitac_rig.learning.translate import translate_file
 
     summary = translate_file(run, source, target, input_path, out)
-    console = Console()
     console.print(
         f"translated {summary['frames']} frames {source} {tuple(summary['input_shape'][1:])} -> "
         f"{target} {tuple(summary['output_shape'][1:])}: {summary['output']}"
@@ -275,15 +271,13 @@ def geometry_command(
     if predict is not None:
         sensor = _sensor_of(predict, sensor, "--sensor")
         out = _output_beside_run(run, "geometry", f"{predict.stem}_geometry.npz", out)
-    from rich.console import Console
     from rich.table import Table
 
     from unitac_rig.learning.contact_geometry import ESTIMATOR_PT, GeometryConfig, geometry_for_run, predict_file
     from unitac_rig.learning.report import write_report
 
-    console = Console()
     if predict is not None:
-        _print_prediction(console, *predict_file(run, predict, sensor, trained_on, out), sensor)
+        _print_prediction(*predict_file(run, predict, sensor, trained_on, out), sensor)
         return
 
     def on_stage(message: str) -> None:
@@ -311,7 +305,7 @@ def geometry_command(
     console.print(f"{json_path}\n{png_path}\n{Path(run) / ESTIMATOR_PT} (apply it: --predict FRAMES)")
 
 
-def _print_prediction(console: Any, prediction: Any, path: Path, sensor: str) -> None:
+def _print_prediction(prediction: Any, path: Path, sensor: str) -> None:
     """``geometry --predict``'s output: the first few predicted profiles as a table, and where all of them went."""
     from rich.table import Table
 
@@ -343,15 +337,12 @@ def export_model_command(
     ),
 ) -> None:
     """Write each sensor's encoder and decoder (normaliser folded in: sensor units in and out) with a model card."""
-    from rich.console import Console
-
     from unitac_rig.errors import UsageError
     from unitac_rig.learning.export import CARD_NAME, CONFIG_NAME, MODEL_JSON, export_model
 
     if push_to_hub is not None and fmt != "safetensors":
         raise UsageError("--push-to-hub uploads the Hub layout only", hint="drop --format or use --format safetensors")
     document = export_model(run, out, fmt, member)
-    console = Console()
     console.print(f"exported {run} (member {member}, seed {document['seed']}) as {fmt} -> {out}")
     for sensor, entry in document["sensors"].items():
         console.print(
@@ -364,11 +355,3 @@ def export_model_command(
         from unitac_rig.learning.export import push_to_hub as push
 
         console.print(f"pushed to https://huggingface.co/{push_to_hub}: {push(out, push_to_hub)}")
-
-
-def register(app: typer.Typer) -> None:
-    """Add this area's commands to the root app (``train`` is added by :mod:`unitac_rig.cli.learn_train`)."""
-    app.command("report")(report_command)
-    app.command("translate")(translate_command)
-    app.command("geometry")(geometry_command)
-    app.command("export-model")(export_model_command)

@@ -19,8 +19,9 @@ import typer
 from pydantic import ValidationError
 from pydantic.fields import FieldInfo
 
+from unitac_rig.cli.help import field_bounds, field_flag
 from unitac_rig.cli.learn import DEVICES, RUN_MARKER, kept_run_line, report_with_table
-from unitac_rig.cli.pace import EveryFewSeconds, Pace
+from unitac_rig.cli.output import EveryFewSeconds, Pace, console
 from unitac_rig.cli.paths import require_empty_output
 from unitac_rig.errors import UsageError
 from unitac_rig.interrupts import termination_as_interrupt
@@ -34,7 +35,6 @@ _MODEL = "Model (the paper's shape by default)"
 _SPLIT = "Split, preprocessing and metrics"
 _REPORT = "Evaluation and report"
 _SEEDS = train_config.TrainingSection.model_fields["seeds"].default  # --seed and --n-seeds start from these
-_BOUNDS = ("gt", "ge", "lt", "le")  # pydantic's (annotated_types') bound attributes
 _PANELS = {
     "model": _MODEL,
     "training": _TRAINING,
@@ -70,7 +70,7 @@ class ConfigOption:
         """The typer parameter: None unless given, help, default and range from the field."""
         info = self.info
         choices = typing.get_args(info.annotation) if typing.get_origin(info.annotation) is typing.Literal else ()
-        bounds = {name: getattr(m, name) for m in info.metadata for name in _BOUNDS if hasattr(m, name)}
+        bounds = field_bounds(info)
         default = info.default
         paper = isinstance(info.json_schema_extra, dict) and info.json_schema_extra.get("paper")
         if isinstance(default, bool):
@@ -91,8 +91,8 @@ class ConfigOption:
         option = typer.Option(
             *self.flag.split(" "),
             metavar="W,W" if isinstance(default, tuple) else ("NAME" if choices else None),
-            min=_plain(bounds.get("ge")),
-            max=_plain(bounds.get("le")),
+            min=bounds.get("ge"),
+            max=bounds.get("le"),
             show_default=shown + (", as in the paper" if paper else ""),
             help=help_text,
             rich_help_panel=_PANELS[self.section],
@@ -102,20 +102,14 @@ class ConfigOption:
         )
 
 
-def _plain(bound: Any) -> Any:
-    """0.0 -> 0 (for the help's "at least 0")."""
-    return int(bound) if isinstance(bound, float) and bound.is_integer() else bound
-
-
 def config_options() -> dict[str, ConfigOption]:
     """Every field of the training configuration that is a ``train`` option, by parameter name."""
     options = {}
     for (section, key), info in train_config.fields().items():
-        extra = info.json_schema_extra if isinstance(info.json_schema_extra, dict) else {}
-        flag = extra.get("cli", "--" + train_config.flat_key(section, key).removeprefix("shape.").replace("_", "-"))
+        name = train_config.flat_key(section, key).removeprefix("shape.")
+        flag = field_flag(name, info)
         if flag is not None:
-            option = ConfigOption(section, key, str(flag), info)
-            options[option.name] = option
+            options[name] = ConfigOption(section, key, flag, info)
     return options
 
 
@@ -335,21 +329,18 @@ train_command = build_train_command()
 
 def run_train(request: TrainRequest) -> None:
     """Run a checked request: a new or resumed run (then its report), or a sensor added to a trained run."""
-    from rich.console import Console
-
     from unitac_rig.learning.train import load_run, resolve_device, train
 
     resolve_device(request.device)  # a bad --device fails before the data is read
-    console = Console()
     if request.extends:
-        _train_new_sensor(request, console)
+        _train_new_sensor(request)
         return
     config = request.train_config()
-    dataset = _paired_dataset(request, console)
+    dataset = _paired_dataset(request)
     total = request.epochs if config is None else config.epochs
     try:
         # Ctrl-C / SIGTERM wait for the end of the epoch (train() then checkpoints it); a second one stops at once
-        with _progress(console, "[bold]train") as progress, termination_as_interrupt():
+        with _progress("[bold]train") as progress, termination_as_interrupt():
             task = progress.add_task("train", total=total, status="")
             outcome = train(
                 dataset,
@@ -359,7 +350,7 @@ def run_train(request: TrainRequest) -> None:
                 threads=request.threads or None,
                 resume=request.resume,
                 epochs=request.epochs if request.resume else None,
-                progress=_epoch_printer(console, progress, task, total),
+                progress=_epoch_printer(progress, task, total),
             )
             progress.update(task, total=outcome.epochs_done)
     except KeyboardInterrupt:
@@ -367,10 +358,10 @@ def run_train(request: TrainRequest) -> None:
         raise
     console.print(f"trained {outcome.epochs_done} epochs in {outcome.train_seconds:.1f} s -> {request.out}")
     if request.report:
-        report_with_table(console, request.out, run=load_run(request.out))
+        report_with_table(request.out, run=load_run(request.out))
 
 
-def _paired_dataset(request: TrainRequest, console: Any) -> Any:
+def _paired_dataset(request: TrainRequest) -> Any:
     """The paired dataset of --data, partial when asked or when the resumed run trained on a partial join."""
     from unitac_rig.learning.data import build_paired_dataset, load_sets
     from unitac_rig.learning.train import trained_on_partial_join
@@ -388,7 +379,7 @@ def _paired_dataset(request: TrainRequest, console: Any) -> Any:
     return dataset
 
 
-def _progress(console: Any, label: str, *, log_lines: bool = True) -> Any:
+def _progress(label: str, *, log_lines: bool = True) -> Any:
     """A progress bar on a terminal; in a log (``log_lines``) none, the epoch printer writes a line now and then."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -403,7 +394,7 @@ def _progress(console: Any, label: str, *, log_lines: bool = True) -> Any:
     )
 
 
-def _epoch_printer(console: Any, progress: Any, task: Any, total: int | None) -> Any:
+def _epoch_printer(progress: Any, task: Any, total: int | None) -> Any:
     """The ``progress`` callback of ``train()``: the bar's status (the primary frame metric of the cross-sensor
     directions and the latent alignment), and a line every few seconds when the output is a log."""
     from unitac_rig.learning.metric_table import METRICS, frame_metrics
@@ -451,7 +442,7 @@ def dropped_sessions(sets: list[Any], paired_objects: tuple[str, ...] | list[str
     return lines
 
 
-def _train_new_sensor(request: TrainRequest, console: Any) -> None:
+def _train_new_sensor(request: TrainRequest) -> None:
     """``train --from RUN --new-sensor NAME``: the new sensor's encoder and output layer against the frozen model."""
     from rich.table import Table
 
@@ -467,7 +458,7 @@ def _train_new_sensor(request: TrainRequest, console: Any) -> None:
         hint="only --epochs, --lr, --batch-size, --device and --threads go with --new-sensor",
     )
     sets = load_sets(request.data)
-    with _progress(console, f"[bold]train {new_sensor}", log_lines=False) as progress:
+    with _progress(f"[bold]train {new_sensor}", log_lines=False) as progress:
         task = progress.add_task("extend", total=None, status="")
 
         def on_epoch(record: dict[str, Any]) -> None:
@@ -505,11 +496,6 @@ def _train_new_sensor(request: TrainRequest, console: Any) -> None:
     console.print(table)
     console.print(f"{out / EXTENSION_JSON}")
     if request.report and outcome.complete_test_rows:
-        report_with_table(console, out)
+        report_with_table(out)
     elif request.report:
         console.print("no test contact was recorded by every sensor: no report.md (see extension.json)")
-
-
-def register(app: typer.Typer) -> None:
-    """Add ``train`` to the root app (named in ``cli/app.py``'s COMMAND_MODULES, so the import goes one way)."""
-    app.command("train")(train_command)

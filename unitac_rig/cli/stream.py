@@ -1,13 +1,6 @@
-"""``unitac-rig stream RUN``: the trained model on the mounted sensor, live, as JSON lines.
-
-Reads the sensor the rig file names (``--rig``; detected when the file lists several) or the real-time twin's
-(``--simulated``: the twin started in this process), tares on the first frames (keep the pad unloaded), then writes
-one JSON line per frame to stdout, or to the one client of ``--listen 127.0.0.1:PORT``: the frame's latent, the frame
-translated into every other sensor of the run, and the contact-geometry estimate when the run has a fitted one
-(``unitac-rig geometry RUN``). Until Ctrl-C, ``--frames`` or ``--duration``; then a summary (frames, device-counter
-gaps, the rate achieved, latency from the frame's host timestamp to the line written, the warm-up backlog apart) on
-stderr and in ``--summary``. Ctrl-C (or SIGTERM / SIGHUP) still writes the summary, then exits 130 (143 / 129).
-The fields of a line are documented in docs/use-your-model-on-the-robot.md.
+"""``unitac-rig stream RUN``: the trained model on the mounted sensor (the rig file's, or the real-time twin's
+started here), live, as JSON lines on stdout or to one client on 127.0.0.1; a summary on stderr at the end, also after
+Ctrl-C, SIGTERM or SIGHUP (exit 130, 143, 129). The lines: docs/use-your-model-on-the-robot.md.
 """
 
 from __future__ import annotations
@@ -227,8 +220,3 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
 
 def _ms(value: float | None) -> str:
     return "-" if value is None else f"{value:.3f}"
-
-
-def register(app: typer.Typer) -> None:
-    """Add ``stream`` to the root app."""
-    app.command("stream")(stream_command)

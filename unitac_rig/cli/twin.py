@@ -1,13 +1,8 @@
 """``unitac-rig twin``: the real-time twin of the whole rig on a loopback address, until Ctrl-C or SIGTERM.
 
-It starts the controller twin (a simulated UR e-Series controller that the real ur_rtde clients drive) with the
-object in front of the arm, serves the mounted sensor on loopback network transports from the same scene, prints the
-rig file that points the hardware code path at it (stdout; ``--write-rig`` also saves it), and then reports what the
-controller does (program started or stopped, protective and emergency stops, watchdog trips) on stderr. In another
-terminal, ``unitac-rig collect --rig <that file> --object <same object>`` runs exactly as on the robot.
-
-Lines typed on its stdin act as the teach pendant: ``unlock`` (unlock a protective stop), ``estop`` (press the
-emergency stop), ``release`` (release it, power on and release the brakes), ``pstop`` (a protective stop), ``status``.
+The controller twin (a simulated UR e-Series controller the real ur_rtde clients drive) and the mounted sensor on
+loopback transports, from one scene; stdout gets the rig file that points the hardware code path at them (``collect
+--rig <that file>`` runs as on the robot), stderr what the controller does. Lines on stdin act as the teach pendant.
 """
 
 from __future__ import annotations
@@ -164,8 +159,3 @@ def _watch(rig: object, stop: threading.Event, quiet: bool) -> None:
             error = rig.controller.status().get("last_error") if counts != last_counts else ""
             typer.echo(f"twin: {line}" + (f" ({error})" if error else ""), err=True)
             last_line, last_counts = line, counts
-
-
-def register(app: typer.Typer) -> None:
-    """Add ``twin`` to the root app."""
-    app.command("twin")(twin)

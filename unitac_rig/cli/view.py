@@ -75,8 +75,3 @@ def view_command(
             rec.disconnect()
     if save is not None:
         typer.echo(f"view: wrote {save} ({save.stat().st_size / 1e6:.1f} MB); open it with: rerun {save}", err=True)
-
-
-def register(app: typer.Typer) -> None:
-    """Add ``view`` to the root app."""
-    app.command("view")(view_command)

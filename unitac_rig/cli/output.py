@@ -1,5 +1,6 @@
-"""Progress in words, the same in ``collect``, ``campaign`` and ``train``: the time left at this run's pace
-(``about 12 min left``), and how often a log (no terminal to redraw a bar) gets a progress line.
+"""What the commands print, said the same way everywhere: the one console of standard output, durations, the time
+left at this run's pace (``about 12 min left``: ``collect``, ``campaign``, ``train``), and how often a log (no
+terminal to redraw a bar) gets a progress line.
 
 The pace is measured on this run only (work done before a resume took no time here), so the estimate follows the
 load of the machine it runs on rather than a figure measured elsewhere.
@@ -9,6 +10,9 @@ from __future__ import annotations
 
 import time
 
+from rich.console import Console
+
+console = Console()  # standard output; errors and interruption lines go to stderr through typer.echo(err=True)
 LOG_LINE_EVERY_S = 10.0  # without a terminal (a log, nohup, CI): a progress line at most this often, s
 
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 import contextlib
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from types import FrameType
 
 _noted: list[int] = []
@@ -111,6 +111,17 @@ def _on_signal(signal_number: int, frame: FrameType | None) -> None:
         raise interrupt_for(signal_number)
 
 
+@contextlib.contextmanager
+def _handled_by(handler: Callable[[int, FrameType | None], None]) -> Iterator[None]:
+    """``handler`` takes SIGINT, SIGTERM and SIGHUP for the duration; the previous handlers are restored after."""
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, *TERMINATION_SIGNALS)}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
 def last_termination_signal() -> int | None:
     """The last SIGTERM / SIGHUP received inside :func:`termination_as_interrupt`, if any."""
     return _received[-1] if _received else None
@@ -125,14 +136,12 @@ def termination_as_interrupt(*, defer: bool = True) -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {sig: signal.signal(sig, _on_signal) for sig in (*TERMINATION_SIGNALS, signal.SIGINT)}
     was_deferring, _deferring[0] = _deferring[0], defer
     try:
-        yield
-        raise_if_interrupted()  # one that arrived after the last poll still ends the command as interrupted
+        with _handled_by(_on_signal):
+            yield
+            raise_if_interrupted()  # one that arrived after the last poll still ends the command as interrupted
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
         _deferring[0] = was_deferring
         forget_interrupts()  # the interrupt (if any) has propagated; nothing after the scope may see it again
 
@@ -147,8 +156,7 @@ class StopRequest(threading.Event):
 def stop_on_signals() -> Iterator[StopRequest]:
     """An event that Ctrl-C, SIGTERM and SIGHUP set for the duration, instead of raising: a serving loop that moves
     no arm (``twin``, ``stream``) polls it and ends cleanly, closing what it opened, and may then end the command
-    as interrupted (``raise interrupt_for(stop.signal_number)``: exit 130, or 128 + the signal). The previous
-    handlers are restored after. Main thread only."""
+    as interrupted (``raise interrupt_for(stop.signal_number)``: exit 130, or 128 + the signal). Main thread only."""
     stop = StopRequest()
 
     def on_signal(signal_number: int, frame: FrameType | None) -> None:
@@ -158,12 +166,8 @@ def stop_on_signals() -> Iterator[StopRequest]:
                 _received.append(signal_number)  # the CLI's exit status names it (see app.main)
         stop.set()
 
-    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, *TERMINATION_SIGNALS)}
-    try:
+    with _handled_by(on_signal):
         yield stop
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
 
 
 def termination_signal(exc: BaseException) -> int | None:

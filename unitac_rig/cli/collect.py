@@ -56,6 +56,10 @@ IMPERFECTIONS_OPTION = typer.Option(
     f"from {', '.join(f.name for f in dataclasses.fields(Imperfections))}.",
 )
 _PRESS = RigConfig().press  # the rig file's defaults, for the help of the options that override them
+ANGLES_OPTION = typer.Option(
+    None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
+)
+LIVE_OPTION = typer.Option(True, "--live/--no-live", help="Show the live panel.")
 
 
 # rig-file field -> the command-line option that overrides it (an error in an override names the option typed)
@@ -295,11 +299,9 @@ def collect(
     ),
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed (runs are deterministic per seed)."),
     imperfections: str = IMPERFECTIONS_OPTION,
-    angles: int | None = typer.Option(
-        None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
-    ),
+    angles: int | None = ANGLES_OPTION,
     max_presses: int | None = typer.Option(None, "--max-presses", help="Stop after this many presses (resume later)."),
-    live: bool = typer.Option(True, "--live/--no-live", help="Show the live panel."),
+    live: bool = LIVE_OPTION,
     dry_run_only: bool = typer.Option(
         False,
         "--dry-run",
@@ -362,13 +364,11 @@ def campaign(
     data: Path = DATA_OPTION,
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed."),
     imperfections: str = IMPERFECTIONS_OPTION,
-    angles: int | None = typer.Option(
-        None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
-    ),
+    angles: int | None = ANGLES_OPTION,
     objects: str | None = typer.Option(
         None, "--objects", metavar="ID,ID", show_default="every object", help="Comma-separated object ids."
     ),
-    live: bool = typer.Option(True, "--live/--no-live", help="Show the live panel."),
+    live: bool = LIVE_OPTION,
 ) -> None:
     """Every object with every sensor: unattended on the simulated rig, operator-guided on hardware."""
     _check_counts(seed)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import shlex
 import time
 from pathlib import Path
 from typing import Any
@@ -93,17 +94,12 @@ def _unfinished(session: dict[str, Any]) -> bool:
 def _resume_note(data: Path, session: dict[str, Any]) -> str:
     """``hex_tpu/uskin: incomplete (13 of 91 presses finished); resume: unitac-rig collect ...``: the command that
     plans the same presses again (the angle count it was collected with; the rig file when not simulated)."""
-    import shlex
-
     from unitac_rig.storage.reader import read_session_info
 
     finished = session["presses_complete"] + session["presses_failed"]
-    command = [
-        "unitac-rig collect",
-        f"--object {session['object']}",
-        f"--sensor {session['sensor']}",
-        f"--data {shlex.quote(str(data))}",
-    ]
+    command = (
+        f"unitac-rig collect --object {session['object']} --sensor {session['sensor']} --data {shlex.quote(str(data))}"
+    )
     try:  # verified already by inspect in this process: only the attributes are read again
         attrs = read_session_info(data / session["file"]).attrs
         angles = attrs.get("config", {}).get("press", {}).get("angle_count")
@@ -111,15 +107,13 @@ def _resume_note(data: Path, session: dict[str, Any]) -> str:
     except Exception:  # the file's damage is reported in its integrity note
         angles, rotations = None, []
     if angles is not None:
-        command.append(f"--angles {angles}")
+        command += f" --angles {angles}"
     if len(rotations) == 1 and len(_catalogue_rotations(session["object"])) != 1:  # collect --rotation R
-        command.append(f"--rotation {float(rotations[0]):g}")
+        command += f" --rotation {float(rotations[0]):g}"
     if not session["simulated"]:
-        command.append("--rig RIG.toml")
-    return (
-        f"{session['object']}/{session['sensor']}: incomplete ({finished} of {session['presses_planned']} presses "
-        f"finished); resume: {' '.join(command)}"
-    )
+        command += " --rig RIG.toml"
+    name, planned = f"{session['object']}/{session['sensor']}", session["presses_planned"]
+    return f"{name}: incomplete ({finished} of {planned} presses finished); resume: {command}"
 
 
 def _catalogue_rotations(object_id: str) -> tuple[float, ...]:

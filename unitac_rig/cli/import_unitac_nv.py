@@ -42,10 +42,7 @@ def import_unitac_nv_command(
         return
     if not source.exists():
         raise UsageError(f"SOURCE {source} does not exist", hint="unzip the UniTac-NV download and pass its folder")
-    if processed:
-        mode = "processed"
-    if mode not in ("auto", "raw", "processed"):
-        raise UsageError(f"--mode {mode!r} is not one of auto, raw, processed")
+    mode = "processed" if processed else mode  # checked by the importer (a usage error, exit 2)
     console.print(
         f"conventions: {conventions or 'defaults'} (F/T rotated {conv.ft_rotation_deg:g} deg, PapillArray x/y "
         f"{'flipped' if conv.papillarray_flip_xy else 'kept'}, press band {conv.press_fz_band_n[0]:g} < Fz < "

@@ -4,6 +4,7 @@ hyper-parameter, is :mod:`unitac_rig.cli.learn_train`), and the Table I printer 
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 from typing import Any
 
@@ -15,27 +16,20 @@ from unitac_rig.errors import UsageError
 # What the checks before the heavy imports compare with (tests keep them equal to the library's own tables).
 RUN_MARKER = "checkpoint.pt"  # learning.run.CHECKPOINT_NAME: a folder holding it is a trained run
 DEVICES = ("auto", "cpu", "cuda")
+RUN_ARGUMENT = typer.Argument(..., metavar="RUN", help="Run directory.")
 
 
 def kept_run_line(run: Path, data: list[Path]) -> str:
     """What an interrupted ``train`` kept (its checkpoint's epoch, read back from disk) and the command that goes
     on from there."""
-    import shlex
-
     from unitac_rig.learning.run import checkpoint_path, load_checkpoint
 
     if not checkpoint_path(run).is_file():
         return "train: interrupted before the first checkpoint, nothing kept; run the same command to start again"
     payload = load_checkpoint(run)
     planned = payload.get("config", {}).get("epochs", "?")
-    command = " ".join(
-        [
-            "unitac-rig train",
-            *(f"--data {shlex.quote(str(d))}" for d in data),
-            f"--out {shlex.quote(str(run))}",
-            "--resume",
-        ]
-    )
+    data_options = " ".join(f"--data {shlex.quote(str(d))}" for d in data)
+    command = f"unitac-rig train {data_options} --out {shlex.quote(str(run))} --resume"
     return f"train: interrupted; kept epoch {payload.get('epoch', '?')}/{planned} in {run}; go on with: {command}"
 
 
@@ -43,8 +37,6 @@ def report_with_table(run_dir: Path, **options: Any) -> None:
     """Write the report of the run in ``run_dir`` (a line per stage: the t-SNE alone can take a minute or two), then
     print its Table I and where the report is. Interrupted, it says what it kept: the run as it was (metrics.json and
     report.md are written together at the end), and the command that writes them."""
-    import shlex
-
     from unitac_rig.learning.report import write_report
 
     def on_stage(message: str) -> None:
@@ -64,7 +56,7 @@ def report_with_table(run_dir: Path, **options: Any) -> None:
 
 
 def report_command(
-    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
+    run: Path = RUN_ARGUMENT,
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Redraw the figures too."),
     nmae_normaliser: str = typer.Option(
         None, "--nmae-normaliser", metavar="NAME", show_default="the run's", help="Score under another NMAE normaliser."
@@ -199,7 +191,7 @@ def require_run(run: Path) -> None:
 
 
 def translate_command(
-    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
+    run: Path = RUN_ARGUMENT,
     input_path: Path = typer.Argument(..., metavar="INPUT", help="Session .h5, or frames as .npy/.npz (M, n, 3)."),
     source: str = typer.Option(
         None, "--from", metavar="SENSOR", show_default="the session file's sensor", help="Sensor that recorded INPUT."
@@ -227,7 +219,7 @@ def translate_command(
 
 
 def geometry_command(
-    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
+    run: Path = RUN_ARGUMENT,
     object_id: str = typer.Option(
         None, "--object", metavar="ID", show_default="the run's unseen object", help="Object to estimate."
     ),
@@ -324,7 +316,7 @@ def _print_prediction(prediction: Any, path: Path, sensor: str) -> None:
 
 
 def export_model_command(
-    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
+    run: Path = RUN_ARGUMENT,
     fmt: str = typer.Option(
         "safetensors",
         "--format",

@@ -28,21 +28,14 @@ from unitac_rig.interrupts import termination_as_interrupt
 from unitac_rig.learning import config as train_config
 from unitac_rig.rig.config import read_toml
 
-# Help headings of `train` (the options are many: grouped, as git groups its own).
+# Help headings of `train` (the options are many: grouped, as git groups its own), and of each config section's.
 _RUN = "Data and run"
 _TRAINING = "Training"
 _MODEL = "Model (the paper's shape by default)"
 _SPLIT = "Split, preprocessing and metrics"
 _REPORT = "Evaluation and report"
 _SEEDS = train_config.TrainingSection.model_fields["seeds"].default  # --seed and --n-seeds start from these
-_PANELS = {
-    "model": _MODEL,
-    "training": _TRAINING,
-    "split": _SPLIT,
-    "preprocessing": _SPLIT,
-    "metrics": _SPLIT,
-    "evaluation": _REPORT,
-}
+_PANELS = dict(model=_MODEL, training=_TRAINING, split=_SPLIT, preprocessing=_SPLIT, metrics=_SPLIT, evaluation=_REPORT)
 
 
 @dataclass(frozen=True)

@@ -75,8 +75,7 @@ def _mounted_sensor(
     from unitac_rig.rig.config import load_rig_config, parse_rig_config
     from unitac_rig.rig.hardware import HardwareRig
 
-    twin = None
-    try:
+    with contextlib.ExitStack() as stack:  # closes the sensor, then the rig, then the twin
         if simulated:
             import tomllib
 
@@ -84,8 +83,9 @@ def _mounted_sensor(
             from unitac_rig.sim.twin.rig import RigTwin
 
             name = sensor or next(s for s in ("papillarray", "uskin") if s in run_sensors)
-            twin = RigTwin(object_id, sensor=name, host=first_free_loopback(211, 239))
+            twin = stack.enter_context(RigTwin(object_id, sensor=name, host=first_free_loopback(211, 239)))
             config = parse_rig_config(tomllib.loads(twin.rig_file()))
+            sensor = twin.sensor
         else:
             assert rig_file is not None
             config = load_rig_config(rig_file)
@@ -96,18 +96,11 @@ def _mounted_sensor(
             for n in rated:
                 config.sensors[n] = config.sensors[n].model_copy(update={"rate_hz": rate_hz})
         rig = HardwareRig(config)
-        try:
-            name = sensor if sensor is not None else (twin.sensor if twin is not None else rig.detect_sensor())
-            driver = rig.open_sensor(name)
-            try:
-                yield driver, name
-            finally:
-                driver.disconnect()
-        finally:
-            rig.close()
-    finally:
-        if twin is not None:
-            twin.close()
+        stack.callback(rig.close)
+        name = sensor if sensor is not None else rig.detect_sensor()
+        driver = rig.open_sensor(name)
+        stack.callback(driver.disconnect)
+        yield driver, name
 
 
 def stream_command(

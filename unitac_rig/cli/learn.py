@@ -329,7 +329,6 @@ def export_model_command(
     ),
 ) -> None:
     """Write each sensor's encoder and decoder (normaliser folded in: sensor units in and out) with a model card."""
-    from unitac_rig.errors import UsageError
     from unitac_rig.learning.export import CARD_NAME, CONFIG_NAME, MODEL_JSON, export_model
 
     if push_to_hub is not None and fmt != "safetensors":

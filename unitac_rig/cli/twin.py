@@ -11,18 +11,20 @@ import dataclasses
 import sys
 import threading
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
-from unitac_rig.errors import UsageError
+from unitac_rig.errors import UnitacError, UsageError
 from unitac_rig.interrupts import stop_on_signals
 from unitac_rig.rig.sensors import sensor_names
 
-
-def _status_line(truth: object) -> str:
+if TYPE_CHECKING:  # the twin loads when the command runs, not when the CLI starts
     from unitac_rig.sim.twin import TwinTruth
+    from unitac_rig.sim.twin.rig import RigTwin
 
-    assert isinstance(truth, TwinTruth)
+
+def _status_line(truth: TwinTruth) -> str:
     program = {1: "stopped", 2: "running", 4: "paused"}.get(truth.runtime_state, str(truth.runtime_state))
     safety = "normal"
     if truth.safety_status_bits & (1 << 7):
@@ -107,11 +109,8 @@ def twin(
 PENDANT_HELP = "pendant commands: unlock, estop, release, pstop, status"
 
 
-def _pendant(rig: object, stop: threading.Event) -> None:
+def _pendant(rig: RigTwin, stop: threading.Event) -> None:
     """Read pendant commands from stdin until it closes or the twin stops (a daemon thread; stdin may be a pipe)."""
-    from unitac_rig.sim.twin.rig import RigTwin
-
-    assert isinstance(rig, RigTwin)
     controller = rig.controller
     for line in sys.stdin:
         if stop.is_set():
@@ -140,16 +139,13 @@ def _pendant(rig: object, stop: threading.Event) -> None:
         typer.echo(f"pendant: {reply}", err=True)
 
 
-def _watch(rig: object, stop: threading.Event, quiet: bool) -> None:
+def _watch(rig: RigTwin, stop: threading.Event, quiet: bool) -> None:
     """Wait for a signal; meanwhile report each change of the controller's state (stderr)."""
-    from unitac_rig.sim.twin.rig import RigTwin
-
-    assert isinstance(rig, RigTwin)
     last_line = ""
     last_counts = (0, 0, 0)
     while not stop.wait(0.1):
         if not rig.controller.alive:
-            raise UsageError("the controller twin's process ended", hint="see its error output above")
+            raise UnitacError("the controller twin's process ended", hint="see its error output above")  # exit 1
         if quiet:
             continue
         truth = rig.controller.truth()

@@ -121,14 +121,7 @@ def main(argv: list[str] | None = None) -> None:
             sys.exit(2)
         _fail(debug, f"error: {_usage_line(exc)}", getattr(exc, "exit_code", 2))
     except Exception as exc:
-        if debug:
-            raise
-        typer.secho(
-            f"error: unexpected {type(exc).__name__}: {exc} (rerun with --debug for details)",
-            err=True,
-            fg=typer.colors.RED,
-        )
-        sys.exit(1)
+        _fail(debug, f"error: unexpected {type(exc).__name__}: {exc} (rerun with --debug for details)", 1)
     # Without standalone mode typer *returns* an exit code instead of raising: typer.Exit(n) from a command, and
     # 130 for a KeyboardInterrupt (Ctrl-C, or SIGTERM/SIGHUP during collect), which it catches itself.
     if isinstance(result, int) and result != 0:

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.helpers import cli, console_script
+from tests.helpers import cli, run_console
 from unitac_rig.storage.reader import read_presses
 
 rr = pytest.importorskip("rerun")
@@ -85,10 +85,8 @@ def test_view_stream_simulated_logs_live_frames(tmp_path: Path) -> None:
 
 
 def test_view_is_in_the_help_at_80_columns() -> None:
-    import subprocess
-
     def help_of(*args: str) -> str:
-        done = subprocess.run([console_script(), *args, "--help"], capture_output=True, text=True, timeout=120)
+        done = run_console(*args, "--help")
         assert done.returncode == 0, done.stderr
         return done.stdout
 

@@ -2,27 +2,13 @@
 
 from typing import Any
 
-from drivers.errors import ArmError, DeviceError, DeviceNotFound, DeviceTimeout, ProtectiveStop
-from protocols.errors import CarriesPressRecord, ProtocolError, UnitacError
-
-__all__ = [
-    "ArmError",
-    "CarriesPressRecord",
-    "ConfigError",
-    "DataError",
-    "DeviceError",
-    "DeviceNotFound",
-    "DeviceTimeout",
-    "Interrupted",
-    "ModelError",
-    "ProtectiveStop",
-    "ProtocolError",
-    "SafetyLimit",
-    "SessionStopped",
-    "UnitacError",
-    "UsageError",
-    "with_press_record",
-]
+from drivers.errors import ArmError as ArmError
+from drivers.errors import DeviceError as DeviceError
+from drivers.errors import DeviceNotFound as DeviceNotFound
+from drivers.errors import DeviceTimeout as DeviceTimeout
+from drivers.errors import ProtectiveStop as ProtectiveStop
+from protocols.errors import CarriesPressRecord, UnitacError
+from protocols.errors import ProtocolError as ProtocolError
 
 
 class ConfigError(UnitacError):

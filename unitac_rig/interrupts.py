@@ -28,7 +28,7 @@ from __future__ import annotations
 import contextlib
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from types import FrameType
 
 _noted: list[int] = []
@@ -68,7 +68,7 @@ def acknowledged_interrupts() -> Iterator[None]:
 
     For the clean-up an interrupt asks for (the arm pulling the pad off the object before the process exits): its
     moves poll :func:`raise_if_interrupted` like any other, and a *new* interrupt (the operator's second Ctrl-C)
-    still raises, at once (:func:`raise_at_once`), and ends the clean-up with the arm stopped."""
+    still raises, at once, and ends the clean-up with the arm stopped."""
     saved = _acknowledged[0]
     _acknowledged[0] = len(_noted)
     try:
@@ -81,12 +81,6 @@ def forget_interrupts() -> None:
     """Clear the noted interrupts (tests, and a handler scope that ends without one)."""
     _noted.clear()
     _acknowledged[0] = 0
-
-
-def raise_at_once() -> bool:
-    """Whether a handler should raise the interrupt it just noted rather than defer it: inside
-    :func:`immediate_interrupts`, or when an earlier interrupt is still noted (a repeated Ctrl-C)."""
-    return _immediate_depth[0] > 0 or len(_noted) > 1
 
 
 @contextlib.contextmanager
@@ -108,12 +102,24 @@ _deferring = [False]  # whether the open termination_as_interrupt scope defers (
 
 
 def _on_signal(signal_number: int, frame: FrameType | None) -> None:
-    """Note the interrupt; raise it here only when not deferring, inside a prompt, or on a repeated signal."""
+    """Note the interrupt; raise it here only when not deferring, inside :func:`immediate_interrupts` (a prompt), or
+    when an earlier interrupt is still noted (a repeated Ctrl-C: something between two polls is stuck)."""
     if signal_number != signal.SIGINT:
         _received.append(signal_number)
     note_interrupt(signal_number)  # also when raised: in case the exception gets swallowed
-    if not _deferring[0] or raise_at_once():
+    if not _deferring[0] or _immediate_depth[0] > 0 or len(_noted) > 1:
         raise interrupt_for(signal_number)
+
+
+@contextlib.contextmanager
+def _handled_by(handler: Callable[[int, FrameType | None], None]) -> Iterator[None]:
+    """``handler`` takes SIGINT, SIGTERM and SIGHUP for the duration; the previous handlers are restored after."""
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, *TERMINATION_SIGNALS)}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
 
 
 def last_termination_signal() -> int | None:
@@ -130,14 +136,12 @@ def termination_as_interrupt(*, defer: bool = True) -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {sig: signal.signal(sig, _on_signal) for sig in (*TERMINATION_SIGNALS, signal.SIGINT)}
     was_deferring, _deferring[0] = _deferring[0], defer
     try:
-        yield
-        raise_if_interrupted()  # one that arrived after the last poll still ends the command as interrupted
+        with _handled_by(_on_signal):
+            yield
+            raise_if_interrupted()  # one that arrived after the last poll still ends the command as interrupted
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
         _deferring[0] = was_deferring
         forget_interrupts()  # the interrupt (if any) has propagated; nothing after the scope may see it again
 
@@ -152,8 +156,7 @@ class StopRequest(threading.Event):
 def stop_on_signals() -> Iterator[StopRequest]:
     """An event that Ctrl-C, SIGTERM and SIGHUP set for the duration, instead of raising: a serving loop that moves
     no arm (``twin``, ``stream``) polls it and ends cleanly, closing what it opened, and may then end the command
-    as interrupted (``raise interrupt_for(stop.signal_number)``: exit 130, or 128 + the signal). The previous
-    handlers are restored after. Main thread only."""
+    as interrupted (``raise interrupt_for(stop.signal_number)``: exit 130, or 128 + the signal). Main thread only."""
     stop = StopRequest()
 
     def on_signal(signal_number: int, frame: FrameType | None) -> None:
@@ -163,12 +166,8 @@ def stop_on_signals() -> Iterator[StopRequest]:
                 _received.append(signal_number)  # the CLI's exit status names it (see app.main)
         stop.set()
 
-    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, *TERMINATION_SIGNALS)}
-    try:
+    with _handled_by(on_signal):
         yield stop
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
 
 
 def termination_signal(exc: BaseException) -> int | None:

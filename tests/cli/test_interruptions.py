@@ -8,9 +8,7 @@ real twin: tests/twin/test_stream.py.)
 from __future__ import annotations
 
 import hashlib
-import os
 import signal
-import subprocess
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -20,7 +18,7 @@ import numpy as np
 import pytest
 
 from drivers.frames import TactileFrame
-from tests.helpers import cli, console_script, run_console
+from tests.helpers import cli, run_console, start_console
 from tests.learning.learning_helpers import small_sets, write_sessions
 from tests.twin.twin_helpers import wait_until
 from unitac_rig.cli.learn import kept_run_line
@@ -72,24 +70,8 @@ def test_ctrl_c_in_train_keeps_the_epoch_it_finished_and_names_the_resume_comman
 @pytest.mark.slow
 def test_ctrl_c_in_the_train_command_exits_130_with_the_kept_epoch(data_dir: Path, tmp_path: Path) -> None:
     out = tmp_path / "run"
-    env = {**os.environ, "COLUMNS": "80", "NO_COLOR": "1", "PYTHONUNBUFFERED": "1"}
-    train_cmd = subprocess.Popen(
-        [
-            console_script(),
-            "train",
-            "--data",
-            str(data_dir),
-            "--out",
-            str(out),
-            "--epochs",
-            "100000",
-            "--no-baselines",
-            "--no-report",
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
+    train_cmd = start_console(
+        "train", "--data", str(data_dir), "--out", str(out), "--epochs", "100000", "--no-baselines", "--no-report"
     )
     lines: list[str] = []
     reader = threading.Thread(target=lambda: lines.extend(iter(train_cmd.stdout.readline, "")))  # type: ignore[union-attr]

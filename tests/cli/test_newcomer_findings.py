@@ -19,14 +19,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.helpers import console_script, run_console
+from tests.helpers import run_console, start_console
 from unitac_rig.storage.reader import snapshot_session
 
 ANGLES = "3"
-
-
-def _env(**extra: str) -> dict[str, str]:
-    return {**os.environ, "COLUMNS": "80", "NO_COLOR": "1", **extra}
 
 
 def ok(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
@@ -72,7 +68,7 @@ def torch_unimportable(tmp_path: Path) -> Iterator[dict[str, str]]:
     fake = tmp_path / "no_torch" / "torch"
     fake.mkdir(parents=True)
     (fake / "__init__.py").write_text("raise ImportError('torch imported before the argument checks')\n")
-    yield _env(PYTHONPATH=str(fake.parent))
+    yield {"PYTHONPATH": os.pathsep.join([str(fake.parent), os.environ.get("PYTHONPATH", "")])}
 
 
 # ---- 3, 4: silent data traps --------------------------------------------------------------------------------------
@@ -191,8 +187,7 @@ def test_6_collect_into_a_log_prints_progress_lines(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_7_ctrl_c_says_what_was_kept_and_that_the_same_command_resumes(tmp_path: Path) -> None:
-    args = [console_script(), "collect", "--object", "hex_tpu", "--angles", "91", "--data", str(tmp_path)]
-    process = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+    process = start_console("collect", "--object", "hex_tpu", "--angles", "91", "--data", str(tmp_path))
     try:
         assert process.stdout is not None
         for line in process.stdout:  # wait for the condition: the first press is recorded

@@ -76,7 +76,7 @@ def test_the_config_choices_are_the_librarys_tables() -> None:
 def started(monkeypatch: pytest.MonkeyPatch) -> list[Any]:
     """The requests that got past the checks to the work (reading data, importing torch)."""
     calls: list[Any] = []
-    monkeypatch.setattr(learn_train, "run_train", lambda ctx, request: calls.append(request))
+    monkeypatch.setattr(learn_train, "run_train", calls.append)
     return calls
 
 

@@ -1,6 +1,5 @@
-"""The ``unitac-rig`` command line.
+"""The ``unitac-rig`` command line: the table of its commands (each defined in the module of its area).
 
-Each area registers its own commands from a ``cli_*`` module, so this file stays a short table of contents.
 Errors from the project's exception tree become one clear line and exit code 1 (2 for usage and configuration
 errors); ``--debug`` shows the traceback instead, with the same exit code.
 """
@@ -8,15 +7,15 @@ errors); ``--debug`` shows the traceback instead, with the same exit code.
 from __future__ import annotations
 
 import contextlib
-import importlib
 import logging
 import signal
 import sys
 import traceback
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import typer
 
+from unitac_rig.cli import bench, collect, dataset, import_unitac_nv, learn, learn_train, probe, stream, twin, view
 from unitac_rig.cli.help import use_plain_help
 from unitac_rig.errors import ConfigError, UnitacError, UsageError
 from unitac_rig.interrupts import last_termination_signal, termination_signal
@@ -32,29 +31,31 @@ app = typer.Typer(
     rich_markup_mode=None,  # plain help, readable at 80 columns (see cli/help.py)
 )
 
-# Modules that add commands to ``app`` through a ``register(app)`` function, in help order.
-COMMAND_MODULES = (
-    "unitac_rig.cli.collect",  # collect, campaign, extract, objects
-    "unitac_rig.cli.dataset",  # inspect [--watch], export, verify
-    "unitac_rig.cli.learn_train",  # train
-    "unitac_rig.cli.learn",  # report, translate, geometry, export-model
-    "unitac_rig.cli.probe",  # probe uskin|papillarray|ur5e
-    "unitac_rig.cli.import_unitac_nv",  # import-unitac-nv
-    "unitac_rig.cli.bench",  # bench ...
-    "unitac_rig.cli.twin",  # twin (the real-time twin of the rig)
-    "unitac_rig.cli.stream",  # stream (a trained run on the live sensor)
-    "unitac_rig.cli.view",  # view (a session or a live sensor in Rerun)
-)
-
-# The root help lists the commands under these headings, in this order (a command not named here is listed last).
-COMMAND_GROUPS = {
-    "Collect data": ("collect", "campaign", "extract", "objects"),
-    "Look at and share data": ("inspect", "view", "export", "verify", "import-unitac-nv"),
-    "Learn": ("train", "report", "translate", "geometry", "export-model"),
-    "Devices and the simulated rig": ("probe", "twin", "bench"),
+# Every command under the heading the root help lists it by, in order (a typer app is a group of subcommands).
+COMMANDS: dict[str, dict[str, Any]] = {
+    "Collect data": {
+        "collect": collect.collect,
+        "campaign": collect.campaign,
+        "extract": collect.extract,
+        "objects": collect.objects_cmd,
+    },
+    "Look at and share data": {
+        "inspect": dataset.inspect,
+        "view": view.view_command,
+        "export": dataset.export,
+        "verify": dataset.verify,
+        "import-unitac-nv": import_unitac_nv.import_unitac_nv_command,
+    },
+    "Learn": {
+        "train": learn_train.train_command,
+        "report": learn.report_command,
+        "translate": learn.translate_command,
+        "geometry": learn.geometry_command,
+        "export-model": learn.export_model_command,
+    },
+    "Devices and the simulated rig": {"probe": probe.probe_app, "twin": twin.twin, "bench": bench.bench_app},
+    "Other commands": {"stream": stream.stream_command},
 }
-
-_state = {"debug": False}
 
 
 def _show_version(value: bool) -> None:
@@ -72,7 +73,6 @@ def _root(
         False, "--version", callback=_show_version, is_eager=True, help="Print the version and exit."
     ),
 ) -> None:
-    _state["debug"] = debug
     handler = logging.StreamHandler()
     handler.setFormatter(_LogLine() if not debug else logging.Formatter(LOG_FORMAT))
     logging.basicConfig(level=logging.DEBUG if debug else logging.WARNING, handlers=[handler])
@@ -91,21 +91,19 @@ class _LogLine(logging.Formatter):
         return text
 
 
-for _module in COMMAND_MODULES:
-    importlib.import_module(_module).register(app)
-use_plain_help(app, COMMAND_GROUPS)
+for _commands in COMMANDS.values():
+    for _name, _command in _commands.items():
+        if isinstance(_command, typer.Typer):
+            app.add_typer(_command, name=_name)
+        else:
+            app.command(_name)(_command)
+use_plain_help(app, {heading: tuple(commands) for heading, commands in COMMANDS.items()})
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Console entry point: run the app, mapping every error to one line and a non-zero exit.
-
-    Usage errors (unknown command or option, missing or bad value, a path that is not what the option needs, a rig
-    or configuration file that does not validate) exit 2, also with ``--debug`` (which shows the traceback), and
-    so does no command at all (the help is printed); other project errors 1, Ctrl-C 130,
-    SIGTERM / SIGHUP during a collection 143 / 129 (after the same clean stop as Ctrl-C).
-    Only names typer itself exports are used here: typer 0.29 dropped its click dependency, so importing click
-    (which is not declared) broke this very path on a fresh install.
-    """
+    """Console entry point: every error one line and a non-zero exit (the traceback too with ``--debug``): 2 for a
+    usage error (and no command at all: the help), 1 other project errors, 130 Ctrl-C, 143 / 129 SIGTERM / SIGHUP.
+    Only names typer itself exports are used: typer 0.29 dropped its click dependency (click is not declared)."""
     args = hoist_debug(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
     try:
@@ -123,14 +121,7 @@ def main(argv: list[str] | None = None) -> None:
             sys.exit(2)
         _fail(debug, f"error: {_usage_line(exc)}", getattr(exc, "exit_code", 2))
     except Exception as exc:
-        if debug:
-            raise
-        typer.secho(
-            f"error: unexpected {type(exc).__name__}: {exc} (rerun with --debug for details)",
-            err=True,
-            fg=typer.colors.RED,
-        )
-        sys.exit(1)
+        _fail(debug, f"error: unexpected {type(exc).__name__}: {exc} (rerun with --debug for details)", 1)
     # Without standalone mode typer *returns* an exit code instead of raising: typer.Exit(n) from a command, and
     # 130 for a KeyboardInterrupt (Ctrl-C, or SIGTERM/SIGHUP during collect), which it catches itself.
     if isinstance(result, int) and result != 0:

@@ -81,14 +81,9 @@ def inference_command(
 ) -> None:
     """Encode / decode / translate latency against the 1 ms a 1000 Hz stream leaves."""
     from unitac_rig.bench import inference
-    from unitac_rig.errors import UsageError
+    from unitac_rig.cli.learn import require_run
 
-    if run is not None and not (run / "checkpoint.pt").is_file():
-        raise UsageError(f"{run} has no checkpoint.pt", hint="give a run directory written by `unitac-rig train`")
+    if run is not None:
+        require_run(run)
     doc = inference.run_inference_benchmark(inference.quick_plan() if quick else inference.full_plan(), run)
     _finish(doc, inference.plot_inference_benchmark, inference.summary_lines, out)
-
-
-def register(app: typer.Typer) -> None:
-    """Add ``bench`` and its subcommands to the root app."""
-    app.add_typer(bench_app, name="bench")

@@ -11,14 +11,14 @@ from pathlib import Path
 import numpy as np
 import typer
 from pydantic import ValidationError
-from rich.console import Console, Group
+from rich.console import Group
 from rich.live import Live
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table
 from rich.text import Text
 
-from unitac_rig.cli.pace import spoken_duration
+from unitac_rig.cli.output import EveryFewSeconds, Pace, console, spoken_duration
 from unitac_rig.cli.paths import path_text, require_data_folder, require_directory
 from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.sensor_choice import choose_sensor, collection_order, session_complete, session_presses
@@ -38,8 +38,6 @@ from unitac_rig.storage.reader import list_sessions
 from unitac_rig.storage.recorder import session_path
 from unitac_rig.storage.reextract import reextract_sessions
 
-console = Console(stderr=False)
-
 DATA_OPTION = typer.Option(
     Path("data"),
     "--data",
@@ -50,8 +48,6 @@ DATA_OPTION = typer.Option(
 RIG_OPTION = typer.Option(
     None, "--rig", metavar="FILE", help="Rig file (TOML). Without one, the simulated rig is used."
 )
-
-
 IMPERFECTIONS_OPTION = typer.Option(
     "all",
     "--imperfections",
@@ -60,6 +56,10 @@ IMPERFECTIONS_OPTION = typer.Option(
     f"from {', '.join(f.name for f in dataclasses.fields(Imperfections))}.",
 )
 _PRESS = RigConfig().press  # the rig file's defaults, for the help of the options that override them
+ANGLES_OPTION = typer.Option(
+    None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
+)
+LIVE_OPTION = typer.Option(True, "--live/--no-live", help="Show the live panel.")
 
 
 # rig-file field -> the command-line option that overrides it (an error in an override names the option typed)
@@ -67,29 +67,26 @@ OVERRIDE_OPTIONS = {
     "press.strategy": "--strategy",
     "press.speed_mm_s": "--speed",
     "press.angle_count": "--angles",
-    "object.standoff_mm": "--standoff",
 }
-PROGRESS_EVERY_S = 10.0  # without a terminal (a log, nohup, CI): a progress line at most this often, s
 
 
-def _why_simulated(rig_file: Path | None) -> str:
-    """Why the rig is the simulated one: no rig file, or a rig file without an [arm] table."""
-    return "no rig file given" if rig_file is None else escape(f"rig file {rig_file} has no [arm]")  # rich markup
+def _say_if_simulated(config: RigConfig, rig_file: Path | None, what: str) -> None:
+    """The banner of a simulated rig, saying why (no rig file, or a rig file without an [arm] table)."""
+    if config.simulated:
+        why = "no rig file given" if rig_file is None else escape(f"rig file {rig_file} has no [arm]")  # rich markup
+        console.print(f"[bold yellow]SIMULATED RIG[/] ({why}): {what}")
 
 
-def _check_counts(**options: int | None) -> None:
-    """Counts and seeds the user typed: a negative seed or press count is a usage error naming the option (numpy
-    refuses negative seeds deep inside the rig; a negative --max-presses sliced the plan from the end)."""
-    for name, value in options.items():
-        if value is None:
-            continue
-        flag, lowest = f"--{name.replace('_', '-')}", 0 if name == "seed" else 1
-        if value < lowest:
+def _check_counts(seed: int, max_presses: int | None = None) -> None:
+    """A negative seed or press count is a usage error naming the option (numpy refuses negative seeds deep inside
+    the rig; a negative --max-presses sliced the plan from the end)."""
+    for flag, value, lowest in (("--seed", seed, 0), ("--max-presses", max_presses, 1)):
+        if value is not None and value < lowest:
             raise UsageError(f"{flag} must be {lowest} or more, got {value}")
 
 
 def _configure(
-    rig_file: Path | None, strategy: str | None, speed: float | None, angles: int | None, standoff: float | None
+    rig_file: Path | None, strategy: str | None = None, speed: float | None = None, angles: int | None = None
 ) -> RigConfig:
     """The rig file with the options typed on top (``OVERRIDE_OPTIONS``), validated as one rig file."""
     config = load_rig_config(rig_file)
@@ -98,7 +95,7 @@ def _configure(
             f"--angles must be 1 to {config.press.max_angle_count()}, got {angles}",
             hint="press ids are whole degrees: more angles than degrees in the arc would repeat presses",
         )
-    typed = dict(zip(OVERRIDE_OPTIONS, (strategy, speed, angles, standoff), strict=True))
+    typed = dict(zip(OVERRIDE_OPTIONS, (strategy, speed, angles), strict=True))
     given = {field: value for field, value in typed.items() if value is not None}
     if not given:
         return config
@@ -129,7 +126,7 @@ def _option_error(exc: ConfigError, given: Mapping[str, object]) -> str:
 class LivePanel:
     """Progress over presses with time left, the current force, and a small taxel map (normal channel)."""
 
-    def __init__(self, title: str, planned: int, done: int, sensor: str, threshold_n: float) -> None:
+    def __init__(self, title: str, planned: int, sensor: str, threshold_n: float) -> None:
         self.layout = sensor_layout(sensor)
         self.threshold_n = threshold_n
         self.progress = Progress(
@@ -139,7 +136,7 @@ class LivePanel:
             TextColumn("presses"),
             TimeRemainingColumn(),
         )
-        self.task = self.progress.add_task(title, total=planned, completed=done)
+        self.task = self.progress.add_task(title, total=planned)
         self.force = 0.0
         self.phase = ""
         self.press_id = ""
@@ -184,30 +181,22 @@ class LivePanel:
 
 
 class ProgressLines:
-    """Progress for a log or pipe (no terminal to redraw the panel): one line per press, at most one every
-    ``PROGRESS_EVERY_S`` (the first and the last always), with the time left at this run's pace."""
+    """Progress for a log or pipe (no terminal to redraw the panel): a line per press, at most one every few
+    seconds (the first and the last always), with the time left at this run's pace."""
 
-    def __init__(self, title: str, every_s: float = PROGRESS_EVERY_S) -> None:
-        self.title = title
-        self.every_s = every_s
-        self.started = time.monotonic()
-        self.first_index: int | None = None
-        self._last_line: float | None = None
+    def __init__(self, title: str) -> None:
+        self.title, self.pace, self.lines = title, Pace(), EveryFewSeconds()
 
     def on_press(self, done: PressDone) -> None:
-        now = time.monotonic()
-        if self.first_index is None:
-            self.first_index = done.index - 1  # presses finished before this run
-        last = done.index >= done.planned
-        if not last and self._last_line is not None and now - self._last_line < self.every_s:
+        self.pace.update(done.index)
+        if not self.lines.due(last=done.index >= done.planned):
             return
-        self._last_line = now
         r = done.record
-        pace = (now - self.started) / max(done.index - self.first_index, 1)
-        left = "" if last else f", about {spoken_duration(pace * (done.planned - done.index))} left"
+        left = self.pace.left_text(done.planned - done.index)
         console.print(
             f"{self.title}: press {done.index}/{done.planned} {r.status}, peak "
-            f"{r.attrs.get('peak_force_n', 0):.2f} N, {done.matched}/25 targets matched{left}",
+            f"{r.attrs.get('peak_force_n', 0):.2f} N, {done.matched}/25 targets matched"
+            + (f", {left}" if left else ""),
             highlight=False,
             soft_wrap=True,  # a log line is one line (a terminal folds it itself)
         )
@@ -232,17 +221,20 @@ def _run_session(
     max_presses: int | None,
 ) -> SessionOutcome:
     rot = rotations if rotations is not None else list(obj.rotations_deg)
-    planned = len(rot) * rig.config.press.angle_count
+    title = f"{obj.id} / {sensor}"
     # Only a terminal can redraw the panel; piped into a file it was one last frame glued to the summary line.
-    show = live and console.is_terminal
-    panel = LivePanel(f"{obj.id} / {sensor}", planned, 0, sensor, rig.config.press.threshold_n) if show else None
-    lines = None if panel is not None else ProgressLines(f"{obj.id} / {sensor}")
+    panel = None
+    if live and console.is_terminal:
+        panel = LivePanel(title, len(rot) * rig.config.press.angle_count, sensor, rig.config.press.threshold_n)
+
+    def stop_panel() -> None:
+        if panel is not None:
+            with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone; stopping the arm matters
+                panel.live.stop()
 
     def ask(message: str) -> None:
-        if panel is not None:
-            panel.live.stop()
-        with immediate_interrupts():  # a prompt polls nothing: Ctrl-C must end it at once
-            typer.prompt(message, default="", show_default=False)
+        stop_panel()
+        _prompt(message)
         if panel is not None:
             panel.live.start()
 
@@ -255,24 +247,19 @@ def _run_session(
             sensor,
             data_dir,
             rotations=rot,
-            on_press=panel.on_press if panel else lines.on_press if lines else None,
+            on_press=panel.on_press if panel else ProgressLines(title).on_press,
             on_tick=panel.on_tick if panel else None,
             ask_operator=ask,
             max_presses=max_presses,
         )
     except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM, SIGHUP: the arm has stopped; say what is kept and how to go on
-        if panel is not None:
-            with contextlib.suppress(OSError):
-                panel.live.stop()
-            panel = None
+        stop_panel()  # first, or the panel draws over the line
         with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone
             load = getattr(exc, "load_note", "")  # the load the pad is left under (collection/session.py)
             typer.echo(f"{_kept_line(data_dir, obj.id, sensor)}{load}; run the same command again to resume", err=True)
         raise
     finally:
-        if panel is not None:
-            with contextlib.suppress(OSError):  # after SIGHUP the terminal may be gone; stopping the arm matters
-                panel.live.stop()
+        stop_panel()
     for note in outcome.recovery_notes:
         console.print(f"[yellow]recovered:[/] {note}")
     done_now = outcome.complete + outcome.failed + outcome.aborted
@@ -312,11 +299,9 @@ def collect(
     ),
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed (runs are deterministic per seed)."),
     imperfections: str = IMPERFECTIONS_OPTION,
-    angles: int | None = typer.Option(
-        None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
-    ),
+    angles: int | None = ANGLES_OPTION,
     max_presses: int | None = typer.Option(None, "--max-presses", help="Stop after this many presses (resume later)."),
-    live: bool = typer.Option(True, "--live/--no-live", help="Show the live panel."),
+    live: bool = LIVE_OPTION,
     dry_run_only: bool = typer.Option(
         False,
         "--dry-run",
@@ -328,8 +313,8 @@ def collect(
 
     SIGTERM and SIGHUP stop the arm and keep what was recorded, like Ctrl-C.
     """
-    _check_counts(seed=seed, max_presses=max_presses)
-    config = _configure(rig_file, strategy, speed, angles, None)
+    _check_counts(seed, max_presses)
+    config = _configure(rig_file, strategy, speed, angles)
     require_data_folder(data)
     obj = get_object(object_id, extra_files=config.object.objects_files)
     if rotation is not None and rotation not in obj.rotations_deg:
@@ -337,35 +322,36 @@ def collect(
             f"{obj.id} is swept at rotations {list(obj.rotations_deg)}, not {rotation:g}",
             hint="omit --rotation to run every rotation",
         )
-    if config.simulated:
-        console.print(
-            f"[bold yellow]SIMULATED RIG[/] ({_why_simulated(rig_file)}): every device is simulated, no hardware moves."
-        )
+    _say_if_simulated(config, rig_file, "every device is simulated, no hardware moves.")
     rotations = [rotation] if rotation is not None else None
-    if dry_run_only:
-        with termination_as_interrupt(), open_rig(config, seed=seed, imperfections=imperfections) as rig:
-            visited = dry_run(rig, obj, rotations=rotations, on_standoff=_show_standoff)
-        console.print(
-            f"dry run: {visited.standoffs} stand-offs and {visited.waypoints} waypoints visited, nothing pressed"
-        )
-        return
     with termination_as_interrupt(), open_rig(config, seed=seed, imperfections=imperfections) as rig:
+        if dry_run_only:
+            visited = dry_run(rig, obj, rotations=rotations, on_standoff=_show_standoff)
+            console.print(
+                f"dry run: {visited.standoffs} stand-offs and {visited.waypoints} waypoints visited, nothing pressed"
+            )
+            return
         choice = choose_sensor(rig, obj.id, sensor, data)
         if choice.how == "detected":
             console.print(f"detected mounted sensor: [bold]{choice.name}[/]")
         elif choice.how == "next-incomplete":
             console.print(f"simulated rig: mounting [bold]{choice.name}[/] (no complete data yet for {obj.id})")
-        chosen = choice.name
-        outcome = _run_session(rig, obj, chosen, data, rotations, live, max_presses)
+        outcome = _run_session(rig, obj, choice.name, data, rotations, live, max_presses)
     if outcome.stopped:
         raise SessionStopped(f"session stopped early: {outcome.stopped}", hint="rerun the same command to resume")
 
 
-def _ask_operator(rig: Rig, message: str) -> None:
-    """Wait for the operator with the arm at rest and the controller's watchdog fed meanwhile (the wait may last
-    minutes; without the feeding the controller would stop the program, as after a dead host)."""
-    with rig.arm.keep_alive(), immediate_interrupts():  # a prompt polls nothing: Ctrl-C must end it at once
+def _prompt(message: str) -> None:
+    """Wait for the operator's Enter; Ctrl-C ends the wait at once (a prompt polls nothing)."""
+    with immediate_interrupts():
         typer.prompt(message, default="", show_default=False)
+
+
+def _ask_operator(rig: Rig, message: str) -> None:
+    """:func:`_prompt` with the arm at rest and the controller's watchdog fed meanwhile (the wait may last minutes;
+    without the feeding the controller would stop the program, as after a dead host)."""
+    with rig.arm.keep_alive():
+        _prompt(message)
 
 
 def _show_standoff(plan: PressPlan, index: int, total: int) -> None:
@@ -378,47 +364,32 @@ def campaign(
     data: Path = DATA_OPTION,
     seed: int = typer.Option(0, "--seed", help="Simulated rig: random seed."),
     imperfections: str = IMPERFECTIONS_OPTION,
-    angles: int | None = typer.Option(
-        None, "--angles", show_default=f"the rig file's, else {_PRESS.angle_count}", help="Approach angles per sweep."
-    ),
+    angles: int | None = ANGLES_OPTION,
     objects: str | None = typer.Option(
         None, "--objects", metavar="ID,ID", show_default="every object", help="Comma-separated object ids."
     ),
-    live: bool = typer.Option(True, "--live/--no-live", help="Show the live panel."),
+    live: bool = LIVE_OPTION,
 ) -> None:
     """Every object with every sensor: unattended on the simulated rig, operator-guided on hardware."""
-    _check_counts(seed=seed)
-    config = _configure(rig_file, None, None, angles, None)
+    _check_counts(seed)
+    config = _configure(rig_file, angles=angles)
     require_data_folder(data)
     catalogue = list_objects(extra_files=config.object.objects_files)
     if objects:
         wanted = [o.strip() for o in objects.split(",") if o.strip()]
         catalogue = [get_object(o, extra_files=config.object.objects_files) for o in wanted]
-    if config.simulated:
-        console.print(
-            f"[bold yellow]SIMULATED RIG[/] ({_why_simulated(rig_file)}): running the whole campaign unattended."
-        )
+    _say_if_simulated(config, rig_file, "running the whole campaign unattended.")
     started = time.monotonic()
     with termination_as_interrupt(), open_rig(config, seed=seed, imperfections=imperfections) as rig:
         sensors = collection_order(rig)
-        progress = CampaignProgress(
-            [
-                (obj.id, sensor, len(obj.rotations_deg) * config.press.angle_count)
-                for sensor in sensors
-                for obj in catalogue
-            ]
-        )
-        for obj in catalogue:  # presses finished by earlier runs count as done from the first line on
-            for sensor in sensors:
-                found = session_presses(data, obj.id, sensor)
-                if found is not None:
-                    progress.found(obj.id, sensor, len(found[0]))
+        planned = {(obj.id, s): len(obj.rotations_deg) * config.press.angle_count for s in sensors for obj in catalogue}
+        progress = CampaignProgress(planned, data)
         for sensor in sensors:
             if not rig.simulated:
                 _ask_operator(rig, f"Mount the {sensor} on the arm, then press Enter")
             for obj in catalogue:
                 if session_complete(data, obj.id, sensor):
-                    progress.skipped(obj.id, sensor)
+                    progress.done[obj.id, sensor] = progress.planned[obj.id, sensor]
                     console.print(f"{obj.id} / {sensor}: already complete")
                     continue
                 console.print(progress.line(obj.id, sensor), style="bold", highlight=False, soft_wrap=True)
@@ -437,35 +408,27 @@ class CampaignProgress:
     """The campaign's overall line before each session: which session of how many, presses done, and the time left
     at this run's pace (pressing time per press; operator waits on hardware count too)."""
 
-    def __init__(self, sessions: list[tuple[str, str, int]]) -> None:
-        self.planned = {(obj, sensor): presses for obj, sensor, presses in sessions}
-        self.total_presses = sum(self.planned.values())
-        self.done: dict[tuple[str, str], int] = {}
-        self.pressed_now = 0  # presses finished by this run
-        self.started = time.monotonic()
-
-    def found(self, obj: str, sensor: str, finished: int) -> None:
-        """``finished`` presses of this session were recorded by an earlier run."""
-        self.done[(obj, sensor)] = min(finished, self.planned[(obj, sensor)])
-
-    def skipped(self, obj: str, sensor: str) -> None:
-        self.done[(obj, sensor)] = self.planned[(obj, sensor)]
+    def __init__(self, planned: dict[tuple[str, str], int], data: Path) -> None:
+        self.planned = planned  # presses per (object, sensor), in campaign order
+        self.done: dict[tuple[str, str], int] = {}  # presses finished, by earlier runs too (counted from the start)
+        for (obj, sensor), presses in planned.items():
+            found = session_presses(data, obj, sensor)
+            if found is not None:
+                self.done[obj, sensor] = min(len(found[0]), presses)
+        self.pace, self.pressed_now = Pace(done_before=0), 0
 
     def finished(self, obj: str, sensor: str, outcome: SessionOutcome) -> None:
         self.done[(obj, sensor)] = outcome.already_done + outcome.complete + outcome.failed
         self.pressed_now += outcome.complete + outcome.failed + outcome.aborted
+        self.pace.update(self.pressed_now)
 
     def line(self, obj: str, sensor: str) -> str:
-        keys = list(self.planned)
-        index = keys.index((obj, sensor)) + 1
-        presses = sum(self.done.values())
-        text = f"campaign: session {index}/{len(keys)} ({obj} / {sensor}), {presses}/{self.total_presses} presses done"
-        if self.pressed_now:
-            pace = (time.monotonic() - self.started) / self.pressed_now
-            text += f", about {spoken_duration(pace * (self.total_presses - presses))} left"
-        else:
-            text += ", time left known after the first session"
-        return text
+        keys, presses, total = list(self.planned), sum(self.done.values()), sum(self.planned.values())
+        left = self.pace.left_text(total - presses) or "time left known after the first session"
+        return (
+            f"campaign: session {keys.index((obj, sensor)) + 1}/{len(keys)} ({obj} / {sensor}), "
+            f"{presses}/{total} presses done, {left}"
+        )
 
 
 def extract(
@@ -536,11 +499,3 @@ def objects_cmd(
             "yes" if o.in_autoencoder_training else "no (test only)",
         )
     console.print(table)
-
-
-def register(app: typer.Typer) -> None:
-    """Add collection commands to the root app."""
-    app.command("collect")(collect)
-    app.command("campaign")(campaign)
-    app.command("extract")(extract)
-    app.command("objects")(objects_cmd)

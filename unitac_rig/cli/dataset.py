@@ -6,24 +6,25 @@ ellipsis (long values fold onto a second line). The full numbers are in ``inspec
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import shlex
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import typer
-from rich.console import Console, Group, RenderableType
+from rich.console import Group, RenderableType
 from rich.live import Live
 from rich.table import Table
 from rich.text import Text
 
-from unitac_rig.cli.paths import path_text, require_directory, require_writable_output
+from unitac_rig.cli.output import console
+from unitac_rig.cli.paths import path_text, require_directory, require_empty_output
 from unitac_rig.errors import DataError, UsageError
 from unitac_rig.interrupts import raise_if_interrupted, termination_as_interrupt
 
-console = Console()
 _DATA_HINT = "pass the --data folder you collected into"
 
 
@@ -37,16 +38,8 @@ def inspect_tables(report: dict[str, Any], data: Path) -> RenderableType:
     if not sessions:
         return Text(f"no sessions in {data} yet")
     table = Table(box=None, pad_edge=False)
-    for name, justify in (
-        ("object", "left"),
-        ("sensor", "left"),
-        ("presses", "right"),
-        ("targets", "right"),
-        ("|err| mN", "right"),
-        ("peak N", "right"),
-        ("time s", "right"),
-    ):
-        table.add_column(name, justify=justify, overflow="fold")  # type: ignore[arg-type]
+    for name in ("object", "sensor", "presses", "targets", "|err| mN", "peak N", "time s"):
+        table.add_column(name, justify="left" if name in ("object", "sensor") else "right", overflow="fold")
     for s in sessions:
         e, p = s["match_error_n"], s["peak_force_n"]
         sensor = s["sensor"] + ("*" if s["simulated"] else "") + (" ●" if s.get("writer") else "")
@@ -101,17 +94,12 @@ def _unfinished(session: dict[str, Any]) -> bool:
 def _resume_note(data: Path, session: dict[str, Any]) -> str:
     """``hex_tpu/uskin: incomplete (13 of 91 presses finished); resume: unitac-rig collect ...``: the command that
     plans the same presses again (the angle count it was collected with; the rig file when not simulated)."""
-    import shlex
-
     from unitac_rig.storage.reader import read_session_info
 
     finished = session["presses_complete"] + session["presses_failed"]
-    command = [
-        "unitac-rig collect",
-        f"--object {session['object']}",
-        f"--sensor {session['sensor']}",
-        f"--data {shlex.quote(str(data))}",
-    ]
+    command = (
+        f"unitac-rig collect --object {session['object']} --sensor {session['sensor']} --data {shlex.quote(str(data))}"
+    )
     try:  # verified already by inspect in this process: only the attributes are read again
         attrs = read_session_info(data / session["file"]).attrs
         angles = attrs.get("config", {}).get("press", {}).get("angle_count")
@@ -119,15 +107,13 @@ def _resume_note(data: Path, session: dict[str, Any]) -> str:
     except Exception:  # the file's damage is reported in its integrity note
         angles, rotations = None, []
     if angles is not None:
-        command.append(f"--angles {angles}")
+        command += f" --angles {angles}"
     if len(rotations) == 1 and len(_catalogue_rotations(session["object"])) != 1:  # collect --rotation R
-        command.append(f"--rotation {float(rotations[0]):g}")
+        command += f" --rotation {float(rotations[0]):g}"
     if not session["simulated"]:
-        command.append("--rig RIG.toml")
-    return (
-        f"{session['object']}/{session['sensor']}: incomplete ({finished} of {session['presses_planned']} presses "
-        f"finished); resume: {' '.join(command)}"
-    )
+        command += " --rig RIG.toml"
+    name, planned = f"{session['object']}/{session['sensor']}", session["presses_planned"]
+    return f"{name}: incomplete ({finished} of {planned} presses finished); resume: {command}"
 
 
 def _catalogue_rotations(object_id: str) -> tuple[float, ...]:
@@ -158,29 +144,22 @@ def _watch(data: Path, interval: float, as_json: bool) -> None:
         head = Text(f"{stamp}  refreshing every {interval:g} s, Ctrl-C to stop", style="bold")
         return Group(head, inspect_tables(report, data))
 
-    try:
-        with termination_as_interrupt(defer=False):  # read-only: raising at once harms nothing
-            _refresh_until_interrupted(frame, interval, as_json)
-    except KeyboardInterrupt:
-        return
-
-
-def _refresh_until_interrupted(frame: Callable[[], RenderableType], interval: float, as_json: bool) -> None:
-    if as_json or not console.is_terminal:  # a pipe or a log: one refresh after the other (JSON: one per line)
-        while True:
-            raise_if_interrupted()  # a Ctrl-C swallowed inside an HDF5 read ends the watch all the same
-            rendered = frame()
-            if as_json:
-                typer.echo(rendered.plain if isinstance(rendered, Text) else "")
-            else:
-                console.print(rendered)
-                console.print()
-            time.sleep(interval)
-    with Live(frame(), console=console, auto_refresh=False) as live:
-        while True:
-            time.sleep(interval)
-            raise_if_interrupted()
-            live.update(frame(), refresh=True)
+    with contextlib.suppress(KeyboardInterrupt), termination_as_interrupt(defer=False):  # read-only: raising at once
+        if as_json or not console.is_terminal:  # a pipe or a log: one refresh after the other (JSON: one per line)
+            while True:
+                raise_if_interrupted()  # a Ctrl-C swallowed inside an HDF5 read ends the watch all the same
+                rendered = frame()
+                if as_json:
+                    typer.echo(rendered.plain if isinstance(rendered, Text) else "")
+                else:
+                    console.print(rendered)
+                    console.print()
+                time.sleep(interval)
+        with Live(frame(), console=console, auto_refresh=False) as live:
+            while True:
+                time.sleep(interval)
+                raise_if_interrupted()
+                live.update(frame(), refresh=True)
 
 
 def inspect(
@@ -228,14 +207,9 @@ def export(
     see docs/share-your-data.md)."""
     if fmt not in ("parquet", "lerobot", "rosbag2"):
         raise UsageError(f"--format {fmt}: unknown export format", hint="use parquet, lerobot or rosbag2")
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):  # a usage error like export-model's: exit 2
-        raise UsageError(f"--out {out} already exists and is not an empty directory", hint="choose a new --out")
     for folder in data:
         require_directory(folder, "DATA", hint=_DATA_HINT)
-    require_writable_output(out, "--out")
-    if fmt == "lerobot":
-        _export_lerobot(data, out)
-        return
+    require_empty_output(out, "--out", "already exists and is not an empty directory", hint="choose a new --out")
     if fmt == "rosbag2":
         from unitac_rig.storage.rosbag import export_rosbag2
 
@@ -244,34 +218,32 @@ def export(
             console.print(f"{out / name}: " + ", ".join(f"{t} {n}" for t, n in topics.items()), soft_wrap=True)
         console.print(f"{len(bags.bags)} bags (MCAP), {bags.bytes / 1e6:.1f} MB; open with ros2 bag info or Foxglove")
         return
-    from unitac_rig.storage.export import export_dataset
+    if fmt == "lerobot":
+        from unitac_rig.storage.lerobot import export_lerobot
 
-    console.print(f"copying and pairing the sessions of {', '.join(map(str, data))} into {out}...", soft_wrap=True)
-    summary = export_dataset(data, out)
-    console.print(
-        f"exported {summary.contacts} contacts x {len(summary.sensors)} sensors ({', '.join(summary.sensors)}) = "
-        f"{summary.rows} rows from {summary.sessions} sessions, objects {', '.join(summary.objects)}"
-    )
-    if summary.incomplete:
+        robot = export_lerobot(data, out)
+        for sensor, counts in robot.sensors.items():
+            console.print(
+                f"{sensor}: {counts['episodes']} presses, {counts['frames']} frames at {counts['fps']} fps -> "
+                f"{robot.out / sensor}"
+            )
+        console.print(f"{robot.files} files, {robot.bytes / 1e6:.1f} MB from {robot.sessions} sessions")
+    else:
+        from unitac_rig.storage.export import export_dataset
+
+        console.print(f"copying and pairing the sessions of {', '.join(map(str, data))} into {out}...", soft_wrap=True)
+        summary = export_dataset(data, out)
         console.print(
-            f"[yellow]incomplete sessions (presses finished/planned):[/] {', '.join(summary.incomplete)} "
-            "(listed under incomplete_sessions in manifest.json)"
+            f"exported {summary.contacts} contacts x {len(summary.sensors)} sensors ({', '.join(summary.sensors)}) = "
+            f"{summary.rows} rows from {summary.sessions} sessions, objects {', '.join(summary.objects)}"
         )
-    console.print(f"{summary.files} files, {summary.bytes / 1e6:.1f} MB -> {summary.out}")
-    console.print(f"check a copy with: unitac-rig verify {summary.out}")
-
-
-def _export_lerobot(data: list[Path], out: Path) -> None:
-    from unitac_rig.storage.lerobot import export_lerobot
-
-    summary = export_lerobot(data, out)
-    for sensor, counts in summary.sensors.items():
-        console.print(
-            f"{sensor}: {counts['episodes']} presses, {counts['frames']} frames at {counts['fps']} fps -> "
-            f"{summary.out / sensor}"
-        )
-    console.print(f"{summary.files} files, {summary.bytes / 1e6:.1f} MB from {summary.sessions} sessions")
-    console.print(f"check a copy with: unitac-rig verify {summary.out}")
+        if summary.incomplete:
+            console.print(
+                f"[yellow]incomplete sessions (presses finished/planned):[/] {', '.join(summary.incomplete)} "
+                "(listed under incomplete_sessions in manifest.json)"
+            )
+        console.print(f"{summary.files} files, {summary.bytes / 1e6:.1f} MB -> {summary.out}")
+    console.print(f"check a copy with: unitac-rig verify {out}")
 
 
 def verify(
@@ -286,10 +258,3 @@ def verify(
     require_directory(directory, "DIR", hint="pass a directory written by `unitac-rig export`")
     report = verify_manifest(directory)
     console.print(f"ok: {report.files} files, {report.bytes / 1e6:.1f} MB match {directory / 'manifest.json'}")
-
-
-def register(app: typer.Typer) -> None:
-    """Add the dataset commands to the root app."""
-    app.command("inspect")(inspect)
-    app.command("export")(export)
-    app.command("verify")(verify)

@@ -1,19 +1,10 @@
 """Help pages in the plain style of git/pip-era tools, readable at 80 columns.
 
-typer's rich help draws every option in a six-column box (long name, short name, negative name, type, help) that
-leaves the description about 18 columns on an 80-column terminal, cuts words with an ellipsis and shows a ``<bool>``
-placeholder on flags that take no value. Here instead:
-
-* one option per row, the description wrapped beside it (or below a long name), never cut;
-* flags show no placeholder (``--json``), options that take a value one UPPERCASE word (``--angles N``,
-  ``--data PATH``, or the option's own ``metavar``);
-* defaults one way: ``[default: X]`` (``show_default="..."`` on an option whose value comes from elsewhere, e.g. the
-  rig file or the training configuration);
-* options grouped under headings (``rich_help_panel``), commands grouped by what they are for
-  (:data:`unitac_rig.cli.app.COMMAND_GROUPS`), each with its first sentence.
-
-Only public typer classes are subclassed (``typer.core.TyperCommand`` / ``TyperGroup``); the app sets
-``rich_markup_mode=None`` so they render through the plain formatter.
+typer's rich help boxes every option in six columns, which leaves the description about 18 columns at 80 and cuts
+words. Here: one option per row, its description wrapped beside it; flags without a placeholder, options with one
+UPPERCASE word; ``[default: X]`` (``show_default="..."`` where the value comes from elsewhere); options under their
+``rich_help_panel`` heading, commands under the headings of :data:`unitac_rig.cli.app.COMMANDS`. Only public typer
+classes are subclassed; the app sets ``rich_markup_mode=None`` so they render through the plain formatter.
 """
 
 from __future__ import annotations
@@ -23,6 +14,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 import typer
+from pydantic.fields import FieldInfo
 from typer.core import TyperArgument, TyperCommand, TyperGroup, TyperOption
 from typer.models import DefaultPlaceholder
 
@@ -41,6 +33,20 @@ def placeholder(param: Any) -> str:
     if param.type_descriptor.is_path or element == "path":
         return "PATH"
     return {"int": "N", "float": "NUM", "bool": "BOOL"}.get(element, "TEXT")
+
+
+def field_flag(name: str, info: FieldInfo) -> str | None:
+    """The option that sets the pydantic field ``name``: its ``cli`` extra (None: no option), else ``--name-dashed``."""
+    extra = info.json_schema_extra if isinstance(info.json_schema_extra, dict) else {}
+    flag = extra.get("cli", "--" + name.replace("_", "-"))
+    return None if flag is None else str(flag)
+
+
+def field_bounds(info: FieldInfo) -> dict[str, Any]:
+    """A pydantic field's bounds by their annotated_types names (gt, ge, lt, le); a whole float as an int, so the
+    help says "at least 0"."""
+    bounds = {name: getattr(m, name) for m in info.metadata for name in ("gt", "ge", "lt", "le") if hasattr(m, name)}
+    return {k: int(v) if isinstance(v, float) and v.is_integer() else v for k, v in bounds.items()}
 
 
 def _default_text(param: TyperOption) -> str | None:
@@ -64,61 +70,45 @@ def _range_text(param: Any) -> str | None:
     low, high = getattr(param, "min", None), getattr(param, "max", None)
     if low is not None and high is not None:
         return f"{low} to {high}"
-    if low is not None:
-        return f"at least {low}"
-    if high is not None:
-        return f"at most {high}"
-    return None
+    return f"at least {low}" if low is not None else (f"at most {high}" if high is not None else None)
 
 
-def help_record(param: Any, ctx: Any) -> tuple[str, str] | None:
+def _argument_name(param: TyperArgument) -> str:
+    return placeholder(param) + ("..." if param.nargs != 1 else "")
+
+
+def help_record(param: Any) -> tuple[str, str]:
     """(the option as typed, its description with [default: ...] / [required] / range) for one parameter."""
-    if getattr(param, "hidden", False):
-        return None
     if isinstance(param, TyperArgument):
-        name = placeholder(param) + ("..." if param.nargs != 1 else "")
-        return name, (param.help or "") + ("" if param.required else "  [optional]")
-    names = ", ".join(param.opts)
-    if param.secondary_opts:
-        names += " / " + ", ".join(param.secondary_opts)
+        return _argument_name(param), (param.help or "") + ("" if param.required else "  [optional]")
+    names = ", ".join(param.opts) + (" / " + ", ".join(param.secondary_opts) if param.secondary_opts else "")
     if not param.is_flag and not getattr(param, "count", False):
         names += " " + placeholder(param)
-    extra = []
-    default = _default_text(param)
-    if default is not None and not param.required:
-        extra.append(f"default: {default}")
-    range_text = _range_text(param)
-    if range_text:
-        extra.append(range_text)
-    if param.required:
-        extra.append("required")
+    default = None if param.required else _default_text(param)
+    extra = [f"default: {default}"] if default is not None else []
+    extra += [text for text in (_range_text(param), "required" if param.required else None) if text]
     text = inspect.cleandoc(param.help or "")
     if extra:
-        text = f"{text}  [{'; '.join(extra)}]" if text else f"[{'; '.join(extra)}]"
+        text = f"{text}  [{'; '.join(extra)}]".lstrip()
     return names, text
 
 
-def write_params(params: Iterable[Any], ctx: Any, formatter: Any) -> None:
-    """Arguments first, then options in their groups, in the order the groups first appear."""
-    arguments: list[tuple[str, str]] = []
-    groups: dict[str, list[tuple[str, str]]] = {}
+def write_params(params: Iterable[Any], formatter: Any) -> None:
+    """Arguments first, then options in their groups, the general ones first, then the others in the order their
+    group first appears."""
+    groups: dict[str, list[tuple[str, str]]] = {"Arguments": [], OPTIONS_HEADING: []}
     for param in params:
-        record = help_record(param, ctx)
-        if record is None:
-            continue
-        if isinstance(param, TyperArgument):
-            arguments.append(record)
-        else:
-            panel = getattr(param, "rich_help_panel", None) or OPTIONS_HEADING
-            groups.setdefault(panel, []).append(record)
-    if OPTIONS_HEADING in groups:  # the general options first, then the named groups
-        groups = {OPTIONS_HEADING: groups.pop(OPTIONS_HEADING), **groups}
-    if arguments:
-        with formatter.section("Arguments"):
-            formatter.write_dl(arguments)
-    for heading, rows in groups.items():
-        with formatter.section(heading):
-            formatter.write_dl(rows)
+        if not getattr(param, "hidden", False):
+            heading = "Arguments" if isinstance(param, TyperArgument) else getattr(param, "rich_help_panel", None)
+            groups.setdefault(heading or OPTIONS_HEADING, []).append(help_record(param))
+    _write_sections(groups, formatter)
+
+
+def _write_sections(sections: Mapping[str, list[tuple[str, str]]], formatter: Any) -> None:
+    for heading, rows in sections.items():
+        if rows:
+            with formatter.section(heading):
+                formatter.write_dl(rows)
 
 
 def first_sentence(text: str | None) -> str:
@@ -131,24 +121,19 @@ def first_sentence(text: str | None) -> str:
     return paragraph.rstrip(".")
 
 
-def usage_pieces(command: Any, ctx: Any) -> list[str]:
-    """``[OPTIONS] RUN INPUT``: the arguments by their placeholders (typer wrote ``{run}``)."""
-    pieces = [command.options_metavar] if command.options_metavar else []
-    for param in command.get_params(ctx):
-        if isinstance(param, TyperArgument):
-            name = placeholder(param) + ("..." if param.nargs != 1 else "")
-            pieces.append(name if param.required else f"[{name}]")
-    return pieces
-
-
 class PlainCommand(TyperCommand):
     """A command whose help is plain text: grouped options, one placeholder and default style, no cut words."""
 
     def collect_usage_pieces(self, ctx: Any) -> list[str]:
-        return usage_pieces(self, ctx)
+        """``[OPTIONS] RUN INPUT``: the arguments by their placeholders (typer wrote ``{run}``)."""
+        pieces = [self.options_metavar] if self.options_metavar else []
+        for param in self.get_params(ctx):
+            if isinstance(param, TyperArgument):
+                pieces.append(_argument_name(param) if param.required else f"[{_argument_name(param)}]")
+        return pieces
 
     def format_options(self, ctx: Any, formatter: Any) -> None:
-        write_params(self.get_params(ctx), ctx, formatter)
+        write_params(self.get_params(ctx), formatter)
 
 
 class PlainGroup(TyperGroup):
@@ -157,25 +142,18 @@ class PlainGroup(TyperGroup):
     command_groups: Mapping[str, tuple[str, ...]] = {}
 
     def format_options(self, ctx: Any, formatter: Any) -> None:
-        write_params(self.get_params(ctx), ctx, formatter)
+        write_params(self.get_params(ctx), formatter)
         self.format_commands(ctx, formatter)
 
     def format_commands(self, ctx: Any, formatter: Any) -> None:
         listed = {name: cmd for name in self.list_commands(ctx) if (cmd := self.get_command(ctx, name)) is not None}
-        listed = {name: cmd for name, cmd in listed.items() if not cmd.hidden}
-        sections: dict[str, list[tuple[str, str]]] = {}
-        placed: set[str] = set()
-        for heading, names in self.command_groups.items():
-            for name in names:
-                if name in listed:
-                    sections.setdefault(heading, []).append((name, first_sentence(listed[name].help)))
-                    placed.add(name)
-        rest = [(name, first_sentence(cmd.help)) for name, cmd in listed.items() if name not in placed]
+        rows = {name: (name, first_sentence(cmd.help)) for name, cmd in listed.items() if not cmd.hidden}
+        sections = {heading: [rows[n] for n in names if n in rows] for heading, names in self.command_groups.items()}
+        placed = {name for names in self.command_groups.values() for name in names}
+        rest = [row for name, row in rows.items() if name not in placed]
         if rest:
             sections.setdefault(OTHER_COMMANDS if sections else "Commands", []).extend(rest)
-        for heading, rows in sections.items():
-            with formatter.section(heading):
-                formatter.write_dl(rows)
+        _write_sections(sections, formatter)
 
 
 def use_plain_help(app: typer.Typer, command_groups: Mapping[str, tuple[str, ...]] | None = None) -> None:

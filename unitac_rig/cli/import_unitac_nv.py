@@ -15,11 +15,6 @@ if TYPE_CHECKING:  # the importer and rich load when the command runs, not when 
     from unitac_rig.importer import FileReport, ImportReport
 
 
-def register(app: typer.Typer) -> None:
-    """Add this area's commands to the root app."""
-    app.command("import-unitac-nv")(import_unitac_nv_command)
-
-
 def import_unitac_nv_command(
     source: Path = typer.Argument(
         ...,
@@ -47,10 +42,7 @@ def import_unitac_nv_command(
         return
     if not source.exists():
         raise UsageError(f"SOURCE {source} does not exist", hint="unzip the UniTac-NV download and pass its folder")
-    if processed:
-        mode = "processed"
-    if mode not in ("auto", "raw", "processed"):
-        raise UsageError(f"--mode {mode!r} is not one of auto, raw, processed")
+    mode = "processed" if processed else mode  # checked by the importer (a usage error, exit 2)
     console.print(
         f"conventions: {conventions or 'defaults'} (F/T rotated {conv.ft_rotation_deg:g} deg, PapillArray x/y "
         f"{'flipped' if conv.papillarray_flip_xy else 'kept'}, press band {conv.press_fz_band_n[0]:g} < Fz < "
@@ -99,24 +91,20 @@ def _show_file(console: Console, report: FileReport) -> None:
 
 def _show_totals(console: Console, result: ImportReport) -> list[str]:
     """One line per session written and the totals; -> the outcome of every file."""
-    total_presses = total_complete = total_matched = total_targets = 0
-    for s in result.sessions:
-        if not s.path.exists():
-            continue
+    written = [s for s in result.sessions if s.path.exists()]
+    for s in written:
         console.print(
             f"{s.object_id}__{s.sensor}: {s.presses} presses, {s.complete} complete, "
             f"{s.targets_matched}/{s.targets_total} targets matched ({s.path})"
         )
-        total_presses += s.presses
-        total_complete += s.complete
-        total_matched += s.targets_matched
-        total_targets += s.targets_total
-    n_sessions = sum(1 for s in result.sessions if s.path.exists())
+    presses, complete, matched, targets = (
+        sum(getattr(s, name) for s in written) for name in ("presses", "complete", "targets_matched", "targets_total")
+    )
     outcomes = [f.outcome for f in result.files]
     counts = ", ".join(f"{outcomes.count(o)} {o}" for o in dict.fromkeys(outcomes))
     console.print(
-        f"total: {n_sessions} sessions, {total_presses} presses, {total_complete} complete, "
-        f"{total_matched}/{total_targets} targets matched; files: {counts}"
+        f"total: {len(written)} sessions, {presses} presses, {complete} complete, "
+        f"{matched}/{targets} targets matched; files: {counts}"
     )
     if result.superseded:
         console.print(f"{len(result.superseded)} processed files not used: their sessions have raw files")

@@ -4,62 +4,59 @@ hyper-parameter, is :mod:`unitac_rig.cli.learn_train`), and the Table I printer 
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 from typing import Any
 
 import typer
 
+from unitac_rig.cli.output import console
 from unitac_rig.errors import UsageError
 
 # What the checks before the heavy imports compare with (tests keep them equal to the library's own tables).
 RUN_MARKER = "checkpoint.pt"  # learning.run.CHECKPOINT_NAME: a folder holding it is a trained run
 DEVICES = ("auto", "cpu", "cuda")
-
-
-def stage_printer(console: Any) -> Any:
-    """A report's ``on_stage`` callback: one line per stage (the t-SNE alone can take a minute or two)."""
-
-    def on_stage(message: str) -> None:
-        console.print(f"report: {message}...", highlight=False, soft_wrap=True)
-
-    return on_stage
+RUN_ARGUMENT = typer.Argument(..., metavar="RUN", help="Run directory.")
 
 
 def kept_run_line(run: Path, data: list[Path]) -> str:
     """What an interrupted ``train`` kept (its checkpoint's epoch, read back from disk) and the command that goes
     on from there."""
-    import shlex
-
     from unitac_rig.learning.run import checkpoint_path, load_checkpoint
 
     if not checkpoint_path(run).is_file():
         return "train: interrupted before the first checkpoint, nothing kept; run the same command to start again"
     payload = load_checkpoint(run)
     planned = payload.get("config", {}).get("epochs", "?")
-    command = " ".join(
-        [
-            "unitac-rig train",
-            *(f"--data {shlex.quote(str(d))}" for d in data),
-            f"--out {shlex.quote(str(run))}",
-            "--resume",
-        ]
-    )
+    data_options = " ".join(f"--data {shlex.quote(str(d))}" for d in data)
+    command = f"unitac-rig train {data_options} --out {shlex.quote(str(run))} --resume"
     return f"train: interrupted; kept epoch {payload.get('epoch', '?')}/{planned} in {run}; go on with: {command}"
 
 
-def report_interrupted_line(run: Path) -> str:
-    """What an interrupted report kept: the run as it was (its metrics.json and report.md are written together at
-    the end), and the command that writes them."""
-    import shlex
+def report_with_table(run_dir: Path, **options: Any) -> None:
+    """Write the report of the run in ``run_dir`` (a line per stage: the t-SNE alone can take a minute or two), then
+    print its Table I and where the report is. Interrupted, it says what it kept: the run as it was (metrics.json and
+    report.md are written together at the end), and the command that writes them."""
+    from unitac_rig.learning.report import write_report
 
-    return (
-        f"report: interrupted; {run}/metrics.json and report.md are as they were; "
-        f"write them with: unitac-rig report {shlex.quote(str(run))}"
-    )
+    def on_stage(message: str) -> None:
+        console.print(f"report: {message}...", highlight=False, soft_wrap=True)
+
+    try:
+        path = write_report(run_dir, on_stage=on_stage, **options)
+    except KeyboardInterrupt:
+        typer.echo(
+            f"report: interrupted; {run_dir}/metrics.json and report.md are as they were; "
+            f"write them with: unitac-rig report {shlex.quote(str(run_dir))}",
+            err=True,
+        )
+        raise
+    _print_table(console, run_dir)
+    console.print(f"report: {path}")
 
 
 def report_command(
-    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
+    run: Path = RUN_ARGUMENT,
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Redraw the figures too."),
     nmae_normaliser: str = typer.Option(
         None, "--nmae-normaliser", metavar="NAME", show_default="the run's", help="Score under another NMAE normaliser."
@@ -69,22 +66,8 @@ def report_command(
     ),
 ) -> None:
     """Recompute RUN/metrics.json and rewrite RUN/report.md (and its figures)."""
-    from rich.console import Console
-
-    from unitac_rig.learning.report import write_report
-
-    _require_run(run)
-    console = Console()
-    try:
-        on_stage = stage_printer(console)
-        path = write_report(
-            run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range, on_stage=on_stage
-        )
-    except KeyboardInterrupt:
-        typer.echo(report_interrupted_line(run), err=True)
-        raise
-    _print_table(console, run)
-    console.print(f"report: {path}")
+    require_run(run)
+    report_with_table(run, figures=figures, nmae_normaliser=nmae_normaliser, ssim_range=ssim_range)
 
 
 def _short_sensor_names(sensors: list[str]) -> dict[str, str]:
@@ -201,14 +184,14 @@ def _output_beside_run(run: Path, folder: str, name: str, out: Path | None) -> P
     return path
 
 
-def _require_run(run: Path) -> None:
+def require_run(run: Path) -> None:
     """A cheap check before torch is imported (the same words as :func:`unitac_rig.learning.run.load_checkpoint`)."""
     if not (run / RUN_MARKER).is_file():
         raise UsageError(f"{run} is not a training run (no {RUN_MARKER})", hint="run `unitac-rig train` first")
 
 
 def translate_command(
-    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
+    run: Path = RUN_ARGUMENT,
     input_path: Path = typer.Argument(..., metavar="INPUT", help="Session .h5, or frames as .npy/.npz (M, n, 3)."),
     source: str = typer.Option(
         None, "--from", metavar="SENSOR", show_default="the session file's sensor", help="Sensor that recorded INPUT."
@@ -219,15 +202,12 @@ def translate_command(
     ),
 ) -> None:
     """Translate one sensor's frames into another sensor's format."""
-    _require_run(run)
+    require_run(run)
     source = _sensor_of(input_path, source, "--from")
     out = _output_beside_run(run, "translations", f"{input_path.stem}_to_{target}.npz", out)
-    from rich.console import Console
-
     from unitac_rig.learning.translate import translate_file
 
     summary = translate_file(run, source, target, input_path, out)
-    console = Console()
     console.print(
         f"translated {summary['frames']} frames {source} {tuple(summary['input_shape'][1:])} -> "
         f"{target} {tuple(summary['output_shape'][1:])}: {summary['output']}"
@@ -239,7 +219,7 @@ def translate_command(
 
 
 def geometry_command(
-    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
+    run: Path = RUN_ARGUMENT,
     object_id: str = typer.Option(
         None, "--object", metavar="ID", show_default="the run's unseen object", help="Object to estimate."
     ),
@@ -279,19 +259,17 @@ def geometry_command(
 ) -> None:
     """Downstream contact geometry on the unseen object: N x N train/test-sensor scenarios, RUN/geometry.json and
     the saved estimator; with --predict, the estimator's profiles for new frames."""
-    _require_run(run)
+    require_run(run)
     if predict is not None:
         sensor = _sensor_of(predict, sensor, "--sensor")
         out = _output_beside_run(run, "geometry", f"{predict.stem}_geometry.npz", out)
-    from rich.console import Console
     from rich.table import Table
 
     from unitac_rig.learning.contact_geometry import ESTIMATOR_PT, GeometryConfig, geometry_for_run, predict_file
     from unitac_rig.learning.report import write_report
 
-    console = Console()
     if predict is not None:
-        _print_prediction(console, *predict_file(run, predict, sensor, trained_on, out), sensor)
+        _print_prediction(*predict_file(run, predict, sensor, trained_on, out), sensor)
         return
 
     def on_stage(message: str) -> None:
@@ -319,7 +297,7 @@ def geometry_command(
     console.print(f"{json_path}\n{png_path}\n{Path(run) / ESTIMATOR_PT} (apply it: --predict FRAMES)")
 
 
-def _print_prediction(console: Any, prediction: Any, path: Path, sensor: str) -> None:
+def _print_prediction(prediction: Any, path: Path, sensor: str) -> None:
     """``geometry --predict``'s output: the first few predicted profiles as a table, and where all of them went."""
     from rich.table import Table
 
@@ -338,7 +316,7 @@ def _print_prediction(console: Any, prediction: Any, path: Path, sensor: str) ->
 
 
 def export_model_command(
-    run: Path = typer.Argument(..., metavar="RUN", help="Run directory."),
+    run: Path = RUN_ARGUMENT,
     fmt: str = typer.Option(
         "safetensors",
         "--format",
@@ -351,15 +329,11 @@ def export_model_command(
     ),
 ) -> None:
     """Write each sensor's encoder and decoder (normaliser folded in: sensor units in and out) with a model card."""
-    from rich.console import Console
-
-    from unitac_rig.errors import UsageError
     from unitac_rig.learning.export import CARD_NAME, CONFIG_NAME, MODEL_JSON, export_model
 
     if push_to_hub is not None and fmt != "safetensors":
         raise UsageError("--push-to-hub uploads the Hub layout only", hint="drop --format or use --format safetensors")
     document = export_model(run, out, fmt, member)
-    console = Console()
     console.print(f"exported {run} (member {member}, seed {document['seed']}) as {fmt} -> {out}")
     for sensor, entry in document["sensors"].items():
         console.print(
@@ -372,11 +346,3 @@ def export_model_command(
         from unitac_rig.learning.export import push_to_hub as push
 
         console.print(f"pushed to https://huggingface.co/{push_to_hub}: {push(out, push_to_hub)}")
-
-
-def register(app: typer.Typer) -> None:
-    """Add this area's commands to the root app (``train`` is added by :mod:`unitac_rig.cli.learn_train`)."""
-    app.command("report")(report_command)
-    app.command("translate")(translate_command)
-    app.command("geometry")(geometry_command)
-    app.command("export-model")(export_model_command)

@@ -19,37 +19,23 @@ import typer
 from pydantic import ValidationError
 from pydantic.fields import FieldInfo
 
-from unitac_rig.cli.learn import (
-    DEVICES,
-    RUN_MARKER,
-    _print_table,
-    kept_run_line,
-    report_interrupted_line,
-    stage_printer,
-)
-from unitac_rig.cli.pace import Pace
-from unitac_rig.cli.paths import require_writable_output
+from unitac_rig.cli.help import field_bounds, field_flag
+from unitac_rig.cli.learn import DEVICES, RUN_MARKER, kept_run_line, report_with_table
+from unitac_rig.cli.output import EveryFewSeconds, Pace, console
+from unitac_rig.cli.paths import require_empty_output
 from unitac_rig.errors import UsageError
 from unitac_rig.interrupts import termination_as_interrupt
 from unitac_rig.learning import config as train_config
 from unitac_rig.rig.config import read_toml
 
-# Help headings of `train` (the options are many: grouped, as git groups its own).
+# Help headings of `train` (the options are many: grouped, as git groups its own), and of each config section's.
 _RUN = "Data and run"
 _TRAINING = "Training"
 _MODEL = "Model (the paper's shape by default)"
 _SPLIT = "Split, preprocessing and metrics"
 _REPORT = "Evaluation and report"
 _SEEDS = train_config.TrainingSection.model_fields["seeds"].default  # --seed and --n-seeds start from these
-_BOUNDS = ("gt", "ge", "lt", "le")  # pydantic's (annotated_types') bound attributes
-_PANELS = {
-    "model": _MODEL,
-    "training": _TRAINING,
-    "split": _SPLIT,
-    "preprocessing": _SPLIT,
-    "metrics": _SPLIT,
-    "evaluation": _REPORT,
-}
+_PANELS = dict(model=_MODEL, training=_TRAINING, split=_SPLIT, preprocessing=_SPLIT, metrics=_SPLIT, evaluation=_REPORT)
 
 
 @dataclass(frozen=True)
@@ -77,7 +63,7 @@ class ConfigOption:
         """The typer parameter: None unless given, help, default and range from the field."""
         info = self.info
         choices = typing.get_args(info.annotation) if typing.get_origin(info.annotation) is typing.Literal else ()
-        bounds = {name: getattr(m, name) for m in info.metadata for name in _BOUNDS if hasattr(m, name)}
+        bounds = field_bounds(info)
         default = info.default
         paper = isinstance(info.json_schema_extra, dict) and info.json_schema_extra.get("paper")
         if isinstance(default, bool):
@@ -98,8 +84,8 @@ class ConfigOption:
         option = typer.Option(
             *self.flag.split(" "),
             metavar="W,W" if isinstance(default, tuple) else ("NAME" if choices else None),
-            min=_plain(bounds.get("ge")),
-            max=_plain(bounds.get("le")),
+            min=bounds.get("ge"),
+            max=bounds.get("le"),
             show_default=shown + (", as in the paper" if paper else ""),
             help=help_text,
             rich_help_panel=_PANELS[self.section],
@@ -109,46 +95,15 @@ class ConfigOption:
         )
 
 
-def _plain(bound: Any) -> Any:
-    """0.0 -> 0 (for the help's "at least 0")."""
-    return int(bound) if isinstance(bound, float) and bound.is_integer() else bound
-
-
 def config_options() -> dict[str, ConfigOption]:
     """Every field of the training configuration that is a ``train`` option, by parameter name."""
     options = {}
     for (section, key), info in train_config.fields().items():
-        extra = info.json_schema_extra if isinstance(info.json_schema_extra, dict) else {}
-        flag = extra.get("cli", "--" + train_config.flat_key(section, key).removeprefix("shape.").replace("_", "-"))
+        name = train_config.flat_key(section, key).removeprefix("shape.")
+        flag = field_flag(name, info)
         if flag is not None:
-            option = ConfigOption(section, key, str(flag), info)
-            options[option.name] = option
+            options[name] = ConfigOption(section, key, flag, info)
     return options
-
-
-def check_train_arguments(data: list[Path], out: Path, resume: bool, device: str, config_file: Path | None) -> None:
-    """What a ``train`` call can be refused for without torch or the data: a usage error naming the option, in
-    well under a second (importing torch alone takes seconds on a loaded box)."""
-    if device not in DEVICES:
-        raise UsageError(f"--device {device!r} is not a device", hint=f"use one of: {', '.join(DEVICES)}")
-    for directory in data:
-        if not directory.is_dir():
-            raise UsageError(f"--data {directory} is not a directory", hint="pass the --data folder `collect` wrote")
-    if config_file is not None and not config_file.is_file():
-        raise UsageError(f"--config {config_file} does not exist")
-    if resume:
-        if not (out / RUN_MARKER).is_file():
-            raise UsageError(f"--out {out} holds no run to resume", hint="drop --resume to start a new run there")
-    elif (out / RUN_MARKER).exists():
-        raise UsageError(
-            f"--out {out} already holds a run", hint="pass --resume to continue it, or choose another --out"
-        )
-    elif out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise UsageError(
-            f"--out {out} is not empty and holds no run", hint="a run writes a folder of its own: choose a new --out"
-        )
-    else:
-        require_writable_output(out, "--out")  # /proc/x or a read-only disk: refused before minutes of training
 
 
 @dataclass(frozen=True)
@@ -188,14 +143,38 @@ class TrainRequest:
         return self.options.get("epochs")
 
     def check(self) -> None:
-        """What this call can be refused for before torch is imported or the data read."""
-        if self.n_seeds is not None and self.n_seeds < 1:
-            raise UsageError("--n-seeds must be at least 1")
+        """What this call can be refused for before torch is imported or the data read (importing torch alone takes
+        seconds on a loaded box): a usage error naming the option."""
+        if self.device not in DEVICES:
+            raise UsageError(f"--device {self.device!r} is not a device", hint=f"use one of: {', '.join(DEVICES)}")
         if self.extends or self.resume:  # only the options given are checked (the run keeps its configuration)
             self.settings(with_file=False)
-        else:
-            check_train_arguments(self.data, self.out, self.resume, self.device, self.config_file)
-            self.settings()
+            return
+        for directory in self.data:
+            if not directory.is_dir():
+                raise UsageError(
+                    f"--data {directory} is not a directory", hint="pass the --data folder `collect` wrote"
+                )
+        if self.config_file is not None and not self.config_file.is_file():
+            raise UsageError(f"--config {self.config_file} does not exist")
+        if (self.out / RUN_MARKER).exists():
+            hint = "pass --resume to continue it, or choose another --out"
+            raise UsageError(f"--out {self.out} already holds a run", hint=hint)
+        hint = "a run writes a folder of its own: choose a new --out"  # /proc/x, a read-only disk: refused before
+        require_empty_output(self.out, "--out", "is not empty and holds no run", hint=hint)  # minutes of training
+        self.settings()
+
+    def refuse_options(self, allowed: set[str], refusal: str, hint: str) -> None:
+        """A usage error ``refusal; drop --x, --y`` when options outside ``allowed`` (parameter names) were given."""
+        generated = config_options()
+        given = {name: generated[name].typed(v).split(" ")[0] for name, v in self.options.items() if v is not None}
+        own = {"resume": "--resume", "partial": "--partial", "config_file": "--config", "seed": "--seed"}
+        for name, flag in (own | {"n_seeds": "--n-seeds"}).items():
+            if getattr(self, name) is not None and getattr(self, name) is not False:  # given (0 is a --seed)
+                given[name] = flag
+        dropped = sorted(flag for name, flag in given.items() if name not in allowed)
+        if dropped:
+            raise UsageError(f"{refusal}; drop {', '.join(dropped)}", hint=hint)
 
     def settings(self, *, with_file: bool = True) -> train_config.ConfigFile:
         """The complete configuration this call asks for: the defaults, then the --config file's keys, then the
@@ -232,17 +211,11 @@ class TrainRequest:
         from unitac_rig.learning.train import TrainConfig
 
         if self.resume:
-            generated = config_options()
-            given = [generated[k].flag for k, v in self.options.items() if v is not None and k != "epochs"] + [
-                name
-                for name, v in (("--config", self.config_file), ("--seed", self.seed), ("--n-seeds", self.n_seeds))
-                if v is not None
-            ]
-            if given:
-                raise UsageError(
-                    f"--resume continues a run with its stored configuration; drop {', '.join(sorted(given))}",
-                    hint="only --epochs (to extend the budget) goes with --resume",
-                )
+            self.refuse_options(
+                {"resume", "partial", "epochs"},
+                "--resume continues a run with its stored configuration",
+                hint="only --epochs (to extend the budget) goes with --resume",
+            )
             return None
         settings = self.settings()
         flat = {
@@ -252,107 +225,80 @@ class TrainRequest:
         return TrainConfig().updated(flat)
 
 
-_Data = Annotated[
-    list[Path],
-    typer.Option(
+def _train(
+    ctx: typer.Context,
+    data: list[Path] = typer.Option(
+        ...,
         "--data",
         metavar="DIR",
         help="Directory of session files (collect, campaign or import output); repeat to pool several.",
         rich_help_panel=_RUN,
     ),
-]
-_Out = Annotated[
-    Path, typer.Option("--out", metavar="RUN", help="New run directory (or the run to --resume).", rich_help_panel=_RUN)
-]
-_Resume = Annotated[
-    bool, typer.Option("--resume", help="Continue the run in --out from its last checkpoint.", rich_help_panel=_RUN)
-]
-_ConfigFile = Annotated[
-    Path | None,
-    typer.Option(
+    out: Path = typer.Option(
+        ..., "--out", metavar="RUN", help="New run directory (or the run to --resume).", rich_help_panel=_RUN
+    ),
+    resume: bool = typer.Option(
+        False, "--resume", help="Continue the run in --out from its last checkpoint.", rich_help_panel=_RUN
+    ),
+    config_file: Path | None = typer.Option(
+        None,
         "--config",
         metavar="FILE",
         help="TOML file with any training keys (docs/learning.md); options given here win.",
         rich_help_panel=_RUN,
     ),
-]
-_Partial = Annotated[
-    bool,
-    typer.Option(
+    partial: bool = typer.Option(
+        False,
         "--partial/--complete-only",
         help="Also train on contacts only some sensors recorded (at least two; masked loss). Test and validation "
         "use contacts every sensor recorded.",
         rich_help_panel=_RUN,
     ),
-]
-_FromRun = Annotated[
-    Path | None,
-    typer.Option(
-        "--from", metavar="RUN", help="A trained run to add --new-sensor to (it is not modified).", rich_help_panel=_RUN
+    from_run: Path | None = typer.Option(
+        None,
+        "--from",
+        metavar="RUN",
+        help="A trained run to add --new-sensor to (it is not modified).",
+        rich_help_panel=_RUN,
     ),
-]
-_NewSensor = Annotated[
-    str | None,
-    typer.Option(
+    new_sensor: str | None = typer.Option(
+        None,
         "--new-sensor",
         metavar="SENSOR",
         help="With --from: train only this sensor's encoder and output layer (docs/learning.md).",
         rich_help_panel=_RUN,
     ),
-]
-_Seed = Annotated[
-    int | None,
-    typer.Option(
+    seed: int | None = typer.Option(
+        None,
         "--seed",
         show_default=str(_SEEDS[0]),
         help="Seed of the first model (initialisation, shuffling, dropout).",
         rich_help_panel=_TRAINING,
     ),
-]
-_NSeeds = Annotated[
-    int | None,
-    typer.Option(
+    n_seeds: int | None = typer.Option(
+        None,
         "--n-seeds",
         min=1,
         show_default=str(len(_SEEDS)),
         help="Train seeds SEED..SEED+N-1 together in one batched run.",
         rich_help_panel=_TRAINING,
     ),
-]
-_Device = Annotated[str, typer.Option("--device", metavar="NAME", help="auto, cpu or cuda.", rich_help_panel=_TRAINING)]
-_Threads = Annotated[
-    int,
-    typer.Option(
-        "--threads", min=0, help="CPU threads (0: one, fastest for these small layers).", rich_help_panel=_TRAINING
+    device: str = typer.Option(
+        "auto", "--device", metavar="NAME", help="auto, cpu or cuda.", rich_help_panel=_TRAINING
     ),
-]
-_Report = Annotated[
-    bool,
-    typer.Option("--report/--no-report", help="Write metrics.json, report.md and figures.", rich_help_panel=_REPORT),
-]
-
-
-def _train(
-    ctx: typer.Context,
-    data: _Data,
-    out: _Out,
-    resume: _Resume = False,
-    config_file: _ConfigFile = None,
-    partial: _Partial = False,
-    from_run: _FromRun = None,
-    new_sensor: _NewSensor = None,
-    seed: _Seed = None,
-    n_seeds: _NSeeds = None,
-    device: _Device = "auto",
-    threads: _Threads = 0,
-    report: _Report = True,
+    threads: int = typer.Option(
+        0, "--threads", min=0, help="CPU threads (0: one, fastest for these small layers).", rich_help_panel=_TRAINING
+    ),
+    report: bool = typer.Option(
+        True, "--report/--no-report", help="Write metrics.json, report.md and figures.", rich_help_panel=_REPORT
+    ),
     **options: Any,
 ) -> None:
     """Train UniTac-NV (and the baselines) on paired data; writes RUN/checkpoint.pt, config.toml, metrics.json,
     report.md and figures."""
     request = TrainRequest.from_params(ctx.params)
     request.check()
-    run_train(ctx, request)
+    run_train(request)
 
 
 def build_train_command() -> Any:
@@ -361,7 +307,7 @@ def build_train_command() -> Any:
     def train_command(ctx: typer.Context, **params: Any) -> None:
         _train(ctx, **params)
 
-    own = [p for p in inspect.signature(_train, eval_str=True).parameters.values() if p.kind != p.VAR_KEYWORD]
+    own = [p for p in inspect.signature(_train).parameters.values() if p.kind != p.VAR_KEYWORD]
     own = own[:1] + [p.replace(kind=p.KEYWORD_ONLY) for p in own[1:]]
     generated = [option.parameter() for option in config_options().values()]
     ordered = own[:-1] + generated + own[-1:]  # --report last, after the evaluation options
@@ -374,24 +320,20 @@ def build_train_command() -> Any:
 train_command = build_train_command()
 
 
-def run_train(ctx: typer.Context, request: TrainRequest) -> None:
+def run_train(request: TrainRequest) -> None:
     """Run a checked request: a new or resumed run (then its report), or a sensor added to a trained run."""
-    from rich.console import Console
-
-    from unitac_rig.learning.report import write_report
     from unitac_rig.learning.train import load_run, resolve_device, train
 
     resolve_device(request.device)  # a bad --device fails before the data is read
     if request.extends:
-        _train_new_sensor(ctx, request.data, request.out, request.from_run, request.new_sensor)
+        _train_new_sensor(request)
         return
     config = request.train_config()
-    console = Console()
-    dataset = _paired_dataset(request, console)
+    dataset = _paired_dataset(request)
     total = request.epochs if config is None else config.epochs
     try:
         # Ctrl-C / SIGTERM wait for the end of the epoch (train() then checkpoints it); a second one stops at once
-        with _progress(console, "[bold]train") as progress, termination_as_interrupt():
+        with _progress("[bold]train") as progress, termination_as_interrupt():
             task = progress.add_task("train", total=total, status="")
             outcome = train(
                 dataset,
@@ -401,7 +343,7 @@ def run_train(ctx: typer.Context, request: TrainRequest) -> None:
                 threads=request.threads or None,
                 resume=request.resume,
                 epochs=request.epochs if request.resume else None,
-                progress=_epoch_printer(console, progress, task, total),
+                progress=_epoch_printer(progress, task, total),
             )
             progress.update(task, total=outcome.epochs_done)
     except KeyboardInterrupt:
@@ -409,16 +351,10 @@ def run_train(ctx: typer.Context, request: TrainRequest) -> None:
         raise
     console.print(f"trained {outcome.epochs_done} epochs in {outcome.train_seconds:.1f} s -> {request.out}")
     if request.report:
-        try:
-            path = write_report(request.out, run=load_run(request.out), on_stage=stage_printer(console))
-        except KeyboardInterrupt:  # the run is trained and checkpointed: only its report is missing
-            typer.echo(report_interrupted_line(request.out), err=True)
-            raise
-        _print_table(console, request.out)
-        console.print(f"report: {path}")
+        report_with_table(request.out, run=load_run(request.out))
 
 
-def _paired_dataset(request: TrainRequest, console: Any) -> Any:
+def _paired_dataset(request: TrainRequest) -> Any:
     """The paired dataset of --data, partial when asked or when the resumed run trained on a partial join."""
     from unitac_rig.learning.data import build_paired_dataset, load_sets
     from unitac_rig.learning.train import trained_on_partial_join
@@ -436,7 +372,7 @@ def _paired_dataset(request: TrainRequest, console: Any) -> Any:
     return dataset
 
 
-def _progress(console: Any, label: str, *, log_lines: bool = True) -> Any:
+def _progress(label: str, *, log_lines: bool = True) -> Any:
     """A progress bar on a terminal; in a log (``log_lines``) none, the epoch printer writes a line now and then."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -451,7 +387,7 @@ def _progress(console: Any, label: str, *, log_lines: bool = True) -> Any:
     )
 
 
-def _epoch_printer(console: Any, progress: Any, task: Any, total: int | None) -> Any:
+def _epoch_printer(progress: Any, task: Any, total: int | None) -> Any:
     """The ``progress`` callback of ``train()``: the bar's status (the primary frame metric of the cross-sensor
     directions and the latent alignment), and a line every few seconds when the output is a log."""
     from unitac_rig.learning.metric_table import METRICS, frame_metrics
@@ -472,7 +408,7 @@ def _epoch_printer(console: Any, progress: Any, task: Any, total: int | None) ->
                 status += f" (ratio {seen['latent_ratio'][0]:.2f})"
         progress.update(task, completed=record["epoch"], status=status)
         if not console.is_terminal and lines.due(last=record["epoch"] == total):
-            left = pace.left_text(total) if total else ""  # at this run's pace (the bar shows its own)
+            left = pace.left_text(total - record["epoch"]) if total else ""  # at this run's pace
             line = f"train: epoch {record['epoch']}/{total} {status}".rstrip() + (f", {left}" if left else "")
             console.print(line, soft_wrap=True)
 
@@ -499,80 +435,41 @@ def dropped_sessions(sets: list[Any], paired_objects: tuple[str, ...] | list[str
     return lines
 
 
-class EveryFewSeconds:
-    """Throttle for progress lines written to a log or pipe (no terminal to redraw a bar): the first call, then one
-    every ``seconds``, and the last."""
-
-    def __init__(self, seconds: float = 10.0) -> None:
-        self.seconds = seconds
-        self._last: float | None = None
-
-    def due(self, *, last: bool = False) -> bool:
-        import time
-
-        now = time.monotonic()
-        if last or self._last is None or now - self._last >= self.seconds:
-            self._last = now
-            return True
-        return False
-
-
-# the options that mean something for `train --from RUN --new-sensor NAME` (the rest are the trained run's own)
-_NEW_SENSOR_OPTIONS = frozenset(
-    {"data", "out", "from_run", "new_sensor", "epochs", "learning_rate", "batch_size", "device", "threads", "report"}
-)
-
-
-def _train_new_sensor(
-    ctx: typer.Context, data: list[Path], out: Path, from_run: Path | None, new_sensor: str | None
-) -> None:
+def _train_new_sensor(request: TrainRequest) -> None:
     """``train --from RUN --new-sensor NAME``: the new sensor's encoder and output layer against the frozen model."""
-    from rich.console import Console
     from rich.table import Table
 
     from unitac_rig.learning.data import load_sets
     from unitac_rig.learning.extend import EXTENSION_JSON, ExtendConfig, add_sensor
-    from unitac_rig.learning.report import write_report
 
+    from_run, new_sensor, out = request.from_run, request.new_sensor, request.out
     if from_run is None or not new_sensor:
         raise UsageError("--from and --new-sensor go together", hint="train --from RUN --new-sensor NAME --data DATA")
-    source = getattr(ctx, "get_parameter_source", None)
-    given = [
-        name
-        for name in ctx.params
-        if name not in _NEW_SENSOR_OPTIONS and source is not None and "DEFAULT" not in str(source(name))
-    ]
-    if given:
-        flags = {p.name: (getattr(p, "opts", None) or [p.name])[0] for p in ctx.command.params}
-        raise UsageError(
-            f"--new-sensor keeps the trained run's settings; drop {', '.join(sorted(flags.get(n, n) for n in given))}",
-            hint="only --epochs, --lr, --batch-size, --device and --threads go with --new-sensor",
-        )
-    params = {name: value for name, value in ctx.params.items() if source is None or "DEFAULT" not in str(source(name))}
-    console = Console()
-    sets = load_sets(data)
-    with _progress(console, f"[bold]train {new_sensor}", log_lines=False) as progress:
+    request.refuse_options(
+        {"epochs", "learning_rate", "batch_size"},
+        "--new-sensor keeps the trained run's settings",
+        hint="only --epochs, --lr, --batch-size, --device and --threads go with --new-sensor",
+    )
+    sets = load_sets(request.data)
+    with _progress(f"[bold]train {new_sensor}", log_lines=False) as progress:
         task = progress.add_task("extend", total=None, status="")
 
         def on_epoch(record: dict[str, Any]) -> None:
             loss = sum(record["train_loss"]) / len(record["train_loss"])
             progress.update(task, completed=record["epoch"], total=record["epochs"], status=f"train loss {loss:.4f}")
 
-        config = ExtendConfig(
-            epochs=params.get("epochs"), batch_size=params.get("batch_size"), learning_rate=params.get("learning_rate")
-        )
+        settings = {name: request.options.get(name) for name in ("epochs", "batch_size", "learning_rate")}
         outcome = add_sensor(
             from_run,
             sets,
             new_sensor,
             out,
-            config,
-            device=ctx.params.get("device") or "auto",
-            threads=ctx.params.get("threads") or None,
+            ExtendConfig(**settings),
+            device=request.device,
+            threads=request.threads or None,
             progress=on_epoch,
         )
-    summary = outcome.summary
-    contacts = summary["contacts"]
+    summary, contacts = outcome.summary, outcome.summary["contacts"]
     shared = ", ".join(f"{s} {n}" for s, n in contacts["train_shared_with"].items())
     console.print(
         f"trained {new_sensor} into {from_run} -> {out}: {contacts['train']} training contacts (shared with {shared}), "
@@ -581,25 +478,17 @@ def _train_new_sensor(
     table = Table(title=f"Test NMAE/SSIM of {new_sensor}'s directions (untrained layers -> trained)", box=None)
     for column in ("direction", "contacts", "untrained", "trained"):
         table.add_column(column, justify="right", overflow="fold")
+
+    def scores(entry: dict[str, list[float]]) -> str:
+        return f"{sum(entry['nmae']) / len(entry['nmae']):.3f}/{sum(entry['ssim']) / len(entry['ssim']):.3f}"
+
     for name, after in summary["trained"].items():
-        before = summary["untrained"][name]
         table.add_row(
-            name.replace("_to_", "→"),
-            str(after["contacts"]),
-            f"{sum(before['nmae']) / len(before['nmae']):.3f}/{sum(before['ssim']) / len(before['ssim']):.3f}",
-            f"{sum(after['nmae']) / len(after['nmae']):.3f}/{sum(after['ssim']) / len(after['ssim']):.3f}",
+            name.replace("_to_", "→"), str(after["contacts"]), scores(summary["untrained"][name]), scores(after)
         )
     console.print(table)
     console.print(f"{out / EXTENSION_JSON}")
-    if ctx.params.get("report", True):
-        if outcome.complete_test_rows:
-            path = write_report(out)
-            _print_table(console, out)
-            console.print(f"report: {path}")
-        else:
-            console.print("no test contact was recorded by every sensor: no report.md (see extension.json)")
-
-
-def register(app: typer.Typer) -> None:
-    """Add ``train`` to the root app (named in ``cli/app.py``'s COMMAND_MODULES, so the import goes one way)."""
-    app.command("train")(train_command)
+    if request.report and outcome.complete_test_rows:
+        report_with_table(out)
+    elif request.report:
+        console.print("no test contact was recorded by every sensor: no report.md (see extension.json)")

@@ -1,13 +1,5 @@
 """Path checks every command makes before any work: a usage error (exit 2, one line naming the option) rather than
 an "unexpected OSError" after minutes of work, or a run written into the wrong place.
-
-* :func:`path_text` is a typer ``parser``: an empty path (``--data ""``) is refused, where ``Path("")`` would quietly
-  mean the current directory.
-* :func:`require_directory`: an input folder that must exist (``inspect``, ``extract``, ``export``, ``verify``).
-* :func:`require_data_folder`: ``collect``'s ``--data``, which may not exist yet but must not be a file.
-* :func:`require_writable_output`: an output folder this command will create or fill (``export --out``,
-  ``train --out``): every existing part of the path is a folder and the deepest one accepts a new entry (tried with
-  a probe folder that is removed at once, because permission bits do not tell root, read-only mounts or /proc).
 """
 
 from __future__ import annotations
@@ -23,7 +15,8 @@ from unitac_rig.errors import UsageError
 
 
 def path_text(value: str | Path) -> Path:
-    """A path option or argument as typed; an empty one is a usage error (typer's ``parser=``)."""
+    """A path option or argument as typed (typer's ``parser=``); an empty one (``--data ""``) is a usage error, where
+    ``Path("")`` would quietly mean the current directory."""
     if isinstance(value, Path):  # the option's default
         return value
     if not value.strip():
@@ -48,11 +41,18 @@ def require_data_folder(path: Path, option: str = "--data") -> None:
         require_writable_output(path, option)
 
 
-def require_writable_output(path: Path, option: str) -> None:
-    """``path`` can be created (or filled, when it is an existing folder) by this process, else a usage error.
+def require_empty_output(path: Path, option: str, taken: str, hint: str) -> None:
+    """An output folder a command will create or fill (``export --out``, ``train --out``): new or empty (else a
+    usage error saying it is ``taken``), and writable (:func:`require_writable_output`)."""
+    if path.exists() and (not path.is_dir() or any(path.iterdir())):
+        raise UsageError(f"{option} {path} {taken}", hint=hint)
+    require_writable_output(path, option)
 
-    Only a probe folder is made (and removed) in the deepest existing folder of ``path``; nothing else is written.
-    """
+
+def require_writable_output(path: Path, option: str) -> None:
+    """``path`` can be created (or filled, when it is an existing folder) by this process, else a usage error: every
+    existing part of it is a folder and the deepest one accepts a probe folder, removed at once (permission bits do
+    not tell root, read-only mounts or /proc)."""
     existing = path.absolute()
     while not existing.exists() and existing != existing.parent:
         existing = existing.parent

@@ -1,12 +1,8 @@
 """``unitac-rig probe``: read a few frames from one device to check it is wired up (or try a simulated one).
 
 Every registered sensor (:mod:`unitac_rig.rig.sensors`) is a ``probe <sensor>`` command whose options are the
-fields of its rig-file tables, so ``probe uskin --can-interface socketcan --can-channel can0``, ``probe uskin
---xela-server ws://HOST:5000`` and ``probe papillarray --port /dev/ttyACM0`` open the driver the rig file would, and
-a new sensor is probed with no edit here. They print a taxel map of the last frame, or one JSON object per frame with
-``--json``. ``--simulated`` starts the sensor's simulated device with a synthetic press, so a newcomer can try the
-command with no hardware. A port that is not there, or a device that sends nothing within ``--timeout``, ends with
-one error line and exit status 1.
+fields of its rig-file tables (``probe uskin --can-channel can0``, ``probe papillarray --port /dev/ttyACM0``): it opens
+the driver the rig file would, and a new sensor is probed with no edit here.
 """
 
 from __future__ import annotations
@@ -17,7 +13,7 @@ import inspect
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Literal, Protocol, cast, get_args, get_origin
+from typing import Any, Literal, get_args, get_origin
 
 import numpy as np
 import typer
@@ -29,8 +25,10 @@ from typer.models import CommandInfo
 
 from drivers.frames import TactileFrame
 from drivers.layouts import SensorLayout
-from drivers.sensor import SensorHealth, TactileSensor
-from unitac_rig.cli.help import PlainCommand
+from drivers.sensor import SensorHealth
+from unitac_rig.cli.help import PlainCommand, field_bounds, field_flag
+from unitac_rig.cli.output import console
+from unitac_rig.cli.probe_ur5e import register_ur5e
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.sensors import SENSORS, SensorConfigBase, SensorSpec
 
@@ -125,70 +123,53 @@ def _run_probe(driver: Any, layout: SensorLayout, n_frames: int, as_json: bool, 
         for frame in frames:
             typer.echo(json.dumps(frame_json(frame, layout)))
     else:
-        _print_map(Console(), frames, layout, health)
+        _print_map(console, frames, layout, health)
 
 
 # ---- one command per registered sensor -------------------------------------------------------------------------
 
 
-class SimulatedProbe(Protocol):
-    """A sensor's simulated side as ``probe --simulated`` uses it (see sim/fast_sensors.py)."""
-
-    def probe(self, options: Mapping[str, Any], stack: contextlib.ExitStack) -> TactileSensor:
-        """The real driver on a simulated device streaming a synthetic press, set up as ``options`` (the probe
-        options given, by config field name) say; ``stack`` closes the device."""
-        ...
-
-
 @dataclass(frozen=True)
 class ProbeOption:
-    """One field of a sensor's rig-file table as a probe option: ``--can-channel``, or the field's ``cli`` name."""
+    """One field of a sensor's rig-file tables as a probe option: ``--can-channel``, or the field's ``cli`` name."""
 
     field: str
-    flag: str
-    kind: type
     info: FieldInfo
     tables: tuple[type[SensorConfigBase], ...]  # the tables that have this field
 
-    def typer_option(self) -> Any:
-        """The option, unset by default (the table's own default applies); grouped under its table's ``type``."""
-        bounds: dict[str, Any] = {}
-        for constraint in self.info.metadata:  # pydantic's ge / le: the range the help shows and typer checks
-            if getattr(constraint, "ge", None) is not None:
-                bounds["min"] = constraint.ge
-            if getattr(constraint, "le", None) is not None:
-                bounds["max"] = constraint.le
+    @property
+    def flag(self) -> str:
+        return str(field_flag(self.field, self.info))
+
+    def parameter(self) -> inspect.Parameter:
+        """The option, unset by default (the table's own default applies), grouped under its table's ``type``; the
+        field's ge / le are the range the help shows and typer checks."""
+        annotation: Any = self.info.annotation
+        if get_origin(annotation) is Literal:
+            annotation = type(get_args(annotation)[0])
+        kind: Any = annotation if annotation in (str, int, float, bool) else str
+        bounds = field_bounds(self.info)
         default = None if self.info.is_required() else self.info.default
-        return typer.Option(
+        option = typer.Option(
             None,
             self.flag,
             help=self.info.description or "",
             show_default=False if default is None else str(default),
             rich_help_panel=None if len(self.tables) > 1 else str(self.tables[0].model_fields["type"].default),
-            **bounds,
+            min=bounds.get("ge"),
+            max=bounds.get("le"),
         )
+        return inspect.Parameter(self.field, inspect.Parameter.KEYWORD_ONLY, default=option, annotation=kind | None)
 
 
 def probe_options(spec: SensorSpec) -> dict[str, ProbeOption]:
     """The probe options of a sensor: every field of every rig-file table it accepts (``type`` aside), by name."""
-    found: dict[str, list[type[SensorConfigBase]]] = {}
-    infos: dict[str, FieldInfo] = {}
+    tables: dict[str, list[type[SensorConfigBase]]] = {}
     for table in spec.config_types:
-        for name, info in table.model_fields.items():
+        for name in table.model_fields:
             if name != "type":
-                found.setdefault(name, []).append(table)
-                infos.setdefault(name, info)
-    options = {}
-    for name, tables in found.items():
-        info = infos[name]
-        extra = info.json_schema_extra if isinstance(info.json_schema_extra, dict) else {}
-        flag = str(extra.get("cli", "--" + name.replace("_", "-")))
-        annotation: Any = info.annotation
-        if get_origin(annotation) is Literal:
-            annotation = type(get_args(annotation)[0])
-        kind: type = annotation if annotation in (str, int, float, bool) else str
-        options[name] = ProbeOption(name, flag, kind, info, tuple(tables))
-    return options
+                tables.setdefault(name, []).append(table)
+    return {name: ProbeOption(name, found[0].model_fields[name], tuple(found)) for name, found in tables.items()}
 
 
 def _choose_table(spec: SensorSpec, given: Mapping[str, Any], simulated: bool) -> type[SensorConfigBase] | None:
@@ -233,22 +214,16 @@ def probe_sensor(
 
     table = _choose_table(spec, given, simulated)
     with contextlib.ExitStack() as stack:
-        if simulated:
-            device = spec.simulated_device()
-            if not callable(getattr(device, "probe", None)):
+        if simulated:  # the real driver on the simulated device, streaming a synthetic press (sim/fast_sensors.py)
+            probe = getattr(spec.simulated_device(), "probe", None)
+            if not callable(probe):
                 raise UsageError(f"sensor {spec.name!r} has no simulated device to probe", hint="probe the hardware")
-            driver = cast(SimulatedProbe, device).probe(given, stack)
+            driver = probe(given, stack)  # set up as the options given say; the stack closes the device
         else:
             assert table is not None
             driver = spec.open_driver(_config(spec, table, given), MonotonicClock())
             stack.callback(driver.disconnect)  # closes the transport even if connect() fails
         _run_probe(driver, spec.layout, frames, as_json, timeout)
-
-
-def _units_text(layout: SensorLayout) -> str:
-    if layout.units == "counts":
-        return "raw counts"
-    return f"forces in {layout.units}" + (", displacements in mm" if layout.has_displacement else "")
 
 
 class _SensorProbeInfo(CommandInfo):
@@ -266,10 +241,7 @@ def sensor_probe_command(spec: SensorSpec) -> CommandInfo:
 
     keyword = inspect.Parameter.KEYWORD_ONLY
     parameters = [
-        *(
-            inspect.Parameter(o.field, keyword, default=o.typer_option(), annotation=o.kind | None)
-            for o in options.values()
-        ),
+        *(option.parameter() for option in options.values()),
         inspect.Parameter("frames", keyword, default=FRAMES_OPTION, annotation=int),
         inspect.Parameter("as_json", keyword, default=JSON_OPTION, annotation=bool),
         inspect.Parameter("timeout", keyword, default=TIMEOUT_OPTION, annotation=float),
@@ -279,8 +251,10 @@ def sensor_probe_command(spec: SensorSpec) -> CommandInfo:
     command.__annotations__ = {p.name: p.annotation for p in parameters}
     layout = spec.layout
     tables = " or ".join(f"[{t.model_fields['type'].default}]" for t in spec.config_types)
+    units = "raw counts" if layout.units == "counts" else f"forces in {layout.units}"
+    units += ", displacements in mm" if layout.has_displacement else ""
     text = (
-        f"Read frames from a {layout.model} ({_units_text(layout)}). The options are those of its rig-file table "
+        f"Read frames from a {layout.model} ({units}). The options are those of its rig-file table "
         f"[sensors.{spec.name}], one connection: {tables}."
     )
     return _SensorProbeInfo(name=spec.name, callback=command, cls=PlainCommand, help=text)
@@ -307,13 +281,5 @@ probe_app = _ProbeApp(
     help="Read a few frames from one device (a registered tactile sensor, or the UR5e) to check it is connected.",
     no_args_is_help=True,
 )
-
-
-def register(app: typer.Typer) -> None:
-    """Add ``probe`` and its device subcommands to the root app."""
-    app.add_typer(probe_app, name="probe")
-
-
-from unitac_rig.cli.probe_ur5e import register_ur5e  # noqa: E402
 
 register_ur5e(probe_app)

@@ -1,13 +1,6 @@
-"""``unitac-rig stream RUN``: the trained model on the mounted sensor, live, as JSON lines.
-
-Reads the sensor the rig file names (``--rig``; detected when the file lists several) or the real-time twin's
-(``--simulated``: the twin started in this process), tares on the first frames (keep the pad unloaded), then writes
-one JSON line per frame to stdout, or to the one client of ``--listen 127.0.0.1:PORT``: the frame's latent, the frame
-translated into every other sensor of the run, and the contact-geometry estimate when the run has a fitted one
-(``unitac-rig geometry RUN``). Until Ctrl-C, ``--frames`` or ``--duration``; then a summary (frames, device-counter
-gaps, the rate achieved, latency from the frame's host timestamp to the line written, the warm-up backlog apart) on
-stderr and in ``--summary``. Ctrl-C (or SIGTERM / SIGHUP) still writes the summary, then exits 130 (143 / 129).
-The fields of a line are documented in docs/use-your-model-on-the-robot.md.
+"""``unitac-rig stream RUN``: the trained model on the mounted sensor (the rig file's, or the real-time twin's
+started here), live, as JSON lines on stdout or to one client on 127.0.0.1; a summary on stderr at the end, also after
+Ctrl-C, SIGTERM or SIGHUP (exit 130, 143, 129). The lines: docs/use-your-model-on-the-robot.md.
 """
 
 from __future__ import annotations
@@ -64,14 +57,9 @@ def _socket_writer(address: tuple[str, int], stop: threading.Event) -> Iterator[
         server.close()
 
 
-def _stdout_writer() -> Callable[[bytes], None]:
-    out = sys.stdout.buffer
-
-    def write(line: bytes) -> None:
-        out.write(line)
-        out.flush()
-
-    return write
+def _write_stdout(line: bytes) -> None:
+    sys.stdout.buffer.write(line)
+    sys.stdout.buffer.flush()
 
 
 @contextlib.contextmanager
@@ -87,8 +75,7 @@ def _mounted_sensor(
     from unitac_rig.rig.config import load_rig_config, parse_rig_config
     from unitac_rig.rig.hardware import HardwareRig
 
-    twin = None
-    try:
+    with contextlib.ExitStack() as stack:  # closes the sensor, then the rig, then the twin
         if simulated:
             import tomllib
 
@@ -96,8 +83,9 @@ def _mounted_sensor(
             from unitac_rig.sim.twin.rig import RigTwin
 
             name = sensor or next(s for s in ("papillarray", "uskin") if s in run_sensors)
-            twin = RigTwin(object_id, sensor=name, host=first_free_loopback(211, 239))
+            twin = stack.enter_context(RigTwin(object_id, sensor=name, host=first_free_loopback(211, 239)))
             config = parse_rig_config(tomllib.loads(twin.rig_file()))
+            sensor = twin.sensor
         else:
             assert rig_file is not None
             config = load_rig_config(rig_file)
@@ -108,18 +96,11 @@ def _mounted_sensor(
             for n in rated:
                 config.sensors[n] = config.sensors[n].model_copy(update={"rate_hz": rate_hz})
         rig = HardwareRig(config)
-        try:
-            name = sensor if sensor is not None else (twin.sensor if twin is not None else rig.detect_sensor())
-            driver = rig.open_sensor(name)
-            try:
-                yield driver, name
-            finally:
-                driver.disconnect()
-        finally:
-            rig.close()
-    finally:
-        if twin is not None:
-            twin.close()
+        stack.callback(rig.close)
+        name = sensor if sensor is not None else rig.detect_sensor()
+        driver = rig.open_sensor(name)
+        stack.callback(driver.disconnect)
+        yield driver, name
 
 
 def stream_command(
@@ -130,7 +111,7 @@ def stream_command(
     object_id: str = typer.Option("circle_pla", "--object", help="With --simulated: the object in front of the pad."),
     rate_hz: int = typer.Option(None, "--rate", help="PapillArray sample rate, Hz (100, 250, 500 or 1000)."),
     member: int = typer.Option(0, "--member", help="Which seed of a multi-seed run (index)."),
-    tare_frames: int = typer.Option(50, "--tare-frames", help="Frames to tare on (median) before streaming."),
+    tare_frames: int = typer.Option(50, "--tare-frames", min=1, help="Frames to tare on (median) before streaming."),
     frames: int = typer.Option(None, "--frames", help="Stop after this many frames."),
     duration: float = typer.Option(None, "--duration", help="Stop after this many seconds of streaming."),
     listen: str = typer.Option(None, "--listen", help="Serve the lines to one client on 127.0.0.1:PORT."),
@@ -148,8 +129,6 @@ def stream_command(
 
     if (rig_file is None) == (not simulated):
         raise UsageError("stream needs --rig RIG.toml or --simulated (one of them)")
-    if tare_frames < 1:
-        raise UsageError("--tare-frames must be at least 1")
     address = _listen_address(listen) if listen is not None else None
     from unitac_rig.learning.engine import UNITAC_GROUP
     from unitac_rig.learning.train import load_run
@@ -171,7 +150,7 @@ def stream_command(
                 err=True,
             )
             with contextlib.ExitStack() as stack:
-                write = stack.enter_context(_socket_writer(address, stop)) if address else _stdout_writer()
+                write = stack.enter_context(_socket_writer(address, stop)) if address else _write_stdout
                 try:
                     stats = stream_frames(
                         live_sensor(driver),
@@ -234,8 +213,3 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
 
 def _ms(value: float | None) -> str:
     return "-" if value is None else f"{value:.3f}"
-
-
-def register(app: typer.Typer) -> None:
-    """Add ``stream`` to the root app."""
-    app.command("stream")(stream_command)

@@ -1,13 +1,8 @@
 """``unitac-rig twin``: the real-time twin of the whole rig on a loopback address, until Ctrl-C or SIGTERM.
 
-It starts the controller twin (a simulated UR e-Series controller that the real ur_rtde clients drive) with the
-object in front of the arm, serves the mounted sensor on loopback network transports from the same scene, prints the
-rig file that points the hardware code path at it (stdout; ``--write-rig`` also saves it), and then reports what the
-controller does (program started or stopped, protective and emergency stops, watchdog trips) on stderr. In another
-terminal, ``unitac-rig collect --rig <that file> --object <same object>`` runs exactly as on the robot.
-
-Lines typed on its stdin act as the teach pendant: ``unlock`` (unlock a protective stop), ``estop`` (press the
-emergency stop), ``release`` (release it, power on and release the brakes), ``pstop`` (a protective stop), ``status``.
+The controller twin (a simulated UR e-Series controller the real ur_rtde clients drive) and the mounted sensor on
+loopback transports, from one scene; stdout gets the rig file that points the hardware code path at them (``collect
+--rig <that file>`` runs as on the robot), stderr what the controller does. Lines on stdin act as the teach pendant.
 """
 
 from __future__ import annotations
@@ -16,18 +11,20 @@ import dataclasses
 import sys
 import threading
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
-from unitac_rig.errors import UsageError
+from unitac_rig.errors import UnitacError, UsageError
 from unitac_rig.interrupts import stop_on_signals
 from unitac_rig.rig.sensors import sensor_names
 
-
-def _status_line(truth: object) -> str:
+if TYPE_CHECKING:  # the twin loads when the command runs, not when the CLI starts
     from unitac_rig.sim.twin import TwinTruth
+    from unitac_rig.sim.twin.rig import RigTwin
 
-    assert isinstance(truth, TwinTruth)
+
+def _status_line(truth: TwinTruth) -> str:
     program = {1: "stopped", 2: "running", 4: "paused"}.get(truth.runtime_state, str(truth.runtime_state))
     safety = "normal"
     if truth.safety_status_bits & (1 << 7):
@@ -112,11 +109,8 @@ def twin(
 PENDANT_HELP = "pendant commands: unlock, estop, release, pstop, status"
 
 
-def _pendant(rig: object, stop: threading.Event) -> None:
+def _pendant(rig: RigTwin, stop: threading.Event) -> None:
     """Read pendant commands from stdin until it closes or the twin stops (a daemon thread; stdin may be a pipe)."""
-    from unitac_rig.sim.twin.rig import RigTwin
-
-    assert isinstance(rig, RigTwin)
     controller = rig.controller
     for line in sys.stdin:
         if stop.is_set():
@@ -145,16 +139,13 @@ def _pendant(rig: object, stop: threading.Event) -> None:
         typer.echo(f"pendant: {reply}", err=True)
 
 
-def _watch(rig: object, stop: threading.Event, quiet: bool) -> None:
+def _watch(rig: RigTwin, stop: threading.Event, quiet: bool) -> None:
     """Wait for a signal; meanwhile report each change of the controller's state (stderr)."""
-    from unitac_rig.sim.twin.rig import RigTwin
-
-    assert isinstance(rig, RigTwin)
     last_line = ""
     last_counts = (0, 0, 0)
     while not stop.wait(0.1):
         if not rig.controller.alive:
-            raise UsageError("the controller twin's process ended", hint="see its error output above")
+            raise UnitacError("the controller twin's process ended", hint="see its error output above")  # exit 1
         if quiet:
             continue
         truth = rig.controller.truth()
@@ -164,8 +155,3 @@ def _watch(rig: object, stop: threading.Event, quiet: bool) -> None:
             error = rig.controller.status().get("last_error") if counts != last_counts else ""
             typer.echo(f"twin: {line}" + (f" ({error})" if error else ""), err=True)
             last_line, last_counts = line, counts
-
-
-def register(app: typer.Typer) -> None:
-    """Add ``twin`` to the root app."""
-    app.command("twin")(twin)

@@ -20,7 +20,7 @@ def view_command(
     object_id: str = typer.Option("circle_pla", "--object", help="With --stream --simulated: the object."),
     frames: int = typer.Option(None, "--frames", help="With --stream: stop after this many frames."),
     duration: float = typer.Option(None, "--duration", help="With --stream: stop after this many seconds."),
-    tare_frames: int = typer.Option(50, "--tare-frames", help="With --stream: frames to tare on (median)."),
+    tare_frames: int = typer.Option(50, "--tare-frames", min=1, help="With --stream: frames to tare on (median)."),
     save: Path = typer.Option(None, "--save", help="Write a Rerun recording (.rrd) here instead of a viewer."),
 ) -> None:
     """Show frames (taxel images), wrist force, the pad's pose and matched targets in Rerun (the view extra)."""
@@ -75,8 +75,3 @@ def view_command(
             rec.disconnect()
     if save is not None:
         typer.echo(f"view: wrote {save} ({save.stat().st_size / 1e6:.1f} MB); open it with: rerun {save}", err=True)
-
-
-def register(app: typer.Typer) -> None:
-    """Add ``view`` to the root app."""
-    app.command("view")(view_command)

@@ -30,14 +30,13 @@ from unitac_rig.storage.lease import lease_holder
 from unitac_rig.storage.manifest import (
     MANIFEST_NAME,
     exported_by,
-    publish_when_done,
+    frames_array,
     sensor_layout_info,
     sha256_file,
-    staging_for,
     write_manifest,
 )
 from unitac_rig.storage.paired import PairedDataset, build_paired_dataset
-from unitac_rig.storage.pooling import PooledSession, pool_sessions
+from unitac_rig.storage.pooling import PooledSession, pooled_export
 from unitac_rig.storage.reader import (
     MatchedSet,
     load_matched_set,
@@ -85,18 +84,6 @@ class ExportSummary:
     sensors: tuple[str, ...]
     objects: tuple[str, ...]
     incomplete: tuple[str, ...] = ()  # "object/sensor finished/planned" of each session with presses still to do
-
-
-def _frames_array(values: np.ndarray) -> Any:
-    """(M, n_taxels, 3) float32 -> an Arrow list<list<float32>> array of M frames, without Python loops."""
-    import pyarrow as pa
-
-    values = np.ascontiguousarray(values, dtype=np.float32)
-    m, n = int(values.shape[0]), int(values.shape[1])
-    inner = pa.ListArray.from_arrays(
-        pa.array(np.arange(0, m * n * 3 + 1, 3, dtype=np.int32)), pa.array(values.reshape(-1))
-    )
-    return pa.ListArray.from_arrays(pa.array(np.arange(0, m * n + 1, n, dtype=np.int32)), inner)
 
 
 def _arrow_schema(sensors: Sequence[str], extra: dict[str, Any]) -> Any:
@@ -158,7 +145,7 @@ def paired_table(paired: PairedDataset, sessions: dict[tuple[str, str], dict[str
                     "sensor": pa.array([sensor] * m, pa.string()),
                     "force_n": pa.array(force),
                     "error_n": pa.array(force - np.asarray(paired.target_n, dtype=np.float64)),
-                    "frame": _frames_array(paired.values[sensor]),
+                    "frame": frames_array(paired.values[sensor]),
                     "frame_unit": pa.array([str(sensor_layout_info(sensor)["units"])] * m, pa.string()),
                     "session": pa.array([i.get("file") for i in info], pa.string()),
                     "simulated": pa.array([bool(i.get("simulated", simulated)) for i in info], pa.bool_()),
@@ -210,28 +197,6 @@ def _session_provenance(item: PooledSession, copy: Path, sha256: str) -> dict[st
     }
 
 
-def _prepare_out(out: Path) -> Path:
-    staging = staging_for(out)
-    (staging / RAW_DIR).mkdir()
-    return staging
-
-
-def _session_columns(provenance: list[dict[str, Any]]) -> dict[tuple[str, str], dict[str, Any]]:
-    """Per (object, sensor): the Parquet's per-session columns (raw file, shape, material, simulated)."""
-    by_key = {}
-    for entry in provenance:
-        raw_spec = entry.get("object_spec")
-        spec: dict[str, Any] = raw_spec if isinstance(raw_spec, dict) else {}
-        material = spec.get("material")
-        by_key[(entry["object"], entry["sensor"])] = {
-            "file": entry["file"],
-            "shape": spec.get("shape"),
-            "material": str(material).upper() if material is not None else None,
-            "simulated": entry["simulated"],
-        }
-    return by_key
-
-
 def _incomplete_sessions(provenance: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Sessions collected only in part (finished presses fewer than planned): the card and the summary name them."""
     return [
@@ -256,10 +221,8 @@ def export_dataset(data_dirs: Sequence[Path], out: Path) -> ExportSummary:
     """
     import pyarrow.parquet as pq
 
-    out = Path(out)
-    pooled = pool_sessions([Path(d) for d in data_dirs])
-    staging = _prepare_out(out)
-    with publish_when_done(staging, out):
+    with pooled_export(data_dirs, out) as (pooled, staging):
+        (staging / RAW_DIR).mkdir()
         provenance: list[dict[str, Any]] = []
         sets: list[MatchedSet] = []
         for item in pooled:
@@ -275,7 +238,10 @@ def export_dataset(data_dirs: Sequence[Path], out: Path) -> ExportSummary:
             sets.append(load_matched_set(copy))
         paired = build_paired_dataset(sets)
         sensors = tuple(paired.sensors)
-        by_key = _session_columns(provenance)
+        by_key = {
+            (i.info.object_id, i.info.sensor): {**i.described(), "file": f"{RAW_DIR}/{i.info.path.name}"}
+            for i in pooled
+        }
         simulated = all(bool(e["simulated"]) for e in provenance if e["sensor"] in sensors)
         objects = tuple(sorted(set(np.asarray(paired.object_id).astype(str).tolist())))
         counts = {

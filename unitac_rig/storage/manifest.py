@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
 
+import numpy as np
+
 from unitac_rig.errors import DataError
 from unitac_rig.provenance import git_commit, package_version
 
@@ -160,6 +162,18 @@ def sensor_layout_info(sensor: str, n_taxels: int = 0) -> dict[str, Any]:
         "pitch_mm": layout.pitch_mm,
         "units": layout.units,
     }
+
+
+def frames_array(values: np.ndarray) -> Any:
+    """(M, n_taxels, 3) frames -> an Arrow list<list<float32>> array of M frames, without Python loops."""
+    import pyarrow as pa
+
+    values = np.ascontiguousarray(values, dtype=np.float32)
+    m, n = int(values.shape[0]), int(values.shape[1])
+    inner = pa.ListArray.from_arrays(
+        pa.array(np.arange(0, m * n * 3 + 1, 3, dtype=np.int32)), pa.array(values.reshape(-1))
+    )
+    return pa.ListArray.from_arrays(pa.array(np.arange(0, m * n + 1, n, dtype=np.int32)), inner)
 
 
 def exported_by() -> dict[str, str]:

@@ -18,9 +18,15 @@ from typing import Any
 import h5py
 import numpy as np
 
-from unitac_rig.storage.checksums import array_digest, seal_press_group, sealed_arrays
 from unitac_rig.storage.extraction import Extraction, ExtractionSettings
-from unitac_rig.storage.integrity import IDENTITY_KEYS, canonical_press_id
+from unitac_rig.storage.integrity import (
+    IDENTITY_KEYS,
+    array_digest,
+    as_str,
+    canonical_press_id,
+    seal_press_group,
+    sealed_arrays,
+)
 
 FINISHED_STATUSES = ("complete", "failed")  # never redone on resume; "aborted" presses are redone
 
@@ -133,7 +139,7 @@ def read_extraction(group: h5py.Group) -> tuple[Extraction, np.ndarray] | None:
 
 def write_press_group(parent: h5py.Group, rec: PressRecord, name: str | None = None) -> h5py.Group:
     """Write one press under ``parent/<name or press_id>``, sealed with the SHA-256 of every array and attribute
-    (:mod:`unitac_rig.storage.checksums`); the ``write_complete`` attribute is set last."""
+    (:mod:`unitac_rig.storage.integrity`); the ``write_complete`` attribute is set last."""
     name = name or rec.press_id
     if name in parent:
         del parent[name]
@@ -211,10 +217,6 @@ def read_press_group(g: h5py.Group) -> PressRecord:
         attrs=attrs,
         extraction=ex[0] if ex else None,
     )
-
-
-def as_str(value: Any) -> str:
-    return value.decode() if isinstance(value, bytes) else str(value)
 
 
 def decode_attr(value: Any) -> Any:

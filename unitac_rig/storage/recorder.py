@@ -51,13 +51,16 @@ from typing import Any, Literal
 import h5py
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.checksums import ROOT_ATTR, check_root, seal_root
 from unitac_rig.storage.integrity import (
     IDENTITY_KEYS,
     PRESS_DIR_SUFFIX,
+    ROOT_ATTR,
     SCHEMA_VERSION,
     SessionCheck,
+    as_str,
+    check_root,
     check_session,
+    seal_root,
 )
 from unitac_rig.storage.journal import (
     PRESS_GROUP,
@@ -68,6 +71,7 @@ from unitac_rig.storage.journal import (
     reextracted,
     root_as_header,
     session_header,
+    session_journal,
     session_path,
     session_stem,
     settings_of,
@@ -79,7 +83,6 @@ from unitac_rig.storage.manifest import sha256_file
 from unitac_rig.storage.press_record import (
     FINISHED_STATUSES,
     PressRecord,
-    as_str,
     attr_value,
     read_press_group,
     record_nbytes,
@@ -689,7 +692,7 @@ def repair_session(path: Path, problem: str) -> list[str]:
     done: no journal, the session being written by another process right now, or a press damaged in both copies.
     """
     path = Path(path)
-    journal = path.parent / ".journal" / path.stem
+    journal = session_journal(path)
     attrs = session_header(path)
     if attrs is None:
         raise DataError(

@@ -15,10 +15,9 @@ import h5py
 import numpy as np
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.checksums import ROOT_ATTR
 from unitac_rig.storage.extraction import Extraction, ExtractionSettings
-from unitac_rig.storage.integrity import check_session
-from unitac_rig.storage.journal import journal_check
+from unitac_rig.storage.integrity import ROOT_ATTR, check_session
+from unitac_rig.storage.journal import journal_entry_check, session_journal
 from unitac_rig.storage.lease import SessionLease
 from unitac_rig.storage.manifest import sha256_file
 from unitac_rig.storage.press_record import iter_press_groups, json_default, reseal_extraction, write_extraction
@@ -121,7 +120,7 @@ def reextract_sessions(
     try:
         plans: list[tuple[Path, list[Path]]] = []
         for path in paths:
-            journal = path.parent / ".journal" / path.stem
+            journal = session_journal(path)
             if journal.is_dir():  # a journal without its header too: the writer below rebuilds the header
                 lease = SessionLease(journal, path.stem)
                 lease.acquire(wait_s=0.5, hint=hint)
@@ -132,7 +131,9 @@ def reextract_sessions(
                 object_id, sensor = str(header["object"]), str(header["sensor"])
                 writer = SessionWriter(path.parent, object_id, sensor, header, unrepairable="refuse")
                 writers.append(writer)
-                entries = [p for p in writer._journal_press_files().values() if journal_check(p)[0] != "damaged"]
+                entries = [
+                    p for p in writer._journal_press_files().values() if journal_entry_check(p, {}).state != "damaged"
+                ]
             else:
                 check = check_session(path)
                 if check.needs_repair:
@@ -157,7 +158,7 @@ def reextract_sessions(
                 copies.extend(session_copies[-1:])
             for entry in entries:
                 copies.append((_reextract_copy(entry, settings)[0], entry))
-            header_path = path.parent / ".journal" / path.stem / "_session.json"
+            header_path = session_journal(path) / "_session.json"
             if header_path.exists():
                 data = json.loads(header_path.read_text())
                 data["extraction_settings"] = settings.to_dict()

@@ -32,9 +32,8 @@ from typing import Any
 import numpy as np
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.manifest import publish_when_done, staging_for
-from unitac_rig.storage.pooling import pool_sessions
-from unitac_rig.storage.reader import read_presses
+from unitac_rig.storage.pooling import pooled_export
+from unitac_rig.storage.reader import read_presses, read_session_info
 
 log = logging.getLogger(__name__)
 
@@ -60,8 +59,6 @@ def quaternions(rotvec: np.ndarray) -> np.ndarray:
 def write_session_bag(session: Path, bag: Path, typestore: Any) -> dict[str, int]:
     """Write one session file as the bag directory ``bag`` (must not exist); returns messages per topic."""
     from rosbags.rosbag2 import StoragePlugin, Writer
-
-    from unitac_rig.storage.reader import read_session_info
 
     info = read_session_info(session)
     sensor = info.sensor
@@ -155,11 +152,8 @@ def export_rosbag2(data_dirs: Sequence[Path], out: Path) -> RosbagExportSummary:
     from rosbags.typesys import Stores, get_typestore
 
     typestore = get_typestore(Stores.ROS2_HUMBLE)
-    out = Path(out)
-    pooled = pool_sessions([Path(d) for d in data_dirs])
-    staging = staging_for(out)
     bags: dict[str, dict[str, int]] = {}
-    with publish_when_done(staging, out):
+    with pooled_export(data_dirs, out) as (pooled, staging):
         for item in pooled:
             name = f"{item.info.object_id}__{item.info.sensor}"
             bags[name] = write_session_bag(item.info.path, staging / name, typestore)

@@ -275,10 +275,6 @@ class SessionCheck:
         more = f" (and {len(self.damaged) - 1} more presses)" if len(self.damaged) > 1 else ""
         return f"{self.path}: press {pid}: {what}{more}"
 
-    def describe(self) -> str:
-        """A word for ``inspect`` and export manifests: ``verified`` or ``damaged``."""
-        return "damaged" if self.needs_repair else "verified"
-
 
 def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> SessionCheck:
     """Verify every press (and the root attributes) of a session file; see :class:`SessionCheck`.

@@ -1,11 +1,7 @@
 """The journal: each press's durable log and repair copy (``DATA/.journal/<object>__<sensor>/<press_id>.h5``) and
-the session's header (``_session.json``), checked like the data they protect.
-
-An entry is verified against its checksums and, given the session's identity, against the press its
-name says and the session's object, sensor and session id (:func:`journal_entry_check`); readers ask
-:func:`journal_problems` which presses have lost their repair copy. A session file's extraction settings are the
-newer side when ``extract`` was killed between its renames (:func:`settings_of` compares them). The writer that
-repairs both sides is :class:`unitac_rig.storage.recorder.SessionWriter`.
+the session's header (``_session.json``), checked like the data they protect (docs/dataset.md, "The journal is
+checked like the data it protects"). The writer that repairs both sides is
+:class:`unitac_rig.storage.recorder.SessionWriter`.
 """
 
 from __future__ import annotations
@@ -187,15 +183,19 @@ def reextracted(rec: PressRecord, settings: Mapping[str, Any]) -> PressRecord:
     return dataclasses.replace(rec, extraction=extraction)
 
 
-def write_header(journal: Path, attrs: Mapping[str, Any]) -> None:
-    """Write ``journal/_session.json`` atomically (private name, rename)."""
+def write_header(journal: Path, attrs: Mapping[str, Any], publish: bool = True) -> Path:
+    """Write ``journal/_session.json`` under a private name and rename it into place; with ``publish`` False, return
+    the private copy instead (``extract`` renames every copy at once)."""
     header = journal / "_session.json"
     tmp = private_copy_path(header)
     try:
         tmp.write_text(json.dumps(dict(attrs), default=json_default, indent=1))
-        os.replace(tmp, header)
-    finally:
+        if publish:
+            os.replace(tmp, header)
+    except BaseException:
         tmp.unlink(missing_ok=True)
+        raise
+    return tmp
 
 
 def root_as_header(path: Path) -> dict[str, Any] | None:

@@ -1,21 +1,10 @@
-"""``unitac-rig export --format lerobot``: the recorded presses as LeRobotDataset v3 datasets, and the way back.
+"""``unitac-rig export --format lerobot``: the recorded presses as LeRobotDataset v3.0 datasets, and the way back.
 
-LeRobot (Hugging Face's robot-learning library) shares datasets in its v3.0 layout: ``meta/info.json`` (features with
-dtype, shape and names; one ``fps``), ``meta/stats.json``, ``meta/tasks.parquet``, ``meta/episodes/chunk-XXX/
-file-XXX.parquet`` (one row per episode: length, where its frames are, per-episode stats) and ``data/chunk-XXX/
-file-XXX.parquet`` (one row per frame). Those facts are taken from the standalone ``lerobot-dataset`` package
-(0.4.4), whose ``LeRobotDataset`` loads what is written here (``tests/storage/test_lerobot_export.py``); nothing of
-it is imported: the files are written with pyarrow.
-
-One press is one episode and one tactile frame one row. A LeRobot dataset has one frame rate, and the sensors of a
-press dataset never run together (each session mounts one sensor, at its own rate: uSkin 100 Hz, PapillArray up to
-1 kHz), so each sensor is **its own LeRobot dataset** in ``OUT/<sensor>/`` at that sensor's rate; the arm's 500 Hz
-wrench and TCP pose are sampled at each tactile frame (the arm sample nearest in host time, its offset kept in
-``observation.arm_dt_s``). Every time is host time, the one clock both streams were stamped with.
-
-Next to them: ``README.md`` (the card) and ``manifest.json`` (SHA-256 of every file; ``unitac-rig verify OUT``).
-:func:`load_matched_sets` reads an export back into the force-matched sets ``train`` joins, which give the same
-pairs as the Parquet export of the same data (the frames are the rows the press's extraction picked).
+One press is one episode and one tactile frame one row; each sensor is its own dataset in ``OUT/<sensor>/`` at that
+sensor's rate, with the arm's nearest sample at each frame (docs/dataset.md, "Export for LeRobot"). The layout's
+facts are taken from the standalone ``lerobot-dataset`` package (0.4.4), whose ``LeRobotDataset`` loads what is
+written here (``tests/storage/test_lerobot_export.py``); nothing of it is imported: the files are written with
+pyarrow. :func:`load_matched_sets` reads an export back into the force-matched sets ``train`` joins.
 """
 
 from __future__ import annotations
@@ -30,7 +19,8 @@ from typing import Any
 import numpy as np
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.lerobot_card import render_card, render_sensor_card
+from unitac_rig.storage.cards import lerobot_card, lerobot_sensor_card
+from unitac_rig.storage.extraction import nearest_index
 from unitac_rig.storage.manifest import exported_by, frames_array, sensor_layout_info, write_manifest
 from unitac_rig.storage.pooling import PooledSession, pooled_export
 from unitac_rig.storage.press_record import PressRecord
@@ -241,13 +231,6 @@ class _Episode:
     length: int
 
 
-def _nearest(sorted_t: np.ndarray, query: np.ndarray) -> np.ndarray:
-    pos = np.searchsorted(sorted_t, query)
-    left = np.clip(pos - 1, 0, sorted_t.size - 1)
-    right = np.clip(pos, 0, sorted_t.size - 1)
-    return np.where(np.abs(sorted_t[right] - query) < np.abs(sorted_t[left] - query), right, left)
-
-
 def _episode(
     rec: PressRecord, session: dict[str, Any], sensor: str, targets: Sequence[float], displacement: bool
 ) -> _Episode:
@@ -259,7 +242,7 @@ def _episode(
     tared = np.asarray(rec.tactile_values, np.float32) - tare.astype(np.float32)[None]
     robot_t = np.asarray(rec.robot_t_s, dtype=np.float64)
     if robot_t.size:
-        arm = _nearest(robot_t, t)
+        arm = nearest_index(robot_t, t)
         wrench = np.asarray(rec.robot_force, np.float32).reshape(-1, 6)[arm]
         pose = np.asarray(rec.robot_pose, np.float64).reshape(-1, 6)[arm].astype(np.float32)
         press = np.asarray(rec.press_force_n, np.float32)[arm]
@@ -290,8 +273,7 @@ def _episode(
         "timestamp": (t - t[0]).astype(np.float32),
     }
     if displacement:
-        disp = rec.tactile_displacement_mm
-        columns[f"{key}.displacement_mm"] = np.asarray(disp, np.float32)
+        columns[f"{key}.displacement_mm"] = np.asarray(rec.tactile_displacement_mm, np.float32)
     threshold = rec.attrs.get("threshold_n")
     meta: dict[str, Any] = {
         "unitac/object": session["object"],
@@ -307,18 +289,10 @@ def _episode(
         "unitac/t0_host_s": float(t[0]),
         "unitac/tare_baseline": tare.reshape(-1),
     }
-    if ex is not None:
-        meta.update(
-            {
-                "extraction/targets_n": np.asarray(ex.targets_n, np.float64),
-                "extraction/crossing_t_s": np.asarray(ex.crossing_t_s, np.float64),
-                "extraction/frame_index": np.asarray(ex.frame_index, np.int64),
-                "extraction/force_at_frame_n": np.asarray(ex.force_at_frame_n, np.float64),
-                "extraction/error_n": np.asarray(ex.error_n, np.float64),
-                "extraction/miss": np.asarray(ex.miss, bool),
-                "extraction/settings": json.dumps(ex.settings.to_dict()),
-            }
-        )
+    if ex is not None:  # every per-target array but frame_t_s (the frame's row gives its time)
+        kept = ("targets_n", "crossing_t_s", "frame_index", "force_at_frame_n", "error_n", "miss")
+        meta |= {f"extraction/{name}": np.asarray(getattr(ex, name)) for name in kept}
+        meta["extraction/settings"] = json.dumps(ex.settings.to_dict())
     shape = session.get("shape")
     material = session.get("material")
     what = f" ({' '.join(str(x) for x in (shape, material) if x)})" if shape or material else ""
@@ -567,9 +541,9 @@ def export_lerobot(data_dirs: Sequence[Path], out: Path) -> LeRobotExportSummary
                 for item in pooled
             ],
         }
-        (staging / CARD_NAME).write_text(render_card(document), encoding="utf-8")
+        (staging / CARD_NAME).write_text(lerobot_card(document), encoding="utf-8")
         for sensor, summary in summaries.items():
-            (staging / sensor / CARD_NAME).write_text(render_sensor_card(sensor, summary, document), encoding="utf-8")
+            (staging / sensor / CARD_NAME).write_text(lerobot_sensor_card(sensor, summary, document), encoding="utf-8")
         files = sorted(str(p.relative_to(staging)) for p in staging.rglob("*") if p.is_file())
         write_manifest(staging, document, files)
     total = sum((out / rel).stat().st_size for rel in files)

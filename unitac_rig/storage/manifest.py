@@ -1,11 +1,7 @@
 """What every export shares: building it in a hidden sibling folder and publishing it whole (:func:`staging_for`,
-:func:`publish_when_done`), what it says about its maker and sensors, and ``manifest.json``: what it holds and the
-SHA-256 of every file in it, so a copy can be checked.
-
-The manifest lists every file of the export (relative path, size in bytes, SHA-256) except itself, plus whatever
-the exporter describes (schema, units, counts, provenance; see :mod:`unitac_rig.storage.export`).
-:func:`verify_manifest` re-hashes the files and stops at the first one that is missing, has another size or
-another hash, and refuses a directory holding files the manifest does not list (added after export).
+:func:`publish_when_done`), what it says about its maker and sensors, and ``manifest.json``: every file of the export
+but itself (path, bytes, SHA-256) plus what the exporter describes. :func:`verify_manifest` re-hashes them, stops at
+the first that is missing or differs, and refuses files the manifest does not list.
 """
 
 from __future__ import annotations
@@ -44,16 +40,13 @@ def sha256_file(path: Path) -> str:
     return digest.hexdigest()
 
 
-def file_entry(root: Path, relative: str) -> dict[str, Any]:
-    path = Path(root) / relative
-    return {"path": relative, "bytes": path.stat().st_size, "sha256": sha256_file(path)}
-
-
 def write_manifest(root: Path, document: Mapping[str, Any], files: Iterable[str]) -> Path:
     """Write ``root/manifest.json``: ``document`` plus ``manifest_version`` and the ``files`` list (hashed now)."""
     root = Path(root)
     body = {"manifest_version": MANIFEST_VERSION, **document}
-    body["files"] = [file_entry(root, rel) for rel in sorted(files)]
+    body["files"] = [
+        {"path": rel, "bytes": (root / rel).stat().st_size, "sha256": sha256_file(root / rel)} for rel in sorted(files)
+    ]
     path = root / MANIFEST_NAME
     tmp = path.with_name(f".{MANIFEST_NAME}.tmp")
     tmp.write_text(json.dumps(body, indent=1, sort_keys=False) + "\n", encoding="utf-8")
@@ -83,7 +76,6 @@ def read_manifest(root: Path) -> dict[str, Any]:
 class VerifyReport:
     files: int
     bytes: int
-    unlisted: tuple[str, ...]  # files in the directory the manifest does not mention (verify_manifest refuses them)
 
 
 def _safe_relative(root: Path, relative: object) -> Path:
@@ -135,7 +127,7 @@ def verify_manifest(root: Path) -> VerifyReport:
             f"{root / unlisted[0]}{more}: not in the manifest (added after export)",
             hint="remove what was added, or copy the export again",
         )
-    return VerifyReport(files=len(listed), bytes=total, unlisted=unlisted)
+    return VerifyReport(files=len(listed), bytes=total)
 
 
 def sensor_layout_info(sensor: str, n_taxels: int = 0) -> dict[str, Any]:

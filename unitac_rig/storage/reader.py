@@ -93,7 +93,7 @@ class SessionInfo:
     sensor: str
     simulated: bool
     attrs: dict[str, Any]
-    integrity: str = "verified"  # or why not (see SessionCheck.describe); "repaired: ..." when a read repaired it
+    integrity: str = "verified"  # or why not (see Verified.integrity); "repaired: ..." when a read repaired it
     repairs: tuple[str, ...] = field(default_factory=tuple)
 
 
@@ -128,7 +128,7 @@ class Verified:
 
     @property
     def integrity(self) -> str:
-        described = self.check.describe()
+        described = "damaged" if self.check.needs_repair else "verified"
         return f"repaired from the journal, {described}" if self.repairs else described
 
 
@@ -293,9 +293,9 @@ def _rebuild_vanished(data_dir: Path, present: list[Path]) -> list[Path]:
     return rebuilt
 
 
-def read_presses(path: Path, *, with_streams: bool = True) -> list[PressRecord]:
+def read_presses(path: Path) -> list[PressRecord]:
     with _open(path) as f:
-        return [read_press_group(g) for _, g in iter_press_groups(f)] if with_streams else []
+        return [read_press_group(g) for _, g in iter_press_groups(f)]
 
 
 def press_summaries(path: Path) -> list[dict[str, Any]]:
@@ -312,6 +312,15 @@ def press_summaries(path: Path) -> list[dict[str, Any]]:
             item["robot_samples"] = int(g["robot/t_s"].shape[0])
             out.append(item)
     return out
+
+
+def press_counts(attrs: dict[str, Any], presses: list[dict[str, Any]]) -> dict[str, int]:
+    """A session's presses planned (its ``planned_presses``; without them, those it holds), complete, failed and
+    aborted, from its root attributes and :func:`press_summaries`."""
+    counts = {"planned": len(attrs.get("planned_presses") or []) or len(presses)}
+    return counts | {
+        status: sum(p["status"] == status for p in presses) for status in ("complete", "failed", "aborted")
+    }
 
 
 def rig_label(attrs: dict[str, Any]) -> str:

@@ -17,10 +17,10 @@ import numpy as np
 from unitac_rig.errors import DataError
 from unitac_rig.storage.extraction import Extraction, ExtractionSettings
 from unitac_rig.storage.integrity import ROOT_ATTR, check_session
-from unitac_rig.storage.journal import journal_entry_check, session_journal
+from unitac_rig.storage.journal import journal_entry_check, read_journal_header, session_journal, write_header
 from unitac_rig.storage.lease import SessionLease
 from unitac_rig.storage.manifest import sha256_file
-from unitac_rig.storage.press_record import iter_press_groups, json_default, reseal_extraction, write_extraction
+from unitac_rig.storage.press_record import iter_press_groups, reseal_extraction, write_extraction
 from unitac_rig.storage.recorder import (
     PRESS_GROUP,
     SessionWriter,
@@ -109,10 +109,6 @@ def reextract_sessions(
        removes the copies and leaves the dataset as it was; a crash during step 3 leaves each session's file old
        or new, never a mix of presses.
     """
-    problems = settings.problems()
-    if problems:
-        name, why = problems[0]
-        raise DataError(f"extraction setting {name}: {why}")
     hint = "rerun extract when that collection has finished"
     leases: list[SessionLease] = []
     writers: list[SessionWriter] = []
@@ -158,13 +154,10 @@ def reextract_sessions(
                 copies.extend(session_copies[-1:])
             for entry in entries:
                 copies.append((_reextract_copy(entry, settings)[0], entry))
-            header_path = session_journal(path) / "_session.json"
-            if header_path.exists():
-                data = json.loads(header_path.read_text())
-                data["extraction_settings"] = settings.to_dict()
-                tmp = private_copy_path(header_path)
-                tmp.write_text(json.dumps(data, default=json_default, indent=1))
-                copies.append((tmp, header_path))
+            journal = session_journal(path)
+            if (journal / "_session.json").exists():
+                header = {**read_journal_header(journal), "extraction_settings": settings.to_dict()}
+                copies.append((write_header(journal, header, publish=False), journal / "_session.json"))
             results.append((path, presses, matched))
         if accept is not None:
             accept(results)

@@ -315,8 +315,13 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
             check.file_problem = f"its press index could not be read ({_one_line(exc)})"
             return check
         for pid in names:
-            missing = _missing_press_file(path, presses, pid)
-            if missing:
+            try:
+                link = presses.get(pid, getlink=True)
+            except Exception as exc:
+                check.damaged[pid] = f"its link could not be read ({_one_line(exc)})"
+                continue
+            filename = str(link.filename) if isinstance(link, h5py.ExternalLink) else None
+            if missing := _missing_press_file(path, filename):
                 check.damaged[pid] = missing
                 continue
             try:
@@ -333,7 +338,7 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
             result = PressCheck("ok") if trusted else check_press_group(g)
             if result.damaged:
                 check.damaged[pid] = result.detail
-            elif identity and (wrong := press_identity_problem(g, pid, identity, _link_name(presses, pid))):
+            elif identity and (wrong := press_identity_problem(g, pid, identity, filename)):
                 check.damaged[pid] = wrong
             else:
                 try:
@@ -365,11 +370,6 @@ def press_seal(path: Path, presses: h5py.Group, pid: str) -> str | None:
     return seal
 
 
-def _link_name(presses: h5py.Group, pid: str) -> str | None:
-    link = presses.get(pid, getlink=True)
-    return str(link.filename) if isinstance(link, h5py.ExternalLink) else None
-
-
 def file_stamp(path: Path) -> str:
     """A file's identity and version: device, inode, size, mtime and ctime (ns). Any write, copy or rename-over
     changes it (ctime cannot be set back by ``touch``), so a result remembered for one stamp holds only for it."""
@@ -377,19 +377,13 @@ def file_stamp(path: Path) -> str:
     return f"{st.st_dev}:{st.st_ino}:{st.st_size}:{st.st_mtime_ns}:{st.st_ctime_ns}"
 
 
-def _missing_press_file(path: Path, presses: h5py.Group, pid: str) -> str | None:
-    """Why the press file ``pid`` links to cannot be there (missing, or outside the session's folder), or None.
-
-    A session file links one file per press (``<object>__<sensor>.presses/``): copied without that folder, its
-    presses are missing, which is damage to repair from the journal or to refuse, never a silent gap.
-    """
-    try:
-        link = presses.get(pid, getlink=True)
-    except Exception as exc:
-        return f"its link could not be read ({_one_line(exc)})"
-    if not isinstance(link, h5py.ExternalLink):
+def _missing_press_file(path: Path, filename: str | None) -> str | None:
+    """Why the press file a press links to (``filename``; None: a group inside the file) cannot be there (missing,
+    or outside the session's folder), or None. A session file copied without its ``.presses/`` folder has its presses
+    missing: damage to repair from the journal or to refuse, never a silent gap."""
+    if filename is None:
         return None
-    target = Path(str(link.filename))
+    target = Path(filename)
     if target.is_absolute() or ".." in target.parts:
         return f"it links to {target}, outside the session's folder"
     if not (path.parent / target).is_file():

@@ -43,10 +43,6 @@ _HELD: dict[str, _Held] = {}  # lock file path -> the lease this process holds o
 _GUARD = threading.Lock()
 
 
-def lease_path(journal: Path) -> Path:
-    return Path(journal) / LEASE_NAME
-
-
 def _describe(info: dict[str, Any] | None) -> str:
     if not info:
         return "another process"
@@ -67,7 +63,7 @@ class SessionLease:
     """The exclusive right to change one session (its file and journal) while held."""
 
     def __init__(self, journal: Path, session: str) -> None:
-        self.path = lease_path(journal)
+        self.path = Path(journal) / LEASE_NAME
         self.session = session
         self._owner = object()
 
@@ -141,7 +137,7 @@ def lease_holder(journal: Path) -> dict[str, Any] | None:
 
     Never blocks and never disturbs a writer (see ACQUIRE_WAIT_S). A lease held by this very process counts too.
     """
-    path = lease_path(journal)
+    path = Path(journal) / LEASE_NAME
     with _GUARD:
         entry = _HELD.get(str(path))
         if entry is not None:

@@ -15,7 +15,7 @@ import h5py
 import numpy as np
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.extraction import Extraction, ExtractionSettings
+from unitac_rig.storage.extraction import Extraction, ExtractionSettings, extract_press
 from unitac_rig.storage.integrity import ROOT_ATTR, check_session
 from unitac_rig.storage.journal import journal_entry_check, read_journal_header, session_journal, write_header
 from unitac_rig.storage.lease import SessionLease
@@ -35,8 +35,6 @@ from unitac_rig.storage.recorder import (
 
 
 def _reextract_group(g: h5py.Group, settings: ExtractionSettings) -> Extraction:
-    from unitac_rig.storage.extraction import extract_press
-
     values = g["tactile/values"][()]
     extraction = extract_press(
         g["robot/t_s"][()], g["robot/press_force_n"][()], g["tactile/t_s"][()], g["tactile/valid"][()], settings

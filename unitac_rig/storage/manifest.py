@@ -135,25 +135,11 @@ def sensor_layout_info(sensor: str, n_taxels: int = 0) -> dict[str, Any]:
     registry does not know is one column of ``n_taxels``."""
     from unitac_rig.rig.sensors import SENSORS
 
+    keys = ("model", "rows", "cols", "n_taxels", "pitch_mm", "units")
     spec = SENSORS.get(sensor)
     if spec is None:
-        return {
-            "model": "unknown",
-            "rows": n_taxels,
-            "cols": 1,
-            "n_taxels": n_taxels,
-            "pitch_mm": None,
-            "units": "sensor units",
-        }
-    layout = spec.layout
-    return {
-        "model": layout.model,
-        "rows": layout.rows,
-        "cols": layout.cols,
-        "n_taxels": layout.n_taxels,
-        "pitch_mm": layout.pitch_mm,
-        "units": layout.units,
-    }
+        return dict(zip(keys, ("unknown", n_taxels, 1, n_taxels, None, "sensor units"), strict=True))
+    return {key: getattr(spec.layout, key) for key in keys}
 
 
 def frames_array(values: np.ndarray) -> Any:

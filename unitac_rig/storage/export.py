@@ -208,18 +208,17 @@ def export_dataset(data_dirs: Sequence[Path], out: Path) -> ExportSummary:
             provenance.append(_session_provenance(item, copy, digest))
             sets.append(load_matched_set(copy))
         paired = build_paired_dataset(sets)
-        sensors = tuple(paired.sensors)
+        sensors, objects = paired.sensors, paired.objects
         by_key = {
             (i.info.object_id, i.info.sensor): {**i.described(), "file": f"{RAW_DIR}/{i.info.path.name}"}
             for i in pooled
         }
         simulated = all(bool(e["simulated"]) for e in provenance if e["sensor"] in sensors)
-        objects = tuple(sorted(set(np.asarray(paired.object_id).astype(str).tolist())))
         counts = {
             "contacts": len(paired),
             "rows": len(paired) * len(sensors),
             "sensors": {s: len(paired) for s in sensors},
-            "contacts_per_object": {o: int(np.sum(np.asarray(paired.object_id).astype(str) == o)) for o in objects},
+            "contacts_per_object": {o: int(np.sum(paired.object_id == o)) for o in objects},
             "matched_frames_without_partner": {s: int(n) for s, n in paired.dropped_per_sensor.items()},
             "sessions": len(provenance),
         }

@@ -257,7 +257,8 @@ class SessionCheck:
     file_problem: str | None = None  # the file cannot be used at all (does not open, foreign, index unreadable)
     root_problem: str | None = None  # the root attributes differ from their checksum
     damaged: dict[str, str] = field(default_factory=dict)  # press id -> what is wrong
-    verified: list[str] = field(default_factory=list)  # presses whose every array and attribute matched
+    identity: dict[str, str] = field(default_factory=dict)  # what the verified root names (IDENTITY_KEYS)
+    seals: set[tuple[str, str]] = field(default_factory=set)  # (press id, press_seal) of every verified press
     half_written: list[str] = field(default_factory=list)  # groups without write_complete (readers skip them)
     statuses: dict[str, str] = field(default_factory=dict)  # status of every intact, complete-written press
 
@@ -302,12 +303,11 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
             return check
         if check.version != SCHEMA_VERSION:
             return check  # another format: not ours to judge (the readers say which version it is)
-        identity: dict[str, str] = {}
         root = check_root(f)
         if root.damaged:
             check.root_problem = root.detail
         else:
-            identity, check.root_problem = root_identity(f, path)
+            check.identity, check.root_problem = root_identity(f, path)
         try:
             presses = f["presses"]
             names = sorted(presses)
@@ -333,12 +333,12 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
             if not complete:
                 check.half_written.append(pid)
                 continue
-            seal = press_seal(path, presses, pid) if known_good else None
+            seal = press_seal(path, presses, pid)
             trusted = seal is not None and (pid, seal) in known_good
             result = PressCheck("ok") if trusted else check_press_group(g)
             if result.damaged:
                 check.damaged[pid] = result.detail
-            elif identity and (wrong := press_identity_problem(g, pid, identity, filename)):
+            elif check.identity and (wrong := press_identity_problem(g, pid, check.identity, filename)):
                 check.damaged[pid] = wrong
             else:
                 try:
@@ -347,7 +347,8 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
                 except Exception as exc:  # a press trusted from an earlier read whose file changed since
                     check.damaged[pid] = f"its status could not be read ({_one_line(exc)})"
                     continue
-                check.verified.append(pid)
+                if seal is not None:
+                    check.seals.add((pid, seal))
     return check
 
 

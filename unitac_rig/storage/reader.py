@@ -24,14 +24,12 @@ import numpy as np
 from unitac_rig.errors import DataError
 from unitac_rig.rig.sensors import SENSORS
 from unitac_rig.storage.integrity import (
-    IDENTITY_KEYS,
     PRESS_ATTR,
     SCHEMA_VERSION,
     SessionCheck,
     as_str,
     attrs_digest,
     check_session,
-    press_seal,
     root_attr_items,
 )
 from unitac_rig.storage.journal import journal_problems, session_journal
@@ -171,12 +169,17 @@ def verified_session(path: Path) -> Verified:
     if cached is not None:
         return cached
     stored, stored_journal = load_trust(path)
+
+    def journal_issues(check: SessionCheck) -> tuple[dict[str, str], dict[str, str]]:
+        """Which intact presses lost their repair copy (:func:`journal_problems`), and the entries verified intact."""
+        return journal_problems(path, sorted(check.statuses), check.identity, stored_journal)
+
     with _VERIFIED_GUARD:
         known = set(_PRESSES_OK.get(str(path.resolve()), ())) | stored
     check = check_session(path, known)
     damaged = check.needs_repair
     repairs: tuple[str, ...] = ()
-    issues, good = ({}, {}) if damaged else _journal_issues(path, check, stored_journal)
+    issues, good = ({}, {}) if damaged else journal_issues(check)
     if issues and lease_holder(session_journal(path)) is not None:
         for issue in issues.values():  # the collection writing it now recreates it when it next opens the session
             log.warning("%s: %s (the session is being written now; rerun later to restore it)", path, issue)
@@ -193,36 +196,17 @@ def verified_session(path: Path) -> Verified:
         check = check_session(path, known)
         if damaged and check.needs_repair:
             raise DataError(check.first_problem(), hint="restore the file from a backup")
-        issues, good = _journal_issues(path, check, stored_journal)
+        issues, good = journal_issues(check)
         for issue in issues.values() if repairs or damaged else ():
             log.warning("%s: %s", path, issue)
     result = Verified(check, repairs)
-    seals = _press_seals(path, check.verified)
-    save_trust(path, seals, good)
+    save_trust(path, check.seals, good)
     key = _version_key(path)
     with _VERIFIED_GUARD:
-        _PRESSES_OK.setdefault(str(path.resolve()), set()).update(seals)
+        _PRESSES_OK.setdefault(str(path.resolve()), set()).update(check.seals)
         if key is not None:
             _VERIFIED[key] = result
     return result
-
-
-def _journal_issues(path: Path, check: SessionCheck, trusted: dict[str, str]) -> tuple[dict[str, str], dict[str, str]]:
-    """:func:`journal_problems` for an intact session file: its identity from its verified root."""
-    with h5py.File(path, "r") as f:
-        identity = {k: as_str(f.attrs[k]) for k in IDENTITY_KEYS}
-    return journal_problems(path, sorted(check.statuses), identity, trusted)
-
-
-def _press_seals(path: Path, pids: list[str]) -> set[tuple[str, str]]:
-    """(press id, :func:`press_seal`) of the verified presses: what a later version may trust (``known_good``)."""
-    seals: set[tuple[str, str]] = set()
-    with h5py.File(path, "r") as f:
-        for pid in pids:
-            seal = press_seal(path, f["presses"], pid)
-            if seal is not None:
-                seals.add((pid, seal))
-    return seals
 
 
 def _open(path: Path) -> h5py.File:

@@ -64,7 +64,7 @@ RAW_PARTS = ("robot/", "tactile/", "tare_baseline", "events")
 def raw_contents(path: Path) -> dict[str, str]:
     """press id -> digest of what was recorded in a session file (raw streams, tare, events, status): what damage
     may not lose. The extraction is left out (``extract`` recomputes it); an unreadable press is absent."""
-    from unitac_rig.storage.checksums import array_digest, attrs_digest
+    from unitac_rig.storage.integrity import array_digest, attrs_digest
 
     out: dict[str, str] = {}
     try:

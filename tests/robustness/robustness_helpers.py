@@ -9,7 +9,7 @@ import pytest
 
 from unitac_rig.rig.config import parse_rig_config
 from unitac_rig.storage.lease import LEASE_NAME
-from unitac_rig.storage.trust import TRUST_NAME
+from unitac_rig.storage.reader import TRUST_NAME
 
 FEW_ANGLES = {"press": {"angle_count": 3}}
 

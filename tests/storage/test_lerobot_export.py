@@ -20,7 +20,7 @@ import pytest
 from tests.helpers import cli
 from tests.robustness.robustness_helpers import one_error_line
 from unitac_rig.learning.data import build_paired_dataset, load_sets
-from unitac_rig.storage import lerobot, lerobot_card
+from unitac_rig.storage import cards, lerobot
 from unitac_rig.storage.reader import read_presses
 
 SENSORS = ("uskin", "papillarray")
@@ -156,9 +156,7 @@ def test_each_sensor_folder_is_a_hub_dataset_with_its_own_card(exported: Path) -
         meta = _front_matter(card)
         frames = len(_frames(exported / sensor))
         assert meta["license"] == "cc-by-4.0" and meta["task_categories"] == ["robotics"]
-        assert (
-            meta["size_categories"] == [lerobot_card.size_category(frames)] == ["n<1K" if frames < 1000 else "1K<n<10K"]
-        )
+        assert meta["size_categories"] == [cards.size_category(frames)] == ["n<1K" if frames < 1000 else "1K<n<10K"]
         assert sensor in meta["tags"] and "LeRobot" in meta["tags"]
         assert "@inproceedings{hou2025unitacnv" in card and "IROS" in card and "2506.19699" in card
         assert f"{sensor}/README.md" in listed  # in the manifest: verify checks it

@@ -145,6 +145,14 @@ def smooth(values: np.ndarray, window: int) -> np.ndarray:
     return (padded_sum[hi] - padded_sum[lo]) / (hi - lo)
 
 
+def nearest_index(sorted_t: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """Index of the element of ``sorted_t`` nearest each of ``query`` (the earlier one on a tie)."""
+    pos = np.searchsorted(sorted_t, query)
+    left = np.clip(pos - 1, 0, sorted_t.size - 1)
+    right = np.clip(pos, 0, sorted_t.size - 1)
+    return np.where(np.abs(sorted_t[right] - query) < np.abs(sorted_t[left] - query), right, left)
+
+
 def first_upward_crossings(t_s: np.ndarray, force_n: np.ndarray, targets_n: np.ndarray) -> np.ndarray:
     """Interpolated time at which ``force_n`` first rises through each target, up to its peak (NaN if never)."""
     t_s = np.asarray(t_s, dtype=np.float64)
@@ -296,12 +304,7 @@ def extract_press(
     miss = np.ones(n, dtype=bool)
     if frame_t.size and robot_t.size:
         reached = ~np.isnan(crossing)
-        # nearest frame in time to each crossing
-        pos = np.searchsorted(frame_t, crossing[reached])
-        left = np.clip(pos - 1, 0, frame_t.size - 1)
-        right = np.clip(pos, 0, frame_t.size - 1)
-        pick_right = np.abs(frame_t[right] - crossing[reached]) < np.abs(frame_t[left] - crossing[reached])
-        nearest = np.where(pick_right, right, left)
+        nearest = nearest_index(frame_t, crossing[reached])
         frame_index[reached] = nearest
         frame_time[reached] = frame_t[nearest]
         force_at[reached] = force_at_times(frame_t[nearest], reached)

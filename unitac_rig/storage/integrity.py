@@ -1,21 +1,187 @@
-"""Checking a session file against its checksums (read-only): which presses are intact, damaged, or carry none.
+"""Verifying what was recorded: the SHA-256 checksums that travel with the data, and the check of a session file
+against them (read-only; docs/dataset.md, "Integrity").
 
-:func:`check_session` reads every array of every press (a full read of the file) and never raises for damage; what
-to do about it is the caller's: the recorder repairs from the journal (:mod:`unitac_rig.storage.recorder`), the
-readers repair or refuse (:func:`unitac_rig.storage.reader.verified_session`).
+A press group carries ``checksums`` (JSON): ``{"algorithm": "sha256", "arrays": {"robot/t_s": hex, ...}, "attrs":
+hex}``. An array's digest covers its dtype, shape and bytes as written (events: their values as canonical JSON); the
+``attrs`` digest covers the attributes of the group and of everything inside it (``write_complete`` and
+``checksums`` excepted) as canonical JSON, so it survives a copy unchanged. Digests are computed from the in-memory
+arrays when a press is first written and never change afterwards, except the extraction's (``unitac-rig extract``
+verifies the raw arrays, then seals the new extraction). A session file's root carries ``attrs_sha256`` over its
+root attributes and sorted press ids, so a press link removed, added or renamed is damage too. A press's identity
+(object, sensor, session id, press id, angle) is among its sealed attributes (:func:`press_identity_problem`).
+
+:func:`check_session` reads every array of every press and never raises for damage; what to do about it is the
+caller's: the recorder repairs from the journal, the readers repair or refuse
+(:func:`unitac_rig.storage.reader.verified_session`).
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
-from collections.abc import Container
+from collections.abc import Container, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import h5py
+import numpy as np
 
-from unitac_rig.storage.checksums import PRESS_ATTR, PressCheck, check_press_group, check_root
+ALGORITHM = "sha256"
+PRESS_ATTR = "checksums"  # on every press group (journal entry or session file)
+ROOT_ATTR = "attrs_sha256"  # on a session file's root
+_UNSEALED_ATTRS = frozenset({"write_complete", PRESS_ATTR, ROOT_ATTR})
+
+
+def _plain(value: Any) -> Any:
+    """A stored value as plain JSON-able Python, the same whatever width or container HDF5 gave back."""
+    if isinstance(value, bytes):
+        return value.decode("utf-8")  # a flipped bit that breaks UTF-8 raises: the caller counts it as damage
+    if isinstance(value, np.ndarray):
+        return [_plain(v) for v in value.tolist()]
+    if isinstance(value, np.generic):
+        return _plain(value.item())
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _canonical(value: Any) -> bytes:
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=True).encode("utf-8")
+
+
+def array_digest(array: np.ndarray) -> str:
+    """Hex SHA-256 of an array's dtype, shape and little-endian bytes (structured/object arrays: canonical JSON)."""
+    a = np.asarray(array)
+    digest = hashlib.sha256()
+    if a.dtype.names is not None or a.dtype.hasobject:
+        digest.update(b"json:" + _canonical(_plain(a.tolist())))
+    else:
+        a = np.ascontiguousarray(a)
+        if a.dtype.byteorder == ">":
+            a = a.astype(a.dtype.newbyteorder("<"))
+        digest.update(f"{a.dtype.str}:{a.shape}:".encode())
+        digest.update(a.tobytes())
+    return digest.hexdigest()
+
+
+def attrs_digest(items: Iterable[tuple[str, Any]]) -> str:
+    """Hex SHA-256 of (path@name, value) attribute pairs as canonical JSON."""
+    plain = {key: _plain(value) for key, value in items}
+    return hashlib.sha256(_canonical(plain)).hexdigest()
+
+
+def _group_attr_items(group: h5py.Group) -> list[tuple[str, Any]]:
+    """Every attribute of ``group`` and of the groups and datasets inside it, keyed ``path@name``."""
+    items = [(f"@{k}", v) for k, v in group.attrs.items() if k not in _UNSEALED_ATTRS]
+
+    def visit(name: str, obj: Any) -> None:
+        items.extend((f"{name}@{k}", v) for k, v in obj.attrs.items())
+
+    group.visititems(visit)
+    return items
+
+
+def dataset_paths(group: h5py.Group) -> list[str]:
+    paths: list[str] = []
+    group.visititems(lambda name, obj: paths.append(name) if isinstance(obj, h5py.Dataset) else None)
+    return sorted(paths)
+
+
+def seal_press_group(group: h5py.Group, arrays: Mapping[str, str]) -> None:
+    """Store the array digests (computed by the writer from what it wrote) and the digest of the attributes now."""
+    document = {"algorithm": ALGORITHM, "arrays": dict(sorted(arrays.items()))}
+    group.attrs[PRESS_ATTR] = json.dumps({**document, "attrs": attrs_digest(_group_attr_items(group))})
+
+
+def sealed_arrays(group: h5py.Group) -> dict[str, str]:
+    """The array digests a (verified) press group carries."""
+    raw = group.attrs[PRESS_ATTR]
+    return dict(json.loads(as_str(raw))["arrays"])
+
+
+@dataclass(frozen=True)
+class PressCheck:
+    """The outcome of verifying one press group or a root: ``ok`` or ``damaged`` (why: ``detail``)."""
+
+    state: str
+    detail: str = ""
+
+    @property
+    def damaged(self) -> bool:
+        return self.state == "damaged"
+
+
+def check_press_group(group: h5py.Group) -> PressCheck:
+    """Read every array of a press group and compare it with the digests it carries. Never raises for damage: an
+    unreadable chunk, a missing or extra dataset, a changed byte or attribute all come back as ``damaged``."""
+    try:
+        raw = group.attrs.get(PRESS_ATTR)
+    except Exception as exc:  # h5py raises many types for damaged metadata
+        return PressCheck("damaged", f"attributes unreadable ({_one_line(exc)})")
+    if raw is None:
+        return PressCheck("damaged", "it has no checksums")
+    try:
+        document = json.loads(as_str(raw))
+        expected = dict(document["arrays"])
+        expected_attrs = str(document["attrs"])
+        if document.get("algorithm") != ALGORITHM:
+            return PressCheck("damaged", f"unknown checksum algorithm {document.get('algorithm')!r}")
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        return PressCheck("damaged", f"checksums attribute unreadable ({_one_line(exc)})")
+    try:
+        present = dataset_paths(group)
+    except Exception as exc:
+        return PressCheck("damaged", f"group index unreadable ({_one_line(exc)})")
+    for path in sorted(set(expected) | set(present)):
+        if path not in present:
+            return PressCheck("damaged", f"{path} is missing")
+        if path not in expected:
+            return PressCheck("damaged", f"{path} is not in its checksums")
+        try:
+            data = group[path][()]
+        except Exception as exc:  # a damaged chunk fails decompression (OSError) or worse
+            return PressCheck("damaged", f"{path} is unreadable ({_one_line(exc)})")
+        if array_digest(data) != expected[path]:
+            return PressCheck("damaged", f"{path} differs from its checksum")
+    try:
+        if attrs_digest(_group_attr_items(group)) != expected_attrs:
+            return PressCheck("damaged", "its attributes differ from their checksum")
+    except Exception as exc:
+        return PressCheck("damaged", f"attributes unreadable ({_one_line(exc)})")
+    return PressCheck("ok")
+
+
+def root_attr_items(f: h5py.File) -> list[tuple[str, Any]]:
+    return [(k, v) for k, v in f.attrs.items() if k not in _UNSEALED_ATTRS]
+
+
+def _root_sealed_items(f: h5py.File) -> list[tuple[str, Any]]:
+    """What a root seal covers: the root attributes and the sorted press ids."""
+    presses = f.get("presses")
+    return [*root_attr_items(f), (" presses", sorted(presses) if presses is not None else [])]
+
+
+def seal_root(f: h5py.File) -> None:
+    f.attrs[ROOT_ATTR] = attrs_digest(_root_sealed_items(f))
+
+
+def check_root(f: h5py.File) -> PressCheck:
+    """Verify a session file's root attributes (and press list) against ``attrs_sha256``; a missing seal is damage
+    (a damaged attribute heap can hide it), never "unsealed"."""
+    try:
+        names = list(f.attrs)
+        if ROOT_ATTR not in names:
+            return PressCheck("damaged", "its root seal (attrs_sha256) is missing or unreadable")
+        expected = f.attrs[ROOT_ATTR]
+        expected = as_str(expected)
+        if attrs_digest(_root_sealed_items(f)) != expected:
+            return PressCheck("damaged", "its root attributes or press list differ from their checksum")
+    except Exception as exc:
+        return PressCheck("damaged", f"its root attributes are unreadable ({_one_line(exc)})")
+    return PressCheck("ok")
+
 
 #: the one session format: SHA-256 checksums on every press and on the root attributes, every press carrying its
 #: identity (IDENTITY_KEYS, press id, angle) under its seal, the root seal covering the list of presses
@@ -25,7 +191,8 @@ IDENTITY_KEYS = ("object", "sensor", "session_id")
 PRESS_DIR_SUFFIX = ".presses"  # a session's press files: ``<object>__<sensor>.presses/<press_id>-<sha12>.h5``
 
 
-def _text(value: Any) -> str:
+def as_str(value: Any) -> str:
+    """A stored string attribute as text (h5py gives bytes or str)."""
     return value.decode() if isinstance(value, bytes) else str(value)
 
 
@@ -42,7 +209,7 @@ def press_identity_problem(group: h5py.Group, pid: str, identity: dict[str, str]
     press intact but in the wrong place (another object's or sensor's file copied over it, two press files or
     journal entries swapped) is caught here."""
     try:
-        attrs = {key: _text(group.attrs[key]) for key in (*IDENTITY_KEYS, "press_id") if key in group.attrs}
+        attrs = {key: as_str(group.attrs[key]) for key in (*IDENTITY_KEYS, "press_id") if key in group.attrs}
         rotation, angle = float(group.attrs["rotation_deg"]), float(group.attrs["angle_deg"])
     except Exception as exc:
         return f"its identity attributes are unreadable ({_one_line(exc)})"
@@ -69,7 +236,7 @@ def press_identity_problem(group: h5py.Group, pid: str, identity: dict[str, str]
 def root_identity(f: h5py.File, path: Path) -> tuple[dict[str, str], str | None]:
     """(the session identity a file's verified root names, why it does not fit the file's name or None)."""
     try:
-        identity = {key: _text(f.attrs[key]) for key in IDENTITY_KEYS if key in f.attrs}
+        identity = {key: as_str(f.attrs[key]) for key in IDENTITY_KEYS if key in f.attrs}
     except Exception as exc:
         return {}, f"its identity attributes are unreadable ({_one_line(exc)})"
     missing = [key for key in IDENTITY_KEYS if key not in identity]
@@ -90,7 +257,8 @@ class SessionCheck:
     file_problem: str | None = None  # the file cannot be used at all (does not open, foreign, index unreadable)
     root_problem: str | None = None  # the root attributes differ from their checksum
     damaged: dict[str, str] = field(default_factory=dict)  # press id -> what is wrong
-    verified: list[str] = field(default_factory=list)  # presses whose every array and attribute matched
+    identity: dict[str, str] = field(default_factory=dict)  # what the verified root names (IDENTITY_KEYS)
+    seals: set[tuple[str, str]] = field(default_factory=set)  # (press id, press_seal) of every verified press
     half_written: list[str] = field(default_factory=list)  # groups without write_complete (readers skip them)
     statuses: dict[str, str] = field(default_factory=dict)  # status of every intact, complete-written press
 
@@ -107,10 +275,6 @@ class SessionCheck:
         pid, what = next(iter(self.damaged.items()))
         more = f" (and {len(self.damaged) - 1} more presses)" if len(self.damaged) > 1 else ""
         return f"{self.path}: press {pid}: {what}{more}"
-
-    def describe(self) -> str:
-        """A word for ``inspect`` and export manifests: ``verified`` or ``damaged``."""
-        return "damaged" if self.needs_repair else "verified"
 
 
 def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> SessionCheck:
@@ -139,12 +303,11 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
             return check
         if check.version != SCHEMA_VERSION:
             return check  # another format: not ours to judge (the readers say which version it is)
-        identity: dict[str, str] = {}
         root = check_root(f)
         if root.damaged:
             check.root_problem = root.detail
         else:
-            identity, check.root_problem = root_identity(f, path)
+            check.identity, check.root_problem = root_identity(f, path)
         try:
             presses = f["presses"]
             names = sorted(presses)
@@ -152,8 +315,13 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
             check.file_problem = f"its press index could not be read ({_one_line(exc)})"
             return check
         for pid in names:
-            missing = _missing_press_file(path, presses, pid)
-            if missing:
+            try:
+                link = presses.get(pid, getlink=True)
+            except Exception as exc:
+                check.damaged[pid] = f"its link could not be read ({_one_line(exc)})"
+                continue
+            filename = str(link.filename) if isinstance(link, h5py.ExternalLink) else None
+            if missing := _missing_press_file(path, filename):
                 check.damaged[pid] = missing
                 continue
             try:
@@ -165,21 +333,22 @@ def check_session(path: Path, known_good: Container[tuple[str, str]] = ()) -> Se
             if not complete:
                 check.half_written.append(pid)
                 continue
-            seal = press_seal(path, presses, pid) if known_good else None
+            seal = press_seal(path, presses, pid)
             trusted = seal is not None and (pid, seal) in known_good
             result = PressCheck("ok") if trusted else check_press_group(g)
             if result.damaged:
                 check.damaged[pid] = result.detail
-            elif identity and (wrong := press_identity_problem(g, pid, identity, _link_name(presses, pid))):
+            elif check.identity and (wrong := press_identity_problem(g, pid, check.identity, filename)):
                 check.damaged[pid] = wrong
             else:
                 try:
                     status = g.attrs["status"]
-                    check.statuses[pid] = status.decode() if isinstance(status, bytes) else str(status)
+                    check.statuses[pid] = as_str(status)
                 except Exception as exc:  # a press trusted from an earlier read whose file changed since
                     check.damaged[pid] = f"its status could not be read ({_one_line(exc)})"
                     continue
-                check.verified.append(pid)
+                if seal is not None:
+                    check.seals.add((pid, seal))
     return check
 
 
@@ -191,7 +360,7 @@ def press_seal(path: Path, presses: h5py.Group, pid: str) -> str | None:
         raw = presses[pid].attrs.get(PRESS_ATTR)
         if raw is None:
             return None
-        seal = raw.decode() if isinstance(raw, bytes) else str(raw)
+        seal = as_str(raw)
         link = presses.get(pid, getlink=True)
         if isinstance(link, h5py.ExternalLink):
             seal += f"|{link.filename}|{file_stamp(Path(path).parent / str(link.filename))}"
@@ -202,11 +371,6 @@ def press_seal(path: Path, presses: h5py.Group, pid: str) -> str | None:
     return seal
 
 
-def _link_name(presses: h5py.Group, pid: str) -> str | None:
-    link = presses.get(pid, getlink=True)
-    return str(link.filename) if isinstance(link, h5py.ExternalLink) else None
-
-
 def file_stamp(path: Path) -> str:
     """A file's identity and version: device, inode, size, mtime and ctime (ns). Any write, copy or rename-over
     changes it (ctime cannot be set back by ``touch``), so a result remembered for one stamp holds only for it."""
@@ -214,19 +378,13 @@ def file_stamp(path: Path) -> str:
     return f"{st.st_dev}:{st.st_ino}:{st.st_size}:{st.st_mtime_ns}:{st.st_ctime_ns}"
 
 
-def _missing_press_file(path: Path, presses: h5py.Group, pid: str) -> str | None:
-    """Why the press file ``pid`` links to cannot be there (missing, or outside the session's folder), or None.
-
-    A session file links one file per press (``<object>__<sensor>.presses/``): copied without that folder, its
-    presses are missing, which is damage to repair from the journal or to refuse, never a silent gap.
-    """
-    try:
-        link = presses.get(pid, getlink=True)
-    except Exception as exc:
-        return f"its link could not be read ({_one_line(exc)})"
-    if not isinstance(link, h5py.ExternalLink):
+def _missing_press_file(path: Path, filename: str | None) -> str | None:
+    """Why the press file a press links to (``filename``; None: a group inside the file) cannot be there (missing,
+    or outside the session's folder), or None. A session file copied without its ``.presses/`` folder has its presses
+    missing: damage to repair from the journal or to refuse, never a silent gap."""
+    if filename is None:
         return None
-    target = Path(str(link.filename))
+    target = Path(filename)
     if target.is_absolute() or ".." in target.parts:
         return f"it links to {target}, outside the session's folder"
     if not (path.parent / target).is_file():

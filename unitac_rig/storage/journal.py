@@ -1,11 +1,7 @@
 """The journal: each press's durable log and repair copy (``DATA/.journal/<object>__<sensor>/<press_id>.h5``) and
-the session's header (``_session.json``), checked like the data they protect.
-
-An entry is verified against its checksums and, given the session's identity, against the press its
-name says and the session's object, sensor and session id (:func:`journal_entry_check`); readers ask
-:func:`journal_problems` which presses have lost their repair copy. A session file's extraction settings are the
-newer side when ``extract`` was killed between its renames (:func:`settings_of` compares them). The writer that
-repairs both sides is :class:`unitac_rig.storage.recorder.SessionWriter`.
+the session's header (``_session.json``), checked like the data they protect (docs/dataset.md, "The journal is
+checked like the data it protects"). The writer that repairs both sides is
+:class:`unitac_rig.storage.recorder.SessionWriter`.
 """
 
 from __future__ import annotations
@@ -20,10 +16,16 @@ from typing import Any
 import h5py
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.checksums import ROOT_ATTR, check_press_group, check_root
 from unitac_rig.storage.extraction import ExtractionSettings, extract_press
-from unitac_rig.storage.integrity import file_stamp, press_identity_problem
-from unitac_rig.storage.press_record import PressRecord, as_str, decode_attr, json_default, write_press_group
+from unitac_rig.storage.integrity import (
+    ROOT_ATTR,
+    as_str,
+    check_press_group,
+    check_root,
+    file_stamp,
+    press_identity_problem,
+)
+from unitac_rig.storage.press_record import PressRecord, decode_attr, json_default, write_press_group
 
 #: the group that holds the press in a press file and in a journal entry
 PRESS_GROUP = "press"
@@ -39,6 +41,11 @@ def session_path(data_dir: Path, object_id: str, sensor: str) -> Path:
 
 def journal_dir(data_dir: Path, object_id: str, sensor: str) -> Path:
     return Path(data_dir) / ".journal" / session_stem(object_id, sensor)
+
+
+def session_journal(path: Path) -> Path:
+    """The journal folder of the session file ``path``."""
+    return Path(path).parent / ".journal" / Path(path).stem
 
 
 def private_copy_path(path: Path) -> Path:
@@ -79,13 +86,6 @@ def write_journal_entry(journal: Path, rec: PressRecord) -> Path:
     return final
 
 
-def journal_check(path: Path, identity: Mapping[str, str] | None = None) -> tuple[str, str]:
-    """(state, status or detail) of a journal entry: ``ok``/``unsealed`` with the press status, or ``damaged``
-    (content, or with ``identity``: not the press of that session its name says)."""
-    entry = journal_entry_check(path, identity or {})
-    return (entry.state, entry.status) if entry.state != "damaged" else ("damaged", entry.detail)
-
-
 @dataclasses.dataclass(frozen=True)
 class JournalEntry:
     """What one journal entry holds: ``state`` ``ok``/``unsealed``/``damaged`` (why: ``detail``), the press status,
@@ -108,7 +108,7 @@ def journal_entry_check(path: Path, identity: Mapping[str, str]) -> JournalEntry
             if result.damaged:
                 return JournalEntry("damaged", result.detail)
             holds = as_str(group.attrs.get("press_id", ""))
-            settings = _group_settings(group)
+            settings = settings_of(group["extraction"].attrs["settings"]) if "extraction" in group else None
             status = as_str(group.attrs["status"])
             if identity:
                 wrong = press_identity_problem(group, holds, dict(identity), None)
@@ -128,15 +128,18 @@ def journal_problems(
     entry missing, damaged, holding another press) and whether the journal header is missing, as (what -> why,
     entry name -> stamp of the entries verified intact). ``trusted`` (entry name -> stamp) are not read again.
     Nothing when the session has no journal folder (an export's copy, files copied without ``.journal/``)."""
-    journal = journal_dir(Path(path).parent, *Path(path).stem.split("__", 1))
+    journal = session_journal(path)
     problems: dict[str, str] = {}
     good: dict[str, str] = {}
     if not journal.is_dir():
         return problems, good
     if not (journal / "_session.json").is_file():
         problems["_session.json"] = "the journal header _session.json is missing"
-    elif unreadable := _unreadable_header(journal):
-        problems["_session.json"] = f"the journal header is damaged: {unreadable}"
+    else:
+        try:
+            read_journal_header(journal)
+        except DataError as exc:
+            problems["_session.json"] = f"the journal header is damaged: {exc}"
     for pid in presses:
         entry = journal / f"{pid}.h5"
         try:
@@ -153,13 +156,6 @@ def journal_problems(
         else:
             good[entry.name] = stamp
     return problems, good
-
-
-def _group_settings(group: h5py.Group) -> dict[str, Any] | None:
-    """The extraction settings a press group was extracted with (None: no extraction)."""
-    if "extraction" not in group:
-        return None
-    return settings_of(group["extraction"].attrs["settings"])
 
 
 def settings_of(value: Any) -> dict[str, Any] | None:
@@ -187,15 +183,19 @@ def reextracted(rec: PressRecord, settings: Mapping[str, Any]) -> PressRecord:
     return dataclasses.replace(rec, extraction=extraction)
 
 
-def write_header(journal: Path, attrs: Mapping[str, Any]) -> None:
-    """Write ``journal/_session.json`` atomically (private name, rename)."""
+def write_header(journal: Path, attrs: Mapping[str, Any], publish: bool = True) -> Path:
+    """Write ``journal/_session.json`` under a private name and rename it into place; with ``publish`` False, return
+    the private copy instead (``extract`` renames every copy at once)."""
     header = journal / "_session.json"
     tmp = private_copy_path(header)
     try:
         tmp.write_text(json.dumps(dict(attrs), default=json_default, indent=1))
-        os.replace(tmp, header)
-    finally:
+        if publish:
+            os.replace(tmp, header)
+    except BaseException:
         tmp.unlink(missing_ok=True)
+        raise
+    return tmp
 
 
 def root_as_header(path: Path) -> dict[str, Any] | None:
@@ -226,19 +226,10 @@ def read_journal_header(journal: Path) -> dict[str, Any]:
     return data
 
 
-def _unreadable_header(journal: Path) -> str | None:
-    """Why ``journal/_session.json`` cannot be read (None when it reads)."""
-    try:
-        read_journal_header(journal)
-    except DataError as exc:
-        return str(exc)
-    return None
-
-
 def session_header(path: Path) -> dict[str, Any] | None:
     """The journal header of the session file ``path``; when the header is gone but its journal folder is there,
     the session file's verified root attributes (what the writer rewrites the header from); None: no journal."""
-    journal = Path(path).parent / ".journal" / Path(path).stem
+    journal = session_journal(path)
     if (journal / "_session.json").is_file():
         return read_journal_header(journal)
     return root_as_header(Path(path)) if journal.is_dir() else None

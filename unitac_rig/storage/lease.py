@@ -1,15 +1,10 @@
-"""Who writes a session right now: an advisory lock file in the session's journal folder.
+"""Who writes a session right now: an advisory ``flock`` on ``.journal/<object>__<sensor>/_writer.lock``.
 
-Readers need no lock at all: the writer never modifies a published session file in place, it swaps in a new copy
-(see :mod:`unitac_rig.storage.recorder`). Writers do need one, because two processes appending to one session
-would each publish a copy without the other's latest press. So every process that changes a session (``collect``,
-``campaign``, the importer, ``extract``) holds ``.journal/<object>__<sensor>/_writer.lock`` with ``flock``
-(exclusive) while it may write. The kernel drops the lock when the process dies, so a crash never leaves a stale
-lease; the file's text (pid, host, command, start time) only serves the error message.
-
-Inside one process a second writer of the same session takes the lease over from the first (tests and the
-importer reopen a session while an older writer object is still referenced); across processes the second one
-fails with a :class:`DataError` naming the holder.
+Readers need no lock (the writer never changes a published file in place); every process that changes a session
+(``collect``, ``campaign``, the importer, ``extract``) holds this one exclusively while it may write, since two
+writers would each publish a copy without the other's latest press. The kernel drops it when the process dies, so
+a crash never leaves a stale lease; the file's text (pid, host, command, start time) only serves the error message.
+Inside one process a second writer of the same session takes the lease over from the first.
 """
 
 from __future__ import annotations
@@ -48,10 +43,6 @@ _HELD: dict[str, _Held] = {}  # lock file path -> the lease this process holds o
 _GUARD = threading.Lock()
 
 
-def lease_path(journal: Path) -> Path:
-    return Path(journal) / LEASE_NAME
-
-
 def _describe(info: dict[str, Any] | None) -> str:
     if not info:
         return "another process"
@@ -72,15 +63,9 @@ class SessionLease:
     """The exclusive right to change one session (its file and journal) while held."""
 
     def __init__(self, journal: Path, session: str) -> None:
-        self.path = lease_path(journal)
+        self.path = Path(journal) / LEASE_NAME
         self.session = session
         self._owner = object()
-
-    @property
-    def held(self) -> bool:
-        with _GUARD:
-            entry = _HELD.get(str(self.path))
-            return entry is not None and entry.owner is self._owner
 
     def acquire(self, wait_s: float = ACQUIRE_WAIT_S, hint: str | None = None) -> None:
         """Take the lease, waiting up to ``wait_s`` seconds; raise DataError naming the holder if it stays taken."""
@@ -146,19 +131,13 @@ class SessionLease:
             finally:
                 os.close(entry.fd)
 
-    def __enter__(self) -> SessionLease:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()
-
 
 def lease_holder(journal: Path) -> dict[str, Any] | None:
     """Who holds the session's lease now (pid, host, command, since_unix), or None when nobody writes it.
 
     Never blocks and never disturbs a writer (see ACQUIRE_WAIT_S). A lease held by this very process counts too.
     """
-    path = lease_path(journal)
+    path = Path(journal) / LEASE_NAME
     with _GUARD:
         entry = _HELD.get(str(path))
         if entry is not None:

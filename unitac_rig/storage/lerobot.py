@@ -1,21 +1,10 @@
-"""``unitac-rig export --format lerobot``: the recorded presses as LeRobotDataset v3 datasets, and the way back.
+"""``unitac-rig export --format lerobot``: the recorded presses as LeRobotDataset v3.0 datasets, and the way back.
 
-LeRobot (Hugging Face's robot-learning library) shares datasets in its v3.0 layout: ``meta/info.json`` (features with
-dtype, shape and names; one ``fps``), ``meta/stats.json``, ``meta/tasks.parquet``, ``meta/episodes/chunk-XXX/
-file-XXX.parquet`` (one row per episode: length, where its frames are, per-episode stats) and ``data/chunk-XXX/
-file-XXX.parquet`` (one row per frame). Those facts are taken from the standalone ``lerobot-dataset`` package
-(0.4.4), whose ``LeRobotDataset`` loads what is written here (``tests/storage/test_lerobot_export.py``); nothing of
-it is imported: the files are written with pyarrow.
-
-One press is one episode and one tactile frame one row. A LeRobot dataset has one frame rate, and the sensors of a
-press dataset never run together (each session mounts one sensor, at its own rate: uSkin 100 Hz, PapillArray up to
-1 kHz), so each sensor is **its own LeRobot dataset** in ``OUT/<sensor>/`` at that sensor's rate; the arm's 500 Hz
-wrench and TCP pose are sampled at each tactile frame (the arm sample nearest in host time, its offset kept in
-``observation.arm_dt_s``). Every time is host time, the one clock both streams were stamped with.
-
-Next to them: ``README.md`` (the card) and ``manifest.json`` (SHA-256 of every file; ``unitac-rig verify OUT``).
-:func:`load_matched_sets` reads an export back into the force-matched sets ``train`` joins, which give the same
-pairs as the Parquet export of the same data (the frames are the rows the press's extraction picked).
+One press is one episode and one tactile frame one row; each sensor is its own dataset in ``OUT/<sensor>/`` at that
+sensor's rate, with the arm's nearest sample at each frame (docs/dataset.md, "Export for LeRobot"). The layout's
+facts are taken from the standalone ``lerobot-dataset`` package (0.4.4), whose ``LeRobotDataset`` loads what is
+written here (``tests/storage/test_lerobot_export.py``); nothing of it is imported: the files are written with
+pyarrow. :func:`load_matched_sets` reads an export back into the force-matched sets ``train`` joins.
 """
 
 from __future__ import annotations
@@ -23,24 +12,19 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Iterator, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.lerobot_card import render_card, render_sensor_card
-from unitac_rig.storage.manifest import (
-    exported_by,
-    publish_when_done,
-    sensor_layout_info,
-    staging_for,
-    write_manifest,
-)
-from unitac_rig.storage.pooling import pool_sessions
+from unitac_rig.storage.cards import lerobot_card, lerobot_sensor_card
+from unitac_rig.storage.extraction import nearest_index
+from unitac_rig.storage.manifest import exported_by, frames_array, sensor_layout_info, write_manifest
+from unitac_rig.storage.pooling import PooledSession, pooled_export
 from unitac_rig.storage.press_record import PressRecord
-from unitac_rig.storage.reader import MatchedSet, PressMatches, matched_set, read_presses, read_session_info
+from unitac_rig.storage.reader import MatchedSet, PressMatches, matched_set, read_presses
 
 CODEBASE_VERSION = "v3.0"  # LeRobotDataset format version (lerobot-dataset 0.4.x reads v3.0)
 CHUNKS_SIZE = 1000  # files per chunk directory (LeRobot's default)
@@ -66,14 +50,20 @@ class LeRobotExportSummary:
 class _Feature:
     name: str
     dtype: str  # LeRobot dtype: float32, int64, bool, string
-    shape: tuple[int, ...]
-    names: list[str] | None
-    unit: str
     description: str
+    unit: str = ""
+    shape: tuple[int, ...] = (1,)
+    names: list[str] | None = None
 
     def info(self) -> dict[str, Any]:
         """Its ``meta/info.json`` entry: dtype, shape, names, unit, description."""
-        return {key: list(v) if key == "shape" else v for key, v in asdict(self).items() if key != "name"}
+        return {
+            "dtype": self.dtype,
+            "shape": list(self.shape),
+            "names": self.names,
+            "unit": self.unit,
+            "description": self.description,
+        }
 
 
 def _tactile_key(sensor: str) -> str:
@@ -81,105 +71,78 @@ def _tactile_key(sensor: str) -> str:
 
 
 def _features(sensor: str, layout: dict[str, Any], targets: Sequence[float], displacement: bool) -> list[_Feature]:
-    """Every column of one sensor's dataset: the sensor's own, then the arm's, the press's and LeRobot's indices."""
-    return _tactile_features(sensor, layout, displacement) + _arm_and_index_features(targets)
-
-
-def _tactile_features(sensor: str, layout: dict[str, Any], displacement: bool) -> list[_Feature]:
-    """The tactile frame, its validity, counter and device clock (and the PapillArray's displacements)."""
-    n = int(layout["n_taxels"])
-    key = _tactile_key(sensor)
-    units = str(layout["units"])
-    grid = (
-        f"taxel k at row k // {layout['cols']}, column k % {layout['cols']} of the {layout['rows']} x "
-        f"{layout['cols']} grid"
-    )
-    features = [
+    """Every column of one sensor's dataset: the tactile frame, its validity, counter and device clock (and the
+    PapillArray's displacements), then the arm's nearest sample, the press's annotations and LeRobot's indices."""
+    key, rows, cols = _tactile_key(sensor), layout["rows"], layout["cols"]
+    frame = ((int(layout["n_taxels"]), 3), ["taxel", "channel"])
+    grid = f"taxel k at row k // {cols}, column k % {cols} of the {rows} x {cols} grid"
+    nearest = "(nearest arm sample)"
+    return [
         _Feature(
             key,
             "float32",
-            (n, 3),
-            ["taxel", "channel"],
-            units,
             f"tare-subtracted tactile frame: {grid}; channels x, y, z in the sensor's frame",
+            str(layout["units"]),
+            *frame,
         ),
-        _Feature(f"{key}.valid", "bool", (1,), None, "", "false where a taxel was missing or stale"),
-        _Feature(f"{key}.seq", "int64", (1,), None, "", "the device's frame counter (-1: the protocol has none)"),
-        _Feature(f"{key}.device_t_us", "int64", (1,), None, "us", "the device's own clock (-1: none)"),
-    ]
-    if displacement:
-        features.append(
-            _Feature(
-                f"{key}.displacement_mm",
-                "float32",
-                (n, 3),
-                ["taxel", "channel"],
-                "mm",
-                "pillar displacement x, y, z (PapillArray)",
-            )
-        )
-    return features
-
-
-def _arm_and_index_features(targets: Sequence[float]) -> list[_Feature]:
-    """What every sensor's dataset shares: the arm's nearest sample, the press's annotations, LeRobot's indices."""
-    return [
+        _Feature(f"{key}.valid", "bool", "false where a taxel was missing or stale"),
+        _Feature(f"{key}.seq", "int64", "the device's frame counter (-1: the protocol has none)"),
+        _Feature(f"{key}.device_t_us", "int64", "the device's own clock (-1: none)", "us"),
+        *(
+            [_Feature(f"{key}.displacement_mm", "float32", "pillar displacement x, y, z (PapillArray)", "mm", *frame)]
+            if displacement
+            else []
+        ),
         _Feature(
             "observation.wrench",
             "float32",
+            f"wrist wrench on the tool, base axes, after the press's F/T zero {nearest}",
+            "N, N m",
             (6,),
             ["fx", "fy", "fz", "tx", "ty", "tz"],
-            "N, N m",
-            "wrist wrench on the tool, base axes, after the press's F/T zero (nearest arm sample)",
         ),
         _Feature(
             "observation.tcp_pose",
             "float32",
+            f"TCP pose in the base frame, rotation vector {nearest}",
+            "m, rad",
             (6,),
             ["x", "y", "z", "rx", "ry", "rz"],
-            "m, rad",
-            "TCP pose in the base frame, rotation vector (nearest arm sample)",
         ),
         _Feature(
             "observation.press_force_n",
             "float32",
-            (1,),
-            None,
+            f"wrist force along the press direction, positive while pressing {nearest}",
             "N",
-            "wrist force along the press direction, positive while pressing (nearest arm sample)",
         ),
         _Feature(
             "observation.arm_dt_s",
             "float32",
-            (1,),
-            None,
-            "s",
             "host time of the arm sample used minus the tactile frame's host time",
+            "s",
         ),
-        _Feature("annotation.object", "string", (1,), None, "", "object id (see `unitac-rig objects`)"),
-        _Feature("annotation.rotation_deg", "float32", (1,), None, "deg", "rotation of the object on its mount"),
-        _Feature("annotation.angle_deg", "float32", (1,), None, "deg", "approach angle of the press"),
+        _Feature("annotation.object", "string", "object id (see `unitac-rig objects`)"),
+        _Feature("annotation.rotation_deg", "float32", "rotation of the object on its mount", "deg"),
+        _Feature("annotation.angle_deg", "float32", "approach angle of the press", "deg"),
         _Feature(
             "annotation.matched_targets",
             "bool",
-            (len(targets),),
-            [f"{t:.2f} N" for t in targets],
-            "",
             "true for each target force this frame was force-matched to (the press's extraction; misses "
             "false): the frames the paired dataset is built from",
+            "",
+            (len(targets),),
+            [f"{t:.2f} N" for t in targets],
         ),
         _Feature(
             "timestamp",
             "float32",
-            (1,),
-            None,
-            "s",
             "host time of the tactile frame minus that of the episode's first frame (measured, not index/fps)",
+            "s",
         ),
-        _Feature("frame_index", "int64", (1,), None, "", "frame number within the episode"),
-        _Feature("episode_index", "int64", (1,), None, "", "episode (press) number"),
-        _Feature("index", "int64", (1,), None, "", "frame number within the dataset"),
-        _Feature("task_index", "int64", (1,), None, "", "row of meta/tasks.parquet"),
+        _Feature("frame_index", "int64", "frame number within the episode"),
+        _Feature("episode_index", "int64", "episode (press) number"),
+        _Feature("index", "int64", "frame number within the dataset"),
+        _Feature("task_index", "int64", "row of meta/tasks.parquet"),
     ]
 
 
@@ -211,10 +174,6 @@ def feature_stats(values: np.ndarray) -> dict[str, np.ndarray]:
     return stats
 
 
-def _stats_json(stats: dict[str, np.ndarray]) -> dict[str, Any]:
-    return {k: np.asarray(v).tolist() for k, v in stats.items()}
-
-
 # ---------------------------------------------------------------------------------------------------------------
 # Arrow helpers (pyarrow is imported lazily, as in storage/export.py)
 
@@ -223,26 +182,21 @@ def _column(feature: _Feature, values: Any) -> tuple[Any, Any]:
     """(pyarrow array, pyarrow field) in the layout `datasets` reads as the feature's type."""
     import pyarrow as pa
 
-    arrow_type = {"float32": pa.float32(), "int64": pa.int64(), "bool": pa.bool_(), "string": pa.string()}
     if feature.dtype == "string":
         return pa.array(list(values), pa.string()), pa.field(feature.name, pa.string())
-    array = np.ascontiguousarray(values, dtype=np.dtype(feature.dtype if feature.dtype != "bool" else bool))
-    value_type = arrow_type[feature.dtype]
+    value_type = {"float32": pa.float32(), "int64": pa.int64(), "bool": pa.bool_()}[feature.dtype]
+    array = np.ascontiguousarray(values, dtype=bool if feature.dtype == "bool" else np.dtype(feature.dtype))
     if feature.shape == (1,):
         return pa.array(array.reshape(-1), value_type), pa.field(feature.name, value_type)
-    m = int(array.shape[0])
-    flat = pa.array(array.reshape(-1), value_type)
     if len(feature.shape) == 1:
         list_type = pa.list_(value_type, feature.shape[0])
+        flat = pa.array(array.reshape(-1), value_type)
         return pa.FixedSizeListArray.from_arrays(flat, feature.shape[0]), pa.field(feature.name, list_type)
-    n, c = feature.shape
-    inner = pa.ListArray.from_arrays(pa.array(np.arange(0, m * n * c + 1, c, dtype=np.int32)), flat)
-    outer = pa.ListArray.from_arrays(pa.array(np.arange(0, m * n + 1, n, dtype=np.int32)), inner)
     metadata = {
         b"ARROW:extension:name": ARRAY2D.encode(),
-        b"ARROW:extension:metadata": json.dumps([[n, c], feature.dtype]).encode(),
+        b"ARROW:extension:metadata": json.dumps([list(feature.shape), feature.dtype]).encode(),
     }
-    return outer, pa.field(feature.name, pa.list_(pa.list_(value_type)), metadata=metadata)
+    return frames_array(array), pa.field(feature.name, pa.list_(pa.list_(value_type)), metadata=metadata)
 
 
 def _hf_features(features: Sequence[_Feature]) -> dict[str, Any]:
@@ -277,13 +231,6 @@ class _Episode:
     length: int
 
 
-def _nearest(sorted_t: np.ndarray, query: np.ndarray) -> np.ndarray:
-    pos = np.searchsorted(sorted_t, query)
-    left = np.clip(pos - 1, 0, sorted_t.size - 1)
-    right = np.clip(pos, 0, sorted_t.size - 1)
-    return np.where(np.abs(sorted_t[right] - query) < np.abs(sorted_t[left] - query), right, left)
-
-
 def _episode(
     rec: PressRecord, session: dict[str, Any], sensor: str, targets: Sequence[float], displacement: bool
 ) -> _Episode:
@@ -295,7 +242,7 @@ def _episode(
     tared = np.asarray(rec.tactile_values, np.float32) - tare.astype(np.float32)[None]
     robot_t = np.asarray(rec.robot_t_s, dtype=np.float64)
     if robot_t.size:
-        arm = _nearest(robot_t, t)
+        arm = nearest_index(robot_t, t)
         wrench = np.asarray(rec.robot_force, np.float32).reshape(-1, 6)[arm]
         pose = np.asarray(rec.robot_pose, np.float64).reshape(-1, 6)[arm].astype(np.float32)
         press = np.asarray(rec.press_force_n, np.float32)[arm]
@@ -326,8 +273,7 @@ def _episode(
         "timestamp": (t - t[0]).astype(np.float32),
     }
     if displacement:
-        disp = rec.tactile_displacement_mm
-        columns[f"{key}.displacement_mm"] = np.asarray(disp, np.float32)
+        columns[f"{key}.displacement_mm"] = np.asarray(rec.tactile_displacement_mm, np.float32)
     threshold = rec.attrs.get("threshold_n")
     meta: dict[str, Any] = {
         "unitac/object": session["object"],
@@ -343,18 +289,10 @@ def _episode(
         "unitac/t0_host_s": float(t[0]),
         "unitac/tare_baseline": tare.reshape(-1),
     }
-    if ex is not None:
-        meta.update(
-            {
-                "extraction/targets_n": np.asarray(ex.targets_n, np.float64),
-                "extraction/crossing_t_s": np.asarray(ex.crossing_t_s, np.float64),
-                "extraction/frame_index": np.asarray(ex.frame_index, np.int64),
-                "extraction/force_at_frame_n": np.asarray(ex.force_at_frame_n, np.float64),
-                "extraction/error_n": np.asarray(ex.error_n, np.float64),
-                "extraction/miss": np.asarray(ex.miss, bool),
-                "extraction/settings": json.dumps(ex.settings.to_dict()),
-            }
-        )
+    if ex is not None:  # every per-target array but frame_t_s (the frame's row gives its time)
+        kept = ("targets_n", "crossing_t_s", "frame_index", "force_at_frame_n", "error_n", "miss")
+        meta |= {f"extraction/{name}": np.asarray(getattr(ex, name)) for name in kept}
+        meta["extraction/settings"] = json.dumps(ex.settings.to_dict())
     shape = session.get("shape")
     material = session.get("material")
     what = f" ({' '.join(str(x) for x in (shape, material) if x)})" if shape or material else ""
@@ -366,25 +304,10 @@ def _episode(
 # one sensor -> one LeRobot dataset
 
 
-def _sessions_of(pooled: Sequence[Any], sensor: str) -> Iterator[tuple[dict[str, Any], list[PressRecord]]]:
+def _sessions_of(pooled: Sequence[PooledSession], sensor: str) -> Iterator[tuple[dict[str, Any], list[PressRecord]]]:
     for item in pooled:
-        if item.info.sensor != sensor:
-            continue
-        attrs = read_session_info(item.info.path).attrs
-        raw_spec = attrs.get("object_spec")
-        spec: dict[str, Any] = raw_spec if isinstance(raw_spec, dict) else {}
-        material = spec.get("material")
-        session = {
-            "object": item.info.object_id,
-            "file": item.info.path.name,
-            "simulated": item.info.simulated,
-            "shape": spec.get("shape"),
-            "material": str(material).upper() if material is not None else None,
-            "sha256": item.sha256,
-            "source": str(item.source),
-        }
-        presses = [p for p in read_presses(item.info.path) if len(p.tactile_t_s) > 0]
-        yield session, presses
+        if item.info.sensor == sensor:
+            yield item.described(), [p for p in read_presses(item.info.path) if len(p.tactile_t_s) > 0]
 
 
 class _DataFiles:
@@ -421,45 +344,36 @@ class _DataFiles:
 
 
 def _info_json(
-    sensor: str,
-    layout: dict[str, Any],
-    features: Sequence[_Feature],
-    targets: list[float],
-    sessions: Sequence[tuple[dict[str, Any], Any]],
-    episodes: int,
-    total: int,
-    n_tasks: int,
-    fps: int,
+    d: dict[str, Any], features: Sequence[_Feature], targets: list[float], sessions: list[dict[str, Any]]
 ) -> dict[str, Any]:
     """``meta/info.json``: LeRobot's dataset description, with this export's own block under ``unitac_rig``."""
-    simulated = all(bool(s["simulated"]) for s, _ in sessions)
     return {
         "codebase_version": CODEBASE_VERSION,
-        "robot_type": "ur5e (simulated rig)" if simulated else "ur5e",
-        "total_episodes": episodes,
-        "total_frames": total,
-        "total_tasks": n_tasks,
+        "robot_type": "ur5e (simulated rig)" if d["simulated"] else "ur5e",
+        "total_episodes": d["episodes"],
+        "total_frames": d["frames"],
+        "total_tasks": d["tasks"],
         "chunks_size": CHUNKS_SIZE,
         "data_files_size_in_mb": DATA_FILE_SIZE_MB,
         "video_files_size_in_mb": 200,
-        "fps": int(fps),
-        "splits": {"train": f"0:{episodes}"},
+        "fps": d["fps"],
+        "splits": {"train": f"0:{d['episodes']}"},
         "data_path": DATA_PATH,
         "video_path": None,
         "features": {f.name: f.info() for f in features},
         "unitac_rig": {
             "format": EXPORT_FORMAT,
-            "sensor": sensor,
-            "layout": layout,
+            "sensor": d["sensor"],
+            "layout": d["layout"],
             "fps_is": "the sensor's nominal rate (1 / median frame interval); timestamps are measured host times",
             "targets_n": targets,
-            "simulated": simulated,
-            "sessions": [{k: s[k] for k in ("object", "file", "sha256", "source", "simulated")} for s, _ in sessions],
+            "simulated": d["simulated"],
+            "sessions": [{k: s[k] for k in ("object", "file", "sha256", "source", "simulated")} for s in sessions],
         },
     }
 
 
-def _write_sensor_dataset(root: Path, sensor: str, pooled: Sequence[Any]) -> dict[str, Any]:
+def _write_sensor_dataset(root: Path, sensor: str, pooled: Sequence[PooledSession]) -> dict[str, Any]:
     """Write ``root`` as one LeRobotDataset v3.0; returns a summary for the card and manifest."""
     import pyarrow as pa
 
@@ -522,24 +436,22 @@ def _write_sensor_dataset(root: Path, sensor: str, pooled: Sequence[Any]) -> dic
     dataset_stats = {name: feature_stats(np.concatenate(parts)) for name, parts in all_columns.items()}
     _write_episodes(root, episode_rows, by_name)
     _write_tasks(root, tasks)
-    (root / "meta" / "stats.json").write_text(
-        json.dumps({k: _stats_json(v) for k, v in dataset_stats.items()}, indent=1) + "\n", encoding="utf-8"
-    )
-    simulated = all(bool(s["simulated"]) for s, _ in sessions)
-    info = _info_json(sensor, layout, features, targets, sessions, len(episode_rows), total, len(tasks), fps)
-    (root / "meta" / "info.json").write_text(json.dumps(info, indent=1) + "\n", encoding="utf-8")
-    objects = sorted({s["object"] for s, _ in sessions})
-    return {
+    stats_json = {k: {stat: np.asarray(v).tolist() for stat, v in st.items()} for k, st in dataset_stats.items()}
+    (root / "meta" / "stats.json").write_text(json.dumps(stats_json, indent=1) + "\n", encoding="utf-8")
+    summary = {
         "episodes": len(episode_rows),
         "frames": total,
         "fps": int(fps),
-        "objects": objects,
+        "objects": sorted({s["object"] for s, _ in sessions}),
         "tasks": len(tasks),
         "layout": layout,
-        "simulated": simulated,
+        "simulated": all(bool(s["simulated"]) for s, _ in sessions),
         "displacement": displacement,
         "sessions": [s["file"] for s, _ in sessions],
     }
+    info = _info_json({**summary, "sensor": sensor}, features, targets, [s for s, _ in sessions])
+    (root / "meta" / "info.json").write_text(json.dumps(info, indent=1) + "\n", encoding="utf-8")
+    return summary
 
 
 def _write_episodes(root: Path, rows: list[dict[str, Any]], features: dict[str, _Feature]) -> None:
@@ -578,34 +490,15 @@ def _write_tasks(root: Path, tasks: dict[str, int]) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
+    def column(name: str | None, field: str | None, kind: str, metadata: Any = None) -> dict[str, Any]:
+        numpy_type = "int64" if kind == "int64" else "object"
+        return {"name": name, "field_name": field, "pandas_type": kind, "numpy_type": numpy_type, "metadata": metadata}
+
     ordered = sorted(tasks, key=tasks.__getitem__)
     pandas_meta = {
         "index_columns": ["__index_level_0__"],
-        "column_indexes": [
-            {
-                "name": None,
-                "field_name": None,
-                "pandas_type": "unicode",
-                "numpy_type": "object",
-                "metadata": {"encoding": "UTF-8"},
-            }
-        ],
-        "columns": [
-            {
-                "name": "task_index",
-                "field_name": "task_index",
-                "pandas_type": "int64",
-                "numpy_type": "int64",
-                "metadata": None,
-            },
-            {
-                "name": None,
-                "field_name": "__index_level_0__",
-                "pandas_type": "unicode",
-                "numpy_type": "object",
-                "metadata": None,
-            },
-        ],
+        "column_indexes": [column(None, None, "unicode", {"encoding": "UTF-8"})],
+        "columns": [column("task_index", "task_index", "int64"), column(None, "__index_level_0__", "unicode")],
         "attributes": {},
         "creator": {"library": "pyarrow", "version": pa.__version__},
         "pandas_version": "2.2.0",
@@ -627,10 +520,7 @@ def export_lerobot(data_dirs: Sequence[Path], out: Path) -> LeRobotExportSummary
     manifest. Built in a hidden sibling directory and renamed into place, so ``out`` is complete or absent."""
     from unitac_rig.rig.sensors import SENSORS
 
-    out = Path(out)
-    pooled = pool_sessions([Path(d) for d in data_dirs])
-    staging = staging_for(out)
-    with publish_when_done(staging, out):
+    with pooled_export(data_dirs, out) as (pooled, staging):
         present = {item.info.sensor for item in pooled}
         sensors = [s for s in SENSORS if s in present] + sorted(present - set(SENSORS))  # the registry's order
         summaries = {s: _write_sensor_dataset(staging / s, s, pooled) for s in sensors}
@@ -639,7 +529,7 @@ def export_lerobot(data_dirs: Sequence[Path], out: Path) -> LeRobotExportSummary
             "created_unix": time.time(),
             "exported_by": exported_by(),
             "lerobot_codebase_version": CODEBASE_VERSION,
-            "datasets": {s: {k: v for k, v in summary.items()} for s, summary in summaries.items()},
+            "datasets": {s: dict(summary) for s, summary in summaries.items()},
             "sessions": [
                 {
                     "file": item.info.path.name,
@@ -651,9 +541,9 @@ def export_lerobot(data_dirs: Sequence[Path], out: Path) -> LeRobotExportSummary
                 for item in pooled
             ],
         }
-        (staging / CARD_NAME).write_text(render_card(document), encoding="utf-8")
+        (staging / CARD_NAME).write_text(lerobot_card(document), encoding="utf-8")
         for sensor, summary in summaries.items():
-            (staging / sensor / CARD_NAME).write_text(render_sensor_card(sensor, summary, document), encoding="utf-8")
+            (staging / sensor / CARD_NAME).write_text(lerobot_sensor_card(sensor, summary, document), encoding="utf-8")
         files = sorted(str(p.relative_to(staging)) for p in staging.rglob("*") if p.is_file())
         write_manifest(staging, document, files)
     total = sum((out / rel).stat().st_size for rel in files)

@@ -1,11 +1,7 @@
 """What every export shares: building it in a hidden sibling folder and publishing it whole (:func:`staging_for`,
-:func:`publish_when_done`), what it says about its maker and sensors, and ``manifest.json``: what it holds and the
-SHA-256 of every file in it, so a copy can be checked.
-
-The manifest lists every file of the export (relative path, size in bytes, SHA-256) except itself, plus whatever
-the exporter describes (schema, units, counts, provenance; see :mod:`unitac_rig.storage.export`).
-:func:`verify_manifest` re-hashes the files and stops at the first one that is missing, has another size or
-another hash, and refuses a directory holding files the manifest does not list (added after export).
+:func:`publish_when_done`), what it says about its maker and sensors, and ``manifest.json``: every file of the export
+but itself (path, bytes, SHA-256) plus what the exporter describes. :func:`verify_manifest` re-hashes them, stops at
+the first that is missing or differs, and refuses files the manifest does not list.
 """
 
 from __future__ import annotations
@@ -21,6 +17,8 @@ from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
+
+import numpy as np
 
 from unitac_rig.errors import DataError
 from unitac_rig.provenance import git_commit, package_version
@@ -42,16 +40,13 @@ def sha256_file(path: Path) -> str:
     return digest.hexdigest()
 
 
-def file_entry(root: Path, relative: str) -> dict[str, Any]:
-    path = Path(root) / relative
-    return {"path": relative, "bytes": path.stat().st_size, "sha256": sha256_file(path)}
-
-
 def write_manifest(root: Path, document: Mapping[str, Any], files: Iterable[str]) -> Path:
     """Write ``root/manifest.json``: ``document`` plus ``manifest_version`` and the ``files`` list (hashed now)."""
     root = Path(root)
     body = {"manifest_version": MANIFEST_VERSION, **document}
-    body["files"] = [file_entry(root, rel) for rel in sorted(files)]
+    body["files"] = [
+        {"path": rel, "bytes": (root / rel).stat().st_size, "sha256": sha256_file(root / rel)} for rel in sorted(files)
+    ]
     path = root / MANIFEST_NAME
     tmp = path.with_name(f".{MANIFEST_NAME}.tmp")
     tmp.write_text(json.dumps(body, indent=1, sort_keys=False) + "\n", encoding="utf-8")
@@ -81,7 +76,6 @@ def read_manifest(root: Path) -> dict[str, Any]:
 class VerifyReport:
     files: int
     bytes: int
-    unlisted: tuple[str, ...]  # files in the directory the manifest does not mention (verify_manifest refuses them)
 
 
 def _safe_relative(root: Path, relative: object) -> Path:
@@ -133,7 +127,7 @@ def verify_manifest(root: Path) -> VerifyReport:
             f"{root / unlisted[0]}{more}: not in the manifest (added after export)",
             hint="remove what was added, or copy the export again",
         )
-    return VerifyReport(files=len(listed), bytes=total, unlisted=unlisted)
+    return VerifyReport(files=len(listed), bytes=total)
 
 
 def sensor_layout_info(sensor: str, n_taxels: int = 0) -> dict[str, Any]:
@@ -141,25 +135,23 @@ def sensor_layout_info(sensor: str, n_taxels: int = 0) -> dict[str, Any]:
     registry does not know is one column of ``n_taxels``."""
     from unitac_rig.rig.sensors import SENSORS
 
+    keys = ("model", "rows", "cols", "n_taxels", "pitch_mm", "units")
     spec = SENSORS.get(sensor)
     if spec is None:
-        return {
-            "model": "unknown",
-            "rows": n_taxels,
-            "cols": 1,
-            "n_taxels": n_taxels,
-            "pitch_mm": None,
-            "units": "sensor units",
-        }
-    layout = spec.layout
-    return {
-        "model": layout.model,
-        "rows": layout.rows,
-        "cols": layout.cols,
-        "n_taxels": layout.n_taxels,
-        "pitch_mm": layout.pitch_mm,
-        "units": layout.units,
-    }
+        return dict(zip(keys, ("unknown", n_taxels, 1, n_taxels, None, "sensor units"), strict=True))
+    return {key: getattr(spec.layout, key) for key in keys}
+
+
+def frames_array(values: np.ndarray) -> Any:
+    """(M, n_taxels, 3) frames -> an Arrow list<list<float32>> array of M frames, without Python loops."""
+    import pyarrow as pa
+
+    values = np.ascontiguousarray(values, dtype=np.float32)
+    m, n = int(values.shape[0]), int(values.shape[1])
+    inner = pa.ListArray.from_arrays(
+        pa.array(np.arange(0, m * n * 3 + 1, 3, dtype=np.int32)), pa.array(values.reshape(-1))
+    )
+    return pa.ListArray.from_arrays(pa.array(np.arange(0, m * n + 1, n, dtype=np.int32)), inner)
 
 
 def exported_by() -> dict[str, str]:

@@ -9,11 +9,14 @@ to settle silently (which one is right? both are real presses), so pooling stops
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from unitac_rig.errors import DataError
+from unitac_rig.storage.manifest import publish_when_done, staging_for
 from unitac_rig.storage.reader import SessionInfo, list_sessions, session_digest
 
 
@@ -23,6 +26,22 @@ class PooledSession:
     source: Path  # the dataset directory it was taken from
     sha256: str  # session_digest: the content's SHA-256 (root attributes and every press's checksums)
     also_in: tuple[Path, ...] = ()  # other directories holding a copy of the same content
+
+    def described(self) -> dict[str, Any]:
+        """What every export says of the session: object, file, simulated, the object's shape and material (from
+        its ``object_spec``, the material upper-case; None without one), content digest and source directory."""
+        spec = self.info.attrs.get("object_spec")
+        spec = spec if isinstance(spec, dict) else {}
+        material = spec.get("material")
+        return {
+            "object": self.info.object_id,
+            "file": self.info.path.name,
+            "simulated": self.info.simulated,
+            "shape": spec.get("shape"),
+            "material": str(material).upper() if material is not None else None,
+            "sha256": self.sha256,
+            "source": str(self.source),
+        }
 
 
 def pool_sessions(data_dirs: Sequence[Path]) -> list[PooledSession]:
@@ -51,3 +70,14 @@ def pool_sessions(data_dirs: Sequence[Path]) -> list[PooledSession]:
         listed = ", ".join(str(d) for d in data_dirs)
         raise DataError(f"no session files (*__*.h5) in {listed}", hint="run `unitac-rig collect` first")
     return [chosen[key] for key in sorted(chosen)]
+
+
+@contextlib.contextmanager
+def pooled_export(data_dirs: Sequence[Path], out: Path) -> Iterator[tuple[list[PooledSession], Path]]:
+    """Pool ``data_dirs`` and build an export of them in a hidden sibling of ``out`` (the block's folder), renamed
+    into place when the block ends (:func:`unitac_rig.storage.manifest.publish_when_done`): ``out`` is complete or
+    absent."""
+    out = Path(out)
+    pooled = pool_sessions([Path(d) for d in data_dirs])
+    with publish_when_done(staging_for(out), out) as staging:
+        yield pooled, staging

@@ -18,11 +18,19 @@ from typing import Any
 import h5py
 import numpy as np
 
-from unitac_rig.storage.checksums import array_digest, seal_press_group, sealed_arrays
 from unitac_rig.storage.extraction import Extraction, ExtractionSettings
-from unitac_rig.storage.integrity import IDENTITY_KEYS, canonical_press_id
+from unitac_rig.storage.integrity import (
+    IDENTITY_KEYS,
+    array_digest,
+    as_str,
+    canonical_press_id,
+    seal_press_group,
+    sealed_arrays,
+)
 
 FINISHED_STATUSES = ("complete", "failed")  # never redone on resume; "aborted" presses are redone
+#: the per-target arrays of ``extraction/`` (and of :class:`Extraction`), in the order they are written
+EXTRACTION_ARRAYS = ("targets_n", "crossing_t_s", "frame_index", "frame_t_s", "force_at_frame_n", "error_n", "miss")
 
 
 press_id = canonical_press_id  # the press's name, ``rot090_ang-12``: where every reader expects it
@@ -51,10 +59,6 @@ class PressRecord:
     events: list[tuple[float, str, str]] = field(default_factory=list)
     attrs: dict[str, Any] = field(default_factory=dict)  # strategy, speed, threshold, tare info, F/T zero, ...
     extraction: Extraction | None = None
-
-    @property
-    def finished(self) -> bool:
-        return self.status in FINISHED_STATUSES
 
 
 def attr_value(value: Any) -> Any:
@@ -89,16 +93,7 @@ def write_extraction(group: h5py.Group, extraction: Extraction, tared_values: np
     chosen = extraction.frame_index >= 0
     if chosen.any() and tared_values.size:
         frames[chosen] = tared_values[extraction.frame_index[chosen]]
-    arrays = {
-        "targets_n": extraction.targets_n,
-        "crossing_t_s": extraction.crossing_t_s,
-        "frame_index": extraction.frame_index,
-        "frame_t_s": extraction.frame_t_s,
-        "force_at_frame_n": extraction.force_at_frame_n,
-        "error_n": extraction.error_n,
-        "miss": extraction.miss,
-        "values": frames,
-    }
+    arrays = {name: getattr(extraction, name) for name in EXTRACTION_ARRAYS} | {"values": frames}
     digests = {}
     for name, value in arrays.items():
         data = np.asarray(value)
@@ -118,22 +113,15 @@ def read_extraction(group: h5py.Group) -> tuple[Extraction, np.ndarray] | None:
     if "extraction" not in group:
         return None
     ex = group["extraction"]
-    extraction = Extraction(
-        targets_n=ex["targets_n"][()],
-        crossing_t_s=ex["crossing_t_s"][()],
-        frame_index=ex["frame_index"][()],
-        frame_t_s=ex["frame_t_s"][()],
-        force_at_frame_n=ex["force_at_frame_n"][()],
-        error_n=ex["error_n"][()],
-        miss=ex["miss"][()].astype(bool),
-        settings=ExtractionSettings.from_dict(json.loads(ex.attrs["settings"])),
-    )
+    arrays = {name: ex[name][()] for name in EXTRACTION_ARRAYS}
+    arrays["miss"] = arrays["miss"].astype(bool)
+    extraction = Extraction(**arrays, settings=ExtractionSettings.from_dict(json.loads(ex.attrs["settings"])))
     return extraction, ex["values"][()]
 
 
 def write_press_group(parent: h5py.Group, rec: PressRecord, name: str | None = None) -> h5py.Group:
     """Write one press under ``parent/<name or press_id>``, sealed with the SHA-256 of every array and attribute
-    (:mod:`unitac_rig.storage.checksums`); the ``write_complete`` attribute is set last."""
+    (:mod:`unitac_rig.storage.integrity`); the ``write_complete`` attribute is set last."""
     name = name or rec.press_id
     if name in parent:
         del parent[name]
@@ -213,10 +201,6 @@ def read_press_group(g: h5py.Group) -> PressRecord:
     )
 
 
-def as_str(value: Any) -> str:
-    return value.decode() if isinstance(value, bytes) else str(value)
-
-
 def decode_attr(value: Any) -> Any:
     if isinstance(value, bytes | str):
         value = as_str(value)
@@ -235,20 +219,7 @@ def decode_attr(value: Any) -> Any:
 
 def record_nbytes(rec: PressRecord) -> int:
     """Uncompressed size of a press's arrays (bytes): an upper bound on what writing it adds to a file."""
-    arrays = [
-        rec.robot_t_s,
-        rec.robot_force,
-        rec.robot_pose,
-        rec.press_force_n,
-        rec.tactile_t_s,
-        rec.tactile_values,
-        rec.tactile_seq,
-        rec.tactile_device_t_us,
-        rec.tactile_valid,
-        rec.tare_baseline,
-    ]
-    if rec.tactile_displacement_mm is not None:
-        arrays.append(rec.tactile_displacement_mm)
+    arrays = [value for key, value in vars(rec).items() if isinstance(value, np.ndarray | list) and key != "events"]
     total = sum(np.asarray(a).nbytes for a in arrays)
     frame_bytes = int(np.prod(np.shape(rec.tactile_values)[1:])) * 4
     total += 32 * (8 * 6 + frame_bytes)  # extraction: ~25 targets x (6 per-target numbers + one float32 frame)

@@ -9,9 +9,11 @@ identifies its content in either (pooling).
 from __future__ import annotations
 
 import hashlib
+import json
 import logging
 import os
 import threading
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,28 +23,65 @@ import numpy as np
 
 from unitac_rig.errors import DataError
 from unitac_rig.rig.sensors import SENSORS
-from unitac_rig.storage.checksums import PRESS_ATTR, attrs_digest, root_attr_items
 from unitac_rig.storage.integrity import (
-    IDENTITY_KEYS,
+    PRESS_ATTR,
     SCHEMA_VERSION,
     SessionCheck,
+    as_str,
+    attrs_digest,
     check_session,
-    press_seal,
+    root_attr_items,
 )
-from unitac_rig.storage.journal import journal_problems
+from unitac_rig.storage.journal import journal_problems, session_journal
 from unitac_rig.storage.lease import lease_holder
 from unitac_rig.storage.press_record import (
     PressRecord,
-    as_str,
     decode_attr,
     iter_press_groups,
     read_extraction,
     read_press_group,
 )
 from unitac_rig.storage.recorder import private_copy_path, repair_session, session_layout
-from unitac_rig.storage.trust import load_trust, save_trust
 
 log = logging.getLogger(__name__)
+
+
+# Verify once, trust what is unchanged (docs/dataset.md): what a reader verified is remembered in the journal folder
+# (``_verified.json``): each press by its seal (:func:`press_seal`: its checksums and its press file's stamp) and each
+# journal entry by its stamp, so a later reader reads in full only what changed. Only a cache: unreadable or missing,
+# everything is verified again; a folder without a journal (an export's copy) is verified in full every time.
+TRUST_NAME = "_verified.json"
+TRUST_VERSION = 1
+
+
+def load_trust(session: Path) -> tuple[set[tuple[str, str]], dict[str, str]]:
+    """(press id, press seal) pairs and journal entry name -> stamp that an earlier reader verified (empty when
+    nothing is remembered or the record is unreadable)."""
+    try:
+        document = json.loads((session_journal(session) / TRUST_NAME).read_text())
+        if document.get("version") != TRUST_VERSION:
+            return set(), {}
+        presses = {(str(pid), str(seal)) for pid, seal in document["presses"]}
+        journal = {str(k): str(v) for k, v in dict(document["journal"]).items()}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return set(), {}
+    return presses, journal
+
+
+def save_trust(session: Path, presses: Iterable[tuple[str, str]], journal: Mapping[str, str]) -> None:
+    """Remember what was just verified (only where the session has a journal folder); never raises: a read-only
+    dataset is simply verified in full again next time."""
+    path = session_journal(session) / TRUST_NAME
+    if not path.parent.is_dir():
+        return
+    document = {"version": TRUST_VERSION, "presses": sorted(presses), "journal": dict(sorted(journal.items()))}
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(json.dumps(document))
+        os.replace(tmp, path)
+    except OSError as exc:
+        log.debug("could not remember verified presses in %s: %s", path, exc)
+        tmp.unlink(missing_ok=True)
 
 
 @dataclass(frozen=True)
@@ -52,7 +91,7 @@ class SessionInfo:
     sensor: str
     simulated: bool
     attrs: dict[str, Any]
-    integrity: str = "verified"  # or why not (see SessionCheck.describe); "repaired: ..." when a read repaired it
+    integrity: str = "verified"  # or why not (see Verified.integrity); "repaired: ..." when a read repaired it
     repairs: tuple[str, ...] = field(default_factory=tuple)
 
 
@@ -87,7 +126,7 @@ class Verified:
 
     @property
     def integrity(self) -> str:
-        described = self.check.describe()
+        described = "damaged" if self.check.needs_repair else "verified"
         return f"repaired from the journal, {described}" if self.repairs else described
 
 
@@ -118,10 +157,10 @@ def _version_key(path: Path) -> tuple[Any, ...] | None:
 
 def verified_session(path: Path) -> Verified:
     """Verify every press of ``path`` against its checksums and identity (once per file version: what an earlier
-    process verified and has not changed since is trusted, :mod:`unitac_rig.storage.trust`), and that each press
-    still has its repair copy in the journal; repair from the journal what is damaged or missing, and raise a
-    DataError naming the file and press when it cannot be repaired. A file of another schema version is left to
-    the caller's version check.
+    process verified and has not changed since is trusted, see ``TRUST_NAME``), and that each press still has its
+    repair copy in the journal; repair from the journal what is damaged or missing, and raise a DataError naming the
+    file and press when it cannot be repaired. A file of another schema version is left to the caller's version
+    check. A journal that cannot be mended never blocks intact data: it is only warned about.
     """
     path = Path(path)
     key = _version_key(path)
@@ -130,64 +169,44 @@ def verified_session(path: Path) -> Verified:
     if cached is not None:
         return cached
     stored, stored_journal = load_trust(path)
+
+    def journal_issues(check: SessionCheck) -> tuple[dict[str, str], dict[str, str]]:
+        """Which intact presses lost their repair copy (:func:`journal_problems`), and the entries verified intact."""
+        return journal_problems(path, sorted(check.statuses), check.identity, stored_journal)
+
     with _VERIFIED_GUARD:
         known = set(_PRESSES_OK.get(str(path.resolve()), ())) | stored
     check = check_session(path, known)
+    damaged = check.needs_repair
     repairs: tuple[str, ...] = ()
-    issues, good = ({}, {}) if check.needs_repair else _journal_issues(path, check, stored_journal)
-    journal = path.parent / ".journal" / path.stem
-    if not check.needs_repair and issues and lease_holder(journal) is not None:
+    issues, good = ({}, {}) if damaged else journal_issues(check)
+    if issues and lease_holder(session_journal(path)) is not None:
         for issue in issues.values():  # the collection writing it now recreates it when it next opens the session
             log.warning("%s: %s (the session is being written now; rerun later to restore it)", path, issue)
-    elif issues and not check.needs_repair:  # the data is intact: a journal that cannot be mended never blocks it
+    elif damaged or issues:
+        problem = check.first_problem() if damaged else f"{path}: {next(iter(issues.values()))}"
         try:
-            repairs = tuple(repair_session(path, f"{path}: {next(iter(issues.values()))}"))
+            repairs = tuple(repair_session(path, problem))
         except DataError as exc:
+            if damaged:
+                raise
             log.warning("%s: %s; the journal could not be mended: %s", path, "; ".join(issues.values()), exc)
         for note in repairs:
             log.warning("%s: %s", path, note)
         check = check_session(path, known)
-        issues, good = _journal_issues(path, check, stored_journal)
-        for issue in issues.values() if repairs else ():
-            log.warning("%s: %s", path, issue)
-    elif check.needs_repair:
-        problem = check.first_problem()
-        repairs = tuple(repair_session(path, problem))
-        for note in repairs:
-            log.warning("%s: %s", path, note)
-        check = check_session(path, known)
-        if check.needs_repair:
+        if damaged and check.needs_repair:
             raise DataError(check.first_problem(), hint="restore the file from a backup")
-        issues, good = _journal_issues(path, check, stored_journal)
-        for issue in issues.values():
+        issues, good = journal_issues(check)
+        for issue in issues.values() if repairs or damaged else ():
             log.warning("%s: %s", path, issue)
     result = Verified(check, repairs)
-    seals = _press_seals(path, check.verified)
-    save_trust(path, seals, good)
+    save_trust(path, check.seals, good)
     key = _version_key(path)
     with _VERIFIED_GUARD:
-        _PRESSES_OK.setdefault(str(path.resolve()), set()).update(seals)
+        _PRESSES_OK.setdefault(str(path.resolve()), set()).update(check.seals)
         if key is not None:
             _VERIFIED[key] = result
     return result
-
-
-def _journal_issues(path: Path, check: SessionCheck, trusted: dict[str, str]) -> tuple[dict[str, str], dict[str, str]]:
-    """:func:`journal_problems` for an intact session file: its identity from its verified root."""
-    with h5py.File(path, "r") as f:
-        identity = {k: as_str(f.attrs[k]) for k in IDENTITY_KEYS}
-    return journal_problems(path, sorted(check.statuses), identity, trusted)
-
-
-def _press_seals(path: Path, pids: list[str]) -> set[tuple[str, str]]:
-    """(press id, :func:`press_seal`) of the verified presses: what a later version may trust (``known_good``)."""
-    seals: set[tuple[str, str]] = set()
-    with h5py.File(path, "r") as f:
-        for pid in pids:
-            seal = press_seal(path, f["presses"], pid)
-            if seal is not None:
-                seals.add((pid, seal))
-    return seals
 
 
 def _open(path: Path) -> h5py.File:
@@ -258,9 +277,9 @@ def _rebuild_vanished(data_dir: Path, present: list[Path]) -> list[Path]:
     return rebuilt
 
 
-def read_presses(path: Path, *, with_streams: bool = True) -> list[PressRecord]:
+def read_presses(path: Path) -> list[PressRecord]:
     with _open(path) as f:
-        return [read_press_group(g) for _, g in iter_press_groups(f)] if with_streams else []
+        return [read_press_group(g) for _, g in iter_press_groups(f)]
 
 
 def press_summaries(path: Path) -> list[dict[str, Any]]:
@@ -277,6 +296,15 @@ def press_summaries(path: Path) -> list[dict[str, Any]]:
             item["robot_samples"] = int(g["robot/t_s"].shape[0])
             out.append(item)
     return out
+
+
+def press_counts(attrs: dict[str, Any], presses: list[dict[str, Any]]) -> dict[str, int]:
+    """A session's presses planned (its ``planned_presses``; without them, those it holds), complete, failed and
+    aborted, from its root attributes and :func:`press_summaries`."""
+    counts = {"planned": len(attrs.get("planned_presses") or []) or len(presses)}
+    return counts | {
+        status: sum(p["status"] == status for p in presses) for status in ("complete", "failed", "aborted")
+    }
 
 
 def rig_label(attrs: dict[str, Any]) -> str:

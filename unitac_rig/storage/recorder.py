@@ -1,37 +1,13 @@
-"""Crash-safe HDF5 session recording: one session per (object, sensor), one immutable file per press.
+"""Crash-safe HDF5 session recording (docs/dataset.md, "Crash safety" and "Storage layout").
 
-Layout (docs/dataset.md, "Storage layout"):
-
-* ``DATA/<object>__<sensor>.h5``, the *session file*: the session's root attributes and ``/presses/<press_id>``, an
-  HDF5 external link to that press's own file. Attributes and links only (a few hundred bytes per press), so a new
-  version of it is cheap: it is written under a private name and atomically renamed over the published one.
-* ``DATA/<object>__<sensor>.presses/<press_id>-<sha12>.h5``: one file per press (the group ``/press``: the format of
-  :mod:`unitac_rig.storage.press_record`), written once under a private name and renamed into place, never changed
-  afterwards. ``sha12`` is the start of the file's SHA-256, so a new version of a press (redone after an abort,
-  re-extracted, repaired) gets a new name and the files an older session file links to stay as they were.
-* ``DATA/.journal/<object>__<sensor>/<press_id>.h5``: the durable log and repair copy of every press (the same
-  ``/press`` group), written first, fsynced, atomically renamed.
-
-Every byte of a press is written twice, each for its own reason: the journal entry (fsynced: what makes the press
-durable, and its repair copy) and the press file (what readers open); the session file adds a link of a few hundred
-bytes (docs/benchmarks.md, "Storage: bytes written").
-
-Durability: killing the process at any moment loses at most the press in progress, every file stays readable, and the
-same command resumes without duplicating a finished press. A press is durable once its journal entry is renamed,
-then written to its press file, then published by the session file's rename. On every open, the session file, its
-press files and the journal are checked against their checksums and each is repaired from the other: a session file
-that no longer opens is moved aside (``*.broken-<time>.h5``) and rebuilt from the journal; a press whose file is
-damaged or missing is rewritten from its journal entry; a journalled press the session file does not link yet (a
-kill between the steps) is added. An export's self-contained copy of a session (every press a group inside the
-file, :func:`unitac_rig.storage.reader.snapshot_session`) is read-only: no writer continues it.
-
-Readers never disturb the writer, and the writer never disturbs readers: no published file is ever opened for
-writing, so ``inspect``, ``train``, ``extract``'s reader path or a notebook's plain ``h5py.File(path, "r")`` can open
-the session file at any moment and keep it open as long as they like. HDF5 follows the external links, read-only,
-when a press is opened. A reader sees the session as of the last finished press and keeps its version while it holds
-the file: press files are immutable, and one no longer linked by the current session file (a superseded version, a
-kill's leftover) is only deleted when a later command opens the session for writing. One process at a time may
-*write* a session: see :mod:`unitac_rig.storage.lease`.
+A session is ``DATA/<object>__<sensor>.h5`` (root attributes and one external link per press, republished by a
+private copy renamed over it), one immutable file per press under ``<object>__<sensor>.presses/<press_id>-<sha12>.h5``
+(``sha12``: the start of its SHA-256, so a new version gets a new name) and the journal
+``DATA/.journal/<object>__<sensor>/<press_id>.h5`` (fsynced, renamed: what makes a press durable, and its repair
+copy). A press is journalled, then written to its press file, then published by the session file's rename, so a
+kill loses at most the press in progress and the same command resumes. Every open checks the session file, its press
+files and the journal against their checksums and repairs each from the other. No published file is ever opened for
+writing, so readers never disturb the writer; one process at a time writes a session (:mod:`.lease`).
 """
 
 from __future__ import annotations
@@ -51,13 +27,16 @@ from typing import Any, Literal
 import h5py
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.checksums import ROOT_ATTR, check_root, seal_root
 from unitac_rig.storage.integrity import (
     IDENTITY_KEYS,
     PRESS_DIR_SUFFIX,
+    ROOT_ATTR,
     SCHEMA_VERSION,
     SessionCheck,
+    as_str,
+    check_root,
     check_session,
+    seal_root,
 )
 from unitac_rig.storage.journal import (
     PRESS_GROUP,
@@ -68,6 +47,7 @@ from unitac_rig.storage.journal import (
     reextracted,
     root_as_header,
     session_header,
+    session_journal,
     session_path,
     session_stem,
     settings_of,
@@ -79,7 +59,6 @@ from unitac_rig.storage.manifest import sha256_file
 from unitac_rig.storage.press_record import (
     FINISHED_STATUSES,
     PressRecord,
-    as_str,
     attr_value,
     read_press_group,
     record_nbytes,
@@ -106,11 +85,8 @@ def remove_stale_copies(path: Path, journal: Path) -> None:
     killed writer or ``extract`` (call only while holding the session's lease: no live process writes them then)."""
     leftovers = [
         *path.parent.glob(f".{path.name}.*.tmp"),
-        *journal.glob(".*.h5.*.tmp"),
-        *journal.glob("*.h5.tmp"),
-        *journal.glob("._session.json.*.tmp"),
-        *journal.glob("_session.tmp"),
-        *journal.glob("._verified.json.*.tmp"),
+        *journal.glob(".*.tmp"),  # private copies of journal entries, of the journal header, of _verified.json
+        *journal.glob("*.h5.tmp"),  # a journal entry being written
         *press_dir(path).glob(".*.tmp"),
     ]
     for leftover in leftovers:
@@ -349,7 +325,7 @@ class SessionWriter:
             attrs = rebuilt if rebuilt is not None else dict(self.root_attrs)
             attrs.setdefault("session_id", uuid.uuid4().hex)  # names this session in every press it records
             write_header(self.journal, attrs)
-        existing = self._journal_header()
+        existing = read_journal_header(self.journal)
         for key in ("object", "sensor"):
             if existing.get(key) != self.root_attrs.get(key):
                 raise DataError(
@@ -369,15 +345,12 @@ class SessionWriter:
             return rec
         return dataclasses.replace(rec, attrs={**rec.attrs, **self.identity})
 
-    def _journal_header(self) -> dict[str, Any]:
-        return read_journal_header(self.journal)
-
     def _journal_press_files(self) -> dict[str, Path]:
         return {p.stem: p for p in sorted(self.journal.glob("*.h5")) if ".broken-" not in p.name}
 
     def _header_root(self) -> dict[str, Any]:
         """Root attributes from the journal header (the session file's are rebuilt from it when damaged)."""
-        root = {key: attr_value(value) for key, value in self._journal_header().items()}
+        root = {key: attr_value(value) for key, value in read_journal_header(self.journal).items()}
         root["schema_version"] = SCHEMA_VERSION
         return root
 
@@ -581,7 +554,7 @@ class SessionWriter:
         """The journal header's extraction settings follow the session file's (a kill between extract's renames)."""
         if settings is None:
             return
-        header = self._journal_header()
+        header = read_journal_header(self.journal)
         if settings_of(header.get("extraction_settings")) != settings:
             header["extraction_settings"] = settings
             write_header(self.journal, header)
@@ -612,17 +585,14 @@ class SessionWriter:
             ) from exc
 
     # -- public API -------------------------------------------------------------------------------------------------
-    def press_statuses(self) -> dict[str, str]:
-        with h5py.File(self.path, "r") as f:
-            return {pid: as_str(g.attrs.get("status", "")) for pid, g in f["presses"].items()}
-
     def finished_press_ids(self) -> set[str]:
-        return {pid for pid, status in self.press_statuses().items() if status in FINISHED_STATUSES}
+        with h5py.File(self.path, "r") as f:
+            return {pid for pid, g in f["presses"].items() if as_str(g.attrs.get("status", "")) in FINISHED_STATUSES}
 
     def update_root_attrs(self, attrs: Mapping[str, Any]) -> None:
         """Merge attributes into the session (e.g. sensor identity once connected). A sensor whose serial number
         differs from the one the session was recorded with is refused (when both are known)."""
-        header = self._journal_header()
+        header = read_journal_header(self.journal)
         identity = attrs.get("sensor_identity")
         serial = identity.get("serial") if isinstance(identity, dict) else None
         recorded = header.get("sensor_serial")
@@ -672,7 +642,7 @@ class SessionWriter:
         self.path.unlink(missing_ok=True)
         with contextlib.suppress(OSError):
             self.press_dir.rmdir()  # only when empty
-        for leftover in ("_session.json", "_session.tmp", "_verified.json"):
+        for leftover in ("_session.json", "_verified.json"):
             (self.journal / leftover).unlink(missing_ok=True)
         self._lease.release(unlink=True)
         for folder in (self.journal, self.journal.parent, self.data_dir):
@@ -689,7 +659,7 @@ def repair_session(path: Path, problem: str) -> list[str]:
     done: no journal, the session being written by another process right now, or a press damaged in both copies.
     """
     path = Path(path)
-    journal = path.parent / ".journal" / path.stem
+    journal = session_journal(path)
     attrs = session_header(path)
     if attrs is None:
         raise DataError(

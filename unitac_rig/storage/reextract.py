@@ -15,13 +15,12 @@ import h5py
 import numpy as np
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.checksums import ROOT_ATTR
-from unitac_rig.storage.extraction import Extraction, ExtractionSettings
-from unitac_rig.storage.integrity import check_session
-from unitac_rig.storage.journal import journal_check
+from unitac_rig.storage.extraction import Extraction, ExtractionSettings, extract_press
+from unitac_rig.storage.integrity import ROOT_ATTR, check_session
+from unitac_rig.storage.journal import journal_entry_check, read_journal_header, session_journal, write_header
 from unitac_rig.storage.lease import SessionLease
 from unitac_rig.storage.manifest import sha256_file
-from unitac_rig.storage.press_record import iter_press_groups, json_default, reseal_extraction, write_extraction
+from unitac_rig.storage.press_record import iter_press_groups, reseal_extraction, write_extraction
 from unitac_rig.storage.recorder import (
     PRESS_GROUP,
     SessionWriter,
@@ -36,8 +35,6 @@ from unitac_rig.storage.recorder import (
 
 
 def _reextract_group(g: h5py.Group, settings: ExtractionSettings) -> Extraction:
-    from unitac_rig.storage.extraction import extract_press
-
     values = g["tactile/values"][()]
     extraction = extract_press(
         g["robot/t_s"][()], g["robot/press_force_n"][()], g["tactile/t_s"][()], g["tactile/valid"][()], settings
@@ -110,10 +107,6 @@ def reextract_sessions(
        removes the copies and leaves the dataset as it was; a crash during step 3 leaves each session's file old
        or new, never a mix of presses.
     """
-    problems = settings.problems()
-    if problems:
-        name, why = problems[0]
-        raise DataError(f"extraction setting {name}: {why}")
     hint = "rerun extract when that collection has finished"
     leases: list[SessionLease] = []
     writers: list[SessionWriter] = []
@@ -121,7 +114,7 @@ def reextract_sessions(
     try:
         plans: list[tuple[Path, list[Path]]] = []
         for path in paths:
-            journal = path.parent / ".journal" / path.stem
+            journal = session_journal(path)
             if journal.is_dir():  # a journal without its header too: the writer below rebuilds the header
                 lease = SessionLease(journal, path.stem)
                 lease.acquire(wait_s=0.5, hint=hint)
@@ -132,7 +125,9 @@ def reextract_sessions(
                 object_id, sensor = str(header["object"]), str(header["sensor"])
                 writer = SessionWriter(path.parent, object_id, sensor, header, unrepairable="refuse")
                 writers.append(writer)
-                entries = [p for p in writer._journal_press_files().values() if journal_check(p)[0] != "damaged"]
+                entries = [
+                    p for p in writer._journal_press_files().values() if journal_entry_check(p, {}).state != "damaged"
+                ]
             else:
                 check = check_session(path)
                 if check.needs_repair:
@@ -157,13 +152,10 @@ def reextract_sessions(
                 copies.extend(session_copies[-1:])
             for entry in entries:
                 copies.append((_reextract_copy(entry, settings)[0], entry))
-            header_path = path.parent / ".journal" / path.stem / "_session.json"
-            if header_path.exists():
-                data = json.loads(header_path.read_text())
-                data["extraction_settings"] = settings.to_dict()
-                tmp = private_copy_path(header_path)
-                tmp.write_text(json.dumps(data, default=json_default, indent=1))
-                copies.append((tmp, header_path))
+            journal = session_journal(path)
+            if (journal / "_session.json").exists():
+                header = {**read_journal_header(journal), "extraction_settings": settings.to_dict()}
+                copies.append((write_header(journal, header, publish=False), journal / "_session.json"))
             results.append((path, presses, matched))
         if accept is not None:
             accept(results)

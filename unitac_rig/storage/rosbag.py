@@ -1,24 +1,7 @@
-"""``unitac-rig export --format rosbag2``: each recorded session as a ROS 2 bag (MCAP storage) that ``ros2 bag info``,
-``ros2 bag play`` and Foxglove open, written with the pure-Python ``rosbags`` package (no ROS installation).
-
-One bag per session, ``OUT/<object>__<sensor>/`` (``metadata.yaml`` + one ``.mcap``), every press of the session in
-time order, in standard message types only (ROS 2 Humble definitions, embedded in the MCAP file):
-
-* ``/arm/wrench`` ``geometry_msgs/msg/WrenchStamped``: the wrist wrench on the tool (N, N m), base axes, after the
-  press's F/T zero, every arm sample (500 Hz), ``frame_id`` ``base``;
-* ``/arm/tcp_pose`` ``geometry_msgs/msg/PoseStamped``: the TCP pose in the base frame (m; the rotation vector as a
-  quaternion), every arm sample;
-* ``/tactile/<sensor>`` ``std_msgs/msg/Float32MultiArray``: one message per tactile frame, tare-subtracted (the press's
-  tare), in the sensor's units, laid out ``row x col x channel`` (the layout's ``dim`` labels and strides say so).
-  Why not ``sensor_msgs/msg/Image``: a taxel frame has 3 float channels (x, y, z), which no image viewer shows
-  (Foxglove's image panel has no ``32FC3``), while Foxglove's plot panel plots any element of a multi-array
-  (``/tactile/uskin.data[2]``) and every ROS tool reads it. A multi-array has no header, so each message's bag time is
-  the frame's own host stamp, and
-* ``/tactile/<sensor>/stamp`` ``sensor_msgs/msg/TimeReference`` beside each frame carries that stamp in a header, with
-  the device's own clock as ``time_ref`` when the device has one (PapillArray) and ``source`` ``seq=<counter>``.
-
-Times are the rig host's clock, the one both streams were stamped with at recording (a monotonic clock: the bag's
-dates are not calendar dates). The bags are read back with ``rosbags``' reader in the tests.
+"""``unitac-rig export --format rosbag2``: each recorded session as a ROS 2 bag (MCAP storage, standard ROS 2 Humble
+message types) that ``ros2 bag``, Foxglove and the pure-Python ``rosbags`` package (which writes it) open; the
+topics, and why the frames are a ``Float32MultiArray``, are in docs/share-your-data.md ("ROS 2 bags"). Times are the
+rig host's clock, the one both streams were stamped with.
 """
 
 from __future__ import annotations
@@ -32,9 +15,8 @@ from typing import Any
 import numpy as np
 
 from unitac_rig.errors import DataError
-from unitac_rig.storage.manifest import publish_when_done, staging_for
-from unitac_rig.storage.pooling import pool_sessions
-from unitac_rig.storage.reader import read_presses
+from unitac_rig.storage.pooling import pooled_export
+from unitac_rig.storage.reader import read_presses, read_session_info
 
 log = logging.getLogger(__name__)
 
@@ -61,10 +43,7 @@ def write_session_bag(session: Path, bag: Path, typestore: Any) -> dict[str, int
     """Write one session file as the bag directory ``bag`` (must not exist); returns messages per topic."""
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    from unitac_rig.storage.reader import read_session_info
-
-    info = read_session_info(session)
-    sensor = info.sensor
+    sensor = read_session_info(session).sensor
     presses = sorted(read_presses(session), key=lambda r: float(r.tactile_t_s[0]) if len(r.tactile_t_s) else 0.0)
     types = typestore.types
     header_of, vector, stamp_of = (
@@ -88,7 +67,8 @@ def write_session_bag(session: Path, bag: Path, typestore: Any) -> dict[str, int
     with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conn = {t: writer.add_connection(t, msgtype, typestore=typestore) for t, msgtype in topics.items()}
 
-        def put(topic: str, t_ns: int, message: Any) -> None:
+        def put(topic: str, t_ns: int, **fields: Any) -> None:
+            message = types[topics[topic]](**fields)
             writer.write(conn[topic], t_ns, typestore.serialize_cdr(message, topics[topic]))
             counts[topic] += 1
 
@@ -107,26 +87,20 @@ def write_session_bag(session: Path, bag: Path, typestore: Any) -> dict[str, int
                 if kind == 0:
                     header = header_of(stamp=time_of(t_ns), frame_id=FRAME_ID)
                     f, p, q = force[k], pose[k], quat[k]
-                    wrench = types["geometry_msgs/msg/Wrench"](
-                        force=vector(x=f[0], y=f[1], z=f[2]), torque=vector(x=f[3], y=f[4], z=f[5])
+                    wrench = types["geometry_msgs/msg/Wrench"](force=vector(*f[:3]), torque=vector(*f[3:]))
+                    put("/arm/wrench", t_ns, header=header, wrench=wrench)
+                    point, orientation = (
+                        types["geometry_msgs/msg/Point"](*p[:3]),
+                        types["geometry_msgs/msg/Quaternion"](*q),
                     )
-                    put("/arm/wrench", t_ns, types[topics["/arm/wrench"]](header=header, wrench=wrench))
-                    position = types["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2])
-                    orientation = types["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])
-                    pose_msg = types["geometry_msgs/msg/Pose"](position=position, orientation=orientation)
-                    put("/arm/tcp_pose", t_ns, types[topics["/arm/tcp_pose"]](header=header, pose=pose_msg))
+                    put("/arm/tcp_pose", t_ns, header=header, pose=types["geometry_msgs/msg/Pose"](point, orientation))
                     continue
-                values = np.ascontiguousarray(tared[k].reshape(-1))
-                put(frames_topic, t_ns, types[topics[frames_topic]](layout=layout, data=values))
+                put(frames_topic, t_ns, layout=layout, data=np.ascontiguousarray(tared[k].reshape(-1)))
                 device_us = int(rec.tactile_device_t_us[k])
                 source = f"seq={int(rec.tactile_seq[k])}" + ("" if device_us >= 0 else " (no device clock)")
-                reference = time_of(device_us * 1000 if device_us >= 0 else t_ns)
                 header = header_of(stamp=time_of(t_ns), frame_id=sensor)
-                put(
-                    f"{frames_topic}/stamp",
-                    t_ns,
-                    types[topics[f"{frames_topic}/stamp"]](header=header, time_ref=reference, source=source),
-                )
+                reference = time_of(device_us * 1000 if device_us >= 0 else t_ns)
+                put(f"{frames_topic}/stamp", t_ns, header=header, time_ref=reference, source=source)
     return counts
 
 
@@ -155,11 +129,8 @@ def export_rosbag2(data_dirs: Sequence[Path], out: Path) -> RosbagExportSummary:
     from rosbags.typesys import Stores, get_typestore
 
     typestore = get_typestore(Stores.ROS2_HUMBLE)
-    out = Path(out)
-    pooled = pool_sessions([Path(d) for d in data_dirs])
-    staging = staging_for(out)
     bags: dict[str, dict[str, int]] = {}
-    with publish_when_done(staging, out):
+    with pooled_export(data_dirs, out) as (pooled, staging):
         for item in pooled:
             name = f"{item.info.object_id}__{item.info.sensor}"
             bags[name] = write_session_bag(item.info.path, staging / name, typestore)

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from unitac_rig.storage.lease import lease_holder
-from unitac_rig.storage.reader import list_sessions, press_summaries, rig_label
+from unitac_rig.storage.reader import list_sessions, press_counts, press_summaries, rig_label
 from unitac_rig.storage.recorder import journal_dir
 
 
@@ -28,7 +28,7 @@ def inspect_dataset(data_dir: Path) -> dict[str, Any]:
     keys_by_object: dict[str, dict[tuple[str, str], set[tuple[float, float, float]]]] = defaultdict(dict)
     for info in list_sessions(data_dir):
         presses = press_summaries(info.path)
-        planned = info.attrs.get("planned_presses") or []
+        counts = press_counts(info.attrs, presses)
         complete = [p for p in presses if p["status"] == "complete"]
         errors: list[float] = []
         matched = missed = 0
@@ -55,10 +55,7 @@ def inspect_dataset(data_dir: Path) -> dict[str, Any]:
                 "file": info.path.name,
                 # "verified" (every press matched its checksums), "repaired from the journal, ...", or why not
                 "integrity": info.integrity,
-                "presses_planned": len(planned) if planned else len(presses),
-                "presses_complete": len(complete),
-                "presses_failed": sum(p["status"] == "failed" for p in presses),
-                "presses_aborted": sum(p["status"] == "aborted" for p in presses),
+                **{f"presses_{k}": n for k, n in counts.items()},
                 "targets_matched": matched,
                 "targets_missed": missed,
                 "match_error_n": _stats(errors, ("median", "p95", "max")),

@@ -1,12 +1,17 @@
-"""The cards of a LeRobot export (``unitac-rig export --format lerobot``): the YAML front matter a dataset hub
-reads, what a colleague needs to know, loading code that works beside torch's CPU build, and the paper's citation.
-:mod:`unitac_rig.storage.lerobot` writes the datasets and calls these with its summary documents."""
+"""The dataset cards (``README.md``) of the exports: the YAML front matter a dataset hub reads, what a colleague
+needs to know, and how to load the data. :func:`pairs_card` is the Parquet export's (:mod:`.export`),
+:func:`lerobot_card` and :func:`lerobot_sensor_card` the LeRobot export's (:mod:`.lerobot`, with loading code that
+works beside torch's CPU build and the paper's citation); each renders the summary document its exporter writes into
+``manifest.json``."""
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from unitac_rig.storage.manifest import MANIFEST_NAME
+
+PARQUET_NAME = "pairs.parquet"
 
 LICENSE = "cc-by-4.0"  # proposed on the cards; the data's owner changes it before publishing if theirs differs
 CITATION = """@inproceedings{hou2025unitacnv,
@@ -64,7 +69,7 @@ def _load_and_cite(loading: list[str]) -> list[str]:
     ]
 
 
-def render_sensor_card(sensor: str, d: dict[str, Any], doc: dict[str, Any]) -> str:
+def lerobot_sensor_card(sensor: str, d: dict[str, Any], doc: dict[str, Any]) -> str:
     """``<sensor>/README.md``: the card of one sensor's dataset, the folder that is uploaded as a Hub dataset."""
     layout = d["layout"]
     simulated = ""
@@ -107,8 +112,8 @@ def render_sensor_card(sensor: str, d: dict[str, Any], doc: dict[str, Any]) -> s
     return "\n".join(lines)
 
 
-def render_card(doc: dict[str, Any]) -> str:
-    """The export's README.md: what the datasets are, how to load them with LeRobot, the features and limits."""
+def lerobot_card(doc: dict[str, Any]) -> str:
+    """The LeRobot export's README.md: what the datasets are, how to load them with LeRobot, the features and limits."""
     datasets = doc["datasets"]
     simulated = all(d["simulated"] for d in datasets.values())
     lines = [
@@ -169,5 +174,125 @@ def render_card(doc: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-# ---------------------------------------------------------------------------------------------------------------
-# the way back: an export -> the force-matched sets
+def pairs_card(doc: dict[str, Any]) -> str:
+    """The Parquet export's card: what the pairs are, how to load them, columns, sensors, sessions, limits."""
+    exported = doc["exported_by"]
+    lines = [
+        *_card_intro(doc),
+        *_card_tables(doc),
+        *_card_limits(doc),
+        "",
+        f"Exported by unitac-rig {exported['package_version']} (commit `{str(exported['git_commit'])[:12]}`) on "
+        f"{time.strftime('%Y-%m-%d %H:%M', time.localtime(doc['created_unix']))}; `{MANIFEST_NAME}` lists every file "
+        "with its SHA-256.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _card_intro(doc: dict[str, Any]) -> list[str]:
+    """The card's front matter, what the dataset is, and how to load it."""
+    counts = doc["counts"]
+    sensors = list(doc["sensors"])
+    kind = "the simulated rig (the project's twin)" if doc["simulated"] else "a UR5e press rig"
+    return [
+        "---",
+        "pretty_name: unitac-rig paired tactile dataset",
+        "tags: [tactile, robotics, cross-sensor, unitac-rig]",
+        "configs:",
+        "- config_name: default",
+        "  data_files:",
+        "  - split: train",
+        f"    path: {PARQUET_NAME}",
+        "---",
+        "",
+        "# Paired tactile dataset (unitac-rig export)",
+        "",
+        f"{counts['contacts']} contacts, each recorded by every one of {len(sensors)} sensors ({', '.join(sensors)}): "
+        f"{counts['rows']} rows in `{PARQUET_NAME}`, from {counts['sessions']} sessions recorded on {kind}. "
+        "Every contact is one press of an object at one rotation and approach angle, at one target force; each "
+        "sensor's row holds its tactile frame at the moment the wrist force crossed that target.",
+        "",
+        "## Load it",
+        "",
+        "```python",
+        "import pandas as pd",
+        f'df = pd.read_parquet("{PARQUET_NAME}")',
+        "import numpy as np",
+        'frame = np.stack(df.loc[0, "frame"])            # (n_taxels, 3), in the unit of df.loc[0, "frame_unit"]',
+        "",
+        "import datasets",
+        f'ds = datasets.load_dataset("parquet", data_files="{PARQUET_NAME}")["train"]',
+        "```",
+        "",
+        "Check the copy first: `unitac-rig verify .` (every file's SHA-256 against `manifest.json`).",
+        "",
+    ]
+
+
+def _card_tables(doc: dict[str, Any]) -> list[str]:
+    """The card's tables: columns, sensors, contacts per object, sessions."""
+    return [
+        "## Columns",
+        "",
+        "| column | unit | meaning |",
+        "|---|---|---|",
+        *(f"| `{c['name']}` | {c['unit'] or ''} | {c['description']} |" for c in doc["schema"]),
+        "",
+        "Rows of one `contact` share object, rotation, angle and target: pivot on `contact` to get the pairs. "
+        "Units are also in the Parquet schema (each field's `unit` metadata).",
+        "",
+        "## Sensors",
+        "",
+        "| sensor | model | taxel grid | frame unit |",
+        "|---|---|---|---|",
+        *(
+            f"| {s} | {info.get('model', '?')} | {info.get('rows', '?')} x {info.get('cols', '?')} "
+            f"| {info.get('units', '?')} |"
+            for s, info in doc["sensors"].items()
+        ),
+        "",
+        "## Contacts per object",
+        "",
+        "| object | contacts |",
+        "|---|---:|",
+        *(f"| {o} | {n} |" for o, n in doc["counts"]["contacts_per_object"].items()),
+        "",
+        "## Sessions (raw recordings, HDF5, under `raw/`)",
+        "",
+        "| file | presses complete/planned | simulated | SHA-256 |",
+        "|---|---|---|---|",
+        *(
+            f"| `{s['file']}` | {s['presses']['complete']}/{s['presses']['planned']} | "
+            f"{'yes' if s['simulated'] else 'no'} | `{s['sha256'][:16]}…` |"
+            for s in doc["sessions"]
+        ),
+        "",
+        "The session format (raw arm and tactile streams, tare, events, the extraction) is documented in "
+        "unitac-rig's docs/dataset.md; full provenance of each session (rig, software version, commit, sensor "
+        "identity, extraction settings) is in `manifest.json`.",
+        "",
+    ]
+
+
+def _card_limits(doc: dict[str, Any]) -> list[str]:
+    """How the pairs were made and what they cannot be used for."""
+    lines = [
+        "## How it was made, and limits",
+        "",
+        "- Frames are force-matched: the tactile frame nearest the moment the smoothed wrist force first crossed "
+        "each target on the loading ramp, kept only when within the extraction tolerance (`error_n`).",
+        "- A contact is kept only when every sensor has it (join on object, rotation, angle, target); matched frames "
+        "without a partner are left out ("
+        + ", ".join(f"{s}: {n}" for s, n in doc["counts"]["matched_frames_without_partner"].items())
+        + ").",
+        "- Frames are tare-subtracted, in each sensor's own unit (uSkin raw counts are not newtons).",
+        "- No train/test split is given. Do not split rows at random: the forces of one press are near-identical "
+        "frames. Split by approach direction (object, rotation, angle), as unitac-rig's `train` does.",
+    ]
+    if doc["simulated"]:
+        lines.append(
+            "- **Simulated.** Recorded on the project's simulated rig: contact mechanics and sensor responses are "
+            "models, not measurements; do not report results on it as real-sensor results."
+        )
+    return lines

@@ -2,9 +2,9 @@
 
 A twin without them is far easier than the hardware: its readings are one smooth function of the contact, so a
 model that interpolates between seen contacts scores as well as one that generalises. Each imperfection here is a
-field of :class:`Imperfections` (True = on; the default, :data:`REALISTIC`, has all of them but the opt-in
-:data:`OPT_IN`); :data:`CLEAN` turns
-every one off and gives, bit for bit, the twin as it was before them (``unitac-rig campaign --imperfections none``).
+field of :class:`Imperfections` (True = on; the default, :data:`REALISTIC`, has all of them but the opt-in ones,
+:data:`OPT_IN`); :data:`CLEAN` turns every one off and gives, bit for bit, the twin as it was before them
+(``unitac-rig campaign --imperfections none``).
 
 * ``hysteresis`` and ``creep`` of the elastomer (the uSkin's skin, the PapillArray's silicone pillars):
   :class:`ElastomerMemory` changes each taxel's load before its transducer reads it;

@@ -166,8 +166,6 @@ class ImportConventions(StrictTable):
         for name, sensor in self.sensor_names.items():
             if sensor not in ("uskin", "papillarray"):
                 raise ValueError(f"sensor_names.{name}: {sensor!r} is not a sensor id (use uskin or papillarray)")
-        if self.drop_first_rows < 0:
-            raise ValueError("drop_first_rows must be >= 0")
         return self
 
     # -- helpers ------------------------------------------------------------------------------------------------

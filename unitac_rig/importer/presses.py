@@ -71,11 +71,17 @@ def to_our_frame(matrices: np.ndarray, mapping: TactileMapping) -> np.ndarray:
     return np.ascontiguousarray(grid.reshape(grid.shape[0], -1, 3))
 
 
-def _flip_xy(matrices: np.ndarray) -> np.ndarray:
-    out = np.array(matrices, dtype=np.float64, copy=True)
-    out[..., 0] *= -1.0
-    out[..., 1] *= -1.0
-    return out
+def _tactile(
+    force: np.ndarray, disp: np.ndarray | None, layout: SensorLayout, conv: ImportConventions, flip_xy: bool
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Their force and displacement matrices in our frame: PapillArray x/y negated when ``flip_xy``, then the
+    sensor's :class:`TactileMapping`; the displacement only for a layout that has one."""
+    sign = np.array([-1.0, -1.0, 1.0]) if flip_xy and layout.name == "papillarray" else np.ones(3)
+    mapping = conv.tactile_mapping[layout.name]
+    values = to_our_frame(np.asarray(force, dtype=np.float64) * sign, mapping)
+    if disp is None or not layout.has_displacement:
+        return values, None
+    return values, to_our_frame(np.asarray(disp, dtype=np.float64) * sign, mapping)
 
 
 def streams_from_raw(raw: RawColumns, layout: SensorLayout, conv: ImportConventions) -> Streams:
@@ -89,14 +95,8 @@ def streams_from_raw(raw: RawColumns, layout: SensorLayout, conv: ImportConventi
             f"only {int(keep.sum())} usable samples after dropping the first {conv.drop_first_rows} rows; "
             f"the baseline needs {conv.baseline_samples}"
         )
-    force = raw.force[keep]
     disp = raw.displacement[keep] if raw.displacement is not None else None
-    if layout.name == "papillarray" and conv.papillarray_flip_xy:
-        force = _flip_xy(force)
-        disp = _flip_xy(disp) if disp is not None else None
-    mapping = conv.tactile_mapping[layout.name]
-    values = to_our_frame(force, mapping)
-    displacement = to_our_frame(disp, mapping) if disp is not None and layout.has_displacement else None
+    values, displacement = _tactile(raw.force[keep], disp, layout, conv, conv.papillarray_flip_xy)
     t = raw.time_s[keep]
     n_base = conv.baseline_samples
     return Streams(
@@ -116,14 +116,8 @@ def streams_from_raw(raw: RawColumns, layout: SensorLayout, conv: ImportConventi
 def streams_from_processed(arrays: ProcessedArrays, layout: SensorLayout, conv: ImportConventions) -> Streams:
     """A processed file: the authors already dropped rows, subtracted the baseline, rotated the F/T and flipped the
     PapillArray; only the difference to our conventions is applied here, and the tare is zero."""
-    force = arrays.force
-    disp: np.ndarray | None = arrays.displacement if layout.has_displacement else None
-    if layout.name == "papillarray" and conv.papillarray_flip_xy != AUTHORS_PROCESSED_STEPS["papillarray_flip_xy"]:
-        force = _flip_xy(force)
-        disp = _flip_xy(disp) if disp is not None else None
-    mapping = conv.tactile_mapping[layout.name]
-    values = to_our_frame(force, mapping)
-    displacement = to_our_frame(disp, mapping) if disp is not None else None
+    flip = conv.papillarray_flip_xy != AUTHORS_PROCESSED_STEPS["papillarray_flip_xy"]
+    values, displacement = _tactile(arrays.force, arrays.displacement, layout, conv, flip)
     n = values.shape[0]
     return Streams(
         t_s=arrays.time_s,

@@ -105,11 +105,7 @@ class PressStreams:
         # A stopped controller first: after a host freeze the tactile stream looks stalled too, but what happened is
         # that the watchdog stopped the program (no sensor reconnect and retry for that).
         check_controller(state, f"press {self.plan.press_id}")
-        force = press_force_n(state.tcp_force, self.plan.direction)
-        self.robot_t.append(state.host_t_ns / 1e9)
-        self.robot_force.append(np.asarray(state.tcp_force, dtype=np.float64))
-        self.robot_pose.append(np.asarray(state.tcp_pose, dtype=np.float64))
-        self.press_force.append(force)
+        force = self._record(state)
         wrench = np.asarray(state.tcp_force, dtype=np.float64)[:3]
         self.lateral.append(wrench + force * np.asarray(self.plan.direction))  # F minus its press-axis part
         if self.last_controller_t_s is not None:
@@ -189,13 +185,19 @@ class PressStreams:
 
         def on_period(state: ArmState) -> None:
             guard(state)
-            self.robot_t.append(state.host_t_ns / 1e9)
-            self.robot_force.append(np.asarray(state.tcp_force, dtype=np.float64))
-            self.robot_pose.append(np.asarray(state.tcp_pose, dtype=np.float64))
-            self.press_force.append(press_force_n(state.tcp_force, self.plan.direction))
+            self._record(state)
             self.frames.extend(self.sensor.poll())
 
         return on_period
+
+    def _record(self, state: ArmState) -> float:
+        """Append one period's robot streams; -> its press force, N."""
+        force = press_force_n(state.tcp_force, self.plan.direction)
+        self.robot_t.append(state.host_t_ns / 1e9)
+        self.robot_force.append(np.asarray(state.tcp_force, dtype=np.float64))
+        self.robot_pose.append(np.asarray(state.tcp_pose, dtype=np.float64))
+        self.press_force.append(force)
+        return force
 
     def hold(self, seconds: float) -> None:
         for _ in range(max(0, round(seconds / self.arm.control_period_s))):

@@ -37,7 +37,7 @@ from drivers.arm import Arm
 from drivers.errors import ArmError, ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop
 from drivers.sensor import TactileSensor
 from unitac_rig.collection.guarded_motion import settle
-from unitac_rig.collection.press import run_press, zero_wrist
+from unitac_rig.collection.press import run_press
 from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.transit import (
     PressPlan,
@@ -49,7 +49,7 @@ from unitac_rig.collection.transit import (
     transit_guard,
     with_standoff,
 )
-from unitac_rig.collection.wrist import Unloaded, load_left_note, read_zero, unload_wrist, write_zero
+from unitac_rig.collection.wrist import Unloaded, load_left_note, read_zero, unload_wrist, write_zero, zero_wrist
 from unitac_rig.errors import CarriesPressRecord, SafetyLimit, UnitacError
 from unitac_rig.interrupts import acknowledged_interrupts, raise_if_interrupted
 from unitac_rig.provenance import git_commit, package_version

@@ -36,6 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from drivers.arm import Arm
+from drivers.frames import TactileFrame
+from drivers.sensor import TactileSensor
 from unitac_rig.collection.guarded_motion import wait_until_at_rest
 from unitac_rig.collection.transit import UNLOADED_FORCE_N, move_within_limits
 from unitac_rig.errors import SafetyLimit
@@ -50,6 +52,15 @@ UNLOAD_MAX_MM = 45.0  # give up (refuse) when the reading still falls after this
 UNLOAD_WINDOW_S = 0.1  # the mean wrench is read over this window at rest, s
 PROBE_CHANGE_N = 0.5  # a step that changes the mean |F| by less than this found the pad free, N
 UNLOAD_SPEED_MM_S = 10.0  # back-off speed (away from the object: the near speed's default), mm/s
+
+# The window whose mean decides "unloaded" before a zero: 25 readings at 500 Hz. A UR's wrist F/T noise is ~1.15 N
+# white before its ~20 Hz filter, so the mean of 25 readings is off by ~0.23 N (1 sigma): 13 sigma below
+# UNLOADED_FORCE_N. The window after the zero (run_press's settle_s, 0.2 s) sets the host offset and the press-force
+# noise behind the contact threshold: the readings are correlated over ~8 ms, so a 0.1 s window misjudges the noise by
+# up to 40 % and a fast approach then stops on noise (measured on the fast twin); it stays 0.2 s.
+UNLOADED_CHECK_S = 0.05
+ZEROED_FORCE_N = 2.5  # mean |F| right after zeroing must be below this, else the zero did not take, N (a zero
+# taken from one filtered sample is off by its noise, ~0.5 N per axis on a UR; 2.5 N is ~4.5 sigma of that)
 
 
 def read_zero(journal: Path) -> np.ndarray | None:
@@ -76,13 +87,58 @@ def write_zero(journal: Path, wrench: np.ndarray) -> None:
             tmp.unlink()
 
 
-def mean_wrench(arm: Arm, seconds: float = UNLOAD_WINDOW_S) -> np.ndarray:
-    """The mean wrench (6,) over ``seconds`` of control periods (the arm at rest), N and N*m."""
-    readings = []
+def settle_window(arm: Arm, sensor: TactileSensor | None, seconds: float) -> tuple[list[TactileFrame], np.ndarray]:
+    """Wait ``seconds`` at rest one control period at a time; -> (the sensor's frames seen, every wrench read
+    (K, 6) in N, N*m)."""
+    if sensor is not None:
+        sensor.poll()  # drop anything queued during the transit move
+    frames: list[TactileFrame] = []
+    forces = []
     for _ in range(max(1, round(seconds / arm.control_period_s))):
         arm.wait_period()
-        readings.append(np.asarray(arm.read_state().tcp_force, dtype=np.float64))
-    return np.mean(readings, axis=0)
+        forces.append(np.asarray(arm.read_state().tcp_force, dtype=np.float64))
+        if sensor is not None:
+            frames.extend(sensor.poll())
+    return frames, np.asarray(forces)
+
+
+def zero_wrist(
+    arm: Arm,
+    sensor: TactileSensor,
+    settle_s: float,
+    where: str,
+    *,
+    check_s: float | None = None,
+    reference: np.ndarray | None = None,
+) -> tuple[list[TactileFrame], np.ndarray]:
+    """Zero the wrist F/T at rest after settling, refusing when the pad is loaded; -> (frames of both windows,
+    wrenches (K, 6) of the ``settle_s`` window after the zero, whose mean is the host-side offset left over: a zero
+    from one noisy sample is off). ``check_s``: the window before the zero (None: ``settle_s``).
+
+    The unloaded check compares the mean wrench with ``reference`` (6,), an unloaded reading (the session's first
+    zero passes the free reading its back-off found, collection/wrist.py); without one, with the controller's zero,
+    which the last zero set on an unloaded pad (a UR's F/T drifts by well under ``UNLOADED_FORCE_N`` between
+    presses). There is no way to skip it: a zero under load is what pressed a resumed pad to 28-30 N. After zeroing,
+    the window's mean must be near zero.
+    """
+    wait_until_at_rest(arm)
+    before, wrenches = settle_window(arm, sensor, settle_s if check_s is None else check_s)
+    # the mean, not the largest sample: a UR's F/T has ~1 N of sample noise, while a real contact shifts the mean
+    mean_force = force_n(wrenches.mean(axis=0), reference)
+    if mean_force > UNLOADED_FORCE_N:
+        raise SafetyLimit(
+            f"wrist reads {mean_force:.2f} N at {where}: the pad is touching something, refusing to zero the F/T",
+            hint="check the object's position (object.center_m) and the stand-off in the rig file",
+        )
+    arm.zero_ft()
+    frames, wrenches = settle_window(arm, sensor, settle_s)
+    left = force_n(wrenches.mean(axis=0))
+    if left > ZEROED_FORCE_N:
+        raise SafetyLimit(
+            f"wrist still reads {left:.2f} N after zeroing at {where}: the F/T zero did not take",
+            hint="check the wrist force with `unitac-rig probe ur5e` and the payload set on the teach pendant",
+        )
+    return before + frames, wrenches
 
 
 def force_n(wrench: np.ndarray, reference: np.ndarray | None = None) -> float:
@@ -120,7 +176,7 @@ def unload_wrist(arm: Arm, limits: LimitsConfig, *, zero: np.ndarray | None = No
     when the arm cannot back off (the workspace edge) while the remembered zero says the pad is loaded.
     """
     wait_until_at_rest(arm)
-    first = mean_wrench(arm)
+    first = settle_window(arm, None, UNLOAD_WINDOW_S)[1].mean(axis=0)
     off_zero = math.nan if zero is None else force_n(first, zero)
     previous, backed_mm = first, 0.0
     speed = min(UNLOAD_SPEED_MM_S, limits.near_speed_mm_s) / 1000.0
@@ -140,7 +196,7 @@ def unload_wrist(arm: Arm, limits: LimitsConfig, *, zero: np.ndarray | None = No
             break
         backed_mm += step_mm
         wait_until_at_rest(arm)
-        now = mean_wrench(arm)
+        now = settle_window(arm, None, UNLOAD_WINDOW_S)[1].mean(axis=0)
         change = force_n(now, previous)
         previous = now
         if change < PROBE_CHANGE_N:

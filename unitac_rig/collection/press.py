@@ -122,7 +122,7 @@ def run_press(
     )
     streams.event("start", f"strategy={press.strategy} speed={press.speed_mm_s} mm/s")
     streams.event("contact_threshold", f"{contact_threshold_n:.2f} N (press-force noise {noise_n:.3f} N rms)")
-    streams.event("ft_zero", json_list(ft_offset))
+    streams.event("ft_zero", "[" + ", ".join(f"{v:.4f}" for v in ft_offset) + "]")
     streams.event("tare", f"{tare['n_frames']} frames, spread {tare['spread']:.3g}")
     status, reason = "aborted", "interrupted"
     pending: BaseException | None = None
@@ -139,7 +139,8 @@ def run_press(
         stop_arm(arm)
         _back_off(arm, streams, plan, press, quiet=True)
     except (SafetyLimit, ProtectiveStop, DeviceError, KeyboardInterrupt) as exc:
-        status, reason, pending = "aborted", _abort_reason(exc), exc
+        reason = next(why for kind, why in _ABORT_REASONS if isinstance(exc, kind))
+        status, pending = "aborted", exc
         detail = "interrupted by the operator" if isinstance(exc, KeyboardInterrupt) else f"{reason}: {exc}"
         streams.event("abort", detail)
         if not isinstance(exc, ProtectiveStop | ControlScriptStopped):  # the controller has already stopped the arm
@@ -169,14 +170,6 @@ _ABORT_REASONS: tuple[tuple[type[BaseException], str], ...] = (
     (DeviceError, "device_error"),
     (KeyboardInterrupt, "interrupted"),
 )
-
-
-def _abort_reason(exc: BaseException) -> str:
-    return next(reason for kind, reason in _ABORT_REASONS if isinstance(exc, kind))
-
-
-def json_list(values: np.ndarray) -> str:
-    return "[" + ", ".join(f"{v:.4f}" for v in np.asarray(values).ravel()) + "]"
 
 
 def _back_off(arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfig, *, quiet: bool = False) -> None:

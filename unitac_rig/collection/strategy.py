@@ -54,9 +54,8 @@ class PressStrategy(Protocol):
 
 
 def press_strategy(name: str) -> PressStrategy:
-    """The strategy registered as ``name`` in ``rig/strategies.py`` (imported on first use)."""
-    if name not in PRESS_STRATEGIES:
-        raise ConfigError(f"unknown press strategy {name!r}", hint=f"use one of: {', '.join(PRESS_STRATEGIES)}")
+    """The strategy registered as ``name`` in ``rig/strategies.py`` (imported on first use; the rig file's
+    ``press.strategy`` was checked against that table when it was read)."""
     strategy = load(PRESS_STRATEGIES[name])
     if not isinstance(strategy, PressStrategy):
         raise ConfigError(f"press strategy {name!r} ({PRESS_STRATEGIES[name]}) has no press(ctx) method")

@@ -31,7 +31,7 @@ from drivers.arm import Arm, ArmState
 from drivers.errors import DeviceTimeout
 from drivers.frames import TactileFrame
 from drivers.sensor import TactileSensor
-from unitac_rig.collection.guarded_motion import check_controller, force_magnitude
+from unitac_rig.collection.guarded_motion import check_controller, force_magnitude, settle
 from unitac_rig.collection.transit import PressPlan
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.interrupts import raise_if_interrupted
@@ -200,6 +200,4 @@ class PressStreams:
         return force
 
     def hold(self, seconds: float) -> None:
-        for _ in range(max(0, round(seconds / self.arm.control_period_s))):
-            self.arm.wait_period()
-            self.tick(self.arm.read_state())
+        settle(self.arm, seconds, self.tick)

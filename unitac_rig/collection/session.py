@@ -42,7 +42,6 @@ from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.transit import (
     PressPlan,
     check_session_plan,
-    clearance_waypoints,
     make_plan,
     move_clear,
     retract_from_object,
@@ -477,20 +476,18 @@ def record_reason(record: PressRecord | None) -> str:
     return "not recorded" if record is None else f"{record.status}: {record.reason}"
 
 
-def session_tare(
-    rig: Rig, sensor: TactileSensor, first: PressPlan, *, zero: np.ndarray | None = None, free: Unloaded | None = None
-) -> dict[str, Any]:
+def session_tare(rig: Rig, sensor: TactileSensor, first: PressPlan, *, free: Unloaded | None = None) -> dict[str, Any]:
     """Zero the wrist F/T and tare the sensor (device bias where it has one) at the first stand-off pose.
 
     Never on a loaded wrist: before any motion toward the object the pad backs off along its axis until the reading
-    stops changing (:func:`~unitac_rig.collection.wrist.unload_wrist`; ``zero`` is the session's remembered unloaded
-    reading, None on a first session; ``free``: what a back-off the caller ran found), and the zero at the stand-off
+    stops changing (:func:`~unitac_rig.collection.wrist.unload_wrist`; ``free``: what a back-off the caller ran
+    found, with the session's remembered unloaded reading), and the zero at the stand-off
     is refused when the reading there is more than ``UNLOADED_FORCE_N`` off the free one (the object stands closer
     than the rig file says). The dict holds the tare, ``ft_zero_offset`` (the reading after the zero: the new
     unloaded zero) and ``unloaded_at_start_n`` (the load found at the start, 0 when none).
     """
     config = rig.config
-    free = free if free is not None else unload_wrist(rig.arm, config.limits, zero=zero)
+    free = free if free is not None else unload_wrist(rig.arm, config.limits)
     move_clear(
         rig.arm, first, config.object.clearance_mm / 1000.0, config.press.transit_speed_mm_s / 1000.0, config.limits
     )
@@ -592,9 +589,7 @@ def dry_run(
     clearance = config.object.clearance_mm / 1000.0
     check_session_plan(arm.read_state().tcp_pose, plans, clearance, config.limits, confirmed_standoff_mm(config))
     for index, plan in enumerate(plans):
-        here = arm.read_state().tcp_pose
-        outcome.waypoints += len(clearance_waypoints(here, plan, clearance))
-        move_clear(arm, plan, clearance, speed, config.limits)
+        outcome.waypoints += move_clear(arm, plan, clearance, speed, config.limits)
         settle(arm, DRY_RUN_HOLD_S, on_period=transit_guard(arm, config.limits))
         outcome.standoffs += 1
         if on_standoff is not None:

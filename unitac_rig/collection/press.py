@@ -1,21 +1,12 @@
 """One force-terminated press: from the stand-off toward the object's centre, stop at the threshold, dwell, retract.
 
-How the pad goes from the stand-off to the stop force is the press strategy's (``press.strategy``: one object per
-module in ``collection/strategies/``, registered in ``rig/strategies.py``; see ``collection/strategy.py``). Everything
-around it, and every check while it runs, is this press's, the same for every strategy:
-
-* before it: the move to the stand-off (``collection/transit.py``: checked waypoints, the near zone, a force guard),
-  the wrist F/T zeroed at rest after checking that nothing touches the pad, the tactile baseline;
-* while it runs: the strategy moves only through :class:`~unitac_rig.collection.strategy.PressContext`, whose motions
-  run in the controller's force mode with a set-point just above the threshold (``press.setpoint_margin_n``), so a
-  host that freezes mid-press cannot push past it and a host that dies stops the program through the RTDE watchdog
-  (docs/real-rig.md, "Safety"); and every control period goes through
-  :meth:`~.safety_check.PressStreams.tick`: |F| and |T| against the hard limits, travel beyond first
-  contact (a soft object fails the press instead of being crushed), protective stops, the tactile stream, host stalls;
-* after it: the dwell, the retract until the pad is unloaded, the move back to the stand-off, the record.
-
-Every path out stops the arm (``guarded_motion`` and the ``finally`` blocks here), Ctrl-C included, and whatever
-was recorded is kept.
+Before it: the move to the stand-off (``collection/transit.py``), the wrist F/T zeroed at rest on a pad checked
+unloaded (``collection/wrist.py``), the tactile baseline. Then the rig file's ``press.strategy`` presses through the
+seam of ``collection/strategy.py`` (controller-side force mode with a set-point just above the threshold, so a frozen
+host cannot push past it), every control period through :meth:`~.safety_check.PressStreams.tick`, the checks of every
+press whatever its strategy. After it: the dwell, the retract until the pad is unloaded, the move back to the
+stand-off, the record. Every path out stops the arm (``guarded_motion`` and the ``finally`` blocks here), Ctrl-C
+included, and whatever was recorded is kept.
 """
 
 from __future__ import annotations

@@ -6,18 +6,10 @@ record it keeps while checking: the robot and tactile streams, one control perio
 beyond first contact (:class:`TravelLimit`), a contact whose force leaves the friction cone around the press axis
 (:class:`OffAxisLimit`), and |F| or |T| past the hard limits; it records host stalls.
 
-The off-axis bound. Force mode regulates the press axis only; on the other axes the arm holds position, so a
-contact's lateral force is bounded by nothing but stiffness (hardware-facts 3.6). A flat pad pressing a convex object
-that stands where the rig file says touches it with its face: the contact normal is the press axis and Coulomb
-friction bounds the lateral force by mu x the press force. A lateral force beyond that means the normal itself is
-tilted: the object touches the pad's rim (it stands to the side, or the pad is not over it). The bound is
-``OFF_AXIS_FRICTION`` x (filtered press force) + ``OFF_AXIS_FLOOR_N``: 0.7 is 1.55x the largest friction coefficient
-the project knows (the PapillArray's silicone pillars on printed plastic, fitted 0.45 in sim/scene.py, which the
-simulated square's corners reach), and the floor covers what the wrist reads across the axis with no contact: its
-noise after the controller's filter is correlated over ~8 ms, so the 20 ms mean the check reads still swings by
-1-2 N (a 1.5 N floor stopped 1 of 91 well-placed hex_tpu presses on the twin before contact), and a UR5e's F/T
-precision is +-3.5 N (hardware-facts 3). At the 10 N threshold it lets |F| reach sqrt(10.2^2 + 10.1^2) = 14.4 N at
-most, under the 15 N the issue asks.
+The off-axis bound (docs/real-rig.md, "Safety" item 9, has its derivation): force mode regulates the press axis
+only, so a lateral force beyond Coulomb friction on the pad's face (``OFF_AXIS_FRICTION`` x the filtered press force
++ ``OFF_AXIS_FLOOR_N`` for the wrist's noise across the axis) means the object touches the pad's rim. At the 10 N
+threshold it lets |F| reach 14.4 N at most.
 """
 
 from __future__ import annotations
@@ -45,8 +37,12 @@ HOST_GAP_EVENT_S = 0.02  # controller-clock gaps between two reads longer than t
 # object reads -10 N. The stop rule's 100 ms window alone let a stiff object reach the hard limit first.
 SIGN_SAMPLES = 10
 SIGN_FACTOR = 1.5
-OFF_AXIS_FRICTION = 0.7  # lateral force allowed per newton of press force (a friction cone of 35 deg), see above
-OFF_AXIS_FLOOR_N = 3.0  # lateral force allowed at no press force (the wrist's noise across the axis), N
+# Lateral force allowed per newton of press force (a friction cone of 35 deg): 1.55x the largest friction coefficient
+# the project knows (the PapillArray's pillars on printed plastic, 0.45 in sim/scene.py).
+OFF_AXIS_FRICTION = 0.7
+# Lateral force allowed at no press force, N: the 20 ms mean of the wrist's noise across the axis still swings 1-2 N (a
+# 1.5 N floor stopped 1 of 91 well-placed hex_tpu presses on the twin); a UR5e's F/T precision is +-3.5 N.
+OFF_AXIS_FLOOR_N = 3.0
 OFF_AXIS_PHASES = ("approach", "press", "dwell")  # while the pad is driven into the object or held there
 
 

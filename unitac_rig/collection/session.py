@@ -5,9 +5,7 @@ already finished in the session file (complete or failed) are skipped, so the sa
 a Ctrl-C, a termination signal or a protective stop. Library code: no printing; progress goes through callbacks the
 CLI renders.
 
-Before the first motion the whole plan is checked: the arm's start pose, every stand-off (the confirmed one too),
-clearance and retract waypoint and the whole press travel of every press and rotation against the workspace box and
-the arm's reach (one line names the first outside).
+Before the first motion the whole plan is checked (:func:`~unitac_rig.collection.transit.check_session_plan`).
 
 When the session stops instead of carrying on blind: a protective stop (the operator must clear it on the pendant),
 the controller's program stopping (the watchdog after a host stall), a lost robot state stream, a hard force limit,

@@ -5,18 +5,14 @@ A strategy is an object with one method, ``press(ctx) -> stop reason``, in its o
 is checked against that table). It never gets the arm: it moves the pad only through the :class:`PressContext` it is
 handed, whose two motions carry the safety of every press whatever the strategy asks:
 
-* :meth:`PressContext.move` is ``guarded_motion.guarded_move`` in the controller's force mode, compliant along the
-  press direction. The force set-point is the press threshold + ``press.setpoint_margin_n`` (in the controller's
-  zero), raised on a plateau only up to :func:`setpoint_ceiling_n`, never within ``HARD_LIMIT_CLEARANCE_N`` of the
-  hard limit, whatever force the strategy asks to stop at: a host that freezes cannot push past it. A stop force at
-  or above the hard limit is refused; speeds are cut to ``limits.max_speed_mm_s``; travel to the press's budget.
-* :meth:`PressContext.force_control` is one control period of force control with a set-point the strategy chooses,
-  capped at threshold + ``press.setpoint_margin_n`` (the force a stalled host leaves the controller regulating).
+* :meth:`PressContext.move`: ``guarded_motion.guarded_move`` in the controller's force mode, with the press's own
+  set-point (threshold + ``press.setpoint_margin_n``, never within ``HARD_LIMIT_CLEARANCE_N`` of the hard limit)
+  whatever force the strategy asks to stop at: a host that freezes cannot push past it;
+* :meth:`PressContext.force_control`: one control period of force control, its set-point capped the same way.
 
-Every control period of both goes through the press's :meth:`~.safety_check.PressStreams.tick` (hard
-force and torque limits, travel past first contact, the tactile stream, protective stops, a stopped program, Ctrl-C),
-and every motion feeds the RTDE watchdog. The arm is stopped after the strategy returns whatever it left running. The
-moves before (the near zone) and after (dwell, retract) are the press's (collection/press.py), not the strategy's.
+Every control period of both goes through the press's :meth:`~.safety_check.PressStreams.tick` and feeds the RTDE
+watchdog; the arm is stopped after the strategy returns whatever it left running. The moves before and after are the
+press's (collection/press.py), not the strategy's.
 
 Stop reasons a strategy returns: ``"force"`` (the threshold was reached: the press is complete), ``"no_contact"`` (it
 never touched anything: aborted, redone on resume), or a failure (``"travel"``, ``"timeout"``, ``"settled"``).
@@ -145,8 +141,9 @@ class PressContext:
         keep_moving: bool = False,
         final: bool = False,
     ) -> Move:
-        """Along the press at up to ``speed_mm_s`` until the mean of the last ``samples`` press forces reaches
-        ``until_n`` (N), in force mode with the press's set-point (see the module docstring).
+        """Along the press at up to ``speed_mm_s`` (cut to ``limits.max_speed_mm_s``) until the mean of the last
+        ``samples`` press forces reaches ``until_n`` (N), in force mode with the press's set-point (see the module
+        docstring).
 
         ``travel_m``: this move's travel budget (default: what is left of :attr:`backstop_m`; at most that plus
         ``limits.max_travel_after_contact_mm``). ``keep_moving``: on reaching ``until_n`` go straight on with the

@@ -1,26 +1,10 @@
-"""Never zero a loaded wrist: the session's last unloaded zero, kept across a crash, and a guarded back-off that
-proves the pad is free before the session zeroes the wrist F/T.
+"""Never zero a loaded wrist (docs/real-rig.md, "Safety" item 8, has the measurements and the reasoning).
 
-Why: ``zeroFtSensor`` taken while the pad presses on something makes that load read as zero, and the press then adds
-its full threshold on top (an independent controller measured 27.9-30.2 N true for a "10.8 N" press after a resume
-with the pad left touching). Two checks, both before any motion toward the object:
-
-* the **remembered zero**: the mean wrench read right after the last zero the session knows was unloaded (the
-  session's first zero, and every press's own zero, which refuses a loaded pad), written next to the session's
-  journal (``_wrist_zero.json``) so that a resume after ``kill -9`` has it. The controller keeps its F/T zero while
-  the host is gone, so the reading now minus the remembered one is the load now (a controller restart loses the zero;
-  the back-off below still tells a load from a changed zero);
-* the **back-off probe** (physics, needs no remembered zero): a translation does not change the gravity and payload
-  part of a wrist reading, only contact does. So the arm backs along the pad's axis (tool -z, away from whatever the
-  pad presses) in :data:`UNLOAD_STEP_MM` steps, guarded (the force may fall, not grow) and clipped to the workspace,
-  and reads the mean wrench after each step at rest. While a step changes |F| by more than
-  :data:`PROBE_CHANGE_N` the pad was still loaded; the first step that changes nothing proves it free. The load the
-  arm was under is how much the reading fell. Not free after :data:`UNLOAD_MAX_MM`: refused with one line giving the
-  measured load.
-
-The threshold: the mean of a 0.1 s window of a UR's filtered wrist reading scatters by ~0.12 N (0.4 N per sample,
-correlated over ~8 ms), so two windows differ by ~0.17 N (1 sigma) and 0.5 N is ~3 sigma: a false "loaded" costs one
-more step; a contact softer than 0.5 N per 3 mm (0.17 N/mm, far below the softest catalogue object) would go unseen.
+``zeroFtSensor`` under load makes the load read as zero, and the press then adds its threshold on top. So the zero
+(:func:`zero_wrist`) is refused on a loaded pad, against two references kept here: the session's **last unloaded
+zero** (the wrench read right after a zero that was checked unloaded, written next to the journal so a resume after
+``kill -9`` has it), and a **back-off probe** (:func:`unload_wrist`) that needs no zero: a translation changes only the
+contact part of a wrist reading, so the arm backs along the pad's axis in guarded steps until a step changes nothing.
 """
 
 from __future__ import annotations
@@ -50,7 +34,9 @@ ZERO_FILE = "_wrist_zero.json"  # in the session's journal directory: the last u
 UNLOAD_STEP_MM = 3.0  # each back-off step, mm
 UNLOAD_MAX_MM = 45.0  # give up (refuse) when the reading still falls after this much back-off, mm
 UNLOAD_WINDOW_S = 0.1  # the mean wrench is read over this window at rest, s
-PROBE_CHANGE_N = 0.5  # a step that changes the mean |F| by less than this found the pad free, N
+# A step that changes the mean |F| by less than this found the pad free, N: two 0.1 s means of a UR's filtered reading
+# differ by ~0.17 N (1 sigma), so 0.5 N is ~3 sigma; a contact softer than 0.17 N/mm would go unseen.
+PROBE_CHANGE_N = 0.5
 UNLOAD_SPEED_MM_S = 10.0  # back-off speed (away from the object: the near speed's default), mm/s
 
 # The window whose mean decides "unloaded" before a zero: 25 readings at 500 Hz. A UR's wrist F/T noise is ~1.15 N

@@ -1,14 +1,6 @@
-"""The UniTac-NV authors' conventions, made explicit: every constant their offline scripts hard-code is a field here.
-
-Defaults reproduce what their preprocessing does to a raw session (facts from their public repository, see
-docs/import.md): drop the first 10 rows, rotate the wrist F/T x/y (forces and torques) by 45 degrees about z, negate
-PapillArray x/y so both sensors share the uSkin's axes, take the baseline as the mean of the first 100 samples,
-call a press a contiguous run with -20 N < Fz < -5 N of at least 30 (uSkin) / 5 (PapillArray) samples, and label
-each press with round(atan2(y - 0.625, x + 0.15) * 180/pi + 90) degrees from the end-effector x, y in metres.
-
-The rest is what this project adds on top (and says so): how their names map to our object and sensor ids, how the
-press window is widened back to the start of the loading ramp, when a press counts as complete, how their matrices
-map onto our (row, col) grid and axes, and which rotation each arbitrary-object file was recorded at (a guess).
+"""The UniTac-NV authors' conventions, made explicit: every constant their offline scripts hard-code is a field here
+(defaults: what their preprocessing does to a raw session), and what this project adds on top says so (name mapping,
+press windows, completeness, grid mapping, the arbitrary files' rotations: a guess). docs/import.md has every field.
 
 A TOML file can override any field (``--conventions FILE``); the effective conventions are stored in every imported
 session's root attributes.

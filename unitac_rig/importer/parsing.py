@@ -1,13 +1,5 @@
-"""Reading the UniTac-NV files: raw session CSVs and the authors' processed ``.npz`` files.
-
-Raw CSV (one header row, then one row per tactile sample, about 100 Hz), columns by position:
-
-0. host time, ``%Y-%m-%d %H:%M:%S.%f``
-1. sensor sequence number
-2. force matrix as a stringified nested list: uSkin ``4 x 6 x 3`` raw counts, PapillArray ``3 x 3 x 3`` N
-3. displacement matrix, same shape (uSkin: zeros; PapillArray: mm)
-4. wrist F/T ``[Fx, Fy, Fz, Mx, My, Mz]`` (N, N*m), Fz negative while pressing
-5. end-effector pose ``[x, y, z, rx, ry, rz]`` (m, rad)
+"""Reading the UniTac-NV files: raw session CSVs (columns by position: docs/import.md, "Their formats") and the
+authors' processed ``.npz`` files.
 
 Parsing is vectorised: a whole column is joined into one string and read by numpy in one call. Rows whose field
 counts, bracket structure or numbers are wrong are dropped and reported by data-row number (0 = first row after the

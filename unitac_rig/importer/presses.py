@@ -1,13 +1,8 @@
 """From one UniTac-NV recording to this project's presses: conventions, segmentation, windows, angles, duplicates.
 
-Axis and grid mapping (see docs/import.md): their force matrix ``[r][c][k]`` (uSkin 4 x 6, PapillArray 3 x 3; k =
-x, y, z) becomes our taxel ``r * cols + c``, component k, after their PapillArray x/y flip and after the per-sensor
-:class:`TactileMapping` (identity by default). The wrist F/T is rotated by ``ft_rotation_deg`` about z
-(x' = x cos t - y sin t, y' = x sin t + y cos t, the same for Mx, My); the press force is ``-Fz`` (positive while
-pressing), unchanged by that rotation.
-
-One press = one run of their segmentation rule, widened backwards to the start of its loading ramp (their -5 N
-threshold alone would cut the 4..5 N targets) and forwards by a short unloading margin.
+The axis and grid mapping is docs/import.md's ("Axes and grid"). One press = one run of their segmentation rule,
+widened backwards to the start of its loading ramp (their -5 N threshold alone would cut the 4..5 N targets) and
+forwards by a short unloading margin.
 """
 
 from __future__ import annotations

@@ -1,19 +1,10 @@
-"""The press's force policy and every other motion of a session, on top of :class:`drivers.arm.Arm`: watched moves,
-the guarded (force-terminated) move, settling, stopping. Policy, not I/O: the driver only carries the commands.
+"""The press's force policy and every other motion of a session, on top of :class:`drivers.arm.Arm`: watched moves
+(:func:`move_to`), the guarded, force-terminated move (:func:`guarded_move`), settling, stopping. Policy, not I/O:
+the driver only carries the commands.
 
 Every motion here is started and then watched one control period at a time (``wait_period`` also feeds the
 controller's watchdog), and every way out (a reached condition, an exception from a callback or the arm, Ctrl-C, a
 second Ctrl-C during the stop) stops the arm before it returns or raises.
-
-* :func:`move_to`: a straight-line move, asynchronous on the controller and polled here, so a callback that sees
-  something wrong (a force where there should be none) or Ctrl-C stops it at once;
-* :func:`guarded_move`: the press. With ``force_setpoint_n`` it runs in **controller-side force mode**: the controller
-  moves the pad along the press direction at most at the press speed and regulates the contact force toward the
-  set-point (just above the stop threshold) by itself, so a host that stalls mid-press cannot push the force much
-  past the set-point; the host only decides when to end the press. Without it, a plain ``speedL`` every period (for
-  moves where nothing can be crushed). The stop rule takes the mean of the last ``stop_samples`` readings, so one
-  noise spike of the wrist force does not end a press early; the hard limit acts on any single reading of |F| (all
-  force axes) or |T|.
 
 "Press force" along a unit direction d is ``-dot(F[:3], d)`` (N): ``tcp_force`` is what the environment exerts on the
 tool, which points against the press.
@@ -215,12 +206,14 @@ def guarded_move(
     """Move along ``direction`` at ``speed_m_s`` until the press force reaches ``force_threshold_n``.
 
     ``force_setpoint_n``: run in controller-side force mode, compliant along ``direction`` with this force set-point
-    (N, a little above the threshold, as the controller measures it) and ``speed_m_s`` as the speed limit (see the
-    module docstring); None: ``speedL``.
+    (N, a little above the threshold, as the controller measures it) and ``speed_m_s`` as the speed limit: the
+    controller regulates the contact force by itself, so a host that stalls mid-press cannot push it much past the
+    set-point; the host only decides when to end the press. None: a plain ``speedL`` every period (for moves where
+    nothing can be crushed). The stop rule takes the mean of the last ``stop_samples`` readings (one noise spike
+    does not end a press early); the hard limit acts on any single reading of |F| (all force axes) or |T|.
     ``setpoint_ceiling_n``: in force mode, how far the set-point may be raised when the force settles below the
     threshold (see ``PLATEAU_S``); at the ceiling such a move ends with reason "settled" instead of waiting for
     ``max_duration_s``. None: the set-point is never raised (a plateau still ends the move, "settled").
-    ``stop_samples``: the threshold applies to the mean of the last this-many press-force readings.
     ``max_duration_s``: give up after this long (reason "timeout"): in force mode a set-point that the filtered
     force never quite reaches would otherwise hold the pad there for good, travelling nowhere.
     Also stops when the travel along the direction exceeds ``max_travel_m`` (reason "travel"), any single reading

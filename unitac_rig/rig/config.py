@@ -136,12 +136,7 @@ class LimitsConfig(StrictTable):
     def _physical_ceilings(self) -> LimitsConfig:
         """Refuse limits past what the hardware can read or survive (the module's ceilings)."""
         ceilings = (
-            (
-                "hard_force_n",
-                self.hard_force_n,
-                WRIST_FORCE_RANGE_N,
-                "N, the UR5e wrist F/T's force range: a limit the wrist cannot read never trips",
-            ),
+            ("hard_force_n", self.hard_force_n, WRIST_FORCE_RANGE_N, "N, the UR5e wrist F/T's force range"),
             ("hard_torque_nm", self.hard_torque_nm, WRIST_TORQUE_RANGE_NM, "N*m, the UR5e wrist F/T's torque range"),
             ("max_speed_mm_s", self.max_speed_mm_s, REDUCED_SPEED_MM_S, "mm/s, the ISO 10218-1 reduced speed"),
             ("move_force_n", self.move_force_n, self.hard_force_n, "N, limits.hard_force_n"),

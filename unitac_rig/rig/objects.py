@@ -72,7 +72,7 @@ class MaterialSpec:
     source: str = ""
 
 
-# Sources: /docs/simulator.md has the table. [S] stated by a source, [D] derived, [I] inferred/fitted.
+# Sources and the measurements behind each fit: docs/simulator.md, "Materials". [S] stated, [D] derived, [I] fitted.
 MATERIALS: dict[str, MaterialSpec] = {
     "PLA": MaterialSpec(
         name="PLA",
@@ -93,12 +93,8 @@ MATERIALS: dict[str, MaterialSpec] = {
         global_cubic_n_per_mm3=0.15,  # [I] stiffening: tangent ~6 N/mm at 3 mm, 10 N reached after ~3 mm
         corner_stiffness_factor=3.0,  # [I] corner loading stiffer than face-centre loading
         wall_foundation_n_per_mm3=0.03,  # [I] fitted: at 10 N the TPU circle flattens to a ~15 mm wide contact
-        # (ring flattening starts at pi*E*I/R^2 ~ 0.19 N/mm < 0.33 N/mm) and halves the uSkin's peak taxel, as the
-        # low end of the recorded per-file peaks (1.6k vs 5.3k counts) suggests
-        wall_point_stiffness_n_per_mm=4.7,  # [D/I] shell dimple ~ E t^2 / R = 6.5 N/mm; refitted to 0.7x that: the
-        # PapillArray centre pillar still peaks above 4 N on TPU (data: 4.2-5.3 N in every file, TPU included)
-        skin_drag_mm=0.5,  # [I] fitted to the TPU sessions' uSkin lateral readings, larger than PLA's (circle minimum
-        # -1.9k against -1.2k counts, hexagon -3.1k against -2.7k): the flattening wall stretches under the skin
+        wall_point_stiffness_n_per_mm=4.7,  # [D/I] shell dimple ~ E t^2 / R = 6.5 N/mm, refitted to 0.7x that
+        skin_drag_mm=0.5,  # [I] fitted to the TPU sessions' uSkin lateral readings (larger than PLA's)
         source="Shore 95A TPU; thin-ring/beam formulas in scene-facts section 4",
     ),
 }

@@ -92,10 +92,6 @@ class SessionOutcome:
     wrist_zero: np.ndarray | None = None
     last_reason: str | None = None  # how the last press of this run ended ("aborted: no_contact", ...)
 
-    @property
-    def finished(self) -> bool:
-        return self.stopped is None
-
 
 @dataclass
 class PressDone:

@@ -198,10 +198,7 @@ class PressContext:
             force_limits(speed_m_s),
         )
         self._arm.wait_period()
-        state = self._arm.read_state()
-        self._streams.tick(state)
-        if state.protective_stop:
-            raise ProtectiveStop("protective stop during force control")
+        self._streams.tick(self._arm.read_state())  # raises on a protective stop, a hard limit, ...
         return self._streams.press_force[-1]
 
     def _travelled_m(self) -> float:

@@ -178,7 +178,8 @@ def unload_wrist(arm: Arm, limits: LimitsConfig, *, zero: np.ndarray | None = No
                     "the pad's axis (workspace edge): refusing to zero a loaded wrist",
                     hint="move the pad clear of the object (freedrive on the pendant), then run the same command",
                 )
-            log.warning("cannot back off to check the wrist is unloaded (workspace edge); %s", _zero_note(off_zero))
+            note = "no remembered zero" if math.isnan(off_zero) else f"{off_zero:.1f} N off the remembered zero"
+            log.warning("cannot back off to check the wrist is unloaded (workspace edge); %s", note)
             break
         backed_mm += step_mm
         wait_until_at_rest(arm)
@@ -205,27 +206,17 @@ def unload_wrist(arm: Arm, limits: LimitsConfig, *, zero: np.ndarray | None = No
     return result
 
 
-def _zero_note(off_zero: float) -> str:
-    return "no remembered zero" if math.isnan(off_zero) else f"{off_zero:.1f} N off the remembered zero"
-
-
-def load_left_n(arm: Arm, zero: np.ndarray | None) -> float | None:
-    """|F| (N) the pad is left under now, against the unloaded reading ``zero`` (6,); None when the arm cannot be read
-    or no zero is known. One filtered reading: it works with the program stopped (nothing else can be asked then)."""
+def load_left_note(arm: Arm, zero: np.ndarray | None) -> str:
+    """``"; the pad is left loaded: X N on the wrist"`` (or ``"; the pad is left unloaded (X N on the wrist)"``)
+    against the unloaded reading ``zero`` (6,), appended to every way out of a fault so the operator knows whether the
+    pad still presses on something; empty when no zero is known or the arm cannot be read. One filtered reading: it
+    works with the program stopped (nothing else can be asked then)."""
     if zero is None:
-        return None
+        return ""
     try:
-        return force_n(np.asarray(arm.read_state().tcp_force, dtype=np.float64), zero)
+        load = force_n(np.asarray(arm.read_state().tcp_force, dtype=np.float64), zero)
     except Exception as exc:  # the arm is gone (a lost stream): say nothing rather than mask what happened
         log.info("cannot read the load left on the pad: %s", exc)
-        return None
-
-
-def load_left_note(arm: Arm, zero: np.ndarray | None) -> str:
-    """``"; the pad is left under X N"`` (or ``"; the pad is left unloaded (X N)"``), empty when unknown: appended to
-    every way out of a fault, so the operator knows whether the pad still presses on something."""
-    load = load_left_n(arm, zero)
-    if load is None:
         return ""
     if load <= UNLOADED_FORCE_N:
         return f"; the pad is left unloaded ({load:.1f} N on the wrist)"

@@ -172,6 +172,7 @@ def collect_session(
     except BaseException:
         writer.discard_if_unused()  # a missing port must not leave an empty session file behind
         raise
+    pressing = False
     try:
         try:
             with _kept_alive(arm):
@@ -182,14 +183,12 @@ def collect_session(
                 writer.update_root_attrs({"session_tare": tare})
                 outcome.wrist_zero = np.asarray(tare["ft_zero_offset"], dtype=np.float64)
                 write_zero(writer.journal, outcome.wrist_zero)
-        except BaseException as exc:
-            writer.discard_if_unused()  # nor may an arm or sensor that fails before the first press
-            _say_load_left(rig, exc, outcome)
-            raise
-        try:
+            pressing = True
             run = _Run(rig, obj, sensor, sensor_name, writer, extraction, outcome, on_tick)
             run.press_all(todo, on_press, ask_operator, len(rotations))
         except BaseException as exc:
+            if not pressing:
+                writer.discard_if_unused()  # nor may an arm or sensor that fails before the first press
             _say_load_left(rig, exc, outcome)
             raise
         if outcome.stopped is None and outcome.complete == 0 and outcome.failed + outcome.aborted > 0:

@@ -61,16 +61,9 @@ class ExtractionConventions(StrictTable):
     tactile_latency_s: float = Field(default=0.0, description="tactile delay relative to the F/T, s (same CSV row: 0)")
 
     def to_settings(self) -> ExtractionSettings:
-        return ExtractionSettings(
-            targets_n=tuple(self.targets_n),
-            tolerance_n=self.tolerance_n,
-            smoothing_samples=self.smoothing_samples,
-            max_frame_gap_s=self.max_frame_gap_s,
-            tactile_latency_s=self.tactile_latency_s,
-            # the moving average, as before the fit: the authors' wrist lag and noise are not known, and their rows
-            # pair the tactile frame with the wrist reading as recorded (`unitac-rig extract` can re-run with the fit)
-            method="moving-average",
-        )
+        # the moving average, as before the fit: the authors' wrist lag and noise are not known, and their rows pair
+        # the tactile frame with the wrist reading as recorded (`unitac-rig extract` can re-run with the fit)
+        return ExtractionSettings(**self.model_dump(), method="moving-average")
 
 
 def _default_object_shapes() -> dict[str, str]:

@@ -7,15 +7,13 @@ CLI renders.
 
 Before the first motion the whole plan is checked (:func:`~unitac_rig.collection.transit.check_session_plan`).
 
-When the session stops instead of carrying on blind: a protective stop (the operator must clear it on the pendant),
-the controller's program stopping (the watchdog after a host stall), a lost robot state stream, a hard force limit,
-and ``limits.max_failed_in_a_row`` presses in a row that do not complete (no contact, timeout, travel limit, force
-settled below the threshold: the object is missing, misplaced or not what the rig file says). Only a sensor that
-stalls or drops off is reconnected and its press retried, once. After any abort the arm retracts from where it is
-(:func:`~unitac_rig.collection.transit.retract_from_object`), never toward a pose it did not reach; after Ctrl-C,
-SIGTERM or SIGHUP too, so the pad is not left loaded against the object.
-While the host writes a press or waits for the operator, the arm is at rest and :meth:`Arm.keep_alive` feeds the
-controller's watchdog. :func:`dry_run` visits every stand-off and clearance waypoint without pressing.
+The session stops instead of carrying on blind on a protective stop, a stopped controller program, a lost robot state
+stream, a hard force limit, or ``limits.max_failed_in_a_row`` presses in a row that do not complete (the object is
+missing, misplaced or not what the rig file says); only a sensor that stalls or drops off is reconnected and its press
+retried, once. After any abort, Ctrl-C and the termination signals included, the arm retracts from where it is
+(:func:`~unitac_rig.collection.transit.retract_from_object`). While the host writes a press or waits for the
+operator, :meth:`Arm.keep_alive` feeds the controller's watchdog. :func:`dry_run` visits every stand-off and
+clearance waypoint without pressing.
 """
 
 from __future__ import annotations

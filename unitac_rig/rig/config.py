@@ -151,12 +151,6 @@ class LimitsConfig(StrictTable):
             )
         return self
 
-    def near_speed_ceiling_mm_s(self, watchdog_hz: float) -> float:
-        """The fastest near speed (mm/s) whose double fault (a host frozen at an unexpected contact: the move runs
-        on for one watchdog period) stays under ``DOUBLE_FAULT_BOUND_N`` on a ``NEAR_STIFFNESS_N_PER_MM`` contact:
-        (25 N - move_force_n) x watchdog_hz / stiffness (12 mm/s with the defaults)."""
-        return max(DOUBLE_FAULT_BOUND_N - self.move_force_n, 0.0) * watchdog_hz / NEAR_STIFFNESS_N_PER_MM
-
 
 class RigConfig(StrictTable):
     """A whole rig. ``arm`` absent and no sensors means the simulated rig."""
@@ -218,7 +212,9 @@ class RigConfig(StrictTable):
                     "they are read back and checked at connect), or set arm.unchecked_tool = true to run unchecked"
                 )
         watchdog_hz = DEFAULT_WATCHDOG_HZ if self.arm is None else self.arm.watchdog_hz
-        near_ceiling = self.limits.near_speed_ceiling_mm_s(watchdog_hz)
+        # The fastest near speed whose double fault (a host frozen at an unexpected contact: the move runs on for one
+        # watchdog period) stays under DOUBLE_FAULT_BOUND_N on a NEAR_STIFFNESS_N_PER_MM contact (12 mm/s by default)
+        near_ceiling = max(DOUBLE_FAULT_BOUND_N - self.limits.move_force_n, 0.0) * watchdog_hz / NEAR_STIFFNESS_N_PER_MM
         if self.limits.near_speed_mm_s > near_ceiling:
             raise ValueError(
                 f"limits.near_speed_mm_s = {self.limits.near_speed_mm_s:g} is above {near_ceiling:.1f} mm/s: a host "

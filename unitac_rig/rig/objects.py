@@ -174,9 +174,6 @@ class Symmetry:
     def continuous(self) -> bool:
         return self.order == 0
 
-    def to_dict(self) -> dict[str, Any]:
-        return {"order": self.order, "mirror_axis_deg": self.mirror_axis_deg}
-
 
 def outline_symmetry(outlines: Sequence[np.ndarray], tolerance_mm: float = SYMMETRY_TOLERANCE_MM) -> Symmetry:
     """The largest rotational order (up to 24) and a mirror line of closed polygons about the origin: a turn or a

@@ -7,6 +7,7 @@ those files; a run killed mid-file resumes it (presses already written from the 
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -154,7 +155,7 @@ def _check_against_selected(streams: Streams, cands: list[PressCandidate], repor
 
 def _import_file(
     src: SourceFile,
-    writer: _LazyWriter,
+    writer: Callable[[], SessionWriter],
     conv: ImportConventions,
     layout: SensorLayout,
     existing: dict[str, dict[str, Any]],
@@ -206,7 +207,7 @@ def _import_file(
                 f"{cand.describe(streams.rows)}: already in the session from {previous.get('source_file', '?')}"
             )
             continue
-        writer.get().write_press(cand.record)
+        writer().write_press(cand.record)
         existing[pid] = dict(cand.record.attrs)
         report.written += 1
         _count(cand, report)
@@ -223,7 +224,7 @@ def _import_file(
         "sample_rate_hz": _rate_hz(streams.t_s),
         **({"authors_processing": AUTHORS_PROCESSED_STEPS} if src.kind == "processed" else {}),
     }
-    writer.get().update_root_attrs({"source_files": imported})
+    writer().update_root_attrs({"source_files": imported})
     report.outcome = "imported"
 
 
@@ -287,23 +288,6 @@ def import_unitac_nv(
     )
 
 
-class _LazyWriter:
-    """Opens the session only when something is written, so a file that fails leaves no empty session behind."""
-
-    def __init__(self, data_dir: Path, object_id: str, sensor: str, root_attrs: dict[str, Any]) -> None:
-        self._args = (data_dir, object_id, sensor, root_attrs)
-        self._writer: SessionWriter | None = None
-
-    def journal_exists(self) -> bool:
-        data_dir, object_id, sensor, _ = self._args
-        return (journal_dir(data_dir, object_id, sensor) / "_session.json").exists()
-
-    def get(self) -> SessionWriter:
-        if self._writer is None:
-            self._writer = SessionWriter(*self._args)
-        return self._writer
-
-
 def _import_session(
     session: SessionReport,
     files: list[SourceFile],
@@ -314,13 +298,16 @@ def _import_session(
 ) -> None:
     object_id, sensor = session.object_id, session.sensor
     layout = sensor_layout(sensor)
-    writer = _LazyWriter(data_dir, object_id, sensor, _root_attrs(object_id, sensor, conv, source))
+    # opened only when something is written, so a file that fails leaves no empty session behind
+    writer = functools.cache(
+        lambda: SessionWriter(data_dir, object_id, sensor, _root_attrs(object_id, sensor, conv, source))
+    )
     imported: dict[str, Any] = {}
     existing: dict[str, dict[str, Any]] = {}
     files = sorted(files, key=lambda src: src.rotation_deg is not None)  # the ones we cannot place reported first
     placed = any(src.rotation_deg is not None for src in files)
-    if placed and (session.path.exists() or writer.journal_exists()):
-        opened = writer.get()  # recovers a half-written session from its journal first
+    if placed and (session.path.exists() or (journal_dir(data_dir, object_id, sensor) / "_session.json").exists()):
+        opened = writer()  # recovers a half-written session from its journal first
         info = read_session_info(opened.path)
         _check_session(info.attrs, conv, opened.path)
         imported = dict(info.attrs.get("source_files") or {})

@@ -333,6 +333,7 @@ class ObjectFile(BaseModel):
                 raise ValueError("outline_mm has non-finite values")
             if _signed_area(poly) < 0:
                 poly = poly[::-1]
+                self.outline_mm = [(float(x), float(z)) for x, z in poly]  # counter-clockwise from here on
             if not _star_shaped_about_origin(poly):
                 raise ValueError(
                     "outline_mm must surround the origin (the prism axis) and be seen whole from it: every ray "
@@ -341,6 +342,8 @@ class ObjectFile(BaseModel):
             inradius = float(np.min(_edge_distances_from_origin(poly)))
             if self.wall_mm >= inradius:
                 raise ValueError(f"wall_mm {self.wall_mm} must be smaller than the outline's inradius {inradius:.3f}")
+            if not _star_shaped_about_origin(offset_polygon_inward(poly, self.wall_mm)):
+                raise ValueError(f"the {self.wall_mm} mm wall does not fit inside the outline: use a thinner wall_mm")
         return self
 
 
@@ -367,23 +370,11 @@ def load_object_file(path: Path) -> ObjectSpec:
             describe_validation_error(exc, f"object file {path}", ObjectFile),
             hint="see docs/simulator.md (object files) for the fields",
         ) from exc
-    return _spec_from_file(spec)
-
-
-def _spec_from_file(spec: ObjectFile) -> ObjectSpec:
     if spec.radius_mm is not None:
-        outer = _circle_polygon(spec.radius_mm)
-        inner = _circle_polygon(spec.radius_mm - spec.wall_mm)
+        outer, inner = _circle_polygon(spec.radius_mm), _circle_polygon(spec.radius_mm - spec.wall_mm)
     else:
         outer = np.asarray(spec.outline_mm, dtype=np.float64)
-        if _signed_area(outer) < 0:
-            outer = outer[::-1].copy()
         inner = offset_polygon_inward(outer, spec.wall_mm)
-        if not _star_shaped_about_origin(inner):
-            raise ConfigError(
-                f"object {spec.id}: the {spec.wall_mm} mm wall does not fit inside the outline",
-                hint="use a thinner wall_mm or a rounder outline",
-            )
     return ObjectSpec(
         id=spec.id,
         shape=spec.shape,

@@ -128,7 +128,10 @@ def run_press(
         status, reason = "failed", "off_axis" if isinstance(exc, OffAxisLimit) else "travel"
         streams.event("stop", f"{reason.replace('_', '-')} limit: {exc}")
         stop_arm(arm)
-        _back_off(arm, streams, plan, press, quiet=True)
+        try:
+            _back_off(arm, streams, plan, press)
+        except (TravelLimit, SafetyLimit, DeviceTimeout):  # ends the phase; the return to the stand-off follows
+            stop_arm(arm)
     except (SafetyLimit, ProtectiveStop, DeviceError, KeyboardInterrupt) as exc:
         reason = next(why for kind, why in _ABORT_REASONS if isinstance(exc, kind))
         status, pending = "aborted", exc
@@ -163,19 +166,12 @@ _ABORT_REASONS: tuple[tuple[type[BaseException], str], ...] = (
 )
 
 
-def _back_off(arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfig, *, quiet: bool = False) -> None:
+def _back_off(arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfig) -> None:
     """The press's own retract phase: back off along the ray at ``press.retract_speed_mm_s``, still recording, until
     the pad is unloaded (a held, filtered condition: the mean of the last ``RETRACT_HOLD_PERIODS`` readings, not one
-    noisy sample) and 1 mm back; then stop recording. ``quiet`` (after a travel limit): a limit or stall on the way
-    back stops the arm and ends the phase instead of raising; the return to the stand-off follows. Pulling away
-    after an abort is :func:`unitac_rig.collection.transit.retract_from_object`."""
+    noisy sample) and 1 mm back; then stop recording. Pulling away after an abort is
+    :func:`unitac_rig.collection.transit.retract_from_object`."""
     streams.phase = "retract"
-    if quiet:
-        try:
-            _back_off(arm, streams, plan, press)
-        except (TravelLimit, SafetyLimit, DeviceTimeout):
-            stop_arm(arm)
-        return
     speed = min(press.transit_speed_mm_s, press.retract_speed_mm_s) / 1000.0
     twist = np.concatenate([-plan.direction * speed, np.zeros(3)])
     start = np.asarray(arm.read_state().tcp_pose[:3])

@@ -142,10 +142,6 @@ class Run:
     stop: int
     peak: int
 
-    @property
-    def length(self) -> int:
-        return self.stop - self.start
-
 
 def segment_presses(fz_n: np.ndarray, band_n: tuple[float, float], min_samples: int) -> list[Run]:
     """The authors' rule: runs with ``low < Fz < high`` (strict) of at least ``min_samples`` samples; peak = first
@@ -157,11 +153,11 @@ def segment_presses(fz_n: np.ndarray, band_n: tuple[float, float], min_samples: 
     edges = np.diff(np.concatenate([[0], inside.astype(np.int8), [0]]))
     starts = np.nonzero(edges == 1)[0]
     stops = np.nonzero(edges == -1)[0]
-    runs = []
-    for start, stop in zip(starts, stops, strict=True):
-        if stop - start >= min_samples:
-            runs.append(Run(int(start), int(stop), int(start + np.argmin(fz[start:stop]))))
-    return runs
+    return [
+        Run(int(start), int(stop), int(start + np.argmin(fz[start:stop])))
+        for start, stop in zip(starts, stops, strict=True)
+        if stop - start >= min_samples
+    ]
 
 
 def press_window(
@@ -261,7 +257,7 @@ def build_presses(
             {
                 "source_rows": [int(streams.rows[lo]), int(streams.rows[hi - 1])],
                 "peak_row": int(streams.rows[run.peak]),
-                "band_samples": run.length,
+                "band_samples": run.stop - run.start,
                 "raw_angle_deg": raw_angle,
                 "peak_force_n": peak_force,
                 "threshold_n": conv.complete_peak_n,

@@ -307,10 +307,14 @@ def press_frame(position: np.ndarray, direction: np.ndarray) -> np.ndarray:
     return np.concatenate([np.asarray(position, dtype=np.float64), matrix_to_rotvec(np.column_stack([x, y, z]))])
 
 
-def force_limits(speed_m_s: float) -> np.ndarray:
-    """force_mode ``limits`` for a press along task z: the speed limit there, small deviations elsewhere."""
+def send_force_mode(arm: Arm, frame: np.ndarray, setpoint_n: float, speed_m_s: float) -> None:
+    """One force-mode command: compliant along the task ``frame``'s z toward ``setpoint_n`` (N) at most at
+    ``speed_m_s``; on the other axes the controller holds position within the ``FORCE_MODE_DEVIATION_*`` limits."""
     d, r = FORCE_MODE_DEVIATION_M, FORCE_MODE_DEVIATION_RAD
-    return np.array([d, d, speed_m_s, r, r, r])
+    selection = np.array([0, 0, 1, 0, 0, 0], dtype=np.float64)
+    arm.force_mode(
+        frame, selection, np.array([0.0, 0.0, setpoint_n, 0.0, 0.0, 0.0]), np.array([d, d, speed_m_s, r, r, r])
+    )
 
 
 class _SpeedCommand:
@@ -334,15 +338,11 @@ class _ForceCommand:
     def __init__(
         self, arm: Arm, unit: np.ndarray, position: np.ndarray, speed_m_s: float, setpoint_n: float, ceiling_n: float
     ) -> None:
-        self._arm = arm
-        self._frame = press_frame(position, unit)
-        self._selection = np.array([0, 0, 1, 0, 0, 0], dtype=np.float64)
-        self._limits = force_limits(speed_m_s)
+        self._arm, self._frame, self._speed_m_s = arm, press_frame(position, unit), speed_m_s
         self.setpoint_n, self.ceiling_n = setpoint_n, ceiling_n
 
     def __call__(self) -> None:
-        wrench = np.array([0.0, 0.0, self.setpoint_n, 0.0, 0.0, 0.0])
-        self._arm.force_mode(self._frame, self._selection, wrench, self._limits)
+        send_force_mode(self._arm, self._frame, self.setpoint_n, self._speed_m_s)
 
     def raise_setpoint(self) -> bool:
         """Raise the set-point one step toward the ceiling; False when it is already there."""

@@ -27,7 +27,13 @@ import numpy as np
 
 from drivers.arm import Arm
 from drivers.errors import ProtectiveStop
-from unitac_rig.collection.guarded_motion import DEFAULT_SETTLE_S, force_limits, guarded_move, press_frame, stop_arm
+from unitac_rig.collection.guarded_motion import (
+    DEFAULT_SETTLE_S,
+    guarded_move,
+    press_frame,
+    send_force_mode,
+    stop_arm,
+)
 from unitac_rig.collection.safety_check import PressStreams
 from unitac_rig.collection.transit import PressPlan, backstop_m
 from unitac_rig.errors import ConfigError, SafetyLimit
@@ -191,12 +197,7 @@ class PressContext:
         target = min(min(setpoint_n, self._force_cap_n) - self._streams.offset_along_press_n, self._below_limit_n)
         speed_m_s = min(speed_limit_mm_s, self.limits.max_speed_mm_s) / 1000.0
         self._moving = True
-        self._arm.force_mode(
-            self._task_frame,
-            np.array([0, 0, 1, 0, 0, 0], dtype=np.float64),
-            np.array([0, 0, target, 0, 0, 0.0]),
-            force_limits(speed_m_s),
-        )
+        send_force_mode(self._arm, self._task_frame, target, speed_m_s)
         self._arm.wait_period()
         self._streams.tick(self._arm.read_state())  # raises on a protective stop, a hard limit, ...
         return self._streams.press_force[-1]

@@ -8,7 +8,6 @@ session's root attributes.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -165,14 +164,9 @@ class ImportConventions(StrictTable):
             )
         return f"{prefix}_{material.lower()}"
 
-    def as_json_dict(self) -> dict[str, Any]:
-        """Plain JSON-able dict (what is stored in the session's root attributes)."""
-        data: dict[str, Any] = json.loads(self.model_dump_json())
-        return data
-
     def to_toml(self) -> str:
         """The effective conventions as a TOML document that ``load_conventions`` reads back unchanged."""
-        return toml_text(self.as_json_dict())
+        return toml_text(self.model_dump(mode="json"))
 
 
 def _merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
@@ -188,7 +182,7 @@ def _merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
 
 def conventions_from_dict(data: dict[str, Any], source: str = "conventions") -> ImportConventions:
     """Defaults overridden by ``data`` (tables merge with the defaults, so a file only lists what it changes)."""
-    merged = _merge(ImportConventions().as_json_dict(), data)
+    merged = _merge(ImportConventions().model_dump(mode="json"), data)
     try:
         return ImportConventions.model_validate(merged)
     except ValidationError as exc:

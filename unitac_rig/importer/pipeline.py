@@ -106,7 +106,7 @@ def _root_attrs(object_id: str, sensor: str, conv: ImportConventions, source: Pa
         "simulated": False,
         "source": SOURCE_TAG,
         "source_root": str(source),
-        "conventions": conv.as_json_dict(),
+        "conventions": conv.model_dump(mode="json"),
         "source_files": {},
         "config": {
             "importer": "unitac-nv",

@@ -10,12 +10,13 @@ from drivers.clock import VirtualClock
 from drivers.frames import TactileFrame
 from drivers.layouts import PAPILLARRAY
 from unitac_rig.collection.guarded_motion import move_to
-from unitac_rig.collection.press import run_press, settle_window
+from unitac_rig.collection.press import run_press
 from unitac_rig.collection.safety_check import PressStreams, TickInfo
 from unitac_rig.collection.session import plan_presses
 from unitac_rig.collection.strategies.force_ramp import RAMP_MAX_LEAD_N, ramp
 from unitac_rig.collection.strategy import PressContext
 from unitac_rig.collection.transit import PressPlan
+from unitac_rig.collection.wrist import settle_window
 from unitac_rig.rig.config import LimitsConfig, PressConfig, parse_rig_config
 from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.arm import SimArm, SimArmParams

@@ -12,7 +12,8 @@ import pytest
 from tests.helpers import cli
 from tests.importer.unitac_nv_fixtures import QUIET, Press, write_processed_npz, write_raw_csv
 from unitac_rig.errors import ConfigError, DataError
-from unitac_rig.importer import ImportConventions, conventions_from_dict, import_unitac_nv
+from unitac_rig.importer.conventions import ImportConventions, conventions_from_dict
+from unitac_rig.importer.pipeline import import_unitac_nv
 from unitac_rig.storage.press_record import PressRecord
 from unitac_rig.storage.reader import list_sessions, load_matched_set, load_matched_sets, read_presses
 from unitac_rig.storage.recorder import SessionWriter, journal_dir

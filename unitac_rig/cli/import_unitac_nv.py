@@ -12,7 +12,7 @@ from unitac_rig.errors import DataError, UsageError
 if TYPE_CHECKING:  # the importer and rich load when the command runs, not when the CLI starts
     from rich.console import Console
 
-    from unitac_rig.importer import FileReport, ImportReport
+    from unitac_rig.importer.pipeline import FileReport, ImportReport
 
 
 def import_unitac_nv_command(
@@ -33,7 +33,8 @@ def import_unitac_nv_command(
     """Import the dataset published by the UniTac-NV authors (download it by hand first, see docs/import.md)."""
     from rich.console import Console
 
-    from unitac_rig.importer import import_unitac_nv, load_conventions
+    from unitac_rig.importer.conventions import load_conventions
+    from unitac_rig.importer.pipeline import import_unitac_nv
 
     console = Console(highlight=False, soft_wrap=True, markup=False)
     conv = load_conventions(conventions)

@@ -1,19 +1,10 @@
-"""The press's force policy and every other motion of a session, on top of :class:`drivers.arm.Arm`: watched moves,
-the guarded (force-terminated) move, settling, stopping. Policy, not I/O: the driver only carries the commands.
+"""The press's force policy and every other motion of a session, on top of :class:`drivers.arm.Arm`: watched moves
+(:func:`move_to`), the guarded, force-terminated move (:func:`guarded_move`), settling, stopping. Policy, not I/O:
+the driver only carries the commands.
 
 Every motion here is started and then watched one control period at a time (``wait_period`` also feeds the
 controller's watchdog), and every way out (a reached condition, an exception from a callback or the arm, Ctrl-C, a
 second Ctrl-C during the stop) stops the arm before it returns or raises.
-
-* :func:`move_to`: a straight-line move, asynchronous on the controller and polled here, so a callback that sees
-  something wrong (a force where there should be none) or Ctrl-C stops it at once;
-* :func:`guarded_move`: the press. With ``force_setpoint_n`` it runs in **controller-side force mode**: the controller
-  moves the pad along the press direction at most at the press speed and regulates the contact force toward the
-  set-point (just above the stop threshold) by itself, so a host that stalls mid-press cannot push the force much
-  past the set-point; the host only decides when to end the press. Without it, a plain ``speedL`` every period (for
-  moves where nothing can be crushed). The stop rule takes the mean of the last ``stop_samples`` readings, so one
-  noise spike of the wrist force does not end a press early; the hard limit acts on any single reading of |F| (all
-  force axes) or |T|.
 
 "Press force" along a unit direction d is ``-dot(F[:3], d)`` (N): ``tcp_force`` is what the environment exerts on the
 tool, which points against the press.
@@ -159,36 +150,38 @@ def _end_arrived_move(arm: Arm) -> None:
     arm.stop()
 
 
-def _check_motion(
-    speed_m_s: float, max_travel_m: float, accel_m_s2: float, stop_decel_m_s2: float, stop_samples: int
+def _check_arguments(
+    speed_m_s: float,
+    max_travel_m: float,
+    accels_m_s2: tuple[float, float],
+    stop_samples: int,
+    forces_n: tuple[float, float],
+    force_setpoint_n: float | None,
+    ceiling_n: float | None,
 ) -> None:
-    """:func:`guarded_move`'s motion arguments checked before the arm moves (ArmError for nonsense)."""
-    if not speed_m_s > 0:
-        raise ArmError(f"guarded move speed must be > 0 m/s, got {speed_m_s}")
-    if not max_travel_m > 0:
-        raise ArmError(f"guarded move travel limit must be > 0 m, got {max_travel_m}")
-    if not (accel_m_s2 > 0 and stop_decel_m_s2 > 0):
-        raise ArmError("guarded move accelerations must be > 0 m/s^2")
-    if stop_samples < 1:
-        raise ArmError(f"guarded move stop_samples must be >= 1, got {stop_samples}")
-
-
-def _checked_ceiling(
-    force_threshold_n: float, hard_limit_n: float, force_setpoint_n: float | None, setpoint_ceiling_n: float | None
-) -> float | None:
-    """:func:`guarded_move`'s forces checked before the arm moves (ArmError for nonsense); returns the force-mode
-    set-point ceiling (N) the move may raise its set-point to (the set-point itself when no ceiling is given)."""
-    if not 0 < force_threshold_n < hard_limit_n:
-        raise ArmError(
-            f"guarded move needs 0 < threshold ({force_threshold_n} N) < hard limit ({hard_limit_n} N)",
-            hint="check the press threshold and the hard force limit in the rig file",
-        )
-    if force_setpoint_n is not None and not 0 < force_setpoint_n < hard_limit_n:
-        raise ArmError(f"guarded move force set-point {force_setpoint_n} N must be within (0, {hard_limit_n}) N")
-    ceiling_n = force_setpoint_n if setpoint_ceiling_n is None else setpoint_ceiling_n
-    if force_setpoint_n is not None and ceiling_n is not None and not force_setpoint_n <= ceiling_n < hard_limit_n:
-        raise ArmError(f"guarded move set-point ceiling {ceiling_n} N must be within [set-point, {hard_limit_n}) N")
-    return ceiling_n
+    """:func:`guarded_move`'s arguments checked before the arm moves: ArmError naming the first that is nonsense.
+    ``forces_n``: (threshold, hard limit); ``ceiling_n``: the force-mode set-point ceiling, N."""
+    threshold_n, hard_n = forces_n
+    setpoint_n = force_setpoint_n
+    for bad, message in (
+        (not speed_m_s > 0, f"speed must be > 0 m/s, got {speed_m_s}"),
+        (not max_travel_m > 0, f"travel limit must be > 0 m, got {max_travel_m}"),
+        (not min(accels_m_s2) > 0, "accelerations must be > 0 m/s^2"),
+        (stop_samples < 1, f"stop_samples must be >= 1, got {stop_samples}"),
+        (not 0 < threshold_n < hard_n, f"needs 0 < threshold ({threshold_n} N) < hard limit ({hard_n} N)"),
+        (
+            setpoint_n is not None and not 0 < setpoint_n < hard_n,
+            f"force set-point {setpoint_n} N must be within (0, {hard_n}) N",
+        ),
+        (
+            setpoint_n is not None and ceiling_n is not None and not setpoint_n <= ceiling_n < hard_n,
+            f"set-point ceiling {ceiling_n} N must be within [set-point, {hard_n}) N",
+        ),
+    ):
+        if bad:
+            raise ArmError(
+                f"guarded move {message}", hint="check the press threshold and the force limits in the rig file"
+            )
 
 
 def guarded_move(
@@ -213,12 +206,14 @@ def guarded_move(
     """Move along ``direction`` at ``speed_m_s`` until the press force reaches ``force_threshold_n``.
 
     ``force_setpoint_n``: run in controller-side force mode, compliant along ``direction`` with this force set-point
-    (N, a little above the threshold, as the controller measures it) and ``speed_m_s`` as the speed limit (see the
-    module docstring); None: ``speedL``.
+    (N, a little above the threshold, as the controller measures it) and ``speed_m_s`` as the speed limit: the
+    controller regulates the contact force by itself, so a host that stalls mid-press cannot push it much past the
+    set-point; the host only decides when to end the press. None: a plain ``speedL`` every period (for moves where
+    nothing can be crushed). The stop rule takes the mean of the last ``stop_samples`` readings (one noise spike
+    does not end a press early); the hard limit acts on any single reading of |F| (all force axes) or |T|.
     ``setpoint_ceiling_n``: in force mode, how far the set-point may be raised when the force settles below the
     threshold (see ``PLATEAU_S``); at the ceiling such a move ends with reason "settled" instead of waiting for
     ``max_duration_s``. None: the set-point is never raised (a plateau still ends the move, "settled").
-    ``stop_samples``: the threshold applies to the mean of the last this-many press-force readings.
     ``max_duration_s``: give up after this long (reason "timeout"): in force mode a set-point that the filtered
     force never quite reaches would otherwise hold the pad there for good, travelling nowhere.
     Also stops when the travel along the direction exceeds ``max_travel_m`` (reason "travel"), any single reading
@@ -233,8 +228,11 @@ def guarded_move(
     force mode that is still bounded by the set-point. Every other way out stops the arm as usual.
     """
     unit = _unit_direction(direction)
-    _check_motion(speed_m_s, max_travel_m, accel_m_s2, stop_decel_m_s2, stop_samples)
-    ceiling_n = _checked_ceiling(force_threshold_n, hard_limit_n, force_setpoint_n, setpoint_ceiling_n)
+    ceiling_n = force_setpoint_n if setpoint_ceiling_n is None else setpoint_ceiling_n
+    forces_n = (force_threshold_n, hard_limit_n)
+    _check_arguments(
+        speed_m_s, max_travel_m, (accel_m_s2, stop_decel_m_s2), stop_samples, forces_n, force_setpoint_n, ceiling_n
+    )
 
     start_state = arm.read_state()
     start_position = np.asarray(start_state.tcp_pose[:3], dtype=np.float64)
@@ -242,26 +240,48 @@ def guarded_move(
     if force_setpoint_n is not None:
         command = _ForceCommand(arm, unit, start_position, speed_m_s, force_setpoint_n, ceiling_n or force_setpoint_n)
     peak = press_force(start_state, unit)
+
+    def approach(peak: float) -> tuple[StopReason, ArmState, float]:
+        """Command the motion every period until a stop condition; -> (reason, state that triggered it, peak)."""
+        if start_state.protective_stop or start_state.emergency_stop:
+            return "protective_stop", start_state, peak
+        recent: deque[float] = deque(maxlen=stop_samples)
+        periods_left = math.inf if max_duration_s is None else max_duration_s / arm.control_period_s
+        plateau = _Plateau(arm.control_period_s, force_threshold_n) if isinstance(command, _ForceCommand) else None
+        while True:
+            periods_left -= 1
+            try:
+                command()
+            except ProtectiveStop:
+                return "protective_stop", arm.read_state(), peak
+            arm.wait_period()
+            state = arm.read_state()
+            force = press_force(state, unit)
+            peak = max(peak, force)
+            recent.append(force)
+            if on_period is not None:
+                on_period(state)
+            if state.protective_stop or state.emergency_stop:
+                return "protective_stop", state, peak
+            check_controller(state, "a guarded move")
+            magnitude, torque = force_magnitude(state)
+            if magnitude >= hard_limit_n or (hard_torque_nm is not None and torque >= hard_torque_nm):
+                return "hard_limit", state, peak
+            if len(recent) == stop_samples and sum(recent) / stop_samples >= force_threshold_n:
+                return "force", state, peak
+            travel = float(np.dot(np.asarray(state.tcp_pose[:3]) - start_position, unit))
+            if travel > max_travel_m:
+                return "travel", state, peak
+            if plateau is not None and plateau.settled(sum(recent) / len(recent), travel):
+                if not command.raise_setpoint():
+                    return "settled", state, peak
+                plateau.reset()
+            if periods_left <= 0:
+                return "timeout", state, peak
+
     stop_sent = False
     try:
-        if start_state.protective_stop or start_state.emergency_stop:
-            reason: StopReason = "protective_stop"
-            trigger = start_state
-        else:
-            reason, trigger, peak = _approach(
-                arm,
-                command,
-                unit,
-                start_position,
-                max_travel_m,
-                force_threshold_n,
-                hard_limit_n,
-                hard_torque_nm,
-                stop_samples,
-                max_duration_s,
-                on_period,
-                peak,
-            )
+        reason, trigger, peak = approach(peak)
         if keep_moving and reason == "force":
             stop_sent = True  # nothing to stop: the next guarded move takes over within one control period
             travel = float(np.dot(np.asarray(trigger.tcp_pose[:3]) - start_position, unit))
@@ -287,10 +307,14 @@ def press_frame(position: np.ndarray, direction: np.ndarray) -> np.ndarray:
     return np.concatenate([np.asarray(position, dtype=np.float64), matrix_to_rotvec(np.column_stack([x, y, z]))])
 
 
-def force_limits(speed_m_s: float) -> np.ndarray:
-    """force_mode ``limits`` for a press along task z: the speed limit there, small deviations elsewhere."""
+def send_force_mode(arm: Arm, frame: np.ndarray, setpoint_n: float, speed_m_s: float) -> None:
+    """One force-mode command: compliant along the task ``frame``'s z toward ``setpoint_n`` (N) at most at
+    ``speed_m_s``; on the other axes the controller holds position within the ``FORCE_MODE_DEVIATION_*`` limits."""
     d, r = FORCE_MODE_DEVIATION_M, FORCE_MODE_DEVIATION_RAD
-    return np.array([d, d, speed_m_s, r, r, r])
+    selection = np.array([0, 0, 1, 0, 0, 0], dtype=np.float64)
+    arm.force_mode(
+        frame, selection, np.array([0.0, 0.0, setpoint_n, 0.0, 0.0, 0.0]), np.array([d, d, speed_m_s, r, r, r])
+    )
 
 
 class _SpeedCommand:
@@ -314,15 +338,11 @@ class _ForceCommand:
     def __init__(
         self, arm: Arm, unit: np.ndarray, position: np.ndarray, speed_m_s: float, setpoint_n: float, ceiling_n: float
     ) -> None:
-        self._arm = arm
-        self._frame = press_frame(position, unit)
-        self._selection = np.array([0, 0, 1, 0, 0, 0], dtype=np.float64)
-        self._limits = force_limits(speed_m_s)
+        self._arm, self._frame, self._speed_m_s = arm, press_frame(position, unit), speed_m_s
         self.setpoint_n, self.ceiling_n = setpoint_n, ceiling_n
 
     def __call__(self) -> None:
-        wrench = np.array([0.0, 0.0, self.setpoint_n, 0.0, 0.0, 0.0])
-        self._arm.force_mode(self._frame, self._selection, wrench, self._limits)
+        send_force_mode(self._arm, self._frame, self.setpoint_n, self._speed_m_s)
 
     def raise_setpoint(self) -> bool:
         """Raise the set-point one step toward the ceiling; False when it is already there."""
@@ -356,56 +376,6 @@ class _Plateau:
         rise = float(forces[half:].mean() - forces[:half].mean())
         moved = abs(self._travel[-1] - self._travel[0])
         return bool(forces.mean() > self._floor_n and rise < PLATEAU_RISE_N and moved < PLATEAU_TRAVEL_M)
-
-
-def _approach(
-    arm: Arm,
-    command: _SpeedCommand | _ForceCommand,
-    unit: np.ndarray,
-    start_position: np.ndarray,
-    max_travel_m: float,
-    force_threshold_n: float,
-    hard_limit_n: float,
-    hard_torque_nm: float | None,
-    stop_samples: int,
-    max_duration_s: float | None,
-    on_period: Callable[[ArmState], None] | None,
-    peak: float,
-) -> tuple[StopReason, ArmState, float]:
-    """Command the motion every period until a stop condition; -> (reason, state that triggered it, peak)."""
-    recent: deque[float] = deque(maxlen=stop_samples)
-    periods_left = math.inf if max_duration_s is None else max_duration_s / arm.control_period_s
-    plateau = _Plateau(arm.control_period_s, force_threshold_n) if isinstance(command, _ForceCommand) else None
-    while True:
-        periods_left -= 1
-        try:
-            command()
-        except ProtectiveStop:
-            return "protective_stop", arm.read_state(), peak
-        arm.wait_period()
-        state = arm.read_state()
-        force = press_force(state, unit)
-        peak = max(peak, force)
-        recent.append(force)
-        if on_period is not None:
-            on_period(state)
-        if state.protective_stop or state.emergency_stop:
-            return "protective_stop", state, peak
-        check_controller(state, "a guarded move")
-        magnitude, torque = force_magnitude(state)
-        if magnitude >= hard_limit_n or (hard_torque_nm is not None and torque >= hard_torque_nm):
-            return "hard_limit", state, peak
-        if len(recent) == stop_samples and sum(recent) / stop_samples >= force_threshold_n:
-            return "force", state, peak
-        travel = float(np.dot(np.asarray(state.tcp_pose[:3]) - start_position, unit))
-        if travel > max_travel_m:
-            return "travel", state, peak
-        if plateau is not None and plateau.settled(sum(recent) / len(recent), travel):
-            if not command.raise_setpoint():
-                return "settled", state, peak
-            plateau.reset()
-        if periods_left <= 0:
-            return "timeout", state, peak
 
 
 def _ride_out_stop(

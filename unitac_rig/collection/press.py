@@ -1,21 +1,12 @@
 """One force-terminated press: from the stand-off toward the object's centre, stop at the threshold, dwell, retract.
 
-How the pad goes from the stand-off to the stop force is the press strategy's (``press.strategy``: one object per
-module in ``collection/strategies/``, registered in ``rig/strategies.py``; see ``collection/strategy.py``). Everything
-around it, and every check while it runs, is this press's, the same for every strategy:
-
-* before it: the move to the stand-off (``collection/transit.py``: checked waypoints, the near zone, a force guard),
-  the wrist F/T zeroed at rest after checking that nothing touches the pad, the tactile baseline;
-* while it runs: the strategy moves only through :class:`~unitac_rig.collection.strategy.PressContext`, whose motions
-  run in the controller's force mode with a set-point just above the threshold (``press.setpoint_margin_n``), so a
-  host that freezes mid-press cannot push past it and a host that dies stops the program through the RTDE watchdog
-  (docs/real-rig.md, "Safety"); and every control period goes through
-  :meth:`~.safety_check.PressStreams.tick`: |F| and |T| against the hard limits, travel beyond first
-  contact (a soft object fails the press instead of being crushed), protective stops, the tactile stream, host stalls;
-* after it: the dwell, the retract until the pad is unloaded, the move back to the stand-off, the record.
-
-Every path out stops the arm (``guarded_motion`` and the ``finally`` blocks here), Ctrl-C included, and whatever
-was recorded is kept.
+Before it: the move to the stand-off (``collection/transit.py``), the wrist F/T zeroed at rest on a pad checked
+unloaded (``collection/wrist.py``), the tactile baseline. Then the rig file's ``press.strategy`` presses through the
+seam of ``collection/strategy.py`` (controller-side force mode with a set-point just above the threshold, so a frozen
+host cannot push past it), every control period through :meth:`~.safety_check.PressStreams.tick`, the checks of every
+press whatever its strategy. After it: the dwell, the retract until the pad is unloaded, the move back to the
+stand-off, the record. Every path out stops the arm (``guarded_motion`` and the ``finally`` blocks here), Ctrl-C
+included, and whatever was recorded is kept.
 """
 
 from __future__ import annotations
@@ -29,9 +20,8 @@ import numpy as np
 
 from drivers.arm import Arm, ArmState
 from drivers.errors import ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop, RobotStateLost
-from drivers.frames import TactileFrame
 from drivers.sensor import TactileSensor
-from unitac_rig.collection.guarded_motion import move_to, stop_arm, wait_until_at_rest
+from unitac_rig.collection.guarded_motion import move_to, stop_arm
 from unitac_rig.collection.safety_check import OffAxisLimit, PressStreams, TickInfo, TravelLimit
 from unitac_rig.collection.strategy import PressContext, press_strategy
 from unitac_rig.collection.transit import (
@@ -42,21 +32,13 @@ from unitac_rig.collection.transit import (
     move_clear,
     transit_guard,
 )
-from unitac_rig.collection.wrist import force_n
+from unitac_rig.collection.wrist import UNLOADED_CHECK_S, zero_wrist
 from unitac_rig.errors import SafetyLimit, with_press_record
 from unitac_rig.rig.config import LimitsConfig, PressConfig
 from unitac_rig.storage.press_record import PressRecord
 
 log = logging.getLogger(__name__)
 
-# The window whose mean decides "unloaded" before a zero: 25 readings at 500 Hz. A UR's wrist F/T noise is ~1.15 N
-# white before its ~20 Hz filter, so the mean of 25 readings is off by ~0.23 N (1 sigma): 13 sigma below
-# UNLOADED_FORCE_N. The window after the zero (run_press's settle_s, 0.2 s) sets the host offset and the press-force
-# noise behind the contact threshold: the readings are correlated over ~8 ms, so a 0.1 s window misjudges the noise by
-# up to 40 % and a fast approach then stops on noise (measured on the fast twin); it stays 0.2 s.
-UNLOADED_CHECK_S = 0.05
-ZEROED_FORCE_N = 2.5  # mean |F| right after zeroing must be below this, else the zero did not take, N (a zero
-# taken from one filtered sample is off by its noise, ~0.5 N per axis on a UR; 2.5 N is ~4.5 sigma of that)
 # First contact is declared at max(contact_force_n, CONTACT_NOISE_SIGMAS x the press-force noise measured at the
 # stand-off). A UR's wrist F/T has ~0.5 N of noise per 500 Hz sample even after its filter, so a fixed 1 N trigger
 # fires on noise millimetres before the pad touches (every fast approach did on the simulated rig).
@@ -78,57 +60,6 @@ class ZeroedArm:
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._arm, name)
-
-
-def settle_window(arm: Arm, sensor: TactileSensor, seconds: float) -> tuple[list[TactileFrame], np.ndarray]:
-    """Wait ``seconds`` at rest; -> (frames seen, every wrench read (K, 6) in N, N*m)."""
-    sensor.poll()  # drop anything queued during the transit move
-    frames: list[TactileFrame] = []
-    forces = []
-    for _ in range(max(1, round(seconds / arm.control_period_s))):
-        arm.wait_period()
-        forces.append(np.asarray(arm.read_state().tcp_force, dtype=np.float64))
-        frames.extend(sensor.poll())
-    return frames, np.asarray(forces)
-
-
-def zero_wrist(
-    arm: Arm,
-    sensor: TactileSensor,
-    settle_s: float,
-    where: str,
-    *,
-    check_s: float | None = None,
-    reference: np.ndarray | None = None,
-) -> tuple[list[TactileFrame], np.ndarray]:
-    """Zero the wrist F/T at rest after settling, refusing when the pad is loaded; -> (frames of both windows,
-    wrenches (K, 6) of the ``settle_s`` window after the zero, whose mean is the host-side offset left over: a zero
-    from one noisy sample is off). ``check_s``: the window before the zero (None: ``settle_s``).
-
-    The unloaded check compares the mean wrench with ``reference`` (6,), an unloaded reading (the session's first
-    zero passes the free reading its back-off found, collection/wrist.py); without one, with the controller's zero,
-    which the last zero set on an unloaded pad (a UR's F/T drifts by well under ``UNLOADED_FORCE_N`` between
-    presses). There is no way to skip it: a zero under load is what pressed a resumed pad to 28-30 N. After zeroing,
-    the window's mean must be near zero.
-    """
-    wait_until_at_rest(arm)
-    before, wrenches = settle_window(arm, sensor, settle_s if check_s is None else check_s)
-    # the mean, not the largest sample: a UR's F/T has ~1 N of sample noise, while a real contact shifts the mean
-    mean_force = force_n(wrenches.mean(axis=0), reference)
-    if mean_force > UNLOADED_FORCE_N:
-        raise SafetyLimit(
-            f"wrist reads {mean_force:.2f} N at {where}: the pad is touching something, refusing to zero the F/T",
-            hint="check the object's position (object.center_m) and the stand-off in the rig file",
-        )
-    arm.zero_ft()
-    frames, wrenches = settle_window(arm, sensor, settle_s)
-    left = force_n(wrenches.mean(axis=0))
-    if left > ZEROED_FORCE_N:
-        raise SafetyLimit(
-            f"wrist still reads {left:.2f} N after zeroing at {where}: the F/T zero did not take",
-            hint="check the wrist force with `unitac-rig probe ur5e` and the payload set on the teach pendant",
-        )
-    return before + frames, wrenches
 
 
 def run_press(
@@ -182,7 +113,7 @@ def run_press(
     )
     streams.event("start", f"strategy={press.strategy} speed={press.speed_mm_s} mm/s")
     streams.event("contact_threshold", f"{contact_threshold_n:.2f} N (press-force noise {noise_n:.3f} N rms)")
-    streams.event("ft_zero", json_list(ft_offset))
+    streams.event("ft_zero", "[" + ", ".join(f"{v:.4f}" for v in ft_offset) + "]")
     streams.event("tare", f"{tare['n_frames']} frames, spread {tare['spread']:.3g}")
     status, reason = "aborted", "interrupted"
     pending: BaseException | None = None
@@ -197,9 +128,13 @@ def run_press(
         status, reason = "failed", "off_axis" if isinstance(exc, OffAxisLimit) else "travel"
         streams.event("stop", f"{reason.replace('_', '-')} limit: {exc}")
         stop_arm(arm)
-        _back_off(arm, streams, plan, press, quiet=True)
+        try:
+            _back_off(arm, streams, plan, press)
+        except (TravelLimit, SafetyLimit, DeviceTimeout):  # ends the phase; the return to the stand-off follows
+            stop_arm(arm)
     except (SafetyLimit, ProtectiveStop, DeviceError, KeyboardInterrupt) as exc:
-        status, reason, pending = "aborted", _abort_reason(exc), exc
+        reason = next(why for kind, why in _ABORT_REASONS if isinstance(exc, kind))
+        status, pending = "aborted", exc
         detail = "interrupted by the operator" if isinstance(exc, KeyboardInterrupt) else f"{reason}: {exc}"
         streams.event("abort", detail)
         if not isinstance(exc, ProtectiveStop | ControlScriptStopped):  # the controller has already stopped the arm
@@ -231,27 +166,12 @@ _ABORT_REASONS: tuple[tuple[type[BaseException], str], ...] = (
 )
 
 
-def _abort_reason(exc: BaseException) -> str:
-    return next(reason for kind, reason in _ABORT_REASONS if isinstance(exc, kind))
-
-
-def json_list(values: np.ndarray) -> str:
-    return "[" + ", ".join(f"{v:.4f}" for v in np.asarray(values).ravel()) + "]"
-
-
-def _back_off(arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfig, *, quiet: bool = False) -> None:
+def _back_off(arm: Arm, streams: PressStreams, plan: PressPlan, press: PressConfig) -> None:
     """The press's own retract phase: back off along the ray at ``press.retract_speed_mm_s``, still recording, until
     the pad is unloaded (a held, filtered condition: the mean of the last ``RETRACT_HOLD_PERIODS`` readings, not one
-    noisy sample) and 1 mm back; then stop recording. ``quiet`` (after a travel limit): a limit or stall on the way
-    back stops the arm and ends the phase instead of raising; the return to the stand-off follows. Pulling away
-    after an abort is :func:`unitac_rig.collection.transit.retract_from_object`."""
+    noisy sample) and 1 mm back; then stop recording. Pulling away after an abort is
+    :func:`unitac_rig.collection.transit.retract_from_object`."""
     streams.phase = "retract"
-    if quiet:
-        try:
-            _back_off(arm, streams, plan, press)
-        except (TravelLimit, SafetyLimit, DeviceTimeout):
-            stop_arm(arm)
-        return
     speed = min(press.transit_speed_mm_s, press.retract_speed_mm_s) / 1000.0
     twist = np.concatenate([-plan.direction * speed, np.zeros(3)])
     start = np.asarray(arm.read_state().tcp_pose[:3])

@@ -6,18 +6,10 @@ record it keeps while checking: the robot and tactile streams, one control perio
 beyond first contact (:class:`TravelLimit`), a contact whose force leaves the friction cone around the press axis
 (:class:`OffAxisLimit`), and |F| or |T| past the hard limits; it records host stalls.
 
-The off-axis bound. Force mode regulates the press axis only; on the other axes the arm holds position, so a
-contact's lateral force is bounded by nothing but stiffness (hardware-facts 3.6). A flat pad pressing a convex object
-that stands where the rig file says touches it with its face: the contact normal is the press axis and Coulomb
-friction bounds the lateral force by mu x the press force. A lateral force beyond that means the normal itself is
-tilted: the object touches the pad's rim (it stands to the side, or the pad is not over it). The bound is
-``OFF_AXIS_FRICTION`` x (filtered press force) + ``OFF_AXIS_FLOOR_N``: 0.7 is 1.55x the largest friction coefficient
-the project knows (the PapillArray's silicone pillars on printed plastic, fitted 0.45 in sim/scene.py, which the
-simulated square's corners reach), and the floor covers what the wrist reads across the axis with no contact: its
-noise after the controller's filter is correlated over ~8 ms, so the 20 ms mean the check reads still swings by
-1-2 N (a 1.5 N floor stopped 1 of 91 well-placed hex_tpu presses on the twin before contact), and a UR5e's F/T
-precision is +-3.5 N (hardware-facts 3). At the 10 N threshold it lets |F| reach sqrt(10.2^2 + 10.1^2) = 14.4 N at
-most, under the 15 N the issue asks.
+The off-axis bound (docs/real-rig.md, "Safety" item 9, has its derivation): force mode regulates the press axis
+only, so a lateral force beyond Coulomb friction on the pad's face (``OFF_AXIS_FRICTION`` x the filtered press force
++ ``OFF_AXIS_FLOOR_N`` for the wrist's noise across the axis) means the object touches the pad's rim. At the 10 N
+threshold it lets |F| reach 14.4 N at most.
 """
 
 from __future__ import annotations
@@ -31,7 +23,7 @@ from drivers.arm import Arm, ArmState
 from drivers.errors import DeviceTimeout
 from drivers.frames import TactileFrame
 from drivers.sensor import TactileSensor
-from unitac_rig.collection.guarded_motion import check_controller, force_magnitude
+from unitac_rig.collection.guarded_motion import check_controller, force_magnitude, settle
 from unitac_rig.collection.transit import PressPlan
 from unitac_rig.errors import SafetyLimit
 from unitac_rig.interrupts import raise_if_interrupted
@@ -45,8 +37,12 @@ HOST_GAP_EVENT_S = 0.02  # controller-clock gaps between two reads longer than t
 # object reads -10 N. The stop rule's 100 ms window alone let a stiff object reach the hard limit first.
 SIGN_SAMPLES = 10
 SIGN_FACTOR = 1.5
-OFF_AXIS_FRICTION = 0.7  # lateral force allowed per newton of press force (a friction cone of 35 deg), see above
-OFF_AXIS_FLOOR_N = 3.0  # lateral force allowed at no press force (the wrist's noise across the axis), N
+# Lateral force allowed per newton of press force (a friction cone of 35 deg): 1.55x the largest friction coefficient
+# the project knows (the PapillArray's pillars on printed plastic, 0.45 in sim/scene.py).
+OFF_AXIS_FRICTION = 0.7
+# Lateral force allowed at no press force, N: the 20 ms mean of the wrist's noise across the axis still swings 1-2 N (a
+# 1.5 N floor stopped 1 of 91 well-placed hex_tpu presses on the twin); a UR5e's F/T precision is +-3.5 N.
+OFF_AXIS_FLOOR_N = 3.0
 OFF_AXIS_PHASES = ("approach", "press", "dwell")  # while the pad is driven into the object or held there
 
 
@@ -105,11 +101,7 @@ class PressStreams:
         # A stopped controller first: after a host freeze the tactile stream looks stalled too, but what happened is
         # that the watchdog stopped the program (no sensor reconnect and retry for that).
         check_controller(state, f"press {self.plan.press_id}")
-        force = press_force_n(state.tcp_force, self.plan.direction)
-        self.robot_t.append(state.host_t_ns / 1e9)
-        self.robot_force.append(np.asarray(state.tcp_force, dtype=np.float64))
-        self.robot_pose.append(np.asarray(state.tcp_pose, dtype=np.float64))
-        self.press_force.append(force)
+        force = self._record(state)
         wrench = np.asarray(state.tcp_force, dtype=np.float64)[:3]
         self.lateral.append(wrench + force * np.asarray(self.plan.direction))  # F minus its press-axis part
         if self.last_controller_t_s is not None:
@@ -189,15 +181,19 @@ class PressStreams:
 
         def on_period(state: ArmState) -> None:
             guard(state)
-            self.robot_t.append(state.host_t_ns / 1e9)
-            self.robot_force.append(np.asarray(state.tcp_force, dtype=np.float64))
-            self.robot_pose.append(np.asarray(state.tcp_pose, dtype=np.float64))
-            self.press_force.append(press_force_n(state.tcp_force, self.plan.direction))
+            self._record(state)
             self.frames.extend(self.sensor.poll())
 
         return on_period
 
+    def _record(self, state: ArmState) -> float:
+        """Append one period's robot streams; -> its press force, N."""
+        force = press_force_n(state.tcp_force, self.plan.direction)
+        self.robot_t.append(state.host_t_ns / 1e9)
+        self.robot_force.append(np.asarray(state.tcp_force, dtype=np.float64))
+        self.robot_pose.append(np.asarray(state.tcp_pose, dtype=np.float64))
+        self.press_force.append(force)
+        return force
+
     def hold(self, seconds: float) -> None:
-        for _ in range(max(0, round(seconds / self.arm.control_period_s))):
-            self.arm.wait_period()
-            self.tick(self.arm.read_state())
+        settle(self.arm, seconds, self.tick)

@@ -5,19 +5,15 @@ already finished in the session file (complete or failed) are skipped, so the sa
 a Ctrl-C, a termination signal or a protective stop. Library code: no printing; progress goes through callbacks the
 CLI renders.
 
-Before the first motion the whole plan is checked: the arm's start pose, every stand-off (the confirmed one too),
-clearance and retract waypoint and the whole press travel of every press and rotation against the workspace box and
-the arm's reach (one line names the first outside).
+Before the first motion the whole plan is checked (:func:`~unitac_rig.collection.transit.check_session_plan`).
 
-When the session stops instead of carrying on blind: a protective stop (the operator must clear it on the pendant),
-the controller's program stopping (the watchdog after a host stall), a lost robot state stream, a hard force limit,
-and ``limits.max_failed_in_a_row`` presses in a row that do not complete (no contact, timeout, travel limit, force
-settled below the threshold: the object is missing, misplaced or not what the rig file says). Only a sensor that
-stalls or drops off is reconnected and its press retried, once. After any abort the arm retracts from where it is
-(:func:`~unitac_rig.collection.transit.retract_from_object`), never toward a pose it did not reach; after Ctrl-C,
-SIGTERM or SIGHUP too, so the pad is not left loaded against the object.
-While the host writes a press or waits for the operator, the arm is at rest and :meth:`Arm.keep_alive` feeds the
-controller's watchdog. :func:`dry_run` visits every stand-off and clearance waypoint without pressing.
+The session stops instead of carrying on blind on a protective stop, a stopped controller program, a lost robot state
+stream, a hard force limit, or ``limits.max_failed_in_a_row`` presses in a row that do not complete (the object is
+missing, misplaced or not what the rig file says); only a sensor that stalls or drops off is reconnected and its press
+retried, once. After any abort, Ctrl-C and the termination signals included, the arm retracts from where it is
+(:func:`~unitac_rig.collection.transit.retract_from_object`). While the host writes a press or waits for the
+operator, :meth:`Arm.keep_alive` feeds the controller's watchdog. :func:`dry_run` visits every stand-off and
+clearance waypoint without pressing.
 """
 
 from __future__ import annotations
@@ -37,19 +33,18 @@ from drivers.arm import Arm
 from drivers.errors import ArmError, ControlScriptStopped, DeviceError, DeviceTimeout, ProtectiveStop
 from drivers.sensor import TactileSensor
 from unitac_rig.collection.guarded_motion import settle
-from unitac_rig.collection.press import run_press, zero_wrist
+from unitac_rig.collection.press import run_press
 from unitac_rig.collection.safety_check import TickInfo
 from unitac_rig.collection.transit import (
     PressPlan,
     check_session_plan,
-    clearance_waypoints,
     make_plan,
     move_clear,
     retract_from_object,
     transit_guard,
     with_standoff,
 )
-from unitac_rig.collection.wrist import Unloaded, load_left_note, read_zero, unload_wrist, write_zero
+from unitac_rig.collection.wrist import Unloaded, load_left_note, read_zero, unload_wrist, write_zero, zero_wrist
 from unitac_rig.errors import CarriesPressRecord, SafetyLimit, UnitacError
 from unitac_rig.interrupts import acknowledged_interrupts, raise_if_interrupted
 from unitac_rig.provenance import git_commit, package_version
@@ -94,10 +89,6 @@ class SessionOutcome:
     # reads, to say the load every way out of a fault leaves on the pad
     wrist_zero: np.ndarray | None = None
     last_reason: str | None = None  # how the last press of this run ended ("aborted: no_contact", ...)
-
-    @property
-    def finished(self) -> bool:
-        return self.stopped is None
 
 
 @dataclass
@@ -179,6 +170,7 @@ def collect_session(
     except BaseException:
         writer.discard_if_unused()  # a missing port must not leave an empty session file behind
         raise
+    pressing = False
     try:
         try:
             with _kept_alive(arm):
@@ -189,30 +181,21 @@ def collect_session(
                 writer.update_root_attrs({"session_tare": tare})
                 outcome.wrist_zero = np.asarray(tare["ft_zero_offset"], dtype=np.float64)
                 write_zero(writer.journal, outcome.wrist_zero)
+            pressing = True
+            run = _Run(rig, obj, sensor, sensor_name, writer, extraction, outcome, on_tick)
+            run.press_all(todo, on_press, ask_operator, len(rotations))
         except BaseException as exc:
-            writer.discard_if_unused()  # nor may an arm or sensor that fails before the first press
-            _say_load_left(rig, exc, outcome)
-            raise
-        try:
-            _press_all(
-                rig,
-                obj,
-                sensor,
-                sensor_name,
-                todo,
-                writer,
-                extraction,
-                outcome,
-                on_press,
-                on_tick,
-                ask_operator,
-                len(rotations),
-            )
-        except BaseException as exc:
+            if not pressing:
+                writer.discard_if_unused()  # nor may an arm or sensor that fails before the first press
             _say_load_left(rig, exc, outcome)
             raise
         if outcome.stopped is None and outcome.complete == 0 and outcome.failed + outcome.aborted > 0:
-            outcome.stopped = _pressed_nothing(config, obj, outcome)
+            outcome.stopped = _not_completing(
+                config,
+                obj,
+                f"no press completed ({outcome.failed} failed, {outcome.aborted} aborted; the last "
+                f"{outcome.last_reason})",
+            )
         if outcome.stopped is not None:
             outcome.stopped += load_left_note(rig.arm, outcome.wrist_zero)
     finally:
@@ -220,59 +203,155 @@ def collect_session(
     return outcome
 
 
-def _press_all(
-    rig: Rig,
-    obj: ObjectSpec,
-    sensor: TactileSensor,
-    sensor_name: str,
-    todo: list[PressPlan],
-    writer: SessionWriter,
-    extraction: ExtractionSettings,
-    outcome: SessionOutcome,
-    on_press: Callable[[PressDone], None] | None,
-    on_tick: Callable[[TickInfo], None] | None,
-    ask_operator: Callable[[str], None] | None,
-    n_rotations: int,
-) -> None:
-    """Every press of ``todo`` in order, the object turned between rotations; stops as :func:`collect_session` says."""
-    config = rig.config
-    current_rotation: float | None = None
-    previous: PressPlan | None = None
-    stop = False
-    confirmed = False  # a press has found the object where the rig file says (since the last turn)
-    limit = config.limits.max_failed_in_a_row
-    for index, plan in enumerate(todo):
-        raise_if_interrupted()
-        if plan.rotation_deg != current_rotation:
-            confirmed = False  # the placement is unknown again after the object is turned
-            if previous is not None:  # out to the clearance radius before anyone turns the object by hand
-                retract_from_object(rig.arm, previous, rig.config)
-            rig.mount(obj, plan.rotation_deg, sensor_name)
-            if ask_operator is not None and not rig.simulated and n_rotations > 1:
+@dataclass
+class _Run:
+    """One run of a session once the sensor is open and the first stand-off tared: the presses of ``todo``."""
+
+    rig: Rig
+    obj: ObjectSpec
+    sensor: TactileSensor
+    sensor_name: str
+    writer: SessionWriter
+    extraction: ExtractionSettings
+    outcome: SessionOutcome
+    on_tick: Callable[[TickInfo], None] | None
+
+    def press_all(
+        self,
+        todo: list[PressPlan],
+        on_press: Callable[[PressDone], None] | None,
+        ask_operator: Callable[[str], None] | None,
+        n_rotations: int,
+    ) -> None:
+        """Every press of ``todo`` in order, the object turned between rotations; stops as :func:`collect_session`
+        says."""
+        rig, obj, outcome = self.rig, self.obj, self.outcome
+        config = rig.config
+        current_rotation: float | None = None
+        previous: PressPlan | None = None
+        stop = False
+        confirmed = False  # a press has found the object where the rig file says (since the last turn)
+        limit = config.limits.max_failed_in_a_row
+        for index, plan in enumerate(todo):
+            raise_if_interrupted()
+            if plan.rotation_deg != current_rotation:
+                confirmed = False  # the placement is unknown again after the object is turned
+                if previous is not None:  # out to the clearance radius before anyone turns the object by hand
+                    retract_from_object(rig.arm, previous, rig.config)
+                rig.mount(obj, plan.rotation_deg, self.sensor_name)
+                if ask_operator is not None and not rig.simulated and n_rotations > 1:
+                    with rig.arm.keep_alive():
+                        ask_operator(f"Turn {obj.id} to {plan.rotation_deg:g} deg on its mount, then press Enter.")
+                current_rotation = plan.rotation_deg
+            if confirmed:  # the object stands where measured: a shorter free-air approach (and return to it)
+                plan = with_standoff(plan, confirmed_standoff_mm(config))
+            record, stop = self.one_press(plan, moves_limits(config, confirmed))
+            previous = plan
+            confirmed = confirmed or (record is not None and placement_confirmed(record, config))
+            if on_press is not None and record is not None:
+                matched = 0 if record.extraction is None else record.extraction.n_matched
                 with rig.arm.keep_alive():
-                    ask_operator(f"Turn {obj.id} to {plan.rotation_deg:g} deg on its mount, then press Enter.")
-            current_rotation = plan.rotation_deg
-        if confirmed:  # the object stands where measured: a shorter free-air approach (and return to it)
-            plan = with_standoff(plan, confirmed_standoff_mm(config))
-        record, stop = _one_press(
-            rig, sensor, plan, writer, extraction, outcome, on_tick, moves_limits(config, confirmed)
-        )
-        previous = plan
-        confirmed = confirmed or (record is not None and placement_confirmed(record, config))
-        if on_press is not None and record is not None:
-            matched = 0 if record.extraction is None else record.extraction.n_matched
+                    on_press(PressDone(outcome.already_done + index + 1, outcome.planned, record, matched))
+            if record is not None:
+                outcome.failure_streak = outcome.failure_streak + 1 if record.status != "complete" else 0
+                outcome.last_reason = record_reason(record)
+            if outcome.failure_streak >= limit:
+                last = f"the last: {plan.press_id}, {record_reason(record)}"
+                outcome.stopped = _not_completing(config, obj, f"{limit} presses in a row did not complete ({last})")
+                break
+            if stop:
+                break
+        if previous is not None and not stop:  # the stops above retracted already; the operator swaps things next
+            retract_from_object(rig.arm, previous, rig.config, best_effort=True)  # out to the clearance radius
+
+    def one_press(self, plan: PressPlan, limits: LimitsConfig) -> tuple[PressRecord | None, bool]:
+        """Run one press and record it; also says whether the session must stop.
+
+        A sensor that stalls or drops off the bus/port mid-press aborts the press (kept, marked ``aborted``); the
+        sensor is reconnected and the press retried once. A second failure, or a sensor that does not come back,
+        stops the session cleanly (the arm backed off to the stand-off). Safety stops, a stopped controller program,
+        a lost robot state stream and Ctrl-C are re-raised after saving; a protective stop with what to do on the
+        pendant.
+        """
+        rig, sensor, outcome = self.rig, self.sensor, self.outcome
+        config = rig.config
+        for attempt in (1, 2):
+            try:
+                record = run_press(
+                    rig.arm,
+                    sensor,
+                    plan,
+                    config.press,
+                    limits,
+                    on_tick=self.on_tick,
+                    clearance_m=config.object.clearance_mm / 1000.0,
+                )
+            except (SafetyLimit, ProtectiveStop, ArmError, KeyboardInterrupt) as exc:
+                partial = self.save_partial(exc)
+                if isinstance(exc, KeyboardInterrupt):
+                    outcome.stopped = f"interrupted at press {plan.press_id}"
+                    with acknowledged_interrupts():  # a second Ctrl-C still ends the retract, arm stopped
+                        retract_from_object(rig.arm, plan, rig.config, to_clearance=False, best_effort=True)
+                    raise
+                if isinstance(exc, SafetyLimit):
+                    retract_from_object(rig.arm, plan, rig.config, best_effort=True)
+                outcome.stopped = f"{type(exc).__name__} at press {plan.press_id}: {exc}"
+                explained = _controller_stop_explained(rig, exc, f"at press {plan.press_id}")
+                if explained is not exc:
+                    explained.press_record = partial  # type: ignore[attr-defined]
+                    raise explained from exc
+                raise
+            except DeviceError as exc:  # the sensor stalled (DeviceTimeout) or its link failed (port/bus gone)
+                partial = self.save_partial(exc)
+                what = "stalled" if isinstance(exc, DeviceTimeout) else "failed"
+                retract_from_object(rig.arm, plan, rig.config, best_effort=True)
+                if attempt == 1:
+                    log.warning("%s; reconnecting the sensor and retrying the press once", exc)
+                    try:
+                        with rig.arm.keep_alive():
+                            _reconnect(rig, sensor)
+                    except DeviceError as again:
+                        outcome.stopped = f"sensor {what} at press {plan.press_id} and did not come back: {again}"
+                        return partial, True
+                    outcome.recovery_notes.append(f"press {plan.press_id}: sensor {what} ({exc}); reconnected, retried")
+                    continue
+                outcome.stopped = f"sensor {what} twice at press {plan.press_id}: {exc}"
+                return partial, True
             with rig.arm.keep_alive():
-                on_press(PressDone(outcome.already_done + index + 1, outcome.planned, record, matched))
-        if record is not None:
-            outcome.failure_streak = outcome.failure_streak + 1 if record.status != "complete" else 0
-            outcome.last_reason = record_reason(record)
-        if outcome.failure_streak >= limit:
-            outcome.stopped = _failed_in_a_row(config, obj, plan, record)
-            break
-        if stop:
-            break
-    if previous is not None and not stop:  # the stops above retracted already; the operator swaps things next
-        retract_from_object(rig.arm, previous, rig.config, best_effort=True)  # out to the clearance radius
+                self.save(record)
+            return record, False
+        return None, True
+
+    def save_partial(self, exc: BaseException) -> PressRecord | None:
+        """Keep what an aborted press recorded (carried by ``exc``); -> that record, None when it carries none."""
+        partial = exc.press_record if isinstance(exc, CarriesPressRecord) else None
+        if partial is not None:
+            with _kept_alive(self.rig.arm):  # the arm is stopped; writing may take longer than the watchdog allows
+                self.save(partial)
+        return partial
+
+    def save(self, record: PressRecord) -> None:
+        """Write one press (its sensor health and, unless off-axis, its extraction with it) and count it."""
+        outcome = self.outcome
+        try:  # what the link lost so far (checksum errors, gaps, invalid frames...), kept with the press
+            record.attrs.setdefault("sensor_health", self.sensor.health().as_dict())
+        except DeviceError as exc:
+            log.info("no sensor health for press %s: %s", record.press_id, exc)
+        # a press off the object's face never feeds extraction (collection/safety_check.py)
+        if record.reason != "off_axis":
+            record.extraction = extract_press(
+                record.robot_t_s, record.press_force_n, record.tactile_t_s, record.tactile_valid, self.extraction
+            )
+        self.writer.write_press(record)
+        if "ft_zero_offset" in record.attrs:  # the press zeroed an unloaded wrist (zero_wrist refuses a loaded one)
+            outcome.wrist_zero = np.asarray(record.attrs["ft_zero_offset"], dtype=np.float64)
+            write_zero(self.writer.journal, outcome.wrist_zero)
+        if record.status == "complete":
+            outcome.complete += 1
+        elif record.status == "failed":
+            outcome.failed += 1
+        else:
+            outcome.aborted += 1
 
 
 def _say_load_left(rig: Rig, exc: BaseException, outcome: SessionOutcome) -> None:
@@ -319,21 +398,10 @@ def session_attrs(
     }
 
 
-def _pressed_nothing(config: RigConfig, obj: ObjectSpec, outcome: SessionOutcome) -> str:
-    """Why a run whose presses all ended without completing is a failure, not a finished session (one line)."""
+def _not_completing(config: RigConfig, obj: ObjectSpec, what: str) -> str:
+    """Why a run whose presses do not complete stops (one line): ``what`` happened, and where to look."""
     return (
-        f"no press completed ({outcome.failed} failed, {outcome.aborted} aborted; the last {outcome.last_reason}): "
-        f"is {obj.id} mounted at object.center_m = {list(config.object.center_m)}, press_height_m = "
-        f"{config.object.press_height_m} as the rig file says?"
-    )
-
-
-def _failed_in_a_row(config: RigConfig, obj: ObjectSpec, plan: PressPlan, record: PressRecord | None) -> str:
-    """Why the session stopped after ``limits.max_failed_in_a_row`` presses in a row did not complete."""
-    limit = config.limits.max_failed_in_a_row
-    return (
-        f"{limit} presses in a row did not complete (the last: {plan.press_id}, {record_reason(record)}): "
-        f"is {obj.id} mounted at object.center_m = {list(config.object.center_m)}, press_height_m = "
+        f"{what}: is {obj.id} mounted at object.center_m = {list(config.object.center_m)}, press_height_m = "
         f"{config.object.press_height_m} as the rig file says, and is it the object named?"
     )
 
@@ -399,20 +467,18 @@ def record_reason(record: PressRecord | None) -> str:
     return "not recorded" if record is None else f"{record.status}: {record.reason}"
 
 
-def session_tare(
-    rig: Rig, sensor: TactileSensor, first: PressPlan, *, zero: np.ndarray | None = None, free: Unloaded | None = None
-) -> dict[str, Any]:
+def session_tare(rig: Rig, sensor: TactileSensor, first: PressPlan, *, free: Unloaded | None = None) -> dict[str, Any]:
     """Zero the wrist F/T and tare the sensor (device bias where it has one) at the first stand-off pose.
 
     Never on a loaded wrist: before any motion toward the object the pad backs off along its axis until the reading
-    stops changing (:func:`~unitac_rig.collection.wrist.unload_wrist`; ``zero`` is the session's remembered unloaded
-    reading, None on a first session; ``free``: what a back-off the caller ran found), and the zero at the stand-off
+    stops changing (:func:`~unitac_rig.collection.wrist.unload_wrist`; ``free``: what a back-off the caller ran
+    found, with the session's remembered unloaded reading), and the zero at the stand-off
     is refused when the reading there is more than ``UNLOADED_FORCE_N`` off the free one (the object stands closer
     than the rig file says). The dict holds the tare, ``ft_zero_offset`` (the reading after the zero: the new
     unloaded zero) and ``unloaded_at_start_n`` (the load found at the start, 0 when none).
     """
     config = rig.config
-    free = free if free is not None else unload_wrist(rig.arm, config.limits, zero=zero)
+    free = free if free is not None else unload_wrist(rig.arm, config.limits)
     move_clear(
         rig.arm, first, config.object.clearance_mm / 1000.0, config.press.transit_speed_mm_s / 1000.0, config.limits
     )
@@ -432,78 +498,6 @@ def session_tare(
         "unloaded_at_start_n": free.load_n if free.was_loaded else 0.0,
         "unloaded_note": free.describe() if free.was_loaded else "",
     }
-
-
-def _one_press(
-    rig: Rig,
-    sensor: TactileSensor,
-    plan: PressPlan,
-    writer: SessionWriter,
-    extraction: ExtractionSettings,
-    outcome: SessionOutcome,
-    on_tick: Callable[[TickInfo], None] | None,
-    limits: LimitsConfig,
-) -> tuple[PressRecord | None, bool]:
-    """Run one press and record it; also says whether the session must stop.
-
-    A sensor that stalls or drops off the bus/port mid-press aborts the press (kept, marked ``aborted``); the sensor
-    is reconnected and the press retried once. A second failure, or a sensor that does not come back, stops the
-    session cleanly (the arm backed off to the stand-off). Safety stops, a stopped controller program, a lost robot
-    state stream and Ctrl-C are re-raised after saving; a protective stop with what to do on the pendant.
-    """
-    config = rig.config
-    for attempt in (1, 2):
-        try:
-            record = run_press(
-                rig.arm,
-                sensor,
-                plan,
-                config.press,
-                limits,
-                on_tick=on_tick,
-                clearance_m=config.object.clearance_mm / 1000.0,
-            )
-        except (SafetyLimit, ProtectiveStop, ArmError, KeyboardInterrupt) as exc:
-            partial = exc.press_record if isinstance(exc, CarriesPressRecord) else None
-            if partial is not None:
-                with _kept_alive(rig.arm):  # the arm is stopped; writing may take longer than the watchdog allows
-                    _save(writer, sensor, partial, extraction, outcome)
-            if isinstance(exc, KeyboardInterrupt):
-                outcome.stopped = f"interrupted at press {plan.press_id}"
-                with acknowledged_interrupts():  # a second Ctrl-C still ends the retract, arm stopped
-                    retract_from_object(rig.arm, plan, rig.config, to_clearance=False, best_effort=True)
-                raise
-            if isinstance(exc, SafetyLimit):
-                retract_from_object(rig.arm, plan, rig.config, best_effort=True)
-            outcome.stopped = f"{type(exc).__name__} at press {plan.press_id}: {exc}"
-            explained = _controller_stop_explained(rig, exc, f"at press {plan.press_id}")
-            if explained is not exc:
-                explained.press_record = partial  # type: ignore[attr-defined]
-                raise explained from exc
-            raise
-        except DeviceError as exc:  # the sensor stalled (DeviceTimeout) or its link failed (port/bus gone)
-            partial = exc.press_record
-            if partial is not None:
-                with _kept_alive(rig.arm):  # the arm is stopped; writing may take longer than the watchdog allows
-                    _save(writer, sensor, partial, extraction, outcome)
-            what = "stalled" if isinstance(exc, DeviceTimeout) else "failed"
-            retract_from_object(rig.arm, plan, rig.config, best_effort=True)
-            if attempt == 1:
-                log.warning("%s; reconnecting the sensor and retrying the press once", exc)
-                try:
-                    with rig.arm.keep_alive():
-                        _reconnect(rig, sensor)
-                except DeviceError as again:
-                    outcome.stopped = f"sensor {what} at press {plan.press_id} and did not come back: {again}"
-                    return partial, True
-                outcome.recovery_notes.append(f"press {plan.press_id}: sensor {what} ({exc}); reconnected, retried")
-                continue
-            outcome.stopped = f"sensor {what} twice at press {plan.press_id}: {exc}"
-            return partial, True
-        with rig.arm.keep_alive():
-            _save(writer, sensor, record, extraction, outcome)
-        return record, False
-    return None, True
 
 
 def _safety_stopped(rig: Rig) -> bool:
@@ -557,40 +551,12 @@ def _reconnect(rig: Rig, sensor: TactileSensor) -> None:
             rig.clock.sleep(RECONNECT_POLL_S)
 
 
-def _save(
-    writer: SessionWriter,
-    sensor: TactileSensor,
-    record: PressRecord,
-    settings: ExtractionSettings,
-    outcome: SessionOutcome,
-) -> None:
-    try:  # what the link lost so far (checksum errors, gaps, invalid frames...), kept with the press
-        record.attrs.setdefault("sensor_health", sensor.health().as_dict())
-    except DeviceError as exc:
-        log.info("no sensor health for press %s: %s", record.press_id, exc)
-    if record.reason != "off_axis":  # a press off the object's face never feeds extraction (collection/safety_check.py)
-        record.extraction = extract_press(
-            record.robot_t_s, record.press_force_n, record.tactile_t_s, record.tactile_valid, settings
-        )
-    writer.write_press(record)
-    if "ft_zero_offset" in record.attrs:  # the press zeroed an unloaded wrist (zero_wrist refuses a loaded one)
-        outcome.wrist_zero = np.asarray(record.attrs["ft_zero_offset"], dtype=np.float64)
-        write_zero(writer.journal, outcome.wrist_zero)
-    if record.status == "complete":
-        outcome.complete += 1
-    elif record.status == "failed":
-        outcome.failed += 1
-    else:
-        outcome.aborted += 1
-
-
 @dataclass
 class DryRunOutcome:
     """What a dry run visited: stand-off poses and all waypoints (clearance ones included)."""
 
     standoffs: int = 0
     waypoints: int = 0
-    visited: list[str] = field(default_factory=list)  # press ids whose stand-off was reached
 
 
 def dry_run(
@@ -614,12 +580,9 @@ def dry_run(
     clearance = config.object.clearance_mm / 1000.0
     check_session_plan(arm.read_state().tcp_pose, plans, clearance, config.limits, confirmed_standoff_mm(config))
     for index, plan in enumerate(plans):
-        here = arm.read_state().tcp_pose
-        outcome.waypoints += len(clearance_waypoints(here, plan, clearance))
-        move_clear(arm, plan, clearance, speed, config.limits)
+        outcome.waypoints += move_clear(arm, plan, clearance, speed, config.limits)
         settle(arm, DRY_RUN_HOLD_S, on_period=transit_guard(arm, config.limits))
         outcome.standoffs += 1
-        outcome.visited.append(plan.press_id)
         if on_standoff is not None:
             with arm.keep_alive():
                 on_standoff(plan, index + 1, len(plans))

@@ -5,18 +5,14 @@ A strategy is an object with one method, ``press(ctx) -> stop reason``, in its o
 is checked against that table). It never gets the arm: it moves the pad only through the :class:`PressContext` it is
 handed, whose two motions carry the safety of every press whatever the strategy asks:
 
-* :meth:`PressContext.move` is ``guarded_motion.guarded_move`` in the controller's force mode, compliant along the
-  press direction. The force set-point is the press threshold + ``press.setpoint_margin_n`` (in the controller's
-  zero), raised on a plateau only up to :func:`setpoint_ceiling_n`, never within ``HARD_LIMIT_CLEARANCE_N`` of the
-  hard limit, whatever force the strategy asks to stop at: a host that freezes cannot push past it. A stop force at
-  or above the hard limit is refused; speeds are cut to ``limits.max_speed_mm_s``; travel to the press's budget.
-* :meth:`PressContext.force_control` is one control period of force control with a set-point the strategy chooses,
-  capped at threshold + ``press.setpoint_margin_n`` (the force a stalled host leaves the controller regulating).
+* :meth:`PressContext.move`: ``guarded_motion.guarded_move`` in the controller's force mode, with the press's own
+  set-point (threshold + ``press.setpoint_margin_n``, never within ``HARD_LIMIT_CLEARANCE_N`` of the hard limit)
+  whatever force the strategy asks to stop at: a host that freezes cannot push past it;
+* :meth:`PressContext.force_control`: one control period of force control, its set-point capped the same way.
 
-Every control period of both goes through the press's :meth:`~.safety_check.PressStreams.tick` (hard
-force and torque limits, travel past first contact, the tactile stream, protective stops, a stopped program, Ctrl-C),
-and every motion feeds the RTDE watchdog. The arm is stopped after the strategy returns whatever it left running. The
-moves before (the near zone) and after (dwell, retract) are the press's (collection/press.py), not the strategy's.
+Every control period of both goes through the press's :meth:`~.safety_check.PressStreams.tick` and feeds the RTDE
+watchdog; the arm is stopped after the strategy returns whatever it left running. The moves before and after are the
+press's (collection/press.py), not the strategy's.
 
 Stop reasons a strategy returns: ``"force"`` (the threshold was reached: the press is complete), ``"no_contact"`` (it
 never touched anything: aborted, redone on resume), or a failure (``"travel"``, ``"timeout"``, ``"settled"``).
@@ -31,7 +27,13 @@ import numpy as np
 
 from drivers.arm import Arm
 from drivers.errors import ProtectiveStop
-from unitac_rig.collection.guarded_motion import DEFAULT_SETTLE_S, force_limits, guarded_move, press_frame, stop_arm
+from unitac_rig.collection.guarded_motion import (
+    DEFAULT_SETTLE_S,
+    guarded_move,
+    press_frame,
+    send_force_mode,
+    stop_arm,
+)
 from unitac_rig.collection.safety_check import PressStreams
 from unitac_rig.collection.transit import PressPlan, backstop_m
 from unitac_rig.errors import ConfigError, SafetyLimit
@@ -54,9 +56,8 @@ class PressStrategy(Protocol):
 
 
 def press_strategy(name: str) -> PressStrategy:
-    """The strategy registered as ``name`` in ``rig/strategies.py`` (imported on first use)."""
-    if name not in PRESS_STRATEGIES:
-        raise ConfigError(f"unknown press strategy {name!r}", hint=f"use one of: {', '.join(PRESS_STRATEGIES)}")
+    """The strategy registered as ``name`` in ``rig/strategies.py`` (imported on first use; the rig file's
+    ``press.strategy`` was checked against that table when it was read)."""
     strategy = load(PRESS_STRATEGIES[name])
     if not isinstance(strategy, PressStrategy):
         raise ConfigError(f"press strategy {name!r} ({PRESS_STRATEGIES[name]}) has no press(ctx) method")
@@ -146,8 +147,9 @@ class PressContext:
         keep_moving: bool = False,
         final: bool = False,
     ) -> Move:
-        """Along the press at up to ``speed_mm_s`` until the mean of the last ``samples`` press forces reaches
-        ``until_n`` (N), in force mode with the press's set-point (see the module docstring).
+        """Along the press at up to ``speed_mm_s`` (cut to ``limits.max_speed_mm_s``) until the mean of the last
+        ``samples`` press forces reaches ``until_n`` (N), in force mode with the press's set-point (see the module
+        docstring).
 
         ``travel_m``: this move's travel budget (default: what is left of :attr:`backstop_m`; at most that plus
         ``limits.max_travel_after_contact_mm``). ``keep_moving``: on reaching ``until_n`` go straight on with the
@@ -195,17 +197,9 @@ class PressContext:
         target = min(min(setpoint_n, self._force_cap_n) - self._streams.offset_along_press_n, self._below_limit_n)
         speed_m_s = min(speed_limit_mm_s, self.limits.max_speed_mm_s) / 1000.0
         self._moving = True
-        self._arm.force_mode(
-            self._task_frame,
-            np.array([0, 0, 1, 0, 0, 0], dtype=np.float64),
-            np.array([0, 0, target, 0, 0, 0.0]),
-            force_limits(speed_m_s),
-        )
+        send_force_mode(self._arm, self._task_frame, target, speed_m_s)
         self._arm.wait_period()
-        state = self._arm.read_state()
-        self._streams.tick(state)
-        if state.protective_stop:
-            raise ProtectiveStop("protective stop during force control")
+        self._streams.tick(self._arm.read_state())  # raises on a protective stop, a hard limit, ...
         return self._streams.press_force[-1]
 
     def _travelled_m(self) -> float:

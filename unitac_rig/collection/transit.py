@@ -206,10 +206,10 @@ def approach_legs(
     return legs
 
 
-def move_clear(arm: Arm, plan: PressPlan, clearance_m: float, speed_m_s: float, limits: LimitsConfig) -> None:
+def move_clear(arm: Arm, plan: PressPlan, clearance_m: float, speed_m_s: float, limits: LimitsConfig) -> int:
     """Move to ``plan.start_pose`` through :func:`clearance_waypoints`, each checked before the first is sent, each
     move asynchronous, at the speeds of :func:`approach_legs`, and stopped if the wrist feels something
-    (:func:`transit_guard`)."""
+    (:func:`transit_guard`); -> the number of waypoints."""
     here = np.asarray(arm.read_state().tcp_pose, dtype=np.float64)
     waypoints = clearance_waypoints(here, plan, clearance_m)
     for k, pose in enumerate(waypoints):
@@ -217,6 +217,7 @@ def move_clear(arm: Arm, plan: PressPlan, clearance_m: float, speed_m_s: float, 
         check_waypoint(pose, limits, f"{what} of press {plan.press_id}")
     for pose, speed in approach_legs(here, waypoints, plan, limits, speed_m_s):
         move_to(arm, pose, speed, TRANSIT_ACCEL_M_S2, on_period=transit_guard(arm, limits))
+    return len(waypoints)
 
 
 def retract_waypoint(plan: PressPlan, clearance_m: float) -> np.ndarray:

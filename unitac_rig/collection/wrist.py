@@ -1,26 +1,10 @@
-"""Never zero a loaded wrist: the session's last unloaded zero, kept across a crash, and a guarded back-off that
-proves the pad is free before the session zeroes the wrist F/T.
+"""Never zero a loaded wrist (docs/real-rig.md, "Safety" item 8, has the measurements and the reasoning).
 
-Why: ``zeroFtSensor`` taken while the pad presses on something makes that load read as zero, and the press then adds
-its full threshold on top (an independent controller measured 27.9-30.2 N true for a "10.8 N" press after a resume
-with the pad left touching). Two checks, both before any motion toward the object:
-
-* the **remembered zero**: the mean wrench read right after the last zero the session knows was unloaded (the
-  session's first zero, and every press's own zero, which refuses a loaded pad), written next to the session's
-  journal (``_wrist_zero.json``) so that a resume after ``kill -9`` has it. The controller keeps its F/T zero while
-  the host is gone, so the reading now minus the remembered one is the load now (a controller restart loses the zero;
-  the back-off below still tells a load from a changed zero);
-* the **back-off probe** (physics, needs no remembered zero): a translation does not change the gravity and payload
-  part of a wrist reading, only contact does. So the arm backs along the pad's axis (tool -z, away from whatever the
-  pad presses) in :data:`UNLOAD_STEP_MM` steps, guarded (the force may fall, not grow) and clipped to the workspace,
-  and reads the mean wrench after each step at rest. While a step changes |F| by more than
-  :data:`PROBE_CHANGE_N` the pad was still loaded; the first step that changes nothing proves it free. The load the
-  arm was under is how much the reading fell. Not free after :data:`UNLOAD_MAX_MM`: refused with one line giving the
-  measured load.
-
-The threshold: the mean of a 0.1 s window of a UR's filtered wrist reading scatters by ~0.12 N (0.4 N per sample,
-correlated over ~8 ms), so two windows differ by ~0.17 N (1 sigma) and 0.5 N is ~3 sigma: a false "loaded" costs one
-more step; a contact softer than 0.5 N per 3 mm (0.17 N/mm, far below the softest catalogue object) would go unseen.
+``zeroFtSensor`` under load makes the load read as zero, and the press then adds its threshold on top. So the zero
+(:func:`zero_wrist`) is refused on a loaded pad, against two references kept here: the session's **last unloaded
+zero** (the wrench read right after a zero that was checked unloaded, written next to the journal so a resume after
+``kill -9`` has it), and a **back-off probe** (:func:`unload_wrist`) that needs no zero: a translation changes only the
+contact part of a wrist reading, so the arm backs along the pad's axis in guarded steps until a step changes nothing.
 """
 
 from __future__ import annotations
@@ -36,6 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from drivers.arm import Arm
+from drivers.frames import TactileFrame
+from drivers.sensor import TactileSensor
 from unitac_rig.collection.guarded_motion import wait_until_at_rest
 from unitac_rig.collection.transit import UNLOADED_FORCE_N, move_within_limits
 from unitac_rig.errors import SafetyLimit
@@ -48,8 +34,19 @@ ZERO_FILE = "_wrist_zero.json"  # in the session's journal directory: the last u
 UNLOAD_STEP_MM = 3.0  # each back-off step, mm
 UNLOAD_MAX_MM = 45.0  # give up (refuse) when the reading still falls after this much back-off, mm
 UNLOAD_WINDOW_S = 0.1  # the mean wrench is read over this window at rest, s
-PROBE_CHANGE_N = 0.5  # a step that changes the mean |F| by less than this found the pad free, N
+# A step that changes the mean |F| by less than this found the pad free, N: two 0.1 s means of a UR's filtered reading
+# differ by ~0.17 N (1 sigma), so 0.5 N is ~3 sigma; a contact softer than 0.17 N/mm would go unseen.
+PROBE_CHANGE_N = 0.5
 UNLOAD_SPEED_MM_S = 10.0  # back-off speed (away from the object: the near speed's default), mm/s
+
+# The window whose mean decides "unloaded" before a zero: 25 readings at 500 Hz. A UR's wrist F/T noise is ~1.15 N
+# white before its ~20 Hz filter, so the mean of 25 readings is off by ~0.23 N (1 sigma): 13 sigma below
+# UNLOADED_FORCE_N. The window after the zero (run_press's settle_s, 0.2 s) sets the host offset and the press-force
+# noise behind the contact threshold: the readings are correlated over ~8 ms, so a 0.1 s window misjudges the noise by
+# up to 40 % and a fast approach then stops on noise (measured on the fast twin); it stays 0.2 s.
+UNLOADED_CHECK_S = 0.05
+ZEROED_FORCE_N = 2.5  # mean |F| right after zeroing must be below this, else the zero did not take, N (a zero
+# taken from one filtered sample is off by its noise, ~0.5 N per axis on a UR; 2.5 N is ~4.5 sigma of that)
 
 
 def read_zero(journal: Path) -> np.ndarray | None:
@@ -76,13 +73,58 @@ def write_zero(journal: Path, wrench: np.ndarray) -> None:
             tmp.unlink()
 
 
-def mean_wrench(arm: Arm, seconds: float = UNLOAD_WINDOW_S) -> np.ndarray:
-    """The mean wrench (6,) over ``seconds`` of control periods (the arm at rest), N and N*m."""
-    readings = []
+def settle_window(arm: Arm, sensor: TactileSensor | None, seconds: float) -> tuple[list[TactileFrame], np.ndarray]:
+    """Wait ``seconds`` at rest one control period at a time; -> (the sensor's frames seen, every wrench read
+    (K, 6) in N, N*m)."""
+    if sensor is not None:
+        sensor.poll()  # drop anything queued during the transit move
+    frames: list[TactileFrame] = []
+    forces = []
     for _ in range(max(1, round(seconds / arm.control_period_s))):
         arm.wait_period()
-        readings.append(np.asarray(arm.read_state().tcp_force, dtype=np.float64))
-    return np.mean(readings, axis=0)
+        forces.append(np.asarray(arm.read_state().tcp_force, dtype=np.float64))
+        if sensor is not None:
+            frames.extend(sensor.poll())
+    return frames, np.asarray(forces)
+
+
+def zero_wrist(
+    arm: Arm,
+    sensor: TactileSensor,
+    settle_s: float,
+    where: str,
+    *,
+    check_s: float | None = None,
+    reference: np.ndarray | None = None,
+) -> tuple[list[TactileFrame], np.ndarray]:
+    """Zero the wrist F/T at rest after settling, refusing when the pad is loaded; -> (frames of both windows,
+    wrenches (K, 6) of the ``settle_s`` window after the zero, whose mean is the host-side offset left over: a zero
+    from one noisy sample is off). ``check_s``: the window before the zero (None: ``settle_s``).
+
+    The unloaded check compares the mean wrench with ``reference`` (6,), an unloaded reading (the session's first
+    zero passes the free reading its back-off found, collection/wrist.py); without one, with the controller's zero,
+    which the last zero set on an unloaded pad (a UR's F/T drifts by well under ``UNLOADED_FORCE_N`` between
+    presses). There is no way to skip it: a zero under load is what pressed a resumed pad to 28-30 N. After zeroing,
+    the window's mean must be near zero.
+    """
+    wait_until_at_rest(arm)
+    before, wrenches = settle_window(arm, sensor, settle_s if check_s is None else check_s)
+    # the mean, not the largest sample: a UR's F/T has ~1 N of sample noise, while a real contact shifts the mean
+    mean_force = force_n(wrenches.mean(axis=0), reference)
+    if mean_force > UNLOADED_FORCE_N:
+        raise SafetyLimit(
+            f"wrist reads {mean_force:.2f} N at {where}: the pad is touching something, refusing to zero the F/T",
+            hint="check the object's position (object.center_m) and the stand-off in the rig file",
+        )
+    arm.zero_ft()
+    frames, wrenches = settle_window(arm, sensor, settle_s)
+    left = force_n(wrenches.mean(axis=0))
+    if left > ZEROED_FORCE_N:
+        raise SafetyLimit(
+            f"wrist still reads {left:.2f} N after zeroing at {where}: the F/T zero did not take",
+            hint="check the wrist force with `unitac-rig probe ur5e` and the payload set on the teach pendant",
+        )
+    return before + frames, wrenches
 
 
 def force_n(wrench: np.ndarray, reference: np.ndarray | None = None) -> float:
@@ -120,7 +162,7 @@ def unload_wrist(arm: Arm, limits: LimitsConfig, *, zero: np.ndarray | None = No
     when the arm cannot back off (the workspace edge) while the remembered zero says the pad is loaded.
     """
     wait_until_at_rest(arm)
-    first = mean_wrench(arm)
+    first = settle_window(arm, None, UNLOAD_WINDOW_S)[1].mean(axis=0)
     off_zero = math.nan if zero is None else force_n(first, zero)
     previous, backed_mm = first, 0.0
     speed = min(UNLOAD_SPEED_MM_S, limits.near_speed_mm_s) / 1000.0
@@ -136,11 +178,12 @@ def unload_wrist(arm: Arm, limits: LimitsConfig, *, zero: np.ndarray | None = No
                     "the pad's axis (workspace edge): refusing to zero a loaded wrist",
                     hint="move the pad clear of the object (freedrive on the pendant), then run the same command",
                 )
-            log.warning("cannot back off to check the wrist is unloaded (workspace edge); %s", _zero_note(off_zero))
+            note = "no remembered zero" if math.isnan(off_zero) else f"{off_zero:.1f} N off the remembered zero"
+            log.warning("cannot back off to check the wrist is unloaded (workspace edge); %s", note)
             break
         backed_mm += step_mm
         wait_until_at_rest(arm)
-        now = mean_wrench(arm)
+        now = settle_window(arm, None, UNLOAD_WINDOW_S)[1].mean(axis=0)
         change = force_n(now, previous)
         previous = now
         if change < PROBE_CHANGE_N:
@@ -163,27 +206,17 @@ def unload_wrist(arm: Arm, limits: LimitsConfig, *, zero: np.ndarray | None = No
     return result
 
 
-def _zero_note(off_zero: float) -> str:
-    return "no remembered zero" if math.isnan(off_zero) else f"{off_zero:.1f} N off the remembered zero"
-
-
-def load_left_n(arm: Arm, zero: np.ndarray | None) -> float | None:
-    """|F| (N) the pad is left under now, against the unloaded reading ``zero`` (6,); None when the arm cannot be read
-    or no zero is known. One filtered reading: it works with the program stopped (nothing else can be asked then)."""
+def load_left_note(arm: Arm, zero: np.ndarray | None) -> str:
+    """``"; the pad is left loaded: X N on the wrist"`` (or ``"; the pad is left unloaded (X N on the wrist)"``)
+    against the unloaded reading ``zero`` (6,), appended to every way out of a fault so the operator knows whether the
+    pad still presses on something; empty when no zero is known or the arm cannot be read. One filtered reading: it
+    works with the program stopped (nothing else can be asked then)."""
     if zero is None:
-        return None
+        return ""
     try:
-        return force_n(np.asarray(arm.read_state().tcp_force, dtype=np.float64), zero)
+        load = force_n(np.asarray(arm.read_state().tcp_force, dtype=np.float64), zero)
     except Exception as exc:  # the arm is gone (a lost stream): say nothing rather than mask what happened
         log.info("cannot read the load left on the pad: %s", exc)
-        return None
-
-
-def load_left_note(arm: Arm, zero: np.ndarray | None) -> str:
-    """``"; the pad is left under X N"`` (or ``"; the pad is left unloaded (X N)"``), empty when unknown: appended to
-    every way out of a fault, so the operator knows whether the pad still presses on something."""
-    load = load_left_n(arm, zero)
-    if load is None:
         return ""
     if load <= UNLOADED_FORCE_N:
         return f"; the pad is left unloaded ({load:.1f} N on the wrist)"

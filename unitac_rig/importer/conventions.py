@@ -1,14 +1,6 @@
-"""The UniTac-NV authors' conventions, made explicit: every constant their offline scripts hard-code is a field here.
-
-Defaults reproduce what their preprocessing does to a raw session (facts from their public repository, see
-docs/import.md): drop the first 10 rows, rotate the wrist F/T x/y (forces and torques) by 45 degrees about z, negate
-PapillArray x/y so both sensors share the uSkin's axes, take the baseline as the mean of the first 100 samples,
-call a press a contiguous run with -20 N < Fz < -5 N of at least 30 (uSkin) / 5 (PapillArray) samples, and label
-each press with round(atan2(y - 0.625, x + 0.15) * 180/pi + 90) degrees from the end-effector x, y in metres.
-
-The rest is what this project adds on top (and says so): how their names map to our object and sensor ids, how the
-press window is widened back to the start of the loading ramp, when a press counts as complete, how their matrices
-map onto our (row, col) grid and axes, and which rotation each arbitrary-object file was recorded at (a guess).
+"""The UniTac-NV authors' conventions, made explicit: every constant their offline scripts hard-code is a field here
+(defaults: what their preprocessing does to a raw session), and what this project adds on top says so (name mapping,
+press windows, completeness, grid mapping, the arbitrary files' rotations: a guess). docs/import.md has every field.
 
 A TOML file can override any field (``--conventions FILE``); the effective conventions are stored in every imported
 session's root attributes.
@@ -16,7 +8,6 @@ session's root attributes.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -69,16 +60,9 @@ class ExtractionConventions(StrictTable):
     tactile_latency_s: float = Field(default=0.0, description="tactile delay relative to the F/T, s (same CSV row: 0)")
 
     def to_settings(self) -> ExtractionSettings:
-        return ExtractionSettings(
-            targets_n=tuple(self.targets_n),
-            tolerance_n=self.tolerance_n,
-            smoothing_samples=self.smoothing_samples,
-            max_frame_gap_s=self.max_frame_gap_s,
-            tactile_latency_s=self.tactile_latency_s,
-            # the moving average, as before the fit: the authors' wrist lag and noise are not known, and their rows
-            # pair the tactile frame with the wrist reading as recorded (`unitac-rig extract` can re-run with the fit)
-            method="moving-average",
-        )
+        # the moving average, as before the fit: the authors' wrist lag and noise are not known, and their rows pair
+        # the tactile frame with the wrist reading as recorded (`unitac-rig extract` can re-run with the fit)
+        return ExtractionSettings(**self.model_dump(), method="moving-average")
 
 
 def _default_object_shapes() -> dict[str, str]:
@@ -166,8 +150,6 @@ class ImportConventions(StrictTable):
         for name, sensor in self.sensor_names.items():
             if sensor not in ("uskin", "papillarray"):
                 raise ValueError(f"sensor_names.{name}: {sensor!r} is not a sensor id (use uskin or papillarray)")
-        if self.drop_first_rows < 0:
-            raise ValueError("drop_first_rows must be >= 0")
         return self
 
     # -- helpers ------------------------------------------------------------------------------------------------
@@ -182,14 +164,9 @@ class ImportConventions(StrictTable):
             )
         return f"{prefix}_{material.lower()}"
 
-    def as_json_dict(self) -> dict[str, Any]:
-        """Plain JSON-able dict (what is stored in the session's root attributes)."""
-        data: dict[str, Any] = json.loads(self.model_dump_json())
-        return data
-
     def to_toml(self) -> str:
         """The effective conventions as a TOML document that ``load_conventions`` reads back unchanged."""
-        return toml_text(self.as_json_dict())
+        return toml_text(self.model_dump(mode="json"))
 
 
 def _merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
@@ -205,7 +182,7 @@ def _merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
 
 def conventions_from_dict(data: dict[str, Any], source: str = "conventions") -> ImportConventions:
     """Defaults overridden by ``data`` (tables merge with the defaults, so a file only lists what it changes)."""
-    merged = _merge(ImportConventions().as_json_dict(), data)
+    merged = _merge(ImportConventions().model_dump(mode="json"), data)
     try:
         return ImportConventions.model_validate(merged)
     except ValidationError as exc:

@@ -1,15 +1,6 @@
-"""Finding the UniTac-NV files under a SOURCE folder and naming them in this project's terms.
-
-Recognised layouts (names compared case-insensitively):
-
-* raw sessions: ``<shape>_<PLA|TPU>/<xela|papillarray>/sensor_data_<date>_<time>.csv``
-  (under ``UniTac-NV Dataset/``);
-* the arbitrary object: ``<xela|papillarray>/<xela|papil>_arbitrary_<n>.csv`` (under ``arbitrary_obj/``);
-* processed files: ``<shape>_<MATERIAL>_<xela|papillarray>.npz`` and ``arbitrary<n>_PLA_<sensor>.npz``
-  (under ``UniTac-NV Dataset Processed/``).
-
-Anything else (their flattened CSV copies, notebooks, CAD) is listed as ignored.
-"""
+"""Finding the UniTac-NV files under a SOURCE folder (the layouts of docs/import.md, names compared
+case-insensitively) and naming them in this project's terms; anything else (their flattened CSV copies, notebooks,
+CAD) is listed as ignored."""
 
 from __future__ import annotations
 

@@ -1,13 +1,5 @@
-"""Reading the UniTac-NV files: raw session CSVs and the authors' processed ``.npz`` files.
-
-Raw CSV (one header row, then one row per tactile sample, about 100 Hz), columns by position:
-
-0. host time, ``%Y-%m-%d %H:%M:%S.%f``
-1. sensor sequence number
-2. force matrix as a stringified nested list: uSkin ``4 x 6 x 3`` raw counts, PapillArray ``3 x 3 x 3`` N
-3. displacement matrix, same shape (uSkin: zeros; PapillArray: mm)
-4. wrist F/T ``[Fx, Fy, Fz, Mx, My, Mz]`` (N, N*m), Fz negative while pressing
-5. end-effector pose ``[x, y, z, rx, ry, rz]`` (m, rad)
+"""Reading the UniTac-NV files: raw session CSVs (columns by position: docs/import.md, "Their formats") and the
+authors' processed ``.npz`` files.
 
 Parsing is vectorised: a whole column is joined into one string and read by numpy in one call. Rows whose field
 counts, bracket structure or numbers are wrong are dropped and reported by data-row number (0 = first row after the
@@ -20,6 +12,7 @@ import csv
 import hashlib
 import json
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -64,15 +57,14 @@ def _bracket_count(grid: tuple[int, ...]) -> int:
     return total
 
 
-def _parse_row_numbers(text: str, count: int) -> np.ndarray | None:
-    """One field's numbers, or None when it does not hold exactly ``count`` of them."""
+def _numbers(text: str) -> np.ndarray | None:
+    """Every number in ``text`` (brackets, parentheses and commas separate them); None when a token is not one."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error")
-            values = np.fromstring(text.translate(_TO_SPACES), sep=" ")
+            return np.fromstring(text.translate(_TO_SPACES), sep=" ")
     except (ValueError, DeprecationWarning):
         return None
-    return values if values.size == count else None
 
 
 def parse_number_column(
@@ -83,78 +75,62 @@ def parse_number_column(
     Returns ``(values, ok)``: values has shape ``(len(cells), *shape)`` (NaN rows where ``ok`` is False). A row is
     bad when its number of values differs, when (``check_brackets``) its bracket nesting does not fit ``shape``, or
     when a token is not a number. Rows that pass the cheap comma/bracket checks are parsed in one numpy call; only
-    when that call fails are rows parsed one by one to find the culprit.
+    when that call fails (and for rows written without commas) are rows parsed one by one.
     """
     per_row = int(np.prod(shape))
     n = len(cells)
     out = np.full((n, per_row), np.nan)
     ok = np.zeros(n, bool)
-    if n == 0:
-        return out.reshape(n, *shape), ok
     brackets = _bracket_count(shape)
     commas = np.fromiter((c.count(",") for c in cells), dtype=np.int64, count=n)
     opens = np.fromiter((c.count("[") for c in cells), dtype=np.int64, count=n)
-    fast = commas == per_row - 1
-    if check_brackets:
-        fast &= opens == brackets
+    nested = opens == brackets if check_brackets else np.ones(n, bool)
+    fast = (commas == per_row - 1) & nested
     fast_idx = np.nonzero(fast)[0]
+    one_by_one = np.nonzero(~fast & nested)[0]
     if fast_idx.size:
-        joined = " ".join(cells[i] for i in fast_idx).translate(_TO_SPACES)
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("error")
-                values = np.fromstring(joined, sep=" ")
-        except (ValueError, DeprecationWarning):
-            values = np.zeros(0)
-        if values.size == fast_idx.size * per_row:
+        values = _numbers(" ".join(cells[i] for i in fast_idx))
+        if values is not None and values.size == fast_idx.size * per_row:
             out[fast_idx] = values.reshape(-1, per_row)
             ok[fast_idx] = True
         else:  # some token is not a number: find the rows one by one
-            for i in fast_idx:
-                parsed = _parse_row_numbers(cells[i], per_row)
-                if parsed is not None:
-                    out[i] = parsed
-                    ok[i] = True
-    # rows that failed the cheap checks may still be fine when written without commas; parse them alone
-    for i in np.nonzero(~fast)[0]:
-        if check_brackets and opens[i] != brackets:
-            continue
-        parsed = _parse_row_numbers(cells[i], per_row)
-        if parsed is not None:
+            one_by_one = np.concatenate([fast_idx, one_by_one])
+    for i in one_by_one:
+        parsed = _numbers(cells[i])
+        if parsed is not None and parsed.size == per_row:
             out[i] = parsed
             ok[i] = True
     return out.reshape(n, *shape), ok
 
 
-def parse_times(cells: list[str]) -> tuple[np.ndarray, np.ndarray]:
-    """Time strings (``%Y-%m-%d %H:%M:%S.%f``) -> (microseconds since the epoch as int64, ok mask)."""
-    n = len(cells)
-    micros = np.zeros(n, np.int64)
-    ok = np.ones(n, bool)
+def _parse_cells(
+    cells: list[str], all_at_once: Callable[[list[str]], np.ndarray], one: Callable[[str], int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Cells -> (int64 values, ok mask): all in one numpy call, one by one only when that fails."""
+    out = np.zeros(len(cells), np.int64)
+    ok = np.ones(len(cells), bool)
     try:
-        micros[:] = np.array(cells, dtype="datetime64[us]").astype(np.int64)
+        out[:] = all_at_once(cells) if cells else out
     except ValueError:
         for i, cell in enumerate(cells):
             try:
-                micros[i] = np.datetime64(cell.strip(), "us").astype(np.int64)
-            except ValueError:
-                ok[i] = False
-    return micros, ok
-
-
-def parse_ints(cells: list[str]) -> tuple[np.ndarray, np.ndarray]:
-    n = len(cells)
-    out = np.zeros(n, np.int64)
-    ok = np.ones(n, bool)
-    try:
-        out[:] = np.array(cells).astype(np.int64) if n else out
-    except ValueError:
-        for i, cell in enumerate(cells):
-            try:
-                out[i] = int(cell.strip())
+                out[i] = one(cell.strip())
             except ValueError:
                 ok[i] = False
     return out, ok
+
+
+def parse_times(cells: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Time strings (``%Y-%m-%d %H:%M:%S.%f``) -> (microseconds since the epoch as int64, ok mask)."""
+    return _parse_cells(
+        cells,
+        lambda c: np.array(c, dtype="datetime64[us]").astype(np.int64),
+        lambda c: int(np.datetime64(c, "us").astype(np.int64)),
+    )
+
+
+def parse_ints(cells: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    return _parse_cells(cells, lambda c: np.array(c).astype(np.int64), int)
 
 
 def _nested_shape(text: str) -> tuple[int, ...] | None:
@@ -174,20 +150,14 @@ def read_raw_csv(path: Path, grid: tuple[int, int], read_displacement: bool) -> 
     ``grid`` is the sensor's ``(rows, cols)``; a file whose matrices have another shape is refused with a DataError.
     """
     path = Path(path)
-    time_cells: list[str] = []
-    seq_cells: list[str] = []
-    force_cells: list[str] = []
-    disp_cells: list[str] = []
-    ft_cells: list[str] = []
-    pose_cells: list[str] = []
+    columns: list[list[str]] = [[] for _ in range(RAW_COLUMNS)]  # time, seq, force, displacement, F/T, pose
     bad_rows: list[tuple[int, str]] = []
     row_numbers: list[int] = []
     total_rows = 0
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             reader = csv.reader(fh)
-            header = next(reader, None)
-            if header is None:
+            if next(reader, None) is None:
                 raise DataError(f"{path} is empty", hint="is this a UniTac-NV session CSV?")
             for number, row in enumerate(reader):
                 total_rows += 1 if row else 0
@@ -196,14 +166,11 @@ def read_raw_csv(path: Path, grid: tuple[int, int], read_displacement: bool) -> 
                         bad_rows.append((number, f"{len(row)} columns, expected {RAW_COLUMNS}"))
                     continue
                 row_numbers.append(number)
-                time_cells.append(row[0])
-                seq_cells.append(row[1])
-                force_cells.append(row[2])
-                disp_cells.append(row[3])
-                ft_cells.append(row[4])
-                pose_cells.append(row[5])
+                for column, cell in zip(columns, row, strict=False):
+                    column.append(cell)
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise DataError(f"cannot read {path}: {exc}", hint="check the file is a complete UniTac-NV CSV") from exc
+    time_cells, seq_cells, force_cells, disp_cells, ft_cells, pose_cells = columns
 
     matrix_shape = (grid[0], grid[1], 3)
     if force_cells:
@@ -218,27 +185,14 @@ def read_raw_csv(path: Path, grid: tuple[int, int], read_displacement: bool) -> 
     force, ok_f = parse_number_column(force_cells, matrix_shape)
     ft, ok_ft = parse_number_column(ft_cells, (6,), check_brackets=False)
     pose, ok_p = parse_number_column(pose_cells, (6,), check_brackets=False)
-    ok = ok_t & ok_s & ok_f & ok_ft & ok_p
+    checks = {"time": ok_t, "sequence": ok_s, "force matrix": ok_f, "F/T": ok_ft, "pose": ok_p}
     displacement = None
     if read_displacement:
-        displacement, ok_d = parse_number_column(disp_cells, matrix_shape)
-        ok &= ok_d
+        displacement, checks["displacement matrix"] = parse_number_column(disp_cells, matrix_shape)
+    ok = np.logical_and.reduce(list(checks.values()))
     numbers = np.asarray(row_numbers, np.int64)
     for i in np.nonzero(~ok)[0]:
-        fields = [
-            name
-            for name, good in (
-                ("time", ok_t[i]),
-                ("sequence", ok_s[i]),
-                ("force matrix", ok_f[i]),
-                ("F/T", ok_ft[i]),
-                ("pose", ok_p[i]),
-            )
-            if not good
-        ]
-        if read_displacement and not ok_d[i]:
-            fields.append("displacement matrix")
-        bad_rows.append((int(numbers[i]), "unparsable " + ", ".join(fields)))
+        bad_rows.append((int(numbers[i]), "unparsable " + ", ".join(k for k, good in checks.items() if not good[i])))
     bad_rows.sort()
     kept_micros = micros[ok]
     time_s = (kept_micros - kept_micros[0]) / 1e6 if kept_micros.size else np.zeros(0)

@@ -7,6 +7,7 @@ those files; a run killed mid-file resumes it (presses already written from the 
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -105,7 +106,7 @@ def _root_attrs(object_id: str, sensor: str, conv: ImportConventions, source: Pa
         "simulated": False,
         "source": SOURCE_TAG,
         "source_root": str(source),
-        "conventions": conv.as_json_dict(),
+        "conventions": conv.model_dump(mode="json"),
         "source_files": {},
         "config": {
             "importer": "unitac-nv",
@@ -154,13 +155,27 @@ def _check_against_selected(streams: Streams, cands: list[PressCandidate], repor
 
 def _import_file(
     src: SourceFile,
-    writer: _LazyWriter,
+    writer: Callable[[], SessionWriter],
     conv: ImportConventions,
     layout: SensorLayout,
     existing: dict[str, dict[str, Any]],
+    imported: dict[str, Any],
     report: FileReport,
-) -> dict[str, Any]:
-    """Convert one file and write its presses; returns its ``source_files`` entry."""
+) -> None:
+    """Convert one file and write its presses, then its ``source_files`` entry (a file imported before, by its
+    SHA-256, is not; nor one of another kind than the session already holds)."""
+    report.sha256 = file_sha256(src.path)
+    if report.sha256 in imported:
+        previous = imported[report.sha256]
+        report.outcome = "already-imported"
+        report.message = f"already imported (as {previous.get('path', '?')})"
+        report.presses_found = int(previous.get("presses_found", 0))
+        return
+    kinds = {entry.get("kind") for entry in imported.values()}
+    if kinds and src.kind not in kinds:
+        report.outcome = "skipped"
+        report.message = f"the session already holds {', '.join(sorted(map(str, kinds)))} imports; not mixing kinds"
+        return
     streams = _load_streams(src, layout, conv, report)
     assert src.rotation_deg is not None
     source_attrs: dict[str, object] = {
@@ -192,16 +207,15 @@ def _import_file(
                 f"{cand.describe(streams.rows)}: already in the session from {previous.get('source_file', '?')}"
             )
             continue
-        writer.get().write_press(cand.record)
+        writer().write_press(cand.record)
         existing[pid] = dict(cand.record.attrs)
         report.written += 1
         _count(cand, report)
-    bad = len(report.bad_rows)
-    return {
+    imported[report.sha256] = {
         "path": src.relative,
         "kind": src.kind,
         "rows": report.rows,
-        "bad_rows": bad,
+        "bad_rows": len(report.bad_rows),
         "presses_found": report.presses_found,
         "presses_written": report.written + report.already_written,
         "duplicates_dropped": len(report.duplicates),
@@ -210,6 +224,8 @@ def _import_file(
         "sample_rate_hz": _rate_hz(streams.t_s),
         **({"authors_processing": AUTHORS_PROCESSED_STEPS} if src.kind == "processed" else {}),
     }
+    writer().update_root_attrs({"source_files": imported})
+    report.outcome = "imported"
 
 
 def _count(cand: PressCandidate, report: FileReport) -> None:
@@ -261,21 +277,7 @@ def import_unitac_nv(
     for (object_id, sensor), files in sorted(groups.items()):
         session = SessionReport(object_id, sensor, session_path(Path(data_dir), object_id, sensor))
         sessions.append(session)
-        placed = []
-        for src in files:
-            if src.rotation_deg is None:  # not even opened: no session file for files we cannot place
-                report = FileReport(src.relative, src.kind, object_id, sensor, outcome="skipped")
-                report.message = (
-                    f"arbitrary file {src.arbitrary_index} has no rotation in the conventions "
-                    f"(add it under [arbitrary_rotation_deg] in a --conventions file)"
-                )
-                session.files.append(report)
-                if on_file is not None:
-                    on_file(report)
-            else:
-                placed.append(src)
-        if placed:
-            _import_session(session, placed, Path(data_dir), conv, source, on_file)
+        _import_session(session, files, Path(data_dir), conv, source, on_file)
         if session.path.exists():
             _session_counts(session, n_targets)
     return ImportReport(
@@ -284,23 +286,6 @@ def import_unitac_nv(
         superseded=[f.relative for f in found.superseded],
         conventions=conv,
     )
-
-
-class _LazyWriter:
-    """Opens the session only when something is written, so a file that fails leaves no empty session behind."""
-
-    def __init__(self, data_dir: Path, object_id: str, sensor: str, root_attrs: dict[str, Any]) -> None:
-        self._args = (data_dir, object_id, sensor, root_attrs)
-        self._writer: SessionWriter | None = None
-
-    def journal_exists(self) -> bool:
-        data_dir, object_id, sensor, _ = self._args
-        return (journal_dir(data_dir, object_id, sensor) / "_session.json").exists()
-
-    def get(self) -> SessionWriter:
-        if self._writer is None:
-            self._writer = SessionWriter(*self._args)
-        return self._writer
 
 
 def _import_session(
@@ -313,11 +298,16 @@ def _import_session(
 ) -> None:
     object_id, sensor = session.object_id, session.sensor
     layout = sensor_layout(sensor)
-    writer = _LazyWriter(data_dir, object_id, sensor, _root_attrs(object_id, sensor, conv, source))
+    # opened only when something is written, so a file that fails leaves no empty session behind
+    writer = functools.cache(
+        lambda: SessionWriter(data_dir, object_id, sensor, _root_attrs(object_id, sensor, conv, source))
+    )
     imported: dict[str, Any] = {}
     existing: dict[str, dict[str, Any]] = {}
-    if session.path.exists() or writer.journal_exists():
-        opened = writer.get()  # recovers a half-written session from its journal first
+    files = sorted(files, key=lambda src: src.rotation_deg is not None)  # the ones we cannot place reported first
+    placed = any(src.rotation_deg is not None for src in files)
+    if placed and (session.path.exists() or (journal_dir(data_dir, object_id, sensor) / "_session.json").exists()):
+        opened = writer()  # recovers a half-written session from its journal first
         info = read_session_info(opened.path)
         _check_session(info.attrs, conv, opened.path)
         imported = dict(info.attrs.get("source_files") or {})
@@ -326,40 +316,20 @@ def _import_session(
         report = FileReport(src.relative, src.kind, object_id, sensor)
         session.files.append(report)
         try:
-            _one_file(src, writer, conv, layout, existing, imported, report)
+            if src.rotation_deg is None:  # not even opened: no session file for files we cannot place
+                report.outcome = "skipped"
+                report.message = (
+                    f"arbitrary file {src.arbitrary_index} has no rotation in the conventions "
+                    f"(add it under [arbitrary_rotation_deg] in a --conventions file)"
+                )
+            else:
+                _import_file(src, writer, conv, layout, existing, imported, report)
         except DataError as exc:
             report.outcome = "failed"
             report.message = exc.one_line()
             log.warning("%s", report.message)
         if on_file is not None:
             on_file(report)
-
-
-def _one_file(
-    src: SourceFile,
-    writer: _LazyWriter,
-    conv: ImportConventions,
-    layout: SensorLayout,
-    existing: dict[str, dict[str, Any]],
-    imported: dict[str, Any],
-    report: FileReport,
-) -> None:
-    report.sha256 = file_sha256(src.path)
-    if report.sha256 in imported:
-        previous = imported[report.sha256]
-        report.outcome = "already-imported"
-        report.message = f"already imported (as {previous.get('path', '?')})"
-        report.presses_found = int(previous.get("presses_found", 0))
-        return
-    kinds = {entry.get("kind") for entry in imported.values()}
-    if kinds and src.kind not in kinds:
-        report.outcome = "skipped"
-        report.message = f"the session already holds {', '.join(sorted(map(str, kinds)))} imports; not mixing kinds"
-        return
-    entry = _import_file(src, writer, conv, layout, existing, report)
-    imported[report.sha256] = entry
-    writer.get().update_root_attrs({"source_files": imported})
-    report.outcome = "imported"
 
 
 def _check_session(attrs: dict[str, Any], conv: ImportConventions, path: Path) -> None:

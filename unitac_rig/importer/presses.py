@@ -1,13 +1,8 @@
 """From one UniTac-NV recording to this project's presses: conventions, segmentation, windows, angles, duplicates.
 
-Axis and grid mapping (see docs/import.md): their force matrix ``[r][c][k]`` (uSkin 4 x 6, PapillArray 3 x 3; k =
-x, y, z) becomes our taxel ``r * cols + c``, component k, after their PapillArray x/y flip and after the per-sensor
-:class:`TactileMapping` (identity by default). The wrist F/T is rotated by ``ft_rotation_deg`` about z
-(x' = x cos t - y sin t, y' = x sin t + y cos t, the same for Mx, My); the press force is ``-Fz`` (positive while
-pressing), unchanged by that rotation.
-
-One press = one run of their segmentation rule, widened backwards to the start of its loading ramp (their -5 N
-threshold alone would cut the 4..5 N targets) and forwards by a short unloading margin.
+The axis and grid mapping is docs/import.md's ("Axes and grid"). One press = one run of their segmentation rule,
+widened backwards to the start of its loading ramp (their -5 N threshold alone would cut the 4..5 N targets) and
+forwards by a short unloading margin.
 """
 
 from __future__ import annotations
@@ -71,11 +66,17 @@ def to_our_frame(matrices: np.ndarray, mapping: TactileMapping) -> np.ndarray:
     return np.ascontiguousarray(grid.reshape(grid.shape[0], -1, 3))
 
 
-def _flip_xy(matrices: np.ndarray) -> np.ndarray:
-    out = np.array(matrices, dtype=np.float64, copy=True)
-    out[..., 0] *= -1.0
-    out[..., 1] *= -1.0
-    return out
+def _tactile(
+    force: np.ndarray, disp: np.ndarray | None, layout: SensorLayout, conv: ImportConventions, flip_xy: bool
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Their force and displacement matrices in our frame: PapillArray x/y negated when ``flip_xy``, then the
+    sensor's :class:`TactileMapping`; the displacement only for a layout that has one."""
+    sign = np.array([-1.0, -1.0, 1.0]) if flip_xy and layout.name == "papillarray" else np.ones(3)
+    mapping = conv.tactile_mapping[layout.name]
+    values = to_our_frame(np.asarray(force, dtype=np.float64) * sign, mapping)
+    if disp is None or not layout.has_displacement:
+        return values, None
+    return values, to_our_frame(np.asarray(disp, dtype=np.float64) * sign, mapping)
 
 
 def streams_from_raw(raw: RawColumns, layout: SensorLayout, conv: ImportConventions) -> Streams:
@@ -89,14 +90,8 @@ def streams_from_raw(raw: RawColumns, layout: SensorLayout, conv: ImportConventi
             f"only {int(keep.sum())} usable samples after dropping the first {conv.drop_first_rows} rows; "
             f"the baseline needs {conv.baseline_samples}"
         )
-    force = raw.force[keep]
     disp = raw.displacement[keep] if raw.displacement is not None else None
-    if layout.name == "papillarray" and conv.papillarray_flip_xy:
-        force = _flip_xy(force)
-        disp = _flip_xy(disp) if disp is not None else None
-    mapping = conv.tactile_mapping[layout.name]
-    values = to_our_frame(force, mapping)
-    displacement = to_our_frame(disp, mapping) if disp is not None and layout.has_displacement else None
+    values, displacement = _tactile(raw.force[keep], disp, layout, conv, conv.papillarray_flip_xy)
     t = raw.time_s[keep]
     n_base = conv.baseline_samples
     return Streams(
@@ -116,14 +111,8 @@ def streams_from_raw(raw: RawColumns, layout: SensorLayout, conv: ImportConventi
 def streams_from_processed(arrays: ProcessedArrays, layout: SensorLayout, conv: ImportConventions) -> Streams:
     """A processed file: the authors already dropped rows, subtracted the baseline, rotated the F/T and flipped the
     PapillArray; only the difference to our conventions is applied here, and the tare is zero."""
-    force = arrays.force
-    disp: np.ndarray | None = arrays.displacement if layout.has_displacement else None
-    if layout.name == "papillarray" and conv.papillarray_flip_xy != AUTHORS_PROCESSED_STEPS["papillarray_flip_xy"]:
-        force = _flip_xy(force)
-        disp = _flip_xy(disp) if disp is not None else None
-    mapping = conv.tactile_mapping[layout.name]
-    values = to_our_frame(force, mapping)
-    displacement = to_our_frame(disp, mapping) if disp is not None else None
+    flip = conv.papillarray_flip_xy != AUTHORS_PROCESSED_STEPS["papillarray_flip_xy"]
+    values, displacement = _tactile(arrays.force, arrays.displacement, layout, conv, flip)
     n = values.shape[0]
     return Streams(
         t_s=arrays.time_s,
@@ -153,10 +142,6 @@ class Run:
     stop: int
     peak: int
 
-    @property
-    def length(self) -> int:
-        return self.stop - self.start
-
 
 def segment_presses(fz_n: np.ndarray, band_n: tuple[float, float], min_samples: int) -> list[Run]:
     """The authors' rule: runs with ``low < Fz < high`` (strict) of at least ``min_samples`` samples; peak = first
@@ -168,11 +153,11 @@ def segment_presses(fz_n: np.ndarray, band_n: tuple[float, float], min_samples: 
     edges = np.diff(np.concatenate([[0], inside.astype(np.int8), [0]]))
     starts = np.nonzero(edges == 1)[0]
     stops = np.nonzero(edges == -1)[0]
-    runs = []
-    for start, stop in zip(starts, stops, strict=True):
-        if stop - start >= min_samples:
-            runs.append(Run(int(start), int(stop), int(start + np.argmin(fz[start:stop]))))
-    return runs
+    return [
+        Run(int(start), int(stop), int(start + np.argmin(fz[start:stop])))
+        for start, stop in zip(starts, stops, strict=True)
+        if stop - start >= min_samples
+    ]
 
 
 def press_window(
@@ -272,7 +257,7 @@ def build_presses(
             {
                 "source_rows": [int(streams.rows[lo]), int(streams.rows[hi - 1])],
                 "peak_row": int(streams.rows[run.peak]),
-                "band_samples": run.length,
+                "band_samples": run.stop - run.start,
                 "raw_angle_deg": raw_angle,
                 "peak_force_n": peak_force,
                 "threshold_n": conv.complete_peak_n,

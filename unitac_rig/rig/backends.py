@@ -20,17 +20,12 @@ RIG_BACKENDS: dict[str, str] = {
 }
 
 
-def backend_class(name: str) -> type[Rig]:
-    """The Rig class registered under ``name`` (imported on first use)."""
-    cls = load(RIG_BACKENDS[name])
-    assert isinstance(cls, type) and issubclass(cls, Rig)
-    return cls
-
-
 def open_rig(config: RigConfig, *, seed: int = 0, imperfections: str | None = None) -> Rig:
-    """The hardware rig the config describes, or the simulated rig when it names no arm. ``imperfections``: which
-    of the real sensors' imperfections the simulated rig has (sim/imperfections.py; None: all, "none": the clean
-    twin); hardware has its own."""
+    """The hardware rig the config describes, or the simulated rig when it names no arm (each imported on first use).
+    ``imperfections``: which of the real sensors' imperfections the simulated rig has (sim/imperfections.py; None:
+    all, "none": the clean twin); hardware has its own."""
+    backend = load(RIG_BACKENDS["sim" if config.simulated else "hardware"])
+    assert isinstance(backend, type) and issubclass(backend, Rig)
     if config.simulated:
-        return backend_class("sim")(config, seed=seed, imperfections=imperfections)  # type: ignore[call-arg]
-    return backend_class("hardware")(config)  # type: ignore[call-arg]
+        return backend(config, seed=seed, imperfections=imperfections)  # type: ignore[call-arg]
+    return backend(config)  # type: ignore[call-arg]

@@ -69,15 +69,20 @@ class Rig(ABC):
         finally:
             sensor.disconnect()
 
-    def detect_sensor(self, probe_s: float = 1.0) -> str:
-        """The one configured sensor that answers; an error if none or more than one does."""
+    def _answering(self, names: list[str], probe_s: float) -> list[str]:
+        """Those of ``names`` whose sensor sends a frame within ``probe_s`` (one that cannot be opened does not)."""
         answering = []
-        for name in self.sensor_names():
+        for name in names:
             try:
                 if self.sensor_answers(name, probe_s):
                     answering.append(name)
             except DeviceError as exc:
                 log.info("sensor %s does not answer: %s", name, exc)
+        return answering
+
+    def detect_sensor(self, probe_s: float = 1.0) -> str:
+        """The one configured sensor that answers; an error if none or more than one does."""
+        answering = self._answering(self.sensor_names(), probe_s)
         if not answering:
             raise DeviceNotFound(
                 "no configured sensor answers",
@@ -94,15 +99,7 @@ class Rig(ABC):
         """Make sure the sensor the operator named is the one streaming; a clear error naming the one that is."""
         if self.sensor_answers(name, probe_s):
             return
-        others = []
-        for other in self.sensor_names():
-            if other == name:
-                continue
-            try:
-                if self.sensor_answers(other, probe_s):
-                    others.append(other)
-            except DeviceError as exc:
-                log.info("sensor %s does not answer either: %s", other, exc)
+        others = self._answering([n for n in self.sensor_names() if n != name], probe_s)
         instead = f"; {', '.join(others)} answers instead" if others else ""
         raise DeviceTimeout(
             f"sensor {name!r} is connected but sent no frame within {probe_s:g} s{instead}",

@@ -1,7 +1,7 @@
 """The rig file: a TOML document validated by pydantic. No rig file means the simulated rig.
 
 Every model forbids unknown keys: a typo in a safety limit must fail loudly, never pass silently. Validation errors
-become one :class:`ConfigError` line naming the field. See docs/rig-file.md for every field.
+become one :class:`ConfigError` line naming the field. docs/rig-file.md says what every field means and why.
 """
 
 from __future__ import annotations
@@ -48,17 +48,9 @@ class ArmConfig(StrictTable):
         le=100,
         description="RTDE watchdog: the controller stops the program when the host sends nothing for 1/this s",
     )
-    tcp_offset: tuple[float, float, float, float, float, float] | None = Field(
-        None, description="TCP set on the pendant, [x, y, z (m), rx, ry, rz (rad)] from the flange; checked at connect"
-    )
-    payload_kg: float | None = Field(
-        None, ge=0, le=5, description="payload mass set on the pendant, kg; checked at connect"
-    )
-    unchecked_tool: bool = Field(
-        False,
-        description="run without tcp_offset / payload_kg (not recommended: a wrong TCP moves every pose, a wrong "
-        "payload shifts the wrist force); every session then starts with a warning",
-    )
+    tcp_offset: tuple[float, float, float, float, float, float] | None = None  # the pendant's TCP, m and rad
+    payload_kg: float | None = Field(None, ge=0, le=5, description="payload mass set on the pendant, kg")
+    unchecked_tool: bool = False  # run without tcp_offset / payload_kg (each session then warns)
 
 
 #: one ``[sensors.<name>]`` table: any registered sensor's config type (unitac_rig/rig/sensors), told apart by ``type``;
@@ -69,69 +61,31 @@ SensorConfig = Annotated[SerializeAsAny[SensorConfigBase], BeforeValidator(parse
 class ObjectPlacement(StrictTable):
     center_m: tuple[float, float] = Field((-0.15, 0.625), description="object axis in the base frame (x, y), m")
     press_height_m: float = Field(0.20, description="height of the press plane (TCP z) in the base frame, m")
-    standoff_mm: float = Field(
-        8.0,
-        gt=0,
-        le=50,
-        description="gap between pad and object at the start pose, where position moves end and the F/T is zeroed; "
-        "from there the pad approaches under force control, mm",
-    )
-    clearance_mm: float = Field(
-        90.0, gt=0, description="moves between press rays go out to this distance from the object axis, mm"
-    )
-    objects_files: tuple[Path, ...] = Field((), description="extra object files (TOML/JSON) to add to the catalogue")
+    standoff_mm: float = Field(8.0, gt=0, le=50, description="pad-object gap where position moves end, mm")
+    clearance_mm: float = Field(90.0, gt=0, description="moves between rays go this far from the axis, mm")
+    objects_files: tuple[Path, ...] = ()  # extra object files (TOML/JSON) added to the catalogue
 
 
 class PressConfig(StrictTable):
     threshold_n: float = Field(10.0, gt=0, description="stop force along the press, N")
     # two-phase 15/2 mm/s: chosen from the press chart (docs/benchmarks.md, "Press strategy")
-    strategy: Annotated[str, AfterValidator(known_strategy)] = Field(
-        "two-phase", description="how the pad goes from the stand-off to the threshold: a name in rig/strategies.py"
-    )
+    strategy: Annotated[str, AfterValidator(known_strategy)] = "two-phase"  # a name in rig/strategies.py
     speed_mm_s: float = Field(2.0, gt=0, description="press speed (guarded) / slow speed (two-phase), mm/s")
     fast_speed_mm_s: float = Field(15.0, gt=0, description="approach speed before contact (two-phase, force-ramp)")
     contact_force_n: float = Field(1.0, gt=0, description="force that counts as first contact, N")
     ramp_rate_n_s: float = Field(8.0, gt=0, description="force-ramp strategy: force rise rate after contact, N/s")
     dwell_s: float = Field(0.2, ge=0, description="hold at the stop before retracting, s")
     transit_speed_mm_s: float = Field(50.0, gt=0, description="speed between presses, mm/s")
-    retract_speed_mm_s: float = Field(
-        20.0, gt=0, description="speed back off the object after the dwell (away from it: nothing to crush), mm/s"
-    )
-    confirmed_standoff_mm: float = Field(
-        5.0,
-        gt=0,
-        description="the stand-off once a press has confirmed the object's placement (within 5 mm of where the rig "
-        "file says), mm: shortens the free-air approach; never below limits.min_standoff_mm nor above "
-        "object.standoff_mm, and object.standoff_mm again whenever the object is turned or the session restarts",
-    )
-    setpoint_margin_n: float = Field(
-        0.2,
-        gt=0,
-        description="the controller's force set-point during contact is threshold + this, N: what a stalled host "
-        "leaves the controller holding, so small; a force that settles below the threshold (the host's F/T offset "
-        "estimate is off by more than this) raises it within 0.3 s, see setpoint_ceiling_margin_n",
-    )
-    setpoint_ceiling_margin_n: float = Field(
-        2.0,
-        gt=0,
-        description="a force that settles below the threshold raises the set-point in 0.5 N steps up to threshold + "
-        "this (never past halfway from the first set-point to limits.hard_force_n), N; at the ceiling the press "
-        "fails as 'settled' within seconds",
-    )
-    force_mode_damping: float = Field(
-        0.025, ge=0, le=1, description="URScript force_mode_set_damping, sent before every press (UR default 0.005)"
-    )
-    force_mode_gain_scaling: float = Field(
-        1.0, gt=0, le=2, description="URScript force_mode_set_gain_scaling, sent before every press (UR default 1)"
-    )
-    stop_samples: int = Field(
-        50,
-        ge=1,
-        le=50,
-        description="the press stops when the mean of this many wrist readings reaches the threshold (50 at 500 Hz: "
-        "the mean's noise ~0.16 N, so the true force reaches the threshold instead of a noise peak ending the press "
-        "~0.3 N short)",
-    )
+    retract_speed_mm_s: float = Field(20.0, gt=0, description="back off the object after the dwell, mm/s")
+    confirmed_standoff_mm: float = Field(5.0, gt=0, description="the stand-off once the placement is confirmed, mm")
+    # the controller's set-point in contact is threshold + this, N: what a stalled host leaves it holding, so small
+    setpoint_margin_n: float = Field(0.2, gt=0)
+    setpoint_ceiling_margin_n: float = Field(2.0, gt=0, description="a settled force raises the set-point to this, N")
+    force_mode_damping: float = Field(0.025, ge=0, le=1, description="URScript force_mode_set_damping (UR: 0.005)")
+    force_mode_gain_scaling: float = Field(1.0, gt=0, le=2, description="URScript force_mode_set_gain_scaling")
+    # the press stops when the mean of this many wrist readings reaches the threshold (50 at 500 Hz: the mean's noise
+    # is ~0.16 N, so the true force reaches the threshold instead of a noise peak ending the press ~0.3 N short)
+    stop_samples: int = Field(50, ge=1, le=50)
     angle_min_deg: float = Field(-45.0, ge=-90, le=90, description="first approach angle from the object's normal")
     angle_max_deg: float = Field(45.0, ge=-90, le=90, description="last approach angle, deg")
     angle_count: int = Field(91, ge=1, description="approach angles from angle_min_deg to angle_max_deg")
@@ -164,42 +118,17 @@ def _arc(press: PressConfig) -> list[float]:
 class LimitsConfig(StrictTable):
     hard_force_n: float = Field(25.0, gt=0, description="abort a press when |F| (all force axes) passes this, N")
     hard_torque_nm: float = Field(2.0, gt=0, description="abort a press when |T| at the TCP passes this, N*m")
-    move_force_n: float = Field(
-        5.0, gt=0, description="stop a transit move when the wrist force changes by more than this, N"
-    )
-    min_standoff_mm: float = Field(
-        5.0, gt=0, description="object.standoff_mm may not be smaller: no position move ends closer, mm"
-    )
-    max_failed_in_a_row: int = Field(
-        3,
-        ge=1,
-        description="stop the session after this many presses in a row that did not complete (no contact, "
-        "timeout, travel limit, ...): the object is missing, misplaced or not what the rig file says",
-    )
-    max_reach_m: float = Field(
-        0.85, gt=0, description="no waypoint farther than this from the shoulder (0, 0, 0.1625 m): UR5e reach"
-    )
+    move_force_n: float = Field(5.0, gt=0, description="stop a transit move when the wrist force grows this much, N")
+    min_standoff_mm: float = Field(5.0, gt=0, description="no position move ends closer to the object, mm")
+    max_failed_in_a_row: int = Field(3, ge=1, description="stop after this many presses in a row do not complete")
+    max_reach_m: float = Field(0.85, gt=0, description="no waypoint farther from the shoulder (0, 0, 0.1625 m), m")
     max_travel_after_contact_mm: float = Field(8.0, gt=0, description="fail a press that travels further, mm")
     max_speed_mm_s: float = Field(100.0, gt=0, description="no press or transit speed may exceed this, mm/s")
-    near_speed_mm_s: float = Field(
-        10.0,
-        gt=0,
-        description="position moves toward the object within near_zone_mm of its expected surface go no faster, "
-        "mm/s: what bounds the force on the controller when the host freezes at an unexpected contact (see "
-        "docs/real-rig.md)",
-    )
-    near_zone_mm: float = Field(
-        50.0,
-        ge=0,
-        description="how far from the expected surface the object may really stand (placement uncertainty), mm; "
-        "approaches inside it run at near_speed_mm_s",
-    )
-    near_zone_confirmed_mm: float = Field(
-        10.0,
-        ge=0,
-        description="the near zone once a press has touched the object within 5 mm of where the rig file says (the "
-        "placement is then measured); back to near_zone_mm whenever the object is turned or the session restarts, mm",
-    )
+    # moves toward the object inside the near zone go no faster, mm/s: what bounds the force on the controller when
+    # the host freezes at an unexpected contact (docs/real-rig.md, "The bounds")
+    near_speed_mm_s: float = Field(10.0, gt=0)
+    near_zone_mm: float = Field(50.0, ge=0, description="how far the object may stand from where expected, mm")
+    near_zone_confirmed_mm: float = Field(10.0, ge=0, description="the near zone once the placement is confirmed, mm")
     workspace_min_m: tuple[float, float, float] = (-0.6, 0.2, 0.0)
     workspace_max_m: tuple[float, float, float] = (0.4, 1.0, 0.6)
 
@@ -207,12 +136,7 @@ class LimitsConfig(StrictTable):
     def _physical_ceilings(self) -> LimitsConfig:
         """Refuse limits past what the hardware can read or survive (the module's ceilings)."""
         ceilings = (
-            (
-                "hard_force_n",
-                self.hard_force_n,
-                WRIST_FORCE_RANGE_N,
-                "N, the UR5e wrist F/T's force range: a limit the wrist cannot read never trips",
-            ),
+            ("hard_force_n", self.hard_force_n, WRIST_FORCE_RANGE_N, "N, the UR5e wrist F/T's force range"),
             ("hard_torque_nm", self.hard_torque_nm, WRIST_TORQUE_RANGE_NM, "N*m, the UR5e wrist F/T's torque range"),
             ("max_speed_mm_s", self.max_speed_mm_s, REDUCED_SPEED_MM_S, "mm/s, the ISO 10218-1 reduced speed"),
             ("move_force_n", self.move_force_n, self.hard_force_n, "N, limits.hard_force_n"),
@@ -226,12 +150,6 @@ class LimitsConfig(StrictTable):
                 "is zeroed at the stand-off, which must stay clear of the object"
             )
         return self
-
-    def near_speed_ceiling_mm_s(self, watchdog_hz: float) -> float:
-        """The fastest near speed (mm/s) whose double fault (a host frozen at an unexpected contact: the move runs
-        on for one watchdog period) stays under ``DOUBLE_FAULT_BOUND_N`` on a ``NEAR_STIFFNESS_N_PER_MM`` contact:
-        (25 N - move_force_n) x watchdog_hz / stiffness (12 mm/s with the defaults)."""
-        return max(DOUBLE_FAULT_BOUND_N - self.move_force_n, 0.0) * watchdog_hz / NEAR_STIFFNESS_N_PER_MM
 
 
 class RigConfig(StrictTable):
@@ -294,7 +212,9 @@ class RigConfig(StrictTable):
                     "they are read back and checked at connect), or set arm.unchecked_tool = true to run unchecked"
                 )
         watchdog_hz = DEFAULT_WATCHDOG_HZ if self.arm is None else self.arm.watchdog_hz
-        near_ceiling = self.limits.near_speed_ceiling_mm_s(watchdog_hz)
+        # The fastest near speed whose double fault (a host frozen at an unexpected contact: the move runs on for one
+        # watchdog period) stays under DOUBLE_FAULT_BOUND_N on a NEAR_STIFFNESS_N_PER_MM contact (12 mm/s by default)
+        near_ceiling = max(DOUBLE_FAULT_BOUND_N - self.limits.move_force_n, 0.0) * watchdog_hz / NEAR_STIFFNESS_N_PER_MM
         if self.limits.near_speed_mm_s > near_ceiling:
             raise ValueError(
                 f"limits.near_speed_mm_s = {self.limits.near_speed_mm_s:g} is above {near_ceiling:.1f} mm/s: a host "

@@ -72,7 +72,7 @@ class MaterialSpec:
     source: str = ""
 
 
-# Sources: /docs/simulator.md has the table. [S] stated by a source, [D] derived, [I] inferred/fitted.
+# Sources and the measurements behind each fit: docs/simulator.md, "Materials". [S] stated, [D] derived, [I] fitted.
 MATERIALS: dict[str, MaterialSpec] = {
     "PLA": MaterialSpec(
         name="PLA",
@@ -93,12 +93,8 @@ MATERIALS: dict[str, MaterialSpec] = {
         global_cubic_n_per_mm3=0.15,  # [I] stiffening: tangent ~6 N/mm at 3 mm, 10 N reached after ~3 mm
         corner_stiffness_factor=3.0,  # [I] corner loading stiffer than face-centre loading
         wall_foundation_n_per_mm3=0.03,  # [I] fitted: at 10 N the TPU circle flattens to a ~15 mm wide contact
-        # (ring flattening starts at pi*E*I/R^2 ~ 0.19 N/mm < 0.33 N/mm) and halves the uSkin's peak taxel, as the
-        # low end of the recorded per-file peaks (1.6k vs 5.3k counts) suggests
-        wall_point_stiffness_n_per_mm=4.7,  # [D/I] shell dimple ~ E t^2 / R = 6.5 N/mm; refitted to 0.7x that: the
-        # PapillArray centre pillar still peaks above 4 N on TPU (data: 4.2-5.3 N in every file, TPU included)
-        skin_drag_mm=0.5,  # [I] fitted to the TPU sessions' uSkin lateral readings, larger than PLA's (circle minimum
-        # -1.9k against -1.2k counts, hexagon -3.1k against -2.7k): the flattening wall stretches under the skin
+        wall_point_stiffness_n_per_mm=4.7,  # [D/I] shell dimple ~ E t^2 / R = 6.5 N/mm, refitted to 0.7x that
+        skin_drag_mm=0.5,  # [I] fitted to the TPU sessions' uSkin lateral readings (larger than PLA's)
         source="Shore 95A TPU; thin-ring/beam formulas in scene-facts section 4",
     ),
 }
@@ -177,9 +173,6 @@ class Symmetry:
     @property
     def continuous(self) -> bool:
         return self.order == 0
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"order": self.order, "mirror_axis_deg": self.mirror_axis_deg}
 
 
 def outline_symmetry(outlines: Sequence[np.ndarray], tolerance_mm: float = SYMMETRY_TOLERANCE_MM) -> Symmetry:
@@ -340,6 +333,7 @@ class ObjectFile(BaseModel):
                 raise ValueError("outline_mm has non-finite values")
             if _signed_area(poly) < 0:
                 poly = poly[::-1]
+                self.outline_mm = [(float(x), float(z)) for x, z in poly]  # counter-clockwise from here on
             if not _star_shaped_about_origin(poly):
                 raise ValueError(
                     "outline_mm must surround the origin (the prism axis) and be seen whole from it: every ray "
@@ -348,6 +342,8 @@ class ObjectFile(BaseModel):
             inradius = float(np.min(_edge_distances_from_origin(poly)))
             if self.wall_mm >= inradius:
                 raise ValueError(f"wall_mm {self.wall_mm} must be smaller than the outline's inradius {inradius:.3f}")
+            if not _star_shaped_about_origin(offset_polygon_inward(poly, self.wall_mm)):
+                raise ValueError(f"the {self.wall_mm} mm wall does not fit inside the outline: use a thinner wall_mm")
         return self
 
 
@@ -374,23 +370,11 @@ def load_object_file(path: Path) -> ObjectSpec:
             describe_validation_error(exc, f"object file {path}", ObjectFile),
             hint="see docs/simulator.md (object files) for the fields",
         ) from exc
-    return _spec_from_file(spec)
-
-
-def _spec_from_file(spec: ObjectFile) -> ObjectSpec:
     if spec.radius_mm is not None:
-        outer = _circle_polygon(spec.radius_mm)
-        inner = _circle_polygon(spec.radius_mm - spec.wall_mm)
+        outer, inner = _circle_polygon(spec.radius_mm), _circle_polygon(spec.radius_mm - spec.wall_mm)
     else:
         outer = np.asarray(spec.outline_mm, dtype=np.float64)
-        if _signed_area(outer) < 0:
-            outer = outer[::-1].copy()
         inner = offset_polygon_inward(outer, spec.wall_mm)
-        if not _star_shaped_about_origin(inner):
-            raise ConfigError(
-                f"object {spec.id}: the {spec.wall_mm} mm wall does not fit inside the outline",
-                hint="use a thinner wall_mm or a rounder outline",
-            )
     return ObjectSpec(
         id=spec.id,
         shape=spec.shape,

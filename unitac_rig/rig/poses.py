@@ -1,10 +1,6 @@
-"""Rig geometry: approach directions, press frames and pose conversions (base frame, metres, radians).
-
-Convention (shared with the simulator and the object catalogue): the object stands at ``center_m`` in the robot
-base's horizontal plane; for approach angle theta the pad comes from base direction u = (sin theta, -cos theta, 0) and
-presses along d = -u, toward the centre. The TCP is the centre of the sensing surface with tool +z = d,
-tool y = base +z (up) and tool x = y cross z = (-dy, dx, 0), i.e. horizontal and across the press.
-"""
+"""Rig geometry: approach directions, press frames and pose conversions (base frame, metres, radians), in the
+conventions that ``rig/objects.py``'s docstring states (the pad comes from u = (sin theta, -cos theta, 0) and presses
+along d = -u; tool +z = d, tool y = base +z)."""
 
 from __future__ import annotations
 

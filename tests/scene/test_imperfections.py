@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from drivers.layouts import PAPILLARRAY, USKIN
+from drivers.layouts import USKIN
 from unitac_rig.collection.session import collect_session
 from unitac_rig.errors import UsageError
 from unitac_rig.rig.config import parse_rig_config
@@ -19,7 +18,6 @@ from unitac_rig.rig.objects import get_object
 from unitac_rig.sim.fast_rig import SimRig, seeded_scene
 from unitac_rig.sim.imperfections import (
     CLEAN,
-    PILLAR_FLANK_FRICTION,
     REALISTIC,
     SKIN_FLANK_FRICTION,
     ElastomerMemory,
@@ -29,7 +27,7 @@ from unitac_rig.sim.imperfections import (
     print_seed,
     printed_object,
 )
-from unitac_rig.sim.scene import PressScene, TaxelLoads
+from unitac_rig.sim.scene import TaxelLoads
 from unitac_rig.sim.sensor_models import PapillArrayModel, PapillArrayParams, UskinModel, UskinParams
 from unitac_rig.storage.reader import read_presses, read_session_info
 from unitac_rig.storage.recorder import session_path
@@ -52,10 +50,6 @@ def test_switches_parse_from_words_and_unknown_names_are_usage_errors() -> None:
     assert only.hysteresis and only.drift and not only.creep and not only.mount_offset
     for value in (REALISTIC, CLEAN, no_creep, only):
         assert Imperfections.parse(value.text) == value
-    assert not REALISTIC.pillar_flank_friction and REALISTIC.text == "all"  # opt-in: sessions keep their "all"
-    opted = Imperfections.parse("all,pillar_flank_friction")
-    assert opted.pillar_flank_friction and opted.creep and opted.text == "all,pillar_flank_friction"
-    assert Imperfections.parse(opted.text) == opted
     with pytest.raises(UsageError, match="unknown imperfection"):
         Imperfections.parse("all,-wobble")
     with pytest.raises(UsageError):
@@ -187,25 +181,6 @@ def test_flank_friction_turns_the_skins_shear_to_each_flank_of_the_seeded_scene(
     corner_on, corner_off = on.loads_at_force(45.0, 10.0).forces_n, off.loads_at_force(45.0, 10.0).forces_n
     assert np.abs(corner_on[:, 0]).sum() > 1.15 * np.abs(corner_off[:, 0]).sum()
     np.testing.assert_allclose(on.loads_at_force(0.0, 10.0).forces_n, off.loads_at_force(0.0, 10.0).forces_n)
-
-
-def test_pillar_flank_friction_is_opt_in_and_turns_each_pillars_shear_to_its_flank() -> None:
-    """The opt-in switch gives the PapillArray scene the fitted pillar flank friction (its physics:
-    tests/scene/test_scene_fidelity_terms.py); "all" leaves it off, and the uSkin's scene is left alone. The hexagon
-    pressed at 20 deg meets the left tip with a 40 deg flank: tan(40 - atan 0.33) = 0.399 of its load, where the
-    default reads the cap 0.45."""
-    hexagon = get_object("hex_pla")
-    on = seeded_scene(hexagon, 0.0, "papillarray", seed=1, imperfections=Imperfections.parse("pillar_flank_friction"))
-    off = seeded_scene(
-        hexagon, 0.0, "papillarray", seed=1, imperfections=Imperfections.parse("all,-pillar_flank_friction")
-    )
-    assert on.params.pillar_flank_friction == PILLAR_FLANK_FRICTION and off.params.pillar_flank_friction == 0.0
-    assert seeded_scene(hexagon, 0.0, "papillarray", seed=1, imperfections=REALISTIC).params.pillar_flank_friction == 0
-    exact_on = replace(on.params.exact(), pillar_flank_friction=PILLAR_FLANK_FRICTION)
-    grid = PAPILLARRAY.to_grid(
-        PressScene(hexagon, 0.0, PAPILLARRAY, params=exact_on).loads_at_force(20.0, 10.0).forces_n
-    )
-    assert grid[1, 0, 0] / grid[1, 0, 2] == pytest.approx(-math.tan(math.radians(40) - math.atan(0.33)), abs=2e-3)
 
 
 def _session_hashes(

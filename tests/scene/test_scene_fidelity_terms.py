@@ -383,20 +383,6 @@ def test_a_flank_shears_the_skin_along_its_normal_turned_back_by_friction() -> N
     np.testing.assert_allclose(flank_shear_ratio(slopes, 0.25), expected, atol=1e-4)
 
 
-def test_the_pillar_tips_stick_inside_coulombs_cone_and_slip_at_its_edge() -> None:
-    """The hexagon pressed at 20 deg: the left tip meets a 40 deg flank, the middle one a 20 deg flank. With the
-    pillar flank friction mu 0.33 (atan 18.26 deg) they read tan(40 - 18.26) = 0.399 and tan(20 - 18.26) = 0.030 of
-    their load, a flank under 18.26 deg (the square at 10 deg) nothing: the tip sticks. The default reads
-    min(0.55 tan(tilt), 0.45): 0.45, 0.200 and 0.097, every flank over 39 deg alike."""
-    params = replace(EXACT, pillar_flank_friction=0.33)
-    g = grid("hex_pla", PAPILLARRAY, 20.0, params)
-    np.testing.assert_allclose(g[1, :2, 0] / g[1, :2, 2], [-0.3993, 0.0304], atol=2e-3)
-    clean = grid("hex_pla", PAPILLARRAY, 20.0, EXACT)
-    np.testing.assert_allclose(clean[1, :2, 0] / clean[1, :2, 2], [-0.45, 0.2002], atol=2e-3)
-    square = grid("square_pla", PAPILLARRAY, 10.0, params)
-    assert square[1, 0, 2] > 4.0 and square[1, 0, 0] == 0.0
-
-
 def test_the_corners_angle_reaches_the_skins_shear_through_its_flanks() -> None:
     """The square at 45 deg (a 90 deg corner) and the hexagon at 30 deg (120 deg): with almost no spreading and no
     bulge each column next to the corner holds one flank, and reads its shear/normal: +-0.6 and +-0.2861 at mu 0.25,

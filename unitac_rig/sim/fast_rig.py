@@ -34,7 +34,6 @@ from unitac_rig.sim.fast_sensors import configured_sensors
 from unitac_rig.sim.faults import FaultInjector, FaultPlan
 from unitac_rig.sim.imperfections import (
     CLEAN,
-    PILLAR_FLANK_FRICTION,
     SKIN_FLANK_FRICTION,
     Imperfections,
     as_imperfections,
@@ -138,8 +137,6 @@ def seeded_scene(
         obj = printed_object(obj, np.random.default_rng(print_seed(seed, obj.id)))
     if imperfections.flank_friction:
         params = replace(params or SceneParams(), skin_flank_friction=SKIN_FLANK_FRICTION)
-    if imperfections.pillar_flank_friction:
-        params = replace(params or SceneParams(), pillar_flank_friction=PILLAR_FLANK_FRICTION)
     if imperfections.mount_offset:
         params = params or SceneParams()
         extra_mm = mount_offset_mm(np.random.default_rng(mount_seed(seed, obj.id, sensor, rotation_deg)))

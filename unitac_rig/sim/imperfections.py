@@ -2,9 +2,8 @@
 
 A twin without them is far easier than the hardware: its readings are one smooth function of the contact, so a
 model that interpolates between seen contacts scores as well as one that generalises. Each imperfection here is a
-field of :class:`Imperfections` (True = on; the default, :data:`REALISTIC`, has all of them but the opt-in ones,
-:data:`OPT_IN`); :data:`CLEAN` turns every one off and gives, bit for bit, the twin as it was before them
-(``unitac-rig campaign --imperfections none``).
+field of :class:`Imperfections` (True = on; the default, :data:`REALISTIC`, has all of them); :data:`CLEAN` turns
+every one off and gives, bit for bit, the twin as it was before them (``unitac-rig campaign --imperfections none``).
 
 * ``hysteresis`` and ``creep`` of the elastomer (the uSkin's skin, the PapillArray's silicone pillars):
   :class:`ElastomerMemory` changes each taxel's load before its transducer reads it;
@@ -18,10 +17,6 @@ field of :class:`Imperfections` (True = on; the default, :data:`REALISTIC`, has 
 * ``flank_friction``: the uSkin's skin sheared by each flank it meets along that flank's own normal, turned back by
   friction (:data:`SKIN_FLANK_FRICTION`, ``unitac_rig.sim.scene_pads.flank_shear_ratio``), instead of the clean
   twin's shear in proportion to the tilt with one cap: a corner's angle reaches the readings.
-* ``pillar_flank_friction`` (opt-in, off in the default set, issue 38): the same Coulomb cone for the PapillArray's
-  pillar tips (:data:`PILLAR_FLANK_FRICTION`): a tip sticks on a flank tilted less than atan mu and slips at the
-  cone's edge past it, instead of c * tan(tilt) capped at one friction, which reads every corner of 101 deg or
-  sharper alike. ``"all"`` is the default set; ``"all,pillar_flank_friction"`` adds it.
 
 The figures and their sources are with each parameter (sensor ones in ``sim/sensor_models.py``) and in
 docs/simulator.md ("Imperfections").
@@ -51,13 +46,6 @@ SKIN_FLANK_FRICTION = 0.25  # [I] fitted on the seen objects' recorded uSkin ext
 # draws (benchmarks/fidelity.py draws --set skin_flank_friction=MU) it meets 28.6 of the 32 seen targets per draw at
 # 0.25, 27.8 at 0.36, 28.4 at 0.47, 26.8 / 26.4 at the handbook's rubber on PLA 0.62 / 0.76, 28.2 with it off: the
 # same below-handbook value the fitted cap skin_friction (0.18) says of printed layer lines
-PILLAR_FLANK_FRICTION = 0.33  # [I] fitted on the seen objects' recorded extremes only: Coulomb mu of a pillar tip
-# on a printed flank (SceneParams.pillar_flank_friction). Over 5 draws (fidelity.py draws --set
-# skin_flank_friction=0.25 --set pillar_flank_friction=MU, 91 angles) it meets 27.0 / 27.4 / 28.4 / 28.0 / 26.6 /
-# 24.4 of 32 per draw at 0.25 / 0.30 / 0.33 / 0.36 / 0.40 / 0.45, 28.6 off: below 0.33 the square's corners read
-# too much pillar shear, above it the hexagon's 30 deg flanks stick. Below the handbook's silicone on PLA (0.6-1.0),
-# as the fitted caps are
-OPT_IN = ("pillar_flank_friction",)  # switches "all" leaves off: screened, not yet measured through a full run
 
 
 @dataclass(frozen=True)
@@ -72,7 +60,6 @@ class Imperfections:
     print_tolerance: bool = True
     mount_offset: bool = True
     flank_friction: bool = True
-    pillar_flank_friction: bool = False  # opt-in (OPT_IN)
 
     @property
     def any(self) -> bool:
@@ -80,24 +67,22 @@ class Imperfections:
 
     @property
     def text(self) -> str:
-        """The switches as :meth:`parse` reads them: ``"all"`` (the default set) with any opt-in ones added,
-        ``"none"``, or the names that are on."""
+        """The switches as :meth:`parse` reads them: ``"all"``, ``"none"`` or the names that are on."""
         on = [f.name for f in dataclasses.fields(self) if getattr(self, f.name)]
-        if all(getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in OPT_IN):
-            return ",".join(["all", *(name for name in OPT_IN if getattr(self, name))])
+        if len(on) == len(dataclasses.fields(self)):
+            return "all"
         return ",".join(on) if on else "none"
 
     @classmethod
     def parse(cls, text: str) -> Imperfections:
-        """``"all"`` (the default set: every one but :data:`OPT_IN`), ``"none"`` (the clean twin), ``"all,-creep"``
-        (all but creep), ``"all,pillar_flank_friction"``, or the names to switch on (``"hysteresis,creep"``). A name
-        it does not know is a usage error."""
+        """``"all"`` (every one), ``"none"`` (the clean twin), ``"all,-creep"`` (all but creep), or the names to
+        switch on (``"hysteresis,creep"``). A name it does not know is a usage error."""
         names = [f.name for f in dataclasses.fields(cls)]
         items = [t.strip() for t in text.split(",") if t.strip()]
         if not items:
             raise UsageError("no imperfections named", hint=f"'all', 'none', or some of: {', '.join(names)}")
         base = items[0] in ("all", "none")
-        state = {n: items[0] == "all" and n not in OPT_IN for n in names} if base else dict.fromkeys(names, False)
+        state = dict.fromkeys(names, items[0] == "all") if base else dict.fromkeys(names, False)
         for item in items[1:] if base else items:
             name, on = (item[1:], False) if item.startswith("-") else (item.lstrip("+"), True)
             if name not in state:

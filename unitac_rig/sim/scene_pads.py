@@ -290,11 +290,6 @@ class PillarPad:
         ratio, ratio_y = _friction_capped(
             p.shear_projection * col_slope[self.cols], np.full(layout.n_taxels, p.shear_projection * self.pitch_tan), mu
         )
-        if (
-            p.pillar_flank_friction > 0
-        ):  # Coulomb's cone about the flank the tip meets: sticks inside, slips at its edge
-            ratio = flank_shear_ratio(col_slope[self.cols], p.pillar_flank_friction)
-            ratio_y = _friction_capped(np.zeros_like(ratio), p.shear_projection * self.pitch_tan, mu)[1]
         # an off-axis contact also bends the pillar sideways: with the tip's lateral spring in the load path the
         # pillar is softer along the press, 1/k = 1/k_axial + |ratio|^2/k_lateral (compatibility along the normal)
         k = 1.0 / (1.0 / p.pillar_axial_n_per_mm + (ratio**2 + ratio_y**2) / p.pillar_lateral_n_per_mm)

@@ -36,10 +36,6 @@ class SceneParams:
     pillar_tip_radius_mm: float = 3.0  # [S] pillars 6 mm diameter, hemispherical tips
     pillar_edge_recess_mm: float = 0.4  # [I] edge pillars below the centre one (spec: centre tallest), 0.3-0.5
     pillar_corner_recess_mm: float = 0.8  # [I] corner pillars, 0.6-1.0
-    pillar_flank_friction: float = 0.0  # [S/I] mu of the pillar tips on a printed flank when the flank sets the
-    # shear's direction (scene_pads.flank_shear_ratio at the tip's contact slope, as skin_flank_friction for the skin);
-    # 0 = off (the fitted c * tan(tilt) capped at pillar_friction: every flank over 39 deg, a corner of 101 deg or
-    # sharper, reads alike)
     pillar_friction: float = 0.45  # [I] fitted: Coulomb coefficient of the silicone pillar tips on either printed
     # material, caps pillar shear at mu * normal (handbook silicone on PLA 0.6-1.0, on TPU 0.8-1.2; printed layer
     # lines and the tips' coating are not in those). With shear_projection 0.55 it binds on the square's corners
@@ -107,14 +103,13 @@ class SceneParams:
                 self.skin_friction,
                 self.pillar_friction,
                 self.skin_flank_friction,
-                self.pillar_flank_friction,
             )
             < 0
         ):
             raise ConfigError(
                 "scene error spreads, the skin bulge and friction cannot be negative",
                 hint="centring_error_mm, rotation_error_deg, pad_pitch_sd_deg, skin_bulge_mm, skin_friction,"
-                " pillar_friction, skin_flank_friction, pillar_flank_friction >= 0",
+                " pillar_friction, skin_flank_friction >= 0",
             )
         if self.bending_lever_mm < 0:
             raise ConfigError("the bending lever cannot be negative", hint="bending_lever_mm >= 0 (0: no bending)")

@@ -184,6 +184,66 @@ def _check_arguments(
             )
 
 
+@dataclass(frozen=True)
+class _StopRule:
+    """When a guarded move ends, judged on every reading (see :func:`guarded_move`): forces N, torque N*m, travel m,
+    duration s."""
+
+    threshold_n: float
+    hard_limit_n: float
+    hard_torque_nm: float | None
+    stop_samples: int
+    max_travel_m: float
+    max_duration_s: float | None
+
+    def run(
+        self,
+        arm: Arm,
+        command: _SpeedCommand | _ForceCommand,
+        unit: np.ndarray,
+        start_state: ArmState,
+        on_period: Callable[[ArmState], None] | None,
+        peak: float,
+    ) -> tuple[StopReason, ArmState, float]:
+        """Command the motion every period until a stop condition; -> (reason, state that triggered it, peak)."""
+        if start_state.protective_stop or start_state.emergency_stop:
+            return "protective_stop", start_state, peak
+        start_position = np.asarray(start_state.tcp_pose[:3], dtype=np.float64)
+        recent: deque[float] = deque(maxlen=self.stop_samples)
+        periods_left = math.inf if self.max_duration_s is None else self.max_duration_s / arm.control_period_s
+        plateau = _Plateau(arm.control_period_s, self.threshold_n) if isinstance(command, _ForceCommand) else None
+        while True:
+            periods_left -= 1
+            try:
+                command()
+            except ProtectiveStop:
+                return "protective_stop", arm.read_state(), peak
+            arm.wait_period()
+            state = arm.read_state()
+            force = press_force(state, unit)
+            peak = max(peak, force)
+            recent.append(force)
+            if on_period is not None:
+                on_period(state)
+            if state.protective_stop or state.emergency_stop:
+                return "protective_stop", state, peak
+            check_controller(state, "a guarded move")
+            magnitude, torque = force_magnitude(state)
+            if magnitude >= self.hard_limit_n or (self.hard_torque_nm is not None and torque >= self.hard_torque_nm):
+                return "hard_limit", state, peak
+            if len(recent) == self.stop_samples and sum(recent) / self.stop_samples >= self.threshold_n:
+                return "force", state, peak
+            travel = float(np.dot(np.asarray(state.tcp_pose[:3]) - start_position, unit))
+            if travel > self.max_travel_m:
+                return "travel", state, peak
+            if plateau is not None and plateau.settled(sum(recent) / len(recent), travel):
+                if not command.raise_setpoint():
+                    return "settled", state, peak
+                plateau.reset()
+            if periods_left <= 0:
+                return "timeout", state, peak
+
+
 def guarded_move(
     arm: Arm,
     direction: np.ndarray,
@@ -241,47 +301,10 @@ def guarded_move(
         command = _ForceCommand(arm, unit, start_position, speed_m_s, force_setpoint_n, ceiling_n or force_setpoint_n)
     peak = press_force(start_state, unit)
 
-    def approach(peak: float) -> tuple[StopReason, ArmState, float]:
-        """Command the motion every period until a stop condition; -> (reason, state that triggered it, peak)."""
-        if start_state.protective_stop or start_state.emergency_stop:
-            return "protective_stop", start_state, peak
-        recent: deque[float] = deque(maxlen=stop_samples)
-        periods_left = math.inf if max_duration_s is None else max_duration_s / arm.control_period_s
-        plateau = _Plateau(arm.control_period_s, force_threshold_n) if isinstance(command, _ForceCommand) else None
-        while True:
-            periods_left -= 1
-            try:
-                command()
-            except ProtectiveStop:
-                return "protective_stop", arm.read_state(), peak
-            arm.wait_period()
-            state = arm.read_state()
-            force = press_force(state, unit)
-            peak = max(peak, force)
-            recent.append(force)
-            if on_period is not None:
-                on_period(state)
-            if state.protective_stop or state.emergency_stop:
-                return "protective_stop", state, peak
-            check_controller(state, "a guarded move")
-            magnitude, torque = force_magnitude(state)
-            if magnitude >= hard_limit_n or (hard_torque_nm is not None and torque >= hard_torque_nm):
-                return "hard_limit", state, peak
-            if len(recent) == stop_samples and sum(recent) / stop_samples >= force_threshold_n:
-                return "force", state, peak
-            travel = float(np.dot(np.asarray(state.tcp_pose[:3]) - start_position, unit))
-            if travel > max_travel_m:
-                return "travel", state, peak
-            if plateau is not None and plateau.settled(sum(recent) / len(recent), travel):
-                if not command.raise_setpoint():
-                    return "settled", state, peak
-                plateau.reset()
-            if periods_left <= 0:
-                return "timeout", state, peak
-
     stop_sent = False
     try:
-        reason, trigger, peak = approach(peak)
+        rule = _StopRule(force_threshold_n, hard_limit_n, hard_torque_nm, stop_samples, max_travel_m, max_duration_s)
+        reason, trigger, peak = rule.run(arm, command, unit, start_state, on_period, peak)
         if keep_moving and reason == "force":
             stop_sent = True  # nothing to stop: the next guarded move takes over within one control period
             travel = float(np.dot(np.asarray(trigger.tcp_pose[:3]) - start_position, unit))

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import statistics
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -215,6 +215,17 @@ def frame_line(
     ).encode()
 
 
+def _count_seq_gaps(frames: Sequence[TactileFrame], last_seq: int | None) -> tuple[int, int | None]:
+    """Frames lost between consecutive sequence numbers (frames without one count none), and the last one seen."""
+    gaps = 0
+    for frame in frames:
+        if frame.seq is not None:
+            if last_seq is not None and frame.seq > last_seq + 1:
+                gaps += frame.seq - last_seq - 1
+            last_seq = frame.seq
+    return gaps, last_seq
+
+
 def stream_frames(
     sensor: LiveSensor,
     model: LiveModel,
@@ -251,10 +262,8 @@ def stream_frames(
             if max_frames is not None and baseline is not None:
                 frames = frames[: max_frames - stats.frames_out]  # the rest arrived after the stop: not dropped
             stats.frames_in += len(frames)
-            for frame in frames:
-                if frame.seq is not None and last_seq is not None and frame.seq > last_seq + 1:
-                    stats.seq_gaps += frame.seq - last_seq - 1
-                last_seq = frame.seq if frame.seq is not None else last_seq
+            gaps, last_seq = _count_seq_gaps(frames, last_seq)
+            stats.seq_gaps += gaps
             if baseline is None:
                 take = frames[: max(0, tare_frames - len(tare))]
                 tare += [f.values for f in take if f.valid]

@@ -201,14 +201,11 @@ class _StopRule:
         arm: Arm,
         command: _SpeedCommand | _ForceCommand,
         unit: np.ndarray,
-        start_state: ArmState,
+        start_position: np.ndarray,
         on_period: Callable[[ArmState], None] | None,
         peak: float,
     ) -> tuple[StopReason, ArmState, float]:
         """Command the motion every period until a stop condition; -> (reason, state that triggered it, peak)."""
-        if start_state.protective_stop or start_state.emergency_stop:
-            return "protective_stop", start_state, peak
-        start_position = np.asarray(start_state.tcp_pose[:3], dtype=np.float64)
         recent: deque[float] = deque(maxlen=self.stop_samples)
         periods_left = math.inf if self.max_duration_s is None else self.max_duration_s / arm.control_period_s
         plateau = _Plateau(arm.control_period_s, self.threshold_n) if isinstance(command, _ForceCommand) else None
@@ -304,7 +301,10 @@ def guarded_move(
     stop_sent = False
     try:
         rule = _StopRule(force_threshold_n, hard_limit_n, hard_torque_nm, stop_samples, max_travel_m, max_duration_s)
-        reason, trigger, peak = rule.run(arm, command, unit, start_state, on_period, peak)
+        reason: StopReason = "protective_stop"
+        trigger = start_state
+        if not (start_state.protective_stop or start_state.emergency_stop):
+            reason, trigger, peak = rule.run(arm, command, unit, start_position, on_period, peak)
         if keep_moving and reason == "force":
             stop_sent = True  # nothing to stop: the next guarded move takes over within one control period
             travel = float(np.dot(np.asarray(trigger.tcp_pose[:3]) - start_position, unit))

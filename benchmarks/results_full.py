@@ -23,7 +23,7 @@ split-to-split spread is not correlated through init, dropout and shuffles); mem
 geometry split from :func:`geometry_split_seed`, a seed of its own (25 members hold out 25 geometry test sets).
 
     python benchmarks/results_full.py OUT [--work DIR] [--data DATA] [--config FILE.toml] [--jobs 16]
-        [--budget-s 500] [--epochs 1000] [--splits 5] [--seeds 5] [--angles N]
+        [--budget-s 500] [--epochs 1000] [--splits 5] [--seeds 5] [--angles N] [--frame-baseline recording|press]
         [--protocol random --protocol blocked] [--ceiling-members 1] [--patience 100]
 
 OUT gets ``results/<protocol>/split-<K>.json`` and ``results/collection.json`` (commit as docs/results/),
@@ -56,6 +56,7 @@ from unitac_rig.learning.report import write_report
 from unitac_rig.learning.run import TRAINING_PAIRS, checkpoint_path, load_test_set, save_test_set
 from unitac_rig.learning.train import TrainConfig, load_run, train
 from unitac_rig.rig.objects import list_objects
+from unitac_rig.storage.reader import FRAME_BASELINES
 from unitac_rig.storage.summary import inspect_dataset
 
 SENSORS = ("uskin", "papillarray")
@@ -82,6 +83,12 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=Path("/tmp/unitac-results-work"))
     parser.add_argument("--data", type=Path, default=None, help="train on these sessions instead of collecting")
     parser.add_argument("--config", type=Path, default=None, help="TOML training config (docs/learning.md)")
+    parser.add_argument(
+        "--frame-baseline",
+        choices=FRAME_BASELINES,
+        default="recording",
+        help="what frames are referenced to (default: the paper's one baseline per recording; docs/learning.md)",
+    )
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 2)
     parser.add_argument("--budget-s", type=float, default=500.0, help="wall seconds for everything")
     parser.add_argument("--epochs", type=int, default=1000, help="at most this many (fewer if the budget says so)")
@@ -117,10 +124,10 @@ def main() -> None:
         mark("collected")
     write_collection(data, args.out / "results" / COLLECTION_JSON)
     dataset_dir = args.work / "dataset"
-    save_dataset(data, dataset_dir)
+    flat = (load_config(args.config) if args.config else {}) | {"frame_baseline": args.frame_baseline}
+    save_dataset(data, dataset_dir, args.frame_baseline)
     mark("dataset built")
     runs = [(p, k) for p in protocols for k in range(args.splits)]
-    flat = load_config(args.config) if args.config else {}
     pool = ProcessPoolExecutor(max_workers=args.jobs, mp_context=multiprocessing.get_context("spawn"))
     with pool:
         common = (dataset_dir, args.work, args.seeds, args.patience, flat)
@@ -183,9 +190,10 @@ def write_collection(data: Path, target: Path) -> None:
     target.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
 
 
-def save_dataset(data: Path, target: Path) -> None:
-    """Join the sessions once; every worker reads the joined contacts back (``load_test_set``) in a second."""
-    dataset = build_paired_dataset(load_sets(data))
+def save_dataset(data: Path, target: Path, baseline: str) -> None:
+    """Join the sessions once (frames referenced to ``baseline``); every worker reads the joined contacts back
+    (``load_test_set``) in a second."""
+    dataset = build_paired_dataset(load_sets(data, baseline))
     target.mkdir(parents=True, exist_ok=True)
     save_test_set(target, dataset)
     print(f"{len(dataset)} pairs, objects {', '.join(dataset.objects)}", flush=True)

@@ -18,7 +18,7 @@ import numpy as np
 
 from unitac_rig.bench import markdown_table, replace_doc_section
 from unitac_rig.learning.contact_geometry import GeometryConfig
-from unitac_rig.learning.evaluate import PREPROCESSING_TEXT, metric_description
+from unitac_rig.learning.evaluate import FRAME_BASELINE_TEXT, PREPROCESSING_TEXT, metric_description
 from unitac_rig.learning.metrics import NMAE_NORMALISERS, SSIM_RANGES
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM, PAPER_TABLE1
 from unitac_rig.learning.report import table_columns
@@ -416,7 +416,9 @@ def render(
         f"{shape['latent_dim']} / {list(shape['decoder_hidden'])}. unitac-rig {prov.get('package_version')}, commit "
         f"`{str(prov.get('git_commit', ''))[:12]}`.",
         "",
-        f"Preprocessing: {PREPROCESSING_TEXT[config['preprocessing']]} (`{config['preprocessing']}`). Default reading: "
+        f"Preprocessing: {PREPROCESSING_TEXT[config['preprocessing']]} (`{config['preprocessing']}`); frames "
+        f"referenced to {FRAME_BASELINE_TEXT[config.get('frame_baseline', 'press')]} "
+        f"(`{config.get('frame_baseline', 'press')}`). Default reading: "
         f"NMAE (`{described['nmae_normaliser']}`): {described['nmae']}. SSIM (`{described['ssim_range']}`): "
         f"{described['ssim']}. Why these: docs/learning.md (Preprocessing and metrics); every claim under every "
         "other reading is in its own table below.",

@@ -204,8 +204,11 @@ def test_round_trip_gives_the_pairs_of_the_parquet_export(data: Path, exported: 
         rows = df[df["sensor"] == sensor].sort_values("contact")
         assert np.array_equal(np.stack([np.stack(f) for f in rows["frame"]]), back.values[sensor])
         assert np.allclose(rows["force_n"].to_numpy(), back.force_n[sensor])
-    # `train --data EXPORT` reads the same sets
+    # `train --data EXPORT` reads the same sets, under either frame baseline (each episode keeps its start and tare)
     assert build_paired_dataset(load_sets(exported)).content_hash() == manifest["paired_content_hash"]
+    recording = build_paired_dataset(load_sets(exported, "recording"))
+    assert recording.content_hash() == build_paired_dataset(load_sets(data, "recording")).content_hash()
+    assert recording.content_hash() != manifest["paired_content_hash"]  # the twin drifts between presses
 
 
 def test_exporting_into_a_directory_that_holds_files_is_one_line(

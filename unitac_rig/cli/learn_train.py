@@ -329,7 +329,7 @@ def run_train(request: TrainRequest) -> None:
         _train_new_sensor(request)
         return
     config = request.train_config()
-    dataset = _paired_dataset(request)
+    dataset = _paired_dataset(request, config)
     total = request.epochs if config is None else config.epochs
     try:
         # Ctrl-C / SIGTERM wait for the end of the epoch (train() then checkpoints it); a second one stops at once
@@ -354,14 +354,16 @@ def run_train(request: TrainRequest) -> None:
         report_with_table(request.out, run=load_run(request.out))
 
 
-def _paired_dataset(request: TrainRequest) -> Any:
-    """The paired dataset of --data, partial when asked or when the resumed run trained on a partial join."""
+def _paired_dataset(request: TrainRequest, config: Any) -> Any:
+    """The paired dataset of --data, partial when asked or when the resumed run trained on a partial join, its
+    frames referenced as the run asks (``config``; None: as the resumed run did)."""
     from unitac_rig.learning.data import build_paired_dataset, load_sets
-    from unitac_rig.learning.train import trained_on_partial_join
+    from unitac_rig.learning.train import stored_frame_baseline, trained_on_partial_join
 
     partial = request.partial or (request.resume and trained_on_partial_join(request.out))
+    baseline = config.frame_baseline if config is not None else stored_frame_baseline(request.out)
     console.print(f"reading the sessions in {', '.join(map(str, request.data))}...")
-    sets = load_sets(request.data)
+    sets = load_sets(request.data, baseline)
     dataset = build_paired_dataset(sets, partial=partial)
     console.print(
         f"paired dataset: {len(dataset)} contacts, sensors {', '.join(dataset.sensors)}, "

@@ -21,6 +21,7 @@ where the paper gives one)::
     eval_every = 1
     [preprocessing]
     scaling = "sensor_scale"
+    frame_baseline = "press"      # or "recording": the paper's one baseline per recorded file
     [metrics]
     nmae_normaliser = "channel_range"
 
@@ -51,6 +52,7 @@ CONFIG_TOML = "config.toml"
 Preprocessing = Literal["channel_z", "sensor_minmax", "sensor_scale", "raw"]
 NmaeNormaliser = Literal["channel_range", "sensor_range", "channel_std", "frame_range"]
 SsimRange = Literal["channel_range", "sensor_range", "z_range"]
+FrameBaseline = Literal["press", "recording"]  # storage.reader.FRAME_BASELINES
 PREPROCESSING: tuple[str, ...] = get_args(Preprocessing)
 NMAE_NORMALISERS: tuple[str, ...] = get_args(NmaeNormaliser)
 SSIM_RANGES: tuple[str, ...] = get_args(SsimRange)
@@ -143,6 +145,11 @@ class PreprocessingSection(_Section):
     scaling: Preprocessing = _field(
         "sensor_scale", "How frames are scaled for the network.", key="preprocessing", cli="--preprocessing"
     )
+    frame_baseline: FrameBaseline = _field(
+        "press",
+        "What frames are referenced to: each press's own tare, or the tare at the start of the recording (the "
+        "paper's preprocessing; the sensor's drift stays in).",
+    )
 
 
 class MetricsSection(_Section):
@@ -230,6 +237,9 @@ def to_toml(flat: Mapping[str, Any]) -> str:
 
 
 _DEFAULTS = defaults()
+# keys added after runs were stored, with what those runs did: a run from before frame_baseline trained on each
+# press's own tare
+_ADDED_SINCE = {"frame_baseline": "press"}
 
 
 def _default_shape() -> ModelShape:
@@ -259,6 +269,7 @@ class TrainConfig:
     unseen_objects: tuple[str, ...] | None = _DEFAULTS["unseen_objects"]  # None: the object catalogue decides
     tsne_contacts: int = _DEFAULTS["tsne_contacts"]
     preprocessing: str = _DEFAULTS["preprocessing"]
+    frame_baseline: str = _DEFAULTS["frame_baseline"]
     nmae_normaliser: str = _DEFAULTS["nmae_normaliser"]
     ssim_range: str = _DEFAULTS["ssim_range"]
     patience: int = _DEFAULTS["patience"]  # epochs without a better validation NMAE before stopping; 0: never
@@ -281,6 +292,7 @@ class TrainConfig:
         """The config a checkpoint stored (every key: a run's config is written whole); ModelError when one is
         missing or unknown."""
         names = {f.name for f in dataclass_fields(cls)}
+        d = {**_ADDED_SINCE, **d}
         if set(d) != names:
             odd = sorted(names.symmetric_difference(d))
             raise ModelError(f"the stored training config does not match this unitac-rig's ({', '.join(odd)})")

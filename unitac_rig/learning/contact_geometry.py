@@ -47,7 +47,14 @@ from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.data import DEFAULT_GAP_DEG, PairedDataset, hold_out_rays, object_symmetry
 from unitac_rig.learning.network import UNITAC_GROUP, StackedLinear, linear_layers, mlp, stacked_mlp
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM
-from unitac_rig.learning.run import LoadedRun, computing_on, load_run, load_test_set, safe_torch_load
+from unitac_rig.learning.run import (
+    LoadedRun,
+    computing_on,
+    load_run,
+    load_test_set,
+    safe_torch_load,
+    stored_frame_baseline,
+)
 from unitac_rig.learning.translate import Translator, read_frames
 
 log = logging.getLogger(__name__)
@@ -699,7 +706,7 @@ def predict_file(
 ) -> tuple[GeometryPrediction, Path]:
     """Profiles for the frames in ``input_path`` (as ``translate`` reads them); writes ``<input>_geometry.npz``
     (``profiles_mm``, ``offsets_mm``, sensors, and the input's keys) or ``output_path``."""
-    data = read_frames(Path(input_path), sensor)
+    data = read_frames(Path(input_path), sensor, stored_frame_baseline(run_dir))
     prediction = predict_geometry(run_dir, data.frames, sensor, trained_on)
     out = Path(output_path) if output_path else Path(input_path).with_name(f"{Path(input_path).stem}_geometry.npz")
     arrays = {

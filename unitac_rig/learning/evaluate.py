@@ -238,6 +238,11 @@ PREPROCESSING_TEXT = {
     "sensor_scale": "per-sensor scale (one pooled training standard deviation per sensor, no shift)",
     "raw": "raw readings (sensor units, no scaling)",
 }
+FRAME_BASELINE_TEXT = {
+    "press": "each press's own tare (taken in free air just before it)",
+    "recording": "the tare at the start of each recording (one object rotation of one session), as the paper's "
+    "preprocessing subtracts one baseline per recorded file: the sensor's drift since then stays in",
+}
 
 
 def simple_baseline_table(
@@ -318,7 +323,11 @@ def evaluate_run(run: LoadedRun, test: PairedDataset, simple: SimplePredictions 
         "simulated": bool(test.simulated),
         "dataset_hash": run.payload["dataset_hash"],
         "provenance": run.payload.get("provenance", {}),
-        "preprocessing": {"scaling": config.preprocessing, "text": PREPROCESSING_TEXT[config.preprocessing]},
+        "preprocessing": {
+            "scaling": config.preprocessing,
+            "text": PREPROCESSING_TEXT[config.preprocessing],
+            "frame_baseline": config.frame_baseline,
+        },
         "metrics": metric_description(config.nmae_normaliser, config.ssim_range),
         "metric_table": {
             m.name: {"label": m.label, "direction": m.direction, "units": m.units, "scope": m.scope}

@@ -18,6 +18,7 @@ from unitac_rig.learning.contact_geometry import GEOMETRY_JSON, GEOMETRY_PNG
 from unitac_rig.learning.data import PairedDataset, object_shape_material
 from unitac_rig.learning.engine import UNITAC_GROUP, baseline_name
 from unitac_rig.learning.evaluate import (
+    FRAME_BASELINE_TEXT,
     PREPROCESSING_TEXT,
     Evaluator,
     direction_name,
@@ -368,7 +369,8 @@ def render_markdown(metrics: dict[str, Any], run: LoadedRun, figures: dict[str, 
         f"widths {list(run.config.shape.encoder_hidden)} / {run.config.shape.latent_dim} / "
         f"{list(run.config.shape.decoder_hidden)}"
         + (f", alignment term {run.config.shape.align_weight}" if run.config.shape.align_weight else ""),
-        f"- preprocessing: {PREPROCESSING_TEXT[run.config.preprocessing]} (`{run.config.preprocessing}`)",
+        f"- preprocessing: {PREPROCESSING_TEXT[run.config.preprocessing]} (`{run.config.preprocessing}`); frames "
+        f"referenced to {FRAME_BASELINE_TEXT[run.config.frame_baseline]} (`{run.config.frame_baseline}`)",
         f"- unitac-rig {prov.get('package_version', '?')}, commit `{str(prov.get('git_commit', '?'))[:12]}`, "
         f"torch {prov.get('torch_version', '?')}",
         "",

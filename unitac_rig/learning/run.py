@@ -92,6 +92,14 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any]:
     return payload
 
 
+def stored_frame_baseline(run_dir: Path) -> str:
+    """The frame baseline the run in ``run_dir`` trained on (what its data is read with to resume it,
+    and a session file's frames to feed it); "press" when there is no run there."""
+    if not checkpoint_path(run_dir).is_file():
+        return "press"
+    return TrainConfig.from_dict(load_checkpoint(run_dir)["config"]).frame_baseline
+
+
 def safe_torch_load(path: Path, *, what: str) -> Any:
     """``torch.load(path, weights_only=True)`` on the CPU; a :class:`ModelError` that
     says what the file is and what to do when it holds anything else, is damaged or is not a torch file at all.
@@ -192,6 +200,7 @@ _CONTACT_KEYS = ("object_id", "rotation_deg", "angle_deg", "target_n")  # a cont
 def save_test_set(run_dir: Path, test: PairedDataset) -> None:
     """The test rows (every sensor's frames and the keys), so evaluation, reports and geometry need no --data."""
     arrays = {"sensors": np.array(test.sensors, dtype=str), "simulated": np.array(test.simulated)}
+    arrays["frame_baseline"] = np.array(test.frame_baseline)
     arrays |= {key: getattr(test, key) for key in _CONTACT_KEYS}
     arrays["object_id"] = test.object_id.astype(str)
     for sensor in test.sensors:
@@ -228,6 +237,7 @@ def load_test_set(run_dir: Path) -> PairedDataset:
             values={s: data[f"values__{s}"] for s in sensors},
             force_n={s: data[f"force_n__{s}"] for s in sensors},
             simulated=bool(data["simulated"]),
+            frame_baseline=str(data["frame_baseline"]) if "frame_baseline" in data else "press",  # older runs: press
         )
 
 

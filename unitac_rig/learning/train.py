@@ -40,6 +40,7 @@ from unitac_rig.learning.run import (
     save_checkpoint,
     save_test_set,
     save_training_pairs,
+    stored_frame_baseline,
     tsne_rows,
     write_config_json,
 )
@@ -109,6 +110,12 @@ def train(
 ) -> TrainingRun:
     """Train (or resume) a run in ``run_dir``. ``epochs`` on resume extends or keeps the stored budget."""
     run_dir = Path(run_dir)
+    if config is not None and config.frame_baseline != dataset.frame_baseline:  # the run must say what it trained on
+        raise UsageError(
+            f"the training options reference frames to the {config.frame_baseline} baseline, the data was read with "
+            f"the {dataset.frame_baseline} one",
+            hint=f"read the data with load_sets(DATA, baseline={config.frame_baseline!r})",
+        )
     with computing_on(device, threads) as torch_device:
         run = (
             _resume_run(dataset, run_dir, epochs, torch_device)
@@ -338,6 +345,7 @@ __all__ = [
     "load_run",
     "load_test_set",
     "resolve_device",
+    "stored_frame_baseline",
     "train",
     "trained_on_partial_join",
 ]

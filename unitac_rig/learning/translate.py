@@ -20,7 +20,7 @@ import torch
 from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.data import Normaliser
 from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
-from unitac_rig.learning.run import load_run
+from unitac_rig.learning.run import load_run, stored_frame_baseline
 
 
 class Translator:
@@ -95,9 +95,10 @@ class FramesInput:
     keys: dict[str, np.ndarray]  # object_id / rotation_deg / angle_deg / target_n when the input has them
 
 
-def read_frames(path: Path, sensor: str) -> FramesInput:
-    """Frames from a session ``.h5`` (its force-matched frames), an ``.npy`` array or an ``.npz`` (key
-    ``frames`` or ``values``, or its only array); shape (M, n_taxels, 3) or (n_taxels, 3)."""
+def read_frames(path: Path, sensor: str, baseline: str = "press") -> FramesInput:
+    """Frames from a session ``.h5`` (its force-matched frames, referenced to ``baseline``: the one the run trained
+    on), an ``.npy`` array or an ``.npz`` (key ``frames`` or ``values``, or its only array); shape (M, n_taxels, 3)
+    or (n_taxels, 3)."""
     path = Path(path)
     if not path.is_file():
         raise UsageError(f"{path} does not exist")
@@ -105,7 +106,7 @@ def read_frames(path: Path, sensor: str) -> FramesInput:
     if suffix in (".h5", ".hdf5"):
         from unitac_rig.storage.reader import load_matched_set
 
-        matched = load_matched_set(path)
+        matched = load_matched_set(path, baseline)
         if matched.sensor != sensor:
             raise UsageError(
                 f"{path.name} was recorded with {matched.sensor}, not {sensor}", hint=f"pass --from {matched.sensor}"
@@ -142,7 +143,7 @@ def translate_file(
 ) -> dict[str, Any]:
     """Translate a file and write ``<input>_to_<target>.npz`` (or ``output_path``); returns a summary."""
     translator = Translator.load(run_dir)
-    data = read_frames(input_path, source)
+    data = read_frames(input_path, source, stored_frame_baseline(run_dir))
     translated = translator.translate(data.frames, source, target)
     output_path = (
         Path(output_path) if output_path else Path(input_path).with_name(f"{Path(input_path).stem}_to_{target}.npz")

@@ -24,7 +24,7 @@ from unitac_rig.storage.extraction import nearest_index
 from unitac_rig.storage.manifest import exported_by, frames_array, sensor_layout_info, write_manifest
 from unitac_rig.storage.pooling import PooledSession, pooled_export
 from unitac_rig.storage.press_record import PressRecord
-from unitac_rig.storage.reader import MatchedSet, PressMatches, matched_set, read_presses
+from unitac_rig.storage.reader import MatchedSet, PressMatches, PressTare, matched_set, read_presses, recording_shifts
 
 CODEBASE_VERSION = "v3.0"  # LeRobotDataset format version (lerobot-dataset 0.4.x reads v3.0)
 CHUNKS_SIZE = 1000  # files per chunk directory (LeRobot's default)
@@ -570,9 +570,10 @@ def _export_info(path: Path) -> dict[str, Any] | None:
     return info if isinstance(marker, dict) and marker.get("format") == EXPORT_FORMAT else None
 
 
-def load_matched_sets(directory: Path) -> list[MatchedSet]:
+def load_matched_sets(directory: Path, baseline: str = "press") -> list[MatchedSet]:
     """The force-matched sets of a LeRobot export (one per object and sensor, the presses in session order): each
-    complete press's matched targets, their frames (the rows its extraction picked), forces and errors."""
+    complete press's matched targets, their frames (the rows its extraction picked), forces and errors; ``baseline``
+    as :func:`unitac_rig.storage.reader.load_matched_set` takes it (every episode keeps its start and its tare)."""
     import pyarrow.parquet as pq
 
     directory = Path(directory)
@@ -594,9 +595,14 @@ def load_matched_sets(directory: Path) -> list[MatchedSet]:
         episodes = pq.read_table(sorted((root / "meta" / "episodes").glob("*/*.parquet"))).to_pylist()
         frames_by_file: dict[tuple[int, int], Any] = {}
         parts: dict[str, tuple[list[PressMatches], list[bool]]] = {}
+        tares: dict[str, tuple[list[PressTare], list[int]]] = {}  # per object: every episode's, the matched ones
         for ep in sorted(episodes, key=lambda e: e["episode_index"]):
+            every, used = tares.setdefault(str(ep["unitac/object"]), ([], []))
+            tare = np.asarray(ep["unitac/tare_baseline"], np.float64).reshape(n_taxels, 3)
+            every.append(PressTare(float(ep["unitac/t0_host_s"]), float(ep["unitac/rotation_deg"]), tare))
             if ep.get("unitac/status") != "complete" or ep.get("extraction/miss") is None:
                 continue
+            used.append(len(every) - 1)
             where = (int(ep["data/chunk_index"]), int(ep["data/file_index"]))
             if where not in frames_by_file:
                 table = pq.read_table(
@@ -620,5 +626,7 @@ def load_matched_sets(directory: Path) -> list[MatchedSet]:
             presses.append(press)
             simulated.append(bool(ep["unitac/simulated"]))
         for object_id, (presses, simulated) in sorted(parts.items()):
-            sets.append(matched_set(object_id, sensor, all(simulated), presses, n_taxels))
+            every, used = tares[object_id]
+            shifts = [recording_shifts(every)[i] for i in used] if baseline == "recording" else None
+            sets.append(matched_set(object_id, sensor, all(simulated), presses, n_taxels, shifts=shifts))
     return sets

@@ -27,9 +27,10 @@ log = logging.getLogger(__name__)
 JoinKey = tuple[str, int, int, int]
 
 
-def load_sets(data_dir: Path | Sequence[Path]) -> list[MatchedSet]:
+def load_sets(data_dir: Path | Sequence[Path], baseline: str = "press") -> list[MatchedSet]:
     """Every force-matched set under ``data_dir`` (one per session file), via the session reader; a LeRobot export
-    (``unitac-rig export --format lerobot``) is read back from its episodes.
+    (``unitac-rig export --format lerobot``) is read back from its episodes. ``baseline``: what the frames are
+    referenced to (:data:`unitac_rig.storage.reader.FRAME_BASELINES`).
 
     Several directories are pooled by :func:`unitac_rig.storage.pooling.pool_sessions` (the rule ``export`` uses): a
     byte-identical copy of a session counts once, two different files for one (object, sensor) are a DataError.
@@ -40,13 +41,13 @@ def load_sets(data_dir: Path | Sequence[Path]) -> list[MatchedSet]:
             raise DataError(f"data directory {directory} does not exist", hint="pass the --data folder `collect` wrote")
     if len(dirs) == 1:
         if lerobot.is_lerobot_export(dirs[0]):  # `export --format lerobot` read back: the same matched frames
-            return list(lerobot.load_matched_sets(dirs[0]))
-        return list(load_matched_sets(dirs[0]))
+            return list(lerobot.load_matched_sets(dirs[0], baseline))
+        return list(load_matched_sets(dirs[0], baseline))
     pooled = pool_sessions(dirs)
     for item in pooled:
         if item.also_in:
             log.info("%s is also in %s (identical): pooled once", item.info.path, ", ".join(map(str, item.also_in)))
-    return [load_matched_set(item.info.path) for item in pooled]
+    return [load_matched_set(item.info.path, baseline) for item in pooled]
 
 
 def sensor_order(names: Iterable[str]) -> tuple[str, ...]:
@@ -67,7 +68,8 @@ def join_key(object_id: str, rotation_deg: float, angle_deg: float, target_n: fl
 class PairedDataset:
     """M joined contacts; row ``i`` of every sensor's ``values`` is the same (object, rotation, angle, target).
 
-    ``values[s]``: (M, n_taxels_s, 3) float32, tare-subtracted, sensor units (uSkin counts, PapillArray N).
+    ``values[s]``: (M, n_taxels_s, 3) float32, tare-subtracted (``frame_baseline``: each press's tare, or its
+    recording's), sensor units (uSkin counts, PapillArray N).
     ``force_n[s]``: (M,) wrist force at sensor ``s``'s matched frame, N.
     ``present[s]``: (M,) bool, whether sensor ``s`` recorded the contact (a partial join,
     ``build_paired_dataset(..., partial=True)``); a missing frame is NaN. None: every sensor has every row.
@@ -83,6 +85,7 @@ class PairedDataset:
     simulated: bool
     dropped_per_sensor: dict[str, int] = field(default_factory=dict)
     present: dict[str, np.ndarray] | None = None
+    frame_baseline: str = "press"  # what the frames are referenced to (reader.FRAME_BASELINES)
 
     def __len__(self) -> int:
         return int(self.object_id.shape[0])
@@ -116,6 +119,7 @@ class PairedDataset:
             force_n={s: f[mask] for s, f in self.force_n.items()},
             simulated=self.simulated,
             present=None if self.present is None else {s: p[mask] for s, p in self.present.items()},
+            frame_baseline=self.frame_baseline,
         )
 
     def content_hash(self) -> str:
@@ -145,6 +149,9 @@ def build_paired_dataset(
     """
     chosen = _chosen_sensors(sets, sensors)
     _one_rig(sets, chosen)
+    baselines = {s.baseline for s in sets if s.sensor in chosen}
+    if len(baselines) > 1:
+        raise DataError(f"the sets are referenced to different frame baselines ({', '.join(sorted(baselines))})")
     best, n_taxels = _best_rows(sets, chosen)
     keys = _shared_keys(best, chosen, partial)
     shared = set(keys)
@@ -173,6 +180,7 @@ def build_paired_dataset(
         simulated=all(bool(s.simulated) for s in sets if s.sensor in chosen),
         dropped_per_sensor=dropped,
         present=has_frame,
+        frame_baseline=baselines.pop() if baselines else "press",
     )
 
 

@@ -99,7 +99,9 @@ class SessionInfo:
 class MatchedSet:
     """Every force-matched frame of one (object, sensor) session that hit its target (misses and failed presses out).
 
-    ``values`` are tare-subtracted, in the sensor's units (uSkin counts, PapillArray N), shape (M, n_taxels, 3).
+    ``values`` are tare-subtracted, in the sensor's units (uSkin counts, PapillArray N), shape (M, n_taxels, 3): each
+    press's own tare (``baseline`` "press"), or the tare at the start of its recording ("recording", see
+    :func:`recording_shifts`).
     """
 
     object_id: str
@@ -112,6 +114,7 @@ class MatchedSet:
     force_n: np.ndarray
     error_n: np.ndarray
     rig: str = ""  # which rig recorded it (:func:`rig_label`); "" when the session does not say
+    baseline: str = "press"  # what ``values`` are referenced to (:data:`FRAME_BASELINES`)
 
     def __len__(self) -> int:
         return int(self.target_n.size)
@@ -323,29 +326,79 @@ def rig_label(attrs: dict[str, Any]) -> str:
 PressMatches = tuple[float, float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
+#: What a matched frame is referenced to. "press": the tare each press takes in free air just before it (what the
+#: recorder stores; the sensor's drift since the session began is gone). "recording": the tare at the start of the
+#: press's recording, as the paper's preprocessing subtracts one baseline (the first 100 samples) per recorded file;
+#: the paper recorded each object rotation as its own file, so a recording is one rotation of one session, and the
+#: drift since its start stays in every frame (docs/learning.md, "Frame baseline").
+FRAME_BASELINES = ("press", "recording")
+
+
+@dataclass(frozen=True)
+class PressTare:
+    """When a press began (host s), its rotation and its tare: what :func:`recording_shifts` needs of every press."""
+
+    start_s: float
+    rotation_deg: float
+    tare: np.ndarray  # (n_taxels, 3), sensor units
+
+
+def recording_shifts(tares: list[PressTare]) -> list[np.ndarray]:
+    """Per press, what moves its frames from its own tare to its recording's: its tare minus the tare of the first
+    press (by start time) of the same rotation. Every press counts, failed ones too: the recording began with it."""
+    first: dict[float, PressTare] = {}
+    for tare in tares:
+        known = first.get(tare.rotation_deg)
+        if known is None or tare.start_s < known.start_s:
+            first[tare.rotation_deg] = tare
+    return [np.asarray(t.tare, np.float64) - np.asarray(first[t.rotation_deg].tare, np.float64) for t in tares]
+
+
 def matched_set(
-    object_id: str, sensor: str, simulated: bool, presses: list[PressMatches], n_taxels: int, rig: str = ""
+    object_id: str,
+    sensor: str,
+    simulated: bool,
+    presses: list[PressMatches],
+    n_taxels: int,
+    rig: str = "",
+    shifts: list[np.ndarray] | None = None,
 ) -> MatchedSet:
-    """A MatchedSet of ``presses`` in order (the one way a session and a LeRobot export both build one)."""
+    """A MatchedSet of ``presses`` in order (the one way a session and a LeRobot export both build one); ``shifts``
+    (one per press, from :func:`recording_shifts`) re-reference each press's frames to its recording's tare."""
 
     def cat(i: int, shape: tuple[int, ...] = ()) -> np.ndarray:
         parts = [np.full(len(p[2]), p[i]) if i < 2 else np.asarray(p[i]) for p in presses]
         return np.concatenate(parts) if parts else np.zeros((0, *shape))
 
+    if shifts is not None:
+        presses = [
+            (p[0], p[1], p[2], np.asarray(p[3], np.float64) + shift, p[4], p[5])
+            for p, shift in zip(presses, shifts, strict=True)
+        ]
     values = cat(3, (n_taxels, 3)).astype(np.float32)
-    return MatchedSet(object_id, sensor, simulated, cat(0), cat(1), cat(2), values, cat(4), cat(5), rig)
+    baseline = "press" if shifts is None else "recording"
+    return MatchedSet(object_id, sensor, simulated, cat(0), cat(1), cat(2), values, cat(4), cat(5), rig, baseline)
 
 
-def load_matched_set(path: Path) -> MatchedSet:
+def load_matched_set(path: Path, baseline: str = "press") -> MatchedSet:
+    """The session's force-matched frames, referenced to ``baseline`` (one of :data:`FRAME_BASELINES`)."""
+    if baseline not in FRAME_BASELINES:
+        raise DataError(f"unknown frame baseline {baseline!r}", hint=f"one of {', '.join(FRAME_BASELINES)}")
     info = read_session_info(path)
     presses: list[PressMatches] = []
+    tares: list[PressTare] = []  # every press's, in file order
+    used: list[int] = []  # which of them the matched presses are
     with _open(path) as f:
         for _, g in iter_press_groups(f):
+            rotation, angle = float(g.attrs["rotation_deg"]), float(g.attrs["angle_deg"])
+            times = g["tactile/t_s"]
+            start_s = float(times[0]) if times.shape[0] else float("inf")  # no frames: it cannot have begun one
+            tares.append(PressTare(start_s, rotation, g["tare_baseline"][()]))
             if as_str(g.attrs["status"]) != "complete" or (ex := read_extraction(g)) is None:
                 continue
+            used.append(len(tares) - 1)
             extraction, frames = ex
             keep = ~extraction.miss
-            rotation, angle = float(g.attrs["rotation_deg"]), float(g.attrs["angle_deg"])
             presses.append(
                 (
                     rotation,
@@ -358,15 +411,19 @@ def load_matched_set(path: Path) -> MatchedSet:
             )
     spec = SENSORS.get(info.sensor)
     n_taxels = spec.layout.n_taxels if spec else (presses[0][3].shape[1] if presses else 0)
-    return matched_set(info.object_id, info.sensor, info.simulated, presses, n_taxels, rig_label(info.attrs))
+    shifts = None
+    if baseline == "recording":
+        every = recording_shifts(tares)
+        shifts = [every[i] for i in used]
+    return matched_set(info.object_id, info.sensor, info.simulated, presses, n_taxels, rig_label(info.attrs), shifts)
 
 
-def load_matched_sets(data_dir: Path) -> list[MatchedSet]:
+def load_matched_sets(data_dir: Path, baseline: str = "press") -> list[MatchedSet]:
     """One MatchedSet per session in ``data_dir``; raises DataError when there is none."""
     sessions = list_sessions(data_dir)
     if not sessions:
         raise DataError(f"no session files (*__*.h5) in {data_dir}", hint="run `unitac-rig collect` first")
-    return [load_matched_set(s.path) for s in sessions]
+    return [load_matched_set(s.path, baseline) for s in sessions]
 
 
 def session_files(path: Path) -> list[Path]:

@@ -30,8 +30,8 @@ def data(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_a_recording_baseline_run_trains_records_and_resumes_on_those_frames(data: Path, tmp_path: Path) -> None:
     run = tmp_path / "run"
-    args = ["train", "--data", str(data), "--out", str(run), "--epochs", "2", "--no-report", "--frame-baseline", "recording"]
-    assert cli(args) == 0
+    args = ["train", "--data", str(data), "--out", str(run), "--epochs", "2", "--no-report"]
+    assert cli([*args, "--frame-baseline", "recording"]) == 0
     assert tomllib.loads((run / "config.toml").read_text())["preprocessing"]["frame_baseline"] == "recording"
     assert stored_frame_baseline(run) == "recording"
 

@@ -22,7 +22,7 @@ Seeds: split ``K`` of a protocol trains model seeds ``K * n .. K * n + n - 1`` (
 split-to-split spread is not correlated through init, dropout and shuffles); member ``m`` of split ``K`` draws its
 geometry split from :func:`geometry_split_seed`, a seed of its own (25 members hold out 25 geometry test sets).
 
-    python benchmarks/results_full.py OUT [--work DIR] [--data DATA] [--config FILE.toml] [--jobs 16]
+    python benchmarks/results_full.py OUT [--work DIR] [--data DATA | --rig RIG.toml] [--config FILE.toml] [--jobs 16]
         [--budget-s 500] [--epochs 1000] [--splits 5] [--seeds 5] [--angles N] [--frame-baseline recording|press]
         [--protocol random --protocol blocked] [--ceiling-members 1] [--patience 100]
 
@@ -59,6 +59,7 @@ from unitac_rig.rig.objects import list_objects
 from unitac_rig.storage.reader import FRAME_BASELINES
 from unitac_rig.storage.summary import inspect_dataset
 
+ROOT = Path(__file__).resolve().parent.parent
 SENSORS = ("uskin", "papillarray")
 PROBE_EPOCHS = 2
 COLLECTION_JSON = "collection.json"  # run_results reads it beside the protocols' folders
@@ -82,6 +83,12 @@ def main() -> None:
     parser.add_argument("out", type=Path)
     parser.add_argument("--work", type=Path, default=Path("/tmp/unitac-results-work"))
     parser.add_argument("--data", type=Path, default=None, help="train on these sessions instead of collecting")
+    parser.add_argument(
+        "--rig",
+        type=Path,
+        default=ROOT / "examples" / "paper-pace.toml",
+        help="rig file the collection runs with (default: the simulated rig at the paper's pace)",
+    )
     parser.add_argument("--config", type=Path, default=None, help="TOML training config (docs/learning.md)")
     parser.add_argument(
         "--frame-baseline",
@@ -120,7 +127,7 @@ def main() -> None:
 
     data = args.data or args.work / "data"
     if args.data is None:
-        collect(data, args.angles, args.jobs, logs)
+        collect(data, args.angles, args.jobs, logs, args.rig)
         mark("collected")
     write_collection(data, args.out / "results" / COLLECTION_JSON)
     dataset_dir = args.work / "dataset"
@@ -154,14 +161,17 @@ def main() -> None:
     (args.out / "timings.json").write_text(json.dumps(timings, indent=2) + "\n", encoding="utf-8")
 
 
-def collect(data: Path, angles: int | None, jobs: int, logs: Path) -> None:
-    """One ``unitac-rig collect`` process per (object, sensor), the longest sessions first."""
+def collect(data: Path, angles: int | None, jobs: int, logs: Path, rig: Path | None = None) -> None:
+    """One ``unitac-rig collect`` process per (object, sensor) with the rig file ``rig`` (None: the simulated
+    rig's defaults), the longest sessions first."""
     objects = sorted(list_objects(), key=lambda o: -len(o.rotations_deg))
     commands = []
     for obj in objects:
         for sensor in SENSORS:
             command = [sys.executable, "-m", "unitac_rig", "collect", "--object", obj.id, "--sensor", sensor]
             command += ["--no-live", "--data", str(data), "--seed", "0"]
+            if rig is not None:
+                command += ["--rig", str(rig)]
             if angles is not None:
                 command += ["--angles", str(angles)]
             commands.append((f"collect_{obj.id}_{sensor}", command))

@@ -60,3 +60,9 @@ def test_user_object_files_resolve_relative_to_the_rig_file():
     assert config.simulated
     tri = get_object("tri_tpu", extra_files=config.object.objects_files)
     assert tri.material == "TPU" and len(tri.outer_mm) == 3
+
+
+def test_the_paper_pace_example_is_the_simulated_rig_resting_before_each_press():
+    config = load_rig_config(EXAMPLES / "paper-pace.toml")
+    assert config.simulated and config.press.rest_s == 8.0
+    assert config.press.threshold_n == 10.0 and len(config.angles_deg()) == 91  # the paper's procedure otherwise

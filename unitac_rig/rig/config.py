@@ -75,6 +75,9 @@ class PressConfig(StrictTable):
     contact_force_n: float = Field(1.0, gt=0, description="force that counts as first contact, N")
     ramp_rate_n_s: float = Field(8.0, gt=0, description="force-ramp strategy: force rise rate after contact, N/s")
     dwell_s: float = Field(0.2, ge=0, description="hold at the stop before retracting, s")
+    # the paper's presses came every 6-12 s (its sessions ran 563-1145 s for 91 presses), ours every 1.5-3 s: a rest
+    # lets the elastomer recover from the last press (creep, hysteresis) and reproduces the paper's pace
+    rest_s: float = Field(0.0, ge=0, le=60, description="rest in free air at the stand-off before each press, s")
     transit_speed_mm_s: float = Field(50.0, gt=0, description="speed between presses, mm/s")
     retract_speed_mm_s: float = Field(20.0, gt=0, description="back off the object after the dwell, mm/s")
     confirmed_standoff_mm: float = Field(5.0, gt=0, description="the stand-off once the placement is confirmed, mm")

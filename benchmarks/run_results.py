@@ -23,6 +23,7 @@ from unitac_rig.learning.metrics import NMAE_NORMALISERS, SSIM_RANGES
 from unitac_rig.learning.paper import PAPER_GEOMETRY_MAE_MM, PAPER_TABLE1
 from unitac_rig.learning.report import table_columns
 from unitac_rig.plotting import new_figure, save_figure
+from unitac_rig.rig.objects import list_objects
 
 ROOT = Path(__file__).resolve().parent.parent
 SEEN_DIRECTIONS = ("uskin_to_uskin", "uskin_to_papillarray", "papillarray_to_papillarray", "papillarray_to_uskin")
@@ -507,6 +508,7 @@ def protocol_section(protocol: str, splits: list[dict[str, Any]], figures: dict[
                 ["*paper*", *(f"{paper[c][0]:.3f} / {paper[c][1]:.3f}" if c in paper else "–" for c in columns)]
             )
     lines += markdown_table(["row", *(_arrow(c) for c in columns)], ["---"] * (len(columns) + 1), table_rows)
+    lines += unseen_ratio_lines(protocol, splits, columns)
     lines += simple_baselines_lines(protocol, splits)
     lines += [
         "",
@@ -563,6 +565,38 @@ def protocol_section(protocol: str, splits: list[dict[str, Any]], figures: dict[
 
 
 # ---- the simple baselines -----------------------------------------------------------------------------------
+
+
+RATIO_FACTOR = 1.5  # issue 38's held-out check: each column's unseen/seen NMAE within this factor of the paper's
+
+
+OBJECTS = {o.id: o for o in list_objects()}
+
+
+def unseen_ratio_lines(protocol: str, splits: list[dict[str, Any]], columns: list[str]) -> list[str]:
+    """How much harder the unseen object is than the seen ones, per column, beside the paper's: the unseen row's
+    mean NMAE over members divided by the all-seen row's (the paper's: its two rows' NMAE, on its random split)."""
+    table = splits[0]["metrics"]["table1"]
+    unseen = [o for o in table if o in PAPER_TABLE1 and o in OBJECTS and not OBJECTS[o].in_autoencoder_training]
+    if not unseen or "all_seen" not in table:
+        return []
+    row = unseen[0]
+    cells, within = [], 0
+    for c in columns:
+        ours = members(splits, row, c, "nmae").mean() / members(splits, "all_seen", c, "nmae").mean()
+        paper = PAPER_TABLE1[row][c][0] / PAPER_TABLE1["all_seen"][c][0]
+        ok = 1 / RATIO_FACTOR <= ours / paper <= RATIO_FACTOR
+        within += ok
+        cells.append(f"{_arrow(c)} {ours:.2f} (paper {paper:.2f}){'' if ok else ' **out**'}")
+    return [
+        "",
+        f"How much harder the unseen object is: {row} / all-seen NMAE (means over members) per column, "
+        f"{within} of {len(columns)} within a factor {RATIO_FACTOR:g} of the paper's"
+        + ("" if protocol == "random" else " (the paper's are on its random split, where seen test angles are easier)")
+        + ": "
+        + "; ".join(cells)
+        + ".",
+    ]
 
 
 def simple_members(splits: list[dict[str, Any]], row: str, column: str, metric: str) -> np.ndarray:

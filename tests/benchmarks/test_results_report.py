@@ -155,3 +155,30 @@ def test_the_committed_page_is_what_the_committed_json_renders(tmp_path: Path) -
     shutil.copyfile(ROOT / "docs" / "results.md", page)
     assert run_results.write_page(ROOT / "docs" / "results", page, None)
     assert page.read_text(encoding="utf-8") == (ROOT / "docs" / "results.md").read_text(encoding="utf-8")
+
+
+def test_the_unseen_to_seen_ratio_is_the_ratio_of_member_means_beside_the_papers() -> None:
+    import run_results
+
+    columns = list(run_results.PAPER_TABLE1["all_seen"])
+    paper = {
+        c: run_results.PAPER_TABLE1["irregular_pla"][c][0] / run_results.PAPER_TABLE1["all_seen"][c][0] for c in columns
+    }
+    # members 0.01 and 0.03 on the seen row (mean 0.02); the unseen row's mean is the paper's ratio times 0.02,
+    # except the first column (twice the paper's: out) and the second (1.4 times: within 1.5)
+    factor = {c: 1.0 for c in columns} | {columns[0]: 2.0, columns[1]: 1.4}
+    table = {
+        "all_seen": {c: {"nmae": 0.02} for c in columns},
+        "irregular_pla": {c: {"nmae": 0.02 * paper[c] * factor[c]} for c in columns},
+    }
+    members = {
+        "all_seen": {c: {"nmae": [0.01, 0.03]} for c in columns},
+        "irregular_pla": {c: {"nmae": [0.02 * paper[c] * factor[c]] * 2} for c in columns},
+    }
+    splits = [{"metrics": {"table1": table, "table1_members": members}}]
+    (line,) = [x for x in run_results.unseen_ratio_lines("random", splits, columns) if x]
+    assert f"{len(columns) - 1} of {len(columns)} within a factor 1.5" in line
+    assert line.count("**out**") == 1
+    assert f"{2 * paper[columns[0]]:.2f} (paper {paper[columns[0]]:.2f}) **out**" in line
+    assert "random split, where" not in line
+    assert "random split, where" in run_results.unseen_ratio_lines("blocked", splits, columns)[1]

@@ -32,7 +32,7 @@ from unitac_rig.collection.transit import (
     move_clear,
     transit_guard,
 )
-from unitac_rig.collection.wrist import UNLOADED_CHECK_S, settle_window, zero_wrist
+from unitac_rig.collection.wrist import UNLOADED_CHECK_S, rest, zero_wrist
 from unitac_rig.errors import SafetyLimit, with_press_record
 from unitac_rig.rig.config import LimitsConfig, PressConfig
 from unitac_rig.storage.press_record import PressRecord
@@ -85,8 +85,7 @@ def run_press(
     """
     strategy = press_strategy(press.strategy)  # an unregistered name fails before the arm moves
     move_clear(arm, plan, clearance_m, press.transit_speed_mm_s / 1000.0, limits)
-    if press.rest_s > 0:  # in free air, the arm at rest at the stand-off: the frames before the tare are not kept
-        settle_window(arm, sensor, press.rest_s)
+    rest(arm, sensor, press.rest_s)  # in free air at the stand-off, before the tare: the elastomer recovers
     frames, wrenches = zero_wrist(
         arm, sensor, settle_s, f"the stand-off of press {plan.press_id}", check_s=UNLOADED_CHECK_S
     )

@@ -88,6 +88,13 @@ def settle_window(arm: Arm, sensor: TactileSensor | None, seconds: float) -> tup
     return frames, np.asarray(forces)
 
 
+def rest(arm: Arm, sensor: TactileSensor, seconds: float) -> None:
+    """Stand still for ``seconds`` (the rig file's ``press.rest_s``; 0: not at all), one control period at a time as
+    :func:`settle_window` waits; the frames seen meanwhile are not kept."""
+    if seconds > 0:
+        settle_window(arm, sensor, seconds)
+
+
 def zero_wrist(
     arm: Arm,
     sensor: TactileSensor,

@@ -443,6 +443,7 @@ def _train_new_sensor(request: TrainRequest) -> None:
 
     from unitac_rig.learning.data import load_sets
     from unitac_rig.learning.extend import EXTENSION_JSON, ExtendConfig, add_sensor
+    from unitac_rig.learning.train import stored_frame_baseline
 
     from_run, new_sensor, out = request.from_run, request.new_sensor, request.out
     if from_run is None or not new_sensor:
@@ -452,7 +453,7 @@ def _train_new_sensor(request: TrainRequest) -> None:
         "--new-sensor keeps the trained run's settings",
         hint="only --epochs, --lr, --batch-size, --device and --threads go with --new-sensor",
     )
-    sets = load_sets(request.data)
+    sets = load_sets(request.data, stored_frame_baseline(from_run))  # the new sensor's frames as the run's were read
     with _progress(f"[bold]train {new_sensor}", log_lines=False) as progress:
         task = progress.add_task("extend", total=None, status="")
 

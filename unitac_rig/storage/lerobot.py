@@ -24,15 +24,7 @@ from unitac_rig.storage.extraction import nearest_index
 from unitac_rig.storage.manifest import exported_by, frames_array, sensor_layout_info, write_manifest
 from unitac_rig.storage.pooling import PooledSession, pooled_export
 from unitac_rig.storage.press_record import PressRecord
-from unitac_rig.storage.reader import (
-    FRAME_BASELINES,
-    MatchedSet,
-    PressMatches,
-    PressTare,
-    matched_set,
-    read_presses,
-    recording_shifts,
-)
+from unitac_rig.storage.reader import MatchedSet, PressMatches, PressTare, frame_shifts, matched_set, read_presses
 
 CODEBASE_VERSION = "v3.0"  # LeRobotDataset format version (lerobot-dataset 0.4.x reads v3.0)
 CHUNKS_SIZE = 1000  # files per chunk directory (LeRobot's default)
@@ -584,8 +576,7 @@ def load_matched_sets(directory: Path, baseline: str = "press") -> list[MatchedS
     as :func:`unitac_rig.storage.reader.load_matched_set` takes it (every episode keeps its start and its tare)."""
     import pyarrow.parquet as pq
 
-    if baseline not in FRAME_BASELINES:
-        raise DataError(f"unknown frame baseline {baseline!r}", hint=f"one of {', '.join(FRAME_BASELINES)}")
+    frame_shifts(baseline, [], [])  # an unknown name fails before the export is read
     directory = Path(directory)
     infos = [
         (p.parents[1], info)
@@ -636,10 +627,6 @@ def load_matched_sets(directory: Path, baseline: str = "press") -> list[MatchedS
             presses.append(press)
             simulated.append(bool(ep["unitac/simulated"]))
         for object_id, (presses, simulated) in sorted(parts.items()):
-            every, used = tares[object_id]
-            shifts = None
-            if baseline == "recording":
-                shifted = recording_shifts(every)
-                shifts = [shifted[i] for i in used]
+            shifts = frame_shifts(baseline, *tares[object_id])
             sets.append(matched_set(object_id, sensor, all(simulated), presses, n_taxels, shifts=shifts))
     return sets

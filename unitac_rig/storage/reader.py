@@ -354,6 +354,18 @@ def recording_shifts(tares: list[PressTare]) -> list[np.ndarray]:
     return [np.asarray(t.tare, np.float64) - np.asarray(first[t.rotation_deg].tare, np.float64) for t in tares]
 
 
+def frame_shifts(baseline: str, tares: list[PressTare], matched: list[int]) -> list[np.ndarray] | None:
+    """What :func:`matched_set` adds to each matched press's frames for ``baseline``: None for "press" (the frames
+    as stored), :func:`recording_shifts` of every press, picked for the ``matched`` ones (indices into ``tares``), for
+    "recording". DataError for any other name. The one rule the session reader and the LeRobot read-back share."""
+    if baseline not in FRAME_BASELINES:
+        raise DataError(f"unknown frame baseline {baseline!r}", hint=f"one of {', '.join(FRAME_BASELINES)}")
+    if baseline == "press":
+        return None
+    every = recording_shifts(tares)
+    return [every[i] for i in matched]
+
+
 def matched_set(
     object_id: str,
     sensor: str,
@@ -382,21 +394,21 @@ def matched_set(
 
 def load_matched_set(path: Path, baseline: str = "press") -> MatchedSet:
     """The session's force-matched frames, referenced to ``baseline`` (one of :data:`FRAME_BASELINES`)."""
-    if baseline not in FRAME_BASELINES:
-        raise DataError(f"unknown frame baseline {baseline!r}", hint=f"one of {', '.join(FRAME_BASELINES)}")
+    frame_shifts(baseline, [], [])  # an unknown name fails before the file is read
     info = read_session_info(path)
     presses: list[PressMatches] = []
-    tares: list[PressTare] = []  # every press's, in file order
+    tares: list[PressTare] = []  # every press's, in file order ("recording" only: "press" needs none)
     used: list[int] = []  # which of them the matched presses are
     with _open(path) as f:
-        for _, g in iter_press_groups(f):
+        for index, (_, g) in enumerate(iter_press_groups(f)):
             rotation, angle = float(g.attrs["rotation_deg"]), float(g.attrs["angle_deg"])
-            times = g["tactile/t_s"]
-            start_s = float(times[0]) if times.shape[0] else float("inf")  # no frames: it cannot have begun one
-            tares.append(PressTare(start_s, rotation, g["tare_baseline"][()]))
+            if baseline == "recording":
+                times = g["tactile/t_s"]
+                start_s = float(times[0]) if times.shape[0] else float("inf")  # no frames: it cannot have begun one
+                tares.append(PressTare(start_s, rotation, g["tare_baseline"][()]))
             if as_str(g.attrs["status"]) != "complete" or (ex := read_extraction(g)) is None:
                 continue
-            used.append(len(tares) - 1)
+            used.append(index)
             extraction, frames = ex
             keep = ~extraction.miss
             presses.append(
@@ -411,10 +423,7 @@ def load_matched_set(path: Path, baseline: str = "press") -> MatchedSet:
             )
     spec = SENSORS.get(info.sensor)
     n_taxels = spec.layout.n_taxels if spec else (presses[0][3].shape[1] if presses else 0)
-    shifts = None
-    if baseline == "recording":
-        every = recording_shifts(tares)
-        shifts = [every[i] for i in used]
+    shifts = frame_shifts(baseline, tares, used)
     return matched_set(info.object_id, info.sensor, info.simulated, presses, n_taxels, rig_label(info.attrs), shifts)
 
 

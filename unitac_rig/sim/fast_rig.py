@@ -68,7 +68,8 @@ class SimulatedSensor(Protocol):
 
     ``rng_stream`` keys the sensor's own random stream under the rig seed (``default_rng([seed, rng_stream])``), so
     adding a sensor leaves the others' noise as it was. It must be unique: the arm draws from stream 1, the
-    scenes from 4, the uSkin 2 and the PapillArray 3.
+    scenes from 4, the uSkin 2 and the PapillArray 3. A model with ``use_noise_stream(rng)`` draws its per-sample
+    noise from a stream of each session's own from the session's mount on (:func:`noise_seed`).
     """
 
     rng_stream: int
@@ -105,6 +106,14 @@ def home_pose(placement: ObjectPlacement) -> np.ndarray:
 def scene_seed(seed: int, object_id: str, sensor: str, rotation_deg: float) -> list[int]:
     """Seed of the sensor mount's errors (pad pitch) in one session: what is mounted, not how many rigs ran before."""
     return [seed, 4, zlib.crc32(object_id.encode()), zlib.crc32(sensor.encode()), round(rotation_deg * 1000) % 2**32]
+
+
+def noise_seed(seed: int, object_id: str, sensor: str, rotation_deg: float) -> list[int]:
+    """Seed of a sensor's per-sample draws (white noise, drift steps) in one session. A real sensor never reads the
+    same noise twice; keyed by the unit's stream alone, every ``collect`` process with the same seed read one
+    noise and drift path in every session (issue 38: the seen sessions and the unseen prism's first rotation
+    drifted alike). The unit's static draws (baselines, gains, offsets) stay per unit."""
+    return [seed, 8, zlib.crc32(object_id.encode()), zlib.crc32(sensor.encode()), round(rotation_deg * 1000) % 2**32]
 
 
 def placement_seed(seed: int, object_id: str, rotation_deg: float) -> list[int]:
@@ -227,6 +236,7 @@ class SimRig(Rig):
             name: device.model(np.random.default_rng([seed, device.rng_stream]))
             for name, device in self._simulated.items()
         }
+        self._noise_sessions: dict[str, tuple[str, float]] = {}  # sensor -> the session its noise stream is keyed to
         self.faults = faults
         self._devices: list[Any] = []
         self._object: ObjectSpec | None = None
@@ -250,6 +260,18 @@ class SimRig(Rig):
             object_center_m=self.config.object.center_m,
             imperfections=self.imperfections,
         )
+        self._key_noise_stream(obj.id, rotation_deg, sensor_name)
+
+    def _key_noise_stream(self, object_id: str, rotation_deg: float, sensor_name: str) -> None:
+        """Give the sensor a noise stream of this session's own when the session changes (not when the same one is
+        mounted again, which would replay its noise). A registered model without ``use_noise_stream`` keeps its
+        unit stream."""
+        model = self._models.get(sensor_name)
+        use_stream = getattr(model, "use_noise_stream", None)
+        if use_stream is None or self._noise_sessions.get(sensor_name) == (object_id, rotation_deg):
+            return
+        use_stream(np.random.default_rng(noise_seed(self.seed, object_id, sensor_name, rotation_deg)))
+        self._noise_sessions[sensor_name] = (object_id, rotation_deg)
 
     def open_sensor(self, name: str) -> TactileSensor:
         if name not in self._simulated:

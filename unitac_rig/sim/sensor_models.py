@@ -151,7 +151,13 @@ class UskinModel:
             self.neighbours = np.where((dist > 0) & (dist < 1.2 * pitch), p.neighbour_crosstalk, 0.0)
         self.elastomer = elastomer_for(n, p, imperfections)
         self.drift = RandomWalk((n, 3), p.drift_counts_per_sqrt_s) if imperfections.drift else None
+        self.noise_rng = self.rng  # the per-sample draws (noise, drift steps); see use_noise_stream
         self._t_ns = 0  # the sample clock when a caller gives none: 100 Hz
+
+    def use_noise_stream(self, rng: np.random.Generator) -> None:
+        """Draw the per-sample noise and drift steps from ``rng`` from now on. The static parts stay (one unit);
+        the simulated rig keys a stream per session, so two sessions never read the same noise (docs/simulator.md)."""
+        self.noise_rng = rng
 
     def signal_counts(self, forces_n: np.ndarray) -> np.ndarray:
         """Noise-free counts above the baseline for taxel forces (..., n, 3) N: per-taxel gain, then cross-talk
@@ -170,8 +176,9 @@ class UskinModel:
     ) -> SensorSample:
         """The reading for ``loads`` at device time ``t_ns`` (creep and drift need it; None: 10 ms after the
         previous sample). Samples must come in time order: the elastomer and the drift carry state. The noise is
-        drawn from ``noise_rng`` when given (a synthetic source's per-instant generator), else from the model's."""
-        normals = (noise_rng or self.rng).standard_normal
+        drawn from ``noise_rng`` when given (a synthetic source's per-instant generator), else from the model's
+        noise stream (:meth:`use_noise_stream`)."""
+        normals = (noise_rng or self.noise_rng).standard_normal
         t_ns = self._clock(t_ns)
         if self.elastomer is not None:
             forces = np.asarray(loads.forces_n)
@@ -226,16 +233,21 @@ class PapillArrayModel:
             self.force_map = force_map
         self.elastomer = elastomer_for(n, p, imperfections)
         self.drift = RandomWalk((n, 3), p.drift_mm_per_sqrt_s) if imperfections.drift else None
+        self.noise_rng = self.rng
         self._t_ns = 0
+
+    def use_noise_stream(self, rng: np.random.Generator) -> None:
+        """As :meth:`UskinModel.use_noise_stream`."""
+        self.noise_rng = rng
 
     def sample(
         self, loads: TaxelLoads, t_ns: int | None = None, noise_rng: np.random.Generator | None = None
     ) -> SensorSample:
         """The reading at device time ``t_ns`` (None: 10 ms after the previous sample), in time order; the noise
-        from ``noise_rng`` when given, else from the model's generator (see :meth:`UskinModel.sample`)."""
+        from ``noise_rng`` when given, else from the model's noise stream (see :meth:`UskinModel.sample`)."""
         p = self.params
         shape = self.layout.frame_shape
-        normals = (noise_rng or self.rng).standard_normal
+        normals = (noise_rng or self.noise_rng).standard_normal
         self._t_ns = self._t_ns + 10_000_000 if t_ns is None else int(t_ns)
         forces_true = np.asarray(loads.forces_n)
         disp_true = None if loads.displacement_mm is None else np.asarray(loads.displacement_mm)

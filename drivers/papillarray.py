@@ -3,7 +3,14 @@
 The hub streams as soon as the port is open (no start command); the driver sets the rate (``f<rate>\\n``), decodes
 packets with :class:`protocols.papillarray.PacketParser` and hands out frames of pillar forces (9, 3) in N with the
 tip displacements (9, 3) in mm, ``seq`` = the hub's packet counter and ``device_t_us`` = its timestamp. A tare is
-the device's own bias (``z\\n``, up to 2 s), refused when the frames show load.
+the device's own bias (``z\\n``, up to 2 s), refused when the frames show load or motion.
+
+The contact check (any pillar's |Fz| above the SDK's 0.5 N contact threshold) reads forces relative to the hub's
+last bias, so it is only made once the driver has biased the hub since opening the port: an unbiased hub (after
+power-up or a replug, which powers it) reads its zero's offset and drift since the factory calibration, which no
+threshold tells apart from a load. The first bias is therefore taken on the caller's word that the sensor is clear
+(a session takes it in free air at the stand-off), and a bias taken under load shows at the next tare as a pillar
+reading a negative Fz once unloaded, which is refused with that cause.
 """
 
 from __future__ import annotations
@@ -122,6 +129,7 @@ class PapillArrayDriver(PumpedSensor):
         self._last_counter: int | None = None
         self._last_plausible: np.ndarray | None = None  # (9, 6) last reading that passed the physics check
         self._last_plausible_counter: int | None = None
+        self._zeroed_since_open = False  # biased by this driver since the port opened: Fz is relative to unloaded
         self._health.link_check = LINK_CHECK
 
     # ---- transport --------------------------------------------------------------------------------------------
@@ -136,6 +144,7 @@ class PapillArrayDriver(PumpedSensor):
         self._last_counter = None
         self._last_plausible = None
         self._last_plausible_counter = None
+        self._zeroed_since_open = False  # a reopened port may be a replugged (so unbiased) hub
         self._write(encode_command(Command.SET_RATE, self.rate_hz))
         logger.info("papillarray: %s open, rate set to %d Hz", self.url, self.rate_hz)
 
@@ -245,9 +254,10 @@ class PapillArrayDriver(PumpedSensor):
     def tare(self, frames: list[TactileFrame]) -> TareRecord:
         """Bias the hub (``z``) if ``frames`` show an unloaded, still sensor; blocks ~2 s while the hub biases.
 
-        Refuses (DeviceError) when any pillar's |Fz| exceeds the SDK contact threshold (0.5 N) or a channel's std
-        exceeds ``max_tare_std_n``. Frames that arrive while the hub biases are discarded. The returned baseline is
-        zero: the device removes the offset itself.
+        Refuses (DeviceError) when a channel's std exceeds ``max_tare_std_n`` and, once the hub has been biased
+        since the port opened, when any pillar's |Fz| exceeds the SDK contact threshold (0.5 N): before that the
+        readings carry the unbiased hub's offset (module docstring). Frames that arrive while the hub biases are
+        discarded. The returned baseline is zero: the device removes the offset itself.
         """
         self._require_connected()
         if len(frames) < MIN_TARE_FRAMES:
@@ -258,11 +268,10 @@ class PapillArrayDriver(PumpedSensor):
         stack = np.stack([f.values for f in frames]).astype(np.float64)
         peak_fz = float(np.abs(stack[:, :, 2]).max())
         spread = float(stack.std(axis=0).max())
-        if peak_fz > CONTACT_THRESHOLD_N:
-            raise DeviceError(
-                f"papillarray tare refused: a pillar reads |Fz| = {peak_fz:.2f} N (> {CONTACT_THRESHOLD_N} N contact)",
-                hint="move the sensor clear of the object and keep it unloaded for at least 1 s, then tare",
-            )
+        if self._zeroed_since_open and peak_fz > CONTACT_THRESHOLD_N:
+            raise _contact_refusal(stack[:, :, 2])
+        if not self._zeroed_since_open:
+            logger.info("papillarray: first bias since the port opened; unbiased |Fz| up to %.2f N", peak_fz)
         if spread > self.max_tare_std_n:
             raise DeviceError(
                 f"papillarray tare refused: force std {spread:.3f} N exceeds {self.max_tare_std_n:.3f} N",
@@ -270,6 +279,7 @@ class PapillArrayDriver(PumpedSensor):
             )
         self._write(encode_command(Command.BIAS))
         self.clock.sleep(BIAS_SETTLE_S)
+        self._zeroed_since_open = True
         discarded = self.poll()
         logger.info("papillarray: bias sent; %d frames during the bias discarded", len(discarded))
         return TareRecord(
@@ -286,3 +296,19 @@ class PapillArrayDriver(PumpedSensor):
 
     def identity(self) -> dict[str, Any]:
         return {**super().identity(), "transport": f"serial:{self.url}", "slot": self.slot, "rate_hz": self.rate_hz}
+
+
+def _contact_refusal(fz_n: np.ndarray) -> DeviceError:
+    """The refusal for frames ``fz_n`` (frames, 9) N whose largest |Fz| passes the contact threshold: a load pushes
+    a pillar's Fz up; a negative one means the last bias was taken while a pillar was loaded."""
+    low, high = float(fz_n.min()), float(fz_n.max())
+    if -low > high:
+        return DeviceError(
+            f"papillarray tare refused: a pillar reads Fz = {low:.2f} N unloaded (< -{CONTACT_THRESHOLD_N} N): "
+            "the last bias was taken while it was loaded",
+            hint="clear the sensor of everything, then run again: the first bias after the port opens is taken afresh",
+        )
+    return DeviceError(
+        f"papillarray tare refused: a pillar reads |Fz| = {high:.2f} N (> {CONTACT_THRESHOLD_N} N contact)",
+        hint="move the sensor clear of the object and keep it unloaded for at least 1 s, then tare",
+    )

@@ -305,3 +305,37 @@ def test_impossible_means_beyond_what_the_pillar_and_the_hubs_filter_allow(
     if before is not None and previous is not None:
         before[4] = previous
     assert implausible_pillars(readings, before, dt_s).tolist() == [False] * 4 + [flagged] + [False] * 4
+
+
+def test_an_unbiased_hub_is_biased_whatever_its_offset_and_a_bias_under_load_is_refused_next_time() -> None:
+    """After power-up (or a replug) the hub reads its zero's offset and drift, here 0.8 N on a pillar with nothing
+    touching it: the SDK's 0.5 N contact threshold cannot tell that from a load, so the first bias since the port
+    opened is taken (a campaign of hours stopped at a session's start on this). A bias taken under load shows
+    at the next tare as a negative Fz unloaded, refused with that cause; a reconnect biases afresh."""
+    params = PapillArrayParams(offset_sd_mm=0.0, noise_mm=0.0005)
+    clock = VirtualClock()
+    source = PressSource(PAPILLARRAY, period_s=8.0, rest_fraction=0.5, params=params)
+    source.model.offset_mm[4, 2] = 0.8 / source.model.calibration[2]  # a drifted zero, not a load
+    with hub_rig(clock, source) as (driver, hub):
+        idle = step(clock, driver, 50)
+        assert min(f.values[4, 2] for f in idle) > 0.5  # what the check used to refuse
+        driver.tare(idle)
+        assert hub.biased
+        assert np.abs(step(clock, driver, 20)[-1].values[:, 2]).max() < 0.05
+        step(clock, driver, 300)  # into the press
+        with pytest.raises(DeviceError, match="contact"):
+            driver.tare(step(clock, driver, 20))  # biased since the port opened: the check is made
+    clock = VirtualClock()
+    with hub_rig(clock, PressSource(PAPILLARRAY, period_s=8.0, rest_fraction=0.5, params=params)) as (driver, hub):
+        step(clock, driver, 550)  # into the press (free air for the first 4 s of each 8)
+        loaded = step(clock, driver, 20)
+        assert max(f.values[:, 2].max() for f in loaded) > 0.5
+        driver.tare(loaded)  # the first bias: taken on the caller's word
+        step(clock, driver, 100)  # free air again (8 s on)
+        unloaded = step(clock, driver, 20)
+        assert min(f.values[:, 2].min() for f in unloaded) < -0.5  # the load it zeroed, now missing
+        with pytest.raises(DeviceError, match="taken while it was loaded"):
+            driver.tare(unloaded)
+        driver.reconnect()
+        driver.tare(step(clock, driver, 20))  # afresh: a new first bias, in free air
+        assert np.abs(step(clock, driver, 20)[-1].values[:, 2]).max() < 0.05

@@ -196,12 +196,7 @@ class SimArm:
         self._delay_line: deque[np.ndarray] = deque([self._true_wrench.copy()] * delay_periods)
         self._axis_scale = np.array([1.0, 1.0, 1.0] + [self.params.ft_torque_scale_m] * 3)
         self._bias = rng.normal(0.0, self.params.ft_bias_sigma_n, 6) * self._axis_scale
-        self._ft_noise = FtNoise(
-            NormalBlocks(rng),
-            self.params.ft_bias_drift_n_per_sqrt_s * math.sqrt(self.control_period_s),
-            self.params.ft_noise_sigma_n,
-            self._axis_scale,
-        )
+        self._ft_noise = self._ft_noise_from(rng)
         self._filtered = self._true_wrench + self._bias
         self._zero_offset = np.zeros(6)
         self._gains = np.array(
@@ -213,6 +208,19 @@ class SimArm:
         self._filter_alpha = 1.0 if cutoff is None else 1.0 - math.exp(-2 * math.pi * cutoff * self.control_period_s)
         self._latest: ArmState | None = self._snapshot()
         clock.on_advance(self._on_clock_advance)
+
+    def _ft_noise_from(self, rng: np.random.Generator) -> FtNoise:
+        return FtNoise(
+            NormalBlocks(rng),
+            self.params.ft_bias_drift_n_per_sqrt_s * math.sqrt(self.control_period_s),
+            self.params.ft_noise_sigma_n,
+            self._axis_scale,
+        )
+
+    def use_noise_stream(self, rng: np.random.Generator) -> None:
+        """Draw the F/T's bias drift steps and white noise from ``rng`` from now on (the bias keeps its value): the
+        simulated rig keys a stream per session, as it does the sensors' (fast_rig.noise_seed)."""
+        self._ft_noise = self._ft_noise_from(rng)
 
     # ---- truth (for simulated sensors and tests) ------------------------------------------------------------
 

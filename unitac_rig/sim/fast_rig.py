@@ -108,12 +108,21 @@ def scene_seed(seed: int, object_id: str, sensor: str, rotation_deg: float) -> l
     return [seed, 4, zlib.crc32(object_id.encode()), zlib.crc32(sensor.encode()), round(rotation_deg * 1000) % 2**32]
 
 
-def noise_seed(seed: int, object_id: str, sensor: str, rotation_deg: float) -> list[int]:
-    """Seed of a sensor's per-sample draws (white noise, drift steps) in one session. A real sensor never reads the
-    same noise twice; keyed by the unit's stream alone, every ``collect`` process with the same seed read one
-    noise and drift path in every session (issue 38: the seen sessions and the unseen prism's first rotation
-    drifted alike). The unit's static draws (baselines, gains, offsets) stay per unit."""
-    return [seed, 8, zlib.crc32(object_id.encode()), zlib.crc32(sensor.encode()), round(rotation_deg * 1000) % 2**32]
+def noise_seed(seed: int, object_id: str, sensor: str, rotation_deg: float, device: str) -> list[int]:
+    """Seed of ``device``'s per-sample draws (white noise, drift steps) in one session (``object_id`` at
+    ``rotation_deg`` pressed with ``sensor``); ``device`` is the sensor's name or ``"arm"`` (the wrist F/T). A real
+    sensor never reads the same noise twice; keyed by the unit's stream alone, every ``collect`` process with the
+    same seed read one noise and drift path in every session (issue 38: the seen sessions and the unseen prism's
+    first rotation drifted alike). The units' static draws (baselines, gains, offsets, the F/T's first bias) stay
+    per unit."""
+    return [
+        seed,
+        8,
+        zlib.crc32(device.encode()),
+        zlib.crc32(object_id.encode()),
+        zlib.crc32(sensor.encode()),
+        round(rotation_deg * 1000) % 2**32,
+    ]
 
 
 def placement_seed(seed: int, object_id: str, rotation_deg: float) -> list[int]:
@@ -236,7 +245,7 @@ class SimRig(Rig):
             name: device.model(np.random.default_rng([seed, device.rng_stream]))
             for name, device in self._simulated.items()
         }
-        self._noise_sessions: dict[str, tuple[str, float]] = {}  # sensor -> the session its noise stream is keyed to
+        self._noise_session: tuple[str, float, str] | None = None  # the session the noise streams are keyed to
         self.faults = faults
         self._devices: list[Any] = []
         self._object: ObjectSpec | None = None
@@ -263,15 +272,21 @@ class SimRig(Rig):
         self._key_noise_stream(obj.id, rotation_deg, sensor_name)
 
     def _key_noise_stream(self, object_id: str, rotation_deg: float, sensor_name: str) -> None:
-        """Give the sensor a noise stream of this session's own when the session changes (not when the same one is
-        mounted again, which would replay its noise). A registered model without ``use_noise_stream`` keeps its
-        unit stream."""
-        model = self._models.get(sensor_name)
-        use_stream = getattr(model, "use_noise_stream", None)
-        if use_stream is None or self._noise_sessions.get(sensor_name) == (object_id, rotation_deg):
+        """Give the mounted sensor and the wrist F/T noise streams of this session's own when the session changes
+        (not when the same one is mounted again, which would replay its noise). A registered model without
+        ``use_noise_stream`` keeps its unit stream."""
+        session = (object_id, rotation_deg, sensor_name)
+        if self._noise_session == session:
             return
-        use_stream(np.random.default_rng(noise_seed(self.seed, object_id, sensor_name, rotation_deg)))
-        self._noise_sessions[sensor_name] = (object_id, rotation_deg)
+        self._noise_session = session
+
+        def stream(device: str) -> np.random.Generator:
+            return np.random.default_rng(noise_seed(self.seed, object_id, sensor_name, rotation_deg, device))
+
+        self.sim_arm.use_noise_stream(stream("arm"))
+        use_stream = getattr(self._models.get(sensor_name), "use_noise_stream", None)
+        if use_stream is not None:
+            use_stream(stream(sensor_name))
 
     def open_sensor(self, name: str) -> TactileSensor:
         if name not in self._simulated:

@@ -48,6 +48,7 @@ import numpy as np
 from protocols import rtde
 from protocols.rtde import ControllerVersion, PackageType
 from unitac_rig.sim.arm import ROBOT_MODE_RUNNING, SAFETY_MODE_NORMAL, SAFETY_MODE_PROTECTIVE_STOP, SimArm, SimArmParams
+from unitac_rig.sim.fast_rig import noise_seed
 from unitac_rig.sim.twin import dashboard
 from unitac_rig.sim.twin.motion import TwinArm, pose_matrix
 from unitac_rig.sim.twin.params import DASHBOARD_PORT, RTDE_PORT, SCRIPT_PORT, TwinSettings
@@ -119,6 +120,10 @@ class Controller:
             start_pose=np.asarray(settings.start_pose, dtype=np.float64),
             tool_offset=np.asarray(self.params.tool_offset, dtype=np.float64),
         )
+        scene = settings.scene
+        if scene is not None and scene.sensor is not None:  # the session's own F/T noise, as on the fast twin
+            session = (scene.object_id, scene.sensor, scene.rotation_deg)
+            self.arm.use_noise_stream(np.random.default_rng(noise_seed(settings.seed, *session, "arm")))
         if self.params.pendant_tcp is not None:
             self.arm.active_tcp = np.asarray(self.params.pendant_tcp, dtype=np.float64)
         self.payload_kg = self.params.payload_kg

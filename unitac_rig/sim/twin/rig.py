@@ -36,7 +36,7 @@ from unitac_rig.errors import UsageError
 from unitac_rig.rig.config import ObjectPlacement, toml_value
 from unitac_rig.rig.objects import get_object
 from unitac_rig.rig.sensors import sensor_layout, sensor_names
-from unitac_rig.sim.fast_rig import home_pose
+from unitac_rig.sim.fast_rig import home_pose, noise_seed
 from unitac_rig.sim.fast_sensors import configured_sensors
 from unitac_rig.sim.sensor_signals import SignalSource
 from unitac_rig.sim.twin.handle import ControllerTwin
@@ -135,6 +135,10 @@ class RigTwin:
 
         device = self._sensors[self.sensor]
         model = device.model(np.random.default_rng([self.seed, device.rng_stream]))
+        use_stream = getattr(model, "use_noise_stream", None)
+        if use_stream is not None:  # the session's own noise, as on the fast twin
+            session = (self.object_id, self.sensor, self.rotation_deg)
+            use_stream(np.random.default_rng(noise_seed(self.seed, *session, self.sensor)))
         self._source = SceneSensorSource(build_scene(self.spec), model, self.controller.true_pad_pose)
         device.serve_twin(self.host, self._source, self._serve)
 

@@ -213,12 +213,12 @@ def test_the_clean_twin_records_what_the_twin_recorded_before_the_imperfections(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Seed 3, hex_pla, 2 angles, both sensors: with the sensors' and the wrist's noise drawn from the units'
-    streams (as it was before each session had streams of its own), the recorded tactile streams, press forces and wrist wrenches
-    hash as they did at commit e6fcb9e (issue 37's press, before sim/imperfections.py; and 11dc7c9's hashes were
-    matched the same way before that press); with the session's own stream (the twin now) they hash to the second
-    pair, so that change moved nothing but the noise draws. The realistic twin records something else. A deliberate
-    change of the press or the scene changes these: recompute them on the commit before it with the imperfections
-    left out."""
+    streams (as before each session had streams of its own), the recorded tactile streams, press forces and wrist
+    wrenches hash as they did at commit e6fcb9e (issue 37's press, before sim/imperfections.py; and 11dc7c9's
+    hashes were matched the same way before that press); with the session's own streams (the twin now) they hash
+    to the first pair, so that change moved nothing but the noise draws. The realistic twin records something
+    else. A deliberate change of the press or the scene changes these: recompute them on the commit before it with
+    the imperfections left out."""
     clean = _session_hashes(tmp_path, "none")
     assert clean == {
         "uskin": "358915370c6e0f8046d9ed7b3bb0826af68c8ccc61f7e587ea365523472f3215",

@@ -5,14 +5,16 @@ the sensor's drift since then stays in the frame. Checked against the raw stream
 from __future__ import annotations
 
 from pathlib import Path
+from typing import get_args
 
 import numpy as np
 import pytest
 
 from tests.helpers import cli
 from unitac_rig.errors import DataError
+from unitac_rig.learning.config import FrameBaseline
 from unitac_rig.storage.paired import build_paired_dataset, load_sets
-from unitac_rig.storage.reader import PressTare, load_matched_set, read_presses, recording_shifts
+from unitac_rig.storage.reader import FRAME_BASELINES, PressTare, load_matched_set, read_presses, recording_shifts
 
 
 def test_each_press_shifts_to_the_first_tare_of_its_own_rotation_by_time_not_by_file_order() -> None:
@@ -86,3 +88,8 @@ def test_a_paired_dataset_says_which_baseline_and_refuses_a_mix(irregular: Path)
         build_paired_dataset(mixed)
     with pytest.raises(DataError, match="unknown frame baseline"):
         load_matched_set(irregular / "irregular_pla__uskin.h5", "session")
+
+
+def test_the_training_options_and_the_reader_know_the_same_frame_baselines() -> None:
+    """The config's Literal (what a TOML or --frame-baseline accepts) and the reader's names are one list twice."""
+    assert get_args(FrameBaseline) == FRAME_BASELINES

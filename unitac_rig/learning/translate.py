@@ -20,22 +20,30 @@ import torch
 from unitac_rig.errors import DataError, ModelError, UsageError
 from unitac_rig.learning.data import Normaliser
 from unitac_rig.learning.engine import UNITAC_GROUP, StackedAutoencoders
-from unitac_rig.learning.run import load_run, stored_frame_baseline
+from unitac_rig.learning.run import load_run
 
 
 class Translator:
     """One member of a run's UniTac-NV model, ready for inference (no dropout, CPU by default)."""
 
-    def __init__(self, engine: StackedAutoencoders, normaliser: Normaliser, run_dir: Path | None = None) -> None:
+    def __init__(
+        self,
+        engine: StackedAutoencoders,
+        normaliser: Normaliser,
+        run_dir: Path | None = None,
+        frame_baseline: str = "press",
+    ) -> None:
         self.engine = engine
         self.normaliser = normaliser
         self.run_dir = run_dir
+        self.frame_baseline = frame_baseline  # what the run's frames were referenced to (storage.reader)
 
     @classmethod
     def load(cls, run_dir: Path | str, member: int = 0, device: str = "cpu") -> Translator:
         run = load_run(Path(run_dir), device)
         run.check_member(member)
-        return cls(run.engine.member(member, groups=[UNITAC_GROUP]), run.normaliser, Path(run_dir))
+        engine = run.engine.member(member, groups=[UNITAC_GROUP])
+        return cls(engine, run.normaliser, Path(run_dir), run.config.frame_baseline)
 
     @property
     def sensors(self) -> tuple[str, ...]:
@@ -143,7 +151,7 @@ def translate_file(
 ) -> dict[str, Any]:
     """Translate a file and write ``<input>_to_<target>.npz`` (or ``output_path``); returns a summary."""
     translator = Translator.load(run_dir)
-    data = read_frames(input_path, source, stored_frame_baseline(run_dir))
+    data = read_frames(input_path, source, translator.frame_baseline)
     translated = translator.translate(data.frames, source, target)
     output_path = (
         Path(output_path) if output_path else Path(input_path).with_name(f"{Path(input_path).stem}_to_{target}.npz")

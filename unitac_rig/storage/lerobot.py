@@ -24,7 +24,15 @@ from unitac_rig.storage.extraction import nearest_index
 from unitac_rig.storage.manifest import exported_by, frames_array, sensor_layout_info, write_manifest
 from unitac_rig.storage.pooling import PooledSession, pooled_export
 from unitac_rig.storage.press_record import PressRecord
-from unitac_rig.storage.reader import MatchedSet, PressMatches, PressTare, frame_shifts, matched_set, read_presses
+from unitac_rig.storage.reader import (
+    MatchedSet,
+    PressMatches,
+    PressTare,
+    check_frame_baseline,
+    frame_shifts,
+    matched_set,
+    read_presses,
+)
 
 CODEBASE_VERSION = "v3.0"  # LeRobotDataset format version (lerobot-dataset 0.4.x reads v3.0)
 CHUNKS_SIZE = 1000  # files per chunk directory (LeRobot's default)
@@ -576,7 +584,7 @@ def load_matched_sets(directory: Path, baseline: str = "press") -> list[MatchedS
     as :func:`unitac_rig.storage.reader.load_matched_set` takes it (every episode keeps its start and its tare)."""
     import pyarrow.parquet as pq
 
-    frame_shifts(baseline, [], [])  # an unknown name fails before the export is read
+    check_frame_baseline(baseline)
     directory = Path(directory)
     infos = [
         (p.parents[1], info)

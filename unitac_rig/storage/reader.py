@@ -354,12 +354,17 @@ def recording_shifts(tares: list[PressTare]) -> list[np.ndarray]:
     return [np.asarray(t.tare, np.float64) - np.asarray(first[t.rotation_deg].tare, np.float64) for t in tares]
 
 
+def check_frame_baseline(baseline: str) -> None:
+    """DataError unless ``baseline`` is one of :data:`FRAME_BASELINES` (readers call it before reading anything)."""
+    if baseline not in FRAME_BASELINES:
+        raise DataError(f"unknown frame baseline {baseline!r}", hint=f"one of {', '.join(FRAME_BASELINES)}")
+
+
 def frame_shifts(baseline: str, tares: list[PressTare], matched: list[int]) -> list[np.ndarray] | None:
     """What :func:`matched_set` adds to each matched press's frames for ``baseline``: None for "press" (the frames
     as stored), :func:`recording_shifts` of every press, picked for the ``matched`` ones (indices into ``tares``), for
     "recording". DataError for any other name. The one rule the session reader and the LeRobot read-back share."""
-    if baseline not in FRAME_BASELINES:
-        raise DataError(f"unknown frame baseline {baseline!r}", hint=f"one of {', '.join(FRAME_BASELINES)}")
+    check_frame_baseline(baseline)
     if baseline == "press":
         return None
     every = recording_shifts(tares)
@@ -394,7 +399,7 @@ def matched_set(
 
 def load_matched_set(path: Path, baseline: str = "press") -> MatchedSet:
     """The session's force-matched frames, referenced to ``baseline`` (one of :data:`FRAME_BASELINES`)."""
-    frame_shifts(baseline, [], [])  # an unknown name fails before the file is read
+    check_frame_baseline(baseline)
     info = read_session_info(path)
     presses: list[PressMatches] = []
     tares: list[PressTare] = []  # every press's, in file order ("recording" only: "press" needs none)
